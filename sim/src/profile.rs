@@ -1,0 +1,198 @@
+//! Error-motion profiles: a function of the axis position (m) giving an error value (m or rad).
+//!
+//! A profile is a sum of terms, each one of the shapes of FORMAT.md §2: a polynomial, harmonics,
+//! a seeded random profile, or a table. Each term gives its value and its first and second
+//! derivatives in position, so dynamics tests can compare an accelerometer with v²·E''(x).
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+
+/// One harmonic term: amplitude·sin(2π·x/wavelength + phase).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Harmonic {
+    /// Amplitude in the unit of the error motion (m or rad).
+    pub amplitude: f64,
+    /// Spatial wavelength, m (> 0).
+    pub wavelength: f64,
+    /// Phase, rad.
+    #[serde(default)]
+    pub phase: f64,
+}
+
+/// A seeded random profile: a stationary Gaussian process of the given RMS and Gaussian
+/// correlation function rms²·exp(−d²/(2ℓ²)), drawn by the spectral method (a sum of cosines with
+/// wavenumbers drawn from N(0, 1/ℓ²)), so it is smooth, evaluable anywhere, and reproducible.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RandomProfile {
+    pub rms: f64,
+    /// Correlation length ℓ, m (> 0).
+    pub correlation_length: f64,
+    pub seed: u64,
+}
+
+/// Number of cosines in a random profile.
+const RANDOM_TERMS: usize = 64;
+
+/// One term of a profile.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Term {
+    /// Σ c_i·x^i, x in m.
+    Poly(Vec<f64>),
+    Harmonics(Vec<Harmonic>),
+    /// Expanded random profile: (amplitude, wavenumber rad/m, phase) per cosine.
+    Random { spec: RandomProfile, cosines: Vec<(f64, f64, f64)> },
+    /// Linear interpolation in a table of (position, value), positions strictly increasing;
+    /// constant beyond the ends.
+    Table { x: Vec<f64>, y: Vec<f64> },
+}
+
+/// An error motion as a function of axis position: the sum of its terms (zero if none).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Profile {
+    pub terms: Vec<Term>,
+}
+
+impl Term {
+    /// Expands a random-profile specification into its cosines (deterministic in `spec.seed`).
+    pub fn random(spec: RandomProfile) -> Term {
+        let mut rng = ChaCha8Rng::seed_from_u64(spec.seed);
+        let amp = spec.rms * (2.0 / RANDOM_TERMS as f64).sqrt();
+        let cosines = (0..RANDOM_TERMS)
+            .map(|_| {
+                let z: f64 = rng.sample(StandardNormal);
+                let k = z / spec.correlation_length;
+                let phase = rng.gen::<f64>() * std::f64::consts::TAU;
+                (amp, k, phase)
+            })
+            .collect();
+        Term::Random { spec, cosines }
+    }
+
+    /// Value, first and second derivative at position x.
+    pub fn eval3(&self, x: f64) -> [f64; 3] {
+        match self {
+            Term::Poly(c) => {
+                let (mut v, mut d1, mut d2) = (0.0, 0.0, 0.0);
+                for (i, ci) in c.iter().enumerate().rev() {
+                    let fi = i as f64;
+                    v = v * x + ci;
+                    if i >= 1 {
+                        d1 = d1 * x + fi * ci;
+                    }
+                    if i >= 2 {
+                        d2 = d2 * x + fi * (fi - 1.0) * ci;
+                    }
+                }
+                [v, d1, d2]
+            }
+            Term::Harmonics(h) => h.iter().fold([0.0; 3], |acc, hi| {
+                let k = std::f64::consts::TAU / hi.wavelength;
+                let (s, c) = (k * x + hi.phase).sin_cos();
+                [
+                    acc[0] + hi.amplitude * s,
+                    acc[1] + hi.amplitude * k * c,
+                    acc[2] - hi.amplitude * k * k * s,
+                ]
+            }),
+            Term::Random { cosines, .. } => cosines.iter().fold([0.0; 3], |acc, &(a, k, p)| {
+                let (s, c) = (k * x + p).sin_cos();
+                [acc[0] + a * c, acc[1] - a * k * s, acc[2] - a * k * k * c]
+            }),
+            Term::Table { x: xs, y: ys } => {
+                let n = xs.len();
+                if n == 0 {
+                    return [0.0; 3];
+                }
+                if x <= xs[0] || n == 1 {
+                    return [ys[0], 0.0, 0.0];
+                }
+                if x >= xs[n - 1] {
+                    return [ys[n - 1], 0.0, 0.0];
+                }
+                let i = xs.partition_point(|&xi| xi <= x) - 1;
+                let s = (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i]);
+                [ys[i] + s * (x - xs[i]), s, 0.0]
+            }
+        }
+    }
+}
+
+impl Profile {
+    pub fn zero() -> Profile {
+        Profile::default()
+    }
+
+    pub fn poly(coeffs: Vec<f64>) -> Profile {
+        Profile { terms: vec![Term::Poly(coeffs)] }
+    }
+
+    pub fn harmonics(h: Vec<Harmonic>) -> Profile {
+        Profile { terms: vec![Term::Harmonics(h)] }
+    }
+
+    pub fn is_zero(&self) -> bool {
+        self.terms.is_empty()
+    }
+
+    /// Value at position x (m).
+    pub fn value(&self, x: f64) -> f64 {
+        self.eval3(x)[0]
+    }
+
+    /// Value, first and second derivative with respect to position at x.
+    pub fn eval3(&self, x: f64) -> [f64; 3] {
+        self.terms.iter().fold([0.0; 3], |acc, t| {
+            let e = t.eval3(x);
+            [acc[0] + e[0], acc[1] + e[1], acc[2] + e[2]]
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn poly_value_and_derivatives_match_hand_worked_numbers() {
+        // 1 + 2x + 3x² at x = 2: 17, 14, 6.
+        let p = Profile::poly(vec![1.0, 2.0, 3.0]);
+        assert_eq!(p.eval3(2.0), [17.0, 14.0, 6.0]);
+    }
+
+    #[test]
+    fn harmonic_second_derivative_is_minus_k2_times_value() {
+        let p = Profile::harmonics(vec![Harmonic { amplitude: 2e-6, wavelength: 0.25, phase: 0.3 }]);
+        let k = std::f64::consts::TAU / 0.25;
+        let [v, _, d2] = p.eval3(0.37);
+        assert!((d2 + k * k * v).abs() < 1e-12 * k * k);
+    }
+
+    #[test]
+    fn random_profile_is_reproducible_and_has_about_the_requested_rms() {
+        let spec = RandomProfile { rms: 1e-6, correlation_length: 0.05, seed: 7 };
+        let a = Profile { terms: vec![Term::random(spec.clone())] };
+        let b = Profile { terms: vec![Term::random(spec)] };
+        let n = 20000;
+        let mut ss = 0.0;
+        for i in 0..n {
+            let x = i as f64 * 1e-3; // 20 m: many correlation lengths
+            assert_eq!(a.value(x), b.value(x));
+            ss += a.value(x).powi(2);
+        }
+        let rms = (ss / n as f64).sqrt();
+        // 64 cosines: the sample RMS scatters by about 1/sqrt(64·2) ≈ 10 %; allow 30 %.
+        assert!((rms / 1e-6 - 1.0).abs() < 0.3, "rms {rms}");
+    }
+
+    #[test]
+    fn table_interpolates_linearly_and_holds_its_end_values() {
+        let p = Profile { terms: vec![Term::Table { x: vec![0.0, 1.0], y: vec![0.0, 2.0] }] };
+        assert_eq!(p.value(0.25), 0.5);
+        assert_eq!(p.value(-1.0), 0.0);
+        assert_eq!(p.value(3.0), 2.0);
+    }
+}
