@@ -44,10 +44,16 @@ pub enum Term {
     Poly(Vec<f64>),
     Harmonics(Vec<Harmonic>),
     /// Expanded random profile: (amplitude, wavenumber rad/m, phase) per cosine.
-    Random { spec: RandomProfile, cosines: Vec<(f64, f64, f64)> },
+    Random {
+        spec: RandomProfile,
+        cosines: Vec<(f64, f64, f64)>,
+    },
     /// Linear interpolation in a table of (position, value), positions strictly increasing;
     /// constant beyond the ends.
-    Table { x: Vec<f64>, y: Vec<f64> },
+    Table {
+        x: Vec<f64>,
+        y: Vec<f64>,
+    },
 }
 
 /// An error motion as a function of axis position: the sum of its terms (zero if none).
@@ -127,11 +133,15 @@ impl Profile {
     }
 
     pub fn poly(coeffs: Vec<f64>) -> Profile {
-        Profile { terms: vec![Term::Poly(coeffs)] }
+        Profile {
+            terms: vec![Term::Poly(coeffs)],
+        }
     }
 
     pub fn harmonics(h: Vec<Harmonic>) -> Profile {
-        Profile { terms: vec![Term::Harmonics(h)] }
+        Profile {
+            terms: vec![Term::Harmonics(h)],
+        }
     }
 
     pub fn is_zero(&self) -> bool {
@@ -165,7 +175,11 @@ mod tests {
 
     #[test]
     fn harmonic_second_derivative_is_minus_k2_times_value() {
-        let p = Profile::harmonics(vec![Harmonic { amplitude: 2e-6, wavelength: 0.25, phase: 0.3 }]);
+        let p = Profile::harmonics(vec![Harmonic {
+            amplitude: 2e-6,
+            wavelength: 0.25,
+            phase: 0.3,
+        }]);
         let k = std::f64::consts::TAU / 0.25;
         let [v, _, d2] = p.eval3(0.37);
         assert!((d2 + k * k * v).abs() < 1e-12 * k * k);
@@ -173,9 +187,17 @@ mod tests {
 
     #[test]
     fn random_profile_is_reproducible_and_has_about_the_requested_rms() {
-        let spec = RandomProfile { rms: 1e-6, correlation_length: 0.05, seed: 7 };
-        let a = Profile { terms: vec![Term::random(spec.clone())] };
-        let b = Profile { terms: vec![Term::random(spec)] };
+        let spec = RandomProfile {
+            rms: 1e-6,
+            correlation_length: 0.05,
+            seed: 7,
+        };
+        let a = Profile {
+            terms: vec![Term::random(spec.clone())],
+        };
+        let b = Profile {
+            terms: vec![Term::random(spec)],
+        };
         let n = 20000;
         let mut ss = 0.0;
         for i in 0..n {
@@ -190,7 +212,12 @@ mod tests {
 
     #[test]
     fn table_interpolates_linearly_and_holds_its_end_values() {
-        let p = Profile { terms: vec![Term::Table { x: vec![0.0, 1.0], y: vec![0.0, 2.0] }] };
+        let p = Profile {
+            terms: vec![Term::Table {
+                x: vec![0.0, 1.0],
+                y: vec![0.0, 2.0],
+            }],
+        };
         assert_eq!(p.value(0.25), 0.5);
         assert_eq!(p.value(-1.0), 0.0);
         assert_eq!(p.value(3.0), 2.0);

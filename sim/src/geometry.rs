@@ -1,0 +1,99 @@
+//! The six error motions of a linear axis (ISO 230-1) and the first-order deviation they cause.
+//!
+//! For the X axis: EXX (positioning), EYX, EZX (straightness), EAX, EBX, ECX (roll, pitch, yaw), each a
+//! function of the axis position, defined at the axis reference point. Small-angle, first-order model
+//! (DESIGN.md §2): the deviation of a point r on the moving body (r from the reference point, axis frame) is
+//! δ(r) = [EXX, EYX, EZX] + [EAX, EBX, ECX] × r.
+
+use crate::profile::Profile;
+use rapier3d_f64::glamx::DVec3;
+
+/// The six error motions of one axis, as functions of the axis position (m → m or rad).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ErrorMotions {
+    /// EXX, m
+    pub positioning: Profile,
+    /// EYX, m
+    pub straightness_y: Profile,
+    /// EZX, m
+    pub straightness_z: Profile,
+    /// EAX, rad
+    pub roll: Profile,
+    /// EBX, rad
+    pub pitch: Profile,
+    /// ECX, rad
+    pub yaw: Profile,
+}
+
+impl ErrorMotions {
+    /// Translation error [EXX, EYX, EZX](x), m, axis frame.
+    pub fn translation(&self, x: f64) -> DVec3 {
+        DVec3::new(
+            self.positioning.value(x),
+            self.straightness_y.value(x),
+            self.straightness_z.value(x),
+        )
+    }
+
+    /// Angular error [EAX, EBX, ECX](x), rad, axis frame.
+    pub fn rotation(&self, x: f64) -> DVec3 {
+        DVec3::new(self.roll.value(x), self.pitch.value(x), self.yaw.value(x))
+    }
+
+    /// δ(r) = E(x) + ε(x) × r: first-order deviation of body point r (m, axis frame, from the reference
+    /// point) at axis position x.
+    pub fn deviation(&self, x: f64, r: DVec3) -> DVec3 {
+        self.translation(x) + self.rotation(x).cross(r)
+    }
+
+    /// Derivatives with respect to position of (translation, rotation): (E'(x), ε'(x)).
+    pub fn slope(&self, x: f64) -> (DVec3, DVec3) {
+        let d = |p: &Profile| p.eval3(x)[1];
+        (
+            DVec3::new(
+                d(&self.positioning),
+                d(&self.straightness_y),
+                d(&self.straightness_z),
+            ),
+            DVec3::new(d(&self.roll), d(&self.pitch), d(&self.yaw)),
+        )
+    }
+
+    /// The profile of an error motion by its ISO 230-1 index: 0..6 = EXX, EYX, EZX, EAX, EBX, ECX.
+    pub fn by_index(&self, i: usize) -> &Profile {
+        [
+            &self.positioning,
+            &self.straightness_y,
+            &self.straightness_z,
+            &self.roll,
+            &self.pitch,
+            &self.yaw,
+        ][i]
+    }
+}
+
+/// Effect names of the six error motions, in ISO index order (FORMAT.md §2).
+pub const ERROR_MOTION_NAMES: [&str; 6] = [
+    "positioning",
+    "straightness_y",
+    "straightness_z",
+    "roll",
+    "pitch",
+    "yaw",
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pitch_moves_a_high_point_along_x_and_a_far_point_down() {
+        // ε = (0, EBX, 0), r = (rx, 0, rz): ε × r = (EBX·rz, 0, −EBX·rx).
+        let e = ErrorMotions {
+            pitch: Profile::poly(vec![10e-6]),
+            ..Default::default()
+        };
+        let d = e.deviation(0.3, DVec3::new(0.5, 0.0, 1.0));
+        assert!((d - DVec3::new(10e-6, 0.0, -5e-6)).length() < 1e-18);
+    }
+}

@@ -1,0 +1,456 @@
+//! Machine structure from URDF: links joined by fixed joints merged into rigid bodies, prismatic joints
+//! kept as axes (guideways). Unknown tags are ignored and meshes are never loaded (no collision
+//! geometry is needed); a malformed structure is rejected with an error that names the link or joint.
+
+use rapier3d_f64::glamx::{DMat3, DQuat, DVec3};
+use std::collections::{BTreeMap, HashMap};
+
+/// Why a URDF could not be turned into a machine.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum UrdfError {
+    #[error("not a readable URDF: {0}")]
+    Parse(String),
+    #[error("joint `{joint}`: {what}")]
+    Joint { joint: String, what: String },
+    #[error("link `{link}`: {what}")]
+    Link { link: String, what: String },
+    #[error("structure: {0}")]
+    Structure(String),
+}
+
+/// A rigid placement: x_parent = rotation·x_child + translation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    pub translation: DVec3,
+    pub rotation: DQuat,
+}
+
+impl Frame {
+    pub const IDENTITY: Frame = Frame {
+        translation: DVec3::ZERO,
+        rotation: DQuat::IDENTITY,
+    };
+
+    /// URDF origin: translation xyz (m) and fixed-axis roll, pitch, yaw (rad): R = Rz(y)·Ry(p)·Rx(r).
+    pub fn from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Frame {
+        let rotation = DQuat::from_rotation_z(rpy[2])
+            * DQuat::from_rotation_y(rpy[1])
+            * DQuat::from_rotation_x(rpy[0]);
+        Frame {
+            translation: DVec3::from_array(xyz),
+            rotation,
+        }
+    }
+
+    /// Composition: (self ∘ child) maps child coordinates to self's parent coordinates.
+    pub fn compose(&self, child: &Frame) -> Frame {
+        Frame {
+            translation: self.translation + self.rotation * child.translation,
+            rotation: self.rotation * child.rotation,
+        }
+    }
+
+    pub fn transform_point(&self, p: DVec3) -> DVec3 {
+        self.translation + self.rotation * p
+    }
+}
+
+/// Mass properties of a body, in the body frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MassProps {
+    /// kg
+    pub mass: f64,
+    /// Centre of mass, m, body frame.
+    pub com: DVec3,
+    /// Inertia tensor about the centre of mass, kg·m², body-frame axes.
+    pub inertia: DMat3,
+}
+
+impl MassProps {
+    pub const ZERO: MassProps = MassProps {
+        mass: 0.0,
+        com: DVec3::ZERO,
+        inertia: DMat3::ZERO,
+    };
+
+    /// Combines two sets of mass properties expressed in the same frame (parallel-axis theorem:
+    /// I = Σ [I_i + m_i·(|d_i|²·1 − d_i·d_iᵀ)], d_i = com_i − com).
+    pub fn combine(&self, other: &MassProps) -> MassProps {
+        let mass = self.mass + other.mass;
+        if mass <= 0.0 {
+            return MassProps::ZERO;
+        }
+        let com = (self.com * self.mass + other.com * other.mass) / mass;
+        let shift = |m: f64, d: DVec3| {
+            m * (DMat3::from_diagonal(DVec3::splat(d.length_squared()))
+                - DMat3::from_cols(d * d.x, d * d.y, d * d.z))
+        };
+        let inertia = self.inertia
+            + shift(self.mass, self.com - com)
+            + other.inertia
+            + shift(other.mass, other.com - com);
+        MassProps { mass, com, inertia }
+    }
+
+    /// The same properties seen in a parent frame.
+    pub fn transformed(&self, f: &Frame) -> MassProps {
+        let r = DMat3::from_quat(f.rotation);
+        MassProps {
+            mass: self.mass,
+            com: f.transform_point(self.com),
+            inertia: r * self.inertia * r.transpose(),
+        }
+    }
+}
+
+/// A rigid body: links welded by fixed joints. Its frame is the frame of its first (root) link.
+#[derive(Clone, Debug)]
+pub struct Body {
+    pub name: String,
+    /// Each link of the body with its placement in the body frame.
+    pub links: Vec<(String, Frame)>,
+    pub mass: MassProps,
+}
+
+impl Body {
+    pub fn link_frame(&self, link: &str) -> Option<Frame> {
+        self.links.iter().find(|(n, _)| n == link).map(|(_, f)| *f)
+    }
+}
+
+/// A prismatic joint: the child body slides along `axis` relative to the parent body.
+#[derive(Clone, Debug)]
+pub struct PrismaticAxis {
+    pub joint: String,
+    pub parent: usize,
+    pub child: usize,
+    /// Placement of the child body frame in the parent body frame at joint position 0.
+    pub origin: Frame,
+    /// Unit direction of motion, in the parent body frame.
+    pub axis: DVec3,
+    /// Travel limits, m.
+    pub lower: f64,
+    pub upper: f64,
+    /// URDF `<dynamics damping friction>` (N·s/m, N), zero where absent.
+    pub damping: f64,
+    pub friction: f64,
+    /// URDF `<limit effort velocity>` (N, m/s).
+    pub effort: f64,
+    pub velocity: f64,
+}
+
+/// The structure of a machine: bodies and the prismatic axes joining them. Body 0 is the base.
+#[derive(Clone, Debug)]
+pub struct MachineStructure {
+    pub name: String,
+    pub bodies: Vec<Body>,
+    pub axes: Vec<PrismaticAxis>,
+}
+
+impl MachineStructure {
+    pub fn axis_by_joint(&self, joint: &str) -> Option<&PrismaticAxis> {
+        self.axes.iter().find(|a| a.joint == joint)
+    }
+
+    pub fn body_of_link(&self, link: &str) -> Option<usize> {
+        self.bodies
+            .iter()
+            .position(|b| b.links.iter().any(|(n, _)| n == link))
+    }
+}
+
+fn finite3(v: [f64; 3]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+/// Reads a machine structure from URDF text. Revolute, continuous and other joints are accepted but
+/// treated as fixed (vmt simulates linear axes); prismatic joints become axes.
+pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
+    let robot = urdf_rs::read_from_string(text).map_err(|e| UrdfError::Parse(e.to_string()))?;
+    let mut link_index: HashMap<&str, usize> = HashMap::new();
+    for (i, l) in robot.links.iter().enumerate() {
+        if link_index.insert(l.name.as_str(), i).is_some() {
+            return Err(UrdfError::Link {
+                link: l.name.clone(),
+                what: "defined twice".into(),
+            });
+        }
+    }
+    if robot.links.is_empty() {
+        return Err(UrdfError::Structure("the URDF has no <link>".into()));
+    }
+    // Each link's inertial, checked.
+    let mut link_mass = Vec::with_capacity(robot.links.len());
+    for l in &robot.links {
+        let i = &l.inertial;
+        let m = i.mass.value;
+        let t = &i.inertia;
+        let vals = [m, t.ixx, t.ixy, t.ixz, t.iyy, t.iyz, t.izz];
+        if !vals.iter().all(|v| v.is_finite())
+            || !finite3(i.origin.xyz.0)
+            || !finite3(i.origin.rpy.0)
+        {
+            return Err(UrdfError::Link {
+                link: l.name.clone(),
+                what: "inertial contains NaN or infinity".into(),
+            });
+        }
+        if m < 0.0 {
+            return Err(UrdfError::Link {
+                link: l.name.clone(),
+                what: format!("negative mass {m} kg"),
+            });
+        }
+        let tensor = DMat3::from_cols(
+            DVec3::new(t.ixx, t.ixy, t.ixz),
+            DVec3::new(t.ixy, t.iyy, t.iyz),
+            DVec3::new(t.ixz, t.iyz, t.izz),
+        );
+        if m > 0.0 && !positive_definite(&tensor) {
+            return Err(UrdfError::Link {
+                link: l.name.clone(),
+                what: format!(
+                    "inertia is not positive definite (ixx={} iyy={} izz={} ixy={} ixz={} iyz={})",
+                    t.ixx, t.iyy, t.izz, t.ixy, t.ixz, t.iyz
+                ),
+            });
+        }
+        let local = MassProps {
+            mass: m,
+            com: DVec3::ZERO,
+            inertia: if m > 0.0 { tensor } else { DMat3::ZERO },
+        };
+        link_mass.push(local.transformed(&Frame::from_xyz_rpy(i.origin.xyz.0, i.origin.rpy.0)));
+    }
+    // Tree: every link has at most one parent joint; exactly one root.
+    let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
+    for (ji, j) in robot.joints.iter().enumerate() {
+        let p = *link_index
+            .get(j.parent.link.as_str())
+            .ok_or_else(|| UrdfError::Joint {
+                joint: j.name.clone(),
+                what: format!("parent link `{}` does not exist", j.parent.link),
+            })?;
+        let c = *link_index
+            .get(j.child.link.as_str())
+            .ok_or_else(|| UrdfError::Joint {
+                joint: j.name.clone(),
+                what: format!("child link `{}` does not exist", j.child.link),
+            })?;
+        if p == c {
+            return Err(UrdfError::Joint {
+                joint: j.name.clone(),
+                what: "parent and child are the same link".into(),
+            });
+        }
+        if parent_joint[c].is_some() {
+            return Err(UrdfError::Joint {
+                joint: j.name.clone(),
+                what: format!("link `{}` already has a parent joint", j.child.link),
+            });
+        }
+        if !finite3(j.origin.xyz.0) || !finite3(j.origin.rpy.0) || !finite3(j.axis.xyz.0) {
+            return Err(UrdfError::Joint {
+                joint: j.name.clone(),
+                what: "origin or axis contains NaN or infinity".into(),
+            });
+        }
+        parent_joint[c] = Some(ji);
+    }
+    let roots: Vec<usize> = (0..robot.links.len())
+        .filter(|&i| parent_joint[i].is_none())
+        .collect();
+    if roots.len() != 1 {
+        let names: Vec<&str> = roots
+            .iter()
+            .map(|&i| robot.links[i].name.as_str())
+            .collect();
+        return Err(UrdfError::Structure(if roots.is_empty() {
+            "no root link: the joints form a cycle".into()
+        } else {
+            format!(
+                "more than one root link (links without a parent joint): {}",
+                names.join(", ")
+            )
+        }));
+    }
+    // Walk from the root; detect cycles (a link unreachable from the root sits on a cycle).
+    let mut children: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
+    for (ji, j) in robot.joints.iter().enumerate() {
+        children[link_index[j.parent.link.as_str()]].push(ji);
+    }
+    let mut body_of: Vec<Option<usize>> = vec![None; robot.links.len()];
+    let mut bodies: Vec<Body> = Vec::new();
+    let mut axes: Vec<PrismaticAxis> = Vec::new();
+    let root = roots[0];
+    bodies.push(Body {
+        name: robot.links[root].name.clone(),
+        links: vec![(robot.links[root].name.clone(), Frame::IDENTITY)],
+        mass: link_mass[root],
+    });
+    body_of[root] = Some(0);
+    let mut stack = vec![root];
+    while let Some(l) = stack.pop() {
+        let b = body_of[l].expect("visited links have a body");
+        let lf = bodies[b]
+            .link_frame(&robot.links[l].name)
+            .expect("link is in its body");
+        for &ji in &children[l] {
+            let j = &robot.joints[ji];
+            let c = link_index[j.child.link.as_str()];
+            if body_of[c].is_some() {
+                return Err(UrdfError::Structure(format!(
+                    "joint `{}` closes a cycle",
+                    j.name
+                )));
+            }
+            let origin = Frame::from_xyz_rpy(j.origin.xyz.0, j.origin.rpy.0);
+            if j.joint_type == urdf_rs::JointType::Prismatic {
+                let a = DVec3::from_array(j.axis.xyz.0);
+                if a.length() < 1e-12 {
+                    return Err(UrdfError::Joint {
+                        joint: j.name.clone(),
+                        what: "axis has zero length".into(),
+                    });
+                }
+                let cb = bodies.len();
+                bodies.push(Body {
+                    name: j.child.link.clone(),
+                    links: vec![(j.child.link.clone(), Frame::IDENTITY)],
+                    mass: link_mass[c],
+                });
+                let placed = lf.compose(&origin);
+                let (lower, upper) = (j.limit.lower, j.limit.upper);
+                if !(lower.is_finite() && upper.is_finite()) || lower > upper {
+                    return Err(UrdfError::Joint { joint: j.name.clone(), what: format!("limits lower={lower} upper={upper}: expected finite with lower ≤ upper") });
+                }
+                let dynamics = j.dynamics.clone().unwrap_or(urdf_rs::Dynamics {
+                    damping: 0.0,
+                    friction: 0.0,
+                });
+                axes.push(PrismaticAxis {
+                    joint: j.name.clone(),
+                    parent: b,
+                    child: cb,
+                    origin: placed,
+                    axis: placed.rotation * a.normalize(),
+                    lower,
+                    upper,
+                    damping: dynamics.damping,
+                    friction: dynamics.friction,
+                    effort: j.limit.effort,
+                    velocity: j.limit.velocity,
+                });
+                body_of[c] = Some(cb);
+            } else {
+                let placed = lf.compose(&origin);
+                bodies[b].links.push((j.child.link.clone(), placed));
+                bodies[b].mass = bodies[b].mass.combine(&link_mass[c].transformed(&placed));
+                body_of[c] = Some(b);
+            }
+            stack.push(c);
+        }
+    }
+    if let Some(l) = (0..robot.links.len()).find(|&i| body_of[i].is_none()) {
+        return Err(UrdfError::Structure(format!(
+            "link `{}` is not connected to the root (cycle)",
+            robot.links[l].name
+        )));
+    }
+    for a in &axes {
+        let b = &bodies[a.child];
+        if b.mass.mass <= 0.0 || !positive_definite(&b.mass.inertia) {
+            return Err(UrdfError::Link {
+                link: b.name.clone(),
+                what: format!("moves on prismatic joint `{}` but has mass {} kg and a non-positive-definite inertia: a moving body needs positive mass and inertia", a.joint, b.mass.mass),
+            });
+        }
+    }
+    Ok(MachineStructure {
+        name: robot.name.clone(),
+        bodies,
+        axes,
+    })
+}
+
+/// Sylvester's criterion on a symmetric 3×3 matrix.
+fn positive_definite(m: &DMat3) -> bool {
+    let a = m.to_cols_array_2d();
+    let d1 = a[0][0];
+    let d2 = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+    d1 > 0.0 && d2 > 0.0 && m.determinant() > 0.0
+}
+
+/// Names of the links by body, for messages.
+pub fn describe(m: &MachineStructure) -> BTreeMap<String, Vec<String>> {
+    m.bodies
+        .iter()
+        .map(|b| {
+            (
+                b.name.clone(),
+                b.links.iter().map(|(n, _)| n.clone()).collect(),
+            )
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TWO_LINKS: &str = r#"<robot name="r">
+      <link name="base"/>
+      <link name="cart"><inertial><mass value="2"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
+      <link name="top"><inertial><origin xyz="0 0 1"/><mass value="2"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
+      <joint name="slide" type="prismatic"><parent link="base"/><child link="cart"/><axis xyz="1 0 0"/><limit lower="0" upper="1" effort="10" velocity="1"/><dynamics damping="3" friction="4"/></joint>
+      <joint name="weld" type="fixed"><parent link="cart"/><child link="top"/></joint>
+      <unknown_tag foo="bar"/>
+    </robot>"#;
+
+    #[test]
+    fn fixed_links_merge_with_the_parallel_axis_theorem() {
+        let m = parse_urdf(TWO_LINKS).unwrap();
+        assert_eq!(m.bodies.len(), 2);
+        let cart = &m.bodies[m.axes[0].child];
+        assert_eq!(cart.mass.mass, 4.0);
+        assert!((cart.mass.com - DVec3::new(0.0, 0.0, 0.5)).length() < 1e-15);
+        // Hand-worked: Ixx = 1 + 1 + 2·0.5² + 2·0.5² = 3; Izz = 2 (no offset about z).
+        assert!((cart.mass.inertia.x_axis.x - 3.0).abs() < 1e-12);
+        assert!((cart.mass.inertia.z_axis.z - 2.0).abs() < 1e-12);
+        assert_eq!((m.axes[0].damping, m.axes[0].friction), (3.0, 4.0));
+    }
+
+    #[test]
+    fn missing_parent_link_is_named() {
+        let bad = TWO_LINKS.replace(r#"<parent link="cart"/>"#, r#"<parent link="nowhere"/>"#);
+        let e = parse_urdf(&bad).unwrap_err().to_string();
+        assert!(e.contains("weld") && e.contains("nowhere"), "{e}");
+    }
+
+    #[test]
+    fn a_cycle_is_rejected() {
+        let bad = TWO_LINKS.replace(
+            "<unknown_tag foo=\"bar\"/>",
+            r#"<joint name="loop" type="fixed"><parent link="top"/><child link="base"/></joint>"#,
+        );
+        assert!(parse_urdf(&bad).is_err());
+    }
+
+    #[test]
+    fn a_moving_body_without_mass_is_rejected() {
+        let bad = TWO_LINKS.replace(r#"<mass value="2"/>"#, r#"<mass value="0"/>"#);
+        let e = parse_urdf(&bad).unwrap_err().to_string();
+        assert!(e.contains("cart") && e.contains("positive mass"), "{e}");
+    }
+
+    #[test]
+    fn non_positive_definite_inertia_and_nan_are_rejected() {
+        let bad = TWO_LINKS.replacen(r#"ixx="1""#, r#"ixx="-1""#, 1);
+        assert!(parse_urdf(&bad)
+            .unwrap_err()
+            .to_string()
+            .contains("positive definite"));
+        let nan = TWO_LINKS.replacen(r#"<mass value="2"/>"#, r#"<mass value="NaN"/>"#, 1);
+        assert!(parse_urdf(&nan).is_err());
+    }
+}
