@@ -120,6 +120,13 @@ impl<'a> AxisSim<'a> {
         }
     }
 
+    /// Adds a velocity change to the body at its centre of mass (an impulse-hammer test), m/s.
+    pub fn kick(&mut self, dv: DVec3) {
+        let rb = &mut self.world.bodies[self.body];
+        let v = rb.linvel();
+        rb.set_linvel(v + dv, true);
+    }
+
     /// Time of the current state, s.
     pub fn time(&self) -> f64 {
         self.steps as f64 * self.model.dt

@@ -1,0 +1,504 @@
+//! Measurement procedures (DESIGN.md §6): what a metrologist runs on the machine. Each procedure is
+//! simulated once into noise-free truth traces (`simulate_procedure`); sensors then read them with
+//! seeded noise (`read_run`), as often as a tolerance study needs.
+
+use crate::axis_sim::{simulate, Sample};
+use crate::geometry::ErrorMotions;
+use crate::machine::AxisModel;
+use crate::motion::MotionPlan;
+use crate::rng::source_rng;
+use crate::sensors::{apply_errors, true_readings, SensorKind, SensorSpec};
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+/// Procedure names of FORMAT.md §1.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ProcedureKind {
+    Positioning,
+    ConstantVelocity,
+    Crawl,
+    FrictionSweep,
+    Free,
+}
+
+impl ProcedureKind {
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            ProcedureKind::Positioning => "positioning",
+            ProcedureKind::ConstantVelocity => "constant_velocity",
+            ProcedureKind::Crawl => "crawl",
+            ProcedureKind::FrictionSweep => "friction_sweep",
+            ProcedureKind::Free => "free",
+        }
+    }
+}
+
+fn d_dwell() -> f64 {
+    1.0
+}
+fn d_average() -> f64 {
+    0.2
+}
+fn d_rate() -> f64 {
+    500.0
+}
+fn d_runs() -> u32 {
+    5
+}
+fn d_targets() -> usize {
+    11
+}
+fn d_high_rate() -> f64 {
+    1200.0
+}
+fn d_one() -> i8 {
+    1
+}
+fn d_overrun() -> f64 {
+    0.005
+}
+fn d_settle() -> f64 {
+    0.2
+}
+
+/// A procedure as a scenario declares it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ProcedureSpec {
+    /// Constant-velocity passes at several speeds with equal sample counts (seed 000): the highest speed is
+    /// sampled at `high_rate` (default 1200 Hz), each other speed v at high_rate·v/v_max, over the range
+    /// [start, end] (m) reached at full speed after `settle` seconds.
+    ConstantVelocity {
+        name: String,
+        speeds: Vec<f64>,
+        start: f64,
+        end: f64,
+        #[serde(default = "d_high_rate")]
+        high_rate: f64,
+        #[serde(default = "d_one")]
+        direction: i8,
+        #[serde(default = "d_settle")]
+        settle: f64,
+        sensors: Vec<String>,
+    },
+    /// ISO 230-2 bidirectional positioning cycle: `targets` (or `n_targets` irregularly spaced between
+    /// start and end), `runs` linear cycles up and down with an `overrun` before each reversal, dwell
+    /// `dwell` s at each target, readings averaged over the last `average` s sampled at `rate` Hz.
+    Positioning {
+        name: String,
+        #[serde(default)]
+        targets: Option<Vec<f64>>,
+        #[serde(default = "d_targets")]
+        n_targets: usize,
+        start: f64,
+        end: f64,
+        #[serde(default = "d_runs")]
+        runs: u32,
+        feed: f64,
+        #[serde(default = "d_dwell")]
+        dwell: f64,
+        #[serde(default = "d_average")]
+        average: f64,
+        #[serde(default = "d_rate")]
+        rate: f64,
+        #[serde(default = "d_overrun")]
+        overrun: f64,
+        sensors: Vec<String>,
+    },
+    /// Seed 003's laser 9-line / three-point measurement of one axis: targets every `step` m from start to
+    /// end, one bidirectional run, every laser line read at every target.
+    NineLine {
+        name: String,
+        start: f64,
+        end: f64,
+        step: f64,
+        feed: f64,
+        #[serde(default = "d_dwell")]
+        dwell: f64,
+        #[serde(default = "d_average")]
+        average: f64,
+        #[serde(default = "d_rate")]
+        rate: f64,
+        #[serde(default = "d_overrun")]
+        overrun: f64,
+        sensors: Vec<String>,
+    },
+}
+
+impl ProcedureSpec {
+    pub fn name(&self) -> &str {
+        match self {
+            ProcedureSpec::ConstantVelocity { name, .. }
+            | ProcedureSpec::Positioning { name, .. }
+            | ProcedureSpec::NineLine { name, .. } => name,
+        }
+    }
+
+    pub fn sensors(&self) -> &[String] {
+        match self {
+            ProcedureSpec::ConstantVelocity { sensors, .. }
+            | ProcedureSpec::Positioning { sensors, .. }
+            | ProcedureSpec::NineLine { sensors, .. } => sensors,
+        }
+    }
+}
+
+/// One reading of a point table: an approach to a target.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Visit {
+    pub target: f64,
+    pub run: u32,
+    pub direction: i8,
+    /// Indices into the trace: the averaging window.
+    pub first: usize,
+    pub last: usize,
+}
+
+/// How a run's samples are laid out.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Layout {
+    /// Uniform samples at `rate` Hz; the trace holds one extra leading sample (accelerometers average
+    /// over the interval before each output sample).
+    TimeSeries {
+        rate: f64,
+    },
+    PointTable {
+        visits: Vec<Visit>,
+    },
+}
+
+/// The noise-free truth of one run.
+#[derive(Clone, Debug)]
+pub struct RunTruth {
+    pub name: String,
+    pub procedure: ProcedureKind,
+    pub feed: Option<f64>,
+    pub direction: Option<i8>,
+    pub start_time: f64,
+    pub sensors: Vec<String>,
+    pub layout: Layout,
+    pub samples: Vec<Sample>,
+}
+
+/// A run's data as a measurement set holds it (FORMAT.md §1), SI units.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RunData {
+    TimeSeries {
+        t: Vec<f64>,
+        columns: Vec<(String, Vec<f64>)>,
+    },
+    PointTable {
+        target: Vec<f64>,
+        run: Vec<u32>,
+        direction: Vec<i8>,
+        t: Vec<f64>,
+        columns: Vec<(String, Vec<f64>)>,
+    },
+}
+
+/// A run as measured: metadata and data.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunRecord {
+    pub name: String,
+    pub procedure: ProcedureKind,
+    pub feed: Option<f64>,
+    pub direction: Option<i8>,
+    pub start_time: f64,
+    pub data: RunData,
+}
+
+/// Irregular ISO 230-2 targets: n targets from start to end, interior ones shifted by a seeded random
+/// fraction (±0.3) of the interval so that periodic errors are not sampled at one phase.
+pub fn irregular_targets(start: f64, end: f64, n: usize, seed: u64, name: &str) -> Vec<f64> {
+    let mut rng = source_rng(seed, &format!("{name}/targets"));
+    let p = (end - start) / (n.max(2) - 1) as f64;
+    (0..n)
+        .map(|i| {
+            let base = start + p * i as f64;
+            if i == 0 || i + 1 == n {
+                base
+            } else {
+                base + p * 0.3 * (2.0 * rng.gen::<f64>() - 1.0)
+            }
+        })
+        .map(|x| (x * 1e6).round() / 1e6)
+        .collect()
+}
+
+/// Simulates a procedure; returns one truth per run.
+pub fn simulate_procedure(
+    model: &AxisModel,
+    errors: &ErrorMotions,
+    spec: &ProcedureSpec,
+    seed: u64,
+) -> Vec<RunTruth> {
+    match spec {
+        ProcedureSpec::ConstantVelocity {
+            name,
+            speeds,
+            start,
+            end,
+            high_rate,
+            direction,
+            settle,
+            sensors,
+        } => {
+            let vmax = speeds.iter().cloned().fold(0.0, f64::max);
+            let n = (high_rate * (end - start).abs() / vmax).round() as usize;
+            let labels: Vec<String> = if speeds.len() == 3 {
+                ["low", "mid", "high"]
+                    .iter()
+                    .map(|s| format!("{name}_{s}"))
+                    .collect()
+            } else {
+                (1..=speeds.len()).map(|i| format!("{name}_{i}")).collect()
+            };
+            let mut sorted: Vec<(usize, f64)> = speeds.iter().cloned().enumerate().collect();
+            sorted.sort_by(|a, b| a.1.total_cmp(&b.1));
+            sorted
+                .iter()
+                .zip(labels)
+                .map(|(&(_, v), label)| {
+                    let rate = high_rate * v / vmax;
+                    let (from, to) = if *direction >= 0 {
+                        (*start, *end)
+                    } else {
+                        (*end, *start)
+                    };
+                    let s = (to - from).signum();
+                    let ramp = v * v / (2.0 * model.max_accel) + v * settle;
+                    let mut plan = MotionPlan::starting_at(from - s * ramp);
+                    plan.dwell(0.3);
+                    let (t0, _) = plan.move_to(to + s * ramp, v, model.max_accel);
+                    let t_first = t0 + v / model.max_accel + settle;
+                    let times: Vec<f64> =
+                        (0..=n).map(|i| t_first + (i as f64 - 1.0) / rate).collect();
+                    let samples = simulate(model, errors, &plan, &times).samples;
+                    RunTruth {
+                        name: label,
+                        procedure: ProcedureKind::ConstantVelocity,
+                        feed: Some(v),
+                        direction: Some(if *direction >= 0 { 1 } else { -1 }),
+                        start_time: 0.0,
+                        sensors: sensors.clone(),
+                        layout: Layout::TimeSeries { rate },
+                        samples,
+                    }
+                })
+                .collect()
+        }
+        ProcedureSpec::Positioning {
+            name,
+            targets,
+            n_targets,
+            start,
+            end,
+            runs,
+            feed,
+            dwell,
+            average,
+            rate,
+            overrun,
+            sensors,
+        } => {
+            let targets = targets
+                .clone()
+                .unwrap_or_else(|| irregular_targets(*start, *end, *n_targets, seed, name));
+            vec![positioning_cycle(
+                model, errors, name, &targets, *runs, *feed, *dwell, *average, *rate, *overrun,
+                sensors,
+            )]
+        }
+        ProcedureSpec::NineLine {
+            name,
+            start,
+            end,
+            step,
+            feed,
+            dwell,
+            average,
+            rate,
+            overrun,
+            sensors,
+        } => {
+            let n = ((end - start) / step).round() as usize;
+            let targets: Vec<f64> = (0..=n).map(|i| start + step * i as f64).collect();
+            vec![positioning_cycle(
+                model, errors, name, &targets, 1, *feed, *dwell, *average, *rate, *overrun, sensors,
+            )]
+        }
+    }
+}
+
+/// ISO 230-2 linear cycle: for each run, approach every target upwards (from below the first target by
+/// `overrun`), then every target downwards (from above the last by `overrun`).
+#[allow(clippy::too_many_arguments)]
+fn positioning_cycle(
+    model: &AxisModel,
+    errors: &ErrorMotions,
+    name: &str,
+    targets: &[f64],
+    runs: u32,
+    feed: f64,
+    dwell: f64,
+    average: f64,
+    rate: f64,
+    overrun: f64,
+    sensors: &[String],
+) -> RunTruth {
+    let a = model.max_accel;
+    let first = targets[0];
+    let last = targets[targets.len() - 1];
+    let mut plan = MotionPlan::starting_at(first - overrun);
+    plan.dwell(0.3);
+    let mut windows = Vec::new();
+    let mut visits_meta = Vec::new();
+    for run in 1..=runs {
+        if run > 1 {
+            plan.move_to(first - overrun, feed, a);
+        }
+        for &x in targets {
+            plan.move_to(x, feed, a);
+            let (_, t1) = plan.dwell(dwell);
+            windows.push(t1);
+            visits_meta.push((x, run, 1i8));
+        }
+        plan.move_to(last + overrun, feed, a);
+        for &x in targets.iter().rev() {
+            plan.move_to(x, feed, a);
+            let (_, t1) = plan.dwell(dwell);
+            windows.push(t1);
+            visits_meta.push((x, run, -1i8));
+        }
+    }
+    let per = ((average * rate).round() as usize).max(1);
+    let mut times = Vec::with_capacity(windows.len() * per);
+    let mut visits = Vec::with_capacity(windows.len());
+    for (t1, (target, run, direction)) in windows.iter().zip(visits_meta) {
+        let first = times.len();
+        for k in 0..per {
+            times.push(t1 - (per - 1 - k) as f64 / rate);
+        }
+        visits.push(Visit {
+            target,
+            run,
+            direction,
+            first,
+            last: times.len() - 1,
+        });
+    }
+    let samples = simulate(model, errors, &plan, &times).samples;
+    RunTruth {
+        name: name.to_string(),
+        procedure: ProcedureKind::Positioning,
+        feed: Some(feed),
+        direction: None,
+        start_time: 0.0,
+        sensors: sensors.to_vec(),
+        layout: Layout::PointTable { visits },
+        samples,
+    }
+}
+
+/// Reads the sensors of a run from its truth with noise seeded by (seed, "run/sensor").
+/// Point tables hold, per visit, the mean over the averaging window; for lasers and encoders the
+/// deviation actual − target along the sensor's direction.
+pub fn read_run(
+    model: &AxisModel,
+    truth: &RunTruth,
+    sensors: &[SensorSpec],
+    seed: u64,
+) -> Result<RunRecord, String> {
+    let mut columns = Vec::new();
+    let mut x_cmd = None;
+    for name in &truth.sensors {
+        let spec = sensors
+            .iter()
+            .find(|s| &s.name == name)
+            .ok_or_else(|| {
+                format!(
+                    "run `{}` names sensor `{name}`, which is not declared",
+                    truth.name
+                )
+            })?
+            .resolved();
+        let clean = true_readings(&spec, model, &truth.samples)?;
+        let fs = match &truth.layout {
+            Layout::TimeSeries { rate } => *rate,
+            Layout::PointTable { .. } => sample_rate(&truth.samples),
+        };
+        let mut rng = source_rng(seed, &format!("{}/{}", truth.name, spec.name));
+        let noisy = apply_errors(&spec, &clean, fs, &mut rng);
+        if spec.kind == SensorKind::Command {
+            x_cmd = Some(noisy.clone());
+        }
+        columns.push((spec.name.clone(), spec, noisy));
+    }
+    let data = match &truth.layout {
+        Layout::TimeSeries { .. } => {
+            let t: Vec<f64> = truth.samples[1..].iter().map(|s| s.t).collect();
+            let mut cols = vec![(
+                "x_cmd".to_string(),
+                x_cmd
+                    .map(|c| c[1..].to_vec())
+                    .unwrap_or_else(|| truth.samples[1..].iter().map(|s| s.cmd.pos).collect()),
+            )];
+            cols.extend(
+                columns
+                    .into_iter()
+                    .filter(|(_, s, _)| s.kind != SensorKind::Command)
+                    .map(|(n, _, v)| (n, v[1..].to_vec())),
+            );
+            RunData::TimeSeries { t, columns: cols }
+        }
+        Layout::PointTable { visits } => {
+            let mean = |v: &[f64], a: &Visit| {
+                v[a.first..=a.last].iter().sum::<f64>() / (a.last - a.first + 1) as f64
+            };
+            let cols = columns
+                .into_iter()
+                .filter(|(_, s, _)| s.kind != SensorKind::Command)
+                .map(|(n, s, v)| {
+                    let nominal = |target: f64| match s.kind {
+                        SensorKind::EncoderLinear | SensorKind::EncoderRotary => target,
+                        SensorKind::LaserLinear
+                        | SensorKind::LaserStraightness
+                        | SensorKind::LaserVector => s.unit_direction().dot(model.axis) * target,
+                        _ => 0.0,
+                    };
+                    (
+                        n,
+                        visits
+                            .iter()
+                            .map(|a| mean(&v, a) - nominal(a.target))
+                            .collect(),
+                    )
+                })
+                .collect();
+            RunData::PointTable {
+                target: visits.iter().map(|a| a.target).collect(),
+                run: visits.iter().map(|a| a.run).collect(),
+                direction: visits.iter().map(|a| a.direction).collect(),
+                t: visits.iter().map(|a| truth.samples[a.last].t).collect(),
+                columns: cols,
+            }
+        }
+    };
+    Ok(RunRecord {
+        name: truth.name.clone(),
+        procedure: truth.procedure,
+        feed: truth.feed,
+        direction: truth.direction,
+        start_time: truth.start_time,
+        data,
+    })
+}
+
+/// Sample rate of the averaging windows of a point table (from the first two samples), Hz.
+fn sample_rate(samples: &[Sample]) -> f64 {
+    match samples {
+        [a, b, ..] if b.t > a.t => 1.0 / (b.t - a.t),
+        _ => 1.0,
+    }
+}

@@ -1,0 +1,255 @@
+//! Sensors (DESIGN.md §5): each reads the noise-free truth trace of a run and adds its own errors and
+//! seeded noise. Sensor noise never feeds back into the physics, so one simulated trace serves many
+//! noise draws (tolerance studies).
+//!
+//! Mounting: `position` is a point of the moving body in the axis frame (m, from the axis reference
+//! point); `direction` is the sensitive direction: in the machine frame for lasers (the optics sit on
+//! the bed), in the axis frame of the moving body for accelerometers (they tilt with it).
+
+use crate::axis_sim::{Sample, GRAVITY};
+use crate::machine::AxisModel;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use rapier3d_f64::glamx::{DQuat, DVec3};
+use serde::{Deserialize, Serialize};
+
+/// Sensor kinds, named as in FORMAT.md §1.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SensorKind {
+    Command,
+    EncoderRotary,
+    EncoderLinear,
+    LaserLinear,
+    LaserStraightness,
+    LaserAngular,
+    LaserVector,
+    Accelerometer,
+    MotorForce,
+    Velocity,
+    Temperature,
+}
+
+impl SensorKind {
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            SensorKind::Command => "command",
+            SensorKind::EncoderRotary => "encoder_rotary",
+            SensorKind::EncoderLinear => "encoder_linear",
+            SensorKind::LaserLinear => "laser_linear",
+            SensorKind::LaserStraightness => "laser_straightness",
+            SensorKind::LaserAngular => "laser_angular",
+            SensorKind::LaserVector => "laser_vector",
+            SensorKind::Accelerometer => "accelerometer",
+            SensorKind::MotorForce => "motor_force",
+            SensorKind::Velocity => "velocity",
+            SensorKind::Temperature => "temperature",
+        }
+    }
+
+    /// In a positioning point table the sensor holds a deviation (actual − target) rather than a reading.
+    pub fn reads_deviation(&self) -> bool {
+        matches!(
+            self,
+            SensorKind::EncoderLinear
+                | SensorKind::EncoderRotary
+                | SensorKind::LaserLinear
+                | SensorKind::LaserVector
+        )
+    }
+}
+
+/// Accelerometer presets (DESIGN.md §5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AccelPreset {
+    /// MEMS part: 25 µg/√Hz, 2 mg bias, 0.5 % scale error, 16-bit over ±2 g (61 µg LSB), DC response.
+    Mems,
+    /// Seismic piezo part: 0.3 µg/√Hz, no DC response (first-order high-pass at 0.2 Hz), 24-bit ADC.
+    Piezo,
+}
+
+/// A sensor as a scenario declares it. Unset error terms are zero.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorSpec {
+    pub name: String,
+    pub kind: SensorKind,
+    /// Mount point on the moving body, axis frame, m. Alternatively `link`.
+    #[serde(default)]
+    pub position: Option<[f64; 3]>,
+    /// A link of the moving body whose origin is the mount point.
+    #[serde(default)]
+    pub link: Option<String>,
+    /// Sensitive direction (unit vector after normalisation).
+    #[serde(default = "default_direction")]
+    pub direction: [f64; 3],
+    /// White noise, 1σ per sample, SI unit of the channel.
+    #[serde(default)]
+    pub sigma: f64,
+    /// Quantisation step (resolution, LSB), SI unit of the channel.
+    #[serde(default)]
+    pub resolution: f64,
+    /// Accelerometer noise density, m/s²/√Hz (one-sided): σ per sample = ρ·√(fs/2).
+    #[serde(default)]
+    pub noise_density: f64,
+    /// Constant bias, SI unit of the channel.
+    #[serde(default)]
+    pub bias: f64,
+    /// Scale-factor error (reading = (1 + s)·true).
+    #[serde(default)]
+    pub scale_factor: f64,
+    /// First-order high-pass corner, Hz (piezo accelerometers have no DC response); 0 = DC coupled.
+    #[serde(default)]
+    pub highpass: f64,
+    #[serde(default)]
+    pub preset: Option<AccelPreset>,
+}
+
+fn default_direction() -> [f64; 3] {
+    [1.0, 0.0, 0.0]
+}
+
+impl SensorSpec {
+    /// The spec with its preset's values filled in where the spec leaves them zero.
+    pub fn resolved(&self) -> SensorSpec {
+        let mut s = self.clone();
+        let ug = GRAVITY * 1e-6;
+        let (rho, bias, scale, lsb, hp) = match self.preset {
+            Some(AccelPreset::Mems) => {
+                (25.0 * ug, 2000.0 * ug, 0.005, 4.0 * GRAVITY / 65536.0, 0.0)
+            }
+            Some(AccelPreset::Piezo) => (0.3 * ug, 0.0, 0.0, 20.0 * GRAVITY / 16_777_216.0, 0.2),
+            None => return s,
+        };
+        let fill = |v: &mut f64, d: f64| {
+            if *v == 0.0 {
+                *v = d
+            }
+        };
+        fill(&mut s.noise_density, rho);
+        fill(&mut s.bias, bias);
+        fill(&mut s.scale_factor, scale);
+        fill(&mut s.resolution, lsb);
+        fill(&mut s.highpass, hp);
+        s
+    }
+
+    /// Mount point in the body frame.
+    pub fn mount(&self, model: &AxisModel) -> Result<DVec3, String> {
+        match (&self.position, &self.link) {
+            (Some(p), None) => {
+                Ok(model.home.rotation.inverse() * (model.axis_rotation * DVec3::from_array(*p)))
+            }
+            (None, Some(l)) => model.link(l).map(|f| f.translation).ok_or_else(|| {
+                format!(
+                    "sensor `{}`: link `{l}` is not a link of the moving body",
+                    self.name
+                )
+            }),
+            (None, None) => Ok(DVec3::ZERO),
+            (Some(_), Some(_)) => Err(format!(
+                "sensor `{}`: give either position or link, not both",
+                self.name
+            )),
+        }
+    }
+
+    /// Mount point in the axis frame (as written in a measurement-set manifest).
+    pub fn axis_position(&self, model: &AxisModel) -> Result<[f64; 3], String> {
+        Ok(model.body_to_axis(self.mount(model)?).to_array())
+    }
+
+    pub fn unit_direction(&self) -> DVec3 {
+        DVec3::from_array(self.direction).normalize_or_zero()
+    }
+}
+
+/// Noise-free reading of a sensor at every sample of a trace (index 0 is the sample before the first
+/// output for accelerometers, which average over the preceding interval). Laser and encoder readings are
+/// displacements from the axis home position, m; accelerometers proper acceleration, m/s².
+pub fn true_readings(
+    spec: &SensorSpec,
+    model: &AxisModel,
+    samples: &[Sample],
+) -> Result<Vec<f64>, String> {
+    let mount = spec.mount(model)?;
+    let d = spec.unit_direction();
+    let home_point = model.home.transform_point(mount);
+    Ok(match spec.kind {
+        SensorKind::Command => samples.iter().map(|s| s.cmd.pos).collect(),
+        SensorKind::EncoderLinear | SensorKind::EncoderRotary => {
+            samples.iter().map(|s| s.feedback).collect()
+        }
+        SensorKind::MotorForce => samples.iter().map(|s| s.force).collect(),
+        SensorKind::Velocity => samples
+            .iter()
+            .map(|s| s.point_velocity(model, mount).dot(model.axis))
+            .collect(),
+        SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => {
+            samples
+                .iter()
+                .map(|s| d.dot(s.point(model, mount) - home_point))
+                .collect()
+        }
+        SensorKind::LaserAngular => samples.iter().map(|s| d.dot(s.rot)).collect(),
+        SensorKind::Accelerometer => {
+            let axis_dir = model.home.rotation * (model.axis_rotation * d);
+            let mut out = Vec::with_capacity(samples.len());
+            for (i, s) in samples.iter().enumerate() {
+                let a = if i == 0 {
+                    DVec3::ZERO
+                } else {
+                    let p = &samples[i - 1];
+                    (s.point_velocity(model, mount) - p.point_velocity(model, mount)) / (s.t - p.t)
+                };
+                let proper = a + DVec3::new(0.0, 0.0, GRAVITY);
+                out.push((DQuat::from_scaled_axis(s.rot) * axis_dir).dot(proper));
+            }
+            out
+        }
+        SensorKind::Temperature => samples.iter().map(|_| 20.0 + 273.15).collect(),
+    })
+}
+
+/// Applies a sensor's errors and seeded noise to noise-free readings sampled at `fs` (Hz):
+/// y = Q[HP((1 + s)·x + b) + n], n ~ N(0, σ²) with σ from `sigma` or ρ·√(fs/2), Q quantisation.
+pub fn apply_errors(spec: &SensorSpec, truth: &[f64], fs: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
+    let sigma = if spec.noise_density > 0.0 {
+        spec.noise_density * (fs / 2.0).sqrt()
+    } else {
+        spec.sigma
+    };
+    let mut out: Vec<f64> = truth
+        .iter()
+        .map(|x| (1.0 + spec.scale_factor) * x + spec.bias)
+        .collect();
+    if spec.highpass > 0.0 && fs > 0.0 {
+        out = highpass_first_order(&out, spec.highpass, fs);
+    }
+    for y in out.iter_mut() {
+        let n: f64 = rng.sample(StandardNormal);
+        *y += sigma * n;
+        if spec.resolution > 0.0 {
+            *y = (*y / spec.resolution).round() * spec.resolution;
+        }
+    }
+    out
+}
+
+/// First-order RC high-pass, discrete: y[n] = α·(y[n−1] + x[n] − x[n−1]), α = RC/(RC + T), RC = 1/(2π·fc),
+/// started at steady state (y[0] = 0).
+pub fn highpass_first_order(x: &[f64], fc: f64, fs: f64) -> Vec<f64> {
+    let rc = 1.0 / (std::f64::consts::TAU * fc);
+    let alpha = rc / (rc + 1.0 / fs);
+    let mut y = Vec::with_capacity(x.len());
+    for (i, &xi) in x.iter().enumerate() {
+        y.push(if i == 0 {
+            0.0
+        } else {
+            alpha * (y[i - 1] + xi - x[i - 1])
+        });
+    }
+    y
+}
