@@ -126,6 +126,13 @@ impl AxisModel {
             return Err(bad("vmt simulates axes whose parent is the fixed base; stacked axes are not supported yet".into()));
         }
         let body = &m.bodies[ax.child];
+        let mp = &body.mass;
+        if !(mp.mass > 0.0) || !crate::urdf::positive_definite(&mp.inertia) {
+            return Err(bad(format!(
+                "moving body `{}` has mass {} kg and a non-positive-definite inertia: a simulated moving body needs positive mass and inertia (add <inertial> to its links)",
+                body.name, mp.mass
+            )));
+        }
         let blocks: Vec<DVec3> = body
             .links
             .iter()

@@ -69,6 +69,13 @@ impl Segment {
                 let (ta, vp) = ramp(d, feed, accel);
                 let total = self.duration();
                 let tau = (t - t0).clamp(0.0, total);
+                if tau >= total {
+                    return Command {
+                        pos: x1,
+                        vel: 0.0,
+                        acc: 0.0,
+                    };
+                }
                 let (p, v, a) = if tau < ta {
                     (0.5 * accel * tau * tau, accel * tau, accel)
                 } else if tau <= total - ta {

@@ -402,8 +402,11 @@ fn positioning_cycle(
 }
 
 /// Reads the sensors of a run from its truth with noise seeded by (seed, "run/sensor").
-/// Point tables hold, per visit, the mean over the averaging window; for lasers and encoders the
-/// deviation actual − target along the sensor's direction.
+///
+/// Time series: one reading per sample. Point tables: per visit, the noise-free reading averaged over
+/// the dwell's averaging window, then the sensor's errors and noise applied once per reading (a
+/// sensor's `sigma` is the 1σ of one reading); lasers and encoders hold the deviation actual − target
+/// along their direction.
 pub fn read_run(
     model: &AxisModel,
     truth: &RunTruth,
@@ -411,7 +414,6 @@ pub fn read_run(
     seed: u64,
 ) -> Result<RunRecord, String> {
     let mut columns = Vec::new();
-    let mut x_cmd = None;
     for name in &truth.sensors {
         let spec = sensors
             .iter()
@@ -424,66 +426,65 @@ pub fn read_run(
             })?
             .resolved();
         let clean = true_readings(&spec, model, &truth.samples)?;
-        let fs = match &truth.layout {
-            Layout::TimeSeries { rate } => *rate,
-            Layout::PointTable { .. } => sample_rate(&truth.samples),
-        };
         let mut rng = source_rng(seed, &format!("{}/{}", truth.name, spec.name));
-        let noisy = apply_errors(&spec, &clean, fs, &mut rng);
-        if spec.kind == SensorKind::Command {
-            x_cmd = Some(noisy.clone());
-        }
-        columns.push((spec.name.clone(), spec, noisy));
+        let values = match &truth.layout {
+            Layout::TimeSeries { rate } => apply_errors(&spec, &clean[1..], *rate, &mut rng),
+            Layout::PointTable { visits } => {
+                let nominal = |target: f64| match spec.kind {
+                    SensorKind::EncoderLinear | SensorKind::EncoderRotary => target,
+                    SensorKind::LaserLinear
+                    | SensorKind::LaserStraightness
+                    | SensorKind::LaserVector => spec.unit_direction().dot(model.axis) * target,
+                    _ => 0.0,
+                };
+                let means: Vec<f64> = visits
+                    .iter()
+                    .map(|a| {
+                        clean[a.first..=a.last].iter().sum::<f64>() / (a.last - a.first + 1) as f64
+                            - nominal(a.target)
+                    })
+                    .collect();
+                let window = visits
+                    .first()
+                    .map_or(1.0, |a| (a.last - a.first + 1) as f64);
+                apply_errors(
+                    &spec,
+                    &means,
+                    sample_rate(&truth.samples) / window,
+                    &mut rng,
+                )
+            }
+        };
+        columns.push((spec, values));
     }
     let data = match &truth.layout {
         Layout::TimeSeries { .. } => {
             let t: Vec<f64> = truth.samples[1..].iter().map(|s| s.t).collect();
-            let mut cols = vec![(
-                "x_cmd".to_string(),
-                x_cmd
-                    .map(|c| c[1..].to_vec())
-                    .unwrap_or_else(|| truth.samples[1..].iter().map(|s| s.cmd.pos).collect()),
-            )];
+            let x_cmd = columns
+                .iter()
+                .find(|(s, _)| s.kind == SensorKind::Command)
+                .map(|(_, v)| v.clone())
+                .unwrap_or_else(|| truth.samples[1..].iter().map(|s| s.cmd.pos).collect());
+            let mut cols = vec![("x_cmd".to_string(), x_cmd)];
             cols.extend(
                 columns
                     .into_iter()
-                    .filter(|(_, s, _)| s.kind != SensorKind::Command)
-                    .map(|(n, _, v)| (n, v[1..].to_vec())),
+                    .filter(|(s, _)| s.kind != SensorKind::Command)
+                    .map(|(s, v)| (s.name, v)),
             );
             RunData::TimeSeries { t, columns: cols }
         }
-        Layout::PointTable { visits } => {
-            let mean = |v: &[f64], a: &Visit| {
-                v[a.first..=a.last].iter().sum::<f64>() / (a.last - a.first + 1) as f64
-            };
-            let cols = columns
+        Layout::PointTable { visits } => RunData::PointTable {
+            target: visits.iter().map(|a| a.target).collect(),
+            run: visits.iter().map(|a| a.run).collect(),
+            direction: visits.iter().map(|a| a.direction).collect(),
+            t: visits.iter().map(|a| truth.samples[a.last].t).collect(),
+            columns: columns
                 .into_iter()
-                .filter(|(_, s, _)| s.kind != SensorKind::Command)
-                .map(|(n, s, v)| {
-                    let nominal = |target: f64| match s.kind {
-                        SensorKind::EncoderLinear | SensorKind::EncoderRotary => target,
-                        SensorKind::LaserLinear
-                        | SensorKind::LaserStraightness
-                        | SensorKind::LaserVector => s.unit_direction().dot(model.axis) * target,
-                        _ => 0.0,
-                    };
-                    (
-                        n,
-                        visits
-                            .iter()
-                            .map(|a| mean(&v, a) - nominal(a.target))
-                            .collect(),
-                    )
-                })
-                .collect();
-            RunData::PointTable {
-                target: visits.iter().map(|a| a.target).collect(),
-                run: visits.iter().map(|a| a.run).collect(),
-                direction: visits.iter().map(|a| a.direction).collect(),
-                t: visits.iter().map(|a| truth.samples[a.last].t).collect(),
-                columns: cols,
-            }
-        }
+                .filter(|(s, _)| s.kind != SensorKind::Command)
+                .map(|(s, v)| (s.name, v))
+                .collect(),
+        },
     };
     Ok(RunRecord {
         name: truth.name.clone(),

@@ -163,7 +163,9 @@ fn finite3(v: [f64; 3]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
 
-/// Reads a machine structure from URDF text. Revolute, continuous and other joints are accepted but
+/// Reads a machine structure from URDF text. Links without `<inertial>` have no mass (kinematic-only
+/// URDFs load; simulating an axis whose moving body has no mass is refused by `AxisModel::build`).
+/// Revolute, continuous and other joints are accepted but
 /// treated as fixed (vmt simulates linear axes); prismatic joints become axes.
 pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
     let robot = urdf_rs::read_from_string(text).map_err(|e| UrdfError::Parse(e.to_string()))?;
@@ -357,15 +359,6 @@ pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
             robot.links[l].name
         )));
     }
-    for a in &axes {
-        let b = &bodies[a.child];
-        if b.mass.mass <= 0.0 || !positive_definite(&b.mass.inertia) {
-            return Err(UrdfError::Link {
-                link: b.name.clone(),
-                what: format!("moves on prismatic joint `{}` but has mass {} kg and a non-positive-definite inertia: a moving body needs positive mass and inertia", a.joint, b.mass.mass),
-            });
-        }
-    }
     Ok(MachineStructure {
         name: robot.name.clone(),
         bodies,
@@ -374,7 +367,7 @@ pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
 }
 
 /// Sylvester's criterion on a symmetric 3×3 matrix.
-fn positive_definite(m: &DMat3) -> bool {
+pub(crate) fn positive_definite(m: &DMat3) -> bool {
     let a = m.to_cols_array_2d();
     let d1 = a[0][0];
     let d2 = a[0][0] * a[1][1] - a[0][1] * a[1][0];
@@ -437,9 +430,20 @@ mod tests {
     }
 
     #[test]
-    fn a_moving_body_without_mass_is_rejected() {
+    fn a_massless_moving_body_loads_as_structure_but_cannot_be_simulated() {
+        // Kinematic-only URDFs (planning models) have no inertials: the structure loads, and
+        // simulating such an axis is refused (machine::AxisModel::build).
         let bad = TWO_LINKS.replace(r#"<mass value="2"/>"#, r#"<mass value="0"/>"#);
-        let e = parse_urdf(&bad).unwrap_err().to_string();
+        let m = parse_urdf(&bad).unwrap();
+        let e = crate::machine::AxisModel::build(
+            &m,
+            &crate::machine::AxisConfig {
+                joint: "slide".into(),
+                ..Default::default()
+            },
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("cart") && e.contains("positive mass"), "{e}");
     }
 

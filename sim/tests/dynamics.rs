@@ -1,7 +1,8 @@
 //! Dynamics are real (issue 2): the accelerometer feels the carriage pushed along its error path, and
 //! the bearing resonance sits where k/m puts it.
 
-mod common_machine;
+mod common;
+use common as common_machine;
 use rapier3d_f64::glamx::DVec3;
 use vmt_sim::axis_sim::{AxisSim, GRAVITY};
 use vmt_sim::geometry::ErrorMotions;

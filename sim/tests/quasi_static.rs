@@ -2,7 +2,8 @@
 //! relative to the same traverse with every error set to zero (which removes gravity sag and the
 //! drive-force tilt), equals δ(r) = E(x) + ε(x) × r, and the body's rotation equals ε(x).
 
-mod common_machine;
+mod common;
+use common as common_machine;
 use rapier3d_f64::glamx::DVec3;
 use vmt_sim::axis_sim::simulate;
 use vmt_sim::geometry::ErrorMotions;

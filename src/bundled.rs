@@ -1,0 +1,17 @@
+//! Machines and scenarios that ship inside the `vmt` binary, so `vmt run` works from any directory.
+
+/// A bundled machine URDF by name.
+pub fn machine_urdf(name: &str) -> Option<&'static str> {
+    match name {
+        "slide_column" => Some(include_str!("../urdf/slide_column.urdf")),
+        _ => None,
+    }
+}
+
+/// Names of the bundled machines.
+pub const MACHINES: [&str; 1] = ["slide_column"];
+
+/// The default scenario (`scenarios/default.toml`).
+pub const DEFAULT_SCENARIO: &str = include_str!("../scenarios/default.toml");
+/// Its path in the source tree, for messages.
+pub const DEFAULT_SCENARIO_PATH: &str = "scenarios/default.toml";
