@@ -1,6 +1,7 @@
 //! One physics step of slide_column at dt = 1e-4 s: the guideway bearings, the servo and rapier's step.
 use criterion::{criterion_group, criterion_main, Criterion};
 use vmt_sim::axis_sim::AxisSim;
+use vmt_sim::axis_sim::AxisTruth;
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::machine::{AxisConfig, AxisModel};
 use vmt_sim::motion::Command;
@@ -15,14 +16,14 @@ fn step(c: &mut Criterion) {
         wavelength: w,
         phase: 0.0,
     };
-    let errors = ErrorMotions {
+    let errors = AxisTruth::geometric(ErrorMotions {
         positioning: Profile::poly(vec![0.0, 2e-5]),
         straightness_y: Profile::harmonics(vec![h(2e-6, 0.5)]),
         straightness_z: Profile::harmonics(vec![h(2e-6, 0.3)]),
         roll: Profile::harmonics(vec![h(1e-5, 0.7)]),
         pitch: Profile::harmonics(vec![h(1e-5, 0.9)]),
         yaw: Profile::harmonics(vec![h(1e-5, 1.1)]),
-    };
+    });
     let mut sim = AxisSim::new(&model, &errors, 0.2);
     let mut x = 0.2;
     c.bench_function("slide_column step (dt = 1e-4 s, six error motions)", |b| {

@@ -1,1 +1,63 @@
-fn main() {}
+//! The `vmt` command line. Exit codes: 0 success, 1 an estimate missed its tolerance, 2 bad input.
+
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "vmt",
+    version,
+    about = "A virtual machine tool: simulate machine-tool linear axes, identify their errors, check models against measurements"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate a scenario and run its estimators (no argument: the bundled default scenario).
+    Run {
+        scenario: Option<PathBuf>,
+        /// Directory for the measurement set and report (default: vmt-out/<scenario name>).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Print machine-readable JSON instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Simulate a scenario and write its measurement set (FORMAT.md §1) with the truth beside it.
+    Simulate {
+        scenario: Option<PathBuf>,
+        /// Output directory (written atomically).
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Write CSV columns in these units instead of SI ("si" or "human": um, urad, mm/s, ...).
+        #[arg(long, default_value = "si")]
+        units: String,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run {
+            scenario,
+            out,
+            json,
+        } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
+        Command::Simulate {
+            scenario,
+            out,
+            units,
+        } => vmt::cli::simulate(scenario.as_deref(), &out, &units).map(|_| 0),
+    };
+    match result {
+        Ok(code) => ExitCode::from(code as u8),
+        Err(e) => {
+            eprintln!("vmt: {e}");
+            ExitCode::from(e.exit_code() as u8)
+        }
+    }
+}

@@ -1,19 +1,45 @@
 //! Time integration of one axis in rapier3d-f64 (DESIGN.md §4): the moving body held by stiff, damped
 //! guideway bearings whose rest pose follows the injected error motions at the current axis position,
-//! driven along the axis by the cascade servo through a force at the nut. Gravity on. One solver
-//! iteration, the body never sleeps, forces are reset every step.
+//! driven along the axis by the cascade servo through a linear motor or a ball screw. Gravity on. One
+//! solver iteration, the body never sleeps, forces are reset every step.
 //!
-//! The run's mutable state (`AxisSim`) is separate from the immutable `AxisModel`.
+//! The run's mutable state (`AxisSim`) is separate from the immutable `AxisModel` and `AxisTruth`.
 
+use crate::drive::{dead_zone_force, DriveConfig, FeedbackKind};
+use crate::feedback::FeedbackErrors;
 use crate::geometry::ErrorMotions;
 use crate::machine::AxisModel;
 use crate::motion::{Command, MotionPlan};
+use crate::profile::Profile;
 use crate::servo::{quantise, servo_update, ServoState};
 use rapier3d_f64::glamx::{DQuat, DVec3};
 use rapier3d_f64::prelude::*;
 
 /// Standard gravity, m/s² (acts along −Z of the machine frame).
 pub const GRAVITY: f64 = 9.80665;
+
+/// Everything injected into the physics of one axis.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AxisTruth {
+    /// The six error motions of the guideway.
+    pub motions: ErrorMotions,
+    /// Errors of the feedback chain (scale error, interpolation, thermal), m.
+    pub feedback: FeedbackErrors,
+    /// Lead error of the screw (cyclic lead), m as a function of the screw position.
+    pub lead_error: Profile,
+    /// Backlash of the screw-nut contact, m.
+    pub backlash: f64,
+}
+
+impl AxisTruth {
+    /// Truth with only geometric error motions.
+    pub fn geometric(motions: ErrorMotions) -> AxisTruth {
+        AxisTruth {
+            motions,
+            ..Default::default()
+        }
+    }
+}
 
 /// The state of the moving body and the drive at one instant (noise-free truth).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -23,7 +49,9 @@ pub struct Sample {
     pub cmd: Command,
     /// Position feedback as the controller sees it (quantised), m.
     pub feedback: f64,
-    /// Drive force, N.
+    /// Motor position in the screw's linear coordinate (linear motor: the feedback), m.
+    pub motor: f64,
+    /// Motor force (servo output), N.
     pub force: f64,
     /// Body frame origin (the axis reference point), world frame, m.
     pub pos: DVec3,
@@ -43,7 +71,8 @@ impl Sample {
             t: l(self.t, o.t),
             cmd: self.cmd,
             feedback: l(self.feedback, o.feedback),
-            force: self.force,
+            motor: l(self.motor, o.motor),
+            force: o.force,
             pos: lv(self.pos, o.pos),
             rot: lv(self.rot, o.rot),
             vel: lv(self.vel, o.vel),
@@ -71,13 +100,21 @@ pub struct Trace {
     pub samples: Vec<Sample>,
 }
 
+/// Motor state of a ball-screw drive, in the screw's linear coordinate.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Motor {
+    u: f64,
+    u_dot: f64,
+}
+
 /// The mutable state of a simulation run of one axis.
 pub struct AxisSim<'a> {
     model: &'a AxisModel,
-    errors: &'a ErrorMotions,
+    truth: &'a AxisTruth,
     world: PhysicsWorld,
     body: RigidBodyHandle,
     servo: ServoState,
+    motor: Motor,
     steps: u64,
     ey: DVec3,
     ez: DVec3,
@@ -86,20 +123,19 @@ pub struct AxisSim<'a> {
 impl<'a> AxisSim<'a> {
     /// A run starting at rest at axis position x0, the body placed on its rest pose lowered by the static
     /// sag of the bearings under gravity.
-    pub fn new(model: &'a AxisModel, errors: &'a ErrorMotions, x0: f64) -> AxisSim<'a> {
+    pub fn new(model: &'a AxisModel, truth: &'a AxisTruth, x0: f64) -> AxisSim<'a> {
         let mut world = PhysicsWorld::new();
         world.gravity = DVec3::new(0.0, 0.0, -GRAVITY);
         world.integration_parameters.dt = model.dt;
         world.integration_parameters.num_solver_iterations = 1;
         let ey = model.axis_rotation * DVec3::Y;
         let ez = model.axis_rotation * DVec3::Z;
-        let x_fb0 = x0 + errors.positioning.value(x0);
-        let rest = model.rest_pose(errors, x0);
-        let sag_per_block = model.mass * GRAVITY / (model.blocks.len() as f64);
-        let sag = DVec3::new(0.0, 0.0, -1.0) * sag_per_block / model.k_z.max(1.0) * (ez.z.abs());
-        let _ = x_fb0;
+        let x_act0 = x0 + truth.motions.positioning.value(x0) + truth.feedback.error(x0, 0.0);
+        let rest = model.rest_pose(&truth.motions, x0);
+        let sag = -ez.z * model.mass * GRAVITY / (model.blocks.len() as f64 * model.k_z);
+        let start = rest.translation + model.axis * (x_act0 - x0) + DVec3::new(0.0, 0.0, sag);
         let rb = RigidBodyBuilder::dynamic()
-            .pose(Pose::from_parts(rest.translation + sag, rest.rotation))
+            .pose(Pose::from_parts(start, rest.rotation))
             .additional_mass_properties(MassProperties::with_inertia_matrix(
                 model.com,
                 model.mass,
@@ -108,15 +144,36 @@ impl<'a> AxisSim<'a> {
             .can_sleep(false)
             .build();
         let body = world.bodies.insert(rb);
-        AxisSim {
+        let mut sim = AxisSim {
             model,
-            errors,
+            truth,
             world,
             body,
             servo: ServoState::default(),
+            motor: Motor::default(),
             steps: 0,
             ey,
             ez,
+        };
+        // The motor starts where the nut sits on the body, in contact on the + side of the clearance.
+        sim.motor.u = sim.motor_rest_position();
+        sim
+    }
+
+    /// Motor position that puts the screw unloaded against the nut at the current body position.
+    fn motor_rest_position(&self) -> f64 {
+        let rb = &self.world.bodies[self.body];
+        let x = self.axis_coordinate(rb);
+        match &self.model.drive {
+            DriveConfig::BallScrew(b) if b.feedback == FeedbackKind::Rotary => {
+                // u + e(u) + lead(u) = x: one fixed-point pass is exact to second order in the errors.
+                let e = |u: f64| self.chain_error(u) + self.truth.lead_error.value(u);
+                x - e(x - e(x)) + 0.5 * self.truth.backlash
+            }
+            DriveConfig::BallScrew(_) => {
+                x - self.truth.lead_error.value(x) + 0.5 * self.truth.backlash
+            }
+            DriveConfig::LinearMotor => x,
         }
     }
 
@@ -139,10 +196,23 @@ impl<'a> AxisSim<'a> {
             .dot(rb.position().translation - self.model.home.translation)
     }
 
-    /// Nominal axis position as the machine sees it: x_actual − EXX(x_actual). The servo drives it to the
-    /// command, so the reference point lands at command + EXX (to first order).
+    /// Error of the positioning chain at x now: EXX(x) + feedback-chain error e(x, t), m.
+    fn chain_error(&self, x: f64) -> f64 {
+        self.truth.motions.positioning.value(x) + self.truth.feedback.error(x, self.time())
+    }
+
+    /// Nominal axis position (what the machine believes) for a table at x: x − EXX(x) − e(x, t).
     fn nominal(&self, x_actual: f64) -> f64 {
-        x_actual - self.errors.positioning.value(x_actual)
+        x_actual - self.chain_error(x_actual)
+    }
+
+    /// Position feedback before quantisation: the scale (linear motor, closed loop) or the motor
+    /// (semi-closed loop).
+    fn raw_feedback(&self, x_actual: f64) -> f64 {
+        match &self.model.drive {
+            DriveConfig::BallScrew(b) if b.feedback == FeedbackKind::Rotary => self.motor.u,
+            _ => self.nominal(x_actual),
+        }
     }
 
     /// Current truth sample.
@@ -153,7 +223,11 @@ impl<'a> AxisSim<'a> {
         Sample {
             t: self.time(),
             cmd,
-            feedback: quantise(self.nominal(x), self.model.servo.resolution),
+            feedback: quantise(self.raw_feedback(x), self.model.servo.resolution),
+            motor: match self.model.drive {
+                DriveConfig::LinearMotor => x,
+                DriveConfig::BallScrew(_) => self.motor.u,
+            },
             force: self.servo.force,
             pos: pose.translation,
             rot: (pose.rotation * self.model.home.rotation.inverse()).to_scaled_axis(),
@@ -177,21 +251,54 @@ impl<'a> AxisSim<'a> {
         };
         let q = self.nominal(x_act);
         if self.steps % m.servo_steps as u64 == 0 {
-            let fb = quantise(q, m.servo.resolution);
+            let fb = quantise(self.raw_feedback(x_act), m.servo.resolution);
+            // Velocity loop on the motor encoder for a ball screw, on the scale for a linear motor.
+            let (vel_fb, mass) = match &m.drive {
+                DriveConfig::BallScrew(b) => (
+                    quantise(self.motor.u, m.servo.resolution),
+                    m.mass + b.rotor_mass(),
+                ),
+                DriveConfig::LinearMotor => (fb, m.mass),
+            };
             servo_update(
                 &m.servo,
                 &mut self.servo,
-                m.mass,
+                mass,
                 ts,
                 cmd.pos,
                 cmd.vel,
                 cmd.acc,
                 fb,
+                vel_fb,
             );
         }
-        let rest = m.rest_pose(self.errors, q);
-        let (de, deps) = self.errors.slope(q);
+        let rest = m.rest_pose(&self.truth.motions, q);
+        let (de, deps) = self.truth.motions.slope(q);
         let (de, deps) = (m.axis_rotation * de, m.axis_rotation * deps);
+        // Drive force on the body at the nut, and the motor's own motion.
+        let f_drive = match &m.drive {
+            DriveConfig::LinearMotor => self.servo.force,
+            DriveConfig::BallScrew(b) => {
+                let semi = b.feedback == FeedbackKind::Rotary;
+                let u = self.motor.u;
+                let nut_free = u
+                    + self.truth.lead_error.value(u)
+                    + if semi { self.chain_error(u) } else { 0.0 };
+                let nut_x = x_act; // the nut rides on the body: its axial coordinate moves with the reference point
+                let c = 2.0 * b.damping_ratio * (b.stiffness * m.mass).sqrt();
+                let f = dead_zone_force(
+                    nut_free - nut_x,
+                    self.motor.u_dot - q_dot,
+                    self.truth.backlash,
+                    b.stiffness,
+                    c,
+                );
+                let m_r = b.rotor_mass();
+                self.motor.u_dot += (self.servo.force - f) / m_r * m.dt;
+                self.motor.u += self.motor.u_dot * m.dt;
+                f
+            }
+        };
         let rb = &mut self.world.bodies[self.body];
         rb.reset_forces(false);
         rb.reset_torques(false);
@@ -206,23 +313,22 @@ impl<'a> AxisSim<'a> {
             rb.add_force_at_point(f, p, false);
         }
         let nut = pose.transform_point(m.nut);
-        let f_drive = self.servo.force - m.axis_damping * q_dot;
-        rb.add_force_at_point(m.axis * f_drive, nut, false);
+        rb.add_force_at_point(m.axis * (f_drive - m.axis_damping * q_dot), nut, false);
         self.world.step();
         self.steps += 1;
     }
 }
 
 /// Simulates a motion plan and returns the truth sampled at `record_times` (s, increasing), linearly
-/// interpolated between physics steps. The run ends at the later of the plan's end and the last record.
+/// interpolated between physics steps.
 pub fn simulate(
     model: &AxisModel,
-    errors: &ErrorMotions,
+    truth: &AxisTruth,
     plan: &MotionPlan,
     record_times: &[f64],
 ) -> Trace {
     let x0 = plan.at(0.0).pos;
-    let mut sim = AxisSim::new(model, errors, x0);
+    let mut sim = AxisSim::new(model, truth, x0);
     let t_end = record_times.last().copied().unwrap_or(0.0).max(0.0);
     let mut out = Vec::with_capacity(record_times.len());
     let mut next = 0;
@@ -243,7 +349,6 @@ pub fn simulate(
             let w = (tr - prev.t) / (cur.t - prev.t);
             let mut s = prev.lerp(&cur, w);
             s.cmd = plan.at(tr);
-            s.force = cur.force;
             out.push(s);
             next += 1;
         }

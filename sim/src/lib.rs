@@ -4,6 +4,8 @@
 //! recording. No file I/O here except reading nothing: URDF text is passed in.
 
 pub mod axis_sim;
+pub mod drive;
+pub mod feedback;
 pub mod geometry;
 pub mod machine;
 pub mod motion;

@@ -2,6 +2,7 @@
 //! bearings, drive point and servo, built from a machine structure (URDF) and a machine section.
 //! Like MuJoCo's mjModel: built once, never changed by a run; the run's state lives in `axis_sim`.
 
+use crate::drive::DriveConfig;
 use crate::geometry::ErrorMotions;
 use crate::servo::ServoConfig;
 use crate::urdf::{Frame, MachineStructure};
@@ -43,6 +44,7 @@ pub struct AxisConfig {
     pub nut_link: String,
     pub guideway: GuidewayConfig,
     pub servo: ServoConfig,
+    pub drive: DriveConfig,
     /// Maximum feed (m/s) and acceleration (m/s²) of the axis.
     pub max_feed: f64,
     pub max_accel: f64,
@@ -57,6 +59,7 @@ impl Default for AxisConfig {
             nut_link: String::new(),
             guideway: GuidewayConfig::default(),
             servo: ServoConfig::default(),
+            drive: DriveConfig::default(),
             max_feed: 0.5,
             max_accel: 2.0,
             dt: 1e-4,
@@ -96,6 +99,7 @@ pub struct AxisModel {
     /// Drive point, body frame, m.
     pub nut: DVec3,
     pub servo: ServoConfig,
+    pub drive: DriveConfig,
     /// Viscous damping along the axis from URDF `<dynamics damping>`, N·s/m.
     pub axis_damping: f64,
     pub travel: (f64, f64),
@@ -179,6 +183,23 @@ impl AxisModel {
                     .translation
             }
         };
+        if let DriveConfig::BallScrew(b) = &cfg.drive {
+            for (k, v) in [
+                ("lead", b.lead),
+                ("rotor_inertia", b.rotor_inertia),
+                ("stiffness", b.stiffness),
+            ] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(bad(format!("drive.{k} must be positive, got {v}")));
+                }
+            }
+            if !(b.damping_ratio >= 0.0 && b.damping_ratio < 1.0) {
+                return Err(bad(format!(
+                    "drive.damping_ratio must be in [0, 1), got {}",
+                    b.damping_ratio
+                )));
+            }
+        }
         let mass = body.mass.mass;
         let n = blocks.len() as f64;
         let damping = |k: f64| 2.0 * cfg.guideway.damping_ratio * (k * mass / n).sqrt();
@@ -198,6 +219,7 @@ impl AxisModel {
             c_z: damping(cfg.guideway.stiffness_z),
             nut,
             servo: cfg.servo.clone(),
+            drive: cfg.drive.clone(),
             axis_damping: ax.damping,
             travel: (ax.lower, ax.upper),
             max_feed: if ax.velocity > 0.0 {

@@ -2,8 +2,8 @@
 //! simulated once into noise-free truth traces (`simulate_procedure`); sensors then read them with
 //! seeded noise (`read_run`), as often as a tolerance study needs.
 
+use crate::axis_sim::AxisTruth;
 use crate::axis_sim::{simulate, Sample};
-use crate::geometry::ErrorMotions;
 use crate::machine::AxisModel;
 use crate::motion::MotionPlan;
 use crate::rng::source_rng;
@@ -229,7 +229,7 @@ pub fn irregular_targets(start: f64, end: f64, n: usize, seed: u64, name: &str) 
 /// Simulates a procedure; returns one truth per run.
 pub fn simulate_procedure(
     model: &AxisModel,
-    errors: &ErrorMotions,
+    errors: &AxisTruth,
     spec: &ProcedureSpec,
     seed: u64,
 ) -> Vec<RunTruth> {
@@ -336,7 +336,7 @@ pub fn simulate_procedure(
 #[allow(clippy::too_many_arguments)]
 fn positioning_cycle(
     model: &AxisModel,
-    errors: &ErrorMotions,
+    errors: &AxisTruth,
     name: &str,
     targets: &[f64],
     runs: u32,

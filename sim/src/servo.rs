@@ -59,9 +59,11 @@ pub fn quantise(x: f64, q: f64) -> f64 {
     }
 }
 
-/// One servo update, period `ts` (s). `feedback` is the quantised position feedback (m); `mass` the
-/// moving mass (kg). Returns the force command (N), limited to ±force_limit; the integrator stops
+/// One servo update, period `ts` (s). `feedback` is the quantised position feedback (m) of the position
+/// loop, `velocity_feedback` the quantised position whose difference the velocity loop uses (the motor
+/// encoder of a ball-screw drive, or the same scale); `mass` the moving mass (kg). Returns the force command (N), limited to ±force_limit; the integrator stops
 /// while the force saturates (anti-windup).
+#[allow(clippy::too_many_arguments)]
 pub fn servo_update(
     cfg: &ServoConfig,
     st: &mut ServoState,
@@ -71,9 +73,12 @@ pub fn servo_update(
     cmd_vel: f64,
     cmd_acc: f64,
     feedback: f64,
+    velocity_feedback: f64,
 ) -> f64 {
-    let v_fb = st.last_feedback.map_or(cmd_vel, |p| (feedback - p) / ts);
-    st.last_feedback = Some(feedback);
+    let v_fb = st
+        .last_feedback
+        .map_or(cmd_vel, |p| (velocity_feedback - p) / ts);
+    st.last_feedback = Some(velocity_feedback);
     let v_ref = cfg.kp * (cmd_pos - feedback)
         + if cfg.velocity_feed_forward {
             cmd_vel

@@ -4,6 +4,7 @@
 mod common;
 use common as common_machine;
 use rapier3d_f64::glamx::DVec3;
+use vmt_sim::axis_sim::AxisTruth;
 use vmt_sim::axis_sim::{AxisSim, GRAVITY};
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::motion::Command;
@@ -15,14 +16,14 @@ use vmt_sim::sensors::{SensorKind, SensorSpec};
 fn noise_free_accelerometer_reads_v2_times_curvature_at_constant_speed() {
     let model = common_machine::slide_column();
     let (amp, wl, v) = (2e-6, 0.1, 0.5);
-    let errors = ErrorMotions {
+    let errors = AxisTruth::geometric(ErrorMotions {
         straightness_z: Profile::harmonics(vec![Harmonic {
             amplitude: amp,
             wavelength: wl,
             phase: 0.4,
         }]),
         ..Default::default()
-    };
+    });
     let acc = SensorSpec {
         name: "acc_z".into(),
         kind: SensorKind::Accelerometer,
@@ -78,7 +79,7 @@ fn noise_free_accelerometer_reads_v2_times_curvature_at_constant_speed() {
 #[test]
 fn vertical_bearing_resonance_sits_at_sqrt_of_n_k_over_m() {
     let model = common_machine::slide_column();
-    let errors = ErrorMotions::default();
+    let errors = AxisTruth::default();
     let mut sim = AxisSim::new(&model, &errors, 0.5);
     let hold = Command {
         pos: 0.5,

@@ -6,6 +6,7 @@ mod common;
 use common as common_machine;
 use rapier3d_f64::glamx::DVec3;
 use vmt_sim::axis_sim::simulate;
+use vmt_sim::axis_sim::AxisTruth;
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::motion::MotionPlan;
 use vmt_sim::profile::{Harmonic, Profile};
@@ -36,8 +37,9 @@ fn slow_traverse_reproduces_the_injected_error_motions() {
         .map(|i| t0 + 0.5 + (t1 - t0 - 1.0) * i as f64 / 60.0)
         .collect();
     let truth = errors();
-    let zero = ErrorMotions::default();
-    let a = simulate(&model, &truth, &plan, &times);
+    let truth_sim = AxisTruth::geometric(truth.clone());
+    let zero = AxisTruth::default();
+    let a = simulate(&model, &truth_sim, &plan, &times);
     let b = simulate(&model, &zero, &plan, &times);
     let points = ["mp1", "mp2", "mp3", "accel_mount"].map(|n| model.link(n).unwrap().translation);
     let (mut worst_d, mut worst_r) = (0.0f64, 0.0f64);

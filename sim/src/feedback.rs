@@ -1,0 +1,88 @@
+//! Errors of the measuring chain the position loop closes on (DESIGN.md §4, FORMAT.md §2): whatever
+//! makes the feedback read x_fb = x − e(x, t) for a table at x makes the servo put the table at
+//! command + e. The chain is the linear scale in a closed loop, or the screw and rotary encoder in a
+//! semi-closed loop (where cyclic lead error and backlash also reach the table).
+
+use crate::profile::Profile;
+use serde::{Deserialize, Serialize};
+
+/// Thermal expansion of the measuring chain: e = α·x·ΔT(t), ΔT(t) = ΔT∞·(1 − exp(−t/τ)).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ThermalExpansion {
+    /// Expansion coefficient, 1/K.
+    pub alpha: f64,
+    /// Final temperature rise ΔT∞, K.
+    pub delta_t: f64,
+    /// Time constant, s.
+    pub tau: f64,
+}
+
+/// Thermal drift: an offset independent of position, e = d∞·(1 − exp(−t/τ)).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ThermalDrift {
+    /// Final offset, m.
+    pub value: f64,
+    /// Time constant, s.
+    pub tau: f64,
+}
+
+/// The position- and time-dependent error of the feedback chain.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FeedbackErrors {
+    /// Position-dependent part (scale error as a slope, interpolation error and, in a semi-closed loop,
+    /// cyclic lead error as harmonics), m.
+    pub along: Profile,
+    pub thermal_expansion: Option<ThermalExpansion>,
+    pub thermal_drift: Option<ThermalDrift>,
+}
+
+impl FeedbackErrors {
+    /// e(x, t), m: the table lands at command + e.
+    pub fn error(&self, x: f64, t: f64) -> f64 {
+        let mut e = if self.along.is_zero() {
+            0.0
+        } else {
+            self.along.value(x)
+        };
+        if let Some(th) = &self.thermal_expansion {
+            e += th.alpha * x * th.delta_t * rise(t, th.tau);
+        }
+        if let Some(d) = &self.thermal_drift {
+            e += d.value * rise(t, d.tau);
+        }
+        e
+    }
+}
+
+/// 1 − exp(−t/τ) (a step for τ = 0).
+fn rise(t: f64, tau: f64) -> f64 {
+    if tau > 0.0 {
+        1.0 - (-t / tau).exp()
+    } else {
+        1.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thermal_expansion_grows_with_position_and_time() {
+        let f = FeedbackErrors {
+            thermal_expansion: Some(ThermalExpansion {
+                alpha: 11.5e-6,
+                delta_t: 2.0,
+                tau: 600.0,
+            }),
+            ..Default::default()
+        };
+        // Hand-worked: 11.5e-6 · 0.8 m · 2 K · (1 − e^-1) = 11.63 µm at t = τ.
+        assert!(
+            (f.error(0.8, 600.0) - 11.5e-6 * 0.8 * 2.0 * (1.0 - (-1.0f64).exp())).abs() < 1e-15
+        );
+        assert!(
+            f.error(0.8, 600.0) > f.error(0.4, 600.0) && f.error(0.8, 1200.0) > f.error(0.8, 600.0)
+        );
+    }
+}

@@ -1,0 +1,224 @@
+//! Scenarios (`vmt-scenario/1`, FORMAT.md §3): a machine, a truth (the injected effects, in the model
+//! format), the sensors and their noise, the procedures to run, and the estimators with the tolerance
+//! each estimate must meet. Every bundled scenario documents its keys in comments.
+
+use crate::bundled;
+use crate::error::VmtError;
+use crate::model::{self, Model};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use vmt_sim::machine::{AxisConfig, AxisModel};
+use vmt_sim::procedures::ProcedureSpec;
+use vmt_sim::sensors::{SensorKind, SensorSpec};
+use vmt_sim::urdf::{parse_urdf, MachineStructure};
+
+/// The scenario file as written (before the truth is parsed and the machine loaded).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScenario {
+    format: String,
+    #[serde(default)]
+    description: String,
+    seed: u64,
+    machine: String,
+    #[serde(default)]
+    axis: AxisConfig,
+    truth: toml::Value,
+    #[serde(default)]
+    sensors: Vec<SensorSpec>,
+    #[serde(default)]
+    procedures: Vec<ProcedureSpec>,
+    #[serde(default)]
+    estimators: Option<toml::Value>,
+}
+
+/// A loaded, validated scenario.
+#[derive(Clone, Debug)]
+pub struct Scenario {
+    /// Where it came from (a path, or the bundled default's source path).
+    pub source: PathBuf,
+    pub description: String,
+    pub seed: u64,
+    /// Machine name as written (bundled name or URDF path) and its structure.
+    pub machine_name: String,
+    pub machine: MachineStructure,
+    pub axis: AxisModel,
+    pub truth: Model,
+    pub sensors: Vec<SensorSpec>,
+    pub procedures: Vec<ProcedureSpec>,
+    pub estimators: Option<toml::Value>,
+}
+
+impl Scenario {
+    /// The bundled default scenario.
+    pub fn bundled_default() -> Result<Scenario, VmtError> {
+        Scenario::parse(bundled::DEFAULT_SCENARIO, Path::new(bundled::DEFAULT_SCENARIO_PATH), None)
+    }
+
+    /// Reads a scenario file.
+    pub fn load(path: &Path) -> Result<Scenario, VmtError> {
+        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, e))?;
+        Scenario::parse(&text, path, path.parent())
+    }
+
+    /// Parses scenario text; `base` is the directory relative paths are resolved against (None: only
+    /// bundled machines and inline truths are allowed).
+    pub fn parse(text: &str, source: &Path, base: Option<&Path>) -> Result<Scenario, VmtError> {
+        let raw: RawScenario = toml::from_str(text).map_err(|e| VmtError::toml(source, text, &e))?;
+        let bad = |place: &str, msg: String| VmtError::input(source, place, msg);
+        if raw.format != "vmt-scenario/1" {
+            return Err(bad("format", format!("expected \"vmt-scenario/1\", got \"{}\"", raw.format)));
+        }
+        let base_dir = base.map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
+        let machine = load_machine(&raw.machine, base, source)?;
+        let axis = AxisModel::build(&machine, &raw.axis).map_err(|e| bad("axis", e.to_string()))?;
+        let truth = match &raw.truth {
+            toml::Value::String(file) => {
+                let p = base_dir.join(file);
+                model::load(&p)?
+            }
+            v => model::from_value(v, source, &base_dir, "truth")?,
+        };
+        validate_sensors(&raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
+        validate_procedures(&raw.procedures, &raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
+        Ok(Scenario {
+            source: source.to_path_buf(),
+            description: raw.description,
+            seed: raw.seed,
+            machine_name: raw.machine,
+            machine,
+            axis,
+            truth,
+            sensors: raw.sensors,
+            procedures: raw.procedures,
+            estimators: raw.estimators,
+        })
+    }
+}
+
+/// Loads a machine by bundled name or URDF path (relative to `base`).
+pub fn load_machine(name: &str, base: Option<&Path>, source: &Path) -> Result<MachineStructure, VmtError> {
+    let (text, file) = match bundled::machine_urdf(name) {
+        Some(t) => (t.to_string(), PathBuf::from(format!("urdf/{name}.urdf"))),
+        None => {
+            let p = base.map(|b| b.join(name)).unwrap_or_else(|| PathBuf::from(name));
+            if !p.exists() {
+                return Err(VmtError::input(
+                    source,
+                    "machine",
+                    format!("`{name}` is neither a bundled machine ({}) nor an existing URDF file ({})", bundled::MACHINES.join(", "), p.display()),
+                ));
+            }
+            (std::fs::read_to_string(&p).map_err(|e| VmtError::io(&p, e))?, p)
+        }
+    };
+    parse_urdf(&text).map_err(|e| VmtError::input(&file, "robot", e.to_string()))
+}
+
+fn finite_nonneg(v: f64) -> bool {
+    v.is_finite() && v >= 0.0
+}
+
+/// Checks sensor values; returns the key path and message of the first problem.
+fn validate_sensors(sensors: &[SensorSpec], axis: &AxisModel) -> Result<(), (String, String)> {
+    for (i, s) in sensors.iter().enumerate() {
+        let at = |k: &str| format!("sensors[{i}] ({}).{k}", s.name);
+        if s.name.is_empty() || s.name.contains(['[', ']', ',', '"']) || s.name == "t" || s.name == "x_cmd" && s.kind != SensorKind::Command {
+            return Err((at("name"), "expected a column name without brackets, commas or quotes, not `t`".into()));
+        }
+        if sensors[..i].iter().any(|o| o.name == s.name) {
+            return Err((at("name"), "sensor names must be unique".into()));
+        }
+        for (k, v) in [("sigma", s.sigma), ("resolution", s.resolution), ("noise_density", s.noise_density), ("highpass", s.highpass)] {
+            if !finite_nonneg(v) {
+                return Err((at(k), format!("expected a finite value ≥ 0, got {v}")));
+            }
+        }
+        if !s.bias.is_finite() || !s.scale_factor.is_finite() || s.scale_factor.abs() >= 0.5 {
+            return Err((at("scale_factor"), format!("expected bias finite and |scale_factor| < 0.5, got {} and {}", s.bias, s.scale_factor)));
+        }
+        if let Some(p) = s.position {
+            if !p.iter().all(|v| v.is_finite() && v.abs() < 100.0) {
+                return Err((at("position"), format!("expected a point within 100 m, got {p:?}")));
+            }
+        }
+        if !s.direction.iter().all(|v| v.is_finite()) || s.unit_direction().length() < 0.5 {
+            return Err((at("direction"), format!("expected a non-zero finite direction, got {:?}", s.direction)));
+        }
+        s.mount(axis).map_err(|m| (at("link"), m))?;
+    }
+    Ok(())
+}
+
+/// Checks procedure values against the axis (travel, feed) and the declared sensors.
+fn validate_procedures(procs: &[ProcedureSpec], sensors: &[SensorSpec], axis: &AxisModel) -> Result<(), (String, String)> {
+    let (lo, hi) = axis.travel;
+    let tol = 1e-9;
+    for (i, p) in procs.iter().enumerate() {
+        let at = |k: &str| format!("procedures[{i}] ({}).{k}", p.name());
+        if procs[..i].iter().any(|o| o.name() == p.name()) {
+            return Err((at("name"), "procedure names must be unique".into()));
+        }
+        for s in p.sensors() {
+            if !sensors.iter().any(|d| &d.name == s) {
+                return Err((at("sensors"), format!("sensor `{s}` is not declared under [[sensors]]")));
+            }
+        }
+        let in_travel = |k: &str, x: f64| {
+            if x.is_finite() && x >= lo - tol && x <= hi + tol {
+                Ok(())
+            } else {
+                Err((at(k), format!("expected a position within the travel [{lo}, {hi}] m, got {x}")))
+            }
+        };
+        let feed_ok = |k: &str, v: f64| {
+            if v.is_finite() && v > 0.0 && v <= axis.max_feed + tol {
+                Ok(())
+            } else {
+                Err((at(k), format!("expected a feed in (0, {}] m/s, got {v}", axis.max_feed)))
+            }
+        };
+        match p {
+            ProcedureSpec::ConstantVelocity { speeds, start, end, high_rate, settle, .. } => {
+                in_travel("start", *start)?;
+                in_travel("end", *end)?;
+                if speeds.is_empty() {
+                    return Err((at("speeds"), "expected at least one speed".into()));
+                }
+                for v in speeds {
+                    feed_ok("speeds", *v)?;
+                }
+                if !(*high_rate > 0.0 && high_rate.is_finite()) || !(end > start) || !finite_nonneg(*settle) {
+                    return Err((at("high_rate"), "expected high_rate > 0, end > start and settle ≥ 0".into()));
+                }
+            }
+            ProcedureSpec::Positioning { targets, n_targets, start, end, runs, feed, dwell, average, rate, overrun, .. } => {
+                in_travel("start", *start)?;
+                in_travel("end", *end)?;
+                feed_ok("feed", *feed)?;
+                if let Some(t) = targets {
+                    for x in t {
+                        in_travel("targets", *x)?;
+                    }
+                    if t.len() < 2 || t.windows(2).any(|w| w[1] <= w[0]) {
+                        return Err((at("targets"), "expected at least two strictly increasing targets".into()));
+                    }
+                } else if *n_targets < 2 {
+                    return Err((at("n_targets"), format!("expected at least 2 targets, got {n_targets}")));
+                }
+                if *runs < 1 || !(end > start) || !(*dwell > 0.0) || !(*average > 0.0 && average <= dwell) || !(*rate > 0.0) || !finite_nonneg(*overrun) {
+                    return Err((at("dwell"), "expected runs ≥ 1, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into()));
+                }
+            }
+            ProcedureSpec::NineLine { start, end, step, feed, dwell, average, rate, overrun, .. } => {
+                in_travel("start", *start)?;
+                in_travel("end", *end)?;
+                feed_ok("feed", *feed)?;
+                if !(*step > 0.0) || !(end > start) || !(*dwell > 0.0) || !(*average > 0.0 && average <= dwell) || !(*rate > 0.0) || !finite_nonneg(*overrun) {
+                    return Err((at("step"), "expected step > 0, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into()));
+                }
+            }
+        }
+    }
+    Ok(())
+}
