@@ -1,1 +1,2 @@
+pub mod friction;
 pub mod profile;
