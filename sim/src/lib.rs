@@ -1,11 +1,12 @@
 //! vmt-sim: the physics of vmt. A machine from URDF, rapier3d-f64 rigid-body dynamics, guideways whose
 //! rest pose follows injected error motions, a servo-driven feed axis, sensors with seeded noise, and
 //! the measurement procedures a metrologist runs. Plain data flows forward: scenario → machine →
-//! recording. No file I/O here except reading nothing: URDF text is passed in.
+//! recording. No file I/O: URDF text is passed in.
 
 pub mod axis_sim;
 pub mod drive;
 pub mod feedback;
+pub mod friction;
 pub mod geometry;
 pub mod machine;
 pub mod motion;
