@@ -11,11 +11,7 @@ use vmt_sim::urdf::parse_urdf;
 fn step(c: &mut Criterion) {
     let text = include_str!("../urdf/slide_column.urdf");
     let model = AxisModel::build(&parse_urdf(text).unwrap(), &AxisConfig::default()).unwrap();
-    let h = |a: f64, w: f64| Harmonic {
-        amplitude: a,
-        wavelength: w,
-        phase: 0.0,
-    };
+    let h = |a: f64, w: f64| Harmonic { amplitude: a, wavelength: w, phase: 0.0 };
     let errors = AxisTruth::geometric(ErrorMotions {
         positioning: Profile::poly(vec![0.0, 2e-5]),
         straightness_y: Profile::harmonics(vec![h(2e-6, 0.5)]),
@@ -29,11 +25,7 @@ fn step(c: &mut Criterion) {
     c.bench_function("slide_column step (dt = 1e-4 s, six error motions)", |b| {
         b.iter(|| {
             x += 0.1 * model.dt;
-            sim.step(Command {
-                pos: x,
-                vel: 0.1,
-                acc: 0.0,
-            });
+            sim.step(Command { pos: x, vel: 0.1, acc: 0.0 });
         })
     });
 }

@@ -42,16 +42,8 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run {
-            scenario,
-            out,
-            json,
-        } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
-        Command::Simulate {
-            scenario,
-            out,
-            units,
-        } => vmt::cli::simulate(scenario.as_deref(), &out, &units).map(|_| 0),
+        Command::Run { scenario, out, json } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
+        Command::Simulate { scenario, out, units } => vmt::cli::simulate(scenario.as_deref(), &out, &units).map(|_| 0),
     };
     match result {
         Ok(code) => ExitCode::from(code as u8),

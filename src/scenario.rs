@@ -192,7 +192,7 @@ fn validate_procedures(procs: &[ProcedureSpec], sensors: &[SensorSpec], axis: &A
                     return Err((at("high_rate"), "expected high_rate > 0, end > start and settle ≥ 0".into()));
                 }
             }
-            ProcedureSpec::Positioning { targets, n_targets, start, end, runs, feed, dwell, average, rate, overrun, .. } => {
+            ProcedureSpec::Positioning { targets, n_targets, start, end, runs, feed, dwell, average, rate, overrun, accel, .. } => {
                 in_travel("start", *start)?;
                 in_travel("end", *end)?;
                 feed_ok("feed", *feed)?;

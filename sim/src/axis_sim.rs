@@ -7,6 +7,7 @@
 
 use crate::drive::{dead_zone_force, DriveConfig, FeedbackKind};
 use crate::feedback::FeedbackErrors;
+use crate::friction::{lugre_step, stick_slip_step, LugreParams, StepInput, StribeckParams};
 use crate::geometry::ErrorMotions;
 use crate::machine::AxisModel;
 use crate::motion::{Command, MotionPlan};
@@ -29,15 +30,29 @@ pub struct AxisTruth {
     pub lead_error: Profile,
     /// Backlash of the screw-nut contact, m.
     pub backlash: f64,
+    /// Friction of the guideway on the moving body.
+    pub friction: GuideFriction,
 }
+
+/// Friction of a guideway (DESIGN.md §4): Coulomb and viscous are Stribeck special cases.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum GuideFriction {
+    #[default]
+    None,
+    /// Static friction curve with true sticking.
+    Stribeck(StribeckParams),
+    /// Dynamic (bristle) model: pre-sliding and stick-slip.
+    LuGre(LugreParams),
+}
+
+/// Stick band of the sticking element, m/s: the body's velocity along the axis is not exactly zero
+/// while stuck, because the bearings rock it slightly (multi-DOF body; see friction::StepInput).
+const STICK_BAND: f64 = 1e-7;
 
 impl AxisTruth {
     /// Truth with only geometric error motions.
     pub fn geometric(motions: ErrorMotions) -> AxisTruth {
-        AxisTruth {
-            motions,
-            ..Default::default()
-        }
+        AxisTruth { motions, ..Default::default() }
     }
 }
 
@@ -53,6 +68,8 @@ pub struct Sample {
     pub motor: f64,
     /// Motor force (servo output), N.
     pub force: f64,
+    /// Guideway friction force on the body along the axis, N.
+    pub friction: f64,
     /// Body frame origin (the axis reference point), world frame, m.
     pub pos: DVec3,
     /// Body rotation relative to its home orientation, rotation vector, world frame, rad.
@@ -73,6 +90,7 @@ impl Sample {
             feedback: l(self.feedback, o.feedback),
             motor: l(self.motor, o.motor),
             force: o.force,
+            friction: o.friction,
             pos: lv(self.pos, o.pos),
             rot: lv(self.rot, o.rot),
             vel: lv(self.vel, o.vel),
@@ -87,10 +105,7 @@ impl Sample {
 
     /// Velocity of a body-frame point p, world frame, m/s.
     pub fn point_velocity(&self, model: &AxisModel, p: DVec3) -> DVec3 {
-        self.vel
-            + self
-                .angvel
-                .cross(DQuat::from_scaled_axis(self.rot) * (model.home.rotation * p))
+        self.vel + self.angvel.cross(DQuat::from_scaled_axis(self.rot) * (model.home.rotation * p))
     }
 }
 
@@ -115,6 +130,10 @@ pub struct AxisSim<'a> {
     body: RigidBodyHandle,
     servo: ServoState,
     motor: Motor,
+    /// LuGre bristle deflection, m.
+    bristle: f64,
+    /// Friction force of the last step on the body along the axis, N.
+    friction_force: f64,
     steps: u64,
     ey: DVec3,
     ez: DVec3,
@@ -136,11 +155,7 @@ impl<'a> AxisSim<'a> {
         let start = rest.translation + model.axis * (x_act0 - x0) + DVec3::new(0.0, 0.0, sag);
         let rb = RigidBodyBuilder::dynamic()
             .pose(Pose::from_parts(start, rest.rotation))
-            .additional_mass_properties(MassProperties::with_inertia_matrix(
-                model.com,
-                model.mass,
-                model.inertia,
-            ))
+            .additional_mass_properties(MassProperties::with_inertia_matrix(model.com, model.mass, model.inertia))
             .can_sleep(false)
             .build();
         let body = world.bodies.insert(rb);
@@ -151,6 +166,8 @@ impl<'a> AxisSim<'a> {
             body,
             servo: ServoState::default(),
             motor: Motor::default(),
+            bristle: 0.0,
+            friction_force: 0.0,
             steps: 0,
             ey,
             ez,
@@ -170,9 +187,7 @@ impl<'a> AxisSim<'a> {
                 let e = |u: f64| self.chain_error(u) + self.truth.lead_error.value(u);
                 x - e(x - e(x)) + 0.5 * self.truth.backlash
             }
-            DriveConfig::BallScrew(_) => {
-                x - self.truth.lead_error.value(x) + 0.5 * self.truth.backlash
-            }
+            DriveConfig::BallScrew(_) => x - self.truth.lead_error.value(x) + 0.5 * self.truth.backlash,
             DriveConfig::LinearMotor => x,
         }
     }
@@ -191,9 +206,7 @@ impl<'a> AxisSim<'a> {
 
     /// Actual axis coordinate of the reference point (m): axis · (origin − home).
     fn axis_coordinate(&self, rb: &RigidBody) -> f64 {
-        self.model
-            .axis
-            .dot(rb.position().translation - self.model.home.translation)
+        self.model.axis.dot(rb.position().translation - self.model.home.translation)
     }
 
     /// Error of the positioning chain at x now: EXX(x) + feedback-chain error e(x, t), m.
@@ -229,6 +242,7 @@ impl<'a> AxisSim<'a> {
                 DriveConfig::BallScrew(_) => self.motor.u,
             },
             force: self.servo.force,
+            friction: self.friction_force,
             pos: pose.translation,
             rot: (pose.rotation * self.model.home.rotation.inverse()).to_scaled_axis(),
             vel: rb.velocity_at_point(pose.translation),
@@ -243,34 +257,17 @@ impl<'a> AxisSim<'a> {
         let (x_act, q_dot, pose) = {
             let rb = &self.world.bodies[self.body];
             let p = *rb.position();
-            (
-                self.axis_coordinate(rb),
-                m.axis.dot(rb.velocity_at_point(p.translation)),
-                p,
-            )
+            (self.axis_coordinate(rb), m.axis.dot(rb.velocity_at_point(p.translation)), p)
         };
         let q = self.nominal(x_act);
         if self.steps % m.servo_steps as u64 == 0 {
             let fb = quantise(self.raw_feedback(x_act), m.servo.resolution);
             // Velocity loop on the motor encoder for a ball screw, on the scale for a linear motor.
             let (vel_fb, mass) = match &m.drive {
-                DriveConfig::BallScrew(b) => (
-                    quantise(self.motor.u, m.servo.resolution),
-                    m.mass + b.rotor_mass(),
-                ),
+                DriveConfig::BallScrew(b) => (quantise(self.motor.u, m.servo.resolution), m.mass + b.rotor_mass()),
                 DriveConfig::LinearMotor => (fb, m.mass),
             };
-            servo_update(
-                &m.servo,
-                &mut self.servo,
-                mass,
-                ts,
-                cmd.pos,
-                cmd.vel,
-                cmd.acc,
-                fb,
-                vel_fb,
-            );
+            servo_update(&m.servo, &mut self.servo, mass, ts, cmd.pos, cmd.vel, cmd.acc, fb, vel_fb);
         }
         let rest = m.rest_pose(&self.truth.motions, q);
         let (de, deps) = self.truth.motions.slope(q);
@@ -281,24 +278,33 @@ impl<'a> AxisSim<'a> {
             DriveConfig::BallScrew(b) => {
                 let semi = b.feedback == FeedbackKind::Rotary;
                 let u = self.motor.u;
-                let nut_free = u
-                    + self.truth.lead_error.value(u)
-                    + if semi { self.chain_error(u) } else { 0.0 };
+                let nut_free = u + self.truth.lead_error.value(u) + if semi { self.chain_error(u) } else { 0.0 };
                 let nut_x = x_act; // the nut rides on the body: its axial coordinate moves with the reference point
                 let c = 2.0 * b.damping_ratio * (b.stiffness * m.mass).sqrt();
-                let f = dead_zone_force(
-                    nut_free - nut_x,
-                    self.motor.u_dot - q_dot,
-                    self.truth.backlash,
-                    b.stiffness,
-                    c,
-                );
+                let f =
+                    dead_zone_force(nut_free - nut_x, self.motor.u_dot - q_dot, self.truth.backlash, b.stiffness, c);
                 let m_r = b.rotor_mass();
                 self.motor.u_dot += (self.servo.force - f) / m_r * m.dt;
                 self.motor.u += self.motor.u_dot * m.dt;
                 f
             }
         };
+        let f_axis = f_drive - m.axis_damping * q_dot;
+        let f_friction = match &self.truth.friction {
+            GuideFriction::None => 0.0,
+            GuideFriction::Stribeck(p) => {
+                let input = StepInput { v: q_dot, f_ext: f_axis, mass: m.mass, dt: m.dt, stick_band: STICK_BAND };
+                stick_slip_step(p, &input).unwrap_or(0.0)
+            }
+            GuideFriction::LuGre(p) => match lugre_step(p, self.bristle, q_dot, m.dt) {
+                Ok(st) => {
+                    self.bristle = st.z_next;
+                    st.force_on_body
+                }
+                Err(_) => 0.0,
+            },
+        };
+        self.friction_force = f_friction;
         let rb = &mut self.world.bodies[self.body];
         rb.reset_forces(false);
         rb.reset_torques(false);
@@ -313,7 +319,9 @@ impl<'a> AxisSim<'a> {
             rb.add_force_at_point(f, p, false);
         }
         let nut = pose.transform_point(m.nut);
-        rb.add_force_at_point(m.axis * (f_drive - m.axis_damping * q_dot), nut, false);
+        rb.add_force_at_point(m.axis * f_axis, nut, false);
+        // Guideway friction acts in the plane of the bearing blocks, at the reference point.
+        rb.add_force_at_point(m.axis * f_friction, pose.translation, false);
         self.world.step();
         self.steps += 1;
     }
@@ -321,12 +329,7 @@ impl<'a> AxisSim<'a> {
 
 /// Simulates a motion plan and returns the truth sampled at `record_times` (s, increasing), linearly
 /// interpolated between physics steps.
-pub fn simulate(
-    model: &AxisModel,
-    truth: &AxisTruth,
-    plan: &MotionPlan,
-    record_times: &[f64],
-) -> Trace {
+pub fn simulate(model: &AxisModel, truth: &AxisTruth, plan: &MotionPlan, record_times: &[f64]) -> Trace {
     let x0 = plan.at(0.0).pos;
     let mut sim = AxisSim::new(model, truth, x0);
     let t_end = record_times.last().copied().unwrap_or(0.0).max(0.0);
@@ -334,10 +337,7 @@ pub fn simulate(
     let mut next = 0;
     let mut prev = sim.sample(plan.at(0.0));
     while next < record_times.len() && record_times[next] <= prev.t {
-        out.push(Sample {
-            t: record_times[next],
-            ..prev
-        });
+        out.push(Sample { t: record_times[next], ..prev });
         next += 1;
     }
     while next < record_times.len() && sim.time() <= t_end + model.dt {

@@ -39,11 +39,7 @@ pub struct FeedbackErrors {
 impl FeedbackErrors {
     /// e(x, t), m: the table lands at command + e.
     pub fn error(&self, x: f64, t: f64) -> f64 {
-        let mut e = if self.along.is_zero() {
-            0.0
-        } else {
-            self.along.value(x)
-        };
+        let mut e = if self.along.is_zero() { 0.0 } else { self.along.value(x) };
         if let Some(th) = &self.thermal_expansion {
             e += th.alpha * x * th.delta_t * rise(t, th.tau);
         }
@@ -70,19 +66,11 @@ mod tests {
     #[test]
     fn thermal_expansion_grows_with_position_and_time() {
         let f = FeedbackErrors {
-            thermal_expansion: Some(ThermalExpansion {
-                alpha: 11.5e-6,
-                delta_t: 2.0,
-                tau: 600.0,
-            }),
+            thermal_expansion: Some(ThermalExpansion { alpha: 11.5e-6, delta_t: 2.0, tau: 600.0 }),
             ..Default::default()
         };
         // Hand-worked: 11.5e-6 · 0.8 m · 2 K · (1 − e^-1) = 11.63 µm at t = τ.
-        assert!(
-            (f.error(0.8, 600.0) - 11.5e-6 * 0.8 * 2.0 * (1.0 - (-1.0f64).exp())).abs() < 1e-15
-        );
-        assert!(
-            f.error(0.8, 600.0) > f.error(0.4, 600.0) && f.error(0.8, 1200.0) > f.error(0.8, 600.0)
-        );
+        assert!((f.error(0.8, 600.0) - 11.5e-6 * 0.8 * 2.0 * (1.0 - (-1.0f64).exp())).abs() < 1e-15);
+        assert!(f.error(0.8, 600.0) > f.error(0.4, 600.0) && f.error(0.8, 1200.0) > f.error(0.8, 600.0));
     }
 }

@@ -37,20 +37,11 @@ pub enum FrictionError {
     },
 }
 
-fn check(
-    name: &'static str,
-    value: f64,
-    ok: bool,
-    expected: &'static str,
-) -> Result<(), FrictionError> {
+fn check(name: &'static str, value: f64, ok: bool, expected: &'static str) -> Result<(), FrictionError> {
     if value.is_finite() && ok {
         Ok(())
     } else {
-        Err(FrictionError::BadParameter {
-            name,
-            expected,
-            value,
-        })
+        Err(FrictionError::BadParameter { name, expected, value })
     }
 }
 
@@ -125,13 +116,7 @@ impl CoulombParams {
     /// The equivalent Stribeck parameters (Fs = Fc, Fv = 0), so Coulomb friction can use the
     /// sticking element [`stick_slip_step`].
     pub fn as_stribeck(&self) -> StribeckParams {
-        StribeckParams {
-            fc: self.fc,
-            fs: self.fc,
-            vs: 1.0,
-            delta: 2.0,
-            fv: 0.0,
-        }
+        StribeckParams { fc: self.fc, fs: self.fc, vs: 1.0, delta: 2.0, fv: 0.0 }
     }
 }
 
@@ -160,24 +145,9 @@ impl StribeckParams {
 impl LugreParams {
     /// Checks σ0 > 0, σ1 ≥ 0, σ2 ≥ 0, 0 < Fc ≤ Fs, vs > 0, δ > 0, all finite.
     pub fn validate(&self) -> Result<(), FrictionError> {
-        check(
-            "sigma0",
-            self.sigma0,
-            self.sigma0 > 0.0,
-            "finite and > 0 N/m",
-        )?;
-        check(
-            "sigma1",
-            self.sigma1,
-            self.sigma1 >= 0.0,
-            "finite and >= 0 N*s/m",
-        )?;
-        check(
-            "sigma2",
-            self.sigma2,
-            self.sigma2 >= 0.0,
-            "finite and >= 0 N*s/m",
-        )?;
+        check("sigma0", self.sigma0, self.sigma0 > 0.0, "finite and > 0 N/m")?;
+        check("sigma1", self.sigma1, self.sigma1 >= 0.0, "finite and >= 0 N*s/m")?;
+        check("sigma2", self.sigma2, self.sigma2 >= 0.0, "finite and >= 0 N*s/m")?;
         check("fc", self.fc, self.fc > 0.0, "finite and > 0 N")?;
         check("fs", self.fs, self.fs >= self.fc, "finite and >= fc")?;
         check("vs", self.vs, self.vs > 0.0, "finite and > 0 m/s")?;
@@ -187,26 +157,12 @@ impl LugreParams {
     /// The parameters of the 1995 paper (Table I): σ0 = 1e5 N/m, σ1 = √1e5 N·s/m, σ2 = 0.4 N·s/m,
     /// Fc = 1 N, Fs = 1.5 N, vs = 1e-3 m/s, δ = 2.
     pub fn canudas1995() -> LugreParams {
-        LugreParams {
-            sigma0: 1e5,
-            sigma1: 1e5f64.sqrt(),
-            sigma2: 0.4,
-            fc: 1.0,
-            fs: 1.5,
-            vs: 1e-3,
-            delta: 2.0,
-        }
+        LugreParams { sigma0: 1e5, sigma1: 1e5f64.sqrt(), sigma2: 0.4, fc: 1.0, fs: 1.5, vs: 1e-3, delta: 2.0 }
     }
 
     /// The Stribeck curve (N) that is this model's steady state, with Fv = σ2.
     pub fn steady_state(&self) -> StribeckParams {
-        StribeckParams {
-            fc: self.fc,
-            fs: self.fs,
-            vs: self.vs,
-            delta: self.delta,
-            fv: self.sigma2,
-        }
+        StribeckParams { fc: self.fc, fs: self.fs, vs: self.vs, delta: self.delta, fv: self.sigma2 }
     }
 }
 
@@ -269,12 +225,7 @@ impl StepInput {
         check("f_ext", self.f_ext, true, "a finite force in N")?;
         check("mass", self.mass, self.mass > 0.0, "finite and > 0 kg")?;
         check("dt", self.dt, self.dt > 0.0, "finite and > 0 s")?;
-        check(
-            "stick_band",
-            self.stick_band,
-            self.stick_band >= 0.0,
-            "finite and >= 0 m/s",
-        )
+        check("stick_band", self.stick_band, self.stick_band >= 0.0, "finite and >= 0 m/s")
     }
 }
 
@@ -298,13 +249,7 @@ impl StepInput {
 pub fn stick_slip_step(p: &StribeckParams, input: &StepInput) -> Result<f64, FrictionError> {
     p.validate()?;
     input.validate()?;
-    let StepInput {
-        v,
-        f_ext,
-        mass,
-        dt,
-        stick_band,
-    } = *input;
+    let StepInput { v, f_ext, mass, dt, stick_band } = *input;
     let f_stick = -(mass * v / dt + f_ext);
     let stuck = f_stick.clamp(-p.fs, p.fs);
     if v.abs() <= stick_band {
@@ -353,28 +298,16 @@ pub fn lugre_step(p: &LugreParams, z: f64, v: f64, dt: f64) -> Result<LugreStep,
     let a = p.sigma0 * v.abs() / g;
     let x = a * dt;
     // φ(x) = (1 − e^{−x})/x, accurate for small x.
-    let phi = if x < 1e-12 {
-        1.0 - 0.5 * x
-    } else {
-        -(-x).exp_m1() / x
-    };
+    let phi = if x < 1e-12 { 1.0 - 0.5 * x } else { -(-x).exp_m1() / x };
     let decay = (-x).exp();
     let z_next = z * decay + v * dt * phi;
     // Mean of z over the step: (1/dt)∫ z dt = z_ss + (z − z_ss)·φ; written without z_ss (a may be 0)
     // as z·φ + v·dt·(1 − φ)/x, and (1 − φ)/x → 1/2 for x → 0.
-    let one_minus_phi_over_x = if x < 1e-6 {
-        0.5 - x / 6.0
-    } else {
-        (1.0 - phi) / x
-    };
+    let one_minus_phi_over_x = if x < 1e-6 { 0.5 - x / 6.0 } else { (1.0 - phi) / x };
     let z_mean = z * phi + v * dt * one_minus_phi_over_x;
     let dz_dt = (z_next - z) / dt;
     let force = p.sigma0 * z_mean + p.sigma1 * dz_dt + p.sigma2 * v;
-    Ok(LugreStep {
-        z_next,
-        dz_dt,
-        force_on_body: -force,
-    })
+    Ok(LugreStep { z_next, dz_dt, force_on_body: -force })
 }
 
 /// A 1-DOF mass–spring–friction trajectory sample (the Canudas de Wit 1995 stick-slip experiment).
@@ -409,12 +342,7 @@ pub fn lugre_spring_pull(
     check("k", k, k >= 0.0, "finite and >= 0 N/m")?;
     check("pull_speed", pull_speed, true, "a finite speed in m/s")?;
     check("dt", dt, dt > 0.0, "finite and > 0 s")?;
-    check(
-        "duration",
-        duration,
-        duration >= 0.0 && duration / dt < 1e9,
-        "finite, >= 0 s and at most 1e9 steps",
-    )?;
+    check("duration", duration, duration >= 0.0 && duration / dt < 1e9, "finite, >= 0 s and at most 1e9 steps")?;
     check("every", every as f64, every >= 1, ">= 1")?;
     let n = (duration / dt).round() as usize;
     let (mut x, mut v, mut z) = (0.0f64, 0.0f64, 0.0f64);
@@ -423,12 +351,7 @@ pub fn lugre_spring_pull(
         let t = i as f64 * dt;
         let step = lugre_step(p, z, v, dt)?;
         if i % every == 0 {
-            out.push(SpringPullSample {
-                t,
-                x,
-                v,
-                friction: -step.force_on_body,
-            });
+            out.push(SpringPullSample { t, x, v, friction: -step.force_on_body });
         }
         let f_spring = k * (pull_speed * t - x);
         v += dt * (f_spring + step.force_on_body) / mass;
@@ -443,13 +366,7 @@ mod tests {
     use super::*;
 
     fn p() -> StribeckParams {
-        StribeckParams {
-            fc: 10.0,
-            fs: 15.0,
-            vs: 0.01,
-            delta: 2.0,
-            fv: 50.0,
-        }
+        StribeckParams { fc: 10.0, fs: 15.0, vs: 0.01, delta: 2.0, fv: 50.0 }
     }
 
     #[test]
@@ -473,25 +390,13 @@ mod tests {
         q.vs = f64::NAN;
         assert!(stribeck_force(&q, 0.1).is_err());
         assert!(stribeck_force(&p(), f64::NAN).is_err());
-        let inp = StepInput {
-            v: 0.0,
-            f_ext: 1.0,
-            mass: 0.0,
-            dt: 1e-4,
-            stick_band: 0.0,
-        };
+        let inp = StepInput { v: 0.0, f_ext: 1.0, mass: 0.0, dt: 1e-4, stick_band: 0.0 };
         assert!(stick_slip_step(&p(), &inp).is_err());
     }
 
     #[test]
     fn sticks_below_fs_and_slides_above() {
-        let mut inp = StepInput {
-            v: 0.0,
-            f_ext: 14.9,
-            mass: 2.0,
-            dt: 1e-4,
-            stick_band: 0.0,
-        };
+        let mut inp = StepInput { v: 0.0, f_ext: 14.9, mass: 2.0, dt: 1e-4, stick_band: 0.0 };
         // Below Fs: friction cancels F_ext exactly.
         assert_eq!(stick_slip_step(&p(), &inp).unwrap(), -14.9);
         // Above Fs: the static level opposes.

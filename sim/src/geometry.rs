@@ -28,11 +28,7 @@ pub struct ErrorMotions {
 impl ErrorMotions {
     /// Translation error [EXX, EYX, EZX](x), m, axis frame.
     pub fn translation(&self, x: f64) -> DVec3 {
-        DVec3::new(
-            self.positioning.value(x),
-            self.straightness_y.value(x),
-            self.straightness_z.value(x),
-        )
+        DVec3::new(self.positioning.value(x), self.straightness_y.value(x), self.straightness_z.value(x))
     }
 
     /// Angular error [EAX, EBX, ECX](x), rad, axis frame.
@@ -50,37 +46,19 @@ impl ErrorMotions {
     pub fn slope(&self, x: f64) -> (DVec3, DVec3) {
         let d = |p: &Profile| p.eval3(x)[1];
         (
-            DVec3::new(
-                d(&self.positioning),
-                d(&self.straightness_y),
-                d(&self.straightness_z),
-            ),
+            DVec3::new(d(&self.positioning), d(&self.straightness_y), d(&self.straightness_z)),
             DVec3::new(d(&self.roll), d(&self.pitch), d(&self.yaw)),
         )
     }
 
     /// The profile of an error motion by its ISO 230-1 index: 0..6 = EXX, EYX, EZX, EAX, EBX, ECX.
     pub fn by_index(&self, i: usize) -> &Profile {
-        [
-            &self.positioning,
-            &self.straightness_y,
-            &self.straightness_z,
-            &self.roll,
-            &self.pitch,
-            &self.yaw,
-        ][i]
+        [&self.positioning, &self.straightness_y, &self.straightness_z, &self.roll, &self.pitch, &self.yaw][i]
     }
 }
 
 /// Effect names of the six error motions, in ISO index order (FORMAT.md §2).
-pub const ERROR_MOTION_NAMES: [&str; 6] = [
-    "positioning",
-    "straightness_y",
-    "straightness_z",
-    "roll",
-    "pitch",
-    "yaw",
-];
+pub const ERROR_MOTION_NAMES: [&str; 6] = ["positioning", "straightness_y", "straightness_z", "roll", "pitch", "yaw"];
 
 #[cfg(test)]
 mod tests {
@@ -89,10 +67,7 @@ mod tests {
     #[test]
     fn pitch_moves_a_high_point_along_x_and_a_far_point_down() {
         // ε = (0, EBX, 0), r = (rx, 0, rz): ε × r = (EBX·rz, 0, −EBX·rx).
-        let e = ErrorMotions {
-            pitch: Profile::poly(vec![10e-6]),
-            ..Default::default()
-        };
+        let e = ErrorMotions { pitch: Profile::poly(vec![10e-6]), ..Default::default() };
         let d = e.deviation(0.3, DVec3::new(0.5, 0.0, 1.0));
         assert!((d - DVec3::new(10e-6, 0.0, -5e-6)).length() < 1e-18);
     }

@@ -25,12 +25,7 @@ pub struct GuidewayConfig {
 
 impl Default for GuidewayConfig {
     fn default() -> Self {
-        GuidewayConfig {
-            blocks: Vec::new(),
-            stiffness_y: 1e9,
-            stiffness_z: 1e9,
-            damping_ratio: 0.05,
-        }
+        GuidewayConfig { blocks: Vec::new(), stiffness_y: 1e9, stiffness_z: 1e9, damping_ratio: 0.05 }
     }
 }
 
@@ -118,16 +113,14 @@ impl AxisModel {
         let ax = m.axis_by_joint(&cfg.joint).ok_or_else(|| {
             MachineError::NoJoint(
                 cfg.joint.clone(),
-                m.axes
-                    .iter()
-                    .map(|a| a.joint.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", "),
+                m.axes.iter().map(|a| a.joint.as_str()).collect::<Vec<_>>().join(", "),
             )
         })?;
         let bad = |what: String| MachineError::Invalid(cfg.joint.clone(), what);
         if m.bodies[ax.parent].name != m.bodies[0].name {
-            return Err(bad("vmt simulates axes whose parent is the fixed base; stacked axes are not supported yet".into()));
+            return Err(bad(
+                "vmt simulates axes whose parent is the fixed base; stacked axes are not supported yet".into()
+            ));
         }
         let body = &m.bodies[ax.child];
         let mp = &body.mass;
@@ -155,21 +148,13 @@ impl AxisModel {
                 blocks.len()
             )));
         }
-        for (name, v) in [
-            ("stiffness_y", cfg.guideway.stiffness_y),
-            ("stiffness_z", cfg.guideway.stiffness_z),
-        ] {
+        for (name, v) in [("stiffness_y", cfg.guideway.stiffness_y), ("stiffness_z", cfg.guideway.stiffness_z)] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(bad(format!(
-                    "guideway.{name} must be a positive stiffness in N/m, got {v}"
-                )));
+                return Err(bad(format!("guideway.{name} must be a positive stiffness in N/m, got {v}")));
             }
         }
         if !(cfg.guideway.damping_ratio >= 0.0 && cfg.guideway.damping_ratio < 1.0) {
-            return Err(bad(format!(
-                "guideway.damping_ratio must be in [0, 1), got {}",
-                cfg.guideway.damping_ratio
-            )));
+            return Err(bad(format!("guideway.damping_ratio must be in [0, 1), got {}", cfg.guideway.damping_ratio)));
         }
         if !(cfg.dt > 0.0 && cfg.dt <= 1e-3) {
             return Err(bad(format!("dt must be in (0, 1e-3] s, got {}", cfg.dt)));
@@ -184,20 +169,13 @@ impl AxisModel {
             }
         };
         if let DriveConfig::BallScrew(b) = &cfg.drive {
-            for (k, v) in [
-                ("lead", b.lead),
-                ("rotor_inertia", b.rotor_inertia),
-                ("stiffness", b.stiffness),
-            ] {
+            for (k, v) in [("lead", b.lead), ("rotor_inertia", b.rotor_inertia), ("stiffness", b.stiffness)] {
                 if !(v.is_finite() && v > 0.0) {
                     return Err(bad(format!("drive.{k} must be positive, got {v}")));
                 }
             }
             if !(b.damping_ratio >= 0.0 && b.damping_ratio < 1.0) {
-                return Err(bad(format!(
-                    "drive.damping_ratio must be in [0, 1), got {}",
-                    b.damping_ratio
-                )));
+                return Err(bad(format!("drive.damping_ratio must be in [0, 1), got {}", b.damping_ratio)));
             }
         }
         let mass = body.mass.mass;
@@ -222,11 +200,7 @@ impl AxisModel {
             drive: cfg.drive.clone(),
             axis_damping: ax.damping,
             travel: (ax.lower, ax.upper),
-            max_feed: if ax.velocity > 0.0 {
-                cfg.max_feed.min(ax.velocity)
-            } else {
-                cfg.max_feed
-            },
+            max_feed: if ax.velocity > 0.0 { cfg.max_feed.min(ax.velocity) } else { cfg.max_feed },
             max_accel: cfg.max_accel,
             dt: cfg.dt,
             servo_steps,

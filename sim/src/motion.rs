@@ -7,13 +7,7 @@ pub enum Segment {
     Dwell { t0: f64, x: f64, duration: f64 },
     /// Move from `x0` to `x1` (m) with peak feed `feed` (m/s) and acceleration `accel` (m/s²):
     /// trapezoidal velocity profile (triangular if the move is too short to reach the feed).
-    Move {
-        t0: f64,
-        x0: f64,
-        x1: f64,
-        feed: f64,
-        accel: f64,
-    },
+    Move { t0: f64, x0: f64, x1: f64, feed: f64, accel: f64 },
 }
 
 /// Commanded position, velocity and acceleration at one instant.
@@ -35,13 +29,7 @@ impl Segment {
     pub fn duration(&self) -> f64 {
         match *self {
             Segment::Dwell { duration, .. } => duration,
-            Segment::Move {
-                x0,
-                x1,
-                feed,
-                accel,
-                ..
-            } => {
+            Segment::Move { x0, x1, feed, accel, .. } => {
                 let d = (x1 - x0).abs();
                 let (ta, vp) = ramp(d, feed, accel);
                 2.0 * ta + (d - vp * ta) / vp.max(f64::MIN_POSITIVE)
@@ -52,29 +40,15 @@ impl Segment {
     /// Command at time t (s) within the segment (clamped to its ends).
     pub fn at(&self, t: f64) -> Command {
         match *self {
-            Segment::Dwell { x, .. } => Command {
-                pos: x,
-                vel: 0.0,
-                acc: 0.0,
-            },
-            Segment::Move {
-                t0,
-                x0,
-                x1,
-                feed,
-                accel,
-            } => {
+            Segment::Dwell { x, .. } => Command { pos: x, vel: 0.0, acc: 0.0 },
+            Segment::Move { t0, x0, x1, feed, accel } => {
                 let d = (x1 - x0).abs();
                 let s = (x1 - x0).signum();
                 let (ta, vp) = ramp(d, feed, accel);
                 let total = self.duration();
                 let tau = (t - t0).clamp(0.0, total);
                 if tau >= total {
-                    return Command {
-                        pos: x1,
-                        vel: 0.0,
-                        acc: 0.0,
-                    };
+                    return Command { pos: x1, vel: 0.0, acc: 0.0 };
                 }
                 let (p, v, a) = if tau < ta {
                     (0.5 * accel * tau * tau, accel * tau, accel)
@@ -84,11 +58,7 @@ impl Segment {
                     let r = total - tau;
                     (d - 0.5 * accel * r * r, accel * r, -accel)
                 };
-                Command {
-                    pos: x0 + s * p,
-                    vel: s * v,
-                    acc: s * a,
-                }
+                Command { pos: x0 + s * p, vel: s * v, acc: s * a }
             }
         }
     }
@@ -109,13 +79,7 @@ pub struct MotionPlan {
 impl MotionPlan {
     /// A plan that starts at rest at `x`, at t = 0.
     pub fn starting_at(x: f64) -> MotionPlan {
-        MotionPlan {
-            segments: vec![Segment::Dwell {
-                t0: 0.0,
-                x,
-                duration: 0.0,
-            }],
-        }
+        MotionPlan { segments: vec![Segment::Dwell { t0: 0.0, x, duration: 0.0 }] }
     }
 
     pub fn end_time(&self) -> f64 {
@@ -123,32 +87,20 @@ impl MotionPlan {
     }
 
     pub fn end_pos(&self) -> f64 {
-        self.segments
-            .last()
-            .map_or(0.0, |s| s.at(f64::INFINITY).pos)
+        self.segments.last().map_or(0.0, |s| s.at(f64::INFINITY).pos)
     }
 
     /// Appends a dwell at the current position; returns (start, end) time.
     pub fn dwell(&mut self, duration: f64) -> (f64, f64) {
         let t0 = self.end_time();
-        self.segments.push(Segment::Dwell {
-            t0,
-            x: self.end_pos(),
-            duration,
-        });
+        self.segments.push(Segment::Dwell { t0, x: self.end_pos(), duration });
         (t0, t0 + duration)
     }
 
     /// Appends a move to x1; returns (start, end) time.
     pub fn move_to(&mut self, x1: f64, feed: f64, accel: f64) -> (f64, f64) {
         let t0 = self.end_time();
-        let s = Segment::Move {
-            t0,
-            x0: self.end_pos(),
-            x1,
-            feed,
-            accel,
-        };
+        let s = Segment::Move { t0, x0: self.end_pos(), x1, feed, accel };
         let t1 = t0 + s.duration();
         self.segments.push(s);
         (t0, t1)

@@ -104,6 +104,9 @@ pub enum ProcedureSpec {
         rate: f64,
         #[serde(default = "d_overrun")]
         overrun: f64,
+        /// Acceleration of the moves, m/s² (default: the axis's max_accel).
+        #[serde(default)]
+        accel: Option<f64>,
         sensors: Vec<String>,
     },
     /// Seed 003's laser 9-line / three-point measurement of one axis: targets every `step` m from start to
@@ -184,17 +187,8 @@ pub struct RunTruth {
 /// A run's data as a measurement set holds it (FORMAT.md §1), SI units.
 #[derive(Clone, Debug, PartialEq)]
 pub enum RunData {
-    TimeSeries {
-        t: Vec<f64>,
-        columns: Vec<(String, Vec<f64>)>,
-    },
-    PointTable {
-        target: Vec<f64>,
-        run: Vec<u32>,
-        direction: Vec<i8>,
-        t: Vec<f64>,
-        columns: Vec<(String, Vec<f64>)>,
-    },
+    TimeSeries { t: Vec<f64>, columns: Vec<(String, Vec<f64>)> },
+    PointTable { target: Vec<f64>, run: Vec<u32>, direction: Vec<i8>, t: Vec<f64>, columns: Vec<(String, Vec<f64>)> },
 }
 
 /// A run as measured: metadata and data.
@@ -227,30 +221,13 @@ pub fn irregular_targets(start: f64, end: f64, n: usize, seed: u64, name: &str) 
 }
 
 /// Simulates a procedure; returns one truth per run.
-pub fn simulate_procedure(
-    model: &AxisModel,
-    errors: &AxisTruth,
-    spec: &ProcedureSpec,
-    seed: u64,
-) -> Vec<RunTruth> {
+pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &ProcedureSpec, seed: u64) -> Vec<RunTruth> {
     match spec {
-        ProcedureSpec::ConstantVelocity {
-            name,
-            speeds,
-            start,
-            end,
-            high_rate,
-            direction,
-            settle,
-            sensors,
-        } => {
+        ProcedureSpec::ConstantVelocity { name, speeds, start, end, high_rate, direction, settle, sensors } => {
             let vmax = speeds.iter().cloned().fold(0.0, f64::max);
             let n = (high_rate * (end - start).abs() / vmax).round() as usize;
             let labels: Vec<String> = if speeds.len() == 3 {
-                ["low", "mid", "high"]
-                    .iter()
-                    .map(|s| format!("{name}_{s}"))
-                    .collect()
+                ["low", "mid", "high"].iter().map(|s| format!("{name}_{s}")).collect()
             } else {
                 (1..=speeds.len()).map(|i| format!("{name}_{i}")).collect()
             };
@@ -261,19 +238,14 @@ pub fn simulate_procedure(
                 .zip(labels)
                 .map(|(&(_, v), label)| {
                     let rate = high_rate * v / vmax;
-                    let (from, to) = if *direction >= 0 {
-                        (*start, *end)
-                    } else {
-                        (*end, *start)
-                    };
+                    let (from, to) = if *direction >= 0 { (*start, *end) } else { (*end, *start) };
                     let s = (to - from).signum();
                     let ramp = v * v / (2.0 * model.max_accel) + v * settle;
                     let mut plan = MotionPlan::starting_at(from - s * ramp);
                     plan.dwell(0.3);
                     let (t0, _) = plan.move_to(to + s * ramp, v, model.max_accel);
                     let t_first = t0 + v / model.max_accel + settle;
-                    let times: Vec<f64> =
-                        (0..=n).map(|i| t_first + (i as f64 - 1.0) / rate).collect();
+                    let times: Vec<f64> = (0..=n).map(|i| t_first + (i as f64 - 1.0) / rate).collect();
                     let samples = simulate(model, errors, &plan, &times).samples;
                     RunTruth {
                         name: label,
@@ -300,32 +272,31 @@ pub fn simulate_procedure(
             average,
             rate,
             overrun,
+            accel,
             sensors,
         } => {
-            let targets = targets
-                .clone()
-                .unwrap_or_else(|| irregular_targets(*start, *end, *n_targets, seed, name));
+            let targets = targets.clone().unwrap_or_else(|| irregular_targets(*start, *end, *n_targets, seed, name));
+            let a = accel.unwrap_or(model.max_accel);
             vec![positioning_cycle(
-                model, errors, name, &targets, *runs, *feed, *dwell, *average, *rate, *overrun,
-                sensors,
+                model, errors, name, &targets, *runs, *feed, a, *dwell, *average, *rate, *overrun, sensors,
             )]
         }
-        ProcedureSpec::NineLine {
-            name,
-            start,
-            end,
-            step,
-            feed,
-            dwell,
-            average,
-            rate,
-            overrun,
-            sensors,
-        } => {
+        ProcedureSpec::NineLine { name, start, end, step, feed, dwell, average, rate, overrun, sensors } => {
             let n = ((end - start) / step).round() as usize;
             let targets: Vec<f64> = (0..=n).map(|i| start + step * i as f64).collect();
             vec![positioning_cycle(
-                model, errors, name, &targets, 1, *feed, *dwell, *average, *rate, *overrun, sensors,
+                model,
+                errors,
+                name,
+                &targets,
+                1,
+                *feed,
+                model.max_accel,
+                *dwell,
+                *average,
+                *rate,
+                *overrun,
+                sensors,
             )]
         }
     }
@@ -341,13 +312,13 @@ fn positioning_cycle(
     targets: &[f64],
     runs: u32,
     feed: f64,
+    a: f64,
     dwell: f64,
     average: f64,
     rate: f64,
     overrun: f64,
     sensors: &[String],
 ) -> RunTruth {
-    let a = model.max_accel;
     let first = targets[0];
     let last = targets[targets.len() - 1];
     let mut plan = MotionPlan::starting_at(first - overrun);
@@ -380,13 +351,7 @@ fn positioning_cycle(
         for k in 0..per {
             times.push(t1 - (per - 1 - k) as f64 / rate);
         }
-        visits.push(Visit {
-            target,
-            run,
-            direction,
-            first,
-            last: times.len() - 1,
-        });
+        visits.push(Visit { target, run, direction, first, last: times.len() - 1 });
     }
     let samples = simulate(model, errors, &plan, &times).samples;
     RunTruth {
@@ -407,23 +372,13 @@ fn positioning_cycle(
 /// the dwell's averaging window, then the sensor's errors and noise applied once per reading (a
 /// sensor's `sigma` is the 1σ of one reading); lasers and encoders hold the deviation actual − target
 /// along their direction.
-pub fn read_run(
-    model: &AxisModel,
-    truth: &RunTruth,
-    sensors: &[SensorSpec],
-    seed: u64,
-) -> Result<RunRecord, String> {
+pub fn read_run(model: &AxisModel, truth: &RunTruth, sensors: &[SensorSpec], seed: u64) -> Result<RunRecord, String> {
     let mut columns = Vec::new();
     for name in &truth.sensors {
         let spec = sensors
             .iter()
             .find(|s| &s.name == name)
-            .ok_or_else(|| {
-                format!(
-                    "run `{}` names sensor `{name}`, which is not declared",
-                    truth.name
-                )
-            })?
+            .ok_or_else(|| format!("run `{}` names sensor `{name}`, which is not declared", truth.name))?
             .resolved();
         let clean = true_readings(&spec, model, &truth.samples)?;
         let mut rng = source_rng(seed, &format!("{}/{}", truth.name, spec.name));
@@ -432,27 +387,19 @@ pub fn read_run(
             Layout::PointTable { visits } => {
                 let nominal = |target: f64| match spec.kind {
                     SensorKind::EncoderLinear | SensorKind::EncoderRotary => target,
-                    SensorKind::LaserLinear
-                    | SensorKind::LaserStraightness
-                    | SensorKind::LaserVector => spec.unit_direction().dot(model.axis) * target,
+                    SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => {
+                        spec.unit_direction().dot(model.axis) * target
+                    }
                     _ => 0.0,
                 };
                 let means: Vec<f64> = visits
                     .iter()
                     .map(|a| {
-                        clean[a.first..=a.last].iter().sum::<f64>() / (a.last - a.first + 1) as f64
-                            - nominal(a.target)
+                        clean[a.first..=a.last].iter().sum::<f64>() / (a.last - a.first + 1) as f64 - nominal(a.target)
                     })
                     .collect();
-                let window = visits
-                    .first()
-                    .map_or(1.0, |a| (a.last - a.first + 1) as f64);
-                apply_errors(
-                    &spec,
-                    &means,
-                    sample_rate(&truth.samples) / window,
-                    &mut rng,
-                )
+                let window = visits.first().map_or(1.0, |a| (a.last - a.first + 1) as f64);
+                apply_errors(&spec, &means, sample_rate(&truth.samples) / window, &mut rng)
             }
         };
         columns.push((spec, values));
@@ -466,12 +413,7 @@ pub fn read_run(
                 .map(|(_, v)| v.clone())
                 .unwrap_or_else(|| truth.samples[1..].iter().map(|s| s.cmd.pos).collect());
             let mut cols = vec![("x_cmd".to_string(), x_cmd)];
-            cols.extend(
-                columns
-                    .into_iter()
-                    .filter(|(s, _)| s.kind != SensorKind::Command)
-                    .map(|(s, v)| (s.name, v)),
-            );
+            cols.extend(columns.into_iter().filter(|(s, _)| s.kind != SensorKind::Command).map(|(s, v)| (s.name, v)));
             RunData::TimeSeries { t, columns: cols }
         }
         Layout::PointTable { visits } => RunData::PointTable {

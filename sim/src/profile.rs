@@ -98,11 +98,7 @@ impl Term {
             Term::Harmonics(h) => h.iter().fold([0.0; 3], |acc, hi| {
                 let k = std::f64::consts::TAU / hi.wavelength;
                 let (s, c) = (k * x + hi.phase).sin_cos();
-                [
-                    acc[0] + hi.amplitude * s,
-                    acc[1] + hi.amplitude * k * c,
-                    acc[2] - hi.amplitude * k * k * s,
-                ]
+                [acc[0] + hi.amplitude * s, acc[1] + hi.amplitude * k * c, acc[2] - hi.amplitude * k * k * s]
             }),
             Term::Random { cosines, .. } => cosines.iter().fold([0.0; 3], |acc, &(a, k, p)| {
                 let (s, c) = (k * x + p).sin_cos();
@@ -133,15 +129,11 @@ impl Profile {
     }
 
     pub fn poly(coeffs: Vec<f64>) -> Profile {
-        Profile {
-            terms: vec![Term::Poly(coeffs)],
-        }
+        Profile { terms: vec![Term::Poly(coeffs)] }
     }
 
     pub fn harmonics(h: Vec<Harmonic>) -> Profile {
-        Profile {
-            terms: vec![Term::Harmonics(h)],
-        }
+        Profile { terms: vec![Term::Harmonics(h)] }
     }
 
     pub fn is_zero(&self) -> bool {
@@ -175,11 +167,7 @@ mod tests {
 
     #[test]
     fn harmonic_second_derivative_is_minus_k2_times_value() {
-        let p = Profile::harmonics(vec![Harmonic {
-            amplitude: 2e-6,
-            wavelength: 0.25,
-            phase: 0.3,
-        }]);
+        let p = Profile::harmonics(vec![Harmonic { amplitude: 2e-6, wavelength: 0.25, phase: 0.3 }]);
         let k = std::f64::consts::TAU / 0.25;
         let [v, _, d2] = p.eval3(0.37);
         assert!((d2 + k * k * v).abs() < 1e-12 * k * k);
@@ -187,17 +175,9 @@ mod tests {
 
     #[test]
     fn random_profile_is_reproducible_and_has_about_the_requested_rms() {
-        let spec = RandomProfile {
-            rms: 1e-6,
-            correlation_length: 0.05,
-            seed: 7,
-        };
-        let a = Profile {
-            terms: vec![Term::random(spec.clone())],
-        };
-        let b = Profile {
-            terms: vec![Term::random(spec)],
-        };
+        let spec = RandomProfile { rms: 1e-6, correlation_length: 0.05, seed: 7 };
+        let a = Profile { terms: vec![Term::random(spec.clone())] };
+        let b = Profile { terms: vec![Term::random(spec)] };
         let n = 20000;
         let mut ss = 0.0;
         for i in 0..n {
@@ -212,12 +192,7 @@ mod tests {
 
     #[test]
     fn table_interpolates_linearly_and_holds_its_end_values() {
-        let p = Profile {
-            terms: vec![Term::Table {
-                x: vec![0.0, 1.0],
-                y: vec![0.0, 2.0],
-            }],
-        };
+        let p = Profile { terms: vec![Term::Table { x: vec![0.0, 1.0], y: vec![0.0, 2.0] }] };
         assert_eq!(p.value(0.25), 0.5);
         assert_eq!(p.value(-1.0), 0.0);
         assert_eq!(p.value(3.0), 2.0);

@@ -52,10 +52,7 @@ impl SensorKind {
     pub fn reads_deviation(&self) -> bool {
         matches!(
             self,
-            SensorKind::EncoderLinear
-                | SensorKind::EncoderRotary
-                | SensorKind::LaserLinear
-                | SensorKind::LaserVector
+            SensorKind::EncoderLinear | SensorKind::EncoderRotary | SensorKind::LaserLinear | SensorKind::LaserVector
         )
     }
 }
@@ -117,9 +114,7 @@ impl SensorSpec {
         let mut s = self.clone();
         let ug = GRAVITY * 1e-6;
         let (rho, bias, scale, lsb, hp) = match self.preset {
-            Some(AccelPreset::Mems) => {
-                (25.0 * ug, 2000.0 * ug, 0.005, 4.0 * GRAVITY / 65536.0, 0.0)
-            }
+            Some(AccelPreset::Mems) => (25.0 * ug, 2000.0 * ug, 0.005, 4.0 * GRAVITY / 65536.0, 0.0),
             Some(AccelPreset::Piezo) => (0.3 * ug, 0.0, 0.0, 20.0 * GRAVITY / 16_777_216.0, 0.2),
             None => return s,
         };
@@ -139,20 +134,13 @@ impl SensorSpec {
     /// Mount point in the body frame.
     pub fn mount(&self, model: &AxisModel) -> Result<DVec3, String> {
         match (&self.position, &self.link) {
-            (Some(p), None) => {
-                Ok(model.home.rotation.inverse() * (model.axis_rotation * DVec3::from_array(*p)))
-            }
-            (None, Some(l)) => model.link(l).map(|f| f.translation).ok_or_else(|| {
-                format!(
-                    "sensor `{}`: link `{l}` is not a link of the moving body",
-                    self.name
-                )
-            }),
+            (Some(p), None) => Ok(model.home.rotation.inverse() * (model.axis_rotation * DVec3::from_array(*p))),
+            (None, Some(l)) => model
+                .link(l)
+                .map(|f| f.translation)
+                .ok_or_else(|| format!("sensor `{}`: link `{l}` is not a link of the moving body", self.name)),
             (None, None) => Ok(DVec3::ZERO),
-            (Some(_), Some(_)) => Err(format!(
-                "sensor `{}`: give either position or link, not both",
-                self.name
-            )),
+            (Some(_), Some(_)) => Err(format!("sensor `{}`: give either position or link, not both", self.name)),
         }
     }
 
@@ -169,29 +157,17 @@ impl SensorSpec {
 /// Noise-free reading of a sensor at every sample of a trace (index 0 is the sample before the first
 /// output for accelerometers, which average over the preceding interval). Laser and encoder readings are
 /// displacements from the axis home position, m; accelerometers proper acceleration, m/s².
-pub fn true_readings(
-    spec: &SensorSpec,
-    model: &AxisModel,
-    samples: &[Sample],
-) -> Result<Vec<f64>, String> {
+pub fn true_readings(spec: &SensorSpec, model: &AxisModel, samples: &[Sample]) -> Result<Vec<f64>, String> {
     let mount = spec.mount(model)?;
     let d = spec.unit_direction();
     let home_point = model.home.transform_point(mount);
     Ok(match spec.kind {
         SensorKind::Command => samples.iter().map(|s| s.cmd.pos).collect(),
-        SensorKind::EncoderLinear | SensorKind::EncoderRotary => {
-            samples.iter().map(|s| s.feedback).collect()
-        }
+        SensorKind::EncoderLinear | SensorKind::EncoderRotary => samples.iter().map(|s| s.feedback).collect(),
         SensorKind::MotorForce => samples.iter().map(|s| s.force).collect(),
-        SensorKind::Velocity => samples
-            .iter()
-            .map(|s| s.point_velocity(model, mount).dot(model.axis))
-            .collect(),
+        SensorKind::Velocity => samples.iter().map(|s| s.point_velocity(model, mount).dot(model.axis)).collect(),
         SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => {
-            samples
-                .iter()
-                .map(|s| d.dot(s.point(model, mount) - home_point))
-                .collect()
+            samples.iter().map(|s| d.dot(s.point(model, mount) - home_point)).collect()
         }
         SensorKind::LaserAngular => samples.iter().map(|s| d.dot(s.rot)).collect(),
         SensorKind::Accelerometer => {
@@ -216,15 +192,8 @@ pub fn true_readings(
 /// Applies a sensor's errors and seeded noise to noise-free readings sampled at `fs` (Hz):
 /// y = Q[HP((1 + s)·x + b) + n], n ~ N(0, σ²) with σ from `sigma` or ρ·√(fs/2), Q quantisation.
 pub fn apply_errors(spec: &SensorSpec, truth: &[f64], fs: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
-    let sigma = if spec.noise_density > 0.0 {
-        spec.noise_density * (fs / 2.0).sqrt()
-    } else {
-        spec.sigma
-    };
-    let mut out: Vec<f64> = truth
-        .iter()
-        .map(|x| (1.0 + spec.scale_factor) * x + spec.bias)
-        .collect();
+    let sigma = if spec.noise_density > 0.0 { spec.noise_density * (fs / 2.0).sqrt() } else { spec.sigma };
+    let mut out: Vec<f64> = truth.iter().map(|x| (1.0 + spec.scale_factor) * x + spec.bias).collect();
     if spec.highpass > 0.0 && fs > 0.0 {
         out = highpass_first_order(&out, spec.highpass, fs);
     }
@@ -245,11 +214,7 @@ pub fn highpass_first_order(x: &[f64], fc: f64, fs: f64) -> Vec<f64> {
     let alpha = rc / (rc + 1.0 / fs);
     let mut y = Vec::with_capacity(x.len());
     for (i, &xi) in x.iter().enumerate() {
-        y.push(if i == 0 {
-            0.0
-        } else {
-            alpha * (y[i - 1] + xi - x[i - 1])
-        });
+        y.push(if i == 0 { 0.0 } else { alpha * (y[i - 1] + xi - x[i - 1]) });
     }
     y
 }

@@ -75,24 +75,13 @@ pub fn servo_update(
     feedback: f64,
     velocity_feedback: f64,
 ) -> f64 {
-    let v_fb = st
-        .last_feedback
-        .map_or(cmd_vel, |p| (velocity_feedback - p) / ts);
+    let v_fb = st.last_feedback.map_or(cmd_vel, |p| (velocity_feedback - p) / ts);
     st.last_feedback = Some(velocity_feedback);
-    let v_ref = cfg.kp * (cmd_pos - feedback)
-        + if cfg.velocity_feed_forward {
-            cmd_vel
-        } else {
-            0.0
-        };
+    let v_ref = cfg.kp * (cmd_pos - feedback) + if cfg.velocity_feed_forward { cmd_vel } else { 0.0 };
     let e_v = v_ref - v_fb;
     let kv = mass * std::f64::consts::TAU * cfg.velocity_bandwidth;
     let ki = std::f64::consts::TAU * cfg.integral_corner;
-    let ff = if cfg.acceleration_feed_forward {
-        mass * cmd_acc
-    } else {
-        0.0
-    };
+    let ff = if cfg.acceleration_feed_forward { mass * cmd_acc } else { 0.0 };
     let unclipped = kv * (e_v + ki * (st.integral + e_v * ts)) + ff;
     let force = unclipped.clamp(-cfg.force_limit, cfg.force_limit);
     if force == unclipped {

@@ -26,20 +26,12 @@ pub struct Frame {
 }
 
 impl Frame {
-    pub const IDENTITY: Frame = Frame {
-        translation: DVec3::ZERO,
-        rotation: DQuat::IDENTITY,
-    };
+    pub const IDENTITY: Frame = Frame { translation: DVec3::ZERO, rotation: DQuat::IDENTITY };
 
     /// URDF origin: translation xyz (m) and fixed-axis roll, pitch, yaw (rad): R = Rz(y)·Ry(p)·Rx(r).
     pub fn from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Frame {
-        let rotation = DQuat::from_rotation_z(rpy[2])
-            * DQuat::from_rotation_y(rpy[1])
-            * DQuat::from_rotation_x(rpy[0]);
-        Frame {
-            translation: DVec3::from_array(xyz),
-            rotation,
-        }
+        let rotation = DQuat::from_rotation_z(rpy[2]) * DQuat::from_rotation_y(rpy[1]) * DQuat::from_rotation_x(rpy[0]);
+        Frame { translation: DVec3::from_array(xyz), rotation }
     }
 
     /// Composition: (self ∘ child) maps child coordinates to self's parent coordinates.
@@ -67,11 +59,7 @@ pub struct MassProps {
 }
 
 impl MassProps {
-    pub const ZERO: MassProps = MassProps {
-        mass: 0.0,
-        com: DVec3::ZERO,
-        inertia: DMat3::ZERO,
-    };
+    pub const ZERO: MassProps = MassProps { mass: 0.0, com: DVec3::ZERO, inertia: DMat3::ZERO };
 
     /// Combines two sets of mass properties expressed in the same frame (parallel-axis theorem:
     /// I = Σ [I_i + m_i·(|d_i|²·1 − d_i·d_iᵀ)], d_i = com_i − com).
@@ -82,24 +70,17 @@ impl MassProps {
         }
         let com = (self.com * self.mass + other.com * other.mass) / mass;
         let shift = |m: f64, d: DVec3| {
-            m * (DMat3::from_diagonal(DVec3::splat(d.length_squared()))
-                - DMat3::from_cols(d * d.x, d * d.y, d * d.z))
+            m * (DMat3::from_diagonal(DVec3::splat(d.length_squared())) - DMat3::from_cols(d * d.x, d * d.y, d * d.z))
         };
-        let inertia = self.inertia
-            + shift(self.mass, self.com - com)
-            + other.inertia
-            + shift(other.mass, other.com - com);
+        let inertia =
+            self.inertia + shift(self.mass, self.com - com) + other.inertia + shift(other.mass, other.com - com);
         MassProps { mass, com, inertia }
     }
 
     /// The same properties seen in a parent frame.
     pub fn transformed(&self, f: &Frame) -> MassProps {
         let r = DMat3::from_quat(f.rotation);
-        MassProps {
-            mass: self.mass,
-            com: f.transform_point(self.com),
-            inertia: r * self.inertia * r.transpose(),
-        }
+        MassProps { mass: self.mass, com: f.transform_point(self.com), inertia: r * self.inertia * r.transpose() }
     }
 }
 
@@ -153,9 +134,7 @@ impl MachineStructure {
     }
 
     pub fn body_of_link(&self, link: &str) -> Option<usize> {
-        self.bodies
-            .iter()
-            .position(|b| b.links.iter().any(|(n, _)| n == link))
+        self.bodies.iter().position(|b| b.links.iter().any(|(n, _)| n == link))
     }
 }
 
@@ -172,10 +151,7 @@ pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
     let mut link_index: HashMap<&str, usize> = HashMap::new();
     for (i, l) in robot.links.iter().enumerate() {
         if link_index.insert(l.name.as_str(), i).is_some() {
-            return Err(UrdfError::Link {
-                link: l.name.clone(),
-                what: "defined twice".into(),
-            });
+            return Err(UrdfError::Link { link: l.name.clone(), what: "defined twice".into() });
         }
     }
     if robot.links.is_empty() {
@@ -188,20 +164,11 @@ pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
         let m = i.mass.value;
         let t = &i.inertia;
         let vals = [m, t.ixx, t.ixy, t.ixz, t.iyy, t.iyz, t.izz];
-        if !vals.iter().all(|v| v.is_finite())
-            || !finite3(i.origin.xyz.0)
-            || !finite3(i.origin.rpy.0)
-        {
-            return Err(UrdfError::Link {
-                link: l.name.clone(),
-                what: "inertial contains NaN or infinity".into(),
-            });
+        if !vals.iter().all(|v| v.is_finite()) || !finite3(i.origin.xyz.0) || !finite3(i.origin.rpy.0) {
+            return Err(UrdfError::Link { link: l.name.clone(), what: "inertial contains NaN or infinity".into() });
         }
         if m < 0.0 {
-            return Err(UrdfError::Link {
-                link: l.name.clone(),
-                what: format!("negative mass {m} kg"),
-            });
+            return Err(UrdfError::Link { link: l.name.clone(), what: format!("negative mass {m} kg") });
         }
         let tensor = DMat3::from_cols(
             DVec3::new(t.ixx, t.ixy, t.ixz),
@@ -217,33 +184,22 @@ pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
                 ),
             });
         }
-        let local = MassProps {
-            mass: m,
-            com: DVec3::ZERO,
-            inertia: if m > 0.0 { tensor } else { DMat3::ZERO },
-        };
+        let local = MassProps { mass: m, com: DVec3::ZERO, inertia: if m > 0.0 { tensor } else { DMat3::ZERO } };
         link_mass.push(local.transformed(&Frame::from_xyz_rpy(i.origin.xyz.0, i.origin.rpy.0)));
     }
     // Tree: every link has at most one parent joint; exactly one root.
     let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
     for (ji, j) in robot.joints.iter().enumerate() {
-        let p = *link_index
-            .get(j.parent.link.as_str())
-            .ok_or_else(|| UrdfError::Joint {
-                joint: j.name.clone(),
-                what: format!("parent link `{}` does not exist", j.parent.link),
-            })?;
-        let c = *link_index
-            .get(j.child.link.as_str())
-            .ok_or_else(|| UrdfError::Joint {
-                joint: j.name.clone(),
-                what: format!("child link `{}` does not exist", j.child.link),
-            })?;
+        let p = *link_index.get(j.parent.link.as_str()).ok_or_else(|| UrdfError::Joint {
+            joint: j.name.clone(),
+            what: format!("parent link `{}` does not exist", j.parent.link),
+        })?;
+        let c = *link_index.get(j.child.link.as_str()).ok_or_else(|| UrdfError::Joint {
+            joint: j.name.clone(),
+            what: format!("child link `{}` does not exist", j.child.link),
+        })?;
         if p == c {
-            return Err(UrdfError::Joint {
-                joint: j.name.clone(),
-                what: "parent and child are the same link".into(),
-            });
+            return Err(UrdfError::Joint { joint: j.name.clone(), what: "parent and child are the same link".into() });
         }
         if parent_joint[c].is_some() {
             return Err(UrdfError::Joint {
@@ -259,21 +215,13 @@ pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
         }
         parent_joint[c] = Some(ji);
     }
-    let roots: Vec<usize> = (0..robot.links.len())
-        .filter(|&i| parent_joint[i].is_none())
-        .collect();
+    let roots: Vec<usize> = (0..robot.links.len()).filter(|&i| parent_joint[i].is_none()).collect();
     if roots.len() != 1 {
-        let names: Vec<&str> = roots
-            .iter()
-            .map(|&i| robot.links[i].name.as_str())
-            .collect();
+        let names: Vec<&str> = roots.iter().map(|&i| robot.links[i].name.as_str()).collect();
         return Err(UrdfError::Structure(if roots.is_empty() {
             "no root link: the joints form a cycle".into()
         } else {
-            format!(
-                "more than one root link (links without a parent joint): {}",
-                names.join(", ")
-            )
+            format!("more than one root link (links without a parent joint): {}", names.join(", "))
         }));
     }
     // Walk from the root; detect cycles (a link unreachable from the root sits on a cycle).
@@ -294,26 +242,18 @@ pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
     let mut stack = vec![root];
     while let Some(l) = stack.pop() {
         let b = body_of[l].expect("visited links have a body");
-        let lf = bodies[b]
-            .link_frame(&robot.links[l].name)
-            .expect("link is in its body");
+        let lf = bodies[b].link_frame(&robot.links[l].name).expect("link is in its body");
         for &ji in &children[l] {
             let j = &robot.joints[ji];
             let c = link_index[j.child.link.as_str()];
             if body_of[c].is_some() {
-                return Err(UrdfError::Structure(format!(
-                    "joint `{}` closes a cycle",
-                    j.name
-                )));
+                return Err(UrdfError::Structure(format!("joint `{}` closes a cycle", j.name)));
             }
             let origin = Frame::from_xyz_rpy(j.origin.xyz.0, j.origin.rpy.0);
             if j.joint_type == urdf_rs::JointType::Prismatic {
                 let a = DVec3::from_array(j.axis.xyz.0);
                 if a.length() < 1e-12 {
-                    return Err(UrdfError::Joint {
-                        joint: j.name.clone(),
-                        what: "axis has zero length".into(),
-                    });
+                    return Err(UrdfError::Joint { joint: j.name.clone(), what: "axis has zero length".into() });
                 }
                 let cb = bodies.len();
                 bodies.push(Body {
@@ -324,12 +264,12 @@ pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
                 let placed = lf.compose(&origin);
                 let (lower, upper) = (j.limit.lower, j.limit.upper);
                 if !(lower.is_finite() && upper.is_finite()) || lower > upper {
-                    return Err(UrdfError::Joint { joint: j.name.clone(), what: format!("limits lower={lower} upper={upper}: expected finite with lower ≤ upper") });
+                    return Err(UrdfError::Joint {
+                        joint: j.name.clone(),
+                        what: format!("limits lower={lower} upper={upper}: expected finite with lower ≤ upper"),
+                    });
                 }
-                let dynamics = j.dynamics.clone().unwrap_or(urdf_rs::Dynamics {
-                    damping: 0.0,
-                    friction: 0.0,
-                });
+                let dynamics = j.dynamics.clone().unwrap_or(urdf_rs::Dynamics { damping: 0.0, friction: 0.0 });
                 axes.push(PrismaticAxis {
                     joint: j.name.clone(),
                     parent: b,
@@ -359,11 +299,7 @@ pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
             robot.links[l].name
         )));
     }
-    Ok(MachineStructure {
-        name: robot.name.clone(),
-        bodies,
-        axes,
-    })
+    Ok(MachineStructure { name: robot.name.clone(), bodies, axes })
 }
 
 /// Sylvester's criterion on a symmetric 3×3 matrix.
@@ -376,15 +312,7 @@ pub(crate) fn positive_definite(m: &DMat3) -> bool {
 
 /// Names of the links by body, for messages.
 pub fn describe(m: &MachineStructure) -> BTreeMap<String, Vec<String>> {
-    m.bodies
-        .iter()
-        .map(|b| {
-            (
-                b.name.clone(),
-                b.links.iter().map(|(n, _)| n.clone()).collect(),
-            )
-        })
-        .collect()
+    m.bodies.iter().map(|b| (b.name.clone(), b.links.iter().map(|(n, _)| n.clone()).collect())).collect()
 }
 
 #[cfg(test)]
@@ -437,10 +365,7 @@ mod tests {
         let m = parse_urdf(&bad).unwrap();
         let e = crate::machine::AxisModel::build(
             &m,
-            &crate::machine::AxisConfig {
-                joint: "slide".into(),
-                ..Default::default()
-            },
+            &crate::machine::AxisConfig { joint: "slide".into(), ..Default::default() },
         )
         .unwrap_err()
         .to_string();
@@ -450,10 +375,7 @@ mod tests {
     #[test]
     fn non_positive_definite_inertia_and_nan_are_rejected() {
         let bad = TWO_LINKS.replacen(r#"ixx="1""#, r#"ixx="-1""#, 1);
-        assert!(parse_urdf(&bad)
-            .unwrap_err()
-            .to_string()
-            .contains("positive definite"));
+        assert!(parse_urdf(&bad).unwrap_err().to_string().contains("positive definite"));
         let nan = TWO_LINKS.replacen(r#"<mass value="2"/>"#, r#"<mass value="NaN"/>"#, 1);
         assert!(parse_urdf(&nan).is_err());
     }

@@ -17,11 +17,7 @@ fn noise_free_accelerometer_reads_v2_times_curvature_at_constant_speed() {
     let model = common_machine::slide_column();
     let (amp, wl, v) = (2e-6, 0.1, 0.5);
     let errors = AxisTruth::geometric(ErrorMotions {
-        straightness_z: Profile::harmonics(vec![Harmonic {
-            amplitude: amp,
-            wavelength: wl,
-            phase: 0.4,
-        }]),
+        straightness_z: Profile::harmonics(vec![Harmonic { amplitude: amp, wavelength: wl, phase: 0.4 }]),
         ..Default::default()
     });
     let acc = SensorSpec {
@@ -52,9 +48,7 @@ fn noise_free_accelerometer_reads_v2_times_curvature_at_constant_speed() {
     };
     let truth = simulate_procedure(&model, &errors, &spec, 1);
     let rec = read_run(&model, &truth[0], &[acc], 1).unwrap();
-    let RunData::TimeSeries { columns, .. } = rec.data else {
-        panic!("time series expected")
-    };
+    let RunData::TimeSeries { columns, .. } = rec.data else { panic!("time series expected") };
     let x = &columns[0].1;
     let a = &columns[1].1;
     let k = std::f64::consts::TAU / wl;
@@ -81,11 +75,7 @@ fn vertical_bearing_resonance_sits_at_sqrt_of_n_k_over_m() {
     let model = common_machine::slide_column();
     let errors = AxisTruth::default();
     let mut sim = AxisSim::new(&model, &errors, 0.5);
-    let hold = Command {
-        pos: 0.5,
-        vel: 0.0,
-        acc: 0.0,
-    };
+    let hold = Command { pos: 0.5, vel: 0.0, acc: 0.0 };
     for _ in 0..3000 {
         sim.step(hold);
     }
@@ -108,12 +98,8 @@ fn vertical_bearing_resonance_sits_at_sqrt_of_n_k_over_m() {
     let f = periods / ((crossings[crossings.len() - 1] - crossings[0]) * model.dt);
     let n = model.blocks.len() as f64;
     let zeta: f64 = 0.05;
-    let f_pred =
-        (n * model.k_z / model.mass).sqrt() / std::f64::consts::TAU * (1.0 - zeta * zeta).sqrt();
+    let f_pred = (n * model.k_z / model.mass).sqrt() / std::f64::consts::TAU * (1.0 - zeta * zeta).sqrt();
     println!("bounce mode: simulated {f:.2} Hz, predicted {f_pred:.2} Hz");
     // 1 %: the symplectic Euler step shifts the frequency by (ω·dt)²/24 ≈ 0.15 %.
-    assert!(
-        (f / f_pred - 1.0).abs() < 0.01,
-        "simulated {f} Hz vs predicted {f_pred} Hz"
-    );
+    assert!((f / f_pred - 1.0).abs() < 0.01, "simulated {f} Hz vs predicted {f_pred} Hz");
 }

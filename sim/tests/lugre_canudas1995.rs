@@ -10,8 +10,7 @@
 /// Wrapped in a module named `friction_…` so `cargo test -p vmt-sim friction` selects these tests.
 mod friction_lugre_canudas1995 {
     use vmt_sim::friction::{
-        lugre_spring_pull, stick_slip_step, stribeck_force, LugreParams, SpringPullSample,
-        StepInput, StribeckParams,
+        lugre_spring_pull, stick_slip_step, stribeck_force, LugreParams, SpringPullSample, StepInput, StribeckParams,
     };
 
     /// Velocity above which the mass counts as slipping, m/s. The paper's vs = 1 mm/s separates the
@@ -46,16 +45,7 @@ mod friction_lugre_canudas1995 {
 
     fn run(pull_speed: f64, duration: f64) -> Vec<SpringPullSample> {
         // Paper: 1 kg, spring 2 N/m; default simulator step 1e-4 s, keep every sample (every = 1).
-        lugre_spring_pull(
-            &LugreParams::canudas1995(),
-            1.0,
-            2.0,
-            pull_speed,
-            1e-4,
-            duration,
-            1,
-        )
-        .unwrap()
+        lugre_spring_pull(&LugreParams::canudas1995(), 1.0, 2.0, pull_speed, 1e-4, duration, 1).unwrap()
     }
 
     #[test]
@@ -82,15 +72,8 @@ mod friction_lugre_canudas1995 {
         // First break-away: the spring force k·0.1·t reaches Fs = 1.5 N at 7.5 s (paper Fig. 2);
         // pre-sliding lets the mass creep ~1.5e-5 m first, which shifts it by far less than 0.3 s.
         // Tolerance 0.3 s from the brief (≈ the 0.03 N of friction the spring adds in 0.15 s).
-        assert!(
-            starts.len() >= 5,
-            "expected >= 5 slips in 40 s, got {starts:?}"
-        );
-        assert!(
-            (starts[0] - 7.5).abs() < 0.3,
-            "first break-away at {} s",
-            starts[0]
-        );
+        assert!(starts.len() >= 5, "expected >= 5 slips in 40 s, got {starts:?}");
+        assert!((starts[0] - 7.5).abs() < 0.3, "first break-away at {} s", starts[0]);
         // Period ≈ 6.3 s (reconstruction README: slip advance ≈0.63 m at 0.1 m/s). Tolerance 5 %: the
         // value is read off a figure to about two digits. Cycles after the first (the first starts from
         // z = 0, x = 0, a different initial condition).
@@ -105,28 +88,16 @@ mod friction_lugre_canudas1995 {
         // ≈1.0 N right after slip onset; it never exceeds Fs by more than the σ1·v transient.
         let i0 = (starts[1] / 1e-4) as usize;
         let f_before = tr[i0 - 2000].friction; // 0.2 s before the second slip: still sticking, ramping
-        let f_peak_stick = tr[i0 - 4000..i0 + 100]
-            .iter()
-            .map(|s| s.friction)
-            .fold(f64::MIN, f64::max);
+        let f_peak_stick = tr[i0 - 4000..i0 + 100].iter().map(|s| s.friction).fold(f64::MIN, f64::max);
         let f_after = tr[i0 + 3000].friction; // 0.3 s into the slip
         println!("friction 0.2 s before slip {f_before}, max around onset {f_peak_stick}, 0.3 s into slip {f_after}");
         // Stick: the friction equals the spring force within pre-sliding transients; spring rate
         // 0.2 N/s → the friction 0.2 s before the break-away is ≈ 0.04 N below its peak.
-        assert!(
-            f_before > 1.3 && f_before < 1.5,
-            "friction while sticking {f_before}"
-        );
+        assert!(f_before > 1.3 && f_before < 1.5, "friction while sticking {f_before}");
         // Break-away near Fs = 1.5 N (±0.1 N: the figure's resolution).
-        assert!(
-            (f_peak_stick - 1.5).abs() < 0.1,
-            "break-away friction {f_peak_stick}"
-        );
+        assert!((f_peak_stick - 1.5).abs() < 0.1, "break-away friction {f_peak_stick}");
         // Sliding friction ≈ Fc + σ2·v = 1 + 0.4·v ∈ [1.0, 1.15] N (figure shows the hump ≈1.0–1.15 N).
-        assert!(
-            f_after > 0.95 && f_after < 1.25,
-            "sliding friction {f_after}"
-        );
+        assert!(f_after > 0.95 && f_after < 1.25, "sliding friction {f_after}");
     }
 
     #[test]
@@ -142,14 +113,8 @@ mod friction_lugre_canudas1995 {
         let tail = &tr[tr.len() - 50_000..];
         let vmin = tail.iter().map(|s| s.v).fold(f64::MAX, f64::min);
         let vmax = tail.iter().map(|s| s.v).fold(f64::MIN, f64::max);
-        let vmin_all = tr
-            .iter()
-            .filter(|s| s.t > starts[0] + 0.5)
-            .map(|s| s.v)
-            .fold(f64::MAX, f64::min);
-        println!(
-            "0.2 m/s: min velocity after break-away {vmin_all}, last 5 s v in [{vmin}, {vmax}]"
-        );
+        let vmin_all = tr.iter().filter(|s| s.t > starts[0] + 0.5).map(|s| s.v).fold(f64::MAX, f64::min);
+        println!("0.2 m/s: min velocity after break-away {vmin_all}, last 5 s v in [{vmin}, {vmax}]");
         assert_eq!(starts.len(), 1, "the mass re-stuck: slip starts {starts:?}");
         assert!(vmin_all > SLIP_THRESHOLD);
         assert!((vmin - 0.2).abs() < 0.002 && (vmax - 0.2).abs() < 0.002);
@@ -164,17 +129,7 @@ mod friction_lugre_canudas1995 {
         let (mut x, mut v) = (0.0f64, 0.0f64);
         let n = (duration / dt).round() as usize;
         for _ in 0..n {
-            let f = stick_slip_step(
-                p,
-                &StepInput {
-                    v,
-                    f_ext: force,
-                    mass,
-                    dt,
-                    stick_band: 0.0,
-                },
-            )
-            .unwrap();
+            let f = stick_slip_step(p, &StepInput { v, f_ext: force, mass, dt, stick_band: 0.0 }).unwrap();
             v += dt * (force + f) / mass;
             x += dt * v;
         }
@@ -183,22 +138,13 @@ mod friction_lugre_canudas1995 {
 
     #[test]
     fn stribeck_element_sticks_truly_below_fs_and_accelerates_above() {
-        let p = StribeckParams {
-            fc: 1.0,
-            fs: 1.5,
-            vs: 1e-3,
-            delta: 2.0,
-            fv: 0.4,
-        };
+        let p = StribeckParams { fc: 1.0, fs: 1.5, vs: 1e-3, delta: 2.0, fv: 0.4 };
         // 1 kg, 10 s at the default step 1e-4 s.
         for force in [1.0, 1.49, -1.499_999, 0.0] {
             let (x, v) = push(&p, force, 1.0, 1e-4, 10.0);
             // True sticking: no creep at all (a tanh smear with 1e-6 m/s would creep ~1e-5 m).
             // Brief: exactly 0 or below 1e-15 m.
-            assert!(
-                x.abs() <= 1e-15 && v == 0.0,
-                "force {force}: x = {x}, v = {v}"
-            );
+            assert!(x.abs() <= 1e-15 && v == 0.0, "force {force}: x = {x}, v = {v}");
         }
         // Above Fs it breaks away and accelerates: with F = 2 N the net force is ≥ 2 − 1.5 = 0.5 N
         // at first and tends to (2 − 1 − 0.4·v), so after 1 s v is well above 0.4 m/s.
@@ -218,28 +164,12 @@ mod friction_lugre_canudas1995 {
     fn stick_slip_element_stops_a_coasting_body_without_reversal() {
         // A body coasting at 0.05 m/s with no other force stops in finite time and stays at exactly
         // zero (Coulomb deceleration Fc/m = 1 m/s² → stop after ≈0.05 s), never reversing.
-        let p = StribeckParams {
-            fc: 1.0,
-            fs: 1.5,
-            vs: 1e-3,
-            delta: 2.0,
-            fv: 0.0,
-        };
+        let p = StribeckParams { fc: 1.0, fs: 1.5, vs: 1e-3, delta: 2.0, fv: 0.0 };
         let (dt, mass) = (1e-4, 1.0);
         let mut v = 0.05f64;
         let mut stop_step = None;
         for i in 0..2000 {
-            let f = stick_slip_step(
-                &p,
-                &StepInput {
-                    v,
-                    f_ext: 0.0,
-                    mass,
-                    dt,
-                    stick_band: 0.0,
-                },
-            )
-            .unwrap();
+            let f = stick_slip_step(&p, &StepInput { v, f_ext: 0.0, mass, dt, stick_band: 0.0 }).unwrap();
             v += dt * f / mass;
             assert!(v >= 0.0, "reversed at step {i}: v = {v}");
             if v == 0.0 && stop_step.is_none() {

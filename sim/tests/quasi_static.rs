@@ -12,11 +12,7 @@ use vmt_sim::motion::MotionPlan;
 use vmt_sim::profile::{Harmonic, Profile};
 
 fn errors() -> ErrorMotions {
-    let h = |a: f64, w: f64, p: f64| Harmonic {
-        amplitude: a,
-        wavelength: w,
-        phase: p,
-    };
+    let h = |a: f64, w: f64, p: f64| Harmonic { amplitude: a, wavelength: w, phase: p };
     ErrorMotions {
         positioning: Profile::poly(vec![0.0, 20e-6, -8e-6]),
         straightness_y: Profile::harmonics(vec![h(2e-6, 0.8, 0.3), h(0.5e-6, 0.13, 1.0)]),
@@ -33,9 +29,7 @@ fn slow_traverse_reproduces_the_injected_error_motions() {
     let mut plan = MotionPlan::starting_at(0.1);
     plan.dwell(0.3);
     let (t0, t1) = plan.move_to(0.4, 0.01, 0.5);
-    let times: Vec<f64> = (0..=60)
-        .map(|i| t0 + 0.5 + (t1 - t0 - 1.0) * i as f64 / 60.0)
-        .collect();
+    let times: Vec<f64> = (0..=60).map(|i| t0 + 0.5 + (t1 - t0 - 1.0) * i as f64 / 60.0).collect();
     let truth = errors();
     let truth_sim = AxisTruth::geometric(truth.clone());
     let zero = AxisTruth::default();
@@ -54,13 +48,7 @@ fn slow_traverse_reproduces_the_injected_error_motions() {
     }
     println!("worst point deviation error {worst_d:e} m, rotation error {worst_r:e} rad");
     // Issue 2: within 2 nm and 0.02 µrad (second-order terms ε²·r ≈ (30 µrad)²·1.3 m ≈ 1 nm are below).
-    assert!(
-        worst_d < 2e-9,
-        "point deviation differs from E + ε × r by {worst_d:e} m"
-    );
-    assert!(
-        worst_r < 0.02e-6,
-        "rotation differs from ε by {worst_r:e} rad"
-    );
+    assert!(worst_d < 2e-9, "point deviation differs from E + ε × r by {worst_d:e} m");
+    assert!(worst_r < 0.02e-6, "rotation differs from ε by {worst_r:e} rad");
     let _ = DVec3::ZERO;
 }

@@ -5,8 +5,7 @@ use vmt_sim::urdf::parse_urdf;
 
 #[test]
 fn every_real_urdf_with_prismatic_joints_loads() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/realdata/urdf_prismatic");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/realdata/urdf_prismatic");
     let mut loaded = 0;
     for entry in std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
         let path = entry.unwrap().path();
@@ -15,11 +14,7 @@ fn every_real_urdf_with_prismatic_joints_loads() {
         }
         let text = std::fs::read_to_string(&path).unwrap();
         let m = parse_urdf(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        assert!(
-            !m.axes.is_empty(),
-            "{}: no prismatic joint found",
-            path.display()
-        );
+        assert!(!m.axes.is_empty(), "{}: no prismatic joint found", path.display());
         println!(
             "{}: {} bodies, prismatic joints {:?}",
             path.file_name().unwrap().to_string_lossy(),
