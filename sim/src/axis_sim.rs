@@ -64,7 +64,9 @@ pub struct Sample {
     pub cmd: Command,
     /// Position feedback as the controller sees it (quantised), m.
     pub feedback: f64,
-    /// Motor position in the screw's linear coordinate (linear motor: the feedback), m.
+    /// Linear-scale reading of the table (quantised): x − EXX(x) − e(x, t), m.
+    pub scale: f64,
+    /// Motor position in the screw's linear coordinate (linear motor: the scale), m.
     pub motor: f64,
     /// Motor force (servo output), N.
     pub force: f64,
@@ -88,6 +90,7 @@ impl Sample {
             t: l(self.t, o.t),
             cmd: self.cmd,
             feedback: l(self.feedback, o.feedback),
+            scale: l(self.scale, o.scale),
             motor: l(self.motor, o.motor),
             force: o.force,
             friction: o.friction,
@@ -237,9 +240,10 @@ impl<'a> AxisSim<'a> {
             t: self.time(),
             cmd,
             feedback: quantise(self.raw_feedback(x), self.model.servo.resolution),
+            scale: quantise(self.nominal(x), self.model.servo.resolution),
             motor: match self.model.drive {
-                DriveConfig::LinearMotor => x,
-                DriveConfig::BallScrew(_) => self.motor.u,
+                DriveConfig::LinearMotor => quantise(self.nominal(x), self.model.servo.resolution),
+                DriveConfig::BallScrew(_) => quantise(self.motor.u, self.model.servo.resolution),
             },
             force: self.servo.force,
             friction: self.friction_force,

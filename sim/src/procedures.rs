@@ -58,6 +58,15 @@ fn d_one() -> i8 {
 fn d_overrun() -> f64 {
     0.005
 }
+fn d_duration() -> f64 {
+    1.0
+}
+fn d_crawl_rate() -> f64 {
+    2000.0
+}
+fn d_crawl_settle() -> f64 {
+    2.0
+}
 fn d_settle() -> f64 {
     0.2
 }
@@ -109,6 +118,23 @@ pub enum ProcedureSpec {
         accel: Option<f64>,
         sensors: Vec<String>,
     },
+    /// Low-speed crawl (seed 002): constant feeds from `start`, the sensors sampled at `rate` Hz
+    /// (default 2 kHz) for `duration` s (default 1 s) once `settle` s (default 2 s) have passed.
+    Crawl {
+        name: String,
+        /// Feeds, m/s (5 mm/min = 8.33e-5 m/s).
+        feeds: Vec<f64>,
+        start: f64,
+        #[serde(default = "d_duration")]
+        duration: f64,
+        #[serde(default = "d_crawl_rate")]
+        rate: f64,
+        #[serde(default = "d_crawl_settle")]
+        settle: f64,
+        #[serde(default = "d_one")]
+        direction: i8,
+        sensors: Vec<String>,
+    },
     /// Seed 003's laser 9-line / three-point measurement of one axis: targets every `step` m from start to
     /// end, one bidirectional run, every laser line read at every target.
     NineLine {
@@ -134,6 +160,7 @@ impl ProcedureSpec {
         match self {
             ProcedureSpec::ConstantVelocity { name, .. }
             | ProcedureSpec::Positioning { name, .. }
+            | ProcedureSpec::Crawl { name, .. }
             | ProcedureSpec::NineLine { name, .. } => name,
         }
     }
@@ -142,6 +169,7 @@ impl ProcedureSpec {
         match self {
             ProcedureSpec::ConstantVelocity { sensors, .. }
             | ProcedureSpec::Positioning { sensors, .. }
+            | ProcedureSpec::Crawl { sensors, .. }
             | ProcedureSpec::NineLine { sensors, .. } => sensors,
         }
     }
@@ -281,6 +309,29 @@ pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &Procedur
                 model, errors, name, &targets, *runs, *feed, a, *dwell, *average, *rate, *overrun, sensors,
             )]
         }
+        ProcedureSpec::Crawl { name, feeds, start, duration, rate, settle, direction, sensors } => feeds
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| {
+                let s = if *direction >= 0 { 1.0 } else { -1.0 };
+                let mut plan = MotionPlan::starting_at(*start);
+                plan.dwell(0.2);
+                let (t0, _) = plan.move_to(start + s * v * (settle + duration + 1.0), v, model.max_accel);
+                let t_first = t0 + v / model.max_accel + settle;
+                let n = (duration * rate).round() as usize;
+                let times: Vec<f64> = (0..=n).map(|k| t_first + (k as f64 - 1.0) / rate).collect();
+                RunTruth {
+                    name: format!("{name}_{}", i + 1),
+                    procedure: ProcedureKind::Crawl,
+                    feed: Some(v),
+                    direction: Some(s as i8),
+                    start_time: 0.0,
+                    sensors: sensors.clone(),
+                    layout: Layout::TimeSeries { rate: *rate },
+                    samples: simulate(model, errors, &plan, &times).samples,
+                }
+            })
+            .collect(),
         ProcedureSpec::NineLine { name, start, end, step, feed, dwell, average, rate, overrun, sensors } => {
             let n = ((end - start) / step).round() as usize;
             let targets: Vec<f64> = (0..=n).map(|i| start + step * i as f64).collect();

@@ -163,7 +163,8 @@ pub fn true_readings(spec: &SensorSpec, model: &AxisModel, samples: &[Sample]) -
     let home_point = model.home.transform_point(mount);
     Ok(match spec.kind {
         SensorKind::Command => samples.iter().map(|s| s.cmd.pos).collect(),
-        SensorKind::EncoderLinear | SensorKind::EncoderRotary => samples.iter().map(|s| s.feedback).collect(),
+        SensorKind::EncoderLinear => samples.iter().map(|s| s.scale).collect(),
+        SensorKind::EncoderRotary => samples.iter().map(|s| s.motor).collect(),
         SensorKind::MotorForce => samples.iter().map(|s| s.force).collect(),
         SensorKind::Velocity => samples.iter().map(|s| s.point_velocity(model, mount).dot(model.axis)).collect(),
         SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => {
