@@ -3,6 +3,7 @@
 //! the measurement procedures a metrologist runs. Plain data flows forward: scenario → machine →
 //! recording. No file I/O: URDF text is passed in.
 
+pub mod air;
 pub mod axis_sim;
 pub mod drive;
 pub mod feedback;

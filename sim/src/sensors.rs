@@ -6,6 +6,7 @@
 //! point); `direction` is the sensitive direction: in the machine frame for lasers (the optics sit on
 //! the bed), in the axis frame of the moving body for accelerometers (they tilt with it).
 
+use crate::air::{edlen_index, Air, HENE_WAVELENGTH_UM};
 use crate::axis_sim::{Sample, GRAVITY};
 use crate::machine::AxisModel;
 use rand::Rng;
@@ -102,6 +103,19 @@ pub struct SensorSpec {
     pub highpass: f64,
     #[serde(default)]
     pub preset: Option<AccelPreset>,
+    /// Accelerometer bias random walk, m/s² per √s (bias drift).
+    #[serde(default)]
+    pub bias_drift: f64,
+    /// Mounting misalignment of the sensitive axis, rotation vector in the body frame, rad: a tilted
+    /// accelerometer sees gravity, g·sin(angle).
+    #[serde(default)]
+    pub tilt: [f64; 3],
+    /// Lasers: the air the beam actually runs through (default 20 °C, 101 325 Pa, 50 %).
+    #[serde(default)]
+    pub air: Option<Air>,
+    /// Lasers: the air the laser's compensation assumes (default: the actual air, no error).
+    #[serde(default)]
+    pub assumed_air: Option<Air>,
 }
 
 fn default_direction() -> [f64; 3] {
@@ -109,6 +123,28 @@ fn default_direction() -> [f64; 3] {
 }
 
 impl SensorSpec {
+    /// A sensor of the given kind with no errors, mounted at the body frame origin, sensing along x.
+    pub fn new(name: &str, kind: SensorKind) -> SensorSpec {
+        SensorSpec {
+            name: name.to_string(),
+            kind,
+            position: None,
+            link: None,
+            direction: default_direction(),
+            sigma: 0.0,
+            resolution: 0.0,
+            noise_density: 0.0,
+            bias: 0.0,
+            scale_factor: 0.0,
+            highpass: 0.0,
+            preset: None,
+            bias_drift: 0.0,
+            tilt: [0.0; 3],
+            air: None,
+            assumed_air: None,
+        }
+    }
+
     /// The spec with its preset's values filled in where the spec leaves them zero.
     pub fn resolved(&self) -> SensorSpec {
         let mut s = self.clone();
@@ -152,6 +188,23 @@ impl SensorSpec {
     pub fn unit_direction(&self) -> DVec3 {
         DVec3::from_array(self.direction).normalize_or_zero()
     }
+
+    /// Relative scale error of a laser from the air: n_actual/n_assumed − 1 (Edlén).
+    pub fn air_scale_error(&self) -> f64 {
+        let actual = self.air.unwrap_or(Air::REFERENCE);
+        let assumed = self.assumed_air.unwrap_or(actual);
+        edlen_index(&actual, HENE_WAVELENGTH_UM) / edlen_index(&assumed, HENE_WAVELENGTH_UM) - 1.0
+    }
+
+    fn is_laser(&self) -> bool {
+        matches!(
+            self.kind,
+            SensorKind::LaserLinear
+                | SensorKind::LaserStraightness
+                | SensorKind::LaserVector
+                | SensorKind::LaserAngular
+        )
+    }
 }
 
 /// Noise-free reading of a sensor at every sample of a trace (index 0 is the sample before the first
@@ -172,7 +225,8 @@ pub fn true_readings(spec: &SensorSpec, model: &AxisModel, samples: &[Sample]) -
         }
         SensorKind::LaserAngular => samples.iter().map(|s| d.dot(s.rot)).collect(),
         SensorKind::Accelerometer => {
-            let axis_dir = model.home.rotation * (model.axis_rotation * d);
+            let tilt = DQuat::from_scaled_axis(DVec3::from_array(spec.tilt));
+            let axis_dir = model.home.rotation * (tilt * (model.axis_rotation * d));
             let mut out = Vec::with_capacity(samples.len());
             for (i, s) in samples.iter().enumerate() {
                 let a = if i == 0 {
@@ -191,10 +245,22 @@ pub fn true_readings(spec: &SensorSpec, model: &AxisModel, samples: &[Sample]) -
 }
 
 /// Applies a sensor's errors and seeded noise to noise-free readings sampled at `fs` (Hz):
-/// y = Q[HP((1 + s)·x + b) + n], n ~ N(0, σ²) with σ from `sigma` or ρ·√(fs/2), Q quantisation.
+/// y = Q[HP((1 + s)·x + b + w) + n], n ~ N(0, σ²) with σ from `sigma` or ρ·√(fs/2), w the bias random
+/// walk (increments N(0, rate²/fs)), s the scale factor (plus the air's Edlén error for lasers),
+/// Q quantisation.
 pub fn apply_errors(spec: &SensorSpec, truth: &[f64], fs: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let sigma = if spec.noise_density > 0.0 { spec.noise_density * (fs / 2.0).sqrt() } else { spec.sigma };
-    let mut out: Vec<f64> = truth.iter().map(|x| (1.0 + spec.scale_factor) * x + spec.bias).collect();
+    let scale = spec.scale_factor + if spec.is_laser() { spec.air_scale_error() } else { 0.0 };
+    let mut out: Vec<f64> = truth.iter().map(|x| (1.0 + scale) * x + spec.bias).collect();
+    if spec.bias_drift > 0.0 && fs > 0.0 {
+        let step = spec.bias_drift / fs.sqrt();
+        let mut w = 0.0;
+        for y in out.iter_mut() {
+            let n: f64 = rng.sample(StandardNormal);
+            w += step * n;
+            *y += w;
+        }
+    }
     if spec.highpass > 0.0 && fs > 0.0 {
         out = highpass_first_order(&out, spec.highpass, fs);
     }

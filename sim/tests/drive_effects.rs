@@ -22,6 +22,7 @@ fn laser() -> SensorSpec {
         scale_factor: 0.0,
         highpass: 0.0,
         preset: None,
+        ..SensorSpec::new("x", SensorKind::Command)
     }
 }
 

@@ -33,6 +33,7 @@ fn noise_free_accelerometer_reads_v2_times_curvature_at_constant_speed() {
         scale_factor: 0.0,
         highpass: 0.0,
         preset: None,
+        ..SensorSpec::new("x", SensorKind::Command)
     };
     // Settle 1 s after reaching speed: the start-up ringing of the pitch mode (ζ = 0.05, ~110 Hz) has
     // decayed by e^-35 by then, so only the response to the guideway remains.
