@@ -25,3 +25,12 @@ fn every_real_urdf_with_prismatic_joints_loads() {
     }
     assert!(loaded >= 5, "expected the five real URDFs, found {loaded}");
 }
+
+#[test]
+fn bundled_machines_load_with_their_axes() {
+    for (file, axes) in [("slide_column.urdf", vec!["x"]), ("vmc_3axis.urdf", vec!["x", "y", "z"])] {
+        let text = std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../urdf").join(file)).unwrap();
+        let m = parse_urdf(&text).unwrap();
+        assert_eq!(m.axes.iter().map(|a| a.joint.as_str()).collect::<Vec<_>>(), axes, "{file}");
+    }
+}
