@@ -4,12 +4,13 @@
 pub fn machine_urdf(name: &str) -> Option<&'static str> {
     match name {
         "slide_column" => Some(include_str!("../urdf/slide_column.urdf")),
+        "vmc_3axis" => Some(include_str!("../urdf/vmc_3axis.urdf")),
         _ => None,
     }
 }
 
 /// Names of the bundled machines.
-pub const MACHINES: [&str; 1] = ["slide_column"];
+pub const MACHINES: [&str; 2] = ["slide_column", "vmc_3axis"];
 
 /// The default scenario (`scenarios/default.toml`).
 pub const DEFAULT_SCENARIO: &str = include_str!("../scenarios/default.toml");

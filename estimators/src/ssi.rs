@@ -44,9 +44,7 @@ pub enum SsiError {
     #[error("feed velocity for the quantisation floor must be non-zero and finite, got {0} m/s")]
     BadFeed(f64),
     /// Percentiles out of order or outside [0, 100].
-    #[error(
-        "percentiles must satisfy 0 <= lower < upper <= 100, got lower {lower}, upper {upper}"
-    )]
+    #[error("percentiles must satisfy 0 <= lower < upper <= 100, got lower {lower}, upper {upper}")]
     BadPercentiles { lower: f64, upper: f64 },
 }
 
@@ -123,12 +121,7 @@ fn percentile_sorted(sorted: &[f64], p: f64) -> f64 {
     sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
 }
 
-fn evaluate(
-    x: &[f64],
-    dt: f64,
-    q: Option<f64>,
-    percentiles: Option<(f64, f64)>,
-) -> Result<SsiResult, SsiError> {
+fn evaluate(x: &[f64], dt: f64, q: Option<f64>, percentiles: Option<(f64, f64)>) -> Result<SsiResult, SsiError> {
     let s = velocity_by_difference(x, dt)?;
     // Mean of s(n): the sum telescopes to (x(N−1) − x(0)) / ((N−1)·Δt); use the telescoped form,
     // which has no accumulated rounding.
@@ -137,25 +130,14 @@ fn evaluate(
         return Err(SsiError::NoMotion);
     }
     let (s_hi, s_lo) = match percentiles {
-        None => (
-            s.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-            s.iter().copied().fold(f64::INFINITY, f64::min),
-        ),
+        None => (s.iter().copied().fold(f64::NEG_INFINITY, f64::max), s.iter().copied().fold(f64::INFINITY, f64::min)),
         Some((lower, upper)) => {
-            if !(lower.is_finite()
-                && upper.is_finite()
-                && 0.0 <= lower
-                && lower < upper
-                && upper <= 100.0)
-            {
+            if !(lower.is_finite() && upper.is_finite() && 0.0 <= lower && lower < upper && upper <= 100.0) {
                 return Err(SsiError::BadPercentiles { lower, upper });
             }
             let mut sorted = s.clone();
             sorted.sort_by(f64::total_cmp);
-            (
-                percentile_sorted(&sorted, upper),
-                percentile_sorted(&sorted, lower),
-            )
+            (percentile_sorted(&sorted, upper), percentile_sorted(&sorted, lower))
         }
     };
     let ssi = (s_hi - s_lo) / s_mean.abs();
@@ -169,11 +151,7 @@ fn evaluate(
         s_lo,
         s_mean,
         percentiles,
-        verdict: if ssi >= 1.0 {
-            CrawlVerdict::Crawling
-        } else {
-            CrawlVerdict::NoCrawling
-        },
+        verdict: if ssi >= 1.0 { CrawlVerdict::Crawling } else { CrawlVerdict::NoCrawling },
         quantisation_floor,
         n_velocity: s.len(),
     })
@@ -184,11 +162,7 @@ fn evaluate(
 /// `x`: encoder positions (m) of a one-way constant-feed run, sampled every `dt` seconds.
 /// `resolution`: the encoder's count q (m), if known, to report the floor 2q/(Δt·|s_mean|).
 /// Verdict: crawling iff SSI ≥ 1.
-pub fn stick_slip_index(
-    x: &[f64],
-    dt: f64,
-    resolution: Option<f64>,
-) -> Result<SsiResult, SsiError> {
+pub fn stick_slip_index(x: &[f64], dt: f64, resolution: Option<f64>) -> Result<SsiResult, SsiError> {
     evaluate(x, dt, resolution, None)
 }
 
@@ -202,12 +176,7 @@ pub fn stick_slip_index_robust(
     lower_percentile: f64,
     upper_percentile: f64,
 ) -> Result<SsiResult, SsiError> {
-    evaluate(
-        x,
-        dt,
-        resolution,
-        Some((lower_percentile, upper_percentile)),
-    )
+    evaluate(x, dt, resolution, Some((lower_percentile, upper_percentile)))
 }
 
 #[cfg(test)]
@@ -242,20 +211,12 @@ mod tests {
             // 1e-9 relative: positions ~1e-4 m, differences ~1.4e-8 m → rounding of a difference is
             // ~1e-20/1.4e-8 ≈ 1e-12 relative; 1e-9 leaves margin and would catch any formula error
             // (the sinc factor alone is 4e-7).
-            assert!(
-                ((r.ssi - exact) / exact).abs() < 1e-9,
-                "SSI {} exact {exact}",
-                r.ssi
-            );
+            assert!(((r.ssi - exact) / exact).abs() < 1e-9, "SSI {} exact {exact}", r.ssi);
             // Against the continuous 2a/v the discrete value is low by 1 − sinc(π/M) ≈ (π/M)²/6 = 4.1e-7.
             let cont = 2.0 * a_over_v;
             assert!(((r.ssi - cont) / cont).abs() < 0.5e-6);
             assert!((r.s_mean - v).abs() / v < 1e-9);
-            let want = if cont >= 1.0 {
-                CrawlVerdict::Crawling
-            } else {
-                CrawlVerdict::NoCrawling
-            };
+            let want = if cont >= 1.0 { CrawlVerdict::Crawling } else { CrawlVerdict::NoCrawling };
             assert_eq!(r.verdict, want);
         }
     }
@@ -271,18 +232,12 @@ mod tests {
         let dt = 1.0 / 2000.0;
         let v = 5e-3 / 60.0;
         let n = 2000usize;
-        let x: Vec<f64> = (0..=n)
-            .map(|i| q * ((v * i as f64 * dt) / q + 0.37).floor())
-            .collect();
+        let x: Vec<f64> = (0..=n).map(|i| q * ((v * i as f64 * dt) / q + 0.37).floor()).collect();
         let r = stick_slip_index(&x, dt, Some(q)).unwrap();
         let floor = r.quantisation_floor.unwrap();
         // Exact relations (up to rounding ~1e-12 relative in the differences):
         assert!(((r.s_hi - r.s_lo) - q / dt).abs() < 1e-9 * q / dt);
-        assert!(
-            (r.ssi - 0.5 * floor).abs() < 1e-9 * floor,
-            "SSI {} floor {floor}",
-            r.ssi
-        );
+        assert!((r.ssi - 0.5 * floor).abs() < 1e-9 * floor, "SSI {} floor {floor}", r.ssi);
         // Against the nominal floor 2q/(Δt v): s_mean differs from v by at most q/(NΔt), i.e.
         // relative q/(N Δt v) = 4.9e-9/(2000·4.2e-8) = 5.9e-5.
         let nominal = quantisation_floor(q, dt, v).unwrap();
@@ -314,31 +269,13 @@ mod tests {
         let x: Vec<f64> = (0..100).map(|i| -1e-6 * i as f64).collect();
         let r = stick_slip_index(&x, 1e-3, Some(1e-9)).unwrap();
         assert!(r.s_mean < 0.0 && r.ssi < 1e-6);
-        assert!(matches!(
-            stick_slip_index(&x, 0.0, None),
-            Err(SsiError::BadInterval(_))
-        ));
-        assert!(matches!(
-            stick_slip_index(&x[..2], 1e-3, None),
-            Err(SsiError::TooFewSamples(2))
-        ));
-        assert_eq!(
-            stick_slip_index(&[1.0, 2.0, 1.0], 1e-3, None),
-            Err(SsiError::NoMotion)
-        );
+        assert!(matches!(stick_slip_index(&x, 0.0, None), Err(SsiError::BadInterval(_))));
+        assert!(matches!(stick_slip_index(&x[..2], 1e-3, None), Err(SsiError::TooFewSamples(2))));
+        assert_eq!(stick_slip_index(&[1.0, 2.0, 1.0], 1e-3, None), Err(SsiError::NoMotion));
         let mut bad = x.clone();
         bad[7] = f64::NAN;
-        assert!(stick_slip_index(&bad, 1e-3, None)
-            .unwrap_err()
-            .to_string()
-            .contains("sample 7"));
-        assert!(matches!(
-            stick_slip_index_robust(&x, 1e-3, None, 99.0, 1.0),
-            Err(SsiError::BadPercentiles { .. })
-        ));
-        assert!(matches!(
-            quantisation_floor(0.0, 1e-3, 1.0),
-            Err(SsiError::BadResolution(_))
-        ));
+        assert!(stick_slip_index(&bad, 1e-3, None).unwrap_err().to_string().contains("sample 7"));
+        assert!(matches!(stick_slip_index_robust(&x, 1e-3, None, 99.0, 1.0), Err(SsiError::BadPercentiles { .. })));
+        assert!(matches!(quantisation_floor(0.0, 1e-3, 1.0), Err(SsiError::BadResolution(_))));
     }
 }

@@ -29,8 +29,8 @@ fn load(rel: &str) -> (DatFile, AxisResult) {
     let path = realdata_dir().join(rel);
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let dat = parse_dat(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let r = evaluate_bidirectional(&dat.targets, &dat.up, &dat.down)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let r =
+        evaluate_bidirectional(&dat.targets, &dat.up, &dat.down).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     (dat, r)
 }
 
@@ -262,10 +262,7 @@ fn every_dat_file_parses_and_satisfies_the_iso_invariants() {
     assert_eq!(files.len(), 12, "README lists 12 .dat files: {files:?}");
     for f in &files {
         let (dat, r) = load(f);
-        assert!(
-            dat.targets.len() >= 5 && dat.up[0].len() == 5,
-            "{f}: 5 cycles, >= 5 positions"
-        );
+        assert!(dat.targets.len() >= 5 && dat.up[0].len() == 5, "{f}: 5 cycles, >= 5 positions");
         // Exact inequalities: each follows from max/min over a superset, so no tolerance is needed.
         assert!(r.e >= r.e_up.max(r.e_down), "{f}: E < max(E↑, E↓)");
         assert!(r.m <= r.e, "{f}: M > E");
@@ -306,17 +303,9 @@ fn all_reports_right_values_reproduce_and_e_r_are_wrong_as_stated() {
             rep.e,
             reports_wrong_e(&r) * 1e3
         );
-        assert!(
-            (r.e * 1e3 - rep.e).abs() > tol,
-            "{md_file}: printed E {} equals ISO E {}",
-            rep.e,
-            r.e * 1e3
-        );
+        assert!((r.e * 1e3 - rep.e).abs() > tol, "{md_file}: printed E {} equals ISO E {}", rep.e, r.e * 1e3);
         // R: printed = max(R_fwd, R_bwd).
-        assert!(
-            (r.r_up.max(r.r_down) * 1e3 - rep.r).abs() <= tol,
-            "{md_file}: R"
-        );
+        assert!((r.r_up.max(r.r_down) * 1e3 - rep.r).abs() <= tol, "{md_file}: R");
         if (r.r * 1e3 - rep.r).abs() > tol {
             r_wrong += 1;
         }
@@ -328,9 +317,6 @@ fn all_reports_right_values_reproduce_and_e_r_are_wrong_as_stated() {
             rep.r
         );
     }
-    assert!(
-        r_wrong >= 1,
-        "the README says R is wrong where R_i is dominated by 2s↑+2s↓+|B_i|"
-    );
+    assert!(r_wrong >= 1, "the README says R is wrong where R_i is dominated by 2s↑+2s↓+|B_i|");
     println!("R wrong in {r_wrong} of {} reports", pairs.len());
 }

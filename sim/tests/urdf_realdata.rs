@@ -29,7 +29,8 @@ fn every_real_urdf_with_prismatic_joints_loads() {
 #[test]
 fn bundled_machines_load_with_their_axes() {
     for (file, axes) in [("slide_column.urdf", vec!["x"]), ("vmc_3axis.urdf", vec!["x", "y", "z"])] {
-        let text = std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../urdf").join(file)).unwrap();
+        let text = std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../urdf").join(file))
+            .unwrap();
         let m = parse_urdf(&text).unwrap();
         assert_eq!(m.axes.iter().map(|a| a.joint.as_str()).collect::<Vec<_>>(), axes, "{file}");
     }

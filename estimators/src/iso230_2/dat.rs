@@ -28,18 +28,10 @@ use thiserror::Error;
 pub enum DatError {
     /// A line could not be understood.
     #[error("line {line}: expected {expected}, got `{found}`")]
-    Line {
-        line: usize,
-        expected: String,
-        found: String,
-    },
+    Line { line: usize, expected: String, found: String },
     /// A key was given twice.
     #[error("line {line}: `{key}` was already given on line {first_line}")]
-    Duplicate {
-        line: usize,
-        key: String,
-        first_line: usize,
-    },
+    Duplicate { line: usize, key: String, first_line: usize },
     /// The data tables are incomplete or inconsistent with the metadata.
     #[error("{0}")]
     Incomplete(String),
@@ -146,11 +138,7 @@ pub fn parse_dat(text: &str) -> Result<DatFile, DatError> {
                 let i = parse_index(idx, line, name)?;
                 let v = parse_number(value, line, key)?;
                 if let Some(&(_, first)) = targets.get(&i) {
-                    return Err(DatError::Duplicate {
-                        line,
-                        key: key.to_string(),
-                        first_line: first,
-                    });
+                    return Err(DatError::Duplicate { line, key: key.to_string(), first_line: first });
                 }
                 targets.insert(i, (v, line));
             }
@@ -166,43 +154,25 @@ pub fn parse_dat(text: &str) -> Result<DatFile, DatError> {
                 let i = parse_index(a, line, name)?;
                 let j = parse_index(b, line, name)?;
                 let v = parse_number(value, line, key)?;
-                let table = if name == "REF_DATA_FWD" {
-                    &mut fwd
-                } else {
-                    &mut bwd
-                };
+                let table = if name == "REF_DATA_FWD" { &mut fwd } else { &mut bwd };
                 if let Some(&(_, first)) = table.get(&(i, j)) {
-                    return Err(DatError::Duplicate {
-                        line,
-                        key: key.to_string(),
-                        first_line: first,
-                    });
+                    return Err(DatError::Duplicate { line, key: key.to_string(), first_line: first });
                 }
                 table.insert((i, j), (v, line));
             }
             (_, Some(_)) => {
                 return Err(DatError::Line {
                     line,
-                    expected:
-                        "TGT_DATA[i], REF_DATA_FWD[i,j] or REF_DATA_BWD[i,j] (or a plain KEY=value)"
-                            .into(),
+                    expected: "TGT_DATA[i], REF_DATA_FWD[i,j] or REF_DATA_BWD[i,j] (or a plain KEY=value)".into(),
                     found: key.to_string(),
                 })
             }
             (_, None) => {
                 if key.is_empty() {
-                    return Err(DatError::Line {
-                        line,
-                        expected: "a key before '='".into(),
-                        found: s.to_string(),
-                    });
+                    return Err(DatError::Line { line, expected: "a key before '='".into(), found: s.to_string() });
                 }
                 if let Some(&first) = meta_lines.get(key) {
-                    return Err(DatError::Duplicate {
-                        line,
-                        key: key.to_string(),
-                        first_line: first,
-                    });
+                    return Err(DatError::Duplicate { line, key: key.to_string(), first_line: first });
                 }
                 meta_lines.insert(key.to_string(), line);
                 metadata.insert(key.to_string(), value.to_string());
@@ -210,10 +180,7 @@ pub fn parse_dat(text: &str) -> Result<DatFile, DatError> {
         }
     }
 
-    let unit = metadata
-        .get("UNIT")
-        .cloned()
-        .unwrap_or_else(|| "mm".to_string());
+    let unit = metadata.get("UNIT").cloned().unwrap_or_else(|| "mm".to_string());
     let scale = unit_scale(&unit).ok_or_else(|| DatError::Line {
         line: meta_lines.get("UNIT").copied().unwrap_or(0),
         expected: "UNIT one of mm, m, um, nm".into(),
@@ -231,16 +198,9 @@ pub fn parse_dat(text: &str) -> Result<DatFile, DatError> {
             )));
         }
     }
-    let n = fwd
-        .keys()
-        .chain(bwd.keys())
-        .map(|&(_, j)| j)
-        .max()
-        .unwrap_or(0);
+    let n = fwd.keys().chain(bwd.keys()).map(|&(_, j)| j).max().unwrap_or(0);
     if n == 0 {
-        return Err(DatError::Incomplete(
-            "no REF_DATA_FWD[i,j] or REF_DATA_BWD[i,j] line found".into(),
-        ));
+        return Err(DatError::Incomplete("no REF_DATA_FWD[i,j] or REF_DATA_BWD[i,j] line found".into()));
     }
     for (key, expected) in [("POSITIONS", m), ("CYCLES", n)] {
         if let Some(v) = metadata.get(key) {
@@ -260,38 +220,31 @@ pub fn parse_dat(text: &str) -> Result<DatFile, DatError> {
         }
     }
 
-    let build =
-        |table: &BTreeMap<(usize, usize), Cell>, name: &str| -> Result<Vec<Vec<f64>>, DatError> {
-            if let Some((&(i, _), &(_, line))) = table.iter().find(|((i, _), _)| *i > m) {
-                return Err(DatError::Line {
-                    line,
-                    expected: format!("a position index 1..{m} (TGT_DATA has {m} points)"),
-                    found: format!("{name}[{i},...]"),
-                });
-            }
-            (1..=m)
-                .map(|i| {
-                    let tgt = targets[&i].0;
-                    (1..=n)
-                        .map(|j| match table.get(&(i, j)) {
-                            Some(&(v, _)) => Ok((v - tgt) * scale),
-                            None => Err(DatError::Incomplete(format!(
-                                "{name}[{i},{j}] is missing ({m} positions x {n} cycles expected)"
-                            ))),
-                        })
-                        .collect()
-                })
-                .collect()
-        };
+    let build = |table: &BTreeMap<(usize, usize), Cell>, name: &str| -> Result<Vec<Vec<f64>>, DatError> {
+        if let Some((&(i, _), &(_, line))) = table.iter().find(|((i, _), _)| *i > m) {
+            return Err(DatError::Line {
+                line,
+                expected: format!("a position index 1..{m} (TGT_DATA has {m} points)"),
+                found: format!("{name}[{i},...]"),
+            });
+        }
+        (1..=m)
+            .map(|i| {
+                let tgt = targets[&i].0;
+                (1..=n)
+                    .map(|j| match table.get(&(i, j)) {
+                        Some(&(v, _)) => Ok((v - tgt) * scale),
+                        None => Err(DatError::Incomplete(format!(
+                            "{name}[{i},{j}] is missing ({m} positions x {n} cycles expected)"
+                        ))),
+                    })
+                    .collect()
+            })
+            .collect()
+    };
     let up = build(&fwd, "REF_DATA_FWD")?;
     let down = build(&bwd, "REF_DATA_BWD")?;
-    Ok(DatFile {
-        targets: (1..=m).map(|i| targets[&i].0 * scale).collect(),
-        up,
-        down,
-        unit,
-        metadata,
-    })
+    Ok(DatFile { targets: (1..=m).map(|i| targets[&i].0 * scale).collect(), up, down, unit, metadata })
 }
 
 #[cfg(test)]
@@ -320,51 +273,26 @@ mod tests {
         let bad = SMALL.replace("REF_DATA_FWD[2,1]=5.502", "REF_DATA_FWD[2,1]=5.5x2");
         let e = parse_dat(&bad).unwrap_err();
         assert!(matches!(e, DatError::Line { line: 10, .. }), "{e}");
-        assert!(
-            e.to_string().contains("line 10") && e.to_string().contains("finite number"),
-            "{e}"
-        );
+        assert!(e.to_string().contains("line 10") && e.to_string().contains("finite number"), "{e}");
 
         let bad = SMALL.replace("UNIT=mm", "UNIT mm");
         let e = parse_dat(&bad).unwrap_err();
-        assert!(
-            e.to_string().starts_with("line 3: expected KEY=value"),
-            "{e}"
-        );
+        assert!(e.to_string().starts_with("line 3: expected KEY=value"), "{e}");
 
         let bad = SMALL.replace("REF_DATA_BWD[1,2]=-10.003\n", "");
         let e = parse_dat(&bad).unwrap_err();
-        assert!(
-            e.to_string().contains("REF_DATA_BWD[1,2] is missing"),
-            "{e}"
-        );
+        assert!(e.to_string().contains("REF_DATA_BWD[1,2] is missing"), "{e}");
 
         let bad = SMALL.replace("CYCLES=2", "CYCLES=5");
         let e = parse_dat(&bad).unwrap_err();
-        assert!(
-            e.to_string().contains("line 4") && e.to_string().contains("CYCLES=2"),
-            "{e}"
-        );
+        assert!(e.to_string().contains("line 4") && e.to_string().contains("CYCLES=2"), "{e}");
 
         let bad = SMALL.replace("TGT_DATA[2]=5.5", "TGT_DATA[1]=5.5");
         let e = parse_dat(&bad).unwrap_err();
-        assert!(
-            matches!(
-                e,
-                DatError::Duplicate {
-                    line: 8,
-                    first_line: 7,
-                    ..
-                }
-            ),
-            "{e}"
-        );
+        assert!(matches!(e, DatError::Duplicate { line: 8, first_line: 7, .. }), "{e}");
 
         let bad = SMALL.replace("UNIT=mm", "UNIT=inch");
-        assert!(parse_dat(&bad)
-            .unwrap_err()
-            .to_string()
-            .contains("UNIT one of"));
+        assert!(parse_dat(&bad).unwrap_err().to_string().contains("UNIT one of"));
 
         let bad = SMALL.replace("REF_DATA_FWD[1,2]", "REF_DATA_FWD[1;2]");
         assert!(parse_dat(&bad).unwrap_err().to_string().contains("line 11"));

@@ -43,38 +43,17 @@ pub enum Iso230Error {
     #[error("target position {index} must be finite, got {value}")]
     NonFiniteTarget { index: usize, value: f64 },
     /// Targets are not strictly increasing.
-    #[error(
-        "targets must be strictly increasing, got {value} m (target {index}) after {previous} m"
-    )]
-    TargetsNotIncreasing {
-        index: usize,
-        previous: f64,
-        value: f64,
-    },
+    #[error("targets must be strictly increasing, got {value} m (target {index}) after {previous} m")]
+    TargetsNotIncreasing { index: usize, previous: f64, value: f64 },
     /// The deviation table does not have one row per target.
     #[error("{direction} deviations: expected one row per target ({expected} rows), got {got}")]
-    RowCount {
-        direction: &'static str,
-        expected: usize,
-        got: usize,
-    },
+    RowCount { direction: &'static str, expected: usize, got: usize },
     /// Fewer than two runs at a target: the standard deviation s_i (n − 1 in the denominator) is undefined.
-    #[error(
-        "{direction} deviations at target {index}: at least 2 runs are needed for s_i, got {got}"
-    )]
-    TooFewRuns {
-        direction: &'static str,
-        index: usize,
-        got: usize,
-    },
+    #[error("{direction} deviations at target {index}: at least 2 runs are needed for s_i, got {got}")]
+    TooFewRuns { direction: &'static str, index: usize, got: usize },
     /// A deviation is NaN or infinite.
     #[error("{direction} deviation at target {index}, run {run} must be finite, got {value}")]
-    NonFiniteDeviation {
-        direction: &'static str,
-        index: usize,
-        run: usize,
-        value: f64,
-    },
+    NonFiniteDeviation { direction: &'static str, index: usize, run: usize, value: f64 },
 }
 
 /// Direction of approach to a target (ISO 230-2:2014, 3.7): `Up` = ↑ = approach in the positive
@@ -183,74 +162,38 @@ fn check_targets(targets: &[f64]) -> Result<(), Iso230Error> {
     }
     for (i, &p) in targets.iter().enumerate() {
         if !p.is_finite() {
-            return Err(Iso230Error::NonFiniteTarget {
-                index: i + 1,
-                value: p,
-            });
+            return Err(Iso230Error::NonFiniteTarget { index: i + 1, value: p });
         }
         if i > 0 && p <= targets[i - 1] {
-            return Err(Iso230Error::TargetsNotIncreasing {
-                index: i + 1,
-                previous: targets[i - 1],
-                value: p,
-            });
+            return Err(Iso230Error::TargetsNotIncreasing { index: i + 1, previous: targets[i - 1], value: p });
         }
     }
     Ok(())
 }
 
 /// Mean and sample standard deviation (n − 1) of the deviations at one target.
-fn direction_stats(
-    row: &[f64],
-    approach: Approach,
-    index: usize,
-) -> Result<DirectionStats, Iso230Error> {
+fn direction_stats(row: &[f64], approach: Approach, index: usize) -> Result<DirectionStats, Iso230Error> {
     let direction = approach.label();
     if row.len() < 2 {
-        return Err(Iso230Error::TooFewRuns {
-            direction,
-            index: index + 1,
-            got: row.len(),
-        });
+        return Err(Iso230Error::TooFewRuns { direction, index: index + 1, got: row.len() });
     }
     for (j, &x) in row.iter().enumerate() {
         if !x.is_finite() {
-            return Err(Iso230Error::NonFiniteDeviation {
-                direction,
-                index: index + 1,
-                run: j + 1,
-                value: x,
-            });
+            return Err(Iso230Error::NonFiniteDeviation { direction, index: index + 1, run: j + 1, value: x });
         }
     }
     let n = row.len() as f64;
     let mean = row.iter().sum::<f64>() / n;
     let ss: f64 = row.iter().map(|x| (x - mean) * (x - mean)).sum();
     let s = (ss / (n - 1.0)).sqrt();
-    Ok(DirectionStats {
-        mean,
-        s,
-        repeatability: 4.0 * s,
-        runs: row.len(),
-    })
+    Ok(DirectionStats { mean, s, repeatability: 4.0 * s, runs: row.len() })
 }
 
-fn all_stats(
-    targets: &[f64],
-    rows: &[Vec<f64>],
-    approach: Approach,
-) -> Result<Vec<DirectionStats>, Iso230Error> {
+fn all_stats(targets: &[f64], rows: &[Vec<f64>], approach: Approach) -> Result<Vec<DirectionStats>, Iso230Error> {
     if rows.len() != targets.len() {
-        return Err(Iso230Error::RowCount {
-            direction: approach.label(),
-            expected: targets.len(),
-            got: rows.len(),
-        });
+        return Err(Iso230Error::RowCount { direction: approach.label(), expected: targets.len(), got: rows.len() });
     }
-    rows.iter()
-        .enumerate()
-        .map(|(i, row)| direction_stats(row, approach, i))
-        .collect()
+    rows.iter().enumerate().map(|(i, row)| direction_stats(row, approach, i)).collect()
 }
 
 fn max_of(v: impl Iterator<Item = f64>) -> f64 {
@@ -267,11 +210,7 @@ fn min_of(v: impl Iterator<Item = f64>) -> f64 {
 /// x_ij = actual − target (m) at target i, run j, approached in the + / − direction. Runs may
 /// differ in number between targets and directions, but at least 2 are needed per target and
 /// direction (the standard asks for 5).
-pub fn evaluate_bidirectional(
-    targets: &[f64],
-    up: &[Vec<f64>],
-    down: &[Vec<f64>],
-) -> Result<AxisResult, Iso230Error> {
+pub fn evaluate_bidirectional(targets: &[f64], up: &[Vec<f64>], down: &[Vec<f64>]) -> Result<AxisResult, Iso230Error> {
     check_targets(targets)?;
     let su = all_stats(targets, up, Approach::Up)?;
     let sd = all_stats(targets, down, Approach::Down)?;
@@ -281,9 +220,7 @@ pub fn evaluate_bidirectional(
         .zip(su.iter().zip(&sd))
         .map(|(&p, (u, d))| {
             let b_i = u.mean - d.mean;
-            let r_i = (2.0 * u.s + 2.0 * d.s + b_i.abs())
-                .max(u.repeatability)
-                .max(d.repeatability);
+            let r_i = (2.0 * u.s + 2.0 * d.s + b_i.abs()).max(u.repeatability).max(d.repeatability);
             TargetResult {
                 target: p,
                 up: *u,
@@ -305,14 +242,8 @@ pub fn evaluate_bidirectional(
     let m_count = t.len() as f64;
     let both_hi = || t.iter().flat_map(|r| [r.up.mean, r.down.mean]);
     let e = max_of(both_hi()) - min_of(both_hi());
-    let a_hi = max_of(
-        t.iter()
-            .flat_map(|r| [r.up.mean + 2.0 * r.up.s, r.down.mean + 2.0 * r.down.s]),
-    );
-    let a_lo = min_of(
-        t.iter()
-            .flat_map(|r| [r.up.mean - 2.0 * r.up.s, r.down.mean - 2.0 * r.down.s]),
-    );
+    let a_hi = max_of(t.iter().flat_map(|r| [r.up.mean + 2.0 * r.up.s, r.down.mean + 2.0 * r.down.s]));
+    let a_lo = min_of(t.iter().flat_map(|r| [r.up.mean - 2.0 * r.up.s, r.down.mean - 2.0 * r.down.s]));
     Ok(AxisResult {
         b: b_signed.abs(),
         b_signed,
@@ -323,10 +254,8 @@ pub fn evaluate_bidirectional(
         e_up: max_of(t.iter().map(|r| r.up.mean)) - min_of(t.iter().map(|r| r.up.mean)),
         e_down: max_of(t.iter().map(|r| r.down.mean)) - min_of(t.iter().map(|r| r.down.mean)),
         e,
-        m: max_of(t.iter().map(|r| r.mean_bidirectional))
-            - min_of(t.iter().map(|r| r.mean_bidirectional)),
-        a_up: max_of(t.iter().map(|r| r.up.mean + 2.0 * r.up.s))
-            - min_of(t.iter().map(|r| r.up.mean - 2.0 * r.up.s)),
+        m: max_of(t.iter().map(|r| r.mean_bidirectional)) - min_of(t.iter().map(|r| r.mean_bidirectional)),
+        a_up: max_of(t.iter().map(|r| r.up.mean + 2.0 * r.up.s)) - min_of(t.iter().map(|r| r.up.mean - 2.0 * r.up.s)),
         a_down: max_of(t.iter().map(|r| r.down.mean + 2.0 * r.down.s))
             - min_of(t.iter().map(|r| r.down.mean - 2.0 * r.down.s)),
         a: a_hi - a_lo,
@@ -351,8 +280,7 @@ pub fn evaluate_unidirectional(
         targets: targets.to_vec(),
         r: max_of(st.iter().map(|s| s.repeatability)),
         e: max_of(st.iter().map(|s| s.mean)) - min_of(st.iter().map(|s| s.mean)),
-        a: max_of(st.iter().map(|s| s.mean + 2.0 * s.s))
-            - min_of(st.iter().map(|s| s.mean - 2.0 * s.s)),
+        a: max_of(st.iter().map(|s| s.mean + 2.0 * s.s)) - min_of(st.iter().map(|s| s.mean - 2.0 * s.s)),
         stats: st,
     })
 }
@@ -383,16 +311,10 @@ mod tests {
     #[test]
     fn hand_worked_three_targets_three_runs() {
         let targets = [0.0, 0.1, 0.25];
-        let up = vec![
-            vec![1.0 * UM, 2.0 * UM, 3.0 * UM],
-            vec![4.0 * UM, 4.0 * UM, 4.0 * UM],
-            vec![0.0, 3.0 * UM, 6.0 * UM],
-        ];
-        let down = vec![
-            vec![-1.0 * UM, 0.0, 1.0 * UM],
-            vec![0.0, 2.0 * UM, 4.0 * UM],
-            vec![1.0 * UM, 1.0 * UM, 4.0 * UM],
-        ];
+        let up =
+            vec![vec![1.0 * UM, 2.0 * UM, 3.0 * UM], vec![4.0 * UM, 4.0 * UM, 4.0 * UM], vec![0.0, 3.0 * UM, 6.0 * UM]];
+        let down =
+            vec![vec![-1.0 * UM, 0.0, 1.0 * UM], vec![0.0, 2.0 * UM, 4.0 * UM], vec![1.0 * UM, 1.0 * UM, 4.0 * UM]];
         let r = evaluate_bidirectional(&targets, &up, &down).unwrap();
         // Tolerance 1e-18 m: the µm-scaled inputs carry relative rounding ~1e-16, i.e. ~1e-21 m.
         let close = |a: f64, b: f64| (a - b).abs() < 1e-18;
@@ -422,14 +344,8 @@ mod tests {
     #[test]
     fn reversal_dominated_repeatability_and_signed_b() {
         let targets = [0.0, 1.0];
-        let up = vec![
-            vec![-1.0 * UM, 0.0, 1.0 * UM],
-            vec![-1.0 * UM, 0.0, 1.0 * UM],
-        ];
-        let down = vec![
-            vec![9.0 * UM, 10.0 * UM, 11.0 * UM],
-            vec![1.0 * UM, 2.0 * UM, 3.0 * UM],
-        ];
+        let up = vec![vec![-1.0 * UM, 0.0, 1.0 * UM], vec![-1.0 * UM, 0.0, 1.0 * UM]];
+        let down = vec![vec![9.0 * UM, 10.0 * UM, 11.0 * UM], vec![1.0 * UM, 2.0 * UM, 3.0 * UM]];
         let r = evaluate_bidirectional(&targets, &up, &down).unwrap();
         // 1e-18 m: rounding of µm-scaled inputs (see above).
         assert!((r.targets[0].repeatability - 14.0 * UM).abs() < 1e-18);
@@ -442,23 +358,15 @@ mod tests {
     #[test]
     fn bad_inputs_are_rejected_with_a_message() {
         let row = vec![0.0, 1e-6];
-        let e = evaluate_bidirectional(
-            &[0.0, 0.0],
-            &[row.clone(), row.clone()],
-            &[row.clone(), row.clone()],
-        )
-        .unwrap_err();
+        let e =
+            evaluate_bidirectional(&[0.0, 0.0], &[row.clone(), row.clone()], &[row.clone(), row.clone()]).unwrap_err();
         assert!(e.to_string().contains("strictly increasing"), "{e}");
         let e = evaluate_bidirectional(&[0.0], &[vec![1e-6]], &[row.clone()]).unwrap_err();
         assert!(e.to_string().contains("at least 2 runs"), "{e}");
         let e = evaluate_bidirectional(&[0.0], &[vec![f64::NAN, 0.0]], &[row.clone()]).unwrap_err();
         assert!(e.to_string().contains("finite"), "{e}");
-        let e = evaluate_bidirectional(&[0.0, 1.0], &[row.clone()], &[row.clone(), row.clone()])
-            .unwrap_err();
+        let e = evaluate_bidirectional(&[0.0, 1.0], &[row.clone()], &[row.clone(), row.clone()]).unwrap_err();
         assert!(e.to_string().contains("one row per target"), "{e}");
-        assert_eq!(
-            evaluate_bidirectional(&[], &[], &[]).unwrap_err(),
-            Iso230Error::NoTargets
-        );
+        assert_eq!(evaluate_bidirectional(&[], &[], &[]).unwrap_err(), Iso230Error::NoTargets);
     }
 }
