@@ -4,6 +4,7 @@
 
 use crate::bundled;
 use crate::error::VmtError;
+use crate::estimate::EstimatorSpec;
 use crate::model::{self, Model};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -29,7 +30,7 @@ struct RawScenario {
     #[serde(default)]
     procedures: Vec<ProcedureSpec>,
     #[serde(default)]
-    estimators: Option<toml::Value>,
+    estimators: Vec<EstimatorSpec>,
 }
 
 /// A loaded, validated scenario.
@@ -46,7 +47,7 @@ pub struct Scenario {
     pub truth: Model,
     pub sensors: Vec<SensorSpec>,
     pub procedures: Vec<ProcedureSpec>,
-    pub estimators: Option<toml::Value>,
+    pub estimators: Vec<EstimatorSpec>,
 }
 
 impl Scenario {

@@ -32,6 +32,30 @@ pub struct AxisTruth {
     pub backlash: f64,
     /// Friction of the guideway on the moving body.
     pub friction: GuideFriction,
+    /// A structural mode of the column (resonance effect), if any.
+    pub mode: Option<StructuralMode>,
+}
+
+/// A structural mode of the moving body (the column bending), DESIGN.md §4 "structural resonance": a
+/// modal oscillator per direction driven by the acceleration of the reference point (base excitation),
+/// q̈ + 2ζω·q̇ + ω²·q = −a_base, with a linear mode shape φ(r) = r_z/h (h: `height`, the tip of the
+/// column above the reference point): a point r of the body moves by φ(r)·q in addition to the rigid
+/// motion. Sensors see it; the rigid-body dynamics does not (the modal mass is taken as small).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StructuralMode {
+    /// Natural frequency, Hz.
+    pub frequency: f64,
+    /// Damping ratio ζ.
+    pub damping: f64,
+    /// Height of the mode shape's unit point above the reference point, m.
+    pub height: f64,
+}
+
+impl StructuralMode {
+    /// Mode shape at body point r (axis frame): φ = max(r_z, 0)/h.
+    pub fn shape(&self, r: DVec3) -> f64 {
+        r.z.max(0.0) / self.height
+    }
 }
 
 /// Friction of a guideway (DESIGN.md §4): Coulomb and viscous are Stribeck special cases.
@@ -80,6 +104,9 @@ pub struct Sample {
     pub vel: DVec3,
     /// Angular velocity, world frame, rad/s.
     pub angvel: DVec3,
+    /// Modal displacement and velocity of the structural mode (zero without one), world frame.
+    pub mode: DVec3,
+    pub mode_vel: DVec3,
 }
 
 impl Sample {
@@ -98,17 +125,22 @@ impl Sample {
             rot: lv(self.rot, o.rot),
             vel: lv(self.vel, o.vel),
             angvel: lv(self.angvel, o.angvel),
+            mode: lv(self.mode, o.mode),
+            mode_vel: lv(self.mode_vel, o.mode_vel),
         }
     }
 
-    /// World position of a body-frame point p (m), given the home orientation.
-    pub fn point(&self, model: &AxisModel, p: DVec3) -> DVec3 {
-        self.pos + DQuat::from_scaled_axis(self.rot) * (model.home.rotation * p)
+    /// World position of a body-frame point p (m), given the home orientation and the structural mode
+    /// (if the truth has one).
+    pub fn point(&self, model: &AxisModel, p: DVec3, mode: Option<&StructuralMode>) -> DVec3 {
+        let flex = mode.map_or(DVec3::ZERO, |m| self.mode * m.shape(model.body_to_axis(p)));
+        self.pos + DQuat::from_scaled_axis(self.rot) * (model.home.rotation * p) + flex
     }
 
     /// Velocity of a body-frame point p, world frame, m/s.
-    pub fn point_velocity(&self, model: &AxisModel, p: DVec3) -> DVec3 {
-        self.vel + self.angvel.cross(DQuat::from_scaled_axis(self.rot) * (model.home.rotation * p))
+    pub fn point_velocity(&self, model: &AxisModel, p: DVec3, mode: Option<&StructuralMode>) -> DVec3 {
+        let flex = mode.map_or(DVec3::ZERO, |m| self.mode_vel * m.shape(model.body_to_axis(p)));
+        self.vel + self.angvel.cross(DQuat::from_scaled_axis(self.rot) * (model.home.rotation * p)) + flex
     }
 }
 
@@ -137,6 +169,9 @@ pub struct AxisSim<'a> {
     bristle: f64,
     /// Friction force of the last step on the body along the axis, N.
     friction_force: f64,
+    /// Structural mode state (displacement, velocity) and the reference point's last velocity.
+    mode: (DVec3, DVec3),
+    last_vel: Option<DVec3>,
     steps: u64,
     ey: DVec3,
     ez: DVec3,
@@ -171,6 +206,8 @@ impl<'a> AxisSim<'a> {
             motor: Motor::default(),
             bristle: 0.0,
             friction_force: 0.0,
+            mode: (DVec3::ZERO, DVec3::ZERO),
+            last_vel: None,
             steps: 0,
             ey,
             ez,
@@ -251,6 +288,8 @@ impl<'a> AxisSim<'a> {
             rot: (pose.rotation * self.model.home.rotation.inverse()).to_scaled_axis(),
             vel: rb.velocity_at_point(pose.translation),
             angvel: rb.angvel(),
+            mode: self.mode.0,
+            mode_vel: self.mode.1,
         }
     }
 
@@ -328,6 +367,17 @@ impl<'a> AxisSim<'a> {
         rb.add_force_at_point(m.axis * f_friction, pose.translation, false);
         self.world.step();
         self.steps += 1;
+        if let Some(md) = &self.truth.mode {
+            // Base excitation from the reference point's acceleration over the step; semi-implicit Euler.
+            let rb = &self.world.bodies[self.body];
+            let v = rb.velocity_at_point(rb.position().translation);
+            let a_base = self.last_vel.map_or(DVec3::ZERO, |v0| (v - v0) / m.dt);
+            self.last_vel = Some(v);
+            let w = std::f64::consts::TAU * md.frequency;
+            let (q, qd) = &mut self.mode;
+            *qd += (-a_base - 2.0 * md.damping * w * *qd - w * w * *q) * m.dt;
+            *q += *qd * m.dt;
+        }
     }
 }
 

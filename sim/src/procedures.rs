@@ -423,7 +423,13 @@ fn positioning_cycle(
 /// the dwell's averaging window, then the sensor's errors and noise applied once per reading (a
 /// sensor's `sigma` is the 1σ of one reading); lasers and encoders hold the deviation actual − target
 /// along their direction.
-pub fn read_run(model: &AxisModel, truth: &RunTruth, sensors: &[SensorSpec], seed: u64) -> Result<RunRecord, String> {
+pub fn read_run(
+    model: &AxisModel,
+    physics: &AxisTruth,
+    truth: &RunTruth,
+    sensors: &[SensorSpec],
+    seed: u64,
+) -> Result<RunRecord, String> {
     let mut columns = Vec::new();
     for name in &truth.sensors {
         let spec = sensors
@@ -431,7 +437,7 @@ pub fn read_run(model: &AxisModel, truth: &RunTruth, sensors: &[SensorSpec], see
             .find(|s| &s.name == name)
             .ok_or_else(|| format!("run `{}` names sensor `{name}`, which is not declared", truth.name))?
             .resolved();
-        let clean = true_readings(&spec, model, &truth.samples)?;
+        let clean = true_readings(&spec, model, physics.mode.as_ref(), &truth.samples)?;
         let mut rng = source_rng(seed, &format!("{}/{}", truth.name, spec.name));
         let values = match &truth.layout {
             Layout::TimeSeries { rate } => apply_errors(&spec, &clean[1..], *rate, &mut rng),

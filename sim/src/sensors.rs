@@ -7,7 +7,7 @@
 //! the bed), in the axis frame of the moving body for accelerometers (they tilt with it).
 
 use crate::air::{edlen_index, Air, HENE_WAVELENGTH_UM};
-use crate::axis_sim::{Sample, GRAVITY};
+use crate::axis_sim::{Sample, StructuralMode, GRAVITY};
 use crate::machine::AxisModel;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -210,18 +210,25 @@ impl SensorSpec {
 /// Noise-free reading of a sensor at every sample of a trace (index 0 is the sample before the first
 /// output for accelerometers, which average over the preceding interval). Laser and encoder readings are
 /// displacements from the axis home position, m; accelerometers proper acceleration, m/s².
-pub fn true_readings(spec: &SensorSpec, model: &AxisModel, samples: &[Sample]) -> Result<Vec<f64>, String> {
+pub fn true_readings(
+    spec: &SensorSpec,
+    model: &AxisModel,
+    mode: Option<&StructuralMode>,
+    samples: &[Sample],
+) -> Result<Vec<f64>, String> {
     let mount = spec.mount(model)?;
     let d = spec.unit_direction();
     let home_point = model.home.transform_point(mount);
+    let point = |s: &Sample| s.point(model, mount, mode);
+    let velocity = |s: &Sample| s.point_velocity(model, mount, mode);
     Ok(match spec.kind {
         SensorKind::Command => samples.iter().map(|s| s.cmd.pos).collect(),
         SensorKind::EncoderLinear => samples.iter().map(|s| s.scale).collect(),
         SensorKind::EncoderRotary => samples.iter().map(|s| s.motor).collect(),
         SensorKind::MotorForce => samples.iter().map(|s| s.force).collect(),
-        SensorKind::Velocity => samples.iter().map(|s| s.point_velocity(model, mount).dot(model.axis)).collect(),
+        SensorKind::Velocity => samples.iter().map(|s| velocity(s).dot(model.axis)).collect(),
         SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => {
-            samples.iter().map(|s| d.dot(s.point(model, mount) - home_point)).collect()
+            samples.iter().map(|s| d.dot(point(s) - home_point)).collect()
         }
         SensorKind::LaserAngular => samples.iter().map(|s| d.dot(s.rot)).collect(),
         SensorKind::Accelerometer => {
@@ -233,7 +240,7 @@ pub fn true_readings(spec: &SensorSpec, model: &AxisModel, samples: &[Sample]) -
                     DVec3::ZERO
                 } else {
                     let p = &samples[i - 1];
-                    (s.point_velocity(model, mount) - p.point_velocity(model, mount)) / (s.t - p.t)
+                    (velocity(s) - velocity(p)) / (s.t - p.t)
                 };
                 let proper = a + DVec3::new(0.0, 0.0, GRAVITY);
                 out.push((DQuat::from_scaled_axis(s.rot) * axis_dir).dot(proper));

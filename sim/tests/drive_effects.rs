@@ -50,7 +50,7 @@ fn mean_reversal(model: &AxisModel, truth: &AxisTruth) -> f64 {
         sensors: vec!["laser".into()],
     };
     let t = simulate_procedure(model, truth, &spec, 3);
-    let rec = read_run(model, &t[0], &[laser()], 3).unwrap();
+    let rec = read_run(model, truth, &t[0], &[laser()], 3).unwrap();
     let RunData::PointTable { direction, columns, .. } = rec.data else { panic!() };
     let dev = &columns[0].1;
     let mean = |d: i8| {

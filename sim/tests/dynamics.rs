@@ -48,7 +48,7 @@ fn noise_free_accelerometer_reads_v2_times_curvature_at_constant_speed() {
         sensors: vec!["acc_z".into()],
     };
     let truth = simulate_procedure(&model, &errors, &spec, 1);
-    let rec = read_run(&model, &truth[0], &[acc], 1).unwrap();
+    let rec = read_run(&model, &errors, &truth[0], &[acc], 1).unwrap();
     let RunData::TimeSeries { columns, .. } = rec.data else { panic!("time series expected") };
     let x = &columns[0].1;
     let a = &columns[1].1;

@@ -40,7 +40,7 @@ fn slow_traverse_reproduces_the_injected_error_motions() {
     for (sa, sb) in a.samples.iter().zip(&b.samples) {
         let x = sa.cmd.pos;
         for p in points {
-            let d = sa.point(&model, p) - sb.point(&model, p);
+            let d = sa.point(&model, p, None) - sb.point(&model, p, None);
             let expect = truth.deviation(x, model.body_to_axis(p));
             worst_d = worst_d.max((d - expect).length());
         }
