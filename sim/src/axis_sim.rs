@@ -260,11 +260,16 @@ impl<'a> AxisSim<'a> {
     }
 
     /// Position feedback before quantisation: the scale (linear motor, closed loop) or the motor
-    /// (semi-closed loop).
+    /// (semi-closed loop), plus the CNC's compensation c(x).
     fn raw_feedback(&self, x_actual: f64) -> f64 {
-        match &self.model.drive {
+        let fb = match &self.model.drive {
             DriveConfig::BallScrew(b) if b.feedback == FeedbackKind::Rotary => self.motor.u,
             _ => self.nominal(x_actual),
+        };
+        if self.model.compensation.is_zero() {
+            fb
+        } else {
+            fb + self.model.compensation.value(fb)
         }
     }
 

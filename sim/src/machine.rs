@@ -105,6 +105,9 @@ pub struct AxisModel {
     pub servo_steps: usize,
     /// Links of the moving body (name, placement in the body frame), for sensor mounting.
     pub links: Vec<(String, Frame)>,
+    /// The CNC's compensation table (seed 004): the controller adds c(x_fb) to its position feedback,
+    /// so the table lands near command − c (zero: no compensation), m.
+    pub compensation: crate::profile::Profile,
 }
 
 impl AxisModel {
@@ -205,6 +208,7 @@ impl AxisModel {
             dt: cfg.dt,
             servo_steps,
             links: body.links.clone(),
+            compensation: crate::profile::Profile::zero(),
         })
     }
 
