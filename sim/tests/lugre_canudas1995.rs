@@ -122,6 +122,15 @@ mod friction_lugre_canudas1995 {
             (f_peak_stick - 1.5).abs() < 0.1,
             "break-away friction {f_peak_stick}"
         );
+        // As the mass re-sticks the friction dips below Fc (fig5.png: ≈0.75 N) before ramping again:
+        // the spring force at the stop is below Fc. Bound 0.6–0.95 N (figure resolution ±0.1 N).
+        let i1 = (starts[2] / 1e-4) as usize;
+        let f_dip = tr[i0..i1]
+            .iter()
+            .map(|s| s.friction)
+            .fold(f64::MAX, f64::min);
+        println!("friction dip at re-stick {f_dip}");
+        assert!(f_dip > 0.6 && f_dip < 0.95, "dip {f_dip}");
         // Sliding friction ≈ Fc + σ2·v = 1 + 0.4·v ∈ [1.0, 1.15] N (figure shows the hump ≈1.0–1.15 N).
         assert!(
             f_after > 0.95 && f_after < 1.25,
