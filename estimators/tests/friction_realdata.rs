@@ -1,0 +1,199 @@
+//! Friction identification on real data: the rack-and-pinion axis of K. Mnich (Lodz University of
+//! Technology), `shared/realdata/friction_rack_pinion/` (github KonradMnich/friction-identification
+//! at 8b477df). Follows the processing of the README (the author's main.m and extraction.m):
+//! - a3NI.csv (2 kHz): F [N] = −(V − mean(first 10 samples))·200 N/V; NI time shifted by +4 ms;
+//! - a3MR.csv (0.667 ms): v [m/s] = −rpm·20 mm/rev/1000/60;
+//! - force resampled (linearly) onto the servo timebase; 2nd-order Butterworth low-pass 30 Hz,
+//!   causal, on force and velocity; a = dv/dt; F_friction = F − 24.7 kg·a;
+//! - fit on the acceleration phase, 0 < v ≤ 0.55 m/s, lower bound dry ≥ 10 N (the author's
+//!   c1 = 10.0000000001 N sits on that bound);
+//! - the author's model F = c2·v + c1 + v·(c3 − c1)·e/c4·exp(−v/c4) is `StribeckShape::Mnich`.
+//!
+//! The CSV parsing lives here; the estimator only sees numbers.
+
+use std::path::PathBuf;
+use vmt_estimators::friction_id::{
+    fit_stribeck, friction_from_motion, lugre_sigma0_from_presliding, stribeck_curve, FilterMode, FrictionIdError,
+    StribeckCoefficients, StribeckFit, StribeckFitOptions, StribeckShape, SweepDirection,
+};
+
+/// `shared/` sits beside the worktree (`<manifest>/../../shared`) or beside the clone.
+fn data_dir() -> PathBuf {
+    let m = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    for cand in [m.join("../../shared"), m.join("../shared"), m.join("../../../shared")] {
+        let d = cand.join("realdata/friction_rack_pinion");
+        if d.is_dir() {
+            return d;
+        }
+    }
+    panic!("realdata/friction_rack_pinion not found beside {}", m.display());
+}
+
+/// Numeric rows of a CSV after `skip` header lines (the first line may carry a UTF-8 BOM).
+fn read_rows(name: &str, skip: usize) -> Vec<Vec<f64>> {
+    let path = data_dir().join(name);
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    text.lines()
+        .skip(skip)
+        .filter(|l| !l.trim().is_empty())
+        .enumerate()
+        .map(|(i, l)| {
+            l.split(',')
+                .map(|c| {
+                    c.trim()
+                        .parse::<f64>()
+                        .unwrap_or_else(|_| panic!("{name}: line {}: not a number: {c:?}", i + skip + 1))
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Linear interpolation of (tx, x) at t (tx increasing); None outside the range.
+fn interp(tx: &[f64], x: &[f64], t: f64) -> Option<f64> {
+    if t < tx[0] || t > tx[tx.len() - 1] {
+        return None;
+    }
+    let j = tx.partition_point(|&s| s <= t).clamp(1, tx.len() - 1);
+    let f = (t - tx[j - 1]) / (tx[j] - tx[j - 1]);
+    Some(x[j - 1] + f * (x[j] - x[j - 1]))
+}
+
+struct Prepared {
+    t: Vec<f64>,
+    v_raw: Vec<f64>,
+    force_raw: Vec<f64>,
+    dt: f64,
+}
+
+/// Reads both files and puts force and velocity on the servo timebase (README processing).
+fn prepare() -> Prepared {
+    let ni = read_rows("a3NI.csv", 4);
+    let mr = read_rows("a3MR.csv", 5);
+    assert!(ni.len() > 1000 && mr.len() == 1024, "{} NI rows, {} MR rows", ni.len(), mr.len());
+    let v0: f64 = ni[..10].iter().map(|r| r[1]).sum::<f64>() / 10.0;
+    let t_ni: Vec<f64> = ni.iter().map(|r| r[0] + 0.004).collect();
+    let f_ni: Vec<f64> = ni.iter().map(|r| -(r[1] - v0) * 200.0).collect();
+    let mut t = Vec::new();
+    let mut v_raw = Vec::new();
+    let mut force_raw = Vec::new();
+    for r in &mr {
+        let ts = r[0] * 1e-3;
+        // Before the shifted NI record starts (first 4 ms) the axis is at rest and unloaded: the
+        // force is the offset-corrected zero.
+        let f = if ts < t_ni[0] { Some(0.0) } else { interp(&t_ni, &f_ni, ts) };
+        if let Some(f) = f {
+            t.push(ts);
+            v_raw.push(-r[1] * 20.0 / 1000.0 / 60.0);
+            force_raw.push(f);
+        }
+    }
+    let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
+    Prepared { t, v_raw, force_raw, dt }
+}
+
+/// The fit window of the README: acceleration phase (from the start up to the velocity peak),
+/// 0 < v ≤ 0.55 m/s.
+fn window(v: &[f64], friction: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let i_peak = v.iter().enumerate().fold((0, f64::MIN), |b, (i, &x)| if x > b.1 { (i, x) } else { b }).0;
+    v[..i_peak].iter().zip(&friction[..i_peak]).filter(|(x, _)| **x > 0.0 && **x <= 0.55).map(|(a, b)| (*a, *b)).unzip()
+}
+
+const AUTHOR: StribeckCoefficients =
+    StribeckCoefficients { fc: 10.0000000001, fs: 29.625596745, vs: 0.0135216268146, delta: 1.0, fv: 67.4406305914 };
+
+fn fit_mnich(v: &[f64], f: &[f64], dry_lower: f64) -> StribeckFit {
+    let mut o =
+        StribeckFitOptions { shape: StribeckShape::Mnich, direction: SweepDirection::Positive, ..Default::default() };
+    o.lower.fc = dry_lower;
+    fit_stribeck(v, f, &o).unwrap()
+}
+
+fn rms_of(c: &StribeckCoefficients, shape: StribeckShape, v: &[f64], f: &[f64]) -> f64 {
+    (v.iter().zip(f).map(|(&x, &y)| (stribeck_curve(shape, c, x) - y).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+/// Wrapped in a module named `friction_…` so `cargo test -p vmt-estimators friction` selects it.
+mod friction_realdata {
+    use super::*;
+
+    #[test]
+    fn rack_pinion_author_processing_lands_within_15_percent_of_the_published_coefficients() {
+        let d = prepare();
+        println!("{} samples on the servo timebase, dt = {} s", d.t.len(), d.dt);
+        let mf = friction_from_motion(&d.v_raw, &d.force_raw, 24.7, d.dt, Some(30.0), FilterMode::Causal).unwrap();
+        let (v, f) = window(&mf.v, &mf.friction);
+        let fit = fit_mnich(&v, &f, 10.0);
+        let c = fit.coefficients;
+        println!("causal 30 Hz, dry >= 10 N: {}", serde_like(&fit));
+        let author_rms = rms_of(&AUTHOR, StribeckShape::Mnich, &v, &f);
+        println!("published coefficients on the same window: RMS {author_rms} N");
+        // 15 % (brief): the optimisation script is missing from the repository, so the window and
+        // weighting can only be reconstructed from the README; an independent re-processing
+        // reported in the README lands within 6 % (dry 10.6, viscous 69.2, Fmax 29.4, vs 13.2 mm/s).
+        for (name, est, auth) in [
+            ("dry c1", c.fc, AUTHOR.fc),
+            ("viscous c2", c.fv, AUTHOR.fv),
+            ("peak c3", c.fs, AUTHOR.fs),
+            ("Stribeck velocity c4", c.vs, AUTHOR.vs),
+        ] {
+            println!("{name}: {est:.4} vs author {auth:.4} ({:+.1} %)", 100.0 * (est / auth - 1.0));
+            assert!((est / auth - 1.0).abs() < 0.15, "{name}: {est} vs {auth}");
+        }
+        // Our least-squares optimum must fit this window at least as well as the published curve
+        // (which README says gives 4.0 N RMS), up to rounding.
+        assert!(fit.residual_rms <= author_rms + 1e-9, "{} vs {author_rms}", fit.residual_rms);
+        // The README's independent re-processing reports ≈3.9–4.0 N; the load-cell ringing visible
+        // in summary.png (≈±5 N at 30–40 Hz) sets that floor. Accept 3–5 N.
+        assert!(fit.residual_rms > 3.0 && fit.residual_rms < 5.0, "rms {}", fit.residual_rms);
+    }
+
+    #[test]
+    fn rack_pinion_variants_are_reported() {
+        // Not tolerance tests of the author's numbers: how the answer moves with choices the README
+        // leaves open. Printed for the report; only sanity bounds are asserted.
+        let d = prepare();
+        for (label, mode) in [("causal", FilterMode::Causal), ("zero-phase", FilterMode::ZeroPhase)] {
+            let mf = friction_from_motion(&d.v_raw, &d.force_raw, 24.7, d.dt, Some(30.0), mode).unwrap();
+            let (v, f) = window(&mf.v, &mf.friction);
+            for lower in [10.0, 0.0] {
+                let fit = fit_mnich(&v, &f, lower);
+                println!("Mnich, {label} 30 Hz, dry >= {lower}: {}", serde_like(&fit));
+                assert!(fit.coefficients.fv > 40.0 && fit.coefficients.fv < 100.0);
+            }
+            // The exponential Stribeck shape (falls from Fs to Fc) on the same window: this axis
+            // shows friction RISING to a peak at ≈14 mm/s from a lower value near rest, which the
+            // exponential shape cannot follow; report its residual for comparison.
+            let o = StribeckFitOptions { direction: SweepDirection::Positive, ..Default::default() };
+            let fit = fit_stribeck(&v, &f, &o).unwrap();
+            println!("Exponential, {label} 30 Hz: {}", serde_like(&fit));
+            assert!(fit.residual_rms < 10.0);
+        }
+    }
+
+    #[test]
+    fn rack_pinion_lugre_sigma0_is_not_identifiable() {
+        // Pre-sliding would show as force rising at (nearly) constant position before gross motion.
+        // The servo speed is quantised (1 rpm = 0.33 mm/s; exactly 0 until the axis moves at
+        // t ≈ 0.046 s) and the load-cell force does not rise before that (summary.png: force and
+        // acceleration start together at ≈0.05 s), so the stick segment holds no pre-sliding ramp and
+        // σ0 is not identifiable from these files. The estimator must say so.
+        let d = prepare();
+        let mut x = vec![0.0; d.v_raw.len()];
+        for i in 1..x.len() {
+            x[i] = x[i - 1] + 0.5 * (d.v_raw[i] + d.v_raw[i - 1]) * d.dt;
+        }
+        let i_move = d.v_raw.iter().position(|&v| v != 0.0).unwrap();
+        println!("first nonzero servo speed at t = {} s", d.t[i_move]);
+        let r = lugre_sigma0_from_presliding(&x[..i_move], &d.force_raw[..i_move], 29.6);
+        println!("{r:?}");
+        assert!(matches!(r, Err(FrictionIdError::NotIdentifiable(_))), "{r:?}");
+    }
+
+    fn serde_like(fit: &StribeckFit) -> String {
+        format!(
+            "{:?} se {:?} rms {:.3} N n {} at_bound {:?} converged {}",
+            fit.coefficients, fit.std_errors, fit.residual_rms, fit.n_points, fit.at_bound, fit.converged
+        )
+    }
+}
