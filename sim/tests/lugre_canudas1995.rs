@@ -95,23 +95,13 @@ mod friction_lugre_canudas1995 {
         // 0.2 N/s → the friction 0.2 s before the break-away is ≈ 0.04 N below its peak.
         assert!(f_before > 1.3 && f_before < 1.5, "friction while sticking {f_before}");
         // Break-away near Fs = 1.5 N (±0.1 N: the figure's resolution).
-<<<<<<< HEAD
         assert!((f_peak_stick - 1.5).abs() < 0.1, "break-away friction {f_peak_stick}");
-=======
-        assert!(
-            (f_peak_stick - 1.5).abs() < 0.1,
-            "break-away friction {f_peak_stick}"
-        );
         // As the mass re-sticks the friction dips below Fc (fig5.png: ≈0.75 N) before ramping again:
         // the spring force at the stop is below Fc. Bound 0.6–0.95 N (figure resolution ±0.1 N).
         let i1 = (starts[2] / 1e-4) as usize;
-        let f_dip = tr[i0..i1]
-            .iter()
-            .map(|s| s.friction)
-            .fold(f64::MAX, f64::min);
+        let f_dip = tr[i0..i1].iter().map(|s| s.friction).fold(f64::MAX, f64::min);
         println!("friction dip at re-stick {f_dip}");
         assert!(f_dip > 0.6 && f_dip < 0.95, "dip {f_dip}");
->>>>>>> h-friction
         // Sliding friction ≈ Fc + σ2·v = 1 + 0.4·v ∈ [1.0, 1.15] N (figure shows the hump ≈1.0–1.15 N).
         assert!(f_after > 0.95 && f_after < 1.25, "sliding friction {f_after}");
     }
