@@ -11,6 +11,7 @@ pub mod friction;
 pub mod geometry;
 pub mod machine;
 pub mod motion;
+pub mod presets;
 pub mod procedures;
 pub mod profile;
 pub mod rng;
