@@ -96,11 +96,7 @@ const ROT: [char; 3] = ['A', 'B', 'C'];
 /// ISO 230-1 name of error motion `component` (0..3 translations along X, Y, Z; 3..6 rotations
 /// about X, Y, Z) of axis `axis`, e.g. (X, 4) → "EBX".
 pub fn motion_name(axis: AxisName, component: usize) -> String {
-    let c = if component < 3 {
-        TRANS[component]
-    } else {
-        ROT[component.min(5) - 3]
-    };
+    let c = if component < 3 { TRANS[component] } else { ROT[component.min(5) - 3] };
     format!("E{}{}", c, axis.letter())
 }
 
@@ -110,11 +106,7 @@ fn unit(i: usize) -> [f64; 3] {
     e
 }
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -168,9 +160,7 @@ impl Basis {
             }
             Basis::Legendre { order, lo, hi } => {
                 if !(lo.is_finite() && hi.is_finite()) || hi <= lo {
-                    return bad(format!(
-                        "{what}: Legendre range needs finite lo < hi, got [{lo}, {hi}]"
-                    ));
+                    return bad(format!("{what}: Legendre range needs finite lo < hi, got [{lo}, {hi}]"));
                 }
                 if *order > 15 {
                     return bad(format!("{what}: Legendre order must be ≤ 15, got {order}"));
@@ -188,11 +178,7 @@ impl Basis {
             Basis::Nodes(n) => {
                 let tol = 1e-9 * (n[n.len() - 1] - n[0]);
                 if !(q >= n[0] - tol && q <= n[n.len() - 1] + tol) {
-                    return Err(format!(
-                        "position {q} m is outside the nodes [{}, {}] m",
-                        n[0],
-                        n[n.len() - 1]
-                    ));
+                    return Err(format!("position {q} m is outside the nodes [{}, {}] m", n[0], n[n.len() - 1]));
                 }
                 out.resize(n.len(), 0.0);
                 let qc = q.clamp(n[0], n[n.len() - 1]);
@@ -209,9 +195,7 @@ impl Basis {
             Basis::Legendre { order, lo, hi } => {
                 let tol = 1e-9 * (hi - lo);
                 if !(q >= lo - tol && q <= hi + tol) {
-                    return Err(format!(
-                        "position {q} m is outside the range [{lo}, {hi}] m"
-                    ));
+                    return Err(format!("position {q} m is outside the range [{lo}, {hi}] m"));
                 }
                 let t = 2.0 * (q - lo) / (hi - lo) - 1.0;
                 out.push(1.0);
@@ -305,10 +289,7 @@ pub struct IdOptions {
 
 impl Default for IdOptions {
     fn default() -> Self {
-        IdOptions {
-            sigma_mode: SigmaMode::Given,
-            rank_rtol: 1e-9,
-        }
+        IdOptions { sigma_mode: SigmaMode::Given, rank_rtol: 1e-9 }
     }
 }
 
@@ -378,9 +359,7 @@ impl Identification {
     }
     /// The squareness estimate called `name` ("EC0Y" or "squareness_xy"), if modelled.
     pub fn squareness(&self, name: &str) -> Option<&SquarenessEstimate> {
-        self.squareness
-            .iter()
-            .find(|s| s.name == name || s.effect == name)
+        self.squareness.iter().find(|s| s.name == name || s.effect == name)
     }
 }
 
@@ -402,23 +381,14 @@ fn validate_model(model: &Model) -> Result<(), LaserLsError> {
     for (j, ax) in model.axes.iter().enumerate() {
         for (i, other) in model.axes.iter().enumerate().take(j) {
             if other.name == ax.name {
-                return bad(format!(
-                    "axis {:?} appears twice in the chain (positions {i} and {j})",
-                    ax.name
-                ));
+                return bad(format!("axis {:?} appears twice in the chain (positions {i} and {j})", ax.name));
             }
         }
         if !ax.reference_position.is_finite() {
-            return bad(format!(
-                "axis {:?}: reference position must be finite",
-                ax.name
-            ));
+            return bad(format!("axis {:?}: reference position must be finite", ax.name));
         }
         if ax.report_positions.iter().any(|p| !p.is_finite()) {
-            return bad(format!(
-                "axis {:?}: report positions must be finite",
-                ax.name
-            ));
+            return bad(format!("axis {:?}: report positions must be finite", ax.name));
         }
         let mut rp = ax.report_positions.clone();
         rp.sort_by(|a, b| a.total_cmp(b));
@@ -453,25 +423,16 @@ fn validate_readings(readings: &[Reading], n_axes: usize) -> Result<(), LaserLsE
     }
     for (i, r) in readings.iter().enumerate() {
         if r.q.len() != n_axes {
-            return bad(format!(
-                "reading {i}: expected {n_axes} axis positions (one per axis), got {}",
-                r.q.len()
-            ));
+            return bad(format!("reading {i}: expected {n_axes} axis positions (one per axis), got {}", r.q.len()));
         }
         let vs = [r.value, r.sigma];
-        let mut all =
-            r.q.iter()
-                .chain(r.point.iter())
-                .chain(r.direction.iter())
-                .chain(vs.iter());
+        let mut all = r.q.iter().chain(r.point.iter()).chain(r.direction.iter()).chain(vs.iter());
         if all.any(|v| !v.is_finite()) {
             return bad(format!("reading {i}: NaN or infinite value"));
         }
         let nu = dot(r.direction, r.direction).sqrt();
         if (nu - 1.0).abs() > 1e-6 {
-            return bad(format!(
-                "reading {i}: beam direction must be a unit vector, |u| = {nu}"
-            ));
+            return bad(format!("reading {i}: beam direction must be a unit vector, |u| = {nu}"));
         }
         if r.sigma <= 0.0 {
             return bad(format!("reading {i}: sigma must be > 0 m, got {}", r.sigma));
@@ -510,21 +471,11 @@ fn build_layout(model: &Model, readings: &[Reading]) -> Layout {
             }
         }
     }
-    Layout {
-        blocks,
-        squareness,
-        lines,
-        n,
-    }
+    Layout { blocks, squareness, lines, n }
 }
 
 /// Unweighted observation row of one reading (length `layout.n`).
-fn observation_row(
-    model: &Model,
-    layout: &Layout,
-    r: &Reading,
-    buf: &mut Vec<f64>,
-) -> Result<Vec<f64>, String> {
+fn observation_row(model: &Model, layout: &Layout, r: &Reading, buf: &mut Vec<f64>) -> Result<Vec<f64>, String> {
     let mut row = vec![0.0; layout.n];
     let na = model.axes.len();
     for j in 0..na {
@@ -539,13 +490,9 @@ fn observation_row(
             if len == 0 {
                 continue;
             }
-            model.axes[j].motions[k].eval(r.q[j], buf).map_err(|e| {
-                format!(
-                    "axis {:?} ({}): {e}",
-                    model.axes[j].name,
-                    motion_name(model.axes[j].name, k)
-                )
-            })?;
+            model.axes[j].motions[k]
+                .eval(r.q[j], buf)
+                .map_err(|e| format!("axis {:?} ({}): {e}", model.axes[j].name, motion_name(model.axes[j].name, k)))?;
             // translation: u_k; rotation: (ê_k × ρ)·u = ê_k·(ρ × u)
             let s = if k < 3 { r.direction[k] } else { rxu[k - 3] };
             for (t, v) in buf.iter().enumerate() {
@@ -613,9 +560,7 @@ fn functionals(model: &Model, layout: &Layout) -> (Vec<Functional>, Vec<Vec<f64>
                 gauge.push(mean.clone());
                 gauge.push(slope.clone());
             } else {
-                ax.motions[k]
-                    .eval(ax.reference_position, &mut buf)
-                    .expect("validated");
+                ax.motions[k].eval(ax.reference_position, &mut buf).expect("validated");
                 for (t, v) in buf.iter().enumerate() {
                     refrow[start + t] = *v;
                 }
@@ -676,9 +621,7 @@ fn functionals(model: &Model, layout: &Layout) -> (Vec<Functional>, Vec<Vec<f64>
                 if len == 0 || bxa[kk] == 0.0 {
                     continue;
                 }
-                model.axes[i].motions[3 + kk]
-                    .eval(model.axes[i].reference_position, &mut buf)
-                    .expect("validated");
+                model.axes[i].motions[3 + kk].eval(model.axes[i].reference_position, &mut buf).expect("validated");
                 for (t, v) in buf.iter().enumerate() {
                     inner[start + t] += bxa[kk] * v;
                 }
@@ -719,18 +662,11 @@ fn svd_padded(a: &Mat<f64>) -> Result<(Mat<f64>, Vec<f64>, Mat<f64>), LaserLsErr
 /// Cov = s²·P (AᵀWA)⁺ Pᵀ (P the gauge projection, s² = 1 or the a-posteriori factor).
 /// Profiles are reported at each axis' `report_positions` with σ from Cov. Undetermined
 /// error motions, or combinations of them, are named in `unobservable`.
-pub fn identify(
-    readings: &[Reading],
-    model: &Model,
-    opts: &IdOptions,
-) -> Result<Identification, LaserLsError> {
+pub fn identify(readings: &[Reading], model: &Model, opts: &IdOptions) -> Result<Identification, LaserLsError> {
     validate_model(model)?;
     validate_readings(readings, model.axes.len())?;
     if !(opts.rank_rtol > 0.0 && opts.rank_rtol < 1.0) {
-        return bad(format!(
-            "rank_rtol must be in (0, 1), got {}",
-            opts.rank_rtol
-        ));
+        return bad(format!("rank_rtol must be in (0, 1), got {}", opts.rank_rtol));
     }
     let layout = build_layout(model, readings);
     let n = layout.n;
@@ -773,16 +709,8 @@ pub fn identify(
     }
     let (u, s, v) = svd_padded(&a)?;
     let smax = s[0];
-    let rank = if smax > 0.0 {
-        s.iter().filter(|&&x| x > opts.rank_rtol * smax).count()
-    } else {
-        0
-    };
-    let condition = if rank > 0 {
-        smax / s[rank - 1]
-    } else {
-        f64::INFINITY
-    };
+    let rank = if smax > 0.0 { s.iter().filter(|&&x| x > opts.rank_rtol * smax).count() } else { 0 };
+    let condition = if rank > 0 { smax / s[rank - 1] } else { f64::INFINITY };
     // minimum-norm solution in scaled coordinates
     let mut ps = vec![0.0; n];
     for t in 0..rank {
@@ -837,10 +765,7 @@ pub fn identify(
         let cn = &cs * &nul; // nc × nnull
         let (cu, csv, cv) = svd_padded(&cn)?;
         let cmax = csv.first().copied().unwrap_or(0.0);
-        let crank = csv
-            .iter()
-            .filter(|&&x| cmax > 0.0 && x > 1e-8 * cmax)
-            .count();
+        let crank = csv.iter().filter(|&&x| cmax > 0.0 && x > 1e-8 * cmax).count();
         gauge_fixed = crank;
         // (CN)⁺ x = Σ_t v_t (u_tᵀ x)/s_t
         let pinv_apply = |x: &[f64]| -> Vec<f64> {
@@ -854,9 +779,7 @@ pub fn identify(
             w
         };
         // p_s ← p_s − N (CN)⁺ C p_s
-        let cp: Vec<f64> = (0..nc)
-            .map(|i| (0..n).map(|jj| cs[(i, jj)] * ps[jj]).sum())
-            .collect();
+        let cp: Vec<f64> = (0..nc).map(|i| (0..n).map(|jj| cs[(i, jj)] * ps[jj]).sum()).collect();
         let w = pinv_apply(&cp);
         for jj in 0..n {
             ps[jj] -= (0..nnull).map(|q| nul[(jj, q)] * w[q]).sum::<f64>();
@@ -872,19 +795,14 @@ pub fn identify(
         }
         // free null directions: N · null(CN)
         let nfree = nnull - crank;
-        free = Mat::<f64>::from_fn(n, nfree, |jj, f| {
-            (0..nnull).map(|q| nul[(jj, q)] * cv[(q, crank + f)]).sum()
-        });
+        free = Mat::<f64>::from_fn(n, nfree, |jj, f| (0..nnull).map(|q| nul[(jj, q)] * cv[(q, crank + f)]).sum());
     }
     let nfree = free.ncols();
     // parameter values and standard errors
     let params: Vec<f64> = (0..n).map(|jj| ps[jj] * d[jj]).collect();
     let std_errors: Vec<Option<f64>> = (0..n)
         .map(|jj| {
-            let fr: f64 = (0..nfree)
-                .map(|f| free[(jj, f)].powi(2))
-                .sum::<f64>()
-                .sqrt();
+            let fr: f64 = (0..nfree).map(|f| free[(jj, f)].powi(2)).sum::<f64>().sqrt();
             if fr > 1e-7 {
                 None
             } else {
@@ -900,9 +818,8 @@ pub fn identify(
         let gs: Vec<f64> = (0..n).map(|jj| f.coef[jj] * d[jj]).collect();
         let gnorm = gs.iter().map(|x| x * x).sum::<f64>().sqrt();
         let val: f64 = (0..n).map(|jj| f.coef[jj] * params[jj]).sum();
-        let gn: Vec<f64> = (0..nfree)
-            .map(|ff| (0..n).map(|jj| gs[jj] * free[(jj, ff)]).sum::<f64>() / gnorm.max(1e-300))
-            .collect();
+        let gn: Vec<f64> =
+            (0..nfree).map(|ff| (0..n).map(|jj| gs[jj] * free[(jj, ff)]).sum::<f64>() / gnorm.max(1e-300)).collect();
         let unobs = gn.iter().map(|x| x * x).sum::<f64>().sqrt() > 1e-7;
         let sd = if unobs || gnorm == 0.0 {
             if gnorm == 0.0 {
@@ -911,10 +828,8 @@ pub fn identify(
                 None
             }
         } else {
-            let sl: f64 = (0..rank)
-                .map(|t| (0..n).map(|jj| gs[jj] * l[(jj, t)]).sum::<f64>().powi(2))
-                .sum::<f64>()
-                .sqrt();
+            let sl: f64 =
+                (0..rank).map(|t| (0..n).map(|jj| gs[jj] * l[(jj, t)]).sum::<f64>().powi(2)).sum::<f64>().sqrt();
             Some(sigma_scale * sl)
         };
         fvals.push((val, sd));
@@ -948,26 +863,13 @@ pub fn identify(
         pair.sort();
         squareness.push(SquarenessEstimate {
             name: group_names[funcs[fi].group].clone(),
-            effect: format!(
-                "squareness_{}{}",
-                pair[0].to_ascii_lowercase(),
-                pair[1].to_ascii_lowercase()
-            ),
+            effect: format!("squareness_{}{}", pair[0].to_ascii_lowercase(), pair[1].to_ascii_lowercase()),
             value: val,
             std_error: sd,
         });
         fi += 1;
     }
-    let unobservable = describe_unobservable(
-        model,
-        &layout,
-        readings,
-        &funcs,
-        &gn_rows,
-        &group_names,
-        &free,
-        &d,
-    );
+    let unobservable = describe_unobservable(model, &layout, readings, &funcs, &gn_rows, &group_names, &free, &d);
     let mut param_names = vec![String::new(); n];
     for (j, ax) in model.axes.iter().enumerate() {
         for k in 0..6 {
@@ -1029,12 +931,7 @@ fn describe_unobservable(
     }
     let tol = 1e-7;
     let rows_of = |g: usize| -> Vec<&Vec<f64>> {
-        funcs
-            .iter()
-            .zip(gn_rows)
-            .filter(|(f, _)| f.group == g)
-            .map(|(_, r)| r)
-            .collect()
+        funcs.iter().zip(gn_rows).filter(|(f, _)| f.group == g).map(|(_, r)| r).collect()
     };
     let dims: Vec<usize> = (0..ng).map(|g| rows_rank(&rows_of(g), tol)).collect();
     // union-find over coupled groups
@@ -1067,11 +964,9 @@ fn describe_unobservable(
             if dims[g2] == 0 {
                 continue;
             }
-            let coupled = sig[g1].iter().any(|a| {
-                sig[g2]
-                    .iter()
-                    .any(|b| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>().abs() > 1e-6)
-            });
+            let coupled = sig[g1]
+                .iter()
+                .any(|a| sig[g2].iter().any(|b| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>().abs() > 1e-6));
             if coupled {
                 let (a, b) = (find(&mut parent, g1), find(&mut parent, g2));
                 parent[a] = b;
@@ -1085,9 +980,7 @@ fn describe_unobservable(
             continue;
         }
         let root = find(&mut parent, g);
-        let members: Vec<usize> = (0..ng)
-            .filter(|&h| dims[h] > 0 && find(&mut parent, h) == root)
-            .collect();
+        let members: Vec<usize> = (0..ng).filter(|&h| dims[h] > 0 && find(&mut parent, h) == root).collect();
         for &h in &members {
             done[h] = true;
         }
@@ -1100,9 +993,8 @@ fn describe_unobservable(
         let example = svd_padded(&mat).ok().map(|(_, _, v)| {
             let w: Vec<f64> = (0..nfree).map(|f| v[(f, 0)]).collect();
             // the null vector in parameter units, evaluated through each member's functionals
-            let nvec: Vec<f64> = (0..d.len())
-                .map(|jj| (0..nfree).map(|f| free[(jj, f)] * w[f]).sum::<f64>() * d[jj])
-                .collect();
+            let nvec: Vec<f64> =
+                (0..d.len()).map(|jj| (0..nfree).map(|f| free[(jj, f)] * w[f]).sum::<f64>() * d[jj]).collect();
             let rms: Vec<f64> = members
                 .iter()
                 .map(|&h| {
@@ -1146,11 +1038,7 @@ fn describe_unobservable(
         } else {
             let list = match names.len() {
                 2 => format!("{} and {}", names[0], names[1]),
-                _ => format!(
-                    "{} and {}",
-                    names[..names.len() - 1].join(", "),
-                    names[names.len() - 1]
-                ),
+                _ => format!("{} and {}", names[..names.len() - 1].join(", "), names[names.len() - 1]),
             };
             format!(
                 "{list} are confounded with these readings: {undetermined} combination(s) of their {total_dofs} reported values cannot be determined"
@@ -1164,11 +1052,7 @@ fn describe_unobservable(
                     .zip(&rms)
                     .filter(|(_, r)| **r > 1e-3 * mx)
                     .map(|(&h, r)| {
-                        let unit = if is_angle_group(&group_names[h]) {
-                            "µrad"
-                        } else {
-                            "µm"
-                        };
+                        let unit = if is_angle_group(&group_names[h]) { "µrad" } else { "µm" };
                         format!("{:.3} {unit} RMS of {}", r / mx, group_names[h])
                     })
                     .collect();
@@ -1202,10 +1086,7 @@ fn lever_hint(model: &Model, _layout: &Layout, readings: &[Reading], name: &str)
     let b = name.as_bytes();
     let k = (b[1] - b'A') as usize;
     let axis_letter = b[2] as char;
-    let j = model
-        .axes
-        .iter()
-        .position(|a| a.name.letter() == axis_letter)?;
+    let j = model.axes.iter().position(|a| a.name.letter() == axis_letter)?;
     let na = model.axes.len();
     // distinct lever values per distinct beam direction
     let mut per_dir: Vec<([f64; 3], Vec<f64>)> = Vec::new();
@@ -1215,9 +1096,7 @@ fn lever_hint(model: &Model, _layout: &Layout, readings: &[Reading], name: &str)
             rho[model.axes[i].name.index()] += r.q[i];
         }
         let lev = cross(rho, r.direction)[k];
-        let entry = per_dir
-            .iter_mut()
-            .find(|(u, _)| (0..3).all(|c| (u[c] - r.direction[c]).abs() < 1e-9));
+        let entry = per_dir.iter_mut().find(|(u, _)| (0..3).all(|c| (u[c] - r.direction[c]).abs() < 1e-9));
         match entry {
             Some((_, vals)) => {
                 if !vals.iter().any(|v| (v - lev).abs() < 1e-9) {
@@ -1230,12 +1109,7 @@ fn lever_hint(model: &Model, _layout: &Layout, readings: &[Reading], name: &str)
     let single: Vec<String> = per_dir
         .iter()
         .filter(|(_, vals)| vals.len() == 1)
-        .map(|(u, vals)| {
-            format!(
-                "beam ({:.3}, {:.3}, {:.3}): lever {:.4} m",
-                u[0], u[1], u[2], vals[0]
-            )
-        })
+        .map(|(u, vals)| format!("beam ({:.3}, {:.3}, {:.3}): lever {:.4} m", u[0], u[1], u[2], vals[0]))
         .collect();
     if single.len() == per_dir.len() {
         Some(format!(
@@ -1269,17 +1143,9 @@ pub struct PlannedReading {
 }
 
 /// Turns a plan and its measured values (m) into readings with noise σ (m).
-pub fn readings_from_plan(
-    plan: &[PlannedReading],
-    values: &[f64],
-    sigma: f64,
-) -> Result<Vec<Reading>, LaserLsError> {
+pub fn readings_from_plan(plan: &[PlannedReading], values: &[f64], sigma: f64) -> Result<Vec<Reading>, LaserLsError> {
     if plan.len() != values.len() {
-        return bad(format!(
-            "expected one value per planned reading ({}), got {}",
-            plan.len(),
-            values.len()
-        ));
+        return bad(format!("expected one value per planned reading ({}), got {}", plan.len(), values.len()));
     }
     Ok(plan
         .iter()
@@ -1297,17 +1163,11 @@ pub fn readings_from_plan(
 
 fn check_positions(positions: &[f64]) -> Result<(), LaserLsError> {
     if positions.len() < 2 {
-        return bad(format!(
-            "needs at least 2 positions, got {}",
-            positions.len()
-        ));
+        return bad(format!("needs at least 2 positions, got {}", positions.len()));
     }
     for w in positions.windows(2) {
         if !(w[0].is_finite() && w[1].is_finite()) || w[1] <= w[0] {
-            return bad(format!(
-                "positions must be finite and strictly increasing, got {} after {}",
-                w[1], w[0]
-            ));
+            return bad(format!("positions must be finite and strictly increasing, got {} after {}", w[1], w[0]));
         }
     }
     Ok(())
@@ -1332,14 +1192,8 @@ pub fn nine_line_plan(
     if points.iter().flatten().any(|v| !v.is_finite()) {
         return bad("measuring points must be finite".into());
     }
-    let lines: [(usize, usize, &str); 6] = [
-        (0, 0, "δx@P1"),
-        (1, 0, "δx@P2"),
-        (2, 0, "δx@P3"),
-        (0, 1, "δy@P1"),
-        (1, 1, "δy@P2"),
-        (0, 2, "δz@P1"),
-    ];
+    let lines: [(usize, usize, &str); 6] =
+        [(0, 0, "δx@P1"), (1, 0, "δx@P2"), (2, 0, "δx@P3"), (0, 1, "δy@P1"), (1, 1, "δy@P2"), (0, 2, "δz@P1")];
     let mut plan = Vec::new();
     for (id, &(p, dir, label)) in lines.iter().enumerate() {
         for _ in 0..runs {
@@ -1370,27 +1224,18 @@ pub fn nine_line_plan(
 /// ```
 /// EBX, ECX from the differences of the δx (D = (y2−y1)(z3−z1) − (z2−z1)(y3−y1)),
 /// EAX from δy_1 − δy_2, then EXX, EYX, EZX. Returns [EXX, EYX, EZX, EAX, EBX, ECX] (m, rad).
-pub fn nine_line_closed_form(
-    points: &[[f64; 3]; 3],
-    m: [f64; 6],
-) -> Result<[f64; 6], LaserLsError> {
+pub fn nine_line_closed_form(points: &[[f64; 3]; 3], m: [f64; 6]) -> Result<[f64; 6], LaserLsError> {
     let [p1, p2, p3] = *points;
     let det = (p2[1] - p1[1]) * (p3[2] - p1[2]) - (p2[2] - p1[2]) * (p3[1] - p1[1]);
     let dz = p2[2] - p1[2];
-    let span = points
-        .iter()
-        .flat_map(|p| p.iter())
-        .fold(0.0f64, |a, v| a.max(v.abs()))
-        .max(1e-3);
+    let span = points.iter().flat_map(|p| p.iter()).fold(0.0f64, |a, v| a.max(v.abs())).max(1e-3);
     if det.abs() < 1e-9 * span * span {
         return bad(format!(
             "the three δx points must not be collinear in the Y–Z plane (2·area = {det} m²): EBX and ECX cannot be separated"
         ));
     }
     if dz.abs() < 1e-9 * span {
-        return bad(
-            "the two δy points P1, P2 must be at different heights: EAX cannot be separated".into(),
-        );
+        return bad("the two δy points P1, P2 must be at different heights: EAX cannot be separated".into());
     }
     let (dm2, dm3) = (m[1] - m[0], m[2] - m[0]);
     let ebx = ((p2[1] - p1[1]) * dm3 - (p3[1] - p1[1]) * dm2) / det;
@@ -1420,9 +1265,7 @@ pub fn d_optimal_nine_line(candidates: &[[f64; 3]]) -> Result<[usize; 3], LaserL
         return bad(format!("needs at least 3 candidate points, got {m}"));
     }
     if m > 200 {
-        return bad(format!(
-            "exhaustive search limited to 200 candidates, got {m}"
-        ));
+        return bad(format!("exhaustive search limited to 200 candidates, got {m}"));
     }
     if candidates.iter().flatten().any(|v| !v.is_finite()) {
         return bad("candidate points must be finite".into());
@@ -1476,17 +1319,10 @@ fn splitmix(state: &mut u64) -> u64 {
 /// samples by a seeded generator, then Lloyd iterations (assign by Euclidean distance
 /// d(p'_i, p'_j) = √Σ_n (p'_in − p'_jn)², move centres to the means) until the labels stop
 /// changing or `max_iter`. Deterministic for a given seed.
-pub fn kmeans(
-    features: &[Vec<f64>],
-    k: usize,
-    seed: u64,
-    max_iter: usize,
-) -> Result<KMeans, LaserLsError> {
+pub fn kmeans(features: &[Vec<f64>], k: usize, seed: u64, max_iter: usize) -> Result<KMeans, LaserLsError> {
     let m = features.len();
     if k == 0 || m < k {
-        return bad(format!(
-            "k-means needs 1 ≤ k ≤ number of samples, got k = {k}, {m} samples"
-        ));
+        return bad(format!("k-means needs 1 ≤ k ≤ number of samples, got k = {k}, {m} samples"));
     }
     let dim = features[0].len();
     if dim == 0 || features.iter().any(|f| f.len() != dim) {
@@ -1500,11 +1336,7 @@ pub fn kmeans(
         let mean = features.iter().map(|f| f[c]).sum::<f64>() / m as f64;
         let sd = (features.iter().map(|f| (f[c] - mean).powi(2)).sum::<f64>() / m as f64).sqrt();
         for i in 0..m {
-            z[i][c] = if sd > 0.0 {
-                (features[i][c] - mean) / sd
-            } else {
-                0.0
-            };
+            z[i][c] = if sd > 0.0 { (features[i][c] - mean) / sd } else { 0.0 };
         }
     }
     let mut state = seed;
@@ -1555,19 +1387,12 @@ pub fn kmeans(
                 .min_by(|&a, &b| {
                     let pa = if labels[a] == c { 0.0 } else { 1e300 };
                     let pb = if labels[b] == c { 0.0 } else { 1e300 };
-                    (dist2(&z[a], &centroids[c]) + pa)
-                        .total_cmp(&(dist2(&z[b], &centroids[c]) + pb))
+                    (dist2(&z[a], &centroids[c]) + pa).total_cmp(&(dist2(&z[b], &centroids[c]) + pb))
                 })
                 .unwrap_or(0)
         })
         .collect();
-    Ok(KMeans {
-        labels,
-        centroids,
-        iterations,
-        inertia,
-        representatives,
-    })
+    Ok(KMeans { labels, centroids, iterations, inertia, representatives })
 }
 
 /// Seed 003's point selection: k-means (k = 3) on the 9-dimensional feature vectors
@@ -1588,26 +1413,15 @@ pub fn kmeans_nine_line(
             error_features.len()
         ));
     }
-    let feats: Vec<Vec<f64>> = candidates
-        .iter()
-        .zip(error_features)
-        .map(|(p, e)| p.iter().chain(e.iter()).copied().collect())
-        .collect();
+    let feats: Vec<Vec<f64>> =
+        candidates.iter().zip(error_features).map(|(p, e)| p.iter().chain(e.iter()).copied().collect()).collect();
     let km = kmeans(&feats, 3, seed, 100)?;
     let r = &km.representatives;
-    let perms = [
-        [0, 1, 2],
-        [0, 2, 1],
-        [1, 0, 2],
-        [1, 2, 0],
-        [2, 0, 1],
-        [2, 1, 0],
-    ];
+    let perms = [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]];
     let mut best = (f64::NEG_INFINITY, [r[0], r[1], r[2]]);
     for p in perms {
         let idx = [r[p[0]], r[p[1]], r[p[2]]];
-        let c =
-            nine_line_d_criterion(&[candidates[idx[0]], candidates[idx[1]], candidates[idx[2]]]);
+        let c = nine_line_d_criterion(&[candidates[idx[0]], candidates[idx[1]], candidates[idx[2]]]);
         if c > best.0 {
             best = (c, idx);
         }
@@ -1648,12 +1462,7 @@ pub fn seed001_plan(spec: &Seed001Plan) -> Result<Vec<PlannedReading>, LaserLsEr
     for p in &spec.positions {
         check_positions(p)?;
     }
-    if spec
-        .offsets
-        .iter()
-        .chain(spec.diagonal_tool_offsets.iter().flatten())
-        .any(|v| !v.is_finite())
-    {
+    if spec.offsets.iter().chain(spec.diagonal_tool_offsets.iter().flatten()).any(|v| !v.is_finite()) {
         return bad("offsets must be finite".into());
     }
     let [x0, y0, z0] = spec.offsets;
@@ -1675,13 +1484,7 @@ pub fn seed001_plan(spec: &Seed001Plan) -> Result<Vec<PlannedReading>, LaserLsEr
         for &q in &spec.positions[*ax] {
             let mut qq = fixed.to_vec();
             qq[*ax] = q;
-            plan.push(PlannedReading {
-                q: qq,
-                point: *tool,
-                direction: unit(*ax),
-                line: id,
-                label: label.to_string(),
-            });
+            plan.push(PlannedReading { q: qq, point: *tool, direction: unit(*ax), line: id, label: label.to_string() });
         }
     }
     if spec.diagonals {
@@ -1689,12 +1492,7 @@ pub fn seed001_plan(spec: &Seed001Plan) -> Result<Vec<PlannedReading>, LaserLsEr
         if spec.positions.iter().any(|p| p.len() != n) {
             return bad("the diagonals need the same number of positions on X, Y and Z".into());
         }
-        let signs: [[f64; 3]; 4] = [
-            [1.0, 1.0, 1.0],
-            [-1.0, 1.0, 1.0],
-            [1.0, -1.0, 1.0],
-            [1.0, 1.0, -1.0],
-        ];
+        let signs: [[f64; 3]; 4] = [[1.0, 1.0, 1.0], [-1.0, 1.0, 1.0], [1.0, -1.0, 1.0], [1.0, 1.0, -1.0]];
         for (oi, tool) in spec.diagonal_tool_offsets.iter().enumerate() {
             for (di, sg) in signs.iter().enumerate() {
                 let id = 9 + 4 * oi + di;
@@ -1705,31 +1503,13 @@ pub fn seed001_plan(spec: &Seed001Plan) -> Result<Vec<PlannedReading>, LaserLsEr
                         spec.positions[ax][n - 1 - i]
                     }
                 };
-                let span: Vec<f64> = (0..3)
-                    .map(|a| spec.positions[a][n - 1] - spec.positions[a][0])
-                    .collect();
+                let span: Vec<f64> = (0..3).map(|a| spec.positions[a][n - 1] - spec.positions[a][0]).collect();
                 let len = (span[0].powi(2) + span[1].powi(2) + span[2].powi(2)).sqrt();
-                let u = [
-                    sg[0] * span[0] / len,
-                    sg[1] * span[1] / len,
-                    sg[2] * span[2] / len,
-                ];
-                let label = format!(
-                    "{}: diagonal ({:+},{:+},{:+}), tool offset {:?}",
-                    id + 1,
-                    sg[0],
-                    sg[1],
-                    sg[2],
-                    tool
-                );
+                let u = [sg[0] * span[0] / len, sg[1] * span[1] / len, sg[2] * span[2] / len];
+                let label =
+                    format!("{}: diagonal ({:+},{:+},{:+}), tool offset {:?}", id + 1, sg[0], sg[1], sg[2], tool);
                 let mut q = vec![node(0, 0), node(1, 0), node(2, 0)];
-                plan.push(PlannedReading {
-                    q: q.clone(),
-                    point: *tool,
-                    direction: u,
-                    line: id,
-                    label: label.clone(),
-                });
+                plan.push(PlannedReading { q: q.clone(), point: *tool, direction: u, line: id, label: label.clone() });
                 for i in 1..n {
                     for ax in 0..3 {
                         q[ax] = node(ax, i);
@@ -1785,20 +1565,12 @@ pub fn seed001_formulas(
         check_positions(p)?;
     }
     if lines.len() < 9 {
-        return bad(format!(
-            "expected the 9 lines of seed 001, got {}",
-            lines.len()
-        ));
+        return bad(format!("expected the 9 lines of seed 001, got {}", lines.len()));
     }
     let moving = [0, 1, 2, 0, 1, 2, 0, 1, 2];
     for (l, v) in lines.iter().take(9).enumerate() {
         if v.len() != positions[moving[l]].len() {
-            return bad(format!(
-                "line {}: expected {} values, got {}",
-                l + 1,
-                positions[moving[l]].len(),
-                v.len()
-            ));
+            return bad(format!("line {}: expected {} values, got {}", l + 1, positions[moving[l]].len(), v.len()));
         }
         if v.iter().any(|x| !x.is_finite()) {
             return bad(format!("line {}: NaN or infinite value", l + 1));
@@ -1806,15 +1578,11 @@ pub fn seed001_formulas(
     }
     let [x0, y0, z0] = offsets;
     if offsets.iter().any(|o| !o.is_finite() || *o == 0.0) {
-        return bad(format!(
-            "offsets x0, y0, z0 must be finite and non-zero, got {offsets:?}"
-        ));
+        return bad(format!("offsets x0, y0, z0 must be finite and non-zero, got {offsets:?}"));
     }
     let rel = |v: &Vec<f64>| -> Vec<f64> { v.iter().map(|x| x - v[0]).collect() };
     let l: Vec<Vec<f64>> = lines.iter().take(9).map(rel).collect();
-    let diff = |a: usize, b: usize, s: f64| -> Vec<f64> {
-        l[a].iter().zip(&l[b]).map(|(p, q)| (p - q) / s).collect()
-    };
+    let diff = |a: usize, b: usize, s: f64| -> Vec<f64> { l[a].iter().zip(&l[b]).map(|(p, q)| (p - q) / s).collect() };
     let ecx = diff(0, 3, y0);
     let ebx = diff(6, 0, z0);
     let eay = diff(1, 4, z0);
@@ -1860,11 +1628,7 @@ pub fn seed001_formulas(
     ];
     Ok(Seed001Result {
         profiles,
-        squareness: [
-            ("EC0Y".to_string(), sq_xy),
-            ("EB0Z".to_string(), sq_xz),
-            ("EA0Z".to_string(), sq_yz),
-        ],
+        squareness: [("EC0Y".to_string(), sq_xy), ("EB0Z".to_string(), sq_xz), ("EA0Z".to_string(), sq_yz)],
     })
 }
 
@@ -1875,13 +1639,7 @@ mod tests {
     #[test]
     fn legendre_and_nodes_bases_evaluate_as_documented() {
         let mut b = Vec::new();
-        Basis::Legendre {
-            order: 3,
-            lo: 0.0,
-            hi: 2.0,
-        }
-        .eval(1.5, &mut b)
-        .unwrap();
+        Basis::Legendre { order: 3, lo: 0.0, hi: 2.0 }.eval(1.5, &mut b).unwrap();
         // t = 0.5: P0 = 1, P1 = 0.5, P2 = (3·0.25 − 1)/2 = −0.125, P3 = (5·0.125 − 1.5)/2 = −0.4375
         let want = [1.0, 0.5, -0.125, -0.4375];
         for (g, w) in b.iter().zip(want) {
@@ -1936,10 +1694,7 @@ mod tests {
 
     #[test]
     fn rejects_bad_readings() {
-        let model = Model {
-            axes: vec![AxisModel::with_nodes(AxisName::X, &[0.0, 0.5, 1.0])],
-            squareness: false,
-        };
+        let model = Model { axes: vec![AxisModel::with_nodes(AxisName::X, &[0.0, 0.5, 1.0])], squareness: false };
         let r = Reading {
             q: vec![0.5],
             point: [0.0; 3],

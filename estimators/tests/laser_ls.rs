@@ -23,27 +23,13 @@ impl Smooth {
     fn at(&self, q: f64) -> f64 {
         self.c0
             + self.c1 * q
-            + self
-                .waves
-                .iter()
-                .map(|(a, l, p)| a * (2.0 * std::f64::consts::PI * q / l + p).sin())
-                .sum::<f64>()
+            + self.waves.iter().map(|(a, l, p)| a * (2.0 * std::f64::consts::PI * q / l + p).sin()).sum::<f64>()
     }
     fn random(rng: &mut ChaCha8Rng, c0: f64, c1: f64, amp: f64) -> Smooth {
         let waves = (0..3)
-            .map(|_| {
-                (
-                    amp * rng.gen_range(0.3..1.0),
-                    rng.gen_range(0.4..2.5),
-                    rng.gen_range(0.0..6.28),
-                )
-            })
+            .map(|_| (amp * rng.gen_range(0.3..1.0), rng.gen_range(0.4..2.5), rng.gen_range(0.0..6.28)))
             .collect();
-        Smooth {
-            c0: c0 * rng.gen_range(-1.0..1.0),
-            c1: c1 * rng.gen_range(-1.0..1.0),
-            waves,
-        }
+        Smooth { c0: c0 * rng.gen_range(-1.0..1.0), c1: c1 * rng.gen_range(-1.0..1.0), waves }
     }
 }
 
@@ -62,22 +48,14 @@ fn random_axis(rng: &mut ChaCha8Rng, own: usize) -> [Smooth; 6] {
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 /// Forward model of one slide: δ = E(x) + ε(x) × r, written out.
 fn delta_slide(t: &[Smooth; 6], x: f64, r: [f64; 3]) -> [f64; 3] {
     let (exx, eyx, ezx) = (t[0].at(x), t[1].at(x), t[2].at(x));
     let (eax, ebx, ecx) = (t[3].at(x), t[4].at(x), t[5].at(x));
-    [
-        exx + ebx * r[2] - ecx * r[1],
-        eyx + ecx * r[0] - eax * r[2],
-        ezx + eax * r[1] - ebx * r[0],
-    ]
+    [exx + ebx * r[2] - ecx * r[1], eyx + ecx * r[0] - eax * r[2], ezx + eax * r[1] - ebx * r[0]]
 }
 
 /// Forward model of the X → Y → Z chain with squareness [EC0Y, EB0Z, EA0Z].
@@ -107,27 +85,15 @@ fn ls_residual(x: &[f64], y: &[f64]) -> Vec<f64> {
     let mx = x.iter().sum::<f64>() / n;
     let my = y.iter().sum::<f64>() / n;
     let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
-    let b: f64 = x
-        .iter()
-        .zip(y)
-        .map(|(u, v)| (u - mx) * (v - my))
-        .sum::<f64>()
-        / sxx;
-    x.iter()
-        .zip(y)
-        .map(|(u, v)| v - my - b * (u - mx))
-        .collect()
+    let b: f64 = x.iter().zip(y).map(|(u, v)| (u - mx) * (v - my)).sum::<f64>() / sxx;
+    x.iter().zip(y).map(|(u, v)| v - my - b * (u - mx)).collect()
 }
 fn ls_slope(x: &[f64], y: &[f64]) -> f64 {
     let n = x.len() as f64;
     let mx = x.iter().sum::<f64>() / n;
     let my = y.iter().sum::<f64>() / n;
     let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
-    x.iter()
-        .zip(y)
-        .map(|(u, v)| (u - mx) * (v - my))
-        .sum::<f64>()
-        / sxx
+    x.iter().zip(y).map(|(u, v)| (u - mx) * (v - my)).sum::<f64>() / sxx
 }
 
 /// Truth in the reporting convention: positioning and angles relative to the first position,
@@ -155,9 +121,7 @@ fn simulate_slide(plan: &[PlannedReading], t: &[Smooth; 6], rng: &mut ChaCha8Rng
     let zeros: Vec<f64> = (0..40).map(|_| rng.gen_range(-5e-6..5e-6)).collect();
     let values: Vec<f64> = plan
         .iter()
-        .map(|p| {
-            dot(p.direction, delta_slide(t, p.q[0], p.point)) + zeros[p.line] + noise.sample(rng)
-        })
+        .map(|p| dot(p.direction, delta_slide(t, p.q[0], p.point)) + zeros[p.line] + noise.sample(rng))
         .collect();
     readings_from_plan(plan, &values, SIGMA).unwrap()
 }
@@ -168,10 +132,7 @@ const NAMES_X: [&str; 6] = ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"];
 const COLUMN: [[f64; 3]; 3] = [[0.10, 0.25, 1.2], [0.0, -0.25, 0.3], [-0.10, -0.25, 0.8]];
 
 fn slide_model(pos: &[f64]) -> Model {
-    Model {
-        axes: vec![AxisModel::with_nodes(AxisName::X, pos)],
-        squareness: false,
-    }
+    Model { axes: vec![AxisModel::with_nodes(AxisName::X, pos)], squareness: false }
 }
 
 /// Errors of the six X profiles against the truth: (RMS of translations, RMS of angles).
@@ -210,32 +171,21 @@ fn nine_line_recovers_the_six_error_motions_of_x() {
         id.gauge_fixed,
         id.variance_factor
     );
-    println!(
-        "9-line: RMS error translations {:.2} nm, angles {:.2} nrad",
-        rt * 1e9,
-        ra * 1e9
-    );
+    println!("9-line: RMS error translations {:.2} nm, angles {:.2} nrad", rt * 1e9, ra * 1e9);
     assert!(id.unobservable.is_empty(), "{:?}", id.unobservable);
     // Brief: 0.1 µm and 0.5 µrad RMS. With 6 readings of σ = 20 nm per line and position the
     // reported standard errors are ~10–30 nm and nrad, so these bounds are met by a wide margin.
     assert!(rt < 0.1e-6, "translations RMS {rt}");
     assert!(ra < 0.5e-6, "angles RMS {ra}");
     // variance factor ~ χ²/dof = 1 ± √(2/dof) (dof ≈ 330): 0.75..1.25 is > 4σ
-    assert!(
-        (id.variance_factor - 1.0).abs() < 0.25,
-        "{}",
-        id.variance_factor
-    );
+    assert!((id.variance_factor - 1.0).abs() < 0.25, "{}", id.variance_factor);
 
     // Closed form of seed 003 on the averaged readings (relative to the first position) gives
     // the same answer: per position the 9-line system is square, so LS = exact solve.
     let mut means = vec![[0.0; 6]; pos.len()];
     let mut counts = vec![[0usize; 6]; pos.len()];
     for (p, r) in plan.iter().zip(&readings) {
-        let i = pos
-            .iter()
-            .position(|&x| (x - p.q[0]).abs() < 1e-12)
-            .unwrap();
+        let i = pos.iter().position(|&x| (x - p.q[0]).abs() < 1e-12).unwrap();
         means[i][p.line] += r.value;
         counts[i][p.line] += 1;
     }
@@ -294,8 +244,7 @@ fn nine_line_standard_errors_match_the_spread_over_noise_seeds() {
         // pool over positions (skip the reference position of positioning/angles: exactly 0)
         let idx: Vec<usize> = (0..pos.len()).filter(|&i| reported[k][i] > 0.0).collect();
         let emp = (idx.iter().map(|&i| sq[k][i]).sum::<f64>() / idx.len() as f64).sqrt();
-        let rep =
-            (idx.iter().map(|&i| reported[k][i].powi(2)).sum::<f64>() / idx.len() as f64).sqrt();
+        let rep = (idx.iter().map(|&i| reported[k][i].powi(2)).sum::<f64>() / idx.len() as f64).sqrt();
         println!(
             "{}: reported σ {:.2} n, empirical RMS error over {trials} seeds {:.2} n, ratio {:.3}",
             NAMES_X[k],
@@ -305,11 +254,7 @@ fn nine_line_standard_errors_match_the_spread_over_noise_seeds() {
         );
         // Brief: within 30 %. 40 trials × ~10 positions: the sampling error of an RMS is
         // ≈ 1/√(2·40) = 11 % even before pooling, so 30 % is > 2.5 sampling σ.
-        assert!(
-            (emp / rep - 1.0).abs() < 0.3,
-            "{}: {emp} vs {rep}",
-            NAMES_X[k]
-        );
+        assert!((emp / rep - 1.0).abs() < 0.3, "{}: {emp} vs {rep}", NAMES_X[k]);
     }
 }
 
@@ -323,21 +268,11 @@ fn collinear_points_name_the_angles_they_cannot_see() {
     let plan = nine_line_plan(&vertical, &pos, 1, true).unwrap();
     let readings = simulate_slide(&plan, &truth, &mut rng);
     let id = identify(&readings, &slide_model(&pos), &IdOptions::default()).unwrap();
-    println!(
-        "vertical line: rank {}, unobservable: {:#?}",
-        id.rank, id.unobservable
-    );
+    println!("vertical line: rank {}, unobservable: {:#?}", id.rank, id.unobservable);
     assert_eq!(id.unobservable.len(), 1);
     assert!(id.unobservable[0].starts_with("ECX is not observable"));
     for name in ["EXX", "EYX", "EZX", "EAX", "EBX"] {
-        assert!(
-            id.profile(name)
-                .unwrap()
-                .std_errors
-                .iter()
-                .all(|s| s.is_some()),
-            "{name}"
-        );
+        assert!(id.profile(name).unwrap().std_errors.iter().all(|s| s.is_some()), "{name}");
     }
     assert!(id.profile("ECX").unwrap().std_errors[5].is_none());
 
@@ -347,25 +282,11 @@ fn collinear_points_name_the_angles_they_cannot_see() {
     let plan = nine_line_plan(&level, &pos, 1, true).unwrap();
     let readings = simulate_slide(&plan, &truth, &mut rng);
     let id = identify(&readings, &slide_model(&pos), &IdOptions::default()).unwrap();
-    println!(
-        "same height: rank {}, unobservable: {:#?}",
-        id.rank, id.unobservable
-    );
+    println!("same height: rank {}, unobservable: {:#?}", id.rank, id.unobservable);
     let all = id.unobservable.join(" | ");
-    assert!(
-        all.contains("EBX") && all.contains("EXX") && all.contains("EAX"),
-        "{all}"
-    );
-    assert!(
-        !all.contains("ECX"),
-        "ECX is still seen through the sideways offsets: {all}"
-    );
-    assert!(id
-        .profile("ECX")
-        .unwrap()
-        .std_errors
-        .iter()
-        .all(|s| s.is_some()));
+    assert!(all.contains("EBX") && all.contains("EXX") && all.contains("EAX"), "{all}");
+    assert!(!all.contains("ECX"), "ECX is still seen through the sideways offsets: {all}");
+    assert!(id.profile("ECX").unwrap().std_errors.iter().all(|s| s.is_some()));
 }
 
 /// The seed's 9-dimensional feature of a candidate point: position and six error summaries.
@@ -394,19 +315,9 @@ fn d_optimal_points_beat_kmeans_points_on_angular_error() {
     let mut km_degenerate = 0;
     for set in 0..100 {
         let mut r = ChaCha8Rng::seed_from_u64(5000 + set);
-        let cands: Vec<[f64; 3]> = (0..8)
-            .map(|_| {
-                [
-                    r.gen_range(-0.15..0.15),
-                    r.gen_range(-0.3..0.3),
-                    r.gen_range(0.2..1.3),
-                ]
-            })
-            .collect();
-        let feats: Vec<[f64; 6]> = cands
-            .iter()
-            .map(|&p| point_features(&truth, &pos, p))
-            .collect();
+        let cands: Vec<[f64; 3]> =
+            (0..8).map(|_| [r.gen_range(-0.15..0.15), r.gen_range(-0.3..0.3), r.gen_range(0.2..1.3)]).collect();
+        let feats: Vec<[f64; 6]> = cands.iter().map(|&p| point_features(&truth, &pos, p)).collect();
         let di = d_optimal_nine_line(&cands).unwrap();
         let ki = kmeans_nine_line(&cands, &feats, set).unwrap();
         for (which, idx) in [(0, di), (1, ki)] {
@@ -436,7 +347,12 @@ fn d_optimal_points_beat_kmeans_points_on_angular_error() {
     println!(
         "angular RMS error over 100 candidate sets: D-optimal mean {:.1} nrad (median {:.1}, 90 % {:.1}); \
          k-means mean {:.1} nrad (median {:.1}, 90 % {:.1}); k-means sets with unobservable errors: {km_degenerate}",
-        md * 1e9, medd * 1e9, p90d * 1e9, mk * 1e9, medk * 1e9, p90k * 1e9
+        md * 1e9,
+        medd * 1e9,
+        p90d * 1e9,
+        mk * 1e9,
+        medk * 1e9,
+        p90k * 1e9
     );
     // D-optimal maximises det(AᵀA) per position, which minimises the volume of the confidence
     // ellipsoid; it must not do worse on average than a choice that ignores the geometry.
@@ -456,16 +372,8 @@ struct Machine {
 
 fn random_machine(seed: u64) -> Machine {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let t = [
-        random_axis(&mut rng, 0),
-        random_axis(&mut rng, 1),
-        random_axis(&mut rng, 2),
-    ];
-    let sq = [
-        rng.gen_range(-20e-6..20e-6),
-        rng.gen_range(-20e-6..20e-6),
-        rng.gen_range(-20e-6..20e-6),
-    ];
+    let t = [random_axis(&mut rng, 0), random_axis(&mut rng, 1), random_axis(&mut rng, 2)];
+    let sq = [rng.gen_range(-20e-6..20e-6), rng.gen_range(-20e-6..20e-6), rng.gen_range(-20e-6..20e-6)];
     Machine { t, sq }
 }
 
@@ -491,12 +399,7 @@ fn xyz_model(spec: &Seed001Plan) -> Model {
     }
 }
 
-fn simulate_xyz(
-    plan: &[PlannedReading],
-    m: &Machine,
-    rng: &mut ChaCha8Rng,
-    sigma: f64,
-) -> Vec<Reading> {
+fn simulate_xyz(plan: &[PlannedReading], m: &Machine, rng: &mut ChaCha8Rng, sigma: f64) -> Vec<Reading> {
     let noise = Normal::new(0.0, sigma.max(1e-300)).unwrap();
     let zeros: Vec<f64> = (0..40).map(|_| rng.gen_range(-5e-6..5e-6)).collect();
     let values: Vec<f64> = plan
@@ -634,45 +537,18 @@ fn removing_lines_names_what_becomes_unobservable() {
     let full = seed001_plan(&spec).unwrap();
     let m = random_machine(8);
     let cases: [(&str, Vec<usize>, &[&str]); 5] = [
-        (
-            "without the diagonals (lines 1–9 only)",
-            (9..17).collect(),
-            &["EYX", "EAX", "EC0Y"],
-        ),
-        (
-            "diagonals with one tool offset only",
-            (9..13).collect(),
-            &["ECZ", "EXZ"],
-        ),
-        (
-            "diagonals only at zero tool offset",
-            (13..17).collect(),
-            &["ECZ"],
-        ),
-        (
-            "without line 9 (Z with tool offset y0): redundant",
-            vec![8],
-            &[],
-        ),
-        (
-            "without lines 6, 8, 9 (the tool-offset lines)",
-            vec![5, 7, 8],
-            &["EAZ", "EBZ"],
-        ),
+        ("without the diagonals (lines 1–9 only)", (9..17).collect(), &["EYX", "EAX", "EC0Y"]),
+        ("diagonals with one tool offset only", (9..13).collect(), &["ECZ", "EXZ"]),
+        ("diagonals only at zero tool offset", (13..17).collect(), &["ECZ"]),
+        ("without line 9 (Z with tool offset y0): redundant", vec![8], &[]),
+        ("without lines 6, 8, 9 (the tool-offset lines)", vec![5, 7, 8], &["EAZ", "EBZ"]),
     ];
     for (what, drop, must) in cases {
-        let plan: Vec<PlannedReading> = full
-            .iter()
-            .filter(|p| !drop.contains(&p.line))
-            .cloned()
-            .collect();
+        let plan: Vec<PlannedReading> = full.iter().filter(|p| !drop.contains(&p.line)).cloned().collect();
         let mut rng = ChaCha8Rng::seed_from_u64(9);
         let readings = simulate_xyz(&plan, &m, &mut rng, SIGMA);
         let id = identify(&readings, &xyz_model(&spec), &IdOptions::default()).unwrap();
-        println!(
-            "{what}: rank {}, unobservable: {:#?}",
-            id.rank, id.unobservable
-        );
+        println!("{what}: rank {}, unobservable: {:#?}", id.rank, id.unobservable);
         println!("squareness: {:?}", id.squareness);
         let all = id.unobservable.join(" | ");
         for name in must {
@@ -707,23 +583,11 @@ fn seed001_formulas_as_written_versus_the_general_solution() {
     let mut worst_ls_angle: f64 = 0.0;
     for (name, vals) in &seed.profiles {
         let j = axes.iter().position(|a| name.ends_with(a)).unwrap();
-        let k = ["X", "Y", "Z", "A", "B", "C"]
-            .iter()
-            .position(|c| &name[1..2] == *c)
-            .unwrap();
+        let k = ["X", "Y", "Z", "A", "B", "C"].iter().position(|c| &name[1..2] == *c).unwrap();
         let want = truth_profile(&m.t[j][k], &spec.positions[j], k < 3 && k != j);
-        let e_seed = rms(&vals
-            .iter()
-            .zip(&want)
-            .map(|(a, b)| a - b)
-            .collect::<Vec<_>>());
+        let e_seed = rms(&vals.iter().zip(&want).map(|(a, b)| a - b).collect::<Vec<_>>());
         let p = id.profile(name).unwrap();
-        let e_ls = rms(&p
-            .values
-            .iter()
-            .zip(&want)
-            .map(|(a, b)| a - b)
-            .collect::<Vec<_>>());
+        let e_ls = rms(&p.values.iter().zip(&want).map(|(a, b)| a - b).collect::<Vec<_>>());
         let unit = if k < 3 { "nm" } else { "nrad" };
         println!(
             "{name}: seed 001 formula RMS error {:.1} {unit}, general LS {:.1} {unit} (truth RMS {:.1})",
@@ -758,21 +622,11 @@ fn seed001_formulas_as_written_versus_the_general_solution() {
     let mut ls_str = Vec::new();
     for name in straight {
         let j = axes.iter().position(|a| name.ends_with(a)).unwrap();
-        let k = ["X", "Y", "Z"]
-            .iter()
-            .position(|c| &name[1..2] == *c)
-            .unwrap();
+        let k = ["X", "Y", "Z"].iter().position(|c| &name[1..2] == *c).unwrap();
         let want = truth_profile(&m.t[j][k], &spec.positions[j], true);
         let sv = &seed.profiles.iter().find(|(n, _)| n == name).unwrap().1;
         seed_str.extend(sv.iter().zip(&want).map(|(a, b)| a - b));
-        ls_str.extend(
-            id.profile(name)
-                .unwrap()
-                .values
-                .iter()
-                .zip(&want)
-                .map(|(a, b)| a - b),
-        );
+        ls_str.extend(id.profile(name).unwrap().values.iter().zip(&want).map(|(a, b)| a - b));
     }
     println!(
         "straightness RMS error: seed 001 integration {:.1} nm, general LS {:.1} nm",
@@ -793,8 +647,7 @@ fn seed001_straightness_is_right_when_straightness_follows_the_angles() {
     let integ = |f: &Smooth, sgn: f64| -> Vec<f64> {
         let mut out = vec![0.0; fine.len()];
         for i in 1..fine.len() {
-            out[i] = out[i - 1]
-                + sgn * 0.5 * (f.at(fine[i]) + f.at(fine[i - 1])) * (fine[i] - fine[i - 1]);
+            out[i] = out[i - 1] + sgn * 0.5 * (f.at(fine[i]) + f.at(fine[i - 1])) * (fine[i] - fine[i - 1]);
         }
         out
     };
@@ -825,11 +678,7 @@ fn seed001_straightness_is_right_when_straightness_follows_the_angles() {
         let t: Vec<f64> = nodes.iter().map(|&i| truth[i]).collect();
         let want = ls_residual(&spec.positions[0], &t);
         let got = &seed.profiles.iter().find(|(n, _)| n == name).unwrap().1;
-        let e = rms(&got
-            .iter()
-            .zip(&want)
-            .map(|(a, b)| a - b)
-            .collect::<Vec<_>>());
+        let e = rms(&got.iter().zip(&want).map(|(a, b)| a - b).collect::<Vec<_>>());
         println!(
             "{name} (kinematic truth, noise-free): seed 001 RMS error {:.2} nm of {:.0} nm",
             e * 1e9,
@@ -837,17 +686,9 @@ fn seed001_straightness_is_right_when_straightness_follows_the_angles() {
         );
         // trapezoid rule over h = 50 mm (Euler–Maclaurin): error(x) ≈ −h²/12·(ε'(x) − ε'(0)),
         // so |error| ≤ h²/12·(max ε' − min ε'); ×2 for the least-squares line removal
-        let eps = if name == "EYX" {
-            &m.t[0][5]
-        } else {
-            &m.t[0][4]
-        };
-        let d1: Vec<f64> = fine
-            .windows(2)
-            .map(|w| (eps.at(w[1]) - eps.at(w[0])) / (w[1] - w[0]))
-            .collect();
-        let spread = d1.iter().cloned().fold(f64::MIN, f64::max)
-            - d1.iter().cloned().fold(f64::MAX, f64::min);
+        let eps = if name == "EYX" { &m.t[0][5] } else { &m.t[0][4] };
+        let d1: Vec<f64> = fine.windows(2).map(|w| (eps.at(w[1]) - eps.at(w[0])) / (w[1] - w[0])).collect();
+        let spread = d1.iter().cloned().fold(f64::MIN, f64::max) - d1.iter().cloned().fold(f64::MAX, f64::min);
         let bound = 2.0 * 0.05f64.powi(2) / 12.0 * spread;
         println!("  trapezoid bound {:.1} nm", bound * 1e9);
         assert!(e < bound, "{name}: {e} vs {bound}");
