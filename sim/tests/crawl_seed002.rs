@@ -51,7 +51,7 @@ fn crawl_ssi(p: &CrawlPreset, truth: &AxisTruth, feeds_mm_min: &[f64]) -> Vec<f6
     simulate_procedure(&m, truth, &spec, 2)
         .iter()
         .map(|run| {
-            let rec = read_run(&m, run, std::slice::from_ref(&p.scale), 2).unwrap();
+            let rec = read_run(&m, &p.truth, run, std::slice::from_ref(&p.scale), 2).unwrap();
             let RunData::TimeSeries { t, columns } = rec.data else { panic!("crawl runs are time series") };
             assert_eq!(t.len(), 2000, "1 s at 2 kHz");
             let x = &columns.iter().find(|(n, _)| n == &p.scale.name).unwrap().1;
