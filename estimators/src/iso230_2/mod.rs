@@ -389,7 +389,7 @@ mod tests {
             vec![0.0, 3.0 * UM, 6.0 * UM],
         ];
         let down = vec![
-            vec![-1.0 * UM, 0.0, 1.0 * UM],
+            vec![-UM, 0.0, 1.0 * UM],
             vec![0.0, 2.0 * UM, 4.0 * UM],
             vec![1.0 * UM, 1.0 * UM, 4.0 * UM],
         ];
@@ -422,10 +422,7 @@ mod tests {
     #[test]
     fn reversal_dominated_repeatability_and_signed_b() {
         let targets = [0.0, 1.0];
-        let up = vec![
-            vec![-1.0 * UM, 0.0, 1.0 * UM],
-            vec![-1.0 * UM, 0.0, 1.0 * UM],
-        ];
+        let up = vec![vec![-UM, 0.0, 1.0 * UM], vec![-UM, 0.0, 1.0 * UM]];
         let down = vec![
             vec![9.0 * UM, 10.0 * UM, 11.0 * UM],
             vec![1.0 * UM, 2.0 * UM, 3.0 * UM],
@@ -449,12 +446,18 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("strictly increasing"), "{e}");
-        let e = evaluate_bidirectional(&[0.0], &[vec![1e-6]], &[row.clone()]).unwrap_err();
+        let e =
+            evaluate_bidirectional(&[0.0], &[vec![1e-6]], std::slice::from_ref(&row)).unwrap_err();
         assert!(e.to_string().contains("at least 2 runs"), "{e}");
-        let e = evaluate_bidirectional(&[0.0], &[vec![f64::NAN, 0.0]], &[row.clone()]).unwrap_err();
-        assert!(e.to_string().contains("finite"), "{e}");
-        let e = evaluate_bidirectional(&[0.0, 1.0], &[row.clone()], &[row.clone(), row.clone()])
+        let e = evaluate_bidirectional(&[0.0], &[vec![f64::NAN, 0.0]], std::slice::from_ref(&row))
             .unwrap_err();
+        assert!(e.to_string().contains("finite"), "{e}");
+        let e = evaluate_bidirectional(
+            &[0.0, 1.0],
+            std::slice::from_ref(&row),
+            &[row.clone(), row.clone()],
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("one row per target"), "{e}");
         assert_eq!(
             evaluate_bidirectional(&[], &[], &[]).unwrap_err(),
