@@ -42,9 +42,9 @@ pub enum DatError {
 pub struct DatFile {
     /// Target positions P_i, m (in file order).
     pub targets: Vec<f64>,
-    /// Positional deviations x↑_ij = REF_DATA_FWD[i,j] − TGT_DATA[i], m (positive approach), `[i][j]`.
+    /// Positional deviations `x↑_ij = REF_DATA_FWD[i,j] − TGT_DATA[i]`, m (positive approach), `[i][j]`.
     pub up: Vec<Vec<f64>>,
-    /// Positional deviations x↓_ij = REF_DATA_BWD[i,j] − TGT_DATA[i], m (negative approach), `[i][j]`.
+    /// Positional deviations `x↓_ij = REF_DATA_BWD[i,j] − TGT_DATA[i]`, m (negative approach), `[i][j]`.
     pub down: Vec<Vec<f64>>,
     /// The unit the file was written in (`UNIT`, default `mm`).
     pub unit: String,
