@@ -51,59 +51,30 @@ use crate::line::fit_line;
 pub enum CompensationError {
     /// Too few points or nodes.
     #[error("{what}: at least {need} are needed, got {got}")]
-    TooFew {
-        what: &'static str,
-        need: usize,
-        got: usize,
-    },
+    TooFew { what: &'static str, need: usize, got: usize },
     /// Two arrays that must pair up differ in length.
     #[error("{what}: lengths differ ({a} vs {b})")]
-    LengthMismatch {
-        what: &'static str,
-        a: usize,
-        b: usize,
-    },
+    LengthMismatch { what: &'static str, a: usize, b: usize },
     /// A value is NaN or infinite.
     #[error("{what}[{index}] must be finite, got {value}")]
-    NonFinite {
-        what: &'static str,
-        index: usize,
-        value: f64,
-    },
+    NonFinite { what: &'static str, index: usize, value: f64 },
     /// Positions are not strictly increasing.
-    #[error(
-        "{what} must be strictly increasing, got {value} m at index {index} after {previous} m"
-    )]
-    NotIncreasing {
-        what: &'static str,
-        index: usize,
-        previous: f64,
-        value: f64,
-    },
+    #[error("{what} must be strictly increasing, got {value} m at index {index} after {previous} m")]
+    NotIncreasing { what: &'static str, index: usize, previous: f64, value: f64 },
     /// A parameter is out of its range.
     #[error("parameter {name} = {value}: expected {expected}")]
-    BadParameter {
-        name: &'static str,
-        value: f64,
-        expected: &'static str,
-    },
+    BadParameter { name: &'static str, value: f64, expected: &'static str },
     /// A node of the table has no measured point in its two neighbouring intervals.
     #[error("node {index} at {position} m has no measured point in its neighbouring intervals; use fewer nodes")]
     UnsupportedNode { index: usize, position: f64 },
     /// p + c(p) is not increasing on a table segment, so the display cannot be inverse-compensated.
     #[error("table is not invertible: on segment {index} (from {start} m) dc/dp = {slope} <= -1")]
-    NotInvertible {
-        index: usize,
-        start: f64,
-        slope: f64,
-    },
+    NotInvertible { index: usize, start: f64, slope: f64 },
     /// The table's nodes are not equally spaced (controller export).
-    #[error("node spacing must be constant for a controller table: interval {index} is {spacing} m, first is {first} m")]
-    NotEquidistant {
-        index: usize,
-        spacing: f64,
-        first: f64,
-    },
+    #[error(
+        "node spacing must be constant for a controller table: interval {index} is {spacing} m, first is {first} m"
+    )]
+    NotEquidistant { index: usize, spacing: f64, first: f64 },
     /// A correction does not fit a 32-bit integer in units of 0.1 µm.
     #[error("correction {value} m at node {index} overflows a 32-bit count of 0.1 um")]
     Overflow { index: usize, value: f64 },
@@ -120,12 +91,7 @@ fn check_increasing(what: &'static str, v: &[f64]) -> Result<(), CompensationErr
     check_finite(what, v)?;
     for i in 1..v.len() {
         if v[i] <= v[i - 1] {
-            return Err(CompensationError::NotIncreasing {
-                what,
-                index: i,
-                previous: v[i - 1],
-                value: v[i],
-            });
+            return Err(CompensationError::NotIncreasing { what, index: i, previous: v[i - 1], value: v[i] });
         }
     }
     Ok(())
@@ -140,11 +106,7 @@ fn check_points(positions: &[f64], errors: &[f64], need: usize) -> Result<(), Co
         });
     }
     if positions.len() < need {
-        return Err(CompensationError::TooFew {
-            what: "measured points",
-            need,
-            got: positions.len(),
-        });
+        return Err(CompensationError::TooFew { what: "measured points", need, got: positions.len() });
     }
     check_increasing("positions", positions)?;
     check_finite("errors", errors)
@@ -171,18 +133,11 @@ impl CompensationTable {
             });
         }
         if positions.len() < 2 {
-            return Err(CompensationError::TooFew {
-                what: "table nodes",
-                need: 2,
-                got: positions.len(),
-            });
+            return Err(CompensationError::TooFew { what: "table nodes", need: 2, got: positions.len() });
         }
         check_increasing("table positions", &positions)?;
         check_finite("table corrections", &corrections)?;
-        Ok(Self {
-            positions,
-            corrections,
-        })
+        Ok(Self { positions, corrections })
     }
 
     /// Number of nodes.
@@ -205,8 +160,7 @@ impl CompensationTable {
 
     /// Slope dc/dp on interval k.
     fn slope(&self, k: usize) -> f64 {
-        (self.corrections[k + 1] - self.corrections[k])
-            / (self.positions[k + 1] - self.positions[k])
+        (self.corrections[k + 1] - self.corrections[k]) / (self.positions[k + 1] - self.positions[k])
     }
 
     /// Correction c(p) (m) at position p (m): linear interpolation
@@ -228,11 +182,7 @@ impl CompensationTable {
 /// equals the actual position (seed 004: compensation of the scale feedback). NaN → error.
 pub fn forward_compensate(table: &CompensationTable, raw: f64) -> Result<f64, CompensationError> {
     if !raw.is_finite() {
-        return Err(CompensationError::NonFinite {
-            what: "raw feedback",
-            index: 0,
-            value: raw,
-        });
+        return Err(CompensationError::NonFinite { what: "raw feedback", index: 0, value: raw });
     }
     Ok(raw + table.correction_at(raw))
 }
@@ -243,26 +193,15 @@ pub fn forward_compensate(table: &CompensationTable, raw: f64) -> Result<f64, Co
 /// (else [`CompensationError::NotInvertible`]). The segment bracketing the root is found by
 /// bisection on the node values g_k = P_k + c_k; Newton's step `p ← p − f(p)/(1 + dc/dp)` from
 /// its left node is then exact, and one more Newton step removes the rounding of the first.
-pub fn inverse_compensate(
-    table: &CompensationTable,
-    compensated: f64,
-) -> Result<f64, CompensationError> {
+pub fn inverse_compensate(table: &CompensationTable, compensated: f64) -> Result<f64, CompensationError> {
     if !compensated.is_finite() {
-        return Err(CompensationError::NonFinite {
-            what: "compensated position",
-            index: 0,
-            value: compensated,
-        });
+        return Err(CompensationError::NonFinite { what: "compensated position", index: 0, value: compensated });
     }
     let n = table.len();
     for k in 0..n - 1 {
         let s = table.slope(k);
         if 1.0 + s <= 0.0 {
-            return Err(CompensationError::NotInvertible {
-                index: k,
-                start: table.positions[k],
-                slope: s,
-            });
+            return Err(CompensationError::NotInvertible { index: k, start: table.positions[k], slope: s });
         }
     }
     let g = |k: usize| table.positions[k] + table.corrections[k];
@@ -318,11 +257,7 @@ pub fn table_residual(
         });
     }
     if positions.is_empty() {
-        return Err(CompensationError::TooFew {
-            what: "measured points",
-            need: 1,
-            got: 0,
-        });
+        return Err(CompensationError::TooFew { what: "measured points", need: 1, got: 0 });
     }
     check_finite("positions", positions)?;
     check_finite("errors", errors)?;
@@ -333,11 +268,7 @@ pub fn table_residual(
         ss += r * r;
         mx = mx.max(r.abs());
     }
-    Ok(TableResidual {
-        rms: (ss / positions.len() as f64).sqrt(),
-        max_abs: mx,
-        count: positions.len(),
-    })
+    Ok(TableResidual { rms: (ss / positions.len() as f64).sqrt(), max_abs: mx, count: positions.len() })
 }
 
 /// Least-squares continuous piecewise-linear fit with given nodes: the corrections c_k minimise
@@ -351,11 +282,7 @@ pub fn fit_table_on_nodes(
 ) -> Result<CompensationTable, CompensationError> {
     check_points(positions, errors, 1)?;
     if nodes.len() < 2 {
-        return Err(CompensationError::TooFew {
-            what: "table nodes",
-            need: 2,
-            got: nodes.len(),
-        });
+        return Err(CompensationError::TooFew { what: "table nodes", need: 2, got: nodes.len() });
     }
     check_increasing("table nodes", nodes)?;
     let m = nodes.len();
@@ -387,10 +314,7 @@ pub fn fit_table_on_nodes(
         let sub = if k > 0 { off[k - 1] } else { 0.0 };
         let pivot = diag[k] - if k > 0 { sub * cp[k - 1] } else { 0.0 };
         if pivot.is_nan() || pivot <= 1e-12 * diag[k].max(f64::MIN_POSITIVE) {
-            return Err(CompensationError::UnsupportedNode {
-                index: k,
-                position: nodes[k],
-            });
+            return Err(CompensationError::UnsupportedNode { index: k, position: nodes[k] });
         }
         cp[k] = if k + 1 < m { off[k] / pivot } else { 0.0 };
         dp[k] = (rhs[k] - if k > 0 { sub * dp[k - 1] } else { 0.0 }) / pivot;
@@ -421,12 +345,7 @@ impl Default for VariableStepParams {
     /// |r| ≥ 0.98 (seed 004), |residual| ≤ 0.5 µm, starting window = all remaining points,
     /// table residual enforced.
     fn default() -> Self {
-        Self {
-            min_abs_pearson: 0.98,
-            max_abs_residual: 0.5e-6,
-            initial_window: None,
-            enforce_table_residual: true,
-        }
+        Self { min_abs_pearson: 0.98, max_abs_residual: 0.5e-6, initial_window: None, enforce_table_residual: true }
     }
 }
 
@@ -462,13 +381,7 @@ pub struct VariableStepTable {
 }
 
 /// Fits and tests window [s, e]; returns the segment and whether it passes.
-fn try_window(
-    x: &[f64],
-    y: &[f64],
-    s: usize,
-    e: usize,
-    prm: &VariableStepParams,
-) -> (Segment, bool) {
+fn try_window(x: &[f64], y: &[f64], s: usize, e: usize, prm: &VariableStepParams) -> (Segment, bool) {
     let xs = &x[s..=e];
     let ys = &y[s..=e];
     let (a, b) = fit_line(xs, ys);
@@ -483,27 +396,12 @@ fn try_window(
         lxy += (xi - mx) * (yi - my);
         max_res = max_res.max((yi - a - b * xi).abs());
     }
-    let pearson = if lyy > 0.0 && lxx > 0.0 {
-        Some(lxy / (lxx * lyy).sqrt())
-    } else {
-        None
-    };
+    let pearson = if lyy > 0.0 && lxx > 0.0 { Some(lxy / (lxx * lyy).sqrt()) } else { None };
     let flat = b.abs() * (xs[xs.len() - 1] - xs[0]) <= prm.max_abs_residual;
     let two_points = e == s + 1;
     let ok_r = two_points || flat || pearson.is_some_and(|r| r.abs() >= prm.min_abs_pearson);
     let ok_res = two_points || max_res <= prm.max_abs_residual;
-    (
-        Segment {
-            first: s,
-            last: e,
-            slope: b,
-            intercept: a,
-            pearson,
-            flat,
-            max_abs_residual: max_res,
-        },
-        ok_r && ok_res,
-    )
+    (Segment { first: s, last: e, slope: b, intercept: a, pearson, flat, max_abs_residual: max_res }, ok_r && ok_res)
 }
 
 /// Variable-step compensation table by automatic variable-step linear regression (seed 004; the
@@ -575,11 +473,7 @@ pub fn variable_step_table(
         let nodes: Vec<f64> = node_idx.iter().map(|&i| positions[i]).collect();
         let table = fit_table_on_nodes(&nodes, positions, errors)?;
         if !params.enforce_table_residual {
-            return Ok(VariableStepTable {
-                segments,
-                table,
-                refinement_nodes,
-            });
+            return Ok(VariableStepTable { segments, table, refinement_nodes });
         }
         // Worst measured point missing the table by more than the threshold. If it is a node, its
         // nearest non-node neighbours become nodes (narrowing its hat function); otherwise it does.
@@ -588,11 +482,7 @@ pub fn variable_step_table(
             .filter(|&(_, r)| r > params.max_abs_residual)
             .max_by(|a, b| a.1.total_cmp(&b.1));
         let Some((i, _)) = worst else {
-            return Ok(VariableStepTable {
-                segments,
-                table,
-                refinement_nodes,
-            });
+            return Ok(VariableStepTable { segments, table, refinement_nodes });
         };
         let candidates: Vec<usize> = if node_idx.binary_search(&i).is_err() {
             vec![i]
@@ -605,11 +495,7 @@ pub fn variable_step_table(
         };
         if candidates.is_empty() {
             // Every neighbour is a node already: the table interpolates there; nothing left to add.
-            return Ok(VariableStepTable {
-                segments,
-                table,
-                refinement_nodes,
-            });
+            return Ok(VariableStepTable { segments, table, refinement_nodes });
         }
         for k in candidates {
             let at = node_idx.partition_point(|&j| j < k);
@@ -629,11 +515,7 @@ pub fn equidistant_table(
 ) -> Result<CompensationTable, CompensationError> {
     check_points(positions, errors, 2)?;
     if n_nodes < 2 {
-        return Err(CompensationError::TooFew {
-            what: "table nodes",
-            need: 2,
-            got: n_nodes,
-        });
+        return Err(CompensationError::TooFew { what: "table nodes", need: 2, got: n_nodes });
     }
     let (lo, hi) = (positions[0], positions[positions.len() - 1]);
     let step = (hi - lo) / (n_nodes - 1) as f64;
@@ -656,20 +538,14 @@ pub struct ControllerTable {
 /// Exports an equidistant table as a controller table: `start`, `spacing` (m) and corrections as
 /// integers in 0.1 µm, `round(c_k / 1e-7 m)`. Errors if the spacing varies by more than 1e-9
 /// relative (node positions are computed in floating point) or a value overflows i32.
-pub fn export_controller_table(
-    table: &CompensationTable,
-) -> Result<ControllerTable, CompensationError> {
+pub fn export_controller_table(table: &CompensationTable) -> Result<ControllerTable, CompensationError> {
     let p = &table.positions;
     let first = p[1] - p[0];
     let spacing = (p[p.len() - 1] - p[0]) / (p.len() - 1) as f64;
     for k in 0..p.len() - 1 {
         let d = p[k + 1] - p[k];
         if (d - spacing).abs() > 1e-9 * spacing {
-            return Err(CompensationError::NotEquidistant {
-                index: k,
-                spacing: d,
-                first,
-            });
+            return Err(CompensationError::NotEquidistant { index: k, spacing: d, first });
         }
     }
     let corrections_0p1um = table
@@ -685,11 +561,7 @@ pub fn export_controller_table(
             }
         })
         .collect::<Result<Vec<i32>, _>>()?;
-    Ok(ControllerTable {
-        start: p[0],
-        spacing,
-        corrections_0p1um,
-    })
+    Ok(ControllerTable { start: p[0], spacing, corrections_0p1um })
 }
 
 #[cfg(test)]
@@ -701,11 +573,7 @@ mod tests {
         let mut e = 0.0;
         let mut from = 0.0;
         for (k, &s) in slopes.iter().enumerate() {
-            let to = if k < kinks.len() {
-                kinks[k]
-            } else {
-                f64::INFINITY
-            };
+            let to = if k < kinks.len() { kinks[k] } else { f64::INFINITY };
             if x <= to {
                 return e + s * (x - from);
             }
@@ -730,10 +598,7 @@ mod tests {
         let slopes = [10e-6, -25e-6, 5e-6, 40e-6];
         let x = grid();
         let e: Vec<f64> = x.iter().map(|&p| piecewise(p, &kinks, &slopes)).collect();
-        let prm = VariableStepParams {
-            max_abs_residual: 0.05e-6,
-            ..Default::default()
-        };
+        let prm = VariableStepParams { max_abs_residual: 0.05e-6, ..Default::default() };
         let v = variable_step_table(&x, &e, &prm).unwrap();
         let want = [0.0, 0.135, 0.41, 0.655, 0.8];
         assert_eq!(v.table.len(), want.len(), "nodes {:?}", v.table.positions);
@@ -755,23 +620,11 @@ mod tests {
         let slopes = [10e-6, -25e-6, 5e-6, 40e-6];
         let x = grid();
         let e: Vec<f64> = x.iter().map(|&p| piecewise(p, &kinks, &slopes)).collect();
-        let prm = VariableStepParams {
-            max_abs_residual: 0.05e-6,
-            ..Default::default()
-        };
+        let prm = VariableStepParams { max_abs_residual: 0.05e-6, ..Default::default() };
         let v = variable_step_table(&x, &e, &prm).unwrap();
         for k in kinks {
-            let d = v
-                .table
-                .positions
-                .iter()
-                .map(|p| (p - k).abs())
-                .fold(f64::INFINITY, f64::min);
-            assert!(
-                d <= H,
-                "kink {k}: nearest node {d} m away; nodes {:?}",
-                v.table.positions
-            );
+            let d = v.table.positions.iter().map(|p| (p - k).abs()).fold(f64::INFINITY, f64::min);
+            assert!(d <= H, "kink {k}: nearest node {d} m away; nodes {:?}", v.table.positions);
         }
         // Breakpoints (segment ends), not counting refinement nodes.
         assert!(v.segments.len() < 2 + 2 * kinks.len(), "{:?}", v.segments);
@@ -779,10 +632,7 @@ mod tests {
         // 35e-6 · 2.5e-3 = 0.09 µm at one point; bound it by 0.1 µm.
         let r = table_residual(&v.table, &x, &e).unwrap();
         assert!(r.max_abs < 0.1e-6, "{r:?}");
-        println!(
-            "off-grid kinks: nodes {:?}, residual {:?}",
-            v.table.positions, r
-        );
+        println!("off-grid kinks: nodes {:?}, residual {:?}", v.table.positions, r);
     }
 
     /// Smallest equidistant node count reaching `target` max residual.
@@ -806,10 +656,7 @@ mod tests {
         let e_kink: Vec<f64> = x.iter().map(|&p| piecewise(p, &kinks, &slopes)).collect();
         let e_smooth: Vec<f64> = x
             .iter()
-            .map(|&p| {
-                20e-6 * ((p - 0.8) / 0.08).exp()
-                    + 3e-6 * (2.0 * std::f64::consts::PI * p / 0.8).sin()
-            })
+            .map(|&p| 20e-6 * ((p - 0.8) / 0.08).exp() + 3e-6 * (2.0 * std::f64::consts::PI * p / 0.8).sin())
             .collect();
         for (name, e) in [("kinks", &e_kink), ("smooth", &e_smooth)] {
             let v = variable_step_table(&x, e, &VariableStepParams::default()).unwrap();
@@ -833,13 +680,9 @@ mod tests {
     #[test]
     fn forward_and_inverse_are_each_others_inverse() {
         let x = grid();
-        let e: Vec<f64> = x
-            .iter()
-            .map(|&p| piecewise(p, &[0.1372, 0.4119, 0.6531], &[10e-6, -25e-6, 5e-6, 40e-6]))
-            .collect();
-        let t = variable_step_table(&x, &e, &VariableStepParams::default())
-            .unwrap()
-            .table;
+        let e: Vec<f64> =
+            x.iter().map(|&p| piecewise(p, &[0.1372, 0.4119, 0.6531], &[10e-6, -25e-6, 5e-6, 40e-6])).collect();
+        let t = variable_step_table(&x, &e, &VariableStepParams::default()).unwrap().table;
         let mut worst: f64 = 0.0;
         for i in 0..=2000 {
             let q = -0.1 + i as f64 * 1.0 / 2000.0; // −0.1 .. 0.9 m, beyond both ends
@@ -864,9 +707,7 @@ mod tests {
         let x = grid();
         let truth = |p: f64| 12e-6 * (p / 0.3).sin() + 8e-6 * p;
         let e: Vec<f64> = x.iter().map(|&p| truth(p)).collect();
-        let t = variable_step_table(&x, &e, &VariableStepParams::default())
-            .unwrap()
-            .table;
+        let t = variable_step_table(&x, &e, &VariableStepParams::default()).unwrap().table;
         let res = table_residual(&t, &x, &e).unwrap();
         let mut worst: f64 = 0.0;
         for i in 0..=400 {
@@ -878,11 +719,7 @@ mod tests {
         // Between measured points the table interpolates linearly; the curve's second derivative is
         // ≤ 12e-6/0.09 = 1.3e-4 1/m, so interpolation between 5 mm points adds ≤ 1.3e-4·(5e-3)²/8 =
         // 4e-10 m. Allow the measured-point residual plus 1 nm.
-        assert!(
-            worst <= res.max_abs + 1e-9,
-            "landing error {worst:e}, table residual {:e}",
-            res.max_abs
-        );
+        assert!(worst <= res.max_abs + 1e-9, "landing error {worst:e}, table residual {:e}", res.max_abs);
         // Without compensation the landing error is the error itself (≥ 10 µm somewhere).
         assert!(e.iter().fold(0.0f64, |m, v| m.max(v.abs())) > 10e-6);
     }
@@ -892,10 +729,8 @@ mod tests {
     #[test]
     fn pearson_of_scale_versus_laser_reading_is_always_near_one() {
         let x = grid();
-        let e: Vec<f64> = x
-            .iter()
-            .map(|&p| piecewise(p, &[0.1372, 0.4119, 0.6531], &[10e-6, -25e-6, 5e-6, 40e-6]))
-            .collect();
+        let e: Vec<f64> =
+            x.iter().map(|&p| piecewise(p, &[0.1372, 0.4119, 0.6531], &[10e-6, -25e-6, 5e-6, 40e-6])).collect();
         let laser: Vec<f64> = x.iter().zip(&e).map(|(p, e)| p + e).collect();
         let prm = VariableStepParams::default();
         let (seg, _) = try_window(&x, &laser, 0, x.len() - 1, &prm);
@@ -909,10 +744,7 @@ mod tests {
     fn initial_window_caps_the_segment_length() {
         let x = grid();
         let e: Vec<f64> = x.iter().map(|&p| 3e-6 * p).collect();
-        let prm = VariableStepParams {
-            initial_window: Some(10),
-            ..Default::default()
-        };
+        let prm = VariableStepParams { initial_window: Some(10), ..Default::default() };
         let v = variable_step_table(&x, &e, &prm).unwrap();
         assert!(v.segments.iter().all(|s| s.last - s.first <= 9));
         // 161 points, segments of 10 points sharing end points → ceil(160 / 9) = 18 segments.
@@ -925,10 +757,7 @@ mod tests {
     #[test]
     fn controller_export_is_integer_tenths_of_a_micron() {
         let x = grid();
-        let e: Vec<f64> = x
-            .iter()
-            .map(|&p| 12e-6 * (p / 0.3).sin() - 3.04e-6)
-            .collect();
+        let e: Vec<f64> = x.iter().map(|&p| 12e-6 * (p / 0.3).sin() - 3.04e-6).collect();
         let t = equidistant_table(&x, &e, 17).unwrap();
         let c = export_controller_table(&t).unwrap();
         assert_eq!(c.corrections_0p1um.len(), 17);
@@ -938,10 +767,7 @@ mod tests {
             assert!((v as f64 * 1e-7 - t.corrections[k]).abs() <= 0.05e-6 + 1e-15);
         }
         let v = variable_step_table(&x, &e, &VariableStepParams::default()).unwrap();
-        assert!(matches!(
-            export_controller_table(&v.table),
-            Err(CompensationError::NotEquidistant { .. })
-        ));
+        assert!(matches!(export_controller_table(&v.table), Err(CompensationError::NotEquidistant { .. })));
     }
 
     /// ISO 230-2 test → table from the mean bidirectional deviations x̄_i → repeat the test with the
@@ -962,16 +788,8 @@ mod tests {
         };
         let truth = |p: f64| 20e-6 * ((p - 0.8) / 0.15).exp() + 4e-6 * (p / 0.11).sin() + 6e-6 * p;
         let (half_b, sigma) = (1.5e-6, 0.3e-6);
-        let targets: Vec<f64> = (0..21)
-            .map(|i| {
-                i as f64 * 0.04
-                    + if i % 2 == 1 {
-                        0.0031 * ((i % 5) as f64 - 2.0)
-                    } else {
-                        0.0
-                    }
-            })
-            .collect();
+        let targets: Vec<f64> =
+            (0..21).map(|i| i as f64 * 0.04 + if i % 2 == 1 { 0.0031 * ((i % 5) as f64 - 2.0) } else { 0.0 }).collect();
         // One ISO run: the loop drives the compensated coordinate to the target, so the scale
         // reads p = inverse(T) and the axis stands at p + e(p) ± B/2 + noise.
         let mut measure = |table: Option<&CompensationTable>| {
@@ -987,17 +805,18 @@ mod tests {
             evaluate_bidirectional(&targets, &up, &down).unwrap()
         };
         let before = measure(None);
-        let xbar: Vec<f64> = before
-            .targets
-            .iter()
-            .map(|t| t.mean_bidirectional)
-            .collect();
+        let xbar: Vec<f64> = before.targets.iter().map(|t| t.mean_bidirectional).collect();
         let v = variable_step_table(&targets, &xbar, &VariableStepParams::default()).unwrap();
         let after = measure(Some(&v.table));
         println!(
             "ISO before: E {:.2} um A {:.2} um M {:.2} um | table {} nodes | after: E {:.2} um A {:.2} um M {:.2} um",
-            before.e * 1e6, before.a * 1e6, before.m * 1e6, v.table.len(),
-            after.e * 1e6, after.a * 1e6, after.m * 1e6
+            before.e * 1e6,
+            before.a * 1e6,
+            before.m * 1e6,
+            v.table.len(),
+            after.e * 1e6,
+            after.a * 1e6,
+            after.m * 1e6
         );
         // After compensation E ≈ B + table residual (≤ 0.5 µm + noise of x̄_i, σ/√10 ≈ 0.1 µm) +
         // interpolation error between targets: require E below a third of before and A below half.
@@ -1009,26 +828,14 @@ mod tests {
 
     #[test]
     fn bad_inputs_are_rejected() {
-        let e = variable_step_table(&[0.0, 0.0, 1.0], &[0.0; 3], &VariableStepParams::default())
-            .unwrap_err();
+        let e = variable_step_table(&[0.0, 0.0, 1.0], &[0.0; 3], &VariableStepParams::default()).unwrap_err();
         assert!(e.to_string().contains("strictly increasing"), "{e}");
-        let e = variable_step_table(
-            &[0.0, 1.0],
-            &[0.0, f64::NAN],
-            &VariableStepParams::default(),
-        )
-        .unwrap_err();
+        let e = variable_step_table(&[0.0, 1.0], &[0.0, f64::NAN], &VariableStepParams::default()).unwrap_err();
         assert!(e.to_string().contains("finite"), "{e}");
         let e = equidistant_table(&[0.0, 0.1, 0.2], &[0.0; 3], 10).unwrap_err();
-        assert!(
-            matches!(e, CompensationError::UnsupportedNode { .. }),
-            "{e}"
-        );
+        assert!(matches!(e, CompensationError::UnsupportedNode { .. }), "{e}");
         let t = CompensationTable::new(vec![0.0, 1.0], vec![0.0, -2.0]).unwrap();
-        assert!(matches!(
-            inverse_compensate(&t, 0.5),
-            Err(CompensationError::NotInvertible { .. })
-        ));
+        assert!(matches!(inverse_compensate(&t, 0.5), Err(CompensationError::NotInvertible { .. })));
         assert!(CompensationTable::new(vec![0.0], vec![0.0]).is_err());
     }
 }

@@ -311,23 +311,9 @@ mod tests {
     #[test]
     fn hand_worked_three_targets_three_runs() {
         let targets = [0.0, 0.1, 0.25];
-<<<<<<< HEAD
         let up =
             vec![vec![1.0 * UM, 2.0 * UM, 3.0 * UM], vec![4.0 * UM, 4.0 * UM, 4.0 * UM], vec![0.0, 3.0 * UM, 6.0 * UM]];
-        let down =
-            vec![vec![-1.0 * UM, 0.0, 1.0 * UM], vec![0.0, 2.0 * UM, 4.0 * UM], vec![1.0 * UM, 1.0 * UM, 4.0 * UM]];
-=======
-        let up = vec![
-            vec![1.0 * UM, 2.0 * UM, 3.0 * UM],
-            vec![4.0 * UM, 4.0 * UM, 4.0 * UM],
-            vec![0.0, 3.0 * UM, 6.0 * UM],
-        ];
-        let down = vec![
-            vec![-UM, 0.0, 1.0 * UM],
-            vec![0.0, 2.0 * UM, 4.0 * UM],
-            vec![1.0 * UM, 1.0 * UM, 4.0 * UM],
-        ];
->>>>>>> h-iso
+        let down = vec![vec![-UM, 0.0, 1.0 * UM], vec![0.0, 2.0 * UM, 4.0 * UM], vec![1.0 * UM, 1.0 * UM, 4.0 * UM]];
         let r = evaluate_bidirectional(&targets, &up, &down).unwrap();
         // Tolerance 1e-18 m: the µm-scaled inputs carry relative rounding ~1e-16, i.e. ~1e-21 m.
         let close = |a: f64, b: f64| (a - b).abs() < 1e-18;
@@ -357,16 +343,8 @@ mod tests {
     #[test]
     fn reversal_dominated_repeatability_and_signed_b() {
         let targets = [0.0, 1.0];
-<<<<<<< HEAD
-        let up = vec![vec![-1.0 * UM, 0.0, 1.0 * UM], vec![-1.0 * UM, 0.0, 1.0 * UM]];
-        let down = vec![vec![9.0 * UM, 10.0 * UM, 11.0 * UM], vec![1.0 * UM, 2.0 * UM, 3.0 * UM]];
-=======
         let up = vec![vec![-UM, 0.0, 1.0 * UM], vec![-UM, 0.0, 1.0 * UM]];
-        let down = vec![
-            vec![9.0 * UM, 10.0 * UM, 11.0 * UM],
-            vec![1.0 * UM, 2.0 * UM, 3.0 * UM],
-        ];
->>>>>>> h-iso
+        let down = vec![vec![9.0 * UM, 10.0 * UM, 11.0 * UM], vec![1.0 * UM, 2.0 * UM, 3.0 * UM]];
         let r = evaluate_bidirectional(&targets, &up, &down).unwrap();
         // 1e-18 m: rounding of µm-scaled inputs (see above).
         assert!((r.targets[0].repeatability - 14.0 * UM).abs() < 1e-18);
@@ -382,24 +360,12 @@ mod tests {
         let e =
             evaluate_bidirectional(&[0.0, 0.0], &[row.clone(), row.clone()], &[row.clone(), row.clone()]).unwrap_err();
         assert!(e.to_string().contains("strictly increasing"), "{e}");
-        let e =
-            evaluate_bidirectional(&[0.0], &[vec![1e-6]], std::slice::from_ref(&row)).unwrap_err();
+        let e = evaluate_bidirectional(&[0.0], &[vec![1e-6]], std::slice::from_ref(&row)).unwrap_err();
         assert!(e.to_string().contains("at least 2 runs"), "{e}");
-<<<<<<< HEAD
-        let e = evaluate_bidirectional(&[0.0], &[vec![f64::NAN, 0.0]], &[row.clone()]).unwrap_err();
+        let e = evaluate_bidirectional(&[0.0], &[vec![f64::NAN, 0.0]], std::slice::from_ref(&row)).unwrap_err();
         assert!(e.to_string().contains("finite"), "{e}");
-        let e = evaluate_bidirectional(&[0.0, 1.0], &[row.clone()], &[row.clone(), row.clone()]).unwrap_err();
-=======
-        let e = evaluate_bidirectional(&[0.0], &[vec![f64::NAN, 0.0]], std::slice::from_ref(&row))
-            .unwrap_err();
-        assert!(e.to_string().contains("finite"), "{e}");
-        let e = evaluate_bidirectional(
-            &[0.0, 1.0],
-            std::slice::from_ref(&row),
-            &[row.clone(), row.clone()],
-        )
-        .unwrap_err();
->>>>>>> h-iso
+        let e =
+            evaluate_bidirectional(&[0.0, 1.0], std::slice::from_ref(&row), &[row.clone(), row.clone()]).unwrap_err();
         assert!(e.to_string().contains("one row per target"), "{e}");
         assert_eq!(evaluate_bidirectional(&[], &[], &[]).unwrap_err(), Iso230Error::NoTargets);
     }
