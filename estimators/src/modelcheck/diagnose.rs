@@ -273,13 +273,12 @@ fn prepare(input: &ResidualInput) -> Result<Prepared, ModelCheckError> {
         base.push(c.iter().zip(&w).map(|(x, w)| x * w).collect());
     }
     let mut r_t: Vec<f64> = input.residual.iter().zip(&w).map(|(r, w)| r * w).collect();
+    let total: f64 = r_t.iter().map(|x| x * x).sum();
     base.project_out(&mut r_t);
     let stat_old: f64 = r_t.iter().map(|x| x * x).sum();
-    if stat_old == 0.0 {
-        return Err(ModelCheckError::Invalid(
-            "diagnose: the residual is zero after fitting the base columns: nothing to explain"
-                .into(),
-        ));
+    // Rounding level: the base leaves less than 1e-12 of the residual's norm.
+    if stat_old <= 1e-24 * total || stat_old == 0.0 {
+        return Err(ModelCheckError::NothingToExplain);
     }
     let rss_old = if input.base_columns.is_empty() {
         input.residual.iter().map(|r| r * r).sum()
@@ -674,17 +673,23 @@ fn rank_refs(
                 sigma: input.sigma,
                 base_columns: &accepted,
             };
-            let cp = prepare(&cinput)?;
-            let mut all = accepted.clone();
-            all.extend(fits[a].columns.iter().cloned());
-            let fit = fit_signature(input.residual, &all, input.sigma)?;
-            let stat_new: f64 = fit
-                .residual
-                .iter()
-                .zip(&cp.w)
-                .map(|(r, w)| (r * w).powi(2))
-                .sum();
-            delta_bic(&cp, stat_new, fits[a].k)
+            match prepare(&cinput) {
+                // The accepted candidates explain everything: this one adds only its penalty.
+                Err(ModelCheckError::NothingToExplain) => fits[a].k as f64 * (p.n as f64).ln(),
+                Err(e) => return Err(e),
+                Ok(cp) => {
+                    let mut all = accepted.clone();
+                    all.extend(fits[a].columns.iter().cloned());
+                    let fit = fit_signature(input.residual, &all, input.sigma)?;
+                    let stat_new: f64 = fit
+                        .residual
+                        .iter()
+                        .zip(&cp.w)
+                        .map(|(r, w)| (r * w).powi(2))
+                        .sum();
+                    delta_bic(&cp, stat_new, fits[a].k)
+                }
+            }
         };
         fits[a].conditional_delta_bic = Some(cond);
         if cond < config.significance_threshold {
@@ -729,7 +734,7 @@ pub struct ForwardSelection {
 /// ([`rank_candidates`]); if the best is `significant`, add its columns (hyper-parameters held
 /// at their fitted values) to the base columns, remove it from the candidates and repeat; stop
 /// when the best is `noise` or `inseparable` (the data cannot choose), when no candidate is
-/// left, or after `config.max_steps` additions.
+/// left, when the residual is explained exactly, or after `config.max_steps` additions.
 pub fn forward_select(
     input: &ResidualInput,
     candidates: &[Candidate],
@@ -751,7 +756,12 @@ pub fn forward_select(
             sigma: input.sigma,
             base_columns: &base,
         };
-        let diag = rank_refs(&step_input, &remaining, config)?;
+        let diag = match rank_refs(&step_input, &remaining, config) {
+            Err(ModelCheckError::NothingToExplain) if !selected.is_empty() => {
+                break "the selected effects explain the residual exactly".to_string();
+            }
+            other => other?,
+        };
         let top = diag.ranking[0].clone();
         let cols = diag.fits[0].columns.clone();
         steps.push(diag);
@@ -826,5 +836,27 @@ mod tests {
         assert_eq!(d.ranking[0].verdict, Verdict::Significant);
         assert!((d.ranking[0].params["value"] - 6e-6).abs() < 1e-15);
         assert!(d.ranking[0].explained > 1.0 - 1e-12);
+        let fs = forward_select(&inp, &cands, &DiagnoseConfig::default()).unwrap();
+        assert_eq!(fs.selected.len(), 1);
+        assert_eq!(fs.stop_reason, "every candidate was selected");
+        let d3 = dir.clone();
+        let two = vec![
+            Candidate::new("backlash", &["value"], move |_| Ok(vec![d3.clone()])),
+            Candidate::new("scale_error", &["value"], |_| {
+                Ok(vec![(0..40).map(|i| i as f64).collect()])
+            }),
+        ];
+        let fs = forward_select(&inp, &two, &DiagnoseConfig::default()).unwrap();
+        assert_eq!(
+            fs.stop_reason,
+            "the selected effects explain the residual exactly"
+        );
+        // Bad input is an error, not a panic.
+        let bad = vec![Candidate::new("bad", &["a"], |_| Ok(vec![vec![1.0; 3]]))];
+        let e = rank_candidates(&inp, &bad, &DiagnoseConfig::default()).unwrap_err();
+        assert!(
+            e.to_string().contains("expected 40 (one per sample)"),
+            "{e}"
+        );
     }
 }

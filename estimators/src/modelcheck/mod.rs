@@ -75,6 +75,9 @@ pub enum ModelCheckError {
     /// A candidate's signature could not be evaluated or fitted.
     #[error("candidate `{effect}`: {message}")]
     Candidate { effect: String, message: String },
+    /// The residual is zero (below 1e-12 of its norm) after fitting the base columns.
+    #[error("the residual is zero after fitting the base columns: nothing to explain")]
+    NothingToExplain,
     /// The linear algebra failed (e.g. SVD did not converge).
     #[error("numerical failure: {0}")]
     Numerical(String),

@@ -52,7 +52,7 @@ pub fn amplitude_spectrum(
         .enumerate()
         .map(|(k, c)| {
             let a = c.norm() / nf;
-            if k == 0 || (n % 2 == 0 && k == n / 2) {
+            if k == 0 || (n.is_multiple_of(2) && k == n / 2) {
                 a
             } else {
                 2.0 * a
