@@ -1,0 +1,728 @@
+//! Candidate ranking of `vmt diagnose` (DESIGN.md §8; FORMAT.md §4 `ranking`).
+//!
+//! A [`Candidate`] is a named effect whose *signature* maps hyper-parameters (a period, a time
+//! constant, a Stribeck velocity...) to design columns, one value per residual sample. For each
+//! candidate the hyper-parameters are searched on a grid and refined by golden-section search,
+//! the linear coefficients are fitted by weighted least squares together with the model's base
+//! columns, and the fit is scored by the change of the Bayesian information criterion
+//! (Schwarz 1978; Kass & Raftery 1995, J. Am. Stat. Assoc. 90:773):
+//!
+//! - σ known:   ΔBIC = χ²_new − χ²_old + k·ln n,
+//! - σ unknown: ΔBIC = n·ln(RSS_new/RSS_old) + k·ln n  (the profile likelihood of a Gaussian with
+//!   unknown variance: −2 ln L = n·ln(RSS/n) + const),
+//!
+//! where n is the number of samples and k counts the candidate's linear coefficients **plus its
+//! searched hyper-parameters**. Counting a searched hyper-parameter as a parameter is the
+//! look-elsewhere correction: a period searched over M independent frequencies can raise the
+//! best χ² reduction of pure noise by about 2·ln M ≤ 2·ln n, and the k·ln n penalty of the
+//! three parameters of a sinusoid (two amplitudes + the period) with the −10 threshold keeps the
+//! false-alarm probability of one searched sinusoid near M·e^{−(3 ln n + 10)/2} (≈ 10⁻⁵ for
+//! n = 400, M = 400); see the false-alarm test in `tests/modelcheck.rs` for the measured rate.
+//!
+//! Verdicts (see [`rank_candidates`]): `significant` when ΔBIC < −10 ("very strong" evidence in
+//! Kass & Raftery's scale), the candidate explains at least a small fraction of the residual,
+//! and it is not explained away by better-ranked significant candidates; `inseparable` when two
+//! significant candidates fit nearly the same vector on THIS data (cosine > 0.98) with ΔBIC
+//! closer than 10; `noise` otherwise.
+
+use super::lsq::{fit_signature, Basis};
+use super::{check_finite, check_len, ModelCheckError, Sigma};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The signature of a candidate: hyper-parameter values (in the order of
+/// [`Candidate::hyper_parameters`]) → design columns, one `Vec` of n values per linear
+/// coefficient. An `Err` marks a hyper-parameter value as invalid (it is skipped in the search).
+pub type SignatureFn<'a> = dyn Fn(&[f64]) -> Result<Vec<Vec<f64>>, String> + 'a;
+
+/// Optional conversion of (coefficients, hyper-parameters) into the reported `params` (e.g. a
+/// sine and cosine coefficient into amplitude and phase).
+pub type DescribeFn<'a> = dyn Fn(&[f64], &[f64]) -> BTreeMap<String, f64> + 'a;
+
+/// A hyper-parameter searched on a grid (then refined between the neighbours of the best grid
+/// value by golden-section search when `refine` is set), in its own unit (s, m, m/s...).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HyperParameter {
+    /// Name used in `params` (e.g. "period", "tau").
+    pub name: String,
+    /// Grid of values to try; a grid of one value is a fixed, not-searched parameter.
+    pub grid: Vec<f64>,
+    /// Refine the best grid value by golden-section search.
+    pub refine: bool,
+}
+
+/// A candidate effect for `diagnose`.
+pub struct Candidate<'a> {
+    /// Effect name as in FORMAT.md (e.g. "backlash", "thermal_expansion").
+    pub effect: String,
+    /// Names of the linear coefficients, one per signature column (used in `params`).
+    pub coefficient_names: Vec<String>,
+    /// Searched hyper-parameters.
+    pub hyper_parameters: Vec<HyperParameter>,
+    /// Hyper-parameters → columns.
+    pub signature: Box<SignatureFn<'a>>,
+    /// Optional conversion of the fitted numbers into `params`.
+    pub describe: Option<Box<DescribeFn<'a>>>,
+}
+
+impl<'a> Candidate<'a> {
+    /// A candidate with linear coefficients named `coefficient_names` and a signature function.
+    pub fn new(
+        effect: &str,
+        coefficient_names: &[&str],
+        signature: impl Fn(&[f64]) -> Result<Vec<Vec<f64>>, String> + 'a,
+    ) -> Self {
+        Candidate {
+            effect: effect.to_string(),
+            coefficient_names: coefficient_names.iter().map(|s| s.to_string()).collect(),
+            hyper_parameters: Vec::new(),
+            signature: Box::new(signature),
+            describe: None,
+        }
+    }
+
+    /// Adds a hyper-parameter searched over `grid` and refined by golden-section search.
+    pub fn with_hyper(mut self, name: &str, grid: Vec<f64>) -> Self {
+        self.hyper_parameters.push(HyperParameter { name: name.to_string(), grid, refine: true });
+        self
+    }
+
+    /// Sets the conversion of (coefficients, hyper-parameters) into the reported `params`.
+    pub fn with_describe(mut self, f: impl Fn(&[f64], &[f64]) -> BTreeMap<String, f64> + 'a) -> Self {
+        self.describe = Some(Box::new(f));
+        self
+    }
+
+    /// Number of searched hyper-parameters (grids with more than one value).
+    fn searched(&self) -> usize {
+        self.hyper_parameters.iter().filter(|h| h.grid.len() > 1).count()
+    }
+}
+
+/// Thresholds of the verdicts.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DiagnoseConfig {
+    /// ΔBIC below which a candidate can be significant (default −10: "very strong" evidence,
+    /// Kass & Raftery 1995).
+    pub significance_threshold: f64,
+    /// Minimum explained fraction 1 − RSS_new/RSS_old for significance (default 0.01): with very
+    /// many samples a negligible effect can pass the ΔBIC threshold; it is then not worth adding.
+    pub explained_floor: f64,
+    /// |cos| between the fitted signature vectors (weighted, base removed) above which two
+    /// candidates are collinear on this data (default 0.98).
+    pub collinearity_cosine: f64,
+    /// ΔBIC difference below which two collinear candidates are inseparable (default 10).
+    pub inseparable_margin: f64,
+    /// Golden-section iterations per hyper-parameter refinement (default 40).
+    pub refine_iterations: usize,
+    /// Largest number of points of a candidate's hyper-parameter grid (default 200 000).
+    pub max_grid_points: usize,
+    /// Maximum number of effects [`forward_select`] adds (default 5).
+    pub max_steps: usize,
+}
+
+impl Default for DiagnoseConfig {
+    fn default() -> Self {
+        DiagnoseConfig {
+            significance_threshold: -10.0,
+            explained_floor: 0.01,
+            collinearity_cosine: 0.98,
+            inseparable_margin: 10.0,
+            refine_iterations: 40,
+            max_grid_points: 200_000,
+            max_steps: 5,
+        }
+    }
+}
+
+/// Verdict of a candidate, serialised as "significant", "noise" or "inseparable".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Verdict {
+    /// Explains a real part of the residual.
+    Significant,
+    /// Indistinguishable from noise (or explained away by a better candidate).
+    Noise,
+    /// Explains the residual but cannot be told apart from `confused_with` on this data.
+    Inseparable,
+}
+
+/// One entry of FORMAT.md §4 `ranking` (serialises exactly to its keys).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RankingEntry {
+    /// Effect name.
+    pub effect: String,
+    /// ΔBIC of adding the effect alone (negative favours the effect).
+    pub delta_bic: f64,
+    /// Explained fraction 1 − RSS_new/RSS_old (weighted by 1/σ² when σ is known).
+    pub explained: f64,
+    /// The verdict.
+    pub verdict: Verdict,
+    /// Fitted coefficients and hyper-parameters by name, SI units.
+    pub params: BTreeMap<String, f64>,
+    /// Effects this one is inseparable from.
+    pub confused_with: Vec<String>,
+}
+
+/// The full fit of one candidate (details behind a [`RankingEntry`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CandidateFit {
+    /// Effect name.
+    pub effect: String,
+    /// Linear coefficients by name, residual unit per column unit.
+    pub coefficients: BTreeMap<String, f64>,
+    /// Their standard errors (hyper-parameters held at their fitted values).
+    pub std_errors: BTreeMap<String, f64>,
+    /// Fitted hyper-parameters by name.
+    pub hyper_parameters: BTreeMap<String, f64>,
+    /// Reported params (coefficients + hyper-parameters, or the candidate's `describe`).
+    pub params: BTreeMap<String, f64>,
+    /// Number of samples n.
+    pub n: usize,
+    /// Number of new parameters k (coefficients + searched hyper-parameters).
+    pub k: usize,
+    /// χ² before / after (σ known), base columns fitted in both.
+    pub chi2_old: Option<f64>,
+    /// χ² after adding the candidate (σ known).
+    pub chi2_new: Option<f64>,
+    /// Unweighted RSS before (base columns fitted), residual unit squared.
+    pub rss_old: f64,
+    /// Unweighted RSS after adding the candidate.
+    pub rss_new: f64,
+    /// ΔBIC (module doc).
+    pub delta_bic: f64,
+    /// Explained fraction 1 − stat_new/stat_old with stat = χ² (σ known) or RSS.
+    pub explained: f64,
+    /// ΔBIC of the candidate added after the better-ranked significant candidates (filled by
+    /// [`rank_candidates`] for marginally significant candidates), with its hyper-parameters held.
+    pub conditional_delta_bic: Option<f64>,
+    /// Number of signature evaluations of the search.
+    pub evaluations: usize,
+    /// The candidate's columns at the fitted hyper-parameters.
+    #[serde(skip)]
+    pub columns: Vec<Vec<f64>>,
+    /// Residual after fitting base + candidate columns.
+    #[serde(skip)]
+    pub new_residual: Vec<f64>,
+    /// Weighted fitted change (W^{1/2}(r_old − r_new)), used for the collinearity test.
+    #[serde(skip)]
+    fitted_change: Vec<f64>,
+}
+
+/// The residual to diagnose.
+#[derive(Debug, Clone, Copy)]
+pub struct ResidualInput<'a> {
+    /// Residual y − ŷ per sample, e.g. in m.
+    pub residual: &'a [f64],
+    /// Its noise standard deviation.
+    pub sigma: &'a Sigma,
+    /// Columns always refitted with every candidate (e.g. a constant offset, the model's own
+    /// free parameters' sensitivities); may be empty.
+    pub base_columns: &'a [Vec<f64>],
+}
+
+/// Result of [`rank_candidates`]: the ranking and, in the same order, the fits behind it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Diagnosis {
+    /// FORMAT.md §4 `ranking`, best first, every candidate tried.
+    pub ranking: Vec<RankingEntry>,
+    /// Details, same order as `ranking`.
+    pub fits: Vec<CandidateFit>,
+    /// χ² (σ known) or RSS of the residual after the base columns.
+    pub stat_old: f64,
+    /// Number of samples.
+    pub n: usize,
+}
+
+/// Prepared residual: weights, orthonormal weighted base, weighted residual with base removed.
+struct Prepared {
+    n: usize,
+    w: Vec<f64>,
+    base: Basis,
+    r_t: Vec<f64>,
+    stat_old: f64,
+    rss_old: f64,
+    known: bool,
+}
+
+fn prepare(input: &ResidualInput) -> Result<Prepared, ModelCheckError> {
+    let n = input.residual.len();
+    if n < 3 {
+        return Err(ModelCheckError::TooFewSamples { what: "diagnose".into(), need: 3, got: n });
+    }
+    check_finite("residual", input.residual)?;
+    let w = input.sigma.weights(n)?;
+    let mut base = Basis::default();
+    for (j, c) in input.base_columns.iter().enumerate() {
+        check_len(&format!("base column {j}"), n, c.len())?;
+        check_finite(&format!("base column {j}"), c)?;
+        base.push(c.iter().zip(&w).map(|(x, w)| x * w).collect());
+    }
+    let mut r_t: Vec<f64> = input.residual.iter().zip(&w).map(|(r, w)| r * w).collect();
+    let total: f64 = r_t.iter().map(|x| x * x).sum();
+    base.project_out(&mut r_t);
+    let stat_old: f64 = r_t.iter().map(|x| x * x).sum();
+    // Rounding level: the base leaves less than 1e-12 of the residual's norm.
+    if stat_old <= 1e-24 * total || stat_old == 0.0 {
+        return Err(ModelCheckError::NothingToExplain);
+    }
+    let rss_old = if input.base_columns.is_empty() {
+        input.residual.iter().map(|r| r * r).sum()
+    } else {
+        fit_signature(input.residual, input.base_columns, input.sigma)?.rss
+    };
+    Ok(Prepared { n, w, base, r_t, stat_old, rss_old, known: input.sigma.is_known() })
+}
+
+fn delta_bic(p: &Prepared, stat_new: f64, k: usize) -> f64 {
+    let pen = k as f64 * (p.n as f64).ln();
+    if p.known {
+        stat_new - p.stat_old + pen
+    } else {
+        // Floor: a perfect fit would give ln 0.
+        let ratio = (stat_new / p.stat_old).max(1e-300);
+        p.n as f64 * ratio.ln() + pen
+    }
+}
+
+/// Evaluates a candidate's signature at `h` and returns (χ² or RSS reduction, columns).
+fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<f64>>), String> {
+    let cols = (cand.signature)(h)?;
+    if cols.len() != cand.coefficient_names.len() {
+        return Err(format!(
+            "signature returned {} columns, expected {} (one per coefficient name)",
+            cols.len(),
+            cand.coefficient_names.len()
+        ));
+    }
+    let mut b = Basis::default();
+    for (j, c) in cols.iter().enumerate() {
+        if c.len() != p.n {
+            return Err(format!("signature column {j} has {} values, expected {} (one per sample)", c.len(), p.n));
+        }
+        if let Some(i) = c.iter().position(|x| !x.is_finite()) {
+            return Err(format!("signature column {j} is not finite at sample {i}: {}", c[i]));
+        }
+        let mut v: Vec<f64> = c.iter().zip(&p.w).map(|(x, w)| x * w).collect();
+        let n0 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        p.base.project_out(&mut v);
+        let n1 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if n0 > 0.0 && n1 > 1e-9 * n0 {
+            b.push(v);
+        }
+    }
+    let red: f64 = b.q.iter().map(|q| q.iter().zip(&p.r_t).map(|(a, b)| a * b).sum::<f64>().powi(2)).sum();
+    Ok((red, cols))
+}
+
+/// Fits one candidate: grid search of its hyper-parameters, golden-section refinement, weighted
+/// least squares of base + candidate columns ([`fit_signature`]), ΔBIC and explained fraction
+/// (module doc for the equations).
+pub fn fit_candidate(
+    input: &ResidualInput,
+    candidate: &Candidate,
+    config: &DiagnoseConfig,
+) -> Result<CandidateFit, ModelCheckError> {
+    let p = prepare(input)?;
+    fit_prepared(&p, input, candidate, config)
+}
+
+fn fit_prepared(
+    p: &Prepared,
+    input: &ResidualInput,
+    cand: &Candidate,
+    config: &DiagnoseConfig,
+) -> Result<CandidateFit, ModelCheckError> {
+    let err = |message: String| ModelCheckError::Candidate { effect: cand.effect.clone(), message };
+    if cand.coefficient_names.is_empty() {
+        return Err(err("needs at least one coefficient name".into()));
+    }
+    for h in &cand.hyper_parameters {
+        if h.grid.is_empty() {
+            return Err(err(format!("hyper-parameter `{}` has an empty grid", h.name)));
+        }
+        if let Some(v) = h.grid.iter().find(|v| !v.is_finite()) {
+            return Err(err(format!("hyper-parameter `{}` grid holds {v}", h.name)));
+        }
+    }
+    let dims: Vec<usize> = cand.hyper_parameters.iter().map(|h| h.grid.len()).collect();
+    let total = dims.iter().try_fold(1usize, |a, d| a.checked_mul(*d));
+    let total = match total {
+        Some(t) if t <= config.max_grid_points => t,
+        _ => return Err(err(format!("hyper-parameter grid has more than {} points", config.max_grid_points))),
+    };
+    // Grid search over the Cartesian product.
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    let mut first_error: Option<String> = None;
+    let mut evaluations = 0usize;
+    let mut idx = vec![0usize; dims.len()];
+    for _ in 0..total {
+        let h: Vec<f64> = idx.iter().zip(&cand.hyper_parameters).map(|(i, hp)| hp.grid[*i]).collect();
+        evaluations += 1;
+        match reduction(p, cand, &h) {
+            Ok((red, _)) => {
+                if best.as_ref().is_none_or(|(b, _)| red > *b) {
+                    best = Some((red, h));
+                }
+            }
+            Err(e) => {
+                first_error.get_or_insert(e);
+            }
+        }
+        for d in 0..dims.len() {
+            idx[d] += 1;
+            if idx[d] < dims[d] {
+                break;
+            }
+            idx[d] = 0;
+        }
+    }
+    let (mut best_red, mut best_h) = match best {
+        Some(b) => b,
+        None => return Err(err(first_error.unwrap_or_else(|| "no grid point".into()))),
+    };
+    // Golden-section refinement of each hyper-parameter between the neighbours of its best grid
+    // value, the others held (two sweeps when there are several).
+    let sweeps = if cand.hyper_parameters.len() > 1 { 2 } else { 1 };
+    for _ in 0..sweeps {
+        for (d, hp) in cand.hyper_parameters.iter().enumerate() {
+            if !hp.refine || hp.grid.len() < 2 {
+                continue;
+            }
+            let mut g = hp.grid.clone();
+            g.sort_by(|a, b| a.total_cmp(b));
+            let i = g.partition_point(|v| *v < best_h[d]).min(g.len() - 1);
+            let lo = g[i.saturating_sub(1)];
+            let hi = g[(i + 1).min(g.len() - 1)];
+            let mut eval = |x: f64| -> f64 {
+                evaluations += 1;
+                let mut h = best_h.clone();
+                h[d] = x;
+                reduction(p, cand, &h).map(|r| r.0).unwrap_or(f64::NEG_INFINITY)
+            };
+            let (x, fx) = golden_max(&mut eval, lo, hi, config.refine_iterations);
+            if fx > best_red {
+                best_red = fx;
+                best_h[d] = x;
+            }
+        }
+    }
+    let (_, cols) = reduction(p, cand, &best_h).map_err(err)?;
+    let mut all: Vec<Vec<f64>> = input.base_columns.to_vec();
+    all.extend(cols.iter().cloned());
+    let fit = fit_signature(input.residual, &all, input.sigma)?;
+    let nb = input.base_columns.len();
+    let stat_new: f64 = fit.residual.iter().zip(&p.w).map(|(r, w)| (r * w).powi(2)).sum();
+    let fitted_change: Vec<f64> =
+        p.r_t.iter().zip(fit.residual.iter().zip(&p.w)).map(|(rt, (r, w))| rt - r * w).collect();
+    let k = cand.coefficient_names.len() + cand.searched();
+    let coefs = &fit.coefficients[nb..];
+    let coefficients: BTreeMap<String, f64> =
+        cand.coefficient_names.iter().cloned().zip(coefs.iter().copied()).collect();
+    let std_errors: BTreeMap<String, f64> =
+        cand.coefficient_names.iter().cloned().zip(fit.std_errors[nb..].iter().copied()).collect();
+    let hyper_parameters: BTreeMap<String, f64> =
+        cand.hyper_parameters.iter().map(|h| h.name.clone()).zip(best_h.iter().copied()).collect();
+    let params = match &cand.describe {
+        Some(f) => f(coefs, &best_h),
+        None => coefficients.iter().chain(hyper_parameters.iter()).map(|(a, b)| (a.clone(), *b)).collect(),
+    };
+    Ok(CandidateFit {
+        effect: cand.effect.clone(),
+        coefficients,
+        std_errors,
+        hyper_parameters,
+        params,
+        n: p.n,
+        k,
+        chi2_old: p.known.then_some(p.stat_old),
+        chi2_new: p.known.then_some(stat_new),
+        rss_old: p.rss_old,
+        rss_new: fit.rss,
+        delta_bic: delta_bic(p, stat_new, k),
+        explained: (1.0 - stat_new / p.stat_old).clamp(0.0, 1.0),
+        conditional_delta_bic: None,
+        evaluations,
+        columns: cols,
+        new_residual: fit.residual,
+        fitted_change,
+    })
+}
+
+/// Golden-section search for the maximum of `f` on [lo, hi]; returns (x, f(x)) of the best point.
+fn golden_max(f: &mut impl FnMut(f64) -> f64, lo: f64, hi: f64, iters: usize) -> (f64, f64) {
+    let gr = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut a, mut b) = (lo, hi);
+    let mut c = b - gr * (b - a);
+    let mut d = a + gr * (b - a);
+    let (mut fc, mut fd) = (f(c), f(d));
+    let mut best = if fc >= fd { (c, fc) } else { (d, fd) };
+    for _ in 0..iters {
+        if (b - a).abs() <= 1e-12 * (a.abs() + b.abs()) {
+            break;
+        }
+        if fc >= fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - gr * (b - a);
+            fc = f(c);
+            if fc > best.1 {
+                best = (c, fc);
+            }
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + gr * (b - a);
+            fd = f(d);
+            if fd > best.1 {
+                best = (d, fd);
+            }
+        }
+    }
+    best
+}
+
+fn cosine(a: &[f64], b: &[f64]) -> f64 {
+    let ab: f64 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+    let aa: f64 = a.iter().map(|x| x * x).sum();
+    let bb: f64 = b.iter().map(|x| x * x).sum();
+    if aa == 0.0 || bb == 0.0 {
+        0.0
+    } else {
+        (ab / (aa * bb).sqrt()).abs()
+    }
+}
+
+/// Ranks candidate effects for the residual (FORMAT.md §4 `ranking`, best first, every candidate
+/// listed).
+///
+/// Each candidate is fitted alone (plus the base columns) by [`fit_candidate`]; `delta_bic` and
+/// `explained` in the ranking are these marginal values, and the list is sorted by `delta_bic`.
+/// Verdicts:
+/// 1. *marginally significant*: ΔBIC < `significance_threshold` and explained ≥ `explained_floor`;
+/// 2. *inseparable*: two marginally significant candidates whose fitted changes
+///    W^{1/2}(r_old − r_new) have |cos| > `collinearity_cosine` and whose ΔBIC differ by less
+///    than `inseparable_margin`; both list each other in `confused_with`;
+/// 3. *significant*: going down the list, a marginally significant, not inseparable candidate
+///    stays significant only if its ΔBIC conditional on the already accepted candidates (and one
+///    representative of each inseparable group met so far) is still below the threshold — so an
+///    effect that is merely correlated with the true one is "explained away" and reported as
+///    `noise` (its conditional ΔBIC is in [`CandidateFit::conditional_delta_bic`]);
+/// 4. *noise*: everything else.
+pub fn rank_candidates(
+    input: &ResidualInput,
+    candidates: &[Candidate],
+    config: &DiagnoseConfig,
+) -> Result<Diagnosis, ModelCheckError> {
+    let refs: Vec<&Candidate> = candidates.iter().collect();
+    rank_refs(input, &refs, config)
+}
+
+fn rank_refs(
+    input: &ResidualInput,
+    candidates: &[&Candidate],
+    config: &DiagnoseConfig,
+) -> Result<Diagnosis, ModelCheckError> {
+    if candidates.is_empty() {
+        return Err(ModelCheckError::Invalid("diagnose: no candidate effects to try".into()));
+    }
+    let p = prepare(input)?;
+    let mut fits: Vec<CandidateFit> =
+        candidates.iter().map(|c| fit_prepared(&p, input, c, config)).collect::<Result<_, _>>()?;
+    fits.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic).then_with(|| a.effect.cmp(&b.effect)));
+    let m = fits.len();
+    let marginal: Vec<bool> = fits
+        .iter()
+        .map(|f| f.delta_bic < config.significance_threshold && f.explained >= config.explained_floor)
+        .collect();
+    let mut confused: Vec<Vec<String>> = vec![Vec::new(); m];
+    for a in 0..m {
+        for b in a + 1..m {
+            if marginal[a]
+                && marginal[b]
+                && (fits[a].delta_bic - fits[b].delta_bic).abs() < config.inseparable_margin
+                && cosine(&fits[a].fitted_change, &fits[b].fitted_change) > config.collinearity_cosine
+            {
+                let (ea, eb) = (fits[a].effect.clone(), fits[b].effect.clone());
+                confused[a].push(eb);
+                confused[b].push(ea);
+            }
+        }
+    }
+    let mut verdicts = vec![Verdict::Noise; m];
+    // Columns accepted so far (base + significant + inseparable representatives).
+    let mut accepted: Vec<Vec<f64>> = input.base_columns.to_vec();
+    let mut represented: Vec<bool> = vec![false; m];
+    for a in 0..m {
+        if !marginal[a] {
+            continue;
+        }
+        if !confused[a].is_empty() {
+            verdicts[a] = Verdict::Inseparable;
+            // The first member of a group met in rank order represents the group.
+            let group_seen = (0..a).any(|b| represented[b] && confused[a].contains(&fits[b].effect));
+            if !group_seen {
+                represented[a] = true;
+                accepted.extend(fits[a].columns.iter().cloned());
+            }
+            continue;
+        }
+        let cond = if accepted.len() == input.base_columns.len() {
+            fits[a].delta_bic
+        } else {
+            let cinput = ResidualInput { residual: input.residual, sigma: input.sigma, base_columns: &accepted };
+            match prepare(&cinput) {
+                // The accepted candidates explain everything: this one adds only its penalty.
+                Err(ModelCheckError::NothingToExplain) => fits[a].k as f64 * (p.n as f64).ln(),
+                Err(e) => return Err(e),
+                Ok(cp) => {
+                    let mut all = accepted.clone();
+                    all.extend(fits[a].columns.iter().cloned());
+                    let fit = fit_signature(input.residual, &all, input.sigma)?;
+                    let stat_new: f64 = fit.residual.iter().zip(&cp.w).map(|(r, w)| (r * w).powi(2)).sum();
+                    delta_bic(&cp, stat_new, fits[a].k)
+                }
+            }
+        };
+        fits[a].conditional_delta_bic = Some(cond);
+        if cond < config.significance_threshold {
+            verdicts[a] = Verdict::Significant;
+            represented[a] = true;
+            accepted.extend(fits[a].columns.iter().cloned());
+        }
+    }
+    let ranking = fits
+        .iter()
+        .zip(verdicts)
+        .zip(confused)
+        .map(|((f, verdict), confused_with)| RankingEntry {
+            effect: f.effect.clone(),
+            delta_bic: f.delta_bic,
+            explained: f.explained,
+            verdict,
+            params: f.params.clone(),
+            confused_with,
+        })
+        .collect();
+    Ok(Diagnosis { ranking, fits, stat_old: p.stat_old, n: p.n })
+}
+
+/// Result of [`forward_select`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ForwardSelection {
+    /// The effects added, in order, each with the ΔBIC conditional on the ones before it.
+    pub selected: Vec<RankingEntry>,
+    /// The ranking at each step (step i is conditional on the first i selected effects).
+    pub steps: Vec<Diagnosis>,
+    /// Why the selection stopped.
+    pub stop_reason: String,
+}
+
+/// Greedy forward selection (for residuals with several missing effects): rank the candidates
+/// ([`rank_candidates`]); if the best is `significant`, add its columns (hyper-parameters held
+/// at their fitted values) to the base columns, remove it from the candidates and repeat; stop
+/// when the best is `noise` or `inseparable` (the data cannot choose), when no candidate is
+/// left, when the residual is explained exactly, or after `config.max_steps` additions.
+pub fn forward_select(
+    input: &ResidualInput,
+    candidates: &[Candidate],
+    config: &DiagnoseConfig,
+) -> Result<ForwardSelection, ModelCheckError> {
+    let mut base: Vec<Vec<f64>> = input.base_columns.to_vec();
+    let mut remaining: Vec<&Candidate> = candidates.iter().collect();
+    let mut selected = Vec::new();
+    let mut steps = Vec::new();
+    let stop_reason = loop {
+        if remaining.is_empty() {
+            break "every candidate was selected".to_string();
+        }
+        if selected.len() >= config.max_steps {
+            break format!("reached the maximum of {} effects", config.max_steps);
+        }
+        let step_input = ResidualInput { residual: input.residual, sigma: input.sigma, base_columns: &base };
+        let diag = match rank_refs(&step_input, &remaining, config) {
+            Err(ModelCheckError::NothingToExplain) if !selected.is_empty() => {
+                break "the selected effects explain the residual exactly".to_string();
+            }
+            other => other?,
+        };
+        let top = diag.ranking[0].clone();
+        let cols = diag.fits[0].columns.clone();
+        steps.push(diag);
+        match top.verdict {
+            Verdict::Significant => {
+                base.extend(cols);
+                remaining.retain(|c| c.effect != top.effect);
+                selected.push(top);
+            }
+            Verdict::Inseparable => {
+                break format!(
+                    "the best candidates cannot be separated with this data: {} and {}",
+                    top.effect,
+                    top.confused_with.join(", ")
+                );
+            }
+            Verdict::Noise => break "no remaining candidate is significant".to_string(),
+        }
+    };
+    Ok(ForwardSelection { selected, steps, stop_reason })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn verdict_serialises_lowercase_and_entry_has_format_keys() {
+        let e = RankingEntry {
+            effect: "backlash".into(),
+            delta_bic: -812.0,
+            explained: 0.91,
+            verdict: Verdict::Significant,
+            params: [("value".to_string(), 6.1e-6)].into_iter().collect(),
+            confused_with: vec![],
+        };
+        let s = serde_json::to_string(&e).unwrap();
+        assert_eq!(
+            s,
+            r#"{"effect":"backlash","delta_bic":-812.0,"explained":0.91,"verdict":"significant","params":{"value":6.1e-6},"confused_with":[]}"#
+        );
+    }
+
+    #[test]
+    fn golden_section_finds_parabola_maximum() {
+        let (x, fx) = golden_max(&mut |x| -(x - 0.3).powi(2), 0.0, 1.0, 60);
+        // 60 iterations shrink the bracket by 0.618^60 ≈ 3e-13.
+        assert!((x - 0.3).abs() < 1e-7 && fx <= 0.0);
+    }
+
+    #[test]
+    fn noise_free_step_is_recovered_exactly() {
+        let dir: Vec<f64> = (0..40).map(|i| if i % 2 == 0 { 0.5 } else { -0.5 }).collect();
+        let r: Vec<f64> = dir.iter().map(|d| 6e-6 * d + 1e-6).collect();
+        let base = vec![vec![1.0; 40]];
+        let d2 = dir.clone();
+        let cands = vec![Candidate::new("backlash", &["value"], move |_| Ok(vec![d2.clone()]))];
+        let inp = ResidualInput { residual: &r, sigma: &Sigma::Constant(1e-7), base_columns: &base };
+        let d = rank_candidates(&inp, &cands, &DiagnoseConfig::default()).unwrap();
+        assert_eq!(d.ranking[0].verdict, Verdict::Significant);
+        assert!((d.ranking[0].params["value"] - 6e-6).abs() < 1e-15);
+        assert!(d.ranking[0].explained > 1.0 - 1e-12);
+        let fs = forward_select(&inp, &cands, &DiagnoseConfig::default()).unwrap();
+        assert_eq!(fs.selected.len(), 1);
+        assert_eq!(fs.stop_reason, "every candidate was selected");
+        let d3 = dir.clone();
+        let two = vec![
+            Candidate::new("backlash", &["value"], move |_| Ok(vec![d3.clone()])),
+            Candidate::new("scale_error", &["value"], |_| Ok(vec![(0..40).map(|i| i as f64).collect()])),
+        ];
+        let fs = forward_select(&inp, &two, &DiagnoseConfig::default()).unwrap();
+        assert_eq!(fs.stop_reason, "the selected effects explain the residual exactly");
+        // Bad input is an error, not a panic.
+        let bad = vec![Candidate::new("bad", &["a"], |_| Ok(vec![vec![1.0; 3]]))];
+        let e = rank_candidates(&inp, &bad, &DiagnoseConfig::default()).unwrap_err();
+        assert!(e.to_string().contains("expected 40 (one per sample)"), "{e}");
+    }
+}

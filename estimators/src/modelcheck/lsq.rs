@@ -1,0 +1,237 @@
+//! Weighted linear least squares of a residual on signature columns (DESIGN.md §8 `diagnose`).
+//!
+//! [`fit_signature`] solves min_β Σ_i ((r_i − Σ_j X_ij β_j)/σ_i)² with faer's thin SVD on the
+//! column-scaled weighted design, so rank deficiency (two signatures that are identical on these
+//! samples) is detected and reported rather than producing huge, cancelling coefficients.
+
+use super::{check_finite, check_len, check_min, ModelCheckError, Sigma};
+use faer::Mat;
+use serde::{Deserialize, Serialize};
+
+/// A weighted linear least-squares fit of a residual.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LinearFit {
+    /// Fitted coefficients β_j, in residual unit per column unit.
+    pub coefficients: Vec<f64>,
+    /// Standard errors of β_j: √[(XᵀWX)⁻¹]_jj with W = diag(1/σ_i²) when σ is known, times
+    /// √(RSS/(n − rank)) when σ is unknown; infinite (JSON null) for a coefficient that these
+    /// samples cannot determine (rank deficiency).
+    pub std_errors: Vec<f64>,
+    /// The new residual r_i − Σ_j X_ij β_j, in the residual's unit.
+    #[serde(skip)]
+    pub residual: Vec<f64>,
+    /// Residual sum of squares Σ r_new,i², in the residual's unit squared.
+    pub rss: f64,
+    /// χ² = Σ (r_new,i/σ_i)² when σ is known.
+    pub chi2: Option<f64>,
+    /// Numerical rank of the weighted design (< number of columns when columns are dependent).
+    pub rank: usize,
+    /// Degrees of freedom n − rank.
+    pub dof: usize,
+    /// Condition number s_max/s_min of the weighted design with unit-norm columns (∞ if
+    /// rank-deficient).
+    pub condition_number: f64,
+}
+
+/// Weighted linear least squares of a residual on signature columns:
+/// β̂ = argmin Σ_i ((r_i − Σ_j X_ij β_j)/σ_i)² (unweighted when σ is unknown), solved by the thin
+/// SVD (faer) of A = W^{1/2} X D⁻¹ (D = column norms): β̂ = D⁻¹ Σ_{s_k > tol} v_k (u_kᵀ W^{1/2} r)/s_k,
+/// tol = 1e-10·s_max (columns dependent to 1e-10 relative count as dependent); Cov(β̂) = D⁻¹ V S⁻² Vᵀ D⁻¹ (× RSS/(n − rank) when σ is unknown).
+///
+/// `columns` holds p columns of n values each (one value per sample). Needs n > p.
+pub fn fit_signature(residual: &[f64], columns: &[Vec<f64>], sigma: &Sigma) -> Result<LinearFit, ModelCheckError> {
+    let n = residual.len();
+    let p = columns.len();
+    if p == 0 {
+        return Err(ModelCheckError::Invalid("fit_signature: need at least one signature column, got none".into()));
+    }
+    check_min("fit_signature (columns + 1)", p + 1, n)?;
+    check_finite("residual", residual)?;
+    for (j, c) in columns.iter().enumerate() {
+        check_len(&format!("column {j}"), n, c.len())?;
+        check_finite(&format!("column {j}"), c)?;
+    }
+    let w = sigma.weights(n)?;
+    let norms: Vec<f64> = columns
+        .iter()
+        .map(|c| {
+            let s = c.iter().zip(&w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt();
+            if s > 0.0 {
+                s
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let a = Mat::<f64>::from_fn(n, p, |i, j| columns[j][i] * w[i] / norms[j]);
+    let svd = a.thin_svd().map_err(|e| ModelCheckError::Numerical(format!("SVD did not converge: {e:?}")))?;
+    let u = svd.U();
+    let v = svd.V();
+    let s = svd.S().column_vector();
+    let s_max = (0..p).map(|k| s[k]).fold(0.0, f64::max);
+    let tol = 1e-10 * s_max;
+    let keep: Vec<usize> = (0..p).filter(|&k| s[k] > tol && s[k] > 0.0).collect();
+    let rank = keep.len();
+    let b: Vec<f64> = residual.iter().zip(&w).map(|(r, w)| r * w).collect();
+    let mut beta = vec![0.0; p];
+    for &k in &keep {
+        let ub: f64 = (0..n).map(|i| u[(i, k)] * b[i]).sum();
+        for (j, bj) in beta.iter_mut().enumerate() {
+            *bj += v[(j, k)] * ub / s[k];
+        }
+    }
+    for (bj, nj) in beta.iter_mut().zip(&norms) {
+        *bj /= nj;
+    }
+    let new_res: Vec<f64> =
+        (0..n).map(|i| residual[i] - (0..p).map(|j| columns[j][i] * beta[j]).sum::<f64>()).collect();
+    let rss: f64 = new_res.iter().map(|r| r * r).sum();
+    let chi2_w: f64 = new_res.iter().zip(&w).map(|(r, w)| (r * w).powi(2)).sum();
+    let dof = n - rank;
+    let scale = if sigma.is_known() { 1.0 } else { (chi2_w / dof as f64).sqrt() };
+    let std_errors = (0..p)
+        .map(|j| {
+            let null: f64 = (0..p).filter(|k| !keep.contains(k)).map(|k| v[(j, k)].powi(2)).sum();
+            if null > 1e-12 {
+                f64::INFINITY
+            } else {
+                let var: f64 = keep.iter().map(|&k| (v[(j, k)] / s[k]).powi(2)).sum();
+                var.sqrt() / norms[j] * scale
+            }
+        })
+        .collect();
+    let s_min = (0..p).map(|k| s[k]).fold(f64::INFINITY, f64::min);
+    Ok(LinearFit {
+        coefficients: beta,
+        std_errors,
+        residual: new_res,
+        rss,
+        chi2: sigma.is_known().then_some(chi2_w),
+        rank,
+        dof,
+        condition_number: if rank == p { s_max / s_min } else { f64::INFINITY },
+    })
+}
+
+/// Orthonormal basis (modified Gram–Schmidt with re-orthogonalisation, "twice is enough") of
+/// weighted columns; a column whose remaining norm is below 1e-9 of its own norm is dependent
+/// and dropped. Used for the fast ΔRSS evaluations of the hyper-parameter search.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Basis {
+    pub q: Vec<Vec<f64>>,
+}
+
+impl Basis {
+    /// Removes the components of `v` along the basis (twice, for numerical orthogonality).
+    pub fn project_out(&self, v: &mut [f64]) {
+        for _ in 0..2 {
+            for q in &self.q {
+                let d: f64 = q.iter().zip(v.iter()).map(|(a, b)| a * b).sum();
+                for (vi, qi) in v.iter_mut().zip(q) {
+                    *vi -= d * qi;
+                }
+            }
+        }
+    }
+
+    /// Adds `v` (already weighted) to the basis; returns the coefficients of v along the old
+    /// basis vectors and its new normalised length, or `None` for the length if dependent.
+    pub fn push(&mut self, mut v: Vec<f64>) -> (Vec<f64>, Option<f64>) {
+        let norm0 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let mut coef = vec![0.0; self.q.len()];
+        for _ in 0..2 {
+            for (c, q) in coef.iter_mut().zip(&self.q) {
+                let d: f64 = q.iter().zip(v.iter()).map(|(a, b)| a * b).sum();
+                *c += d;
+                for (vi, qi) in v.iter_mut().zip(q) {
+                    *vi -= d * qi;
+                }
+            }
+        }
+        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm0 == 0.0 || norm <= 1e-9 * norm0 {
+            return (coef, None);
+        }
+        for x in v.iter_mut() {
+            *x /= norm;
+        }
+        self.q.push(v);
+        (coef, Some(norm))
+    }
+}
+
+/// Small weighted least squares by MGS QR with column dropping: returns (β, χ²) for
+/// min Σ (w_i (y_i − Σ_j X_ij β_j))²; a dependent column gets β_j = 0.
+pub(crate) fn small_lstsq(cols: &[&[f64]], y: &[f64], w: &[f64]) -> (Vec<f64>, f64) {
+    let p = cols.len();
+    let mut basis = Basis::default();
+    // R factor: for each kept column, its coefficients on earlier basis vectors and diagonal.
+    let mut kept: Vec<usize> = Vec::with_capacity(p);
+    let mut r_rows: Vec<(Vec<f64>, f64)> = Vec::with_capacity(p);
+    for (j, c) in cols.iter().enumerate() {
+        let v: Vec<f64> = c.iter().zip(w).map(|(x, w)| x * w).collect();
+        let (coef, norm) = basis.push(v);
+        if let Some(nrm) = norm {
+            kept.push(j);
+            r_rows.push((coef, nrm));
+        }
+    }
+    let mut yw: Vec<f64> = y.iter().zip(w).map(|(y, w)| y * w).collect();
+    let qty: Vec<f64> = basis.q.iter().map(|q| q.iter().zip(&yw).map(|(a, b)| a * b).sum()).collect();
+    basis.project_out(&mut yw);
+    let chi2: f64 = yw.iter().map(|x| x * x).sum();
+    // Back-substitution: R is upper triangular with R[i][m] = r_rows[m].0[i] (i < m), R[m][m] = norm.
+    let m = kept.len();
+    let mut z = vec![0.0; m];
+    for a in (0..m).rev() {
+        let mut s = qty[a];
+        for b in a + 1..m {
+            s -= r_rows[b].0[a] * z[b];
+        }
+        z[a] = s / r_rows[a].1;
+    }
+    let mut beta = vec![0.0; p];
+    for (a, &j) in kept.iter().enumerate() {
+        beta[j] = z[a];
+    }
+    (beta, chi2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exact_fit_and_hand_worked_standard_error() {
+        // r = 1 + 2x at x = 0, 1, 2, 3 with σ = 0.5: exact fit, zero residual.
+        let x = vec![0.0, 1.0, 2.0, 3.0];
+        let r: Vec<f64> = x.iter().map(|x| 1.0 + 2.0 * x).collect();
+        let f = fit_signature(&r, &[vec![1.0; 4], x.clone()], &Sigma::Constant(0.5)).unwrap();
+        assert!((f.coefficients[0] - 1.0).abs() < 1e-13 && (f.coefficients[1] - 2.0).abs() < 1e-13);
+        assert!(f.rss < 1e-24 && f.rank == 2 && f.dof == 2);
+        // Hand-worked: slope variance σ²/Σ(x − x̄)² = 0.25/5 → SE = 0.2236068;
+        // intercept variance σ²(1/n + x̄²/Sxx) = 0.25·(0.25 + 2.25/5) = 0.175 → 0.4183300.
+        assert!((f.std_errors[1] - (0.05f64).sqrt()).abs() < 1e-13);
+        assert!((f.std_errors[0] - (0.175f64).sqrt()).abs() < 1e-13);
+        // small_lstsq agrees.
+        let (b, chi) = small_lstsq(&[&[1.0; 4], &x], &r, &[2.0; 4]);
+        assert!((b[0] - 1.0).abs() < 1e-13 && (b[1] - 2.0).abs() < 1e-13 && chi < 1e-24);
+    }
+
+    #[test]
+    fn dependent_columns_are_reported() {
+        let x = vec![0.0, 1.0, 2.0, 3.0, 4.0];
+        let r = vec![0.1, 0.9, 2.1, 2.9, 4.2];
+        let two_x: Vec<f64> = x.iter().map(|x| 2.0 * x).collect();
+        let f = fit_signature(&r, &[x.clone(), two_x.clone()], &Sigma::Unknown).unwrap();
+        assert_eq!(f.rank, 1);
+        assert!(f.std_errors.iter().all(|s| s.is_infinite()));
+        // The fitted values are still the projection onto x: slope Σxr/Σx² = (0 + 0.9 + 4.2 + 8.7 + 16.8)/30 = 30.6/30.
+        let slope = f.coefficients[0] + 2.0 * f.coefficients[1];
+        assert!((slope - 30.6 / 30.0).abs() < 1e-12);
+        let (b, _) = small_lstsq(&[&x, &two_x], &r, &[1.0; 5]);
+        assert!((b[0] - 30.6 / 30.0).abs() < 1e-12 && b[1] == 0.0);
+        assert!(fit_signature(&r, &[vec![1.0, f64::NAN, 1.0, 1.0, 1.0]], &Sigma::Unknown).is_err());
+        assert!(fit_signature(&r, &[x], &Sigma::Constant(-1.0)).is_err());
+    }
+}
