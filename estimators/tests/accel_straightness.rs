@@ -285,6 +285,7 @@ fn mems_noise_grows_bound_and_error_in_proportion() {
         amplitude_threshold: 1.0,
         min_wavelength: None,
         max_wavelength: Some(0.3),
+        seed_kalman: true,
     };
     let mut res = Vec::new();
     for (rho, seed0) in [(0.5 * UG, 100u64), (25.0 * UG, 200u64)] {
@@ -331,6 +332,7 @@ fn fusion_beats_every_single_speed_alone() {
         amplitude_threshold: 1.0,
         min_wavelength: None,
         max_wavelength: Some(0.3),
+        seed_kalman: true,
     };
     let mut ms_fused = 0.0;
     let mut ms_single = [0.0f64; 3];
@@ -422,4 +424,148 @@ fn both_methods_return_the_same_grid_and_json_serialises() {
     assert!(json.contains("\"SpatialContinuity\"") && json.contains("out of reach"));
     let back: StraightnessEstimate = serde_json::from_str(&json).unwrap();
     assert_eq!(back.straightness.len(), 3000);
+}
+
+#[test]
+fn seed_pipeline_without_kalman_matches_its_predicted_transfer() {
+    // Checks the seed's integration, high-pass and crossover steps against their predicted gain
+    // G(κ) (StraightnessEstimate::transfer): at ρ = 0.5 µg/√Hz the noise is ≤ 3e-8 m per harmonic, so the
+    // error at each injected harmonic must be A·(G − 1) in phase with it (zero-phase filters). Tolerance:
+    // 3× (predicted noise std + level of the high-pass edge transients, which the periodic model of G
+    // ignores and which spread over all bins: measured at the neighbouring bins) plus 10 % of the bias. Then the same with the Kalman filter, reported: its bias is
+    // what makes the seed lose against the SNR fusion.
+    let rho = 0.5 * UG;
+    let runs = make_runs(rho, 51);
+    for kalman in [false, true] {
+        let cfg = StraightnessConfig {
+            method: FusionMethod::SpatialContinuity,
+            noise_density: Some(rho),
+            seed_kalman: kalman,
+            ..StraightnessConfig::default()
+        };
+        let est = estimate_straightness(&runs, &cfg).unwrap();
+        let (lo, hi) = (est.band.min_wavelength, est.band.max_wavelength);
+        let err = error_vs_band_limited(&est, lo, hi);
+        let m = err.len();
+        eprintln!(
+            "seed kalman={kalman}: RMS error {:.3e} m, interior 20–80 % {:.3e} m, first/last 5 %: {:.3e} / {:.3e} m",
+            rms(&err),
+            rms(&err[m / 5..m - m / 5]),
+            rms(&err[..m / 20]),
+            rms(&err[m - m / 20..])
+        );
+        for &(wl, a, ph) in &HARMONICS {
+            let (s, c) = project(&est.positions, &err, wl);
+            // Truth component: a·sin(κx + φ) = a·cos φ·sin κx + a·sin φ·cos κx.
+            let g = est.transfer(wl).unwrap();
+            let (ps, pc) = (a * ph.cos() * (g - 1.0), a * ph.sin() * (g - 1.0));
+            let sd = est.harmonic_std(wl).unwrap();
+            let dev = (s - ps).hypot(c - pc);
+            // Edge transients spread over all bins: their level here is the mean error magnitude at the
+            // neighbouring bins k ± 1, k ± 2 (no injected harmonic there).
+            let k = (1.0 / wl).round() as i64;
+            let leak = [-2i64, -1, 1, 2]
+                .iter()
+                .map(|d| {
+                    let (s, c) = project(&est.positions, &err, 1.0 / (k + d) as f64);
+                    s.hypot(c)
+                })
+                .sum::<f64>()
+                / 4.0;
+            eprintln!(
+                "  λ={wl}: G={g:.4}, predicted error {:.3e}, measured {:.3e}, deviation {dev:.3e} m, \
+                 neighbouring-bin level {leak:.3e} m",
+                ps.hypot(pc),
+                s.hypot(c)
+            );
+            if !kalman {
+                let tol = 3.0 * (sd + leak) + 0.1 * ps.hypot(pc);
+                assert!(dev < tol, "λ={wl}: deviation {dev} > {tol}");
+            }
+        }
+    }
+}
+
+#[test]
+fn non_periodic_profile_interior_error_both_methods() {
+    // The profile gets an extra 1.5 µm harmonic of 90 mm (11.1 cycles over the travel), so it is not
+    // periodic over L and the DFT's wrap-around matters. The band-limited DFT truth is not meaningful
+    // then; instead compare on the interior 20–80 % after removing a least-squares quadratic from the
+    // difference (the quadratic is unobservable; longer wavelengths are out of band anyway). Asserted:
+    // SNR ≤ seed, and SNR within the brief's 0.3 µm RMS. Numbers in the report.
+    let extra = |x: f64| 1.5e-6 * (2.0 * PI * x / 0.09 + 0.4).sin();
+    let extra_curv =
+        |x: f64| -1.5e-6 * (2.0 * PI / 0.09f64).powi(2) * (2.0 * PI * x / 0.09 + 0.4).sin();
+    let rho = 0.5 * UG;
+    let mut runs = make_runs(rho, 77);
+    for r in runs.iter_mut() {
+        let dx = r.speed / r.sample_rate;
+        let (x0, dir, v) = (r.start_position, r.direction as f64, r.speed);
+        for (j, a) in r.acceleration.iter_mut().enumerate() {
+            *a += v * v * extra_curv(x0 + dir * dx * j as f64);
+        }
+    }
+    let mut out = Vec::new();
+    for method in [FusionMethod::SnrWeighted, FusionMethod::SpatialContinuity] {
+        let cfg = StraightnessConfig {
+            method,
+            noise_density: Some(rho),
+            ..StraightnessConfig::default()
+        };
+        let est = estimate_straightness(&runs, &cfg).unwrap();
+        let m = est.positions.len();
+        let xs = &est.positions[m / 5..m - m / 5];
+        let d: Vec<f64> = xs
+            .iter()
+            .zip(&est.straightness[m / 5..m - m / 5])
+            .map(|(&x, e)| e - truth(x) - extra(x))
+            .collect();
+        let res = remove_quadratic(xs, &d);
+        eprintln!(
+            "non-periodic {method:?}: interior RMS error {:.3e} m (quadratic removed; {:.3e} m without)",
+            rms(&res),
+            rms(&d)
+        );
+        out.push(rms(&res));
+    }
+    assert!(out[0] <= out[1]);
+    assert!(out[0] < 0.3e-6);
+}
+
+/// y minus its least-squares quadratic in x (normal equations on centred x; well conditioned here).
+fn remove_quadratic(x: &[f64], y: &[f64]) -> Vec<f64> {
+    let xm = x.iter().sum::<f64>() / x.len() as f64;
+    let mut m = [[0.0f64; 3]; 3];
+    let mut r = [0.0f64; 3];
+    for (&xi, &yi) in x.iter().zip(y) {
+        let u = xi - xm;
+        let row = [1.0, u, u * u];
+        for i in 0..3 {
+            r[i] += row[i] * yi;
+            for j in 0..3 {
+                m[i][j] += row[i] * row[j];
+            }
+        }
+    }
+    for c in 0..3 {
+        for row in c + 1..3 {
+            let f = m[row][c] / m[c][c];
+            for j in c..3 {
+                m[row][j] -= f * m[c][j];
+            }
+            r[row] -= f * r[c];
+        }
+    }
+    let mut s = [0.0f64; 3];
+    for i in (0..3).rev() {
+        let t: f64 = (i + 1..3).map(|j| m[i][j] * s[j]).sum();
+        s[i] = (r[i] - t) / m[i][i];
+    }
+    x.iter()
+        .zip(y)
+        .map(|(&xi, &yi)| {
+            let u = xi - xm;
+            yi - s[0] - s[1] * u - s[2] * u * u
+        })
+        .collect()
 }
