@@ -1434,8 +1434,8 @@ mod tests {
             worst = worst.max((v - (2.0 * PI * 20.0 * t + 0.3).sin()).abs());
         }
         assert!(worst < 1e-4, "worst interior deviation {worst}");
-        // A pure line is continued exactly by the odd reflection: only the ramp start-up of the filter
-        // remains, which decays inside the 3τ padding (e^{-ζω_c·3τ} ≈ 0.12 of slope·√2/ω_c ≈ 1.1e-2·0.05).
+        // A pure line is continued exactly by the trend+even padding (zero residual): only the ramp start-up
+        // of the filter remains, which decays inside the 3τ padding (e^{-ζω_c·3τ} ≈ 0.12 of slope·√2/ω_c ≈ 1.1e-2·0.05).
         let line: Vec<f64> = (0..2000).map(|i| 0.3 + 0.05 * i as f64 / fs).collect();
         let y = zero_phase_highpass(&line, 1.0, fs).unwrap();
         let worst = y.iter().fold(0.0f64, |a, b| a.max(b.abs()));
