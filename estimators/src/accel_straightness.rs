@@ -77,10 +77,7 @@ fn finite(what: &str, value: f64) -> Result<f64> {
     if value.is_finite() {
         Ok(value)
     } else {
-        Err(AccelStraightnessError::NotFinite {
-            what: what.to_string(),
-            value,
-        })
+        Err(AccelStraightnessError::NotFinite { what: what.to_string(), value })
     }
 }
 
@@ -89,10 +86,7 @@ fn positive(what: &str, value: f64) -> Result<f64> {
     if value > 0.0 {
         Ok(value)
     } else {
-        Err(AccelStraightnessError::NotPositive {
-            what: what.to_string(),
-            value,
-        })
+        Err(AccelStraightnessError::NotPositive { what: what.to_string(), value })
     }
 }
 
@@ -105,10 +99,7 @@ fn finite_slice(what: &str, xs: &[f64]) -> Result<()> {
 
 fn min_len(what: &str, xs: &[f64], n: usize) -> Result<()> {
     if xs.len() < n {
-        return Err(AccelStraightnessError::BadInput(format!(
-            "{what} needs at least {n} samples, got {}",
-            xs.len()
-        )));
+        return Err(AccelStraightnessError::BadInput(format!("{what} needs at least {n} samples, got {}", xs.len())));
     }
     Ok(())
 }
@@ -159,9 +150,7 @@ fn validate_run(i: usize, run: &AccelRun) -> Result<()> {
 pub fn run_positions(run: &AccelRun) -> Result<Vec<f64>> {
     validate_run(0, run)?;
     let dx = run.direction as f64 * run.speed / run.sample_rate;
-    Ok((0..run.acceleration.len())
-        .map(|j| run.start_position + dx * j as f64)
-        .collect())
+    Ok((0..run.acceleration.len()).map(|j| run.start_position + dx * j as f64).collect())
 }
 
 /// Temporal frequency (Hz) at which a spatial wavelength `λ` (m) is seen at speed `v` (m/s): `f = v/λ`.
@@ -316,10 +305,7 @@ pub fn butterworth2_highpass(cutoff_hz: f64, sample_rate: f64) -> Result<Biquad>
     let k = (PI * cutoff_hz / sample_rate).tan();
     let s2 = std::f64::consts::SQRT_2;
     let n = 1.0 + s2 * k + k * k;
-    Ok(Biquad {
-        b: [1.0 / n, -2.0 / n, 1.0 / n],
-        a: [1.0, 2.0 * (k * k - 1.0) / n, (1.0 - s2 * k + k * k) / n],
-    })
+    Ok(Biquad { b: [1.0 / n, -2.0 / n, 1.0 / n], a: [1.0, 2.0 * (k * k - 1.0) / n, (1.0 - s2 * k + k * k) / n] })
 }
 
 /// Steady-state internal state of a biquad (transposed direct form II) for a unit constant input, as
@@ -369,11 +355,7 @@ fn end_line(x: &[f64], idx: impl Iterator<Item = usize>) -> (f64, f64) {
         stx += t * x[i];
     }
     let den = n * stt - st * st;
-    let b = if den > 0.0 {
-        (n * stx - st * sx) / den
-    } else {
-        0.0
-    };
+    let b = if den > 0.0 { (n * stx - st * sx) / den } else { 0.0 };
     ((sx - b * st) / n, b)
 }
 
@@ -456,9 +438,7 @@ pub fn estimate_noise_density(acceleration: &[f64], sample_rate: f64) -> Result<
     let n = acceleration.len();
     let idx: Vec<f64> = (0..n).map(|i| i as f64).collect();
     let detr = remove_line(&idx, acceleration);
-    let w: Vec<f64> = (0..n)
-        .map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / n as f64).cos())
-        .collect();
+    let w: Vec<f64> = (0..n).map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / n as f64).cos()).collect();
     let sw2: f64 = w.iter().map(|v| v * v).sum();
     let mut input: Vec<f64> = detr.iter().zip(&w).map(|(a, b)| a * b).collect();
     let spec = rfft(&mut input);
@@ -471,9 +451,7 @@ pub fn estimate_noise_density(acceleration: &[f64], sample_rate: f64) -> Result<
         count += 1;
     }
     if count == 0 {
-        return Err(AccelStraightnessError::BadInput(
-            "record too short to estimate the noise density".into(),
-        ));
+        return Err(AccelStraightnessError::BadInput("record too short to estimate the noise density".into()));
     }
     Ok((sum / count as f64).sqrt())
 }
@@ -492,12 +470,7 @@ pub fn estimate_noise_density(acceleration: &[f64], sample_rate: f64) -> Result<
 /// `A_c` (each quadrature component, i.e. the amplitude when the phase is known). The bound does not
 /// depend on `fs` (noise above the signal band carries no information). With a two-sided density
 /// `ρ₂` (PSD `ρ₂²` over ±f) replace `ρ` by `√2·ρ₂`.
-pub fn cramer_rao_amplitude(
-    noise_density: f64,
-    wavelength: f64,
-    speed: f64,
-    travel: f64,
-) -> Result<f64> {
+pub fn cramer_rao_amplitude(noise_density: f64, wavelength: f64, speed: f64, travel: f64) -> Result<f64> {
     let rho = positive("noise density ρ (m/s²/√Hz)", noise_density)?;
     let kappa = 2.0 * PI / positive("wavelength (m)", wavelength)?;
     let v = positive("speed (m/s)", speed)?;
@@ -509,9 +482,7 @@ pub fn cramer_rao_amplitude(
 /// add, `1/σ² = Σ_i 1/σ_i²` with `σ_i` from [`cramer_rao_amplitude`] (independent noise, common profile).
 pub fn cramer_rao_combined(per_run_bounds: &[f64]) -> Result<f64> {
     if per_run_bounds.is_empty() {
-        return Err(AccelStraightnessError::BadInput(
-            "combined bound needs at least one run".into(),
-        ));
+        return Err(AccelStraightnessError::BadInput("combined bound needs at least one run".into()));
     }
     let mut info = 0.0;
     for (i, &s) in per_run_bounds.iter().enumerate() {
@@ -523,12 +494,7 @@ pub fn cramer_rao_combined(per_run_bounds: &[f64]) -> Result<f64> {
 
 /// Combined Cramér–Rao bound (m) of the runs `(ρ_i, v_i)` over travel `L` at wavelength `λ`:
 /// `σ = 1/(κ²·√(L·Σ v_i³/ρ_i²))` ([`cramer_rao_amplitude`] and [`cramer_rao_combined`]).
-pub fn cramer_rao_runs(
-    noise_densities: &[f64],
-    speeds: &[f64],
-    travel: f64,
-    wavelength: f64,
-) -> Result<f64> {
+pub fn cramer_rao_runs(noise_densities: &[f64], speeds: &[f64], travel: f64, wavelength: f64) -> Result<f64> {
     if noise_densities.len() != speeds.len() {
         return Err(AccelStraightnessError::BadInput(format!(
             "one noise density per speed expected: {} densities for {} speeds",
@@ -536,11 +502,8 @@ pub fn cramer_rao_runs(
             speeds.len()
         )));
     }
-    let b: Result<Vec<f64>> = noise_densities
-        .iter()
-        .zip(speeds)
-        .map(|(&r, &v)| cramer_rao_amplitude(r, wavelength, v, travel))
-        .collect();
+    let b: Result<Vec<f64>> =
+        noise_densities.iter().zip(speeds).map(|(&r, &v)| cramer_rao_amplitude(r, wavelength, v, travel)).collect();
     cramer_rao_combined(&b?)
 }
 
@@ -597,12 +560,7 @@ pub fn fit_harmonic_amplitude(
     })?;
     let g = v * v * kappa * kappa;
     let (s, co) = (-c[1] / g, -c[2] / g);
-    Ok(HarmonicAmplitude {
-        wavelength,
-        sin: s,
-        cos: co,
-        amplitude: s.hypot(co),
-    })
+    Ok(HarmonicAmplitude { wavelength, sin: s, cos: co, amplitude: s.hypot(co) })
 }
 
 fn solve3(mut m: [[f64; 3]; 3], mut r: [f64; 3]) -> Option<[f64; 3]> {
@@ -670,11 +628,7 @@ pub fn recoverable_band(
     // σ at λ = 1 m scales as λ²: σ(λ) = σ(1)·λ².
     let s1 = cramer_rao_runs(noise_densities, speeds, travel, 1.0)?;
     let noise_limit = (amplitude_threshold / s1).sqrt();
-    let (max_wl, by) = if noise_limit <= cutoff_limit {
-        (noise_limit, "noise")
-    } else {
-        (cutoff_limit, "cutoff")
-    };
+    let (max_wl, by) = if noise_limit <= cutoff_limit { (noise_limit, "noise") } else { (cutoff_limit, "cutoff") };
     let empty = max_wl <= min_wavelength;
     let note = if empty {
         format!(
@@ -732,9 +686,7 @@ fn check_uniform(positions: &[f64]) -> Result<f64> {
     finite_slice("positions", positions)?;
     let dx = (positions[positions.len() - 1] - positions[0]) / (positions.len() - 1) as f64;
     if dx <= 0.0 {
-        return Err(AccelStraightnessError::BadInput(
-            "positions must be strictly increasing".into(),
-        ));
+        return Err(AccelStraightnessError::BadInput("positions must be strictly increasing".into()));
     }
     for (i, w) in positions.windows(2).enumerate() {
         if ((w[1] - w[0]) - dx).abs() > 1e-6 * dx {
@@ -826,8 +778,7 @@ fn resample_run(run: &AccelRun, values: &[f64], grid: &[f64]) -> Vec<f64> {
     grid.iter()
         .map(|&x| {
             // fractional sample index along the run
-            let u =
-                ((x - run.start_position) * run.direction as f64 / step).clamp(0.0, (n - 1) as f64);
+            let u = ((x - run.start_position) * run.direction as f64 / step).clamp(0.0, (n - 1) as f64);
             let j = (u.floor() as usize).min(n - 2);
             let f = u - j as f64;
             values[j] * (1.0 - f) + values[j + 1] * f
@@ -988,14 +939,13 @@ impl StraightnessEstimate {
     pub fn transfer(&self, wavelength: f64) -> Result<f64> {
         let kappa = 2.0 * PI / positive("wavelength (m)", wavelength)?;
         match self.method {
-            FusionMethod::SnrWeighted => Ok(
-                if wavelength >= self.band.min_wavelength && wavelength <= self.band.max_wavelength
-                {
+            FusionMethod::SnrWeighted => {
+                Ok(if wavelength >= self.band.min_wavelength && wavelength <= self.band.max_wavelength {
                     1.0
                 } else {
                     0.0
-                },
-            ),
+                })
+            }
             FusionMethod::SpatialContinuity => {
                 let speeds: Vec<f64> = self.runs.iter().map(|r| r.speed).collect();
                 let order = speed_order(&speeds);
@@ -1005,8 +955,7 @@ impl StraightnessEstimate {
                     let r = &self.runs[i];
                     let fc = r.highpass_hz.unwrap_or(0.0);
                     let om = kappa * r.speed / r.sample_rate;
-                    let hp =
-                        1.0 / (1.0 + ((PI * fc / r.sample_rate).tan() / (om / 2.0).tan()).powi(4));
+                    let hp = 1.0 / (1.0 + ((PI * fc / r.sample_rate).tan() / (om / 2.0).tan()).powi(4));
                     let trap = ((om / 2.0) / (om / 2.0).tan()).powi(2);
                     g += wi * hp * trap;
                 }
@@ -1065,11 +1014,7 @@ pub fn seed_run_displacement(
 /// Seed 000 step 5, fusion of the speeds by the spatial-frequency continuity principle: the displacement
 /// profiles (already on a common uniform grid of period `P = M·Δx`) are combined per DFT bin with the
 /// crossover weights of [`continuity_weights`] (`profiles` and `boundaries` in decreasing-speed order).
-pub fn fuse_spatial_continuity(
-    profiles: &[Vec<f64>],
-    boundaries: &[f64],
-    period: f64,
-) -> Result<Vec<f64>> {
+pub fn fuse_spatial_continuity(profiles: &[Vec<f64>], boundaries: &[f64], period: f64) -> Result<Vec<f64>> {
     let spectra = spectra_of(profiles)?;
     if boundaries.len() + 1 != profiles.len() {
         return Err(AccelStraightnessError::BadInput(format!(
@@ -1094,9 +1039,7 @@ pub fn fuse_spatial_continuity(
 
 fn spectra_of(profiles: &[Vec<f64>]) -> Result<Vec<Vec<Complex<f64>>>> {
     if profiles.is_empty() {
-        return Err(AccelStraightnessError::BadInput(
-            "fusion needs at least one run".into(),
-        ));
+        return Err(AccelStraightnessError::BadInput("fusion needs at least one run".into()));
     }
     let m = profiles[0].len();
     let mut out = Vec::with_capacity(profiles.len());
@@ -1180,14 +1123,9 @@ pub fn fuse_snr_weighted(
 ///    slower run takes over one octave above its own cut-off, where its high-pass gain is 0.94);
 ///    [`fuse_spatial_continuity`]. `SnrWeighted`: [`fuse_snr_weighted`] in [`recoverable_band`].
 /// 4. Removes the least-squares reference line (ISO 230-1).
-pub fn estimate_straightness(
-    runs: &[AccelRun],
-    config: &StraightnessConfig,
-) -> Result<StraightnessEstimate> {
+pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> Result<StraightnessEstimate> {
     if runs.is_empty() {
-        return Err(AccelStraightnessError::BadInput(
-            "at least one accelerometer run is needed".into(),
-        ));
+        return Err(AccelStraightnessError::BadInput("at least one accelerometer run is needed".into()));
     }
     for (i, r) in runs.iter().enumerate() {
         validate_run(i, r)?;
@@ -1237,54 +1175,26 @@ pub fn estimate_straightness(
 
     let (profile, band, crossovers) = match config.method {
         FusionMethod::SnrWeighted => {
-            let band = recoverable_band(
-                &rhos,
-                &speeds,
-                travel,
-                config.amplitude_threshold,
-                min_wl,
-                max_wl,
-            )?;
-            let total: f64 = speeds
-                .iter()
-                .zip(&rhos)
-                .map(|(v, r)| v.powi(3) / (r * r))
-                .sum();
+            let band = recoverable_band(&rhos, &speeds, travel, config.amplitude_threshold, min_wl, max_wl)?;
+            let total: f64 = speeds.iter().zip(&rhos).map(|(v, r)| v.powi(3) / (r * r)).sum();
             let mut curv = Vec::with_capacity(runs.len());
             for (i, r) in runs.iter().enumerate() {
                 let am = mean(&r.acceleration);
-                let c: Vec<f64> = r
-                    .acceleration
-                    .iter()
-                    .map(|a| (a - am) / (r.speed * r.speed))
-                    .collect();
+                let c: Vec<f64> = r.acceleration.iter().map(|a| (a - am) / (r.speed * r.speed)).collect();
                 curv.push(resample_run(r, &c, &grid));
                 diags[i].snr_share = Some(r.speed.powi(3) / (rhos[i] * rhos[i]) / total);
             }
             let prof = if band.empty {
                 vec![0.0; m]
             } else {
-                fuse_snr_weighted(
-                    &curv,
-                    &speeds,
-                    &rhos,
-                    travel,
-                    band.min_wavelength,
-                    band.max_wavelength,
-                )?
+                fuse_snr_weighted(&curv, &speeds, &rhos, travel, band.min_wavelength, band.max_wavelength)?
             };
             (prof, band, Vec::new())
         }
         FusionMethod::SpatialContinuity => {
             let mut cut = Vec::with_capacity(runs.len());
             for (i, r) in runs.iter().enumerate() {
-                let lc = single_run_noise_wavelength(
-                    rhos[i],
-                    r.speed,
-                    travel,
-                    config.amplitude_threshold,
-                )?
-                .min(max_wl);
+                let lc = single_run_noise_wavelength(rhos[i], r.speed, travel, config.amplitude_threshold)?.min(max_wl);
                 let fc = temporal_frequency(r.speed, lc)?;
                 if fc >= 0.5 * r.sample_rate {
                     return Err(AccelStraightnessError::BadInput(format!(
@@ -1304,21 +1214,11 @@ pub fn estimate_straightness(
                 diags[i].kalman = kp;
                 profiles.push(resample_run(&runs[i], &d, &grid));
             }
-            let crossovers: Vec<f64> = order[1..]
-                .iter()
-                .map(|&i| 2.0 * 2.0 * PI / cut[i])
-                .collect();
+            let crossovers: Vec<f64> = order[1..].iter().map(|&i| 2.0 * 2.0 * PI / cut[i]).collect();
             let prof = fuse_spatial_continuity(&profiles, &crossovers, travel)?;
             // The seed's band: the fastest run's cut-off limits long wavelengths.
             let longest_cut = cut.iter().fold(0.0f64, |a, b| a.max(*b));
-            let band = recoverable_band(
-                &rhos,
-                &speeds,
-                travel,
-                config.amplitude_threshold,
-                min_wl,
-                longest_cut,
-            )?;
+            let band = recoverable_band(&rhos, &speeds, travel, config.amplitude_threshold, min_wl, longest_cut)?;
             (prof, band, crossovers)
         }
     };
@@ -1369,11 +1269,7 @@ mod tests {
     fn kalman_with_zero_process_noise_and_unit_alpha_is_a_running_mean() {
         // α = 1, Q = 0, P(1|1) = R: the gains are 1/2, 1/3, ... so X̂(g|g) is the mean of Y(1..g).
         let y = [4.0, 2.0, 6.0, 0.0];
-        let p = KalmanParameters {
-            alpha: 1.0,
-            process_noise: 0.0,
-            measurement_noise: 1.0,
-        };
+        let p = KalmanParameters { alpha: 1.0, process_noise: 0.0, measurement_noise: 1.0 };
         let x = kalman_filter_ar1(&y, &p).unwrap();
         let expect = [4.0, 3.0, 4.0, 3.0];
         for (a, b) in x.iter().zip(expect) {
@@ -1418,15 +1314,9 @@ mod tests {
         // At the ends the trend+even padding must beat scipy-style odd padding on this signal: the odd
         // reflection turns the end value sin(0.3) ≈ 0.3 into a step of ≈ 0.6 (first 100 samples).
         let edge = |v: &[f64]| {
-            (0..100)
-                .map(|i| (v[i] - (2.0 * PI * 20.0 * i as f64 / fs + 0.3).sin()).abs())
-                .fold(0.0f64, f64::max)
+            (0..100).map(|i| (v[i] - (2.0 * PI * 20.0 * i as f64 / fs + 0.3).sin()).abs()).fold(0.0f64, f64::max)
         };
-        eprintln!(
-            "edge error: odd {:.3e}, trend+even {:.3e}",
-            edge(&y_odd),
-            edge(&y)
-        );
+        eprintln!("edge error: odd {:.3e}, trend+even {:.3e}", edge(&y_odd), edge(&y));
         assert!(edge(&y) < 0.5 * edge(&y_odd));
         let mut worst = 0.0f64;
         for (i, v) in y.iter().enumerate().take(1500).skip(500) {
@@ -1457,13 +1347,8 @@ mod tests {
     fn bad_inputs_are_rejected_with_a_message() {
         assert!(cramer_rao_amplitude(f64::NAN, 0.1, 0.1, 1.0).is_err());
         assert!(butterworth2_highpass(600.0, 1000.0).is_err());
-        let run = AccelRun {
-            speed: 0.1,
-            sample_rate: 100.0,
-            start_position: 0.0,
-            direction: 2,
-            acceleration: vec![0.0; 32],
-        };
+        let run =
+            AccelRun { speed: 0.1, sample_rate: 100.0, start_position: 0.0, direction: 2, acceleration: vec![0.0; 32] };
         let e = estimate_straightness(&[run], &StraightnessConfig::default()).unwrap_err();
         assert!(e.to_string().contains("direction"), "{e}");
         let run = AccelRun {

@@ -16,18 +16,11 @@ use vmt_estimators::accel_straightness::*;
 const UG: f64 = 9.80665e-6; // 1 µg in m/s²
 const L: f64 = 1.0;
 const SPEEDS: [f64; 3] = [0.05, 0.15, 0.4];
-const HARMONICS: [(f64, f64, f64); 4] = [
-    (0.020, 1.0e-6, 0.3),
-    (0.050, 2.0e-6, 1.1),
-    (0.125, 1.5e-6, 2.0),
-    (0.250, 3.0e-6, -0.7),
-];
+const HARMONICS: [(f64, f64, f64); 4] =
+    [(0.020, 1.0e-6, 0.3), (0.050, 2.0e-6, 1.1), (0.125, 1.5e-6, 2.0), (0.250, 3.0e-6, -0.7)];
 
 fn truth(x: f64) -> f64 {
-    HARMONICS
-        .iter()
-        .map(|(wl, a, ph)| a * (2.0 * PI * x / wl + ph).sin())
-        .sum()
+    HARMONICS.iter().map(|(wl, a, ph)| a * (2.0 * PI * x / wl + ph).sin()).sum()
 }
 
 fn truth_curvature(x: f64) -> f64 {
@@ -53,13 +46,7 @@ fn make_run(v: f64, dir: i32, rho: f64, offset: f64, rng: &mut ChaCha8Rng) -> Ac
             v * v * truth_curvature(x) + offset + noise.sample(rng)
         })
         .collect();
-    AccelRun {
-        speed: v,
-        sample_rate: fs,
-        start_position: x0,
-        direction: dir,
-        acceleration,
-    }
+    AccelRun { speed: v, sample_rate: fs, start_position: x0, direction: dir, acceleration }
 }
 
 fn make_runs(rho: f64, seed: u64) -> Vec<AccelRun> {
@@ -80,11 +67,7 @@ fn rms(a: &[f64]) -> f64 {
 fn error_vs_band_limited(est: &StraightnessEstimate, min_wl: f64, max_wl: f64) -> Vec<f64> {
     let t: Vec<f64> = est.positions.iter().map(|&x| truth(x)).collect();
     let tb = band_limit_profile(&est.positions, &t, min_wl, max_wl).unwrap();
-    est.straightness
-        .iter()
-        .zip(&tb)
-        .map(|(e, t)| e - t)
-        .collect()
+    est.straightness.iter().zip(&tb).map(|(e, t)| e - t).collect()
 }
 
 /// Undoes the least-squares reference line of an error profile whose periodic part has no content at
@@ -115,25 +98,13 @@ fn project(x: &[f64], e: &[f64], wl: f64) -> (f64, f64) {
     let y = undo_reference_line(x, e);
     let n = x.len() as f64;
     let k = 2.0 * PI / wl;
-    let s = 2.0 / n
-        * x.iter()
-            .zip(&y)
-            .map(|(x, y)| y * (k * x).sin())
-            .sum::<f64>();
-    let c = 2.0 / n
-        * x.iter()
-            .zip(&y)
-            .map(|(x, y)| y * (k * x).cos())
-            .sum::<f64>();
+    let s = 2.0 / n * x.iter().zip(&y).map(|(x, y)| y * (k * x).sin()).sum::<f64>();
+    let c = 2.0 / n * x.iter().zip(&y).map(|(x, y)| y * (k * x).cos()).sum::<f64>();
     (s, c)
 }
 
 fn snr_config(rho: Option<f64>) -> StraightnessConfig {
-    StraightnessConfig {
-        method: FusionMethod::SnrWeighted,
-        noise_density: rho,
-        ..StraightnessConfig::default()
-    }
+    StraightnessConfig { method: FusionMethod::SnrWeighted, noise_density: rho, ..StraightnessConfig::default() }
 }
 
 #[test]
@@ -148,10 +119,7 @@ fn cramer_rao_bound_matches_monte_carlo_std_of_least_squares_amplitude() {
         let x: Vec<f64> = (0..n).map(|j| v * j as f64 / fs).collect();
         let k = 2.0 * PI / wl;
         let amp = 2e-6;
-        let clean: Vec<f64> = x
-            .iter()
-            .map(|&x| -v * v * k * k * amp * (k * x).sin() + 0.02)
-            .collect();
+        let clean: Vec<f64> = x.iter().map(|&x| -v * v * k * k * amp * (k * x).sin() + 0.02).collect();
         let noise = Normal::new(0.0, rho * (fs / 2.0).sqrt()).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(1000 + case as u64);
         let draws = 400;
@@ -173,14 +141,8 @@ fn cramer_rao_bound_matches_monte_carlo_std_of_least_squares_amplitude() {
             std_c / bound,
             ms / draws as f64
         );
-        assert!(
-            (std_s / bound - 1.0).abs() < 0.10,
-            "sin: {std_s} vs {bound}"
-        );
-        assert!(
-            (std_c / bound - 1.0).abs() < 0.10,
-            "cos: {std_c} vs {bound}"
-        );
+        assert!((std_s / bound - 1.0).abs() < 0.10, "sin: {std_s} vs {bound}");
+        assert!((std_c / bound - 1.0).abs() < 0.10, "cos: {std_c} vs {bound}");
         // Unbiased: |mean error| < 4 standard errors of the mean (bound/√400).
         assert!((ms / draws as f64).abs() < 4.0 * bound / (draws as f64).sqrt());
     }
@@ -194,12 +156,7 @@ fn noise_density_is_estimated_from_the_upper_spectrum() {
     for (rho, seed) in [(0.5 * UG, 11u64), (25.0 * UG, 12)] {
         for r in make_runs(rho, seed) {
             let est = estimate_noise_density(&r.acceleration, r.sample_rate).unwrap();
-            eprintln!(
-                "ρ true {:.3} µg/√Hz, estimated {:.3} at v={}",
-                rho / UG,
-                est / UG,
-                r.speed
-            );
+            eprintln!("ρ true {:.3} µg/√Hz, estimated {:.3} at v={}", rho / UG, est / UG, r.speed);
             assert!((est / rho - 1.0).abs() < 0.10, "{est} vs {rho}");
         }
     }
@@ -215,12 +172,7 @@ fn piezo_snr_fusion_meets_rms_and_per_harmonic_cramer_rao() {
     let band = &est.band;
     eprintln!("piezo SNR band: {}", band.note);
     for r in &est.runs {
-        eprintln!(
-            "  run v={} ρ̂={:.3} µg/√Hz share {:.4}",
-            r.speed,
-            r.noise_density / UG,
-            r.snr_share.unwrap()
-        );
+        eprintln!("  run v={} ρ̂={:.3} µg/√Hz share {:.4}", r.speed, r.noise_density / UG, r.snr_share.unwrap());
         assert!((r.noise_density / (0.5 * UG) - 1.0).abs() < 0.10);
     }
     assert!(band.max_wavelength > 0.25 && band.min_wavelength < 0.02);
@@ -261,11 +213,7 @@ fn snr_fusion_is_efficient_over_noise_draws() {
     }
     for (h, &(wl, _, _)) in HARMONICS.iter().enumerate() {
         let std = (sq[h] / (2 * draws) as f64).sqrt();
-        eprintln!(
-            "efficiency λ={wl}: MC std {std:.3e} m, CR {:.3e} m, ratio {:.3}",
-            cr[h],
-            std / cr[h]
-        );
+        eprintln!("efficiency λ={wl}: MC std {std:.3e} m, CR {:.3e} m, ratio {:.3}", cr[h], std / cr[h]);
     }
     for (h, _) in HARMONICS.iter().enumerate() {
         let std = (sq[h] / (2 * draws) as f64).sqrt();
@@ -299,10 +247,7 @@ fn mems_noise_grows_bound_and_error_in_proportion() {
             bound = est.harmonic_std(0.25).unwrap();
         }
         let e = (ms / draws as f64).sqrt();
-        eprintln!(
-            "ρ={:.1} µg/√Hz: RMS error {e:.3e} m, CR at 250 mm {bound:.3e} m",
-            rho / UG
-        );
+        eprintln!("ρ={:.1} µg/√Hz: RMS error {e:.3e} m, CR at 250 mm {bound:.3e} m", rho / UG);
         res.push((e, bound));
     }
     let err_ratio = res[1].0 / res[0].0;
@@ -311,8 +256,7 @@ fn mems_noise_grows_bound_and_error_in_proportion() {
     assert!((bound_ratio - 50.0).abs() < 1e-9);
     assert!(err_ratio > 25.0 && err_ratio < 100.0);
     // With the default 0.1 µm threshold the MEMS band shrinks and says so.
-    let est =
-        estimate_straightness(&make_runs(25.0 * UG, 300), &snr_config(Some(25.0 * UG))).unwrap();
+    let est = estimate_straightness(&make_runs(25.0 * UG, 300), &snr_config(Some(25.0 * UG))).unwrap();
     eprintln!("MEMS band: {}", est.band.note);
     assert_eq!(est.band.max_wavelength_limited_by, "noise");
     assert!(est.band.max_wavelength < 0.125);
@@ -350,11 +294,7 @@ fn fusion_beats_every_single_speed_alone() {
     eprintln!("fused RMS error {f:.4e} m");
     for (i, m) in ms_single.iter().enumerate() {
         let s = (m / draws as f64).sqrt();
-        eprintln!(
-            "  v={} alone: {s:.4e} m (fused/single {:.3})",
-            SPEEDS[i],
-            f / s
-        );
+        eprintln!("  v={} alone: {s:.4e} m (fused/single {:.3})", SPEEDS[i], f / s);
         assert!(f < s);
     }
 }
@@ -367,10 +307,7 @@ fn snr_fusion_is_no_worse_than_seed_continuity_fusion() {
     for (rho, seed) in [(0.5 * UG, 31u64), (25.0 * UG, 32u64)] {
         let runs = make_runs(rho, seed);
         let snr = estimate_straightness(&runs, &snr_config(Some(rho))).unwrap();
-        let seed_cfg = StraightnessConfig {
-            method: FusionMethod::SpatialContinuity,
-            ..snr_config(Some(rho))
-        };
+        let seed_cfg = StraightnessConfig { method: FusionMethod::SpatialContinuity, ..snr_config(Some(rho)) };
         let sd = estimate_straightness(&runs, &seed_cfg).unwrap();
         let (lo, hi) = (snr.band.min_wavelength, snr.band.max_wavelength);
         let e_snr = error_vs_band_limited(&snr, lo, hi);
@@ -394,11 +331,7 @@ fn snr_fusion_is_no_worse_than_seed_continuity_fusion() {
         for &(wl, _, _) in &HARMONICS {
             let (s1, c1) = project(&snr.positions, &e_snr, wl);
             let (s2, c2) = project(&sd.positions, &e_seed, wl);
-            eprintln!(
-                "  λ={wl}: |error| SNR {:.3e}, seed {:.3e} m",
-                s1.hypot(c1),
-                s2.hypot(c2)
-            );
+            eprintln!("  λ={wl}: |error| SNR {:.3e}, seed {:.3e} m", s1.hypot(c1), s2.hypot(c2));
         }
         assert!(rms(&e_snr) <= rms(&e_seed));
     }
@@ -410,10 +343,7 @@ fn both_methods_return_the_same_grid_and_json_serialises() {
     let a = estimate_straightness(&runs, &snr_config(Some(0.5 * UG))).unwrap();
     let b = estimate_straightness(
         &runs,
-        &StraightnessConfig {
-            method: FusionMethod::SpatialContinuity,
-            ..snr_config(Some(0.5 * UG))
-        },
+        &StraightnessConfig { method: FusionMethod::SpatialContinuity, ..snr_config(Some(0.5 * UG)) },
     )
     .unwrap();
     assert_eq!(a.positions, b.positions);
@@ -494,8 +424,7 @@ fn non_periodic_profile_interior_error_both_methods() {
     // difference (the quadratic is unobservable; longer wavelengths are out of band anyway). Asserted:
     // SNR ≤ seed, and SNR within the brief's 0.3 µm RMS. Numbers in the report.
     let extra = |x: f64| 1.5e-6 * (2.0 * PI * x / 0.09 + 0.4).sin();
-    let extra_curv =
-        |x: f64| -1.5e-6 * (2.0 * PI / 0.09f64).powi(2) * (2.0 * PI * x / 0.09 + 0.4).sin();
+    let extra_curv = |x: f64| -1.5e-6 * (2.0 * PI / 0.09f64).powi(2) * (2.0 * PI * x / 0.09 + 0.4).sin();
     let rho = 0.5 * UG;
     let mut runs = make_runs(rho, 77);
     for r in runs.iter_mut() {
@@ -507,19 +436,12 @@ fn non_periodic_profile_interior_error_both_methods() {
     }
     let mut out = Vec::new();
     for method in [FusionMethod::SnrWeighted, FusionMethod::SpatialContinuity] {
-        let cfg = StraightnessConfig {
-            method,
-            noise_density: Some(rho),
-            ..StraightnessConfig::default()
-        };
+        let cfg = StraightnessConfig { method, noise_density: Some(rho), ..StraightnessConfig::default() };
         let est = estimate_straightness(&runs, &cfg).unwrap();
         let m = est.positions.len();
         let xs = &est.positions[m / 5..m - m / 5];
-        let d: Vec<f64> = xs
-            .iter()
-            .zip(&est.straightness[m / 5..m - m / 5])
-            .map(|(&x, e)| e - truth(x) - extra(x))
-            .collect();
+        let d: Vec<f64> =
+            xs.iter().zip(&est.straightness[m / 5..m - m / 5]).map(|(&x, e)| e - truth(x) - extra(x)).collect();
         let res = remove_quadratic(xs, &d);
         eprintln!(
             "non-periodic {method:?}: interior RMS error {:.3e} m (quadratic removed; {:.3e} m without)",
