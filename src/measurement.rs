@@ -963,7 +963,7 @@ pub fn validate_manifest(set: &MeasurementSet, file: &Path) -> Result<(), VmtErr
                 return bad(
                     format!("sensors[{i}].sigma"),
                     format!(
-                        "expected a 1-sigma noise ≥ 0 in SI units of the channel, got {}",
+                        "expected a 1-sigma noise in SI units of the channel ≥ 0, got {}",
                         fmt_num(sg)
                     ),
                 );
@@ -1168,7 +1168,7 @@ enum Col<'a> {
     Int(Vec<String>),
 }
 
-fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> String {
+fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, String> {
     let mut out = String::with_capacity(16 * (n + 1) * header.len().max(1));
     out.push_str(&header.join(","));
     out.push('\n');
@@ -1178,17 +1178,30 @@ fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> String {
                 out.push(',');
             }
             match c {
-                Col::Num(u, v) => out.push_str(&fmt_f64(u.from_si(v[i]))),
+                Col::Num(u, v) => {
+                    let x = u.from_si(v[i]);
+                    if !x.is_finite() {
+                        return Err(format!(
+                            "column {}, row {}: {} (SI) overflows when written in {}; write \
+                             in SI units",
+                            header[j],
+                            i + 1,
+                            fmt_num(v[i]),
+                            u.symbol
+                        ));
+                    }
+                    out.push_str(&fmt_f64(x));
+                }
                 Col::Int(v) => out.push_str(&v[i]),
             }
         }
         out.push('\n');
     }
-    out
+    Ok(out)
 }
 
 /// The CSV text of one run.
-fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> String {
+fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> Result<String, String> {
     let mut header: Vec<String> = Vec::new();
     let mut cols: Vec<Col<'_>> = Vec::new();
     let time_u = write_unit(Dimension::Time, true, units);
@@ -1324,8 +1337,12 @@ pub fn write_with_extras(
     let runs: Vec<(String, String)> = set
         .runs
         .iter()
-        .map(|r| (r.file.clone(), run_csv(set, r, units)))
-        .collect();
+        .map(|r| {
+            run_csv(set, r, units)
+                .map(|text| (r.file.clone(), text))
+                .map_err(|m| VmtError::bad(&dir.join(&r.file), "", m))
+        })
+        .collect::<Result<Vec<(String, String)>, VmtError>>()?;
     replace_dir_atomic(dir, "manifest.toml", |tmp| {
         let put = |name: &str, bytes: &[u8]| -> Result<(), VmtError> {
             let p = tmp.join(name);
@@ -1564,10 +1581,9 @@ pub fn write_profiles(
             cols.push(Col::Num(u, s));
         }
     }
-    write_file_atomic(
-        path,
-        csv_text(&header, &cols, table.position.len()).as_bytes(),
-    )
+    let text =
+        csv_text(&header, &cols, table.position.len()).map_err(|m| VmtError::bad(path, "", m))?;
+    write_file_atomic(path, text.as_bytes())
 }
 
 /// Reads a two-column table CSV (`position`, then `value` or `value_name`) as used by a model's
@@ -1628,6 +1644,8 @@ pub fn value_table_text(x: &[f64], y: &[f64]) -> String {
         &[Col::Num(si, x), Col::Num(si, y)],
         x.len().min(y.len()),
     )
+    // SI units: no conversion, so no overflow; callers validate finiteness first.
+    .unwrap_or_default()
 }
 
 #[cfg(test)]

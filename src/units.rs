@@ -157,12 +157,21 @@ impl Unit {
         } else {
             v * self.factor
         };
-        scaled + self.offset
+        // Adding a zero offset would turn −0 into +0: skip it, so SI reads are bit-exact.
+        if self.offset == 0.0 {
+            scaled
+        } else {
+            scaled + self.offset
+        }
     }
 
     /// Converts an SI value to this unit, the inverse of [`Unit::to_si`].
     pub fn from_si(&self, si: f64) -> f64 {
-        let s = si - self.offset;
+        let s = if self.offset == 0.0 {
+            si
+        } else {
+            si - self.offset
+        };
         if self.divide {
             s * self.factor
         } else {
