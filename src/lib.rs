@@ -1,1 +1,12 @@
+//! vmt: a virtual machine tool. File formats (FORMAT.md), scenarios, workflows (simulate, estimate),
+//! reports and the CLI.
 
+pub mod bundled;
+pub mod cli;
+pub mod error;
+pub mod estimate;
+pub mod measurement;
+pub mod model;
+pub mod scenario;
+pub mod simulate;
+pub mod units;

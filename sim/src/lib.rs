@@ -6,6 +6,7 @@
 pub mod air;
 pub mod axis_sim;
 pub mod drive;
+pub mod effects;
 pub mod feedback;
 pub mod friction;
 pub mod geometry;

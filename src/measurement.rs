@@ -1,0 +1,1693 @@
+//! Measurement sets (`vmt-measurements/1`, FORMAT.md §1) and error-motion profile CSVs
+//! (FORMAT.md §5): plain structs in SI units, a strict reader and an atomic writer.
+//!
+//! A measurement set is a directory holding `manifest.toml` and one CSV file per run. CSV header
+//! cells are `name[unit]` (unit optional → SI); comment lines start with `#`. Two shapes:
+//! a time series (`t` strictly increasing, then `x_cmd` and sensor columns) and a point table
+//! (`target`, `run` 1..n, `direction` ±1, optional `t`, sensor columns). The reader rejects what it
+//! cannot understand with an error naming the file, the line or key path and what was expected
+//! (DESIGN.md §2); the writer writes into a temporary sibling directory and renames it into place,
+//! and prints floats with the shortest digits that round-trip, so write → read is bit-exact in SI.
+
+use crate::error::{fmt_num, parse_toml, TomlReader, VmtError};
+use crate::units::{parse_header_cell, resolve_unit, Dimension, Unit};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeSet;
+use std::io::Write;
+use std::path::{Component, Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use vmt_sim::effects::EffectName;
+
+/// The `format` value of a measurement set's manifest.
+pub const FORMAT_ID: &str = "vmt-measurements/1";
+
+/// What a sensor measures (FORMAT.md §1 "Sensor kinds"), serialised in snake_case.
+/// `pressure` and `humidity` are vmt additions for the air refractive index (Edlén) of a laser.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SensorKind {
+    /// Commanded position, m.
+    Command,
+    /// Rotary encoder on the motor, converted to axis position through the lead, m.
+    EncoderRotary,
+    /// Linear scale along the axis, m.
+    EncoderLinear,
+    /// Laser interferometer, linear optics: displacement along the beam, m.
+    LaserLinear,
+    /// Laser straightness optics: lateral displacement, m.
+    LaserStraightness,
+    /// Laser angular optics, rad.
+    LaserAngular,
+    /// Laser Doppler vector measurement along an arbitrary direction, m.
+    LaserVector,
+    /// Accelerometer (proper acceleration along its direction), m/s².
+    Accelerometer,
+    /// Motor current expressed as force, N.
+    MotorForce,
+    /// Velocity, m/s.
+    Velocity,
+    /// Temperature, K.
+    Temperature,
+    /// Air pressure, Pa (vmt addition).
+    Pressure,
+    /// Relative humidity, ratio (vmt addition; `percent` unit allowed).
+    Humidity,
+}
+
+impl SensorKind {
+    /// Every kind.
+    pub const ALL: [SensorKind; 13] = [
+        SensorKind::Command,
+        SensorKind::EncoderRotary,
+        SensorKind::EncoderLinear,
+        SensorKind::LaserLinear,
+        SensorKind::LaserStraightness,
+        SensorKind::LaserAngular,
+        SensorKind::LaserVector,
+        SensorKind::Accelerometer,
+        SensorKind::MotorForce,
+        SensorKind::Velocity,
+        SensorKind::Temperature,
+        SensorKind::Pressure,
+        SensorKind::Humidity,
+    ];
+
+    /// The name as written in manifests, e.g. `laser_linear`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SensorKind::Command => "command",
+            SensorKind::EncoderRotary => "encoder_rotary",
+            SensorKind::EncoderLinear => "encoder_linear",
+            SensorKind::LaserLinear => "laser_linear",
+            SensorKind::LaserStraightness => "laser_straightness",
+            SensorKind::LaserAngular => "laser_angular",
+            SensorKind::LaserVector => "laser_vector",
+            SensorKind::Accelerometer => "accelerometer",
+            SensorKind::MotorForce => "motor_force",
+            SensorKind::Velocity => "velocity",
+            SensorKind::Temperature => "temperature",
+            SensorKind::Pressure => "pressure",
+            SensorKind::Humidity => "humidity",
+        }
+    }
+
+    /// Parses a manifest `kind` string.
+    pub fn parse(s: &str) -> Option<SensorKind> {
+        SensorKind::ALL.iter().copied().find(|k| k.as_str() == s)
+    }
+
+    /// The physical dimension of the sensor's column (what units its header may carry).
+    pub fn dimension(self) -> Dimension {
+        match self {
+            SensorKind::Command
+            | SensorKind::EncoderRotary
+            | SensorKind::EncoderLinear
+            | SensorKind::LaserLinear
+            | SensorKind::LaserStraightness
+            | SensorKind::LaserVector => Dimension::Length,
+            SensorKind::LaserAngular => Dimension::Angle,
+            SensorKind::Accelerometer => Dimension::Acceleration,
+            SensorKind::MotorForce => Dimension::Force,
+            SensorKind::Velocity => Dimension::Velocity,
+            SensorKind::Temperature => Dimension::Temperature,
+            SensorKind::Pressure => Dimension::Pressure,
+            SensorKind::Humidity => Dimension::Ratio,
+        }
+    }
+}
+
+/// One sensor of a measurement set (a `[[sensors]]` entry).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Sensor {
+    /// The CSV column that carries it.
+    pub name: String,
+    /// What it measures.
+    pub kind: SensorKind,
+    /// The prismatic joint it observes (`x`, `y` or `z`).
+    pub axis: char,
+    /// Measuring point on the moving body, axis reference frame, m (default 0, 0, 0).
+    pub position: [f64; 3],
+    /// Sensitive direction, machine frame (default: along the axis).
+    pub direction: [f64; 3],
+    /// 1-sigma noise in SI units of the channel, if known (≥ 0; 0 = noise-free).
+    pub sigma: Option<f64>,
+}
+
+/// The measurement procedure of a run (DESIGN.md §6).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Procedure {
+    /// ISO 230-2 positioning cycles.
+    Positioning,
+    /// Constant-velocity pass.
+    ConstantVelocity,
+    /// Low-speed crawl (stick-slip, seed 002).
+    Crawl,
+    /// Friction sweep over velocities.
+    FrictionSweep,
+    /// Anything else.
+    Free,
+}
+
+impl Procedure {
+    /// Every procedure.
+    pub const ALL: [Procedure; 5] = [
+        Procedure::Positioning,
+        Procedure::ConstantVelocity,
+        Procedure::Crawl,
+        Procedure::FrictionSweep,
+        Procedure::Free,
+    ];
+
+    /// The name as written in manifests.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Procedure::Positioning => "positioning",
+            Procedure::ConstantVelocity => "constant_velocity",
+            Procedure::Crawl => "crawl",
+            Procedure::FrictionSweep => "friction_sweep",
+            Procedure::Free => "free",
+        }
+    }
+
+    /// Parses a manifest `procedure` string.
+    pub fn parse(s: &str) -> Option<Procedure> {
+        Procedure::ALL.iter().copied().find(|p| p.as_str() == s)
+    }
+}
+
+/// The numbers of one run, SI units.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum RunData {
+    /// Time series: `t` (s, strictly increasing) and named columns of the same length
+    /// (`x_cmd` and sensor columns), in file order.
+    TimeSeries {
+        /// Sample times, s.
+        t: Vec<f64>,
+        /// (column name, values) in file order.
+        columns: Vec<(String, Vec<f64>)>,
+    },
+    /// Point table (positioning): one row per reading.
+    PointTable {
+        /// Target position, m.
+        target: Vec<f64>,
+        /// Run number, 1..n.
+        run: Vec<u32>,
+        /// Approach direction, +1 or −1.
+        direction: Vec<i8>,
+        /// Time of the reading, s, if recorded (for drift).
+        t: Option<Vec<f64>>,
+        /// (sensor name, values) in file order: deviation (actual − target) or reading.
+        columns: Vec<(String, Vec<f64>)>,
+    },
+}
+
+impl RunData {
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        match self {
+            RunData::TimeSeries { t, .. } => t.len(),
+            RunData::PointTable { target, .. } => target.len(),
+        }
+    }
+
+    /// True if there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The named data columns (without t / target / run / direction).
+    pub fn columns(&self) -> &[(String, Vec<f64>)] {
+        match self {
+            RunData::TimeSeries { columns, .. } | RunData::PointTable { columns, .. } => columns,
+        }
+    }
+
+    /// The column `name` (a sensor or `x_cmd`), if present.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.columns()
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_slice())
+    }
+
+    /// Sample or reading times, s, if present.
+    pub fn t(&self) -> Option<&[f64]> {
+        match self {
+            RunData::TimeSeries { t, .. } => Some(t),
+            RunData::PointTable { t, .. } => t.as_deref(),
+        }
+    }
+}
+
+/// One run of a measurement set (a `[[runs]]` entry with its CSV data).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Run {
+    /// Unique name, e.g. `iso`.
+    pub name: String,
+    /// CSV file name, relative to the set's directory.
+    pub file: String,
+    /// Measurement procedure.
+    pub procedure: Procedure,
+    /// The axis moved.
+    pub axis: char,
+    /// Start, s since the start of the measurement session.
+    pub start_time: Option<f64>,
+    /// Feed, m/s (constant_velocity, crawl).
+    pub feed: Option<f64>,
+    /// +1 / −1 for a one-way run.
+    pub direction: Option<i8>,
+    /// The numbers, SI.
+    pub data: RunData,
+}
+
+/// A measurement set: manifest plus the runs' data, SI units.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MeasurementSet {
+    /// Free text.
+    pub description: Option<String>,
+    /// Bundled machine name or URDF path relative to the set.
+    pub machine: Option<String>,
+    /// Present when simulated.
+    pub seed: Option<u64>,
+    /// The sensors.
+    pub sensors: Vec<Sensor>,
+    /// The runs.
+    pub runs: Vec<Run>,
+}
+
+impl MeasurementSet {
+    /// The sensor called `name`.
+    pub fn sensor(&self, name: &str) -> Option<&Sensor> {
+        self.sensors.iter().find(|s| s.name == name)
+    }
+
+    /// The run called `name`.
+    pub fn run(&self, name: &str) -> Option<&Run> {
+        self.runs.iter().find(|r| r.name == name)
+    }
+}
+
+/// Units of the headers a writer produces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum UnitChoice {
+    /// No unit suffixes: SI values, bit-exact round trip.
+    Si,
+    /// Units a metrologist reads: positions (t, target, commands, encoders) in mm, laser and
+    /// other lengths in um, angles in urad, velocities in mm/s, temperatures in degC, humidity in
+    /// percent, others SI. Values are converted, so a round trip is exact to about 1 ulp only.
+    Metrology,
+}
+
+/// Column names a time series or point table reserves.
+const RESERVED: [&str; 4] = ["t", "target", "run", "direction"];
+
+/// True for `x_cmd`, `y_cmd`, `z_cmd`: the commanded position of an axis (a length column).
+pub fn is_command_column(name: &str) -> bool {
+    matches!(name, "x_cmd" | "y_cmd" | "z_cmd")
+}
+
+// ------------------------------------------------------------------------------------------
+// Number formatting and atomic writes.
+
+/// Formats an f64 with the shortest digits that parse back to the same bits: plain for
+/// 1e-5 ≤ |x| < 1e16 and 0 (`0.25`, `-0`), scientific otherwise (`4e-9`). Non-finite values are
+/// never written (writers validate first).
+pub fn fmt_f64(x: f64) -> String {
+    let a = x.abs();
+    if a == 0.0 || (1e-5..1e16).contains(&a) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
+/// Formats an f64 as a TOML float (always with `.` or `e`, so it stays a float).
+pub fn fmt_toml_f64(x: f64) -> String {
+    let s = fmt_f64(x);
+    if s.contains(['.', 'e', 'E']) {
+        s
+    } else {
+        format!("{s}.0")
+    }
+}
+
+/// A TOML string literal (quoted and escaped).
+pub fn toml_str(s: &str) -> String {
+    toml::Value::String(s.to_string()).to_string()
+}
+
+static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// A fresh hidden sibling path of `path`: `.NAME.tag-PID-N`.
+fn sibling(path: &Path, tag: &str) -> PathBuf {
+    let n = TMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+    let name = path
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".to_string());
+    let parent = parent_dir(path);
+    parent.join(format!(".{name}.{tag}-{}-{n}", std::process::id()))
+}
+
+/// The parent directory of `path` ("." for a bare name).
+fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// Writes `bytes` to `path` and flushes them to disk.
+fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), VmtError> {
+    let mut f = std::fs::File::create(path).map_err(|e| VmtError::io(path, "writing", e))?;
+    f.write_all(bytes)
+        .and_then(|_| f.sync_all())
+        .map_err(|e| VmtError::io(path, "writing", e))
+}
+
+/// Writes a file atomically: into a temporary sibling, then renamed over `path`, so a reader
+/// sees the old file or the new one, never a half-written one. Creates missing parent
+/// directories.
+pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> Result<(), VmtError> {
+    let parent = parent_dir(path);
+    std::fs::create_dir_all(&parent)
+        .map_err(|e| VmtError::io(&parent, "creating the directory", e))?;
+    let tmp = sibling(path, "tmp");
+    if let Err(e) = write_synced(&tmp, bytes) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        VmtError::io(path, "renaming into place", e)
+    })
+}
+
+/// Creates or replaces the directory `dir` atomically: `fill` writes the contents into a
+/// temporary sibling directory, which is then renamed into place. An existing `dir` is replaced
+/// only if it is empty or holds the file `marker` (e.g. `manifest.toml`: a previous output of the
+/// same kind), so a mistyped output path never deletes unrelated data. Between the two renames of
+/// a replacement `dir` is briefly absent, never half-written.
+pub fn replace_dir_atomic(
+    dir: &Path,
+    marker: &str,
+    fill: impl FnOnce(&Path) -> Result<(), VmtError>,
+) -> Result<(), VmtError> {
+    let exists = match std::fs::symlink_metadata(dir) {
+        Ok(m) if m.is_dir() => true,
+        Ok(_) => {
+            return Err(VmtError::bad(
+                dir,
+                "",
+                "expected an output directory, but a file of that name exists",
+            ))
+        }
+        Err(_) => false,
+    };
+    if exists {
+        let empty = std::fs::read_dir(dir)
+            .map_err(|e| VmtError::io(dir, "reading the directory", e))?
+            .next()
+            .is_none();
+        if !empty && !dir.join(marker).is_file() {
+            return Err(VmtError::bad(
+                dir,
+                "",
+                format!(
+                    "refusing to replace this directory: it is not empty and holds no `{marker}`, \
+                     so it is not a previous vmt output; choose another output path"
+                ),
+            ));
+        }
+    }
+    let parent = parent_dir(dir);
+    std::fs::create_dir_all(&parent)
+        .map_err(|e| VmtError::io(&parent, "creating the directory", e))?;
+    let tmp = sibling(dir, "tmp");
+    std::fs::create_dir(&tmp).map_err(|e| VmtError::io(&tmp, "creating the directory", e))?;
+    if let Err(e) = fill(&tmp) {
+        let _ = std::fs::remove_dir_all(&tmp);
+        return Err(e);
+    }
+    if exists {
+        let old = sibling(dir, "old");
+        if let Err(e) = std::fs::rename(dir, &old) {
+            let _ = std::fs::remove_dir_all(&tmp);
+            return Err(VmtError::io(dir, "moving the old output aside", e));
+        }
+        if let Err(e) = std::fs::rename(&tmp, dir) {
+            let _ = std::fs::rename(&old, dir);
+            let _ = std::fs::remove_dir_all(&tmp);
+            return Err(VmtError::io(dir, "renaming into place", e));
+        }
+        let _ = std::fs::remove_dir_all(&old);
+    } else {
+        std::fs::rename(&tmp, dir).map_err(|e| {
+            let _ = std::fs::remove_dir_all(&tmp);
+            VmtError::io(dir, "renaming into place", e)
+        })?;
+    }
+    Ok(())
+}
+
+// ------------------------------------------------------------------------------------------
+// CSV reading.
+
+/// A CSV file split into header cells and rows of trimmed text, with the line of each row.
+struct CsvText {
+    /// (name, unit symbol) per column.
+    header: Vec<(String, Option<String>)>,
+    /// (1-based line number, cells).
+    rows: Vec<(u64, Vec<String>)>,
+}
+
+/// Reads a CSV file of FORMAT.md §1: `#` comment lines, one header line, then rows with as many
+/// cells as the header. Duplicate column names are rejected.
+fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
+    let bytes = std::fs::read(path).map_err(|e| VmtError::io(path, "reading", e))?;
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .flexible(true)
+        .from_reader(bytes.as_slice());
+    let mut header: Option<Vec<(String, Option<String>)>> = None;
+    let mut rows: Vec<(u64, Vec<String>)> = Vec::new();
+    for rec in rdr.records() {
+        let rec = rec.map_err(|e| {
+            let place = e
+                .position()
+                .map(|p| format!("line {}", p.line()))
+                .unwrap_or_default();
+            VmtError::bad(path, place, format!("malformed CSV: {e}"))
+        })?;
+        let line = rec.position().map_or(0, |p| p.line());
+        match &header {
+            None => {
+                let mut cols: Vec<(String, Option<String>)> = Vec::new();
+                for cell in rec.iter() {
+                    let (name, unit) = parse_header_cell(cell)
+                        .map_err(|m| VmtError::bad(path, format!("line {line} (header)"), m))?;
+                    if cols.iter().any(|(n, _)| *n == name) {
+                        return Err(VmtError::bad(
+                            path,
+                            format!("line {line} (header)"),
+                            format!("column `{name}` appears twice"),
+                        ));
+                    }
+                    cols.push((name, unit));
+                }
+                header = Some(cols);
+            }
+            Some(h) => {
+                if rec.len() != h.len() {
+                    return Err(VmtError::bad(
+                        path,
+                        format!("line {line}"),
+                        format!(
+                            "expected {} cells like the header, got {}",
+                            h.len(),
+                            rec.len()
+                        ),
+                    ));
+                }
+                rows.push((line, rec.iter().map(|s| s.to_string()).collect()));
+            }
+        }
+    }
+    let header = header.ok_or_else(|| {
+        VmtError::bad(
+            path,
+            "",
+            "empty CSV file: expected a header line, then rows",
+        )
+    })?;
+    if rows.is_empty() {
+        return Err(VmtError::bad(
+            path,
+            "",
+            "expected at least one row of numbers after the header",
+        ));
+    }
+    Ok(CsvText { header, rows })
+}
+
+impl CsvText {
+    fn index(&self, name: &str) -> Option<usize> {
+        self.header.iter().position(|(n, _)| n == name)
+    }
+
+    /// Column `i` as SI numbers: each cell a finite number, converted from the header's unit,
+    /// which must have dimension `dim`.
+    fn numbers(&self, path: &Path, i: usize, dim: Dimension) -> Result<Vec<f64>, VmtError> {
+        let (name, unit) = &self.header[i];
+        let u: Unit = resolve_unit(unit.as_deref(), dim)
+            .map_err(|m| VmtError::bad(path, format!("column {name}"), m))?;
+        self.rows
+            .iter()
+            .map(|(line, cells)| {
+                parse_number(&cells[i])
+                    .map(|v| u.to_si(v))
+                    .map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m))
+            })
+            .collect()
+    }
+
+    /// Column `i` as raw numbers with no unit allowed (run numbers, directions).
+    fn unitless(&self, path: &Path, i: usize, what: &str) -> Result<Vec<f64>, VmtError> {
+        let (name, unit) = &self.header[i];
+        if let Some(u) = unit {
+            return Err(VmtError::bad(
+                path,
+                format!("column {name}"),
+                format!("`{name}` holds {what} and takes no unit, got `[{u}]`"),
+            ));
+        }
+        self.rows
+            .iter()
+            .map(|(line, cells)| {
+                parse_number(&cells[i])
+                    .map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m))
+            })
+            .collect()
+    }
+
+    fn line(&self, row: usize) -> u64 {
+        self.rows[row].0
+    }
+}
+
+/// Parses one CSV cell as a finite number.
+fn parse_number(cell: &str) -> Result<f64, String> {
+    if cell.is_empty() {
+        return Err("expected a number, got an empty cell".to_string());
+    }
+    match cell.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(format!("expected a finite number, got `{cell}`")),
+        Err(_) => Err(format!("expected a number, got `{cell}`")),
+    }
+}
+
+/// Checks that `t` increases strictly; the error names the line of the offending row.
+fn check_increasing(csv: &CsvText, path: &Path, t: &[f64], col: &str) -> Result<(), VmtError> {
+    if let Some(i) = t.windows(2).position(|w| w[1] <= w[0]) {
+        return Err(VmtError::bad(
+            path,
+            format!("line {}, column {col}", csv.line(i + 1)),
+            format!(
+                "`{col}` must increase strictly, got {} after {}",
+                fmt_num(t[i + 1]),
+                fmt_num(t[i])
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Reads one run's CSV; `sensors` gives the kinds (hence units) of sensor columns.
+fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
+    let csv = read_csv_text(path)?;
+    let is_table = csv.index("target").is_some();
+    let mut columns: Vec<(String, Vec<f64>)> = Vec::new();
+    for (i, (name, _)) in csv.header.iter().enumerate() {
+        if RESERVED.contains(&name.as_str()) {
+            continue;
+        }
+        let dim = if let Some(s) = sensors.iter().find(|s| s.name == *name) {
+            s.kind.dimension()
+        } else if is_command_column(name) {
+            Dimension::Length
+        } else {
+            let known: Vec<&str> = sensors.iter().map(|s| s.name.as_str()).collect();
+            return Err(VmtError::bad(
+                path,
+                format!("column {name}"),
+                format!(
+                    "unknown column `{name}`: expected a sensor of manifest.toml ({}), \
+                     x_cmd/y_cmd/z_cmd, or {}",
+                    if known.is_empty() {
+                        "none declared".to_string()
+                    } else {
+                        known.join(", ")
+                    },
+                    if is_table {
+                        "target, run, direction, t"
+                    } else {
+                        "t"
+                    }
+                ),
+            ));
+        };
+        columns.push((name.clone(), csv.numbers(path, i, dim)?));
+    }
+    if !is_table {
+        for r in ["run", "direction"] {
+            if csv.index(r).is_some() {
+                return Err(VmtError::bad(
+                    path,
+                    format!("column {r}"),
+                    format!(
+                        "column `{r}` belongs to a point table, which needs a `target` column \
+                         (m): add it, or remove `{r}` for a time series"
+                    ),
+                ));
+            }
+        }
+        let ti = csv.index("t").ok_or_else(|| {
+            VmtError::bad(
+                path,
+                "line 1 (header)",
+                "missing column `t`: a time series needs `t` (s, increasing); a point table needs \
+                 `target`, `run`, `direction`",
+            )
+        })?;
+        let t = csv.numbers(path, ti, Dimension::Time)?;
+        check_increasing(&csv, path, &t, "t")?;
+        return Ok(RunData::TimeSeries { t, columns });
+    }
+    let need = |c: &str| {
+        csv.index(c).ok_or_else(|| {
+            VmtError::bad(
+                path,
+                "line 1 (header)",
+                format!(
+                    "missing column `{c}`: a point table needs `target` (m), `run` (1..n) and \
+                     `direction` (+1/-1)"
+                ),
+            )
+        })
+    };
+    let target = csv.numbers(path, need("target")?, Dimension::Length)?;
+    let ri = need("run")?;
+    let di = need("direction")?;
+    let run_raw = csv.unitless(path, ri, "run numbers")?;
+    let dir_raw = csv.unitless(path, di, "directions")?;
+    let mut run: Vec<u32> = Vec::with_capacity(run_raw.len());
+    let mut direction: Vec<i8> = Vec::with_capacity(dir_raw.len());
+    for (k, (&r, &d)) in run_raw.iter().zip(&dir_raw).enumerate() {
+        if r < 1.0 || r.fract() != 0.0 || r > f64::from(u32::MAX) {
+            return Err(VmtError::bad(
+                path,
+                format!("line {}, column run", csv.line(k)),
+                format!("expected a run number 1, 2, 3, ..., got {}", fmt_num(r)),
+            ));
+        }
+        if d != 1.0 && d != -1.0 {
+            return Err(VmtError::bad(
+                path,
+                format!("line {}, column direction", csv.line(k)),
+                format!("expected +1 or -1, got {}", fmt_num(d)),
+            ));
+        }
+        run.push(r as u32);
+        direction.push(d as i8);
+    }
+    let t = match csv.index("t") {
+        Some(ti) => Some(csv.numbers(path, ti, Dimension::Time)?),
+        None => None,
+    };
+    Ok(RunData::PointTable {
+        target,
+        run,
+        direction,
+        t,
+        columns,
+    })
+}
+
+// ------------------------------------------------------------------------------------------
+// Manifest.
+
+fn axis_char(r: &TomlReader<'_>, key: &str) -> Result<Option<char>, VmtError> {
+    match r.opt_str(key, "an axis \"x\", \"y\" or \"z\"")? {
+        None => Ok(None),
+        Some(s) if matches!(s, "x" | "y" | "z") => Ok(s.chars().next()),
+        Some(s) => Err(r.bad(
+            key,
+            format!("expected an axis \"x\", \"y\" or \"z\", got {s:?}"),
+        )),
+    }
+}
+
+fn vec3(r: &TomlReader<'_>, key: &str, what: &str) -> Result<Option<[f64; 3]>, VmtError> {
+    match r.opt_f64_array(key, what)? {
+        None => Ok(None),
+        Some(v) if v.len() == 3 => Ok(Some([v[0], v[1], v[2]])),
+        Some(v) => Err(r.bad(key, format!("expected 3 numbers ({what}), got {}", v.len()))),
+    }
+}
+
+/// The unit vector of an axis.
+fn axis_unit(axis: char) -> [f64; 3] {
+    match axis {
+        'y' => [0.0, 1.0, 0.0],
+        'z' => [0.0, 0.0, 1.0],
+        _ => [1.0, 0.0, 0.0],
+    }
+}
+
+fn parse_sensor(r: &TomlReader<'_>) -> Result<Sensor, VmtError> {
+    let name = r
+        .req_str("name", "the sensor's CSV column name")?
+        .to_string();
+    let kind_s = r.req_str("kind", "a sensor kind")?;
+    let kind = SensorKind::parse(kind_s).ok_or_else(|| {
+        let known: Vec<&str> = SensorKind::ALL.iter().map(|k| k.as_str()).collect();
+        r.bad(
+            "kind",
+            format!(
+                "unknown sensor kind {kind_s:?}; expected one of {}",
+                known.join(", ")
+            ),
+        )
+    })?;
+    let axis = axis_char(r, "axis")?.ok_or_else(|| {
+        r.bad(
+            "axis",
+            "missing key: expected the axis observed, \"x\", \"y\" or \"z\"",
+        )
+    })?;
+    let position = vec3(r, "position", "a measuring point in metres")?.unwrap_or([0.0, 0.0, 0.0]);
+    let direction =
+        vec3(r, "direction", "a sensitive direction")?.unwrap_or_else(|| axis_unit(axis));
+    let sigma = r.opt_f64("sigma", "a 1-sigma noise in SI units of the channel")?;
+    r.deny_unknown()?;
+    Ok(Sensor {
+        name,
+        kind,
+        axis,
+        position,
+        direction,
+        sigma,
+    })
+}
+
+/// A run's manifest entry before its data is read.
+fn parse_run_entry(r: &TomlReader<'_>) -> Result<(Run, String), VmtError> {
+    let name = r.req_str("name", "the run's name")?.to_string();
+    let file = r.req_str("file", "the run's CSV file name")?.to_string();
+    let ps = r.req_str("procedure", "a procedure")?;
+    let procedure = Procedure::parse(ps).ok_or_else(|| {
+        let known: Vec<&str> = Procedure::ALL.iter().map(|p| p.as_str()).collect();
+        r.bad(
+            "procedure",
+            format!(
+                "unknown procedure {ps:?}; expected one of {}",
+                known.join(", ")
+            ),
+        )
+    })?;
+    let axis = axis_char(r, "axis")?.ok_or_else(|| {
+        r.bad(
+            "axis",
+            "missing key: expected the axis moved, \"x\", \"y\" or \"z\"",
+        )
+    })?;
+    let start_time = r.opt_f64("start_time", "a time in seconds")?;
+    let feed = r.opt_f64("feed", "a feed in m/s")?;
+    let direction = match r.opt_i64("direction", "+1 or -1")? {
+        None => None,
+        Some(d) if d == 1 || d == -1 => Some(d as i8),
+        Some(d) => return Err(r.bad("direction", format!("expected +1 or -1, got {d}"))),
+    };
+    r.deny_unknown()?;
+    Ok((
+        Run {
+            name,
+            file: file.clone(),
+            procedure,
+            axis,
+            start_time,
+            feed,
+            direction,
+            data: RunData::TimeSeries {
+                t: Vec::new(),
+                columns: Vec::new(),
+            },
+        },
+        file,
+    ))
+}
+
+/// True if `file` is a plain relative path inside the set (no `..`, not absolute).
+fn is_safe_relative(file: &str) -> bool {
+    let p = Path::new(file);
+    !file.is_empty() && p.components().all(|c| matches!(c, Component::Normal(_)))
+}
+
+/// Reads a measurement set from directory `dir`: `manifest.toml` (format `vmt-measurements/1`,
+/// unknown keys rejected) and every run's CSV, converted to SI. Every problem is a
+/// [`VmtError::BadInput`] naming the file and the key path or line and column.
+pub fn read(dir: &Path) -> Result<MeasurementSet, VmtError> {
+    let mpath = dir.join("manifest.toml");
+    if !dir.is_dir() {
+        return Err(VmtError::bad(
+            dir,
+            "",
+            "expected a measurement set: a directory holding manifest.toml and CSV files",
+        ));
+    }
+    let text = std::fs::read_to_string(&mpath)
+        .map_err(|e| VmtError::io(&mpath, "reading the manifest", e))?;
+    let table = parse_toml(&mpath, &text)?;
+    let r = TomlReader::new(&mpath, "", &table);
+    let format = r.req_str("format", &format!("\"{FORMAT_ID}\""))?;
+    if format != FORMAT_ID {
+        return Err(r.bad(
+            "format",
+            format!("expected \"{FORMAT_ID}\", got {format:?}"),
+        ));
+    }
+    let description = r.opt_str("description", "a string")?.map(str::to_string);
+    let machine = r
+        .opt_str("machine", "a bundled machine name or URDF path")?
+        .map(str::to_string);
+    let seed = r.opt_u64("seed", "a non-negative integer seed")?;
+    let sensors: Vec<Sensor> = r
+        .opt_tables("sensors")?
+        .unwrap_or_default()
+        .iter()
+        .map(parse_sensor)
+        .collect::<Result<Vec<Sensor>, VmtError>>()?;
+    let entries = r.opt_tables("runs")?.unwrap_or_default();
+    r.deny_unknown()?;
+    let mut runs: Vec<Run> = Vec::with_capacity(entries.len());
+    let mut set_so_far = MeasurementSet {
+        description,
+        machine,
+        seed,
+        sensors,
+        runs: Vec::new(),
+    };
+    // Manifest-level checks (names, ranges) before touching the CSV files.
+    let mut parsed: Vec<(Run, String)> = Vec::new();
+    for e in &entries {
+        parsed.push(parse_run_entry(e)?);
+    }
+    set_so_far.runs = parsed.iter().map(|(r, _)| r.clone()).collect();
+    validate_manifest(&set_so_far, &mpath)?;
+    for (mut run, file) in parsed {
+        run.data = read_run_data(&dir.join(&file), &set_so_far.sensors)?;
+        runs.push(run);
+    }
+    set_so_far.runs = runs;
+    validate(&set_so_far, &mpath)?;
+    Ok(set_so_far)
+}
+
+/// A valid sensor / column name: non-empty, no whitespace, none of `,[]#"`.
+fn valid_column_name(s: &str) -> bool {
+    !s.is_empty()
+        && !s
+            .chars()
+            .any(|c| c.is_whitespace() || matches!(c, ',' | '[' | ']' | '#' | '"'))
+}
+
+/// Checks the manifest part of a set (sensors and run entries): unique valid names, safe file
+/// names, finite geometry, a non-zero direction, σ ≥ 0, feed > 0. Errors name `file` (the
+/// manifest) and the key path, e.g. `sensors[1].sigma`.
+pub fn validate_manifest(set: &MeasurementSet, file: &Path) -> Result<(), VmtError> {
+    let bad = |place: String, m: String| Err(VmtError::bad(file, place, m));
+    for (i, s) in set.sensors.iter().enumerate() {
+        if !valid_column_name(&s.name) {
+            return bad(
+                format!("sensors[{i}].name"),
+                format!(
+                    "expected a CSV column name (no spaces, commas, brackets, # or quotes), \
+                     got {:?}",
+                    s.name
+                ),
+            );
+        }
+        if RESERVED.contains(&s.name.as_str()) {
+            return bad(
+                format!("sensors[{i}].name"),
+                format!(
+                    "`{}` is reserved for the CSV's own columns (t, target, run, direction)",
+                    s.name
+                ),
+            );
+        }
+        if set.sensors[..i].iter().any(|o| o.name == s.name) {
+            return bad(
+                format!("sensors[{i}].name"),
+                format!("sensor `{}` is declared twice", s.name),
+            );
+        }
+        if !matches!(s.axis, 'x' | 'y' | 'z') {
+            return bad(
+                format!("sensors[{i}].axis"),
+                format!("expected \"x\", \"y\" or \"z\", got {:?}", s.axis),
+            );
+        }
+        if s.position.iter().any(|v| !v.is_finite()) {
+            return bad(
+                format!("sensors[{i}].position"),
+                "expected 3 finite numbers (m)".to_string(),
+            );
+        }
+        let n2: f64 = s.direction.iter().map(|v| v * v).sum();
+        if !n2.is_finite() || n2 == 0.0 {
+            return bad(
+                format!("sensors[{i}].direction"),
+                format!(
+                    "expected a non-zero finite direction, got {:?}",
+                    s.direction
+                ),
+            );
+        }
+        if let Some(sg) = s.sigma {
+            if !(sg.is_finite() && sg >= 0.0) {
+                return bad(
+                    format!("sensors[{i}].sigma"),
+                    format!(
+                        "expected a 1-sigma noise in SI units of the channel ≥ 0, got {}",
+                        fmt_num(sg)
+                    ),
+                );
+            }
+        }
+    }
+    if set.runs.is_empty() {
+        return bad(
+            "runs".to_string(),
+            "expected at least one [[runs]] entry".to_string(),
+        );
+    }
+    for (i, r) in set.runs.iter().enumerate() {
+        if r.name.is_empty() {
+            return bad(
+                format!("runs[{i}].name"),
+                "expected a non-empty name".into(),
+            );
+        }
+        if set.runs[..i].iter().any(|o| o.name == r.name) {
+            return bad(
+                format!("runs[{i}].name"),
+                format!("run `{}` is declared twice", r.name),
+            );
+        }
+        if !is_safe_relative(&r.file) || r.file == "manifest.toml" {
+            return bad(
+                format!("runs[{i}].file"),
+                format!(
+                    "expected a CSV file name relative to the set's directory (no `..`, not \
+                     absolute), got {:?}",
+                    r.file
+                ),
+            );
+        }
+        if set.runs[..i].iter().any(|o| o.file == r.file) {
+            return bad(
+                format!("runs[{i}].file"),
+                format!("file {:?} is used by two runs", r.file),
+            );
+        }
+        if !matches!(r.axis, 'x' | 'y' | 'z') {
+            return bad(
+                format!("runs[{i}].axis"),
+                format!("expected \"x\", \"y\" or \"z\", got {:?}", r.axis),
+            );
+        }
+        if let Some(t0) = r.start_time {
+            if !t0.is_finite() {
+                return bad(
+                    format!("runs[{i}].start_time"),
+                    "expected a finite time in seconds".into(),
+                );
+            }
+        }
+        if let Some(f) = r.feed {
+            if !(f.is_finite() && f > 0.0) {
+                return bad(
+                    format!("runs[{i}].feed"),
+                    format!("expected a feed in m/s > 0, got {}", fmt_num(f)),
+                );
+            }
+        }
+        if let Some(d) = r.direction {
+            if d != 1 && d != -1 {
+                return bad(
+                    format!("runs[{i}].direction"),
+                    format!("expected +1 or -1, got {d}"),
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks a whole set (manifest part, then every run's data: equal column lengths, finite
+/// values, strictly increasing `t`, run numbers ≥ 1, directions ±1, columns that are sensors or
+/// x_cmd/y_cmd/z_cmd). Used by the writer so that nothing is written that the reader would reject.
+pub fn validate(set: &MeasurementSet, file: &Path) -> Result<(), VmtError> {
+    validate_manifest(set, file)?;
+    for (i, r) in set.runs.iter().enumerate() {
+        let place = |what: String| format!("runs[{i}] ({}): {what}", r.name);
+        let bad = |what: String, m: String| Err(VmtError::bad(file, place(what), m));
+        let n = r.data.len();
+        if n == 0 {
+            return bad("data".into(), "expected at least one row".into());
+        }
+        let check = |name: &str, v: &[f64]| -> Result<(), VmtError> {
+            if v.len() != n {
+                return Err(VmtError::bad(
+                    file,
+                    place(format!("column {name}")),
+                    format!(
+                        "expected {n} values like the other columns, got {}",
+                        v.len()
+                    ),
+                ));
+            }
+            if let Some(k) = v.iter().position(|x| !x.is_finite()) {
+                return Err(VmtError::bad(
+                    file,
+                    place(format!("column {name}, row {}", k + 1)),
+                    format!("expected a finite number, got {}", v[k]),
+                ));
+            }
+            Ok(())
+        };
+        let mut seen: BTreeSet<&str> = BTreeSet::new();
+        for (name, v) in r.data.columns() {
+            if set.sensor(name).is_none() && !is_command_column(name) {
+                return bad(
+                    format!("column {name}"),
+                    format!("`{name}` is neither a declared sensor nor x_cmd/y_cmd/z_cmd"),
+                );
+            }
+            if !seen.insert(name) {
+                return bad(format!("column {name}"), "column appears twice".into());
+            }
+            check(name, v)?;
+        }
+        match &r.data {
+            RunData::TimeSeries { t, .. } => {
+                check("t", t)?;
+                if let Some(k) = t.windows(2).position(|w| w[1] <= w[0]) {
+                    return bad(
+                        format!("column t, row {}", k + 2),
+                        format!(
+                            "`t` must increase strictly, got {} after {}",
+                            fmt_num(t[k + 1]),
+                            fmt_num(t[k])
+                        ),
+                    );
+                }
+            }
+            RunData::PointTable {
+                target,
+                run,
+                direction,
+                t,
+                ..
+            } => {
+                check("target", target)?;
+                if let Some(t) = t {
+                    check("t", t)?;
+                }
+                if run.len() != n || direction.len() != n {
+                    return bad(
+                        "columns run, direction".into(),
+                        format!("expected {n} values like `target`"),
+                    );
+                }
+                if let Some(k) = run.iter().position(|&x| x < 1) {
+                    return bad(
+                        format!("column run, row {}", k + 1),
+                        format!("expected a run number 1, 2, 3, ..., got {}", run[k]),
+                    );
+                }
+                if let Some(k) = direction.iter().position(|&d| d != 1 && d != -1) {
+                    return bad(
+                        format!("column direction, row {}", k + 1),
+                        format!("expected +1 or -1, got {}", direction[k]),
+                    );
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+// ------------------------------------------------------------------------------------------
+// Writing.
+
+/// The unit a writer uses for a column of dimension `dim` (`position_like`: t, target, commands,
+/// encoders, which are written in mm rather than um under `Metrology`).
+fn write_unit(dim: Dimension, position_like: bool, choice: UnitChoice) -> Unit {
+    let sym = match (choice, dim) {
+        (UnitChoice::Si, _) => return dim.si(),
+        (UnitChoice::Metrology, Dimension::Length) if position_like => "mm",
+        (UnitChoice::Metrology, Dimension::Length) => "um",
+        (UnitChoice::Metrology, Dimension::Angle) => "urad",
+        (UnitChoice::Metrology, Dimension::Velocity) => "mm/s",
+        (UnitChoice::Metrology, Dimension::Temperature) => "degC",
+        (UnitChoice::Metrology, Dimension::Ratio) => "percent",
+        (UnitChoice::Metrology, d) => return d.si(),
+    };
+    crate::units::unit(sym).unwrap_or_else(|| dim.si())
+}
+
+/// A header cell `name[unit]`, or `name` for SI.
+fn header_cell(name: &str, u: &Unit) -> String {
+    if u.is_si() {
+        name.to_string()
+    } else {
+        format!("{name}[{}]", u.symbol)
+    }
+}
+
+/// CSV text of columns of equal length: header cells and per-column (unit, values); integer
+/// columns are passed as already formatted strings.
+enum Col<'a> {
+    Num(Unit, &'a [f64]),
+    Int(Vec<String>),
+}
+
+fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, String> {
+    let mut out = String::with_capacity(16 * (n + 1) * header.len().max(1));
+    out.push_str(&header.join(","));
+    out.push('\n');
+    for i in 0..n {
+        for (j, c) in cols.iter().enumerate() {
+            if j > 0 {
+                out.push(',');
+            }
+            match c {
+                Col::Num(u, v) => {
+                    let x = u.from_si(v[i]);
+                    if !x.is_finite() {
+                        return Err(format!(
+                            "column {}, row {}: {} (SI) overflows when written in {}; write \
+                             in SI units",
+                            header[j],
+                            i + 1,
+                            fmt_num(v[i]),
+                            u.symbol
+                        ));
+                    }
+                    out.push_str(&fmt_f64(x));
+                }
+                Col::Int(v) => out.push_str(&v[i]),
+            }
+        }
+        out.push('\n');
+    }
+    Ok(out)
+}
+
+/// The CSV text of one run.
+fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> Result<String, String> {
+    let mut header: Vec<String> = Vec::new();
+    let mut cols: Vec<Col<'_>> = Vec::new();
+    let time_u = write_unit(Dimension::Time, true, units);
+    match &run.data {
+        RunData::TimeSeries { t, .. } => {
+            header.push(header_cell("t", &time_u));
+            cols.push(Col::Num(time_u, t));
+        }
+        RunData::PointTable {
+            target,
+            run: rn,
+            direction,
+            t,
+            ..
+        } => {
+            let lu = write_unit(Dimension::Length, true, units);
+            header.push(header_cell("target", &lu));
+            cols.push(Col::Num(lu, target));
+            header.push("run".into());
+            cols.push(Col::Int(rn.iter().map(|r| r.to_string()).collect()));
+            header.push("direction".into());
+            cols.push(Col::Int(direction.iter().map(|d| d.to_string()).collect()));
+            if let Some(t) = t {
+                header.push(header_cell("t", &time_u));
+                cols.push(Col::Num(time_u, t));
+            }
+        }
+    }
+    for (name, v) in run.data.columns() {
+        let (dim, pos) = match set.sensor(name) {
+            Some(s) => (
+                s.kind.dimension(),
+                matches!(
+                    s.kind,
+                    SensorKind::Command | SensorKind::EncoderLinear | SensorKind::EncoderRotary
+                ),
+            ),
+            None => (Dimension::Length, true),
+        };
+        let u = write_unit(dim, pos, units);
+        header.push(header_cell(name, &u));
+        cols.push(Col::Num(u, v));
+    }
+    csv_text(&header, &cols, run.data.len())
+}
+
+/// A TOML array of floats.
+fn toml_f64_array(v: &[f64]) -> String {
+    let items: Vec<String> = v.iter().map(|x| fmt_toml_f64(*x)).collect();
+    format!("[{}]", items.join(", "))
+}
+
+/// The manifest text of a set.
+fn manifest_text(set: &MeasurementSet) -> Result<String, VmtError> {
+    let mut s = String::new();
+    s.push_str(
+        "# vmt measurement set (FORMAT.md §1); CSV values in SI unless a header says [unit]\n",
+    );
+    s.push_str(&format!("format = {}\n", toml_str(FORMAT_ID)));
+    if let Some(d) = &set.description {
+        s.push_str(&format!("description = {}\n", toml_str(d)));
+    }
+    if let Some(m) = &set.machine {
+        s.push_str(&format!("machine = {}\n", toml_str(m)));
+    }
+    if let Some(seed) = set.seed {
+        let seed_i = i64::try_from(seed).map_err(|_| {
+            VmtError::Internal(format!(
+                "seed {seed} does not fit a TOML integer (at most 2^63 - 1)"
+            ))
+        })?;
+        s.push_str(&format!("seed = {seed_i}\n"));
+    }
+    for x in &set.sensors {
+        s.push_str("\n[[sensors]]\n");
+        s.push_str(&format!("name = {}\n", toml_str(&x.name)));
+        s.push_str(&format!("kind = {}\n", toml_str(x.kind.as_str())));
+        s.push_str(&format!("axis = {}\n", toml_str(&x.axis.to_string())));
+        s.push_str(&format!("position = {}\n", toml_f64_array(&x.position)));
+        s.push_str(&format!("direction = {}\n", toml_f64_array(&x.direction)));
+        if let Some(sg) = x.sigma {
+            s.push_str(&format!("sigma = {}\n", fmt_toml_f64(sg)));
+        }
+    }
+    for r in &set.runs {
+        s.push_str("\n[[runs]]\n");
+        s.push_str(&format!("name = {}\n", toml_str(&r.name)));
+        s.push_str(&format!("file = {}\n", toml_str(&r.file)));
+        s.push_str(&format!("procedure = {}\n", toml_str(r.procedure.as_str())));
+        s.push_str(&format!("axis = {}\n", toml_str(&r.axis.to_string())));
+        if let Some(t0) = r.start_time {
+            s.push_str(&format!("start_time = {}\n", fmt_toml_f64(t0)));
+        }
+        if let Some(f) = r.feed {
+            s.push_str(&format!("feed = {}\n", fmt_toml_f64(f)));
+        }
+        if let Some(d) = r.direction {
+            s.push_str(&format!("direction = {d}\n"));
+        }
+    }
+    Ok(s)
+}
+
+/// Writes a measurement set into directory `dir` atomically (see [`write_with_extras`]).
+pub fn write(set: &MeasurementSet, dir: &Path, units: UnitChoice) -> Result<(), VmtError> {
+    write_with_extras(set, dir, units, &[])
+}
+
+/// Writes a measurement set into directory `dir`, plus `extras` (file name, bytes) such as
+/// `truth.toml` and `truth_profiles.csv` (FORMAT.md §5), all in one atomic step: everything is
+/// written into a temporary sibling directory which is then renamed into place, replacing a
+/// previous measurement set (a directory holding `manifest.toml`) or an empty directory.
+/// The set is validated first ([`validate`]): nothing is written that [`read`] would reject.
+pub fn write_with_extras(
+    set: &MeasurementSet,
+    dir: &Path,
+    units: UnitChoice,
+    extras: &[(String, Vec<u8>)],
+) -> Result<(), VmtError> {
+    let mpath = dir.join("manifest.toml");
+    validate(set, &mpath)?;
+    for (name, _) in extras {
+        if !is_safe_relative(name)
+            || name == "manifest.toml"
+            || set.runs.iter().any(|r| r.file == *name)
+        {
+            return Err(VmtError::Internal(format!(
+                "extra file {name:?} is not a fresh relative name inside the set"
+            )));
+        }
+    }
+    let manifest = manifest_text(set)?;
+    let runs: Vec<(String, String)> = set
+        .runs
+        .iter()
+        .map(|r| {
+            run_csv(set, r, units)
+                .map(|text| (r.file.clone(), text))
+                .map_err(|m| VmtError::bad(&dir.join(&r.file), "", m))
+        })
+        .collect::<Result<Vec<(String, String)>, VmtError>>()?;
+    replace_dir_atomic(dir, "manifest.toml", |tmp| {
+        let put = |name: &str, bytes: &[u8]| -> Result<(), VmtError> {
+            let p = tmp.join(name);
+            if let Some(parent) = p.parent() {
+                std::fs::create_dir_all(parent)
+                    .map_err(|e| VmtError::io(parent, "creating the directory", e))?;
+            }
+            write_synced(&p, bytes)
+        };
+        for (file, text) in &runs {
+            put(file, text.as_bytes())?;
+        }
+        for (name, bytes) in extras {
+            put(name, bytes)?;
+        }
+        // The manifest last: a set is complete when its manifest exists.
+        put("manifest.toml", manifest.as_bytes())
+    })
+}
+
+// ------------------------------------------------------------------------------------------
+// Error-motion profiles (FORMAT.md §5).
+
+/// One error-motion column of a profile CSV: `pitch` or `y.pitch`, with optional `pitch_sigma`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProfileColumn {
+    /// Axis prefix (`y.pitch` → `y`); `None` for an unprefixed column (the file's one axis).
+    pub axis: Option<char>,
+    /// Which error motion (positioning, straightness_y, straightness_z, roll, pitch, yaw).
+    pub effect: EffectName,
+    /// Values at the positions, m or rad.
+    pub values: Vec<f64>,
+    /// Standard errors, same unit, if given.
+    pub sigma: Option<Vec<f64>>,
+}
+
+impl ProfileColumn {
+    /// The column name in a file: `pitch` or `y.pitch`.
+    pub fn column_name(&self) -> String {
+        match self.axis {
+            Some(a) => format!("{a}.{}", self.effect),
+            None => self.effect.to_string(),
+        }
+    }
+}
+
+/// A truth or estimate of error motions over positions (FORMAT.md §5): `truth_profiles.csv`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ProfileTable {
+    /// Axis positions, m, strictly increasing.
+    pub position: Vec<f64>,
+    /// The error-motion columns.
+    pub columns: Vec<ProfileColumn>,
+}
+
+impl ProfileTable {
+    /// The column of `effect` on `axis`: an exact axis match first, then an unprefixed column.
+    pub fn get(&self, effect: EffectName, axis: char) -> Option<&ProfileColumn> {
+        self.columns
+            .iter()
+            .find(|c| c.effect == effect && c.axis == Some(axis))
+            .or_else(|| {
+                self.columns
+                    .iter()
+                    .find(|c| c.effect == effect && c.axis.is_none())
+            })
+    }
+}
+
+/// Splits a profile column name into (axis, effect, is_sigma).
+fn parse_profile_column(name: &str) -> Result<(Option<char>, EffectName, bool), String> {
+    let expected = "expected an error-motion column: positioning, straightness_y, \
+                    straightness_z, roll, pitch or yaw, optionally prefixed by the axis (`y.pitch`) \
+                    and suffixed `_sigma`";
+    let (base, sigma) = match name.strip_suffix("_sigma") {
+        Some(b) => (b, true),
+        None => (name, false),
+    };
+    let (axis, ename) = match base.split_once('.') {
+        Some((a, e)) if matches!(a, "x" | "y" | "z") => (a.chars().next(), e),
+        Some(_) => return Err(format!("column `{name}`: bad axis prefix; {expected}")),
+        None => (None, base),
+    };
+    match ename.parse::<EffectName>() {
+        Ok(e) if e.is_error_motion() => Ok((axis, e, sigma)),
+        _ => Err(format!("unknown column `{name}`: {expected}")),
+    }
+}
+
+/// Reads an error-motion profile CSV (FORMAT.md §5): a `position` column (length unit allowed),
+/// one column per error motion (`pitch`, `y.pitch`; length or angle units per effect) and
+/// optional `NAME_sigma` columns. Positions must increase strictly; values must be finite.
+pub fn read_profiles(path: &Path) -> Result<ProfileTable, VmtError> {
+    let csv = read_csv_text(path)?;
+    let pi = csv.index("position").ok_or_else(|| {
+        VmtError::bad(
+            path,
+            "line 1 (header)",
+            "missing column `position` (axis position, m or a length unit)",
+        )
+    })?;
+    let position = csv.numbers(path, pi, Dimension::Length)?;
+    check_increasing(&csv, path, &position, "position")?;
+    let mut columns: Vec<ProfileColumn> = Vec::new();
+    let mut sigmas: Vec<(usize, Option<char>, EffectName)> = Vec::new();
+    for (i, (name, _)) in csv.header.iter().enumerate() {
+        if i == pi {
+            continue;
+        }
+        let (axis, effect, is_sigma) = parse_profile_column(name)
+            .map_err(|m| VmtError::bad(path, format!("column {name}"), m))?;
+        if is_sigma {
+            sigmas.push((i, axis, effect));
+            continue;
+        }
+        let dim = if effect.is_translational() {
+            Dimension::Length
+        } else {
+            Dimension::Angle
+        };
+        columns.push(ProfileColumn {
+            axis,
+            effect,
+            values: csv.numbers(path, i, dim)?,
+            sigma: None,
+        });
+    }
+    for (i, axis, effect) in sigmas {
+        let name = &csv.header[i].0;
+        let dim = if effect.is_translational() {
+            Dimension::Length
+        } else {
+            Dimension::Angle
+        };
+        let v = csv.numbers(path, i, dim)?;
+        if let Some(k) = v.iter().position(|&s| s < 0.0) {
+            return Err(VmtError::bad(
+                path,
+                format!("line {}, column {name}", csv.line(k)),
+                format!("expected a standard error ≥ 0, got {}", fmt_num(v[k])),
+            ));
+        }
+        let col = columns
+            .iter_mut()
+            .find(|c| c.axis == axis && c.effect == effect)
+            .ok_or_else(|| {
+                VmtError::bad(
+                    path,
+                    format!("column {name}"),
+                    format!(
+                        "`{name}` has no value column `{}`",
+                        name.trim_end_matches("_sigma")
+                    ),
+                )
+            })?;
+        col.sigma = Some(v);
+    }
+    Ok(ProfileTable { position, columns })
+}
+
+/// Checks a profile table before writing: positions strictly increasing and finite, equal
+/// lengths, finite values, σ ≥ 0, no column twice.
+pub fn validate_profiles(table: &ProfileTable, file: &Path) -> Result<(), VmtError> {
+    let n = table.position.len();
+    let bad = |place: String, m: String| Err(VmtError::bad(file, place, m));
+    if n == 0 {
+        return bad("position".into(), "expected at least one position".into());
+    }
+    if table.position.iter().any(|x| !x.is_finite()) {
+        return bad("position".into(), "expected finite positions".into());
+    }
+    if let Some(k) = table.position.windows(2).position(|w| w[1] <= w[0]) {
+        return bad(
+            format!("position, row {}", k + 2),
+            format!(
+                "positions must increase strictly, got {} after {}",
+                fmt_num(table.position[k + 1]),
+                fmt_num(table.position[k])
+            ),
+        );
+    }
+    for (i, c) in table.columns.iter().enumerate() {
+        let name = c.column_name();
+        if !c.effect.is_error_motion() {
+            return bad(
+                format!("column {name}"),
+                "only the six error motions go in a profile CSV".into(),
+            );
+        }
+        if table.columns[..i]
+            .iter()
+            .any(|o| o.axis == c.axis && o.effect == c.effect)
+        {
+            return bad(format!("column {name}"), "column appears twice".into());
+        }
+        let sig = c.sigma.as_deref().unwrap_or(&[]);
+        if c.values.len() != n || (c.sigma.is_some() && sig.len() != n) {
+            return bad(
+                format!("column {name}"),
+                format!("expected {n} values like `position`"),
+            );
+        }
+        if c.values.iter().chain(sig).any(|x| !x.is_finite()) || sig.iter().any(|&s| s < 0.0) {
+            return bad(
+                format!("column {name}"),
+                "expected finite values and standard errors ≥ 0".into(),
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Writes a profile CSV (FORMAT.md §5) atomically: `position`, then each column and its
+/// `_sigma` column if any. With `Metrology` units: position in mm, lengths in um, angles in urad.
+pub fn write_profiles(
+    table: &ProfileTable,
+    path: &Path,
+    units: UnitChoice,
+) -> Result<(), VmtError> {
+    validate_profiles(table, path)?;
+    let pu = write_unit(Dimension::Length, true, units);
+    let mut header: Vec<String> = vec![header_cell("position", &pu)];
+    let mut cols: Vec<Col<'_>> = vec![Col::Num(pu, &table.position)];
+    for c in &table.columns {
+        let dim = if c.effect.is_translational() {
+            Dimension::Length
+        } else {
+            Dimension::Angle
+        };
+        let u = write_unit(dim, false, units);
+        let name = c.column_name();
+        header.push(header_cell(&name, &u));
+        cols.push(Col::Num(u, &c.values));
+        if let Some(s) = &c.sigma {
+            header.push(header_cell(&format!("{name}_sigma"), &u));
+            cols.push(Col::Num(u, s));
+        }
+    }
+    let text =
+        csv_text(&header, &cols, table.position.len()).map_err(|m| VmtError::bad(path, "", m))?;
+    write_file_atomic(path, text.as_bytes())
+}
+
+/// Reads a two-column table CSV (`position`, then `value` or `value_name`) as used by a model's
+/// `table = "file.csv"`: returns (positions m, values in SI of dimension `value_dim`), positions
+/// strictly increasing.
+pub fn read_value_table(
+    path: &Path,
+    value_name: &str,
+    value_dim: Dimension,
+) -> Result<(Vec<f64>, Vec<f64>), VmtError> {
+    let csv = read_csv_text(path)?;
+    if csv.header.len() != 2 {
+        return Err(VmtError::bad(
+            path,
+            "line 1 (header)",
+            format!(
+                "expected two columns `position,value` (or `position,{value_name}`), got {}",
+                csv.header.len()
+            ),
+        ));
+    }
+    if csv.header[0].0 != "position" {
+        return Err(VmtError::bad(
+            path,
+            "line 1 (header)",
+            format!(
+                "expected the first column `position`, got `{}`",
+                csv.header[0].0
+            ),
+        ));
+    }
+    let vn = &csv.header[1].0;
+    if vn != "value" && vn != value_name {
+        return Err(VmtError::bad(
+            path,
+            "line 1 (header)",
+            format!("expected the second column `value` (or `{value_name}`), got `{vn}`"),
+        ));
+    }
+    let x = csv.numbers(path, 0, Dimension::Length)?;
+    check_increasing(&csv, path, &x, "position")?;
+    let y = csv.numbers(path, 1, value_dim)?;
+    if x.len() < 2 {
+        return Err(VmtError::bad(
+            path,
+            "",
+            "expected at least two rows (position, value)",
+        ));
+    }
+    Ok((x, y))
+}
+
+/// The CSV text of a two-column table (`position,value`, SI, round-trip digits).
+pub fn value_table_text(x: &[f64], y: &[f64]) -> String {
+    let si = Dimension::Length.si();
+    csv_text(
+        &["position".to_string(), "value".to_string()],
+        &[Col::Num(si, x), Col::Num(si, y)],
+        x.len().min(y.len()),
+    )
+    // SI units: no conversion, so no overflow; callers validate finiteness first.
+    .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fmt_f64_round_trips_exactly_over_many_magnitudes() {
+        // Deterministic pseudo-random bit patterns (xorshift) over the whole finite range.
+        let mut s: u64 = 0x9E37_79B9_7F4A_7C15;
+        for _ in 0..20000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let x = f64::from_bits(s);
+            if !x.is_finite() {
+                continue;
+            }
+            let back: f64 = fmt_f64(x).parse().unwrap();
+            assert_eq!(back.to_bits(), x.to_bits(), "{x:e} → {}", fmt_f64(x));
+            let t: toml::Value = toml::from_str::<toml::Table>(&format!("v = {}", fmt_toml_f64(x)))
+                .unwrap()["v"]
+                .clone();
+            assert_eq!(t.as_float().unwrap().to_bits(), x.to_bits());
+        }
+        assert_eq!(fmt_f64(-0.0), "-0");
+        assert_eq!(fmt_toml_f64(2.0), "2.0");
+        assert_eq!(fmt_f64(4e-9), "4e-9");
+        assert_eq!(fmt_f64(0.25), "0.25");
+    }
+
+    #[test]
+    fn profile_column_names_parse_with_axis_and_sigma() {
+        assert_eq!(
+            parse_profile_column("y.pitch_sigma").unwrap(),
+            (Some('y'), EffectName::Pitch, true)
+        );
+        assert_eq!(
+            parse_profile_column("straightness_y").unwrap(),
+            (None, EffectName::StraightnessY, false)
+        );
+        assert!(parse_profile_column("backlash").is_err());
+        assert!(parse_profile_column("q.pitch").is_err());
+    }
+}
