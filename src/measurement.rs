@@ -311,11 +311,11 @@ pub fn is_command_column(name: &str) -> bool {
 // Number formatting and atomic writes.
 
 /// Formats an f64 with the shortest digits that parse back to the same bits: plain for
-/// 1e-5 ≤ |x| < 1e16 and 0 (`0.25`, `-0`), scientific otherwise (`4e-9`). Non-finite values are
+/// 1e-3 ≤ |x| < 1e16 and 0 (`0.25`, `-0`), scientific otherwise (`4e-9`, `2.8e-5`). Non-finite values are
 /// never written (writers validate first).
 pub fn fmt_f64(x: f64) -> String {
     let a = x.abs();
-    if a == 0.0 || (1e-5..1e16).contains(&a) {
+    if a == 0.0 || (1e-3..1e16).contains(&a) {
         format!("{x}")
     } else {
         format!("{x:e}")
@@ -471,7 +471,12 @@ fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
         .comment(Some(b'#'))
         .trim(csv::Trim::All)
         .flexible(true)
-        .from_reader(bytes.as_slice());
+        // A UTF-8 byte-order mark (spreadsheet exports) is not part of the first column name.
+        .from_reader(
+            bytes
+                .strip_prefix(b"\xEF\xBB\xBF")
+                .unwrap_or(bytes.as_slice()),
+        );
     let mut header: Option<Vec<(String, Option<String>)>> = None;
     let mut rows: Vec<(u64, Vec<String>)> = Vec::new();
     for rec in rdr.records() {
@@ -1675,6 +1680,7 @@ mod tests {
         assert_eq!(fmt_toml_f64(2.0), "2.0");
         assert_eq!(fmt_f64(4e-9), "4e-9");
         assert_eq!(fmt_f64(0.25), "0.25");
+        assert_eq!(fmt_f64(2.8e-5), "2.8e-5");
     }
 
     #[test]

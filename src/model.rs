@@ -190,8 +190,7 @@ impl Model {
 
     /// Sorts the effects by catalogue order, then axis.
     pub fn sort(&mut self) {
-        self.effects
-            .sort_by(|a, b| (a.effect.name, a.effect.axis).cmp(&(b.effect.name, b.effect.axis)));
+        self.effects.sort_by_key(|m| (m.effect.name, m.effect.axis));
     }
 }
 
@@ -587,7 +586,7 @@ pub fn model_to_toml(
     }
     out.push_str(&format!("axis = {}\n", toml_str(&model.axis.to_string())));
     let mut effects: Vec<&ModelEffect> = model.effects.iter().collect();
-    effects.sort_by(|a, b| (a.effect.name, a.effect.axis).cmp(&(b.effect.name, b.effect.axis)));
+    effects.sort_by_key(|m| (m.effect.name, m.effect.axis));
     for me in effects {
         let e = &me.effect;
         let many = model

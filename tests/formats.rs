@@ -448,7 +448,8 @@ fn a_run_may_carry_only_some_of_the_sensors() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("set");
     write_file(&dir, "manifest.toml", MANIFEST);
-    write_file(&dir, "cv.csv", "t,acc_z\n0,0.1\n0.001,0.2\n");
+    // With a byte-order mark and CRLF line ends, as spreadsheets export.
+    write_file(&dir, "cv.csv", "\u{feff}t,acc_z\r\n0,0.1\r\n0.001,0.2\r\n");
     let set = measurement::read(&dir).unwrap();
     assert_eq!(set.runs[0].data.column("acc_z"), Some(&[0.1, 0.2][..]));
     assert_eq!(set.runs[0].data.column("laser_p1"), None);

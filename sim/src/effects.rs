@@ -1040,15 +1040,13 @@ impl Effect {
                     }
                 }
             }
-            EffectParams::ServoLag(s) => {
-                if s.ki.is_some() && s.kp.is_none() {
-                    bad(
-                        "ki".into(),
-                        "the cascade gains go together: `ki` needs `kp` (and `kv` is then the \
-                         velocity-loop gain in N·s/m)"
-                            .into(),
-                    );
-                }
+            EffectParams::ServoLag(s) if s.ki.is_some() && s.kp.is_none() => {
+                bad(
+                    "ki".into(),
+                    "the cascade gains go together: `ki` needs `kp` (and `kv` is then the \
+                     velocity-loop gain in N·s/m)"
+                        .into(),
+                );
             }
             _ => {}
         }
