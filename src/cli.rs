@@ -6,7 +6,7 @@ use crate::error::VmtError;
 use crate::estimate::{run_estimators, Check, Quantity};
 use crate::measurement::{self, MeasurementSet, UnitChoice};
 use crate::scenario::Scenario;
-use crate::simulate::{axis_letter, error_motions, read_all, simulate_truth, to_measurement_set, truth_extras};
+use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set, truth_extras};
 use std::path::{Path, PathBuf};
 
 /// Loads the scenario at `path`, or the bundled default.
@@ -19,8 +19,9 @@ pub fn load_scenario(path: Option<&Path>) -> Result<Scenario, VmtError> {
 
 /// Simulates a scenario and returns its measurement set.
 pub fn simulate_set(sc: &Scenario) -> Result<MeasurementSet, VmtError> {
-    let truths = simulate_truth(sc);
-    let runs = read_all(sc, &truths, sc.seed)?;
+    let ph = physics(sc)?;
+    let truths = simulate_truth(sc, &ph);
+    let runs = read_all(sc, &ph, &truths, sc.seed)?;
     to_measurement_set(sc, &runs)
 }
 
@@ -51,13 +52,13 @@ fn default_out(sc: &Scenario) -> PathBuf {
 /// `vmt run [SCENARIO]`: simulate, estimate, print the table; exit 1 if any estimate misses its tolerance.
 pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, VmtError> {
     let sc = load_scenario(path)?;
-    let truths = simulate_truth(&sc);
-    let runs = read_all(&sc, &truths, sc.seed)?;
+    let ph = physics(&sc)?;
+    let truths = simulate_truth(&sc, &ph);
+    let runs = read_all(&sc, &ph, &truths, sc.seed)?;
     let set = to_measurement_set(&sc, &runs)?;
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| default_out(&sc));
     measurement::write_with_extras(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc)?)?;
-    let errors = error_motions(&sc.truth, axis_letter(&sc.axis.joint));
-    let checks = run_estimators(&sc, &runs, &errors)?;
+    let checks = run_estimators(&sc, &runs, &ph.truth.motions)?;
     let failed: Vec<&Check> = checks.iter().filter(|c| !c.pass).collect();
     if json {
         let v = serde_json::json!({"scenario": sc.source, "checks": checks, "pass": failed.is_empty()});
@@ -70,8 +71,12 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
         if failed.is_empty() {
             println!("all {} estimates within tolerance", checks.len());
         } else {
-            println!("{} of {} estimates missed their tolerance: {}", failed.len(), checks.len(),
-                failed.iter().map(|c| c.error.as_str()).collect::<Vec<_>>().join(", "));
+            println!(
+                "{} of {} estimates missed their tolerance: {}",
+                failed.len(),
+                checks.len(),
+                failed.iter().map(|c| c.error.as_str()).collect::<Vec<_>>().join(", ")
+            );
         }
     }
     Ok(if failed.is_empty() { 0 } else { 1 })
@@ -88,7 +93,10 @@ fn display(q: Quantity, v: f64) -> String {
 
 /// The table of checks: error, injected, recovered, difference, tolerance, pass.
 pub fn check_table(checks: &[Check]) -> String {
-    let mut s = format!("{:<34} {:>14} {:>14} {:>14} {:>14}  {}\n", "error", "injected", "recovered", "difference", "tolerance", "pass");
+    let mut s = format!(
+        "{:<34} {:>14} {:>14} {:>14} {:>14}  {}\n",
+        "error", "injected", "recovered", "difference", "tolerance", "pass"
+    );
     for c in checks {
         s += &format!(
             "{:<34} {:>14} {:>14} {:>14} {:>14}  {}\n",

@@ -42,11 +42,7 @@ pub enum VmtError {
 impl fmt::Display for VmtError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            VmtError::BadInput {
-                file,
-                place,
-                message,
-            } => {
+            VmtError::BadInput { file, place, message } => {
                 if place.is_empty() {
                     write!(f, "{}: {message}", file.display())
                 } else {
@@ -54,11 +50,7 @@ impl fmt::Display for VmtError {
                 }
             }
             VmtError::Usage(m) => write!(f, "usage: {m}"),
-            VmtError::Io {
-                file,
-                action,
-                source,
-            } => write!(f, "{}: {action}: {source}", file.display()),
+            VmtError::Io { file, action, source } => write!(f, "{}: {action}: {source}", file.display()),
             VmtError::Internal(m) => write!(f, "internal error (a bug in vmt): {m}"),
         }
     }
@@ -67,11 +59,7 @@ impl fmt::Display for VmtError {
 impl VmtError {
     /// A bad-input error naming the file, the place and what was expected.
     pub fn bad(file: &Path, place: impl Into<String>, message: impl Into<String>) -> VmtError {
-        VmtError::BadInput {
-            file: file.to_path_buf(),
-            place: place.into(),
-            message: message.into(),
-        }
+        VmtError::BadInput { file: file.to_path_buf(), place: place.into(), message: message.into() }
     }
 
     /// An I/O error while doing `action` on `file`. A file that does not exist when reading is
@@ -80,11 +68,7 @@ impl VmtError {
         if source.kind() == std::io::ErrorKind::NotFound && action.starts_with("reading") {
             return VmtError::bad(file, "", format!("no such file or directory ({action})"));
         }
-        VmtError::Io {
-            file: file.to_path_buf(),
-            action: action.to_string(),
-            source,
-        }
+        VmtError::Io { file: file.to_path_buf(), action: action.to_string(), source }
     }
 
     /// Process exit code: 2 for bad input and bad usage (DESIGN.md §2), 1 for I/O failures,
@@ -127,10 +111,7 @@ pub fn line_col(text: &str, pos: usize) -> (usize, usize) {
     let pos = pos.min(text.len());
     let before = &text.as_bytes()[..pos];
     let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
-    let start = before
-        .iter()
-        .rposition(|&b| b == b'\n')
-        .map_or(0, |i| i + 1);
+    let start = before.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
     let col = String::from_utf8_lossy(&before[start..]).chars().count() + 1;
     (line, col)
 }
@@ -146,11 +127,7 @@ pub fn parse_toml(file: &Path, text: &str) -> Result<toml::Table, VmtError> {
             }
             None => String::new(),
         };
-        VmtError::bad(
-            file,
-            place,
-            format!("malformed TOML: {}", e.message().trim()),
-        )
+        VmtError::bad(file, place, format!("malformed TOML: {}", e.message().trim()))
     })
 }
 
@@ -167,12 +144,7 @@ pub struct TomlReader<'a> {
 impl<'a> TomlReader<'a> {
     /// A reader of `table`, found in `file` at key path `prefix` (empty for the root).
     pub fn new(file: &'a Path, prefix: &str, table: &'a toml::Table) -> TomlReader<'a> {
-        TomlReader {
-            file,
-            prefix: prefix.to_string(),
-            table,
-            asked: RefCell::new(BTreeSet::new()),
-        }
+        TomlReader { file, prefix: prefix.to_string(), table, asked: RefCell::new(BTreeSet::new()) }
     }
 
     /// The file being read.
@@ -238,8 +210,7 @@ impl<'a> TomlReader<'a> {
 
     /// A required string.
     pub fn req_str(&self, key: &str, what: &str) -> Result<&'a str, VmtError> {
-        self.opt_str(key, what)?
-            .ok_or_else(|| self.bad(key, format!("missing key: expected {what}")))
+        self.opt_str(key, what)?.ok_or_else(|| self.bad(key, format!("missing key: expected {what}")))
     }
 
     /// An optional finite number (a TOML float or integer), SI.
@@ -249,16 +220,13 @@ impl<'a> TomlReader<'a> {
             Some(v) => value_f64(v)
                 .filter(|x| x.is_finite())
                 .map(Some)
-                .ok_or_else(|| {
-                    self.bad(key, format!("expected {what}, got {}", describe_value(v)))
-                }),
+                .ok_or_else(|| self.bad(key, format!("expected {what}, got {}", describe_value(v)))),
         }
     }
 
     /// A required finite number.
     pub fn req_f64(&self, key: &str, what: &str) -> Result<f64, VmtError> {
-        self.opt_f64(key, what)?
-            .ok_or_else(|| self.bad(key, format!("missing key: expected {what}")))
+        self.opt_f64(key, what)?.ok_or_else(|| self.bad(key, format!("missing key: expected {what}")))
     }
 
     /// An optional non-negative integer.
@@ -284,10 +252,7 @@ impl<'a> TomlReader<'a> {
         match self.value(key) {
             None => Ok(None),
             Some(toml::Value::Boolean(b)) => Ok(Some(*b)),
-            Some(v) => Err(self.bad(
-                key,
-                format!("expected true or false, got {}", describe_value(v)),
-            )),
+            Some(v) => Err(self.bad(key, format!("expected true or false, got {}", describe_value(v)))),
         }
     }
 
@@ -300,18 +265,12 @@ impl<'a> TomlReader<'a> {
                 .enumerate()
                 .map(|(i, v)| {
                     value_f64(v).filter(|x| x.is_finite()).ok_or_else(|| {
-                        self.bad(
-                            &format!("{key}[{i}]"),
-                            format!("expected {what}, got {}", describe_value(v)),
-                        )
+                        self.bad(&format!("{key}[{i}]"), format!("expected {what}, got {}", describe_value(v)))
                     })
                 })
                 .collect::<Result<Vec<f64>, VmtError>>()
                 .map(Some),
-            Some(v) => Err(self.bad(
-                key,
-                format!("expected an array of {what}, got {}", describe_value(v)),
-            )),
+            Some(v) => Err(self.bad(key, format!("expected an array of {what}, got {}", describe_value(v)))),
         }
     }
 
@@ -329,26 +288,18 @@ impl<'a> TomlReader<'a> {
     pub fn opt_tables(&self, key: &str) -> Result<Option<Vec<TomlReader<'a>>>, VmtError> {
         match self.value(key) {
             None => Ok(None),
-            Some(toml::Value::Array(a)) => a
-                .iter()
-                .enumerate()
-                .map(|(i, v)| match v {
-                    toml::Value::Table(t) => Ok(TomlReader::new(
-                        self.file,
-                        &format!("{}[{i}]", self.path(key)),
-                        t,
-                    )),
-                    other => Err(self.bad(
-                        &format!("{key}[{i}]"),
-                        format!("expected a table, got {}", describe_value(other)),
-                    )),
-                })
-                .collect::<Result<Vec<TomlReader<'a>>, VmtError>>()
-                .map(Some),
-            Some(v) => Err(self.bad(
-                key,
-                format!("expected an array of tables, got {}", describe_value(v)),
-            )),
+            Some(toml::Value::Array(a)) => {
+                a.iter()
+                    .enumerate()
+                    .map(|(i, v)| match v {
+                        toml::Value::Table(t) => Ok(TomlReader::new(self.file, &format!("{}[{i}]", self.path(key)), t)),
+                        other => Err(self
+                            .bad(&format!("{key}[{i}]"), format!("expected a table, got {}", describe_value(other)))),
+                    })
+                    .collect::<Result<Vec<TomlReader<'a>>, VmtError>>()
+                    .map(Some)
+            }
+            Some(v) => Err(self.bad(key, format!("expected an array of tables, got {}", describe_value(v)))),
         }
     }
 
@@ -357,10 +308,7 @@ impl<'a> TomlReader<'a> {
         let asked = self.asked.borrow();
         if let Some(k) = self.table.keys().find(|k| !asked.contains(k.as_str())) {
             let known: Vec<&str> = asked.iter().map(|s| s.as_str()).collect();
-            return Err(self.bad(
-                k,
-                format!("unknown key `{k}` (known keys here: {})", known.join(", ")),
-            ));
+            return Err(self.bad(k, format!("unknown key `{k}` (known keys here: {})", known.join(", "))));
         }
         Ok(())
     }
@@ -386,22 +334,12 @@ mod tests {
             "effects.backlash.value",
             "expected a length in metres ≥ 0, got -4e-6",
         );
-        assert_eq!(
-            e.to_string(),
-            "scenario.toml: effects.backlash.value: expected a length in metres ≥ 0, got -4e-6"
-        );
+        assert_eq!(e.to_string(), "scenario.toml: effects.backlash.value: expected a length in metres ≥ 0, got -4e-6");
         assert_eq!(e.exit_code(), 2);
-        let io = VmtError::io(
-            Path::new("x"),
-            "writing",
-            std::io::Error::from(std::io::ErrorKind::PermissionDenied),
-        );
+        let io = VmtError::io(Path::new("x"), "writing", std::io::Error::from(std::io::ErrorKind::PermissionDenied));
         assert_eq!(io.exit_code(), 1);
-        let nf = VmtError::io(
-            Path::new("x.toml"),
-            "reading the model",
-            std::io::Error::from(std::io::ErrorKind::NotFound),
-        );
+        let nf =
+            VmtError::io(Path::new("x.toml"), "reading the model", std::io::Error::from(std::io::ErrorKind::NotFound));
         assert_eq!(nf.exit_code(), 2);
     }
 
@@ -416,24 +354,14 @@ mod tests {
 
     #[test]
     fn reader_builds_key_paths_and_rejects_unknown_keys() {
-        let t = parse_toml(
-            Path::new("m.toml"),
-            "[effects.backlash]\nvalue = \"big\"\nvalu = 1\n",
-        )
-        .unwrap();
+        let t = parse_toml(Path::new("m.toml"), "[effects.backlash]\nvalue = \"big\"\nvalu = 1\n").unwrap();
         let r = TomlReader::new(Path::new("m.toml"), "", &t);
         let eff = r.opt_table("effects").unwrap().unwrap();
         let b = eff.opt_table("backlash").unwrap().unwrap();
         let e = b.opt_f64("value", "a length in metres").unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "m.toml: effects.backlash.value: expected a length in metres, got a string \"big\""
-        );
+        assert_eq!(e.to_string(), "m.toml: effects.backlash.value: expected a length in metres, got a string \"big\"");
         let e = b.deny_unknown().unwrap_err().to_string();
-        assert!(
-            e.contains("effects.backlash.valu: unknown key `valu`"),
-            "{e}"
-        );
+        assert!(e.contains("effects.backlash.valu: unknown key `valu`"), "{e}");
     }
 
     #[test]

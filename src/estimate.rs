@@ -42,7 +42,15 @@ pub struct Check {
 impl Check {
     pub fn new(error: impl Into<String>, quantity: Quantity, injected: f64, recovered: f64, tolerance: f64) -> Check {
         let difference = recovered - injected;
-        Check { error: error.into(), quantity, injected, recovered, difference, tolerance, pass: difference.abs() <= tolerance }
+        Check {
+            error: error.into(),
+            quantity,
+            injected,
+            recovered,
+            difference,
+            tolerance,
+            pass: difference.abs() <= tolerance,
+        }
     }
 }
 
@@ -57,7 +65,8 @@ pub fn point_table_deviations(run: &RunRecord, sensor: &str) -> Option<(Vec<f64>
     let mut up = vec![Vec::new(); targets.len()];
     let mut down = vec![Vec::new(); targets.len()];
     for ((&x, &d), &v) in target.iter().zip(direction).zip(values) {
-        if d > 0 { &mut up } else { &mut down }[index(x)].push(v);
+        let side = if d > 0 { &mut up } else { &mut down };
+        side[index(x)].push(v);
     }
     Some((targets, up, down))
 }
@@ -67,7 +76,7 @@ pub fn point_table_deviations(run: &RunRecord, sensor: &str) -> Option<(Vec<f64>
 pub fn iso_truth(errors: &ErrorMotions, r: [f64; 3], targets: &[f64]) -> Result<AxisResult, VmtError> {
     let r = rapier3d_f64::glamx::DVec3::from_array(r);
     let dev: Vec<Vec<f64>> = targets.iter().map(|&x| vec![errors.deviation(x, r).x; 2]).collect();
-    evaluate_bidirectional(targets, &dev, &dev).map_err(|e| VmtError::internal(e.to_string()))
+    evaluate_bidirectional(targets, &dev, &dev).map_err(|e| VmtError::Internal(e.to_string()))
 }
 
 /// Runs every estimator of a scenario on its recording and returns the checks.
@@ -79,18 +88,40 @@ pub fn run_estimators(sc: &Scenario, runs: &[RunRecord], errors: &ErrorMotions) 
                 let rec = runs
                     .iter()
                     .find(|r| &r.name == run)
-                    .ok_or_else(|| VmtError::input(&sc.source, "estimators", format!("no run `{run}`")))?;
+                    .ok_or_else(|| VmtError::bad(&sc.source, "estimators", format!("no run `{run}`")))?;
                 let (targets, up, down) = point_table_deviations(rec, sensor).ok_or_else(|| {
-                    VmtError::input(&sc.source, "estimators", format!("run `{run}` is not a point table with sensor `{sensor}`"))
+                    VmtError::bad(
+                        &sc.source,
+                        "estimators",
+                        format!("run `{run}` is not a point table with sensor `{sensor}`"),
+                    )
                 })?;
                 let est = evaluate_bidirectional(&targets, &up, &down)
-                    .map_err(|e| VmtError::input(&sc.source, "estimators", format!("ISO 230-2 of run `{run}`: {e}")))?;
+                    .map_err(|e| VmtError::bad(&sc.source, "estimators", format!("ISO 230-2 of run `{run}`: {e}")))?;
                 let spec = sc.sensors.iter().find(|s| &s.name == sensor).expect("validated sensor");
-                let r = spec.axis_position(&sc.axis).map_err(|m| VmtError::input(&sc.source, "sensors", m))?;
+                let r = spec.axis_position(&sc.axis).map_err(|m| VmtError::bad(&sc.source, "sensors", m))?;
                 let truth = iso_truth(errors, r, &targets)?;
-                checks.push(Check::new(format!("ISO 230-2 E ({sensor})"), Quantity::Length, truth.e, est.e, *tolerance));
-                checks.push(Check::new(format!("ISO 230-2 M ({sensor})"), Quantity::Length, truth.m, est.m, *tolerance));
-                checks.push(Check::new(format!("ISO 230-2 B̄ ({sensor})"), Quantity::Length, truth.b_mean, est.b_mean, *tolerance));
+                checks.push(Check::new(
+                    format!("ISO 230-2 E ({sensor})"),
+                    Quantity::Length,
+                    truth.e,
+                    est.e,
+                    *tolerance,
+                ));
+                checks.push(Check::new(
+                    format!("ISO 230-2 M ({sensor})"),
+                    Quantity::Length,
+                    truth.m,
+                    est.m,
+                    *tolerance,
+                ));
+                checks.push(Check::new(
+                    format!("ISO 230-2 B̄ ({sensor})"),
+                    Quantity::Length,
+                    truth.b_mean,
+                    est.b_mean,
+                    *tolerance,
+                ));
             }
         }
     }

@@ -21,98 +21,25 @@ use vmt_sim::effects::EffectName;
 /// The `format` value of a measurement set's manifest.
 pub const FORMAT_ID: &str = "vmt-measurements/1";
 
-/// What a sensor measures (FORMAT.md §1 "Sensor kinds"), serialised in snake_case.
-/// `pressure` and `humidity` are vmt additions for the air refractive index (Edlén) of a laser.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SensorKind {
-    /// Commanded position, m.
-    Command,
-    /// Rotary encoder on the motor, converted to axis position through the lead, m.
-    EncoderRotary,
-    /// Linear scale along the axis, m.
-    EncoderLinear,
-    /// Laser interferometer, linear optics: displacement along the beam, m.
-    LaserLinear,
-    /// Laser straightness optics: lateral displacement, m.
-    LaserStraightness,
-    /// Laser angular optics, rad.
-    LaserAngular,
-    /// Laser Doppler vector measurement along an arbitrary direction, m.
-    LaserVector,
-    /// Accelerometer (proper acceleration along its direction), m/s².
-    Accelerometer,
-    /// Motor current expressed as force, N.
-    MotorForce,
-    /// Velocity, m/s.
-    Velocity,
-    /// Temperature, K.
-    Temperature,
-    /// Air pressure, Pa (vmt addition).
-    Pressure,
-    /// Relative humidity, ratio (vmt addition; `percent` unit allowed).
-    Humidity,
-}
+pub use vmt_sim::procedures::{ProcedureKind as Procedure, RunData};
+pub use vmt_sim::sensors::SensorKind;
 
-impl SensorKind {
-    /// Every kind.
-    pub const ALL: [SensorKind; 13] = [
-        SensorKind::Command,
-        SensorKind::EncoderRotary,
-        SensorKind::EncoderLinear,
-        SensorKind::LaserLinear,
-        SensorKind::LaserStraightness,
-        SensorKind::LaserAngular,
-        SensorKind::LaserVector,
-        SensorKind::Accelerometer,
-        SensorKind::MotorForce,
-        SensorKind::Velocity,
-        SensorKind::Temperature,
-        SensorKind::Pressure,
-        SensorKind::Humidity,
-    ];
-
-    /// The name as written in manifests, e.g. `laser_linear`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            SensorKind::Command => "command",
-            SensorKind::EncoderRotary => "encoder_rotary",
-            SensorKind::EncoderLinear => "encoder_linear",
-            SensorKind::LaserLinear => "laser_linear",
-            SensorKind::LaserStraightness => "laser_straightness",
-            SensorKind::LaserAngular => "laser_angular",
-            SensorKind::LaserVector => "laser_vector",
-            SensorKind::Accelerometer => "accelerometer",
-            SensorKind::MotorForce => "motor_force",
-            SensorKind::Velocity => "velocity",
-            SensorKind::Temperature => "temperature",
-            SensorKind::Pressure => "pressure",
-            SensorKind::Humidity => "humidity",
-        }
-    }
-
-    /// Parses a manifest `kind` string.
-    pub fn parse(s: &str) -> Option<SensorKind> {
-        SensorKind::ALL.iter().copied().find(|k| k.as_str() == s)
-    }
-
-    /// The physical dimension of the sensor's column (what units its header may carry).
-    pub fn dimension(self) -> Dimension {
-        match self {
-            SensorKind::Command
-            | SensorKind::EncoderRotary
-            | SensorKind::EncoderLinear
-            | SensorKind::LaserLinear
-            | SensorKind::LaserStraightness
-            | SensorKind::LaserVector => Dimension::Length,
-            SensorKind::LaserAngular => Dimension::Angle,
-            SensorKind::Accelerometer => Dimension::Acceleration,
-            SensorKind::MotorForce => Dimension::Force,
-            SensorKind::Velocity => Dimension::Velocity,
-            SensorKind::Temperature => Dimension::Temperature,
-            SensorKind::Pressure => Dimension::Pressure,
-            SensorKind::Humidity => Dimension::Ratio,
-        }
+/// The physical dimension of a sensor kind's column (what units its header may carry).
+pub fn kind_dimension(kind: SensorKind) -> Dimension {
+    match kind {
+        SensorKind::Command
+        | SensorKind::EncoderRotary
+        | SensorKind::EncoderLinear
+        | SensorKind::LaserLinear
+        | SensorKind::LaserStraightness
+        | SensorKind::LaserVector => Dimension::Length,
+        SensorKind::LaserAngular => Dimension::Angle,
+        SensorKind::Accelerometer => Dimension::Acceleration,
+        SensorKind::MotorForce => Dimension::Force,
+        SensorKind::Velocity => Dimension::Velocity,
+        SensorKind::Temperature => Dimension::Temperature,
+        SensorKind::Pressure => Dimension::Pressure,
+        SensorKind::Humidity => Dimension::Ratio,
     }
 }
 
@@ -131,113 +58,6 @@ pub struct Sensor {
     pub direction: [f64; 3],
     /// 1-sigma noise in SI units of the channel, if known (≥ 0; 0 = noise-free).
     pub sigma: Option<f64>,
-}
-
-/// The measurement procedure of a run (DESIGN.md §6).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Procedure {
-    /// ISO 230-2 positioning cycles.
-    Positioning,
-    /// Constant-velocity pass.
-    ConstantVelocity,
-    /// Low-speed crawl (stick-slip, seed 002).
-    Crawl,
-    /// Friction sweep over velocities.
-    FrictionSweep,
-    /// Anything else.
-    Free,
-}
-
-impl Procedure {
-    /// Every procedure.
-    pub const ALL: [Procedure; 5] = [
-        Procedure::Positioning,
-        Procedure::ConstantVelocity,
-        Procedure::Crawl,
-        Procedure::FrictionSweep,
-        Procedure::Free,
-    ];
-
-    /// The name as written in manifests.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Procedure::Positioning => "positioning",
-            Procedure::ConstantVelocity => "constant_velocity",
-            Procedure::Crawl => "crawl",
-            Procedure::FrictionSweep => "friction_sweep",
-            Procedure::Free => "free",
-        }
-    }
-
-    /// Parses a manifest `procedure` string.
-    pub fn parse(s: &str) -> Option<Procedure> {
-        Procedure::ALL.iter().copied().find(|p| p.as_str() == s)
-    }
-}
-
-/// The numbers of one run, SI units.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub enum RunData {
-    /// Time series: `t` (s, strictly increasing) and named columns of the same length
-    /// (`x_cmd` and sensor columns), in file order.
-    TimeSeries {
-        /// Sample times, s.
-        t: Vec<f64>,
-        /// (column name, values) in file order.
-        columns: Vec<(String, Vec<f64>)>,
-    },
-    /// Point table (positioning): one row per reading.
-    PointTable {
-        /// Target position, m.
-        target: Vec<f64>,
-        /// Run number, 1..n.
-        run: Vec<u32>,
-        /// Approach direction, +1 or −1.
-        direction: Vec<i8>,
-        /// Time of the reading, s, if recorded (for drift).
-        t: Option<Vec<f64>>,
-        /// (sensor name, values) in file order: deviation (actual − target) or reading.
-        columns: Vec<(String, Vec<f64>)>,
-    },
-}
-
-impl RunData {
-    /// Number of rows.
-    pub fn len(&self) -> usize {
-        match self {
-            RunData::TimeSeries { t, .. } => t.len(),
-            RunData::PointTable { target, .. } => target.len(),
-        }
-    }
-
-    /// True if there are no rows.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// The named data columns (without t / target / run / direction).
-    pub fn columns(&self) -> &[(String, Vec<f64>)] {
-        match self {
-            RunData::TimeSeries { columns, .. } | RunData::PointTable { columns, .. } => columns,
-        }
-    }
-
-    /// The column `name` (a sensor or `x_cmd`), if present.
-    pub fn column(&self, name: &str) -> Option<&[f64]> {
-        self.columns()
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, v)| v.as_slice())
-    }
-
-    /// Sample or reading times, s, if present.
-    pub fn t(&self) -> Option<&[f64]> {
-        match self {
-            RunData::TimeSeries { t, .. } => Some(t),
-            RunData::PointTable { t, .. } => t.as_deref(),
-        }
-    }
 }
 
 /// One run of a measurement set (a `[[runs]]` entry with its CSV data).
@@ -342,10 +162,7 @@ static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 /// A fresh hidden sibling path of `path`: `.NAME.tag-PID-N`.
 fn sibling(path: &Path, tag: &str) -> PathBuf {
     let n = TMP_COUNTER.fetch_add(1, Ordering::Relaxed);
-    let name = path
-        .file_name()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".to_string());
+    let name = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".to_string());
     let parent = parent_dir(path);
     parent.join(format!(".{name}.{tag}-{}-{n}", std::process::id()))
 }
@@ -361,9 +178,7 @@ fn parent_dir(path: &Path) -> PathBuf {
 /// Writes `bytes` to `path` and flushes them to disk.
 fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), VmtError> {
     let mut f = std::fs::File::create(path).map_err(|e| VmtError::io(path, "writing", e))?;
-    f.write_all(bytes)
-        .and_then(|_| f.sync_all())
-        .map_err(|e| VmtError::io(path, "writing", e))
+    f.write_all(bytes).and_then(|_| f.sync_all()).map_err(|e| VmtError::io(path, "writing", e))
 }
 
 /// Writes a file atomically: into a temporary sibling, then renamed over `path`, so a reader
@@ -371,8 +186,7 @@ fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), VmtError> {
 /// directories.
 pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> Result<(), VmtError> {
     let parent = parent_dir(path);
-    std::fs::create_dir_all(&parent)
-        .map_err(|e| VmtError::io(&parent, "creating the directory", e))?;
+    std::fs::create_dir_all(&parent).map_err(|e| VmtError::io(&parent, "creating the directory", e))?;
     let tmp = sibling(path, "tmp");
     if let Err(e) = write_synced(&tmp, bytes) {
         let _ = std::fs::remove_file(&tmp);
@@ -396,20 +210,11 @@ pub fn replace_dir_atomic(
 ) -> Result<(), VmtError> {
     let exists = match std::fs::symlink_metadata(dir) {
         Ok(m) if m.is_dir() => true,
-        Ok(_) => {
-            return Err(VmtError::bad(
-                dir,
-                "",
-                "expected an output directory, but a file of that name exists",
-            ))
-        }
+        Ok(_) => return Err(VmtError::bad(dir, "", "expected an output directory, but a file of that name exists")),
         Err(_) => false,
     };
     if exists {
-        let empty = std::fs::read_dir(dir)
-            .map_err(|e| VmtError::io(dir, "reading the directory", e))?
-            .next()
-            .is_none();
+        let empty = std::fs::read_dir(dir).map_err(|e| VmtError::io(dir, "reading the directory", e))?.next().is_none();
         if !empty && !dir.join(marker).is_file() {
             return Err(VmtError::bad(
                 dir,
@@ -422,8 +227,7 @@ pub fn replace_dir_atomic(
         }
     }
     let parent = parent_dir(dir);
-    std::fs::create_dir_all(&parent)
-        .map_err(|e| VmtError::io(&parent, "creating the directory", e))?;
+    std::fs::create_dir_all(&parent).map_err(|e| VmtError::io(&parent, "creating the directory", e))?;
     let tmp = sibling(dir, "tmp");
     std::fs::create_dir(&tmp).map_err(|e| VmtError::io(&tmp, "creating the directory", e))?;
     if let Err(e) = fill(&tmp) {
@@ -472,19 +276,12 @@ fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
         .trim(csv::Trim::All)
         .flexible(true)
         // A UTF-8 byte-order mark (spreadsheet exports) is not part of the first column name.
-        .from_reader(
-            bytes
-                .strip_prefix(b"\xEF\xBB\xBF")
-                .unwrap_or(bytes.as_slice()),
-        );
+        .from_reader(bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes.as_slice()));
     let mut header: Option<Vec<(String, Option<String>)>> = None;
     let mut rows: Vec<(u64, Vec<String>)> = Vec::new();
     for rec in rdr.records() {
         let rec = rec.map_err(|e| {
-            let place = e
-                .position()
-                .map(|p| format!("line {}", p.line()))
-                .unwrap_or_default();
+            let place = e.position().map(|p| format!("line {}", p.line())).unwrap_or_default();
             VmtError::bad(path, place, format!("malformed CSV: {e}"))
         })?;
         let line = rec.position().map_or(0, |p| p.line());
@@ -492,8 +289,8 @@ fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
             None => {
                 let mut cols: Vec<(String, Option<String>)> = Vec::new();
                 for cell in rec.iter() {
-                    let (name, unit) = parse_header_cell(cell)
-                        .map_err(|m| VmtError::bad(path, format!("line {line} (header)"), m))?;
+                    let (name, unit) =
+                        parse_header_cell(cell).map_err(|m| VmtError::bad(path, format!("line {line} (header)"), m))?;
                     if cols.iter().any(|(n, _)| *n == name) {
                         return Err(VmtError::bad(
                             path,
@@ -510,30 +307,16 @@ fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
                     return Err(VmtError::bad(
                         path,
                         format!("line {line}"),
-                        format!(
-                            "expected {} cells like the header, got {}",
-                            h.len(),
-                            rec.len()
-                        ),
+                        format!("expected {} cells like the header, got {}", h.len(), rec.len()),
                     ));
                 }
                 rows.push((line, rec.iter().map(|s| s.to_string()).collect()));
             }
         }
     }
-    let header = header.ok_or_else(|| {
-        VmtError::bad(
-            path,
-            "",
-            "empty CSV file: expected a header line, then rows",
-        )
-    })?;
+    let header = header.ok_or_else(|| VmtError::bad(path, "", "empty CSV file: expected a header line, then rows"))?;
     if rows.is_empty() {
-        return Err(VmtError::bad(
-            path,
-            "",
-            "expected at least one row of numbers after the header",
-        ));
+        return Err(VmtError::bad(path, "", "expected at least one row of numbers after the header"));
     }
     Ok(CsvText { header, rows })
 }
@@ -547,8 +330,8 @@ impl CsvText {
     /// which must have dimension `dim`.
     fn numbers(&self, path: &Path, i: usize, dim: Dimension) -> Result<Vec<f64>, VmtError> {
         let (name, unit) = &self.header[i];
-        let u: Unit = resolve_unit(unit.as_deref(), dim)
-            .map_err(|m| VmtError::bad(path, format!("column {name}"), m))?;
+        let u: Unit =
+            resolve_unit(unit.as_deref(), dim).map_err(|m| VmtError::bad(path, format!("column {name}"), m))?;
         self.rows
             .iter()
             .map(|(line, cells)| {
@@ -572,8 +355,7 @@ impl CsvText {
         self.rows
             .iter()
             .map(|(line, cells)| {
-                parse_number(&cells[i])
-                    .map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m))
+                parse_number(&cells[i]).map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m))
             })
             .collect()
     }
@@ -601,11 +383,7 @@ fn check_increasing(csv: &CsvText, path: &Path, t: &[f64], col: &str) -> Result<
         return Err(VmtError::bad(
             path,
             format!("line {}, column {col}", csv.line(i + 1)),
-            format!(
-                "`{col}` must increase strictly, got {} after {}",
-                fmt_num(t[i + 1]),
-                fmt_num(t[i])
-            ),
+            format!("`{col}` must increase strictly, got {} after {}", fmt_num(t[i + 1]), fmt_num(t[i])),
         ));
     }
     Ok(())
@@ -621,7 +399,7 @@ fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
             continue;
         }
         let dim = if let Some(s) = sensors.iter().find(|s| s.name == *name) {
-            s.kind.dimension()
+            kind_dimension(s.kind)
         } else if is_command_column(name) {
             Dimension::Length
         } else {
@@ -632,16 +410,8 @@ fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
                 format!(
                     "unknown column `{name}`: expected a sensor of manifest.toml ({}), \
                      x_cmd/y_cmd/z_cmd, or {}",
-                    if known.is_empty() {
-                        "none declared".to_string()
-                    } else {
-                        known.join(", ")
-                    },
-                    if is_table {
-                        "target, run, direction, t"
-                    } else {
-                        "t"
-                    }
+                    if known.is_empty() { "none declared".to_string() } else { known.join(", ") },
+                    if is_table { "target, run, direction, t" } else { "t" }
                 ),
             ));
         };
@@ -713,13 +483,7 @@ fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
         Some(ti) => Some(csv.numbers(path, ti, Dimension::Time)?),
         None => None,
     };
-    Ok(RunData::PointTable {
-        target,
-        run,
-        direction,
-        t,
-        columns,
-    })
+    Ok(RunData::PointTable { target, run, direction, t, columns })
 }
 
 // ------------------------------------------------------------------------------------------
@@ -729,10 +493,7 @@ fn axis_char(r: &TomlReader<'_>, key: &str) -> Result<Option<char>, VmtError> {
     match r.opt_str(key, "an axis \"x\", \"y\" or \"z\"")? {
         None => Ok(None),
         Some(s) if matches!(s, "x" | "y" | "z") => Ok(s.chars().next()),
-        Some(s) => Err(r.bad(
-            key,
-            format!("expected an axis \"x\", \"y\" or \"z\", got {s:?}"),
-        )),
+        Some(s) => Err(r.bad(key, format!("expected an axis \"x\", \"y\" or \"z\", got {s:?}"))),
     }
 }
 
@@ -754,39 +515,19 @@ fn axis_unit(axis: char) -> [f64; 3] {
 }
 
 fn parse_sensor(r: &TomlReader<'_>) -> Result<Sensor, VmtError> {
-    let name = r
-        .req_str("name", "the sensor's CSV column name")?
-        .to_string();
+    let name = r.req_str("name", "the sensor's CSV column name")?.to_string();
     let kind_s = r.req_str("kind", "a sensor kind")?;
     let kind = SensorKind::parse(kind_s).ok_or_else(|| {
         let known: Vec<&str> = SensorKind::ALL.iter().map(|k| k.as_str()).collect();
-        r.bad(
-            "kind",
-            format!(
-                "unknown sensor kind {kind_s:?}; expected one of {}",
-                known.join(", ")
-            ),
-        )
+        r.bad("kind", format!("unknown sensor kind {kind_s:?}; expected one of {}", known.join(", ")))
     })?;
-    let axis = axis_char(r, "axis")?.ok_or_else(|| {
-        r.bad(
-            "axis",
-            "missing key: expected the axis observed, \"x\", \"y\" or \"z\"",
-        )
-    })?;
+    let axis = axis_char(r, "axis")?
+        .ok_or_else(|| r.bad("axis", "missing key: expected the axis observed, \"x\", \"y\" or \"z\""))?;
     let position = vec3(r, "position", "a measuring point in metres")?.unwrap_or([0.0, 0.0, 0.0]);
-    let direction =
-        vec3(r, "direction", "a sensitive direction")?.unwrap_or_else(|| axis_unit(axis));
+    let direction = vec3(r, "direction", "a sensitive direction")?.unwrap_or_else(|| axis_unit(axis));
     let sigma = r.opt_f64("sigma", "a 1-sigma noise in SI units of the channel")?;
     r.deny_unknown()?;
-    Ok(Sensor {
-        name,
-        kind,
-        axis,
-        position,
-        direction,
-        sigma,
-    })
+    Ok(Sensor { name, kind, axis, position, direction, sigma })
 }
 
 /// A run's manifest entry before its data is read.
@@ -796,20 +537,10 @@ fn parse_run_entry(r: &TomlReader<'_>) -> Result<(Run, String), VmtError> {
     let ps = r.req_str("procedure", "a procedure")?;
     let procedure = Procedure::parse(ps).ok_or_else(|| {
         let known: Vec<&str> = Procedure::ALL.iter().map(|p| p.as_str()).collect();
-        r.bad(
-            "procedure",
-            format!(
-                "unknown procedure {ps:?}; expected one of {}",
-                known.join(", ")
-            ),
-        )
+        r.bad("procedure", format!("unknown procedure {ps:?}; expected one of {}", known.join(", ")))
     })?;
-    let axis = axis_char(r, "axis")?.ok_or_else(|| {
-        r.bad(
-            "axis",
-            "missing key: expected the axis moved, \"x\", \"y\" or \"z\"",
-        )
-    })?;
+    let axis = axis_char(r, "axis")?
+        .ok_or_else(|| r.bad("axis", "missing key: expected the axis moved, \"x\", \"y\" or \"z\""))?;
     let start_time = r.opt_f64("start_time", "a time in seconds")?;
     let feed = r.opt_f64("feed", "a feed in m/s")?;
     let direction = match r.opt_i64("direction", "+1 or -1")? {
@@ -827,10 +558,7 @@ fn parse_run_entry(r: &TomlReader<'_>) -> Result<(Run, String), VmtError> {
             start_time,
             feed,
             direction,
-            data: RunData::TimeSeries {
-                t: Vec::new(),
-                columns: Vec::new(),
-            },
+            data: RunData::TimeSeries { t: Vec::new(), columns: Vec::new() },
         },
         file,
     ))
@@ -854,21 +582,15 @@ pub fn read(dir: &Path) -> Result<MeasurementSet, VmtError> {
             "expected a measurement set: a directory holding manifest.toml and CSV files",
         ));
     }
-    let text = std::fs::read_to_string(&mpath)
-        .map_err(|e| VmtError::io(&mpath, "reading the manifest", e))?;
+    let text = std::fs::read_to_string(&mpath).map_err(|e| VmtError::io(&mpath, "reading the manifest", e))?;
     let table = parse_toml(&mpath, &text)?;
     let r = TomlReader::new(&mpath, "", &table);
     let format = r.req_str("format", &format!("\"{FORMAT_ID}\""))?;
     if format != FORMAT_ID {
-        return Err(r.bad(
-            "format",
-            format!("expected \"{FORMAT_ID}\", got {format:?}"),
-        ));
+        return Err(r.bad("format", format!("expected \"{FORMAT_ID}\", got {format:?}")));
     }
     let description = r.opt_str("description", "a string")?.map(str::to_string);
-    let machine = r
-        .opt_str("machine", "a bundled machine name or URDF path")?
-        .map(str::to_string);
+    let machine = r.opt_str("machine", "a bundled machine name or URDF path")?.map(str::to_string);
     let seed = r.opt_u64("seed", "a non-negative integer seed")?;
     let sensors: Vec<Sensor> = r
         .opt_tables("sensors")?
@@ -879,13 +601,7 @@ pub fn read(dir: &Path) -> Result<MeasurementSet, VmtError> {
     let entries = r.opt_tables("runs")?.unwrap_or_default();
     r.deny_unknown()?;
     let mut runs: Vec<Run> = Vec::with_capacity(entries.len());
-    let mut set_so_far = MeasurementSet {
-        description,
-        machine,
-        seed,
-        sensors,
-        runs: Vec::new(),
-    };
+    let mut set_so_far = MeasurementSet { description, machine, seed, sensors, runs: Vec::new() };
     // Manifest-level checks (names, ranges) before touching the CSV files.
     let mut parsed: Vec<(Run, String)> = Vec::new();
     for e in &entries {
@@ -904,10 +620,7 @@ pub fn read(dir: &Path) -> Result<MeasurementSet, VmtError> {
 
 /// A valid sensor / column name: non-empty, no whitespace, none of `,[]#"`.
 fn valid_column_name(s: &str) -> bool {
-    !s.is_empty()
-        && !s
-            .chars()
-            .any(|c| c.is_whitespace() || matches!(c, ',' | '[' | ']' | '#' | '"'))
+    !s.is_empty() && !s.chars().any(|c| c.is_whitespace() || matches!(c, ',' | '[' | ']' | '#' | '"'))
 }
 
 /// Checks the manifest part of a set (sensors and run entries): unique valid names, safe file
@@ -929,70 +642,43 @@ pub fn validate_manifest(set: &MeasurementSet, file: &Path) -> Result<(), VmtErr
         if RESERVED.contains(&s.name.as_str()) {
             return bad(
                 format!("sensors[{i}].name"),
-                format!(
-                    "`{}` is reserved for the CSV's own columns (t, target, run, direction)",
-                    s.name
-                ),
+                format!("`{}` is reserved for the CSV's own columns (t, target, run, direction)", s.name),
             );
         }
         if set.sensors[..i].iter().any(|o| o.name == s.name) {
-            return bad(
-                format!("sensors[{i}].name"),
-                format!("sensor `{}` is declared twice", s.name),
-            );
+            return bad(format!("sensors[{i}].name"), format!("sensor `{}` is declared twice", s.name));
         }
         if !matches!(s.axis, 'x' | 'y' | 'z') {
-            return bad(
-                format!("sensors[{i}].axis"),
-                format!("expected \"x\", \"y\" or \"z\", got {:?}", s.axis),
-            );
+            return bad(format!("sensors[{i}].axis"), format!("expected \"x\", \"y\" or \"z\", got {:?}", s.axis));
         }
         if s.position.iter().any(|v| !v.is_finite()) {
-            return bad(
-                format!("sensors[{i}].position"),
-                "expected 3 finite numbers (m)".to_string(),
-            );
+            return bad(format!("sensors[{i}].position"), "expected 3 finite numbers (m)".to_string());
         }
         let n2: f64 = s.direction.iter().map(|v| v * v).sum();
         if !n2.is_finite() || n2 == 0.0 {
             return bad(
                 format!("sensors[{i}].direction"),
-                format!(
-                    "expected a non-zero finite direction, got {:?}",
-                    s.direction
-                ),
+                format!("expected a non-zero finite direction, got {:?}", s.direction),
             );
         }
         if let Some(sg) = s.sigma {
             if !(sg.is_finite() && sg >= 0.0) {
                 return bad(
                     format!("sensors[{i}].sigma"),
-                    format!(
-                        "expected a 1-sigma noise in SI units of the channel ≥ 0, got {}",
-                        fmt_num(sg)
-                    ),
+                    format!("expected a 1-sigma noise in SI units of the channel ≥ 0, got {}", fmt_num(sg)),
                 );
             }
         }
     }
     if set.runs.is_empty() {
-        return bad(
-            "runs".to_string(),
-            "expected at least one [[runs]] entry".to_string(),
-        );
+        return bad("runs".to_string(), "expected at least one [[runs]] entry".to_string());
     }
     for (i, r) in set.runs.iter().enumerate() {
         if r.name.is_empty() {
-            return bad(
-                format!("runs[{i}].name"),
-                "expected a non-empty name".into(),
-            );
+            return bad(format!("runs[{i}].name"), "expected a non-empty name".into());
         }
         if set.runs[..i].iter().any(|o| o.name == r.name) {
-            return bad(
-                format!("runs[{i}].name"),
-                format!("run `{}` is declared twice", r.name),
-            );
+            return bad(format!("runs[{i}].name"), format!("run `{}` is declared twice", r.name));
         }
         if !is_safe_relative(&r.file) || r.file == "manifest.toml" {
             return bad(
@@ -1005,39 +691,24 @@ pub fn validate_manifest(set: &MeasurementSet, file: &Path) -> Result<(), VmtErr
             );
         }
         if set.runs[..i].iter().any(|o| o.file == r.file) {
-            return bad(
-                format!("runs[{i}].file"),
-                format!("file {:?} is used by two runs", r.file),
-            );
+            return bad(format!("runs[{i}].file"), format!("file {:?} is used by two runs", r.file));
         }
         if !matches!(r.axis, 'x' | 'y' | 'z') {
-            return bad(
-                format!("runs[{i}].axis"),
-                format!("expected \"x\", \"y\" or \"z\", got {:?}", r.axis),
-            );
+            return bad(format!("runs[{i}].axis"), format!("expected \"x\", \"y\" or \"z\", got {:?}", r.axis));
         }
         if let Some(t0) = r.start_time {
             if !t0.is_finite() {
-                return bad(
-                    format!("runs[{i}].start_time"),
-                    "expected a finite time in seconds".into(),
-                );
+                return bad(format!("runs[{i}].start_time"), "expected a finite time in seconds".into());
             }
         }
         if let Some(f) = r.feed {
             if !(f.is_finite() && f > 0.0) {
-                return bad(
-                    format!("runs[{i}].feed"),
-                    format!("expected a feed in m/s > 0, got {}", fmt_num(f)),
-                );
+                return bad(format!("runs[{i}].feed"), format!("expected a feed in m/s > 0, got {}", fmt_num(f)));
             }
         }
         if let Some(d) = r.direction {
             if d != 1 && d != -1 {
-                return bad(
-                    format!("runs[{i}].direction"),
-                    format!("expected +1 or -1, got {d}"),
-                );
+                return bad(format!("runs[{i}].direction"), format!("expected +1 or -1, got {d}"));
             }
         }
     }
@@ -1061,10 +732,7 @@ pub fn validate(set: &MeasurementSet, file: &Path) -> Result<(), VmtError> {
                 return Err(VmtError::bad(
                     file,
                     place(format!("column {name}")),
-                    format!(
-                        "expected {n} values like the other columns, got {}",
-                        v.len()
-                    ),
+                    format!("expected {n} values like the other columns, got {}", v.len()),
                 ));
             }
             if let Some(k) = v.iter().position(|x| !x.is_finite()) {
@@ -1095,30 +763,17 @@ pub fn validate(set: &MeasurementSet, file: &Path) -> Result<(), VmtError> {
                 if let Some(k) = t.windows(2).position(|w| w[1] <= w[0]) {
                     return bad(
                         format!("column t, row {}", k + 2),
-                        format!(
-                            "`t` must increase strictly, got {} after {}",
-                            fmt_num(t[k + 1]),
-                            fmt_num(t[k])
-                        ),
+                        format!("`t` must increase strictly, got {} after {}", fmt_num(t[k + 1]), fmt_num(t[k])),
                     );
                 }
             }
-            RunData::PointTable {
-                target,
-                run,
-                direction,
-                t,
-                ..
-            } => {
+            RunData::PointTable { target, run, direction, t, .. } => {
                 check("target", target)?;
                 if let Some(t) = t {
                     check("t", t)?;
                 }
                 if run.len() != n || direction.len() != n {
-                    return bad(
-                        "columns run, direction".into(),
-                        format!("expected {n} values like `target`"),
-                    );
+                    return bad("columns run, direction".into(), format!("expected {n} values like `target`"));
                 }
                 if let Some(k) = run.iter().position(|&x| x < 1) {
                     return bad(
@@ -1215,13 +870,7 @@ fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> Result<String,
             header.push(header_cell("t", &time_u));
             cols.push(Col::Num(time_u, t));
         }
-        RunData::PointTable {
-            target,
-            run: rn,
-            direction,
-            t,
-            ..
-        } => {
+        RunData::PointTable { target, run: rn, direction, t, .. } => {
             let lu = write_unit(Dimension::Length, true, units);
             header.push(header_cell("target", &lu));
             cols.push(Col::Num(lu, target));
@@ -1238,11 +887,8 @@ fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> Result<String,
     for (name, v) in run.data.columns() {
         let (dim, pos) = match set.sensor(name) {
             Some(s) => (
-                s.kind.dimension(),
-                matches!(
-                    s.kind,
-                    SensorKind::Command | SensorKind::EncoderLinear | SensorKind::EncoderRotary
-                ),
+                kind_dimension(s.kind),
+                matches!(s.kind, SensorKind::Command | SensorKind::EncoderLinear | SensorKind::EncoderRotary),
             ),
             None => (Dimension::Length, true),
         };
@@ -1262,9 +908,7 @@ fn toml_f64_array(v: &[f64]) -> String {
 /// The manifest text of a set.
 fn manifest_text(set: &MeasurementSet) -> Result<String, VmtError> {
     let mut s = String::new();
-    s.push_str(
-        "# vmt measurement set (FORMAT.md §1); CSV values in SI unless a header says [unit]\n",
-    );
+    s.push_str("# vmt measurement set (FORMAT.md §1); CSV values in SI unless a header says [unit]\n");
     s.push_str(&format!("format = {}\n", toml_str(FORMAT_ID)));
     if let Some(d) = &set.description {
         s.push_str(&format!("description = {}\n", toml_str(d)));
@@ -1273,11 +917,8 @@ fn manifest_text(set: &MeasurementSet) -> Result<String, VmtError> {
         s.push_str(&format!("machine = {}\n", toml_str(m)));
     }
     if let Some(seed) = set.seed {
-        let seed_i = i64::try_from(seed).map_err(|_| {
-            VmtError::Internal(format!(
-                "seed {seed} does not fit a TOML integer (at most 2^63 - 1)"
-            ))
-        })?;
+        let seed_i = i64::try_from(seed)
+            .map_err(|_| VmtError::Internal(format!("seed {seed} does not fit a TOML integer (at most 2^63 - 1)")))?;
         s.push_str(&format!("seed = {seed_i}\n"));
     }
     for x in &set.sensors {
@@ -1329,13 +970,8 @@ pub fn write_with_extras(
     let mpath = dir.join("manifest.toml");
     validate(set, &mpath)?;
     for (name, _) in extras {
-        if !is_safe_relative(name)
-            || name == "manifest.toml"
-            || set.runs.iter().any(|r| r.file == *name)
-        {
-            return Err(VmtError::Internal(format!(
-                "extra file {name:?} is not a fresh relative name inside the set"
-            )));
+        if !is_safe_relative(name) || name == "manifest.toml" || set.runs.iter().any(|r| r.file == *name) {
+            return Err(VmtError::Internal(format!("extra file {name:?} is not a fresh relative name inside the set")));
         }
     }
     let manifest = manifest_text(set)?;
@@ -1352,8 +988,7 @@ pub fn write_with_extras(
         let put = |name: &str, bytes: &[u8]| -> Result<(), VmtError> {
             let p = tmp.join(name);
             if let Some(parent) = p.parent() {
-                std::fs::create_dir_all(parent)
-                    .map_err(|e| VmtError::io(parent, "creating the directory", e))?;
+                std::fs::create_dir_all(parent).map_err(|e| VmtError::io(parent, "creating the directory", e))?;
             }
             write_synced(&p, bytes)
         };
@@ -1409,11 +1044,7 @@ impl ProfileTable {
         self.columns
             .iter()
             .find(|c| c.effect == effect && c.axis == Some(axis))
-            .or_else(|| {
-                self.columns
-                    .iter()
-                    .find(|c| c.effect == effect && c.axis.is_none())
-            })
+            .or_else(|| self.columns.iter().find(|c| c.effect == effect && c.axis.is_none()))
     }
 }
 
@@ -1443,11 +1074,7 @@ fn parse_profile_column(name: &str) -> Result<(Option<char>, EffectName, bool), 
 pub fn read_profiles(path: &Path) -> Result<ProfileTable, VmtError> {
     let csv = read_csv_text(path)?;
     let pi = csv.index("position").ok_or_else(|| {
-        VmtError::bad(
-            path,
-            "line 1 (header)",
-            "missing column `position` (axis position, m or a length unit)",
-        )
+        VmtError::bad(path, "line 1 (header)", "missing column `position` (axis position, m or a length unit)")
     })?;
     let position = csv.numbers(path, pi, Dimension::Length)?;
     check_increasing(&csv, path, &position, "position")?;
@@ -1457,31 +1084,18 @@ pub fn read_profiles(path: &Path) -> Result<ProfileTable, VmtError> {
         if i == pi {
             continue;
         }
-        let (axis, effect, is_sigma) = parse_profile_column(name)
-            .map_err(|m| VmtError::bad(path, format!("column {name}"), m))?;
+        let (axis, effect, is_sigma) =
+            parse_profile_column(name).map_err(|m| VmtError::bad(path, format!("column {name}"), m))?;
         if is_sigma {
             sigmas.push((i, axis, effect));
             continue;
         }
-        let dim = if effect.is_translational() {
-            Dimension::Length
-        } else {
-            Dimension::Angle
-        };
-        columns.push(ProfileColumn {
-            axis,
-            effect,
-            values: csv.numbers(path, i, dim)?,
-            sigma: None,
-        });
+        let dim = if effect.is_translational() { Dimension::Length } else { Dimension::Angle };
+        columns.push(ProfileColumn { axis, effect, values: csv.numbers(path, i, dim)?, sigma: None });
     }
     for (i, axis, effect) in sigmas {
         let name = &csv.header[i].0;
-        let dim = if effect.is_translational() {
-            Dimension::Length
-        } else {
-            Dimension::Angle
-        };
+        let dim = if effect.is_translational() { Dimension::Length } else { Dimension::Angle };
         let v = csv.numbers(path, i, dim)?;
         if let Some(k) = v.iter().position(|&s| s < 0.0) {
             return Err(VmtError::bad(
@@ -1490,19 +1104,13 @@ pub fn read_profiles(path: &Path) -> Result<ProfileTable, VmtError> {
                 format!("expected a standard error ≥ 0, got {}", fmt_num(v[k])),
             ));
         }
-        let col = columns
-            .iter_mut()
-            .find(|c| c.axis == axis && c.effect == effect)
-            .ok_or_else(|| {
-                VmtError::bad(
-                    path,
-                    format!("column {name}"),
-                    format!(
-                        "`{name}` has no value column `{}`",
-                        name.trim_end_matches("_sigma")
-                    ),
-                )
-            })?;
+        let col = columns.iter_mut().find(|c| c.axis == axis && c.effect == effect).ok_or_else(|| {
+            VmtError::bad(
+                path,
+                format!("column {name}"),
+                format!("`{name}` has no value column `{}`", name.trim_end_matches("_sigma")),
+            )
+        })?;
         col.sigma = Some(v);
     }
     Ok(ProfileTable { position, columns })
@@ -1532,29 +1140,17 @@ pub fn validate_profiles(table: &ProfileTable, file: &Path) -> Result<(), VmtErr
     for (i, c) in table.columns.iter().enumerate() {
         let name = c.column_name();
         if !c.effect.is_error_motion() {
-            return bad(
-                format!("column {name}"),
-                "only the six error motions go in a profile CSV".into(),
-            );
+            return bad(format!("column {name}"), "only the six error motions go in a profile CSV".into());
         }
-        if table.columns[..i]
-            .iter()
-            .any(|o| o.axis == c.axis && o.effect == c.effect)
-        {
+        if table.columns[..i].iter().any(|o| o.axis == c.axis && o.effect == c.effect) {
             return bad(format!("column {name}"), "column appears twice".into());
         }
         let sig = c.sigma.as_deref().unwrap_or(&[]);
         if c.values.len() != n || (c.sigma.is_some() && sig.len() != n) {
-            return bad(
-                format!("column {name}"),
-                format!("expected {n} values like `position`"),
-            );
+            return bad(format!("column {name}"), format!("expected {n} values like `position`"));
         }
         if c.values.iter().chain(sig).any(|x| !x.is_finite()) || sig.iter().any(|&s| s < 0.0) {
-            return bad(
-                format!("column {name}"),
-                "expected finite values and standard errors ≥ 0".into(),
-            );
+            return bad(format!("column {name}"), "expected finite values and standard errors ≥ 0".into());
         }
     }
     Ok(())
@@ -1562,21 +1158,19 @@ pub fn validate_profiles(table: &ProfileTable, file: &Path) -> Result<(), VmtErr
 
 /// Writes a profile CSV (FORMAT.md §5) atomically: `position`, then each column and its
 /// `_sigma` column if any. With `Metrology` units: position in mm, lengths in um, angles in urad.
-pub fn write_profiles(
-    table: &ProfileTable,
-    path: &Path,
-    units: UnitChoice,
-) -> Result<(), VmtError> {
+pub fn write_profiles(table: &ProfileTable, path: &Path, units: UnitChoice) -> Result<(), VmtError> {
+    let text = profiles_csv(table, path, units)?;
+    write_file_atomic(path, text.as_bytes())
+}
+
+/// The §5 profile CSV text of a table (`path` is named in messages only).
+pub fn profiles_csv(table: &ProfileTable, path: &Path, units: UnitChoice) -> Result<String, VmtError> {
     validate_profiles(table, path)?;
     let pu = write_unit(Dimension::Length, true, units);
     let mut header: Vec<String> = vec![header_cell("position", &pu)];
     let mut cols: Vec<Col<'_>> = vec![Col::Num(pu, &table.position)];
     for c in &table.columns {
-        let dim = if c.effect.is_translational() {
-            Dimension::Length
-        } else {
-            Dimension::Angle
-        };
+        let dim = if c.effect.is_translational() { Dimension::Length } else { Dimension::Angle };
         let u = write_unit(dim, false, units);
         let name = c.column_name();
         header.push(header_cell(&name, &u));
@@ -1586,38 +1180,26 @@ pub fn write_profiles(
             cols.push(Col::Num(u, s));
         }
     }
-    let text =
-        csv_text(&header, &cols, table.position.len()).map_err(|m| VmtError::bad(path, "", m))?;
-    write_file_atomic(path, text.as_bytes())
+    csv_text(&header, &cols, table.position.len()).map_err(|m| VmtError::bad(path, "", m))
 }
 
 /// Reads a two-column table CSV (`position`, then `value` or `value_name`) as used by a model's
 /// `table = "file.csv"`: returns (positions m, values in SI of dimension `value_dim`), positions
 /// strictly increasing.
-pub fn read_value_table(
-    path: &Path,
-    value_name: &str,
-    value_dim: Dimension,
-) -> Result<(Vec<f64>, Vec<f64>), VmtError> {
+pub fn read_value_table(path: &Path, value_name: &str, value_dim: Dimension) -> Result<(Vec<f64>, Vec<f64>), VmtError> {
     let csv = read_csv_text(path)?;
     if csv.header.len() != 2 {
         return Err(VmtError::bad(
             path,
             "line 1 (header)",
-            format!(
-                "expected two columns `position,value` (or `position,{value_name}`), got {}",
-                csv.header.len()
-            ),
+            format!("expected two columns `position,value` (or `position,{value_name}`), got {}", csv.header.len()),
         ));
     }
     if csv.header[0].0 != "position" {
         return Err(VmtError::bad(
             path,
             "line 1 (header)",
-            format!(
-                "expected the first column `position`, got `{}`",
-                csv.header[0].0
-            ),
+            format!("expected the first column `position`, got `{}`", csv.header[0].0),
         ));
     }
     let vn = &csv.header[1].0;
@@ -1632,11 +1214,7 @@ pub fn read_value_table(
     check_increasing(&csv, path, &x, "position")?;
     let y = csv.numbers(path, 1, value_dim)?;
     if x.len() < 2 {
-        return Err(VmtError::bad(
-            path,
-            "",
-            "expected at least two rows (position, value)",
-        ));
+        return Err(VmtError::bad(path, "", "expected at least two rows (position, value)"));
     }
     Ok((x, y))
 }
@@ -1644,13 +1222,9 @@ pub fn read_value_table(
 /// The CSV text of a two-column table (`position,value`, SI, round-trip digits).
 pub fn value_table_text(x: &[f64], y: &[f64]) -> String {
     let si = Dimension::Length.si();
-    csv_text(
-        &["position".to_string(), "value".to_string()],
-        &[Col::Num(si, x), Col::Num(si, y)],
-        x.len().min(y.len()),
-    )
-    // SI units: no conversion, so no overflow; callers validate finiteness first.
-    .unwrap_or_default()
+    csv_text(&["position".to_string(), "value".to_string()], &[Col::Num(si, x), Col::Num(si, y)], x.len().min(y.len()))
+        // SI units: no conversion, so no overflow; callers validate finiteness first.
+        .unwrap_or_default()
 }
 
 #[cfg(test)]
@@ -1671,9 +1245,8 @@ mod tests {
             }
             let back: f64 = fmt_f64(x).parse().unwrap();
             assert_eq!(back.to_bits(), x.to_bits(), "{x:e} → {}", fmt_f64(x));
-            let t: toml::Value = toml::from_str::<toml::Table>(&format!("v = {}", fmt_toml_f64(x)))
-                .unwrap()["v"]
-                .clone();
+            let t: toml::Value =
+                toml::from_str::<toml::Table>(&format!("v = {}", fmt_toml_f64(x))).unwrap()["v"].clone();
             assert_eq!(t.as_float().unwrap().to_bits(), x.to_bits());
         }
         assert_eq!(fmt_f64(-0.0), "-0");
@@ -1685,14 +1258,8 @@ mod tests {
 
     #[test]
     fn profile_column_names_parse_with_axis_and_sigma() {
-        assert_eq!(
-            parse_profile_column("y.pitch_sigma").unwrap(),
-            (Some('y'), EffectName::Pitch, true)
-        );
-        assert_eq!(
-            parse_profile_column("straightness_y").unwrap(),
-            (None, EffectName::StraightnessY, false)
-        );
+        assert_eq!(parse_profile_column("y.pitch_sigma").unwrap(), (Some('y'), EffectName::Pitch, true));
+        assert_eq!(parse_profile_column("straightness_y").unwrap(), (None, EffectName::StraightnessY, false));
         assert!(parse_profile_column("backlash").is_err());
         assert!(parse_profile_column("q.pitch").is_err());
     }

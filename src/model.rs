@@ -21,15 +21,11 @@
 //! `[[effects.pitch]]` with `axis` in each.
 
 use crate::error::{parse_toml, TomlReader, VmtError};
-use crate::measurement::{
-    fmt_toml_f64, read_value_table, toml_str, value_table_text, write_file_atomic,
-};
+use crate::measurement::{fmt_toml_f64, read_value_table, toml_str, value_table_text, write_file_atomic};
 use crate::units::Dimension;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-use vmt_sim::effects::{
-    param_specs, Effect, EffectName, EffectParams, EffectSet, LeadHarmonic, Range,
-};
+use vmt_sim::effects::{param_specs, Effect, EffectName, EffectParams, EffectSet, LeadHarmonic, Range};
 use vmt_sim::profile::{Harmonic, Profile, RandomProfile, Term};
 
 /// The `format` value of a model file.
@@ -96,18 +92,9 @@ pub fn given_keys(effect: &Effect) -> Vec<String> {
             let mut keys: Vec<String> = Vec::new();
             for (k, present) in [
                 ("poly", p.terms.iter().any(|t| matches!(t, Term::Poly(_)))),
-                (
-                    "harmonics",
-                    p.terms.iter().any(|t| matches!(t, Term::Harmonics(_))),
-                ),
-                (
-                    "random",
-                    p.terms.iter().any(|t| matches!(t, Term::Random { .. })),
-                ),
-                (
-                    "table",
-                    p.terms.iter().any(|t| matches!(t, Term::Table { .. })),
-                ),
+                ("harmonics", p.terms.iter().any(|t| matches!(t, Term::Harmonics(_)))),
+                ("random", p.terms.iter().any(|t| matches!(t, Term::Random { .. }))),
+                ("table", p.terms.iter().any(|t| matches!(t, Term::Table { .. }))),
             ] {
                 if present {
                     keys.push(k.to_string());
@@ -116,11 +103,7 @@ pub fn given_keys(effect: &Effect) -> Vec<String> {
             keys
         }
         params => {
-            let mut keys: Vec<String> = params
-                .scalars(effect.name)
-                .into_iter()
-                .map(|(k, _)| k.to_string())
-                .collect();
+            let mut keys: Vec<String> = params.scalars(effect.name).into_iter().map(|(k, _)| k.to_string()).collect();
             if let EffectParams::CyclicLead(c) = params {
                 if !c.harmonics.is_empty() {
                     keys.push("harmonics".to_string());
@@ -136,13 +119,7 @@ impl ModelEffect {
     /// starts from these values, e.g. `vmt add --from-diagnosis`).
     pub fn new(effect: Effect, fit: bool) -> ModelEffect {
         let given = given_keys(&effect);
-        ModelEffect {
-            effect,
-            fit,
-            basis: None,
-            order: None,
-            given,
-        }
+        ModelEffect { effect, fit, basis: None, order: None, given }
     }
 }
 
@@ -163,16 +140,12 @@ impl Model {
     /// The effects as a simulator's [`EffectSet`] (fit flags dropped; fitted effects carry
     /// their starting values).
     pub fn effect_set(&self) -> EffectSet {
-        EffectSet {
-            effects: self.effects.iter().map(|m| m.effect.clone()).collect(),
-        }
+        EffectSet { effects: self.effects.iter().map(|m| m.effect.clone()).collect() }
     }
 
     /// The effect `name` on `axis`.
     pub fn get(&self, name: EffectName, axis: char) -> Option<&ModelEffect> {
-        self.effects
-            .iter()
-            .find(|m| m.effect.name == name && m.effect.axis == axis)
+        self.effects.iter().find(|m| m.effect.name == name && m.effect.axis == axis)
     }
 
     /// Adds an effect (replacing and returning one with the same name and axis), keeping the
@@ -196,15 +169,10 @@ impl Model {
 
 /// Reads a `vmt-model/1` file. Table profiles are read relative to the file's directory.
 pub fn read_model(path: &Path) -> Result<Model, VmtError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the model", e))?;
+    let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the model", e))?;
     let table = parse_toml(path, &text)?;
     if !table.contains_key("format") {
-        return Err(VmtError::bad(
-            path,
-            "format",
-            format!("missing key: expected format = \"{MODEL_FORMAT}\""),
-        ));
+        return Err(VmtError::bad(path, "format", format!("missing key: expected format = \"{MODEL_FORMAT}\"")));
     }
     parse_model(&table, path, &parent_of(path), "")
 }
@@ -221,47 +189,31 @@ fn parent_of(path: &Path) -> PathBuf {
 /// CSV paths and `prefix` is the key path of the table (`"truth"`, or `""` for a model file),
 /// so errors read `scenario.toml: truth.effects.backlash.value: expected ...`.
 /// `format` is optional here but must be `vmt-model/1` when present.
-pub fn parse_model(
-    table: &toml::Table,
-    file: &Path,
-    base_dir: &Path,
-    prefix: &str,
-) -> Result<Model, VmtError> {
+pub fn parse_model(table: &toml::Table, file: &Path, base_dir: &Path, prefix: &str) -> Result<Model, VmtError> {
     let r = TomlReader::new(file, prefix, table);
     if let Some(f) = r.opt_str("format", &format!("\"{MODEL_FORMAT}\""))? {
         if f != MODEL_FORMAT {
             return Err(r.bad("format", format!("expected \"{MODEL_FORMAT}\", got {f:?}")));
         }
     }
-    let machine = r
-        .opt_str("machine", "a bundled machine name or URDF path")?
-        .map(str::to_string);
+    let machine = r.opt_str("machine", "a bundled machine name or URDF path")?.map(str::to_string);
     let axis = axis_of(&r, "axis")?.unwrap_or('x');
     let mut effects: Vec<(ModelEffect, String)> = Vec::new();
     if let Some(er) = r.opt_table("effects")? {
         for (key, value) in er.table() {
             er.allow(&[key.as_str()]);
             let name: EffectName = key.parse().map_err(|_| {
-                er.bad(
-                    key,
-                    format!(
-                        "unknown effect `{key}`; known effects: {}",
-                        EffectName::known_list()
-                    ),
-                )
+                er.bad(key, format!("unknown effect `{key}`; known effects: {}", EffectName::known_list()))
             })?;
             let readers: Vec<TomlReader<'_>> = match value {
-                toml::Value::Table(_) => vec![er
-                    .opt_table(key)?
-                    .ok_or_else(|| VmtError::Internal("effect table vanished".to_string()))?],
+                toml::Value::Table(_) => {
+                    vec![er.opt_table(key)?.ok_or_else(|| VmtError::Internal("effect table vanished".to_string()))?]
+                }
                 toml::Value::Array(_) => er.opt_tables(key)?.unwrap_or_default(),
                 v => {
                     return Err(er.bad(
                         key,
-                        format!(
-                            "expected a table [effects.{key}], got {}",
-                            crate::error::describe_value(v)
-                        ),
+                        format!("expected a table [effects.{key}], got {}", crate::error::describe_value(v)),
                     ))
                 }
             };
@@ -273,9 +225,7 @@ pub fn parse_model(
         er.deny_unknown()?;
     }
     r.deny_unknown()?;
-    effects.sort_by(|(a, _), (b, _)| {
-        (a.effect.name, a.effect.axis).cmp(&(b.effect.name, b.effect.axis))
-    });
+    effects.sort_by(|(a, _), (b, _)| (a.effect.name, a.effect.axis).cmp(&(b.effect.name, b.effect.axis)));
     for w in effects.windows(2) {
         let (a, _) = &w[0];
         let (b, path) = &w[1];
@@ -283,29 +233,18 @@ pub fn parse_model(
             return Err(VmtError::bad(
                 file,
                 path.clone(),
-                format!(
-                    "`{}` is given twice for axis {}",
-                    b.effect.name, b.effect.axis
-                ),
+                format!("`{}` is given twice for axis {}", b.effect.name, b.effect.axis),
             ));
         }
     }
-    Ok(Model {
-        machine,
-        axis,
-        effects: effects.into_iter().map(|(m, _)| m).collect(),
-        source: file.to_path_buf(),
-    })
+    Ok(Model { machine, axis, effects: effects.into_iter().map(|(m, _)| m).collect(), source: file.to_path_buf() })
 }
 
 fn axis_of(r: &TomlReader<'_>, key: &str) -> Result<Option<char>, VmtError> {
     match r.opt_str(key, "an axis \"x\", \"y\" or \"z\"")? {
         None => Ok(None),
         Some(s) if matches!(s, "x" | "y" | "z") => Ok(s.chars().next()),
-        Some(s) => Err(r.bad(
-            key,
-            format!("expected an axis \"x\", \"y\" or \"z\", got {s:?}"),
-        )),
+        Some(s) => Err(r.bad(key, format!("expected an axis \"x\", \"y\" or \"z\", got {s:?}"))),
     }
 }
 
@@ -322,18 +261,12 @@ fn parse_effect(
     let mut basis: Option<Basis> = None;
     let mut order: Option<u32> = None;
     let params = if name.is_error_motion() {
-        let quantity = if name.is_translational() {
-            "a length in metres"
-        } else {
-            "an angle in radians"
-        };
+        let quantity = if name.is_translational() { "a length in metres" } else { "an angle in radians" };
         if let Some(b) = r.opt_str("basis", "poly, bspline, harmonics or table")? {
-            basis = Some(Basis::parse(b).ok_or_else(|| {
-                r.bad(
-                    "basis",
-                    format!("expected poly, bspline, harmonics or table, got {b:?}"),
-                )
-            })?);
+            basis = Some(
+                Basis::parse(b)
+                    .ok_or_else(|| r.bad("basis", format!("expected poly, bspline, harmonics or table, got {b:?}")))?,
+            );
         }
         if let Some(o) = r.opt_u64("order", "a positive integer")? {
             if o < 1 || o > u64::from(u32::MAX) {
@@ -344,10 +277,7 @@ fn parse_effect(
         if !fit {
             for k in ["basis", "order"] {
                 if r.has(k) {
-                    return Err(r.bad(
-                        k,
-                        format!("`{k}` only applies to a fitted error motion: add fit = true"),
-                    ));
+                    return Err(r.bad(k, format!("`{k}` only applies to a fitted error motion: add fit = true")));
                 }
             }
         }
@@ -376,8 +306,7 @@ fn parse_effect(
         if let Some(rr) = r.opt_table("random")? {
             let spec = RandomProfile {
                 rms: rr.req_f64("rms", &format!("{quantity} ≥ 0"))?,
-                correlation_length: rr
-                    .req_f64("correlation_length", "a correlation length in metres > 0")?,
+                correlation_length: rr.req_f64("correlation_length", "a correlation length in metres > 0")?,
                 seed: rr
                     .opt_u64("seed", "a non-negative integer seed")?
                     .ok_or_else(|| rr.bad("seed", "missing key: expected an integer seed"))?,
@@ -385,13 +314,7 @@ fn parse_effect(
             rr.deny_unknown()?;
             // Range-check before expanding (the expansion divides by the correlation length).
             if !Range::NonNegative.contains(spec.rms) {
-                return Err(rr.bad(
-                    "rms",
-                    format!(
-                        "expected {quantity} ≥ 0, got {}",
-                        crate::error::fmt_num(spec.rms)
-                    ),
-                ));
+                return Err(rr.bad("rms", format!("expected {quantity} ≥ 0, got {}", crate::error::fmt_num(spec.rms))));
             }
             if !Range::Positive.contains(spec.correlation_length) {
                 return Err(rr.bad(
@@ -405,11 +328,7 @@ fn parse_effect(
             terms.push(Term::random(spec));
         }
         if let Some(f) = r.opt_str("table", "a CSV file name (position,value)")? {
-            let dim = if name.is_translational() {
-                Dimension::Length
-            } else {
-                Dimension::Angle
-            };
+            let dim = if name.is_translational() { Dimension::Length } else { Dimension::Angle };
             let (x, y) = read_value_table(&base_dir.join(f), name.as_str(), dim)?;
             terms.push(Term::Table { x, y });
         }
@@ -447,9 +366,7 @@ fn parse_effect(
                 for h in &hs {
                     let order = h
                         .opt_u64("order", "a harmonic number ≥ 2")?
-                        .ok_or_else(|| {
-                            h.bad("order", "missing key: expected a harmonic number ≥ 2")
-                        })?;
+                        .ok_or_else(|| h.bad("order", "missing key: expected a harmonic number ≥ 2"))?;
                     c.harmonics.push(LeadHarmonic {
                         order: u32::try_from(order).unwrap_or(u32::MAX),
                         amplitude: h.req_f64("amplitude", "a length in metres ≥ 0")?,
@@ -467,18 +384,8 @@ fn parse_effect(
     if let Some(p) = effect.validate().into_iter().next() {
         return Err(r.bad(&p.key, p.message));
     }
-    let given = if fit && !name.is_error_motion() {
-        given
-    } else {
-        given_keys(&effect)
-    };
-    Ok(ModelEffect {
-        effect,
-        fit,
-        basis,
-        order,
-        given,
-    })
+    let given = if fit && !name.is_error_motion() { given } else { given_keys(&effect) };
+    Ok(ModelEffect { effect, fit, basis, order, given })
 }
 
 /// A TOML inline table of (key, float) pairs.
@@ -550,9 +457,8 @@ fn profile_lines(
         out.push_str(&format!("harmonics = [{}]\n", items.join(", ")));
     }
     if let Some(s) = random {
-        let seed = i64::try_from(s.seed).map_err(|_| {
-            VmtError::Internal(format!("random seed {} exceeds a TOML integer", s.seed))
-        })?;
+        let seed = i64::try_from(s.seed)
+            .map_err(|_| VmtError::Internal(format!("random seed {} exceeds a TOML integer", s.seed)))?;
         out.push_str(&format!(
             "random = {}\n",
             inline(&[
@@ -573,10 +479,7 @@ fn profile_lines(
 /// The TOML text of a model, and the sidecar CSV files (name, text) of its table profiles,
 /// named `STEM.AXIS.EFFECT.csv` (to be written beside the model file). Floats are written with
 /// the shortest round-trip digits, so reading the text back gives identical numbers.
-pub fn model_to_toml(
-    model: &Model,
-    stem: &str,
-) -> Result<(String, Vec<(String, String)>), VmtError> {
+pub fn model_to_toml(model: &Model, stem: &str) -> Result<(String, Vec<(String, String)>), VmtError> {
     let mut out = String::new();
     let mut sidecars: Vec<(String, String)> = Vec::new();
     out.push_str("# vmt model (FORMAT.md §2); SI units: m, rad, s, N, K\n");
@@ -589,12 +492,7 @@ pub fn model_to_toml(
     effects.sort_by_key(|m| (m.effect.name, m.effect.axis));
     for me in effects {
         let e = &me.effect;
-        let many = model
-            .effects
-            .iter()
-            .filter(|o| o.effect.name == e.name)
-            .count()
-            > 1;
+        let many = model.effects.iter().filter(|o| o.effect.name == e.name).count() > 1;
         if many {
             out.push_str(&format!("\n[[effects.{}]]\n", e.name));
         } else {
@@ -655,10 +553,7 @@ pub fn write_model(model: &Model, path: &Path) -> Result<Vec<PathBuf>, VmtError>
     if let Some(p) = problems.first() {
         return Err(VmtError::bad(path, p.key.clone(), p.message.clone()));
     }
-    let stem = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "model".to_string());
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "model".to_string());
     let (text, sidecars) = model_to_toml(model, &stem)?;
     let dir = parent_of(path);
     let mut written: Vec<PathBuf> = Vec::new();

@@ -58,15 +58,21 @@ impl Scenario {
 
     /// Reads a scenario file.
     pub fn load(path: &Path) -> Result<Scenario, VmtError> {
-        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, e))?;
+        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the scenario", e))?;
         Scenario::parse(&text, path, path.parent())
     }
 
     /// Parses scenario text; `base` is the directory relative paths are resolved against (None: only
     /// bundled machines and inline truths are allowed).
     pub fn parse(text: &str, source: &Path, base: Option<&Path>) -> Result<Scenario, VmtError> {
-        let raw: RawScenario = toml::from_str(text).map_err(|e| VmtError::toml(source, text, &e))?;
-        let bad = |place: &str, msg: String| VmtError::input(source, place, msg);
+        let raw: RawScenario = toml::from_str(text).map_err(|e| {
+            let place = e.span().map(|s| {
+                let (line, col) = crate::error::line_col(text, s.start);
+                format!("line {line}, column {col}")
+            });
+            VmtError::bad(source, place.unwrap_or_default(), e.message().to_string())
+        })?;
+        let bad = |place: &str, msg: String| VmtError::bad(source, place, msg);
         if raw.format != "vmt-scenario/1" {
             return Err(bad("format", format!("expected \"vmt-scenario/1\", got \"{}\"", raw.format)));
         }
@@ -74,11 +80,9 @@ impl Scenario {
         let machine = load_machine(&raw.machine, base, source)?;
         let axis = AxisModel::build(&machine, &raw.axis).map_err(|e| bad("axis", e.to_string()))?;
         let truth = match &raw.truth {
-            toml::Value::String(file) => {
-                let p = base_dir.join(file);
-                model::load(&p)?
-            }
-            v => model::from_value(v, source, &base_dir, "truth")?,
+            toml::Value::String(file) => model::read_model(&base_dir.join(file))?,
+            toml::Value::Table(t) => model::parse_model(t, source, &base_dir, "truth")?,
+            _ => return Err(bad("truth", "expected a table (inline truth) or a file name".into())),
         };
         validate_sensors(&raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
         validate_procedures(&raw.procedures, &raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
@@ -104,16 +108,20 @@ pub fn load_machine(name: &str, base: Option<&Path>, source: &Path) -> Result<Ma
         None => {
             let p = base.map(|b| b.join(name)).unwrap_or_else(|| PathBuf::from(name));
             if !p.exists() {
-                return Err(VmtError::input(
+                return Err(VmtError::bad(
                     source,
                     "machine",
-                    format!("`{name}` is neither a bundled machine ({}) nor an existing URDF file ({})", bundled::MACHINES.join(", "), p.display()),
+                    format!(
+                        "`{name}` is neither a bundled machine ({}) nor an existing URDF file ({})",
+                        bundled::MACHINES.join(", "),
+                        p.display()
+                    ),
                 ));
             }
-            (std::fs::read_to_string(&p).map_err(|e| VmtError::io(&p, e))?, p)
+            (std::fs::read_to_string(&p).map_err(|e| VmtError::io(&p, "reading the URDF", e))?, p)
         }
     };
-    parse_urdf(&text).map_err(|e| VmtError::input(&file, "robot", e.to_string()))
+    parse_urdf(&text).map_err(|e| VmtError::bad(&file, "robot", e.to_string()))
 }
 
 fn finite_nonneg(v: f64) -> bool {
@@ -124,19 +132,31 @@ fn finite_nonneg(v: f64) -> bool {
 fn validate_sensors(sensors: &[SensorSpec], axis: &AxisModel) -> Result<(), (String, String)> {
     for (i, s) in sensors.iter().enumerate() {
         let at = |k: &str| format!("sensors[{i}] ({}).{k}", s.name);
-        if s.name.is_empty() || s.name.contains(['[', ']', ',', '"']) || s.name == "t" || s.name == "x_cmd" && s.kind != SensorKind::Command {
+        if s.name.is_empty()
+            || s.name.contains(['[', ']', ',', '"'])
+            || s.name == "t"
+            || s.name == "x_cmd" && s.kind != SensorKind::Command
+        {
             return Err((at("name"), "expected a column name without brackets, commas or quotes, not `t`".into()));
         }
         if sensors[..i].iter().any(|o| o.name == s.name) {
             return Err((at("name"), "sensor names must be unique".into()));
         }
-        for (k, v) in [("sigma", s.sigma), ("resolution", s.resolution), ("noise_density", s.noise_density), ("highpass", s.highpass)] {
+        for (k, v) in [
+            ("sigma", s.sigma),
+            ("resolution", s.resolution),
+            ("noise_density", s.noise_density),
+            ("highpass", s.highpass),
+        ] {
             if !finite_nonneg(v) {
                 return Err((at(k), format!("expected a finite value ≥ 0, got {v}")));
             }
         }
         if !s.bias.is_finite() || !s.scale_factor.is_finite() || s.scale_factor.abs() >= 0.5 {
-            return Err((at("scale_factor"), format!("expected bias finite and |scale_factor| < 0.5, got {} and {}", s.bias, s.scale_factor)));
+            return Err((
+                at("scale_factor"),
+                format!("expected bias finite and |scale_factor| < 0.5, got {} and {}", s.bias, s.scale_factor),
+            ));
         }
         if let Some(p) = s.position {
             if !p.iter().all(|v| v.is_finite() && v.abs() < 100.0) {
@@ -152,7 +172,11 @@ fn validate_sensors(sensors: &[SensorSpec], axis: &AxisModel) -> Result<(), (Str
 }
 
 /// Checks procedure values against the axis (travel, feed) and the declared sensors.
-fn validate_procedures(procs: &[ProcedureSpec], sensors: &[SensorSpec], axis: &AxisModel) -> Result<(), (String, String)> {
+fn validate_procedures(
+    procs: &[ProcedureSpec],
+    sensors: &[SensorSpec],
+    axis: &AxisModel,
+) -> Result<(), (String, String)> {
     let (lo, hi) = axis.travel;
     let tol = 1e-9;
     for (i, p) in procs.iter().enumerate() {
@@ -193,7 +217,20 @@ fn validate_procedures(procs: &[ProcedureSpec], sensors: &[SensorSpec], axis: &A
                     return Err((at("high_rate"), "expected high_rate > 0, end > start and settle ≥ 0".into()));
                 }
             }
-            ProcedureSpec::Positioning { targets, n_targets, start, end, runs, feed, dwell, average, rate, overrun, accel, .. } => {
+            ProcedureSpec::Positioning {
+                targets,
+                n_targets,
+                start,
+                end,
+                runs,
+                feed,
+                dwell,
+                average,
+                rate,
+                overrun,
+                accel,
+                ..
+            } => {
                 in_travel("start", *start)?;
                 in_travel("end", *end)?;
                 feed_ok("feed", *feed)?;
@@ -207,16 +244,50 @@ fn validate_procedures(procs: &[ProcedureSpec], sensors: &[SensorSpec], axis: &A
                 } else if *n_targets < 2 {
                     return Err((at("n_targets"), format!("expected at least 2 targets, got {n_targets}")));
                 }
-                if *runs < 1 || !(end > start) || !(*dwell > 0.0) || !(*average > 0.0 && average <= dwell) || !(*rate > 0.0) || !finite_nonneg(*overrun) {
-                    return Err((at("dwell"), "expected runs ≥ 1, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into()));
+                if accel.is_some_and(|a| !(a > 0.0 && a.is_finite())) {
+                    return Err((at("accel"), format!("expected an acceleration > 0 m/s², got {accel:?}")));
+                }
+                if *runs < 1
+                    || !(end > start)
+                    || !(*dwell > 0.0)
+                    || !(*average > 0.0 && average <= dwell)
+                    || !(*rate > 0.0)
+                    || !finite_nonneg(*overrun)
+                {
+                    return Err((
+                        at("dwell"),
+                        "expected runs ≥ 1, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into(),
+                    ));
+                }
+            }
+            ProcedureSpec::Crawl { feeds, start, duration, rate, settle, .. } => {
+                in_travel("start", *start)?;
+                if feeds.is_empty() {
+                    return Err((at("feeds"), "expected at least one feed".into()));
+                }
+                for v in feeds {
+                    feed_ok("feeds", *v)?;
+                    in_travel("feeds", start + v * (settle + duration + 1.0))?;
+                }
+                if !(*duration > 0.0 && *rate > 0.0 && finite_nonneg(*settle)) {
+                    return Err((at("duration"), "expected duration > 0, rate > 0 and settle ≥ 0".into()));
                 }
             }
             ProcedureSpec::NineLine { start, end, step, feed, dwell, average, rate, overrun, .. } => {
                 in_travel("start", *start)?;
                 in_travel("end", *end)?;
                 feed_ok("feed", *feed)?;
-                if !(*step > 0.0) || !(end > start) || !(*dwell > 0.0) || !(*average > 0.0 && average <= dwell) || !(*rate > 0.0) || !finite_nonneg(*overrun) {
-                    return Err((at("step"), "expected step > 0, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into()));
+                if !(*step > 0.0)
+                    || !(end > start)
+                    || !(*dwell > 0.0)
+                    || !(*average > 0.0 && average <= dwell)
+                    || !(*rate > 0.0)
+                    || !finite_nonneg(*overrun)
+                {
+                    return Err((
+                        at("step"),
+                        "expected step > 0, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into(),
+                    ));
                 }
             }
         }

@@ -1,51 +1,64 @@
 //! Workflow `simulate`: scenario → machine → recording. The physics of each procedure is simulated
-//! once (in parallel: procedures are independent, and each is deterministic, so the result does not
+//! once (in parallel: procedures are independent and each is deterministic, so the result does not
 //! depend on the number of threads); the sensors then read the truth with noise seeded per run and
-//! sensor.
+//! sensor (so a tolerance study can redraw the noise without redoing the physics).
 
 use crate::error::VmtError;
+use crate::measurement::{self, MeasurementSet, ProfileColumn, ProfileTable, Run, Sensor, SensorKind, UnitChoice};
+use crate::model::model_to_toml;
 use crate::scenario::Scenario;
 use rayon::prelude::*;
-use vmt_sim::effects::EffectParams;
+use std::path::Path;
+use vmt_sim::axis_sim::AxisTruth;
+use vmt_sim::effects::EffectName;
 use vmt_sim::geometry::ErrorMotions;
+use vmt_sim::machine::AxisModel;
 use vmt_sim::procedures::{read_run, simulate_procedure, RunRecord, RunTruth};
+use vmt_sim::sensors::SensorSpec;
+use vmt_sim::truth::axis_physics;
 
 /// The axis letter of a joint, for matching effects (`axis = "x"`): the joint name's last letter.
 pub fn axis_letter(joint: &str) -> char {
     joint.chars().last().unwrap_or('x').to_ascii_lowercase()
 }
 
-/// The six error motions of `axis` from a truth model (effects of other axes and other kinds are not
-/// geometric error motions of this axis and are ignored here).
-pub fn error_motions(truth: &crate::model::Model, axis: char) -> ErrorMotions {
-    let mut e = ErrorMotions::default();
-    for me in &truth.effects {
-        if me.effect.axis != axis {
-            continue;
-        }
-        if let EffectParams::ErrorMotion(p) = &me.effect.params {
-            use vmt_sim::effects::EffectName as N;
-            let slot = match me.effect.name {
-                N::Positioning => &mut e.positioning,
-                N::StraightnessY => &mut e.straightness_y,
-                N::StraightnessZ => &mut e.straightness_z,
-                N::Roll => &mut e.roll,
-                N::Pitch => &mut e.pitch,
-                N::Yaw => &mut e.yaw,
-                _ => continue,
-            };
-            *slot = p.clone();
-        }
-    }
-    e
+/// The machine, truth and sensors as the physics sees them: the scenario's axis model with the truth's
+/// servo changes, the injected effects, and the sensors with the truth's sensor effects.
+#[derive(Clone, Debug)]
+pub struct Physics {
+    pub model: AxisModel,
+    pub truth: AxisTruth,
+    pub sensors: Vec<SensorSpec>,
+}
+
+/// Builds the physics of a scenario from its truth.
+pub fn physics(sc: &Scenario) -> Result<Physics, VmtError> {
+    let axis = axis_letter(&sc.axis.joint);
+    let mut model = sc.axis.clone();
+    let (truth, adj) =
+        axis_physics(&sc.truth.effect_set(), axis, &model).map_err(|m| VmtError::bad(&sc.source, "truth", m))?;
+    adj.apply(&mut model);
+    let sensors = sc
+        .sensors
+        .iter()
+        .map(|s| match (s.kind, adj.accel_bias_drift) {
+            (SensorKind::Accelerometer, Some(rate)) => SensorSpec { bias_drift: rate, ..s.clone() },
+            _ => s.clone(),
+        })
+        .collect();
+    Ok(Physics { model, truth, sensors })
+}
+
+/// The six error motions of the scenario's axis.
+pub fn error_motions(sc: &Scenario) -> Result<ErrorMotions, VmtError> {
+    Ok(physics(sc)?.truth.motions)
 }
 
 /// Noise-free truth traces of every procedure of a scenario, in scenario order.
-pub fn simulate_truth(sc: &Scenario) -> Vec<RunTruth> {
-    let errors = error_motions(&sc.truth, axis_letter(&sc.axis.joint));
+pub fn simulate_truth(sc: &Scenario, ph: &Physics) -> Vec<RunTruth> {
     sc.procedures
         .par_iter()
-        .map(|p| simulate_procedure(&sc.axis, &errors, p, sc.seed))
+        .map(|p| simulate_procedure(&ph.model, &ph.truth, p, sc.seed))
         .collect::<Vec<_>>()
         .into_iter()
         .flatten()
@@ -53,9 +66,82 @@ pub fn simulate_truth(sc: &Scenario) -> Vec<RunTruth> {
 }
 
 /// Sensor readings of every run, noise seeded by `seed`.
-pub fn read_all(sc: &Scenario, truths: &[RunTruth], seed: u64) -> Result<Vec<RunRecord>, VmtError> {
+pub fn read_all(sc: &Scenario, ph: &Physics, truths: &[RunTruth], seed: u64) -> Result<Vec<RunRecord>, VmtError> {
     truths
         .iter()
-        .map(|t| read_run(&sc.axis, t, &sc.sensors, seed).map_err(|m| VmtError::input(&sc.source, "sensors", m)))
+        .map(|t| {
+            read_run(&ph.model, &ph.truth, t, &ph.sensors, seed).map_err(|m| VmtError::bad(&sc.source, "sensors", m))
+        })
         .collect()
+}
+
+/// 1σ of one reading of a sensor as written in the manifest: white noise and quantisation combined,
+/// √(σ² + q²/12); None where the noise is given as a density (it depends on the run's sample rate).
+fn reading_sigma(s: &SensorSpec) -> Option<f64> {
+    let s = s.resolved();
+    (s.noise_density == 0.0).then(|| (s.sigma * s.sigma + s.resolution * s.resolution / 12.0).sqrt())
+}
+
+/// The measurement set (FORMAT.md §1) of a recording.
+pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<MeasurementSet, VmtError> {
+    let axis = axis_letter(&sc.axis.joint);
+    let used = |name: &str| runs.iter().any(|r| r.data.column(name).is_some());
+    let mut sensors = Vec::new();
+    for s in sc.sensors.iter().filter(|s| s.kind != SensorKind::Command && used(&s.name)) {
+        sensors.push(Sensor {
+            name: s.name.clone(),
+            kind: s.kind,
+            axis,
+            position: s.axis_position(&sc.axis).map_err(|m| VmtError::bad(&sc.source, "sensors", m))?,
+            direction: s.unit_direction().to_array(),
+            sigma: reading_sigma(s),
+        });
+    }
+    let runs = runs
+        .iter()
+        .map(|r| Run {
+            name: r.name.clone(),
+            file: format!("{}.csv", r.name),
+            procedure: r.procedure,
+            axis,
+            start_time: Some(r.start_time),
+            feed: r.feed,
+            direction: r.direction,
+            data: r.data.clone(),
+        })
+        .collect();
+    Ok(MeasurementSet {
+        description: Some(sc.description.clone()),
+        machine: Some(sc.machine_name.clone()),
+        seed: Some(sc.seed),
+        sensors,
+        runs,
+    })
+}
+
+/// The truth written beside a measurement set (FORMAT.md §5): `truth.toml` (the truth in the model
+/// format, with any table sidecars) and `truth_profiles.csv` (the six error motions every millimetre
+/// over the travel).
+pub fn truth_extras(sc: &Scenario) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
+    let (toml_text, sidecars) = model_to_toml(&sc.truth, "truth")?;
+    let mut out = vec![("truth.toml".to_string(), toml_text.into_bytes())];
+    out.extend(sidecars.into_iter().map(|(n, t)| (n, t.into_bytes())));
+    let errors = error_motions(sc)?;
+    let (lo, hi) = sc.axis.travel;
+    let n = ((hi - lo) / 1e-3).round().max(1.0) as usize;
+    let position: Vec<f64> = (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect();
+    let columns = EffectName::ERROR_MOTIONS
+        .iter()
+        .enumerate()
+        .map(|(i, &effect)| ProfileColumn {
+            axis: None,
+            effect,
+            values: position.iter().map(|&x| errors.by_index(i).value(x)).collect(),
+            sigma: None,
+        })
+        .collect();
+    let table = ProfileTable { position, columns };
+    let csv = measurement::profiles_csv(&table, Path::new("truth_profiles.csv"), UnitChoice::Si)?;
+    out.push(("truth_profiles.csv".to_string(), csv.into_bytes()));
+    Ok(out)
 }

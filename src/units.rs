@@ -34,11 +34,7 @@ pub enum Dimension {
 impl Dimension {
     /// The dimension with its accepted units, for messages: "a length (m, mm, um, nm)".
     pub fn describe(self) -> String {
-        let units: Vec<&str> = UNITS
-            .iter()
-            .filter(|u| u.dimension == self)
-            .map(|u| u.symbol)
-            .collect();
+        let units: Vec<&str> = UNITS.iter().filter(|u| u.dimension == self).map(|u| u.symbol).collect();
         let name = match self {
             Dimension::Length => "a length",
             Dimension::Time => "a time",
@@ -66,13 +62,7 @@ impl Dimension {
             Dimension::Pressure => "Pa",
             Dimension::Ratio => "1",
         };
-        unit(sym).unwrap_or(Unit {
-            symbol: "1",
-            dimension: self,
-            factor: 1.0,
-            divide: false,
-            offset: 0.0,
-        })
+        unit(sym).unwrap_or(Unit { symbol: "1", dimension: self, factor: 1.0, divide: false, offset: 0.0 })
     }
 }
 
@@ -93,13 +83,7 @@ pub struct Unit {
 }
 
 const fn u(symbol: &'static str, dimension: Dimension, factor: f64, divide: bool) -> Unit {
-    Unit {
-        symbol,
-        dimension,
-        factor,
-        divide,
-        offset: 0.0,
-    }
+    Unit { symbol, dimension, factor, divide, offset: 0.0 }
 }
 
 /// Standard gravity, m/s² (CGPM 1901): 1 g = 9.80665 m/s².
@@ -121,22 +105,11 @@ pub static UNITS: [Unit; 23] = [
     u("rad", Dimension::Angle, 1.0, false),
     u("mrad", Dimension::Angle, 1e3, true),
     u("urad", Dimension::Angle, 1e6, true),
-    u(
-        "arcsec",
-        Dimension::Angle,
-        648000.0 / std::f64::consts::PI,
-        true,
-    ),
+    u("arcsec", Dimension::Angle, 648000.0 / std::f64::consts::PI, true),
     u("deg", Dimension::Angle, 180.0 / std::f64::consts::PI, true),
     u("N", Dimension::Force, 1.0, false),
     u("K", Dimension::Temperature, 1.0, false),
-    Unit {
-        symbol: "degC",
-        dimension: Dimension::Temperature,
-        factor: 1.0,
-        divide: false,
-        offset: 273.15,
-    },
+    Unit { symbol: "degC", dimension: Dimension::Temperature, factor: 1.0, divide: false, offset: 273.15 },
     u("Pa", Dimension::Pressure, 1.0, false),
     u("percent", Dimension::Ratio, 100.0, true),
     u("1", Dimension::Ratio, 1.0, false),
@@ -152,11 +125,7 @@ pub fn unit(symbol: &str) -> Option<Unit> {
 impl Unit {
     /// Converts a value in this unit to SI: v·factor + offset (or v/factor + offset).
     pub fn to_si(&self, v: f64) -> f64 {
-        let scaled = if self.divide {
-            v / self.factor
-        } else {
-            v * self.factor
-        };
+        let scaled = if self.divide { v / self.factor } else { v * self.factor };
         // Adding a zero offset would turn −0 into +0: skip it, so SI reads are bit-exact.
         if self.offset == 0.0 {
             scaled
@@ -167,11 +136,7 @@ impl Unit {
 
     /// Converts an SI value to this unit, the inverse of [`Unit::to_si`].
     pub fn from_si(&self, si: f64) -> f64 {
-        let s = if self.offset == 0.0 {
-            si
-        } else {
-            si - self.offset
-        };
+        let s = if self.offset == 0.0 { si } else { si - self.offset };
         if self.divide {
             s * self.factor
         } else {
@@ -194,14 +159,10 @@ pub fn parse_header_cell(cell: &str) -> Result<(String, Option<String>), String>
         Some(i) => {
             let rest = &cell[i + 1..];
             let Some(j) = rest.find(']') else {
-                return Err(format!(
-                    "header cell `{cell}`: expected `name[unit]`, the `]` is missing"
-                ));
+                return Err(format!("header cell `{cell}`: expected `name[unit]`, the `]` is missing"));
             };
             if !rest[j + 1..].trim().is_empty() {
-                return Err(format!(
-                    "header cell `{cell}`: expected `name[unit]`, found text after `]`"
-                ));
+                return Err(format!("header cell `{cell}`: expected `name[unit]`, found text after `]`"));
             }
             (cell[..i].trim(), Some(rest[..j].trim().to_string()))
         }
@@ -210,9 +171,7 @@ pub fn parse_header_cell(cell: &str) -> Result<(String, Option<String>), String>
         return Err(format!("header cell `{cell}`: the column name is empty"));
     }
     if unit.as_deref() == Some("") {
-        return Err(format!(
-            "header cell `{cell}`: empty unit `[]` (leave the brackets out for SI)"
-        ));
+        return Err(format!("header cell `{cell}`: empty unit `[]` (leave the brackets out for SI)"));
     }
     Ok((name.to_string(), unit))
 }
@@ -225,15 +184,10 @@ pub fn resolve_unit(symbol: Option<&str>, expected: Dimension) -> Result<Unit, S
         return Ok(expected.si());
     };
     match unit(sym) {
-        None => Err(format!(
-            "unknown unit `{sym}`: expected {}",
-            expected.describe()
-        )),
-        Some(u) if u.dimension != expected => Err(format!(
-            "unit `{sym}` is {}, expected {}",
-            u.dimension.describe(),
-            expected.describe()
-        )),
+        None => Err(format!("unknown unit `{sym}`: expected {}", expected.describe())),
+        Some(u) if u.dimension != expected => {
+            Err(format!("unit `{sym}` is {}, expected {}", u.dimension.describe(), expected.describe()))
+        }
         Some(u) => Ok(u),
     }
 }
@@ -244,10 +198,7 @@ mod tests {
 
     #[test]
     fn header_cells_split_into_name_and_unit() {
-        assert_eq!(
-            parse_header_cell(" laser_p1[um] ").unwrap(),
-            ("laser_p1".to_string(), Some("um".to_string()))
-        );
+        assert_eq!(parse_header_cell(" laser_p1[um] ").unwrap(), ("laser_p1".to_string(), Some("um".to_string())));
         assert_eq!(parse_header_cell("t").unwrap(), ("t".to_string(), None));
         assert!(parse_header_cell("x[mm").is_err());
         assert!(parse_header_cell("[mm]").is_err());
@@ -286,15 +237,9 @@ mod tests {
     #[test]
     fn wrong_or_unknown_units_are_rejected_with_the_expected_dimension() {
         let e = resolve_unit(Some("mm"), Dimension::Angle).unwrap_err();
-        assert!(
-            e.contains("`mm` is a length") && e.contains("expected an angle"),
-            "{e}"
-        );
+        assert!(e.contains("`mm` is a length") && e.contains("expected an angle"), "{e}");
         let e = resolve_unit(Some("furlong"), Dimension::Length).unwrap_err();
-        assert!(
-            e.contains("unknown unit `furlong`") && e.contains("um"),
-            "{e}"
-        );
+        assert!(e.contains("unknown unit `furlong`") && e.contains("um"), "{e}");
         assert_eq!(resolve_unit(None, Dimension::Length).unwrap().symbol, "m");
         assert_eq!(Dimension::Ratio.si().symbol, "1");
     }

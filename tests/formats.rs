@@ -6,26 +6,17 @@ use rand_chacha::ChaCha8Rng;
 use std::path::{Path, PathBuf};
 use vmt::error::VmtError;
 use vmt::measurement::{
-    self, MeasurementSet, Procedure, ProfileColumn, ProfileTable, Run, RunData, Sensor, SensorKind,
-    UnitChoice,
+    self, MeasurementSet, Procedure, ProfileColumn, ProfileTable, Run, RunData, Sensor, SensorKind, UnitChoice,
 };
 use vmt::model::{self, Basis, Model, ModelEffect};
 use vmt_sim::effects::{
-    AccelBiasDrift, Backlash, Coulomb, CyclicLead, Effect, EffectName, EffectParams,
-    InterpolationError, LeadHarmonic, Lugre, Resonance, ScaleError, ServoLag, Squareness, Stribeck,
-    ThermalDrift, ThermalExpansion, Viscous,
+    AccelBiasDrift, Backlash, Coulomb, CyclicLead, Effect, EffectName, EffectParams, InterpolationError, LeadHarmonic,
+    Lugre, Resonance, ScaleError, ServoLag, Squareness, Stribeck, ThermalDrift, ThermalExpansion, Viscous,
 };
 use vmt_sim::profile::{Harmonic, Profile, RandomProfile, Term};
 
 fn sensor(name: &str, kind: SensorKind, sigma: Option<f64>) -> Sensor {
-    Sensor {
-        name: name.to_string(),
-        kind,
-        axis: 'x',
-        position: [0.0, 0.25, 1.1],
-        direction: [1.0, 0.0, 0.0],
-        sigma,
-    }
+    Sensor { name: name.to_string(), kind, axis: 'x', position: [0.0, 0.25, 1.1], direction: [1.0, 0.0, 0.0], sigma }
 }
 
 /// Random f64 values spread over many magnitudes and signs (all bits of the mantissa used), plus
@@ -49,9 +40,7 @@ fn awkward_values(rng: &mut ChaCha8Rng, n: usize) -> Vec<f64> {
 fn sample_set(seed: u64) -> MeasurementSet {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = 200;
-    let t: Vec<f64> = (0..n)
-        .map(|i| i as f64 / 1200.0 + 1e-9 * rng.gen::<f64>())
-        .collect();
+    let t: Vec<f64> = (0..n).map(|i| i as f64 / 1200.0 + 1e-9 * rng.gen::<f64>()).collect();
     let x_cmd: Vec<f64> = t.iter().map(|ti| 0.05 * ti).collect();
     let laser = awkward_values(&mut rng, n);
     let acc: Vec<f64> = (0..n).map(|_| rng.gen_range(-1e-3..1e-3)).collect();
@@ -159,10 +148,7 @@ fn measurement_set_round_trips_bit_exactly_for_both_csv_shapes() {
     let head = std::fs::read_to_string(dir.join("cv_fast.csv")).unwrap();
     assert_eq!(head.lines().next().unwrap(), "t,x_cmd,laser_p1,acc_y");
     let head = std::fs::read_to_string(dir.join("iso.csv")).unwrap();
-    assert_eq!(
-        head.lines().next().unwrap(),
-        "target,run,direction,t,laser_p1"
-    );
+    assert_eq!(head.lines().next().unwrap(), "target,run,direction,t,laser_p1");
 }
 
 #[test]
@@ -176,10 +162,7 @@ fn metrology_units_are_written_in_headers_and_read_back_to_within_two_ulp() {
     }
     measurement::write(&set, &dir, UnitChoice::Metrology).unwrap();
     let head = std::fs::read_to_string(dir.join("cv_fast.csv")).unwrap();
-    assert_eq!(
-        head.lines().next().unwrap(),
-        "t,x_cmd[mm],laser_p1[um],acc_y"
-    );
+    assert_eq!(head.lines().next().unwrap(), "t,x_cmd[mm],laser_p1[um],acc_y");
     let back = measurement::read(&dir).unwrap();
     let mut worst = 0.0f64;
     for (a, b) in back.runs.iter().zip(&set.runs) {
@@ -193,18 +176,11 @@ fn metrology_units_are_written_in_headers_and_read_back_to_within_two_ulp() {
     }
     // Written as the shortest round-trip digits of v·1e6 (one rounding), read back and divided
     // by 1e6 (one rounding): at most 2 ulp = 4.4e-16 relative, away from the subnormal range.
-    assert!(
-        worst <= 2.0 * f64::EPSILON,
-        "worst relative error {worst:e}"
-    );
+    assert!(worst <= 2.0 * f64::EPSILON, "worst relative error {worst:e}");
     // 1.8e308 m overflows in um: refused, and nothing is written.
     let huge = tmp.path().join("huge");
     let e = measurement::write(&sample_set(2), &huge, UnitChoice::Metrology).unwrap_err();
-    assert!(
-        e.to_string()
-            .contains("column laser_p1[um], row 3: 1.7976931348623157e308 (SI) overflows"),
-        "{e}"
-    );
+    assert!(e.to_string().contains("column laser_p1[um], row 3: 1.7976931348623157e308 (SI) overflows"), "{e}");
     assert!(!huge.exists());
 }
 
@@ -280,10 +256,7 @@ fn headers_in_mm_um_ms_g_degc_urad_read_the_same_numbers_as_si() {
     let close = |x: f64, y: f64, what: &str| {
         // Both are correctly rounded parses, plus one exact-factor division (or one product
         // by 9.80665 for g): at most 2 ulp apart, i.e. ≤ 4.4e-16 relative (brief: 1e-15).
-        assert!(
-            (x - y).abs() <= 2.0 * f64::EPSILON * y.abs(),
-            "{what}: {x:e} vs {y:e}"
-        );
+        assert!((x - y).abs() <= 2.0 * f64::EPSILON * y.abs(), "{what}: {x:e} vs {y:e}");
     };
     for (x, y) in ta.iter().zip(tb) {
         close(*y, *x, "t");
@@ -326,90 +299,55 @@ fn malformed_toml_names_the_manifest_line_and_column() {
 fn unknown_manifest_key_names_its_key_path() {
     let bad = MANIFEST.replace("sigma = 5e-9", "sigma = 5e-9\ngain = 2.0");
     let (m, _) = read_err(&bad, GOOD_CSV);
-    assert!(
-        m.contains("manifest.toml: sensors[1].gain: unknown key `gain`"),
-        "{m}"
-    );
+    assert!(m.contains("manifest.toml: sensors[1].gain: unknown key `gain`"), "{m}");
 }
 
 #[test]
 fn out_of_range_manifest_value_names_its_key_path() {
     let bad = MANIFEST.replace("sigma = 5e-9", "sigma = -5e-9");
     let (m, _) = read_err(&bad, GOOD_CSV);
-    assert!(
-        m.contains("manifest.toml: sensors[1].sigma: expected"),
-        "{m}"
-    );
+    assert!(m.contains("manifest.toml: sensors[1].sigma: expected"), "{m}");
     assert!(m.contains("≥ 0, got -5e-9"), "{m}");
     let bad = MANIFEST.replace("kind = \"command\"", "kind = \"laser\"");
     let (m, _) = read_err(&bad, GOOD_CSV);
-    assert!(
-        m.contains("sensors[0].kind: unknown sensor kind \"laser\"; expected one of command"),
-        "{m}"
-    );
+    assert!(m.contains("sensors[0].kind: unknown sensor kind \"laser\"; expected one of command"), "{m}");
 }
 
 #[test]
 fn csv_missing_t_column_is_named() {
     let (m, _) = read_err(MANIFEST, "x_cmd,laser_p1\n0,0\n1e-5,1e-9\n");
-    assert!(
-        m.contains("cv.csv: line 1 (header): missing column `t`"),
-        "{m}"
-    );
+    assert!(m.contains("cv.csv: line 1 (header): missing column `t`"), "{m}");
 }
 
 #[test]
 fn point_table_missing_direction_column_is_named() {
     let (m, _) = read_err(MANIFEST, "target,run,laser_p1\n0,1,0\n0.1,1,1e-9\n");
-    assert!(
-        m.contains("cv.csv: line 1 (header): missing column `direction`"),
-        "{m}"
-    );
+    assert!(m.contains("cv.csv: line 1 (header): missing column `direction`"), "{m}");
 }
 
 #[test]
 fn nan_names_line_and_column() {
     // Comment lines count: the NaN is on line 4 of the file.
-    let (m, _) = read_err(
-        MANIFEST,
-        "# written by a DAQ\nt,x_cmd,laser_p1\n0,0,0\n0.001,1e-5,NaN\n",
-    );
-    assert!(
-        m.contains("cv.csv: line 4, column laser_p1: expected a finite number, got `NaN`"),
-        "{m}"
-    );
+    let (m, _) = read_err(MANIFEST, "# written by a DAQ\nt,x_cmd,laser_p1\n0,0,0\n0.001,1e-5,NaN\n");
+    assert!(m.contains("cv.csv: line 4, column laser_p1: expected a finite number, got `NaN`"), "{m}");
 }
 
 #[test]
 fn non_monotonic_t_names_the_line() {
-    let (m, _) = read_err(
-        MANIFEST,
-        "t,x_cmd\n0,0\n0.002,1e-5\n0.001,2e-5\n0.003,3e-5\n",
-    );
-    assert!(
-        m.contains("cv.csv: line 4, column t: `t` must increase strictly, got 0.001 after 0.002"),
-        "{m}"
-    );
+    let (m, _) = read_err(MANIFEST, "t,x_cmd\n0,0\n0.002,1e-5\n0.001,2e-5\n0.003,3e-5\n");
+    assert!(m.contains("cv.csv: line 4, column t: `t` must increase strictly, got 0.001 after 0.002"), "{m}");
 }
 
 #[test]
 fn unknown_unit_names_column_unit_and_expected_dimension() {
     let (m, _) = read_err(MANIFEST, "t,laser_p1[furlong]\n0,0\n0.001,1\n");
-    assert!(
-        m.contains(
-            "cv.csv: column laser_p1: unknown unit `furlong`: expected a length (m, mm, um, nm"
-        ),
-        "{m}"
-    );
+    assert!(m.contains("cv.csv: column laser_p1: unknown unit `furlong`: expected a length (m, mm, um, nm"), "{m}");
 }
 
 #[test]
 fn unit_of_the_wrong_dimension_names_column_and_expected_dimension() {
     let (m, _) = read_err(MANIFEST, "t,laser_p1[deg]\n0,0\n0.001,1\n");
-    assert!(
-        m.contains("cv.csv: column laser_p1: unit `deg` is an angle"),
-        "{m}"
-    );
+    assert!(m.contains("cv.csv: column laser_p1: unit `deg` is an angle"), "{m}");
     assert!(m.contains("expected a length"), "{m}");
     let (m, _) = read_err(MANIFEST, "t[mm],x_cmd\n0,0\n1,1\n");
     assert!(m.contains("column t: unit `mm` is a length"), "{m}");
@@ -419,28 +357,13 @@ fn unit_of_the_wrong_dimension_names_column_and_expected_dimension() {
 #[test]
 fn unknown_column_bad_run_number_and_bad_direction_are_named() {
     let (m, _) = read_err(MANIFEST, "t,laser_p9\n0,0\n0.001,1\n");
-    assert!(
-        m.contains("cv.csv: column laser_p9: unknown column `laser_p9`: expected a sensor"),
-        "{m}"
-    );
-    let (m, _) = read_err(
-        MANIFEST,
-        "target,run,direction,laser_p1\n0,1,1,0\n0.1,0,1,0\n",
-    );
-    assert!(
-        m.contains("cv.csv: line 3, column run: expected a run number 1, 2, 3, ..., got 0"),
-        "{m}"
-    );
+    assert!(m.contains("cv.csv: column laser_p9: unknown column `laser_p9`: expected a sensor"), "{m}");
+    let (m, _) = read_err(MANIFEST, "target,run,direction,laser_p1\n0,1,1,0\n0.1,0,1,0\n");
+    assert!(m.contains("cv.csv: line 3, column run: expected a run number 1, 2, 3, ..., got 0"), "{m}");
     let (m, _) = read_err(MANIFEST, "target,run,direction,laser_p1\n0,1,2,0\n");
-    assert!(
-        m.contains("cv.csv: line 2, column direction: expected +1 or -1, got 2"),
-        "{m}"
-    );
+    assert!(m.contains("cv.csv: line 2, column direction: expected +1 or -1, got 2"), "{m}");
     let (m, _) = read_err(MANIFEST, "t,x_cmd\n0,0\n0.001\n");
-    assert!(
-        m.contains("cv.csv: line 3: expected 2 cells like the header, got 1"),
-        "{m}"
-    );
+    assert!(m.contains("cv.csv: line 3: expected 2 cells like the header, got 1"), "{m}");
 }
 
 #[test]
@@ -465,19 +388,14 @@ fn writing_replaces_a_previous_set_atomically_but_never_a_foreign_directory() {
         &second,
         &dir,
         UnitChoice::Si,
-        &[(
-            "truth.toml".to_string(),
-            b"format = \"vmt-model/1\"\n".to_vec(),
-        )],
+        &[("truth.toml".to_string(), b"format = \"vmt-model/1\"\n".to_vec())],
     )
     .unwrap();
     assert_eq!(measurement::read(&dir).unwrap(), second);
     assert!(dir.join("truth.toml").is_file());
     // No temporary or old directories are left beside it.
-    let names: Vec<String> = std::fs::read_dir(tmp.path())
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
+    let names: Vec<String> =
+        std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert_eq!(names, vec!["set".to_string()]);
     // A directory that is not a measurement set is not replaced.
     let foreign = tmp.path().join("photos");
@@ -492,10 +410,7 @@ fn writing_replaces_a_previous_set_atomically_but_never_a_foreign_directory() {
     }
     let out = tmp.path().join("never");
     let e = measurement::write(&bad, &out, UnitChoice::Si).unwrap_err();
-    assert!(
-        e.to_string().contains("runs[0] (cv_fast): column t, row 6"),
-        "{e}"
-    );
+    assert!(e.to_string().contains("runs[0] (cv_fast): column t, row 6"), "{e}");
     assert!(!out.exists());
 }
 
@@ -543,10 +458,7 @@ fn profile_csv_round_trips_with_axis_prefix_sigma_and_units() {
     // Bad profile column.
     let r = write_file(tmp.path(), "bad.csv", "position,backlash\n0,0\n1,1\n");
     let e = measurement::read_profiles(&r).unwrap_err().to_string();
-    assert!(
-        e.contains("bad.csv: column backlash: unknown column `backlash`"),
-        "{e}"
-    );
+    assert!(e.contains("bad.csv: column backlash: unknown column `backlash`"), "{e}");
     let r = write_file(tmp.path(), "bad2.csv", "position,pitch[mm]\n0,0\n1,1\n");
     let e = measurement::read_profiles(&r).unwrap_err().to_string();
     assert!(e.contains("column pitch: unit `mm` is a length"), "{e}");
@@ -556,14 +468,7 @@ fn profile_csv_round_trips_with_axis_prefix_sigma_and_units() {
 // Models (§2).
 
 fn scalar(name: EffectName, params: EffectParams) -> ModelEffect {
-    ModelEffect::new(
-        Effect {
-            name,
-            axis: 'x',
-            params,
-        },
-        false,
-    )
+    ModelEffect::new(Effect { name, axis: 'x', params }, false)
 }
 
 /// A model holding every effect of the catalogue with non-default values, error motions with
@@ -571,118 +476,56 @@ fn scalar(name: EffectName, params: EffectParams) -> ModelEffect {
 /// second axis.
 fn every_effect_model() -> Model {
     let mut effects: Vec<ModelEffect> = Vec::new();
-    let table = Term::Table {
-        x: vec![0.0, 0.3, 0.7, 1.0],
-        y: vec![0.0, 1.1e-6, -0.4e-6, 0.2e-6],
-    };
+    let table = Term::Table { x: vec![0.0, 0.3, 0.7, 1.0], y: vec![0.0, 1.1e-6, -0.4e-6, 0.2e-6] };
     for (i, name) in EffectName::ERROR_MOTIONS.iter().enumerate() {
         let k = if name.is_translational() { 1e-6 } else { 1e-5 };
         let profile = Profile {
             terms: vec![
                 Term::Poly(vec![0.1 * k, 2.8 * k, -2.4 * k]),
                 Term::Harmonics(vec![
-                    Harmonic {
-                        amplitude: 2.5 * k,
-                        wavelength: 0.32,
-                        phase: 0.7,
-                    },
-                    Harmonic {
-                        amplitude: 0.3 * k,
-                        wavelength: 0.08,
-                        phase: 0.4,
-                    },
+                    Harmonic { amplitude: 2.5 * k, wavelength: 0.32, phase: 0.7 },
+                    Harmonic { amplitude: 0.3 * k, wavelength: 0.08, phase: 0.4 },
                 ]),
-                Term::random(RandomProfile {
-                    rms: 0.5 * k,
-                    correlation_length: 0.05,
-                    seed: 7 + i as u64,
-                }),
+                Term::random(RandomProfile { rms: 0.5 * k, correlation_length: 0.05, seed: 7 + i as u64 }),
                 table.clone(),
             ],
         };
-        effects.push(ModelEffect::new(
-            Effect::error_motion(*name, 'x', profile),
-            false,
-        ));
+        effects.push(ModelEffect::new(Effect::error_motion(*name, 'x', profile), false));
     }
     // A fitted error motion with a basis, no profile given.
-    let mut pitch_y = ModelEffect::new(
-        Effect::error_motion(EffectName::Pitch, 'y', Profile::zero()),
-        true,
-    );
+    let mut pitch_y = ModelEffect::new(Effect::error_motion(EffectName::Pitch, 'y', Profile::zero()), true);
     pitch_y.basis = Some(Basis::Bspline);
     pitch_y.order = Some(8);
     effects.push(pitch_y);
-    for name in [
-        EffectName::SquarenessXy,
-        EffectName::SquarenessXz,
-        EffectName::SquarenessYz,
-    ] {
-        effects.push(scalar(
-            name,
-            EffectParams::Squareness(Squareness { value: -12e-6 }),
-        ));
+    for name in [EffectName::SquarenessXy, EffectName::SquarenessXz, EffectName::SquarenessYz] {
+        effects.push(scalar(name, EffectParams::Squareness(Squareness { value: -12e-6 })));
     }
-    effects.push(scalar(
-        EffectName::Backlash,
-        EffectParams::Backlash(Backlash { value: 4e-6 }),
-    ));
+    effects.push(scalar(EffectName::Backlash, EffectParams::Backlash(Backlash { value: 4e-6 })));
     effects.push(scalar(
         EffectName::CyclicLead,
         EffectParams::CyclicLead(CyclicLead {
             period: 0.010,
             amplitude: 1.5e-6,
             phase: 0.3,
-            harmonics: vec![LeadHarmonic {
-                order: 2,
-                amplitude: 0.4e-6,
-                phase: 1.1,
-            }],
+            harmonics: vec![LeadHarmonic { order: 2, amplitude: 0.4e-6, phase: 1.1 }],
         }),
     ));
-    effects.push(scalar(
-        EffectName::ScaleError,
-        EffectParams::ScaleError(ScaleError { value: 22e-6 }),
-    ));
+    effects.push(scalar(EffectName::ScaleError, EffectParams::ScaleError(ScaleError { value: 22e-6 })));
     effects.push(scalar(
         EffectName::ThermalExpansion,
-        EffectParams::ThermalExpansion(ThermalExpansion {
-            alpha: 11.5e-6,
-            delta_t: 2.5,
-            tau: 1800.0,
-        }),
+        EffectParams::ThermalExpansion(ThermalExpansion { alpha: 11.5e-6, delta_t: 2.5, tau: 1800.0 }),
     ));
-    effects.push(scalar(
-        EffectName::ThermalDrift,
-        EffectParams::ThermalDrift(ThermalDrift {
-            value: 3e-6,
-            tau: 900.0,
-        }),
-    ));
+    effects
+        .push(scalar(EffectName::ThermalDrift, EffectParams::ThermalDrift(ThermalDrift { value: 3e-6, tau: 900.0 })));
     effects.push(scalar(
         EffectName::InterpolationError,
-        EffectParams::InterpolationError(InterpolationError {
-            period: 20e-6,
-            amplitude: 5e-8,
-            phase: 0.0,
-        }),
+        EffectParams::InterpolationError(InterpolationError { period: 20e-6, amplitude: 5e-8, phase: 0.0 }),
     ));
-    effects.push(scalar(
-        EffectName::Coulomb,
-        EffectParams::Coulomb(Coulomb { fc: 1.0 }),
-    ));
-    effects.push(scalar(
-        EffectName::Viscous,
-        EffectParams::Viscous(Viscous { fv: 0.4 }),
-    ));
+    effects.push(scalar(EffectName::Coulomb, EffectParams::Coulomb(Coulomb { fc: 1.0 })));
+    effects.push(scalar(EffectName::Viscous, EffectParams::Viscous(Viscous { fv: 0.4 })));
     effects.push(scalar(
         EffectName::Stribeck,
-        EffectParams::Stribeck(Stribeck {
-            fc: None,
-            fs: 1.5,
-            vs: 1e-3,
-            shape: 2.0,
-        }),
+        EffectParams::Stribeck(Stribeck { fc: None, fs: 1.5, vs: 1e-3, shape: 2.0 }),
     ));
     effects.push(scalar(
         EffectName::Lugre,
@@ -698,51 +541,29 @@ fn every_effect_model() -> Model {
     ));
     effects.push(scalar(
         EffectName::ServoLag,
-        EffectParams::ServoLag(ServoLag {
-            kv: 2000.0,
-            kp: Some(50.0),
-            ki: Some(4e5),
-        }),
+        EffectParams::ServoLag(ServoLag { kv: 2000.0, kp: Some(50.0), ki: Some(4e5) }),
     ));
     // A fitted effect with only one starting value given: the other stays a default.
     let mut res = ModelEffect::new(
         Effect {
             name: EffectName::Resonance,
             axis: 'x',
-            params: EffectParams::Resonance(Resonance {
-                frequency: 180.0,
-                damping: 0.02,
-            }),
+            params: EffectParams::Resonance(Resonance { frequency: 180.0, damping: 0.02 }),
         },
         true,
     );
     res.given = vec!["frequency".to_string()];
     effects.push(res);
     effects.push(ModelEffect::new(
-        Effect {
-            name: EffectName::GravityTilt,
-            axis: 'x',
-            params: EffectParams::GravityTilt,
-        },
+        Effect { name: EffectName::GravityTilt, axis: 'x', params: EffectParams::GravityTilt },
         false,
     ));
-    effects.push(scalar(
-        EffectName::AccelBiasDrift,
-        EffectParams::AccelBiasDrift(AccelBiasDrift { rate: 1e-5 }),
-    ));
+    effects.push(scalar(EffectName::AccelBiasDrift, EffectParams::AccelBiasDrift(AccelBiasDrift { rate: 1e-5 })));
     // Backlash on a second axis: written as [[effects.backlash]].
-    let mut bl_y = scalar(
-        EffectName::Backlash,
-        EffectParams::Backlash(Backlash { value: 2e-6 }),
-    );
+    let mut bl_y = scalar(EffectName::Backlash, EffectParams::Backlash(Backlash { value: 2e-6 }));
     bl_y.effect.axis = 'y';
     effects.push(bl_y);
-    let mut m = Model {
-        machine: Some("slide_column".to_string()),
-        axis: 'x',
-        effects,
-        source: PathBuf::new(),
-    };
+    let mut m = Model { machine: Some("slide_column".to_string()), axis: 'x', effects, source: PathBuf::new() };
     m.sort();
     m
 }
@@ -752,13 +573,8 @@ fn a_model_with_every_effect_round_trips() {
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("model.toml");
     let m = every_effect_model();
-    let names: std::collections::BTreeSet<EffectName> =
-        m.effects.iter().map(|e| e.effect.name).collect();
-    assert_eq!(
-        names.len(),
-        EffectName::ALL.len(),
-        "every effect is in the model"
-    );
+    let names: std::collections::BTreeSet<EffectName> = m.effects.iter().map(|e| e.effect.name).collect();
+    assert_eq!(names.len(), EffectName::ALL.len(), "every effect is in the model");
     let written = model::write_model(&m, &path).unwrap();
     // Six table sidecars (one per error motion of x) and the model.
     assert_eq!(written.len(), 7, "{written:?}");
@@ -773,18 +589,12 @@ fn a_model_with_every_effect_round_trips() {
     // Writing what was read gives the same text (the format is stable).
     let path2 = tmp.path().join("again").join("model.toml");
     model::write_model(&back, &path2).unwrap();
-    assert_eq!(
-        std::fs::read_to_string(&path).unwrap(),
-        std::fs::read_to_string(&path2).unwrap()
-    );
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), std::fs::read_to_string(&path2).unwrap());
     // The fitted resonance is written with its given key only.
     let text = std::fs::read_to_string(&path).unwrap();
     let res = &text[text.find("[effects.resonance]").unwrap()..];
     let res = &res[..res.find("\n\n").unwrap_or(res.len())];
-    assert!(
-        res.contains("frequency = 180.0") && !res.contains("damping"),
-        "{res}"
-    );
+    assert!(res.contains("frequency = 180.0") && !res.contains("damping"), "{res}");
 }
 
 #[test]
@@ -823,22 +633,13 @@ phase = 0.0                        # rad
 #[test]
 fn unknown_effect_name_is_an_error_listing_the_known_effects() {
     let tmp = tempfile::tempdir().unwrap();
-    let p = write_file(
-        tmp.path(),
-        "model.toml",
-        "format = \"vmt-model/1\"\naxis = \"x\"\n[effects.foo]\nvalue = 1.0\n",
-    );
+    let p =
+        write_file(tmp.path(), "model.toml", "format = \"vmt-model/1\"\naxis = \"x\"\n[effects.foo]\nvalue = 1.0\n");
     let e = model::read_model(&p).unwrap_err();
     let m = e.to_string();
     assert_eq!(e.exit_code(), 2);
-    assert!(
-        m.contains("model.toml: effects.foo: unknown effect `foo`"),
-        "{m}"
-    );
-    assert!(
-        m.contains("known effects: positioning, straightness_y"),
-        "{m}"
-    );
+    assert!(m.contains("model.toml: effects.foo: unknown effect `foo`"), "{m}");
+    assert!(m.contains("known effects: positioning, straightness_y"), "{m}");
 }
 
 #[test]
@@ -850,54 +651,21 @@ fn model_value_out_of_range_unknown_key_and_missing_key_are_named() {
     };
     let head = "format = \"vmt-model/1\"\naxis = \"x\"\n";
     let m = read(&format!("{head}[effects.backlash]\nvalue = -4e-6\n"));
-    assert!(
-        m.ends_with(
-            "model.toml: effects.backlash.value: expected a length in metres ≥ 0, got -4e-6"
-        ),
-        "{m}"
-    );
-    let m = read(&format!(
-        "{head}[effects.resonance]\nfrequency = 100.0\ndamping = 1.0\n"
-    ));
-    assert!(
-        m.contains("effects.resonance.damping: expected a damping ratio in [0, 1), got 1"),
-        "{m}"
-    );
+    assert!(m.ends_with("model.toml: effects.backlash.value: expected a length in metres ≥ 0, got -4e-6"), "{m}");
+    let m = read(&format!("{head}[effects.resonance]\nfrequency = 100.0\ndamping = 1.0\n"));
+    assert!(m.contains("effects.resonance.damping: expected a damping ratio in [0, 1), got 1"), "{m}");
     let m = read(&format!("{head}[effects.backlash]\nvalu = 4e-6\n"));
-    assert!(
-        m.contains("model.toml: effects.backlash.value: missing key"),
-        "{m}"
-    );
-    let m = read(&format!(
-        "{head}[effects.backlash]\nvalue = 4e-6\nvalu = 4e-6\n"
-    ));
-    assert!(
-        m.contains("model.toml: effects.backlash.valu: unknown key `valu`"),
-        "{m}"
-    );
-    let m = read(&format!(
-        "{head}[effects.pitch]\nharmonics = [{{ amplitude = 1e-6, wavelength = 0.0 }}]\n"
-    ));
-    assert!(
-        m.contains(
-            "effects.pitch.harmonics[0].wavelength: expected a wavelength in metres > 0, got 0"
-        ),
-        "{m}"
-    );
+    assert!(m.contains("model.toml: effects.backlash.value: missing key"), "{m}");
+    let m = read(&format!("{head}[effects.backlash]\nvalue = 4e-6\nvalu = 4e-6\n"));
+    assert!(m.contains("model.toml: effects.backlash.valu: unknown key `valu`"), "{m}");
+    let m = read(&format!("{head}[effects.pitch]\nharmonics = [{{ amplitude = 1e-6, wavelength = 0.0 }}]\n"));
+    assert!(m.contains("effects.pitch.harmonics[0].wavelength: expected a wavelength in metres > 0, got 0"), "{m}");
     let m = read(&format!("{head}[effects.pitch]\n"));
     assert!(m.contains("effects.pitch: expected a profile"), "{m}");
-    let m = read(&format!(
-        "{head}[effects.pitch]\npoly = [0.0]\nbasis = \"bspline\"\n"
-    ));
-    assert!(
-        m.contains("effects.pitch.basis: `basis` only applies to a fitted"),
-        "{m}"
-    );
+    let m = read(&format!("{head}[effects.pitch]\npoly = [0.0]\nbasis = \"bspline\"\n"));
+    assert!(m.contains("effects.pitch.basis: `basis` only applies to a fitted"), "{m}");
     let m = read("format = \"vmt-model/2\"\n");
-    assert!(
-        m.contains("model.toml: format: expected \"vmt-model/1\""),
-        "{m}"
-    );
+    assert!(m.contains("model.toml: format: expected \"vmt-model/1\""), "{m}");
     let m = read(&format!("{head}[effects.pitch]\ntable = \"missing.csv\"\n"));
     assert!(m.contains("missing.csv: no such file"), "{m}");
 }
@@ -926,35 +694,19 @@ value = 4e-6
     let table = vmt::error::parse_toml(&file, text).unwrap();
     let truth = table["truth"].as_table().unwrap();
     let m = model::parse_model(truth, &file, tmp.path(), "truth").unwrap();
-    let eyx = m
-        .effect_set()
-        .error_motion(EffectName::StraightnessY, 'x')
-        .unwrap()
-        .clone();
+    let eyx = m.effect_set().error_motion(EffectName::StraightnessY, 'x').unwrap().clone();
     // 1.5 um at 0.5 m, linear in between: 0.75 um at 0.25 m (to rounding of the unit division).
     assert!((eyx.value(0.25) - 0.75e-6).abs() < 1e-21);
     assert!((eyx.value(1.0) + 0.5e-6).abs() < 1e-21);
-    let exx = m
-        .effect_set()
-        .error_motion(EffectName::Positioning, 'x')
-        .unwrap()
-        .clone();
-    let want =
-        2.8e-5 * 0.5 - 2.4e-5 * 0.25 + 2.5e-6 * (std::f64::consts::TAU * 0.5 / 0.32 + 0.7).sin();
+    let exx = m.effect_set().error_motion(EffectName::Positioning, 'x').unwrap().clone();
+    let want = 2.8e-5 * 0.5 - 2.4e-5 * 0.25 + 2.5e-6 * (std::f64::consts::TAU * 0.5 / 0.32 + 0.7).sin();
     assert!((exx.value(0.5) - want).abs() < 1e-18);
     let bad = text.replace("value = 4e-6", "value = -4e-6");
     let table = vmt::error::parse_toml(&file, &bad).unwrap();
-    let e = model::parse_model(
-        table["truth"].as_table().unwrap(),
-        &file,
-        tmp.path(),
-        "truth",
-    )
-    .unwrap_err();
+    let e = model::parse_model(table["truth"].as_table().unwrap(), &file, tmp.path(), "truth").unwrap_err();
     assert!(
-        e.to_string().ends_with(
-            "scenario.toml: truth.effects.backlash.value: expected a length in metres ≥ 0, got -4e-6"
-        ),
+        e.to_string()
+            .ends_with("scenario.toml: truth.effects.backlash.value: expected a length in metres ≥ 0, got -4e-6"),
         "{e}"
     );
 }

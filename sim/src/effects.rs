@@ -140,11 +140,7 @@ impl EffectName {
 
     /// All names joined by ", ", for error messages.
     pub fn known_list() -> String {
-        EffectName::ALL
-            .iter()
-            .map(|n| n.as_str())
-            .collect::<Vec<&str>>()
-            .join(", ")
+        EffectName::ALL.iter().map(|n| n.as_str()).collect::<Vec<&str>>().join(", ")
     }
 
     /// True for the six error motions, whose parameters are a [`Profile`] of the axis position.
@@ -155,10 +151,7 @@ impl EffectName {
     /// True for the translational error motions (positioning, straightness: values in m); false
     /// for everything else. Roll, pitch and yaw are angles (rad).
     pub fn is_translational(self) -> bool {
-        matches!(
-            self,
-            EffectName::Positioning | EffectName::StraightnessY | EffectName::StraightnessZ
-        )
+        matches!(self, EffectName::Positioning | EffectName::StraightnessY | EffectName::StraightnessZ)
     }
 
     /// ISO 230-1 symbol of an error motion of `axis` (x, y or z), e.g. pitch of X → `EBX`.
@@ -204,13 +197,7 @@ impl FromStr for EffectName {
     type Err = UnknownEffect;
     /// Parses the snake_case name of FORMAT.md §2 (exact, case-sensitive).
     fn from_str(s: &str) -> Result<EffectName, UnknownEffect> {
-        EffectName::ALL
-            .iter()
-            .copied()
-            .find(|n| n.as_str() == s)
-            .ok_or_else(|| UnknownEffect {
-                name: s.to_string(),
-            })
+        EffectName::ALL.iter().copied().find(|n| n.as_str() == s).ok_or_else(|| UnknownEffect { name: s.to_string() })
     }
 }
 
@@ -268,20 +255,8 @@ pub struct ParamSpec {
     pub required: bool,
 }
 
-const fn spec(
-    key: &'static str,
-    quantity: &'static str,
-    range: Range,
-    default: f64,
-    required: bool,
-) -> ParamSpec {
-    ParamSpec {
-        key,
-        quantity,
-        range,
-        default,
-        required,
-    }
+const fn spec(key: &'static str, quantity: &'static str, range: Range, default: f64, required: bool) -> ParamSpec {
+    ParamSpec { key, quantity, range, default, required }
 }
 
 const LENGTH: &str = "a length in metres";
@@ -293,47 +268,20 @@ const VISC: &str = "a viscous coefficient in N·s/m";
 static SQUARENESS_SPECS: [ParamSpec; 1] = [spec("value", ANGLE, Range::Finite, 0.0, true)];
 static BACKLASH_SPECS: [ParamSpec; 1] = [spec("value", LENGTH, Range::NonNegative, 0.0, true)];
 static CYCLIC_LEAD_SPECS: [ParamSpec; 3] = [
-    spec(
-        "period",
-        "a screw lead in metres",
-        Range::Positive,
-        0.010,
-        true,
-    ),
+    spec("period", "a screw lead in metres", Range::Positive, 0.010, true),
     spec("amplitude", LENGTH, Range::NonNegative, 0.0, true),
     spec("phase", "a phase in radians", Range::Finite, 0.0, false),
 ];
-static SCALE_ERROR_SPECS: [ParamSpec; 1] =
-    [spec("value", "a strain in m/m", Range::Finite, 0.0, true)];
+static SCALE_ERROR_SPECS: [ParamSpec; 1] = [spec("value", "a strain in m/m", Range::Finite, 0.0, true)];
 static THERMAL_EXPANSION_SPECS: [ParamSpec; 3] = [
-    spec(
-        "alpha",
-        "an expansion coefficient in 1/K",
-        Range::Finite,
-        11.5e-6,
-        true,
-    ),
-    spec(
-        "delta_t",
-        "a temperature rise in kelvin",
-        Range::Finite,
-        0.0,
-        true,
-    ),
+    spec("alpha", "an expansion coefficient in 1/K", Range::Finite, 11.5e-6, true),
+    spec("delta_t", "a temperature rise in kelvin", Range::Finite, 0.0, true),
     spec("tau", TAU, Range::NonNegative, 1800.0, true),
 ];
-static THERMAL_DRIFT_SPECS: [ParamSpec; 2] = [
-    spec("value", LENGTH, Range::Finite, 0.0, true),
-    spec("tau", TAU, Range::NonNegative, 1800.0, true),
-];
+static THERMAL_DRIFT_SPECS: [ParamSpec; 2] =
+    [spec("value", LENGTH, Range::Finite, 0.0, true), spec("tau", TAU, Range::NonNegative, 1800.0, true)];
 static INTERPOLATION_SPECS: [ParamSpec; 3] = [
-    spec(
-        "period",
-        "a signal period in metres",
-        Range::Positive,
-        20e-6,
-        true,
-    ),
+    spec("period", "a signal period in metres", Range::Positive, 20e-6, true),
     spec("amplitude", LENGTH, Range::NonNegative, 0.0, true),
     spec("phase", "a phase in radians", Range::Finite, 0.0, false),
 ];
@@ -342,100 +290,29 @@ static VISCOUS_SPECS: [ParamSpec; 1] = [spec("fv", VISC, Range::NonNegative, 0.0
 static STRIBECK_SPECS: [ParamSpec; 4] = [
     spec("fc", FORCE, Range::NonNegative, 0.0, false),
     spec("fs", FORCE, Range::NonNegative, 0.0, true),
-    spec(
-        "vs",
-        "a Stribeck velocity in m/s",
-        Range::Positive,
-        1e-3,
-        true,
-    ),
-    spec(
-        "shape",
-        "a Stribeck shape exponent",
-        Range::Positive,
-        2.0,
-        false,
-    ),
+    spec("vs", "a Stribeck velocity in m/s", Range::Positive, 1e-3, true),
+    spec("shape", "a Stribeck shape exponent", Range::Positive, 2.0, false),
 ];
 static LUGRE_SPECS: [ParamSpec; 7] = [
-    spec(
-        "sigma0",
-        "a bristle stiffness in N/m",
-        Range::Positive,
-        1e5,
-        true,
-    ),
-    spec(
-        "sigma1",
-        "a bristle damping in N·s/m",
-        Range::NonNegative,
-        316.227_766_016_837_94,
-        true,
-    ),
+    spec("sigma0", "a bristle stiffness in N/m", Range::Positive, 1e5, true),
+    spec("sigma1", "a bristle damping in N·s/m", Range::NonNegative, 316.227_766_016_837_94, true),
     spec("sigma2", VISC, Range::NonNegative, 0.0, true),
     spec("fc", FORCE, Range::NonNegative, 0.0, true),
     spec("fs", FORCE, Range::NonNegative, 0.0, true),
-    spec(
-        "vs",
-        "a Stribeck velocity in m/s",
-        Range::Positive,
-        1e-3,
-        true,
-    ),
-    spec(
-        "shape",
-        "a Stribeck shape exponent",
-        Range::Positive,
-        2.0,
-        false,
-    ),
+    spec("vs", "a Stribeck velocity in m/s", Range::Positive, 1e-3, true),
+    spec("shape", "a Stribeck shape exponent", Range::Positive, 2.0, false),
 ];
 static SERVO_LAG_SPECS: [ParamSpec; 3] = [
-    spec(
-        "kv",
-        "a gain (1/s alone; N·s/m with kp)",
-        Range::Positive,
-        30.0,
-        true,
-    ),
-    spec(
-        "kp",
-        "a position-loop gain in 1/s",
-        Range::Positive,
-        30.0,
-        false,
-    ),
-    spec(
-        "ki",
-        "a velocity-loop integral gain in N/m",
-        Range::NonNegative,
-        0.0,
-        false,
-    ),
+    spec("kv", "a gain (1/s alone; N·s/m with kp)", Range::Positive, 30.0, true),
+    spec("kp", "a position-loop gain in 1/s", Range::Positive, 30.0, false),
+    spec("ki", "a velocity-loop integral gain in N/m", Range::NonNegative, 0.0, false),
 ];
 static RESONANCE_SPECS: [ParamSpec; 2] = [
-    spec(
-        "frequency",
-        "a frequency in Hz",
-        Range::Positive,
-        100.0,
-        true,
-    ),
-    spec(
-        "damping",
-        "a damping ratio",
-        Range::UnitInterval,
-        0.02,
-        true,
-    ),
+    spec("frequency", "a frequency in Hz", Range::Positive, 100.0, true),
+    spec("damping", "a damping ratio", Range::UnitInterval, 0.02, true),
 ];
-static ACCEL_BIAS_DRIFT_SPECS: [ParamSpec; 1] = [spec(
-    "rate",
-    "a random-walk rate in m/s²/√s",
-    Range::NonNegative,
-    0.0,
-    true,
-)];
+static ACCEL_BIAS_DRIFT_SPECS: [ParamSpec; 1] =
+    [spec("rate", "a random-walk rate in m/s²/√s", Range::NonNegative, 0.0, true)];
 
 /// The scalar parameters of an effect, in the order they are written. Error motions (whose
 /// parameter is a profile), `gravity_tilt` (none) and the list-valued `cyclic_lead.harmonics`
@@ -449,9 +326,7 @@ pub fn param_specs(name: EffectName) -> &'static [ParamSpec] {
         | EffectName::Pitch
         | EffectName::Yaw
         | EffectName::GravityTilt => &[],
-        EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz => {
-            &SQUARENESS_SPECS
-        }
+        EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz => &SQUARENESS_SPECS,
         EffectName::Backlash => &BACKLASH_SPECS,
         EffectName::CyclicLead => &CYCLIC_LEAD_SPECS,
         EffectName::ScaleError => &SCALE_ERROR_SPECS,
@@ -540,9 +415,7 @@ impl CyclicLead {
     pub fn value(&self, x: f64) -> f64 {
         let k = std::f64::consts::TAU / self.period;
         let base = self.amplitude * (k * x + self.phase).sin();
-        self.harmonics.iter().fold(base, |acc, h| {
-            acc + h.amplitude * (k * f64::from(h.order) * x + h.phase).sin()
-        })
+        self.harmonics.iter().fold(base, |acc, h| acc + h.amplitude * (k * f64::from(h.order) * x + h.phase).sin())
     }
 }
 
@@ -758,13 +631,7 @@ impl EffectParams {
     /// The starting values of `name`'s parameters ([`ParamSpec::default`]; a zero profile for
     /// error motions; optional parameters unset): what a fit starts from when a model gives none.
     pub fn default_for(name: EffectName) -> EffectParams {
-        let d = |key: &str| {
-            param_specs(name)
-                .iter()
-                .find(|s| s.key == key)
-                .map(|s| s.default)
-                .unwrap_or(0.0)
-        };
+        let d = |key: &str| param_specs(name).iter().find(|s| s.key == key).map(|s| s.default).unwrap_or(0.0);
         match name {
             n if n.is_error_motion() => EffectParams::ErrorMotion(Profile::zero()),
             EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz => {
@@ -783,25 +650,17 @@ impl EffectParams {
                 delta_t: d("delta_t"),
                 tau: d("tau"),
             }),
-            EffectName::ThermalDrift => EffectParams::ThermalDrift(ThermalDrift {
-                value: d("value"),
-                tau: d("tau"),
+            EffectName::ThermalDrift => EffectParams::ThermalDrift(ThermalDrift { value: d("value"), tau: d("tau") }),
+            EffectName::InterpolationError => EffectParams::InterpolationError(InterpolationError {
+                period: d("period"),
+                amplitude: d("amplitude"),
+                phase: d("phase"),
             }),
-            EffectName::InterpolationError => {
-                EffectParams::InterpolationError(InterpolationError {
-                    period: d("period"),
-                    amplitude: d("amplitude"),
-                    phase: d("phase"),
-                })
-            }
             EffectName::Coulomb => EffectParams::Coulomb(Coulomb { fc: d("fc") }),
             EffectName::Viscous => EffectParams::Viscous(Viscous { fv: d("fv") }),
-            EffectName::Stribeck => EffectParams::Stribeck(Stribeck {
-                fc: None,
-                fs: d("fs"),
-                vs: d("vs"),
-                shape: d("shape"),
-            }),
+            EffectName::Stribeck => {
+                EffectParams::Stribeck(Stribeck { fc: None, fs: d("fs"), vs: d("vs"), shape: d("shape") })
+            }
             EffectName::Lugre => EffectParams::Lugre(Lugre {
                 sigma0: d("sigma0"),
                 sigma1: d("sigma1"),
@@ -811,15 +670,10 @@ impl EffectParams {
                 vs: d("vs"),
                 shape: d("shape"),
             }),
-            EffectName::ServoLag => EffectParams::ServoLag(ServoLag {
-                kv: d("kv"),
-                kp: None,
-                ki: None,
-            }),
-            EffectName::Resonance => EffectParams::Resonance(Resonance {
-                frequency: d("frequency"),
-                damping: d("damping"),
-            }),
+            EffectName::ServoLag => EffectParams::ServoLag(ServoLag { kv: d("kv"), kp: None, ki: None }),
+            EffectName::Resonance => {
+                EffectParams::Resonance(Resonance { frequency: d("frequency"), damping: d("damping") })
+            }
             EffectName::GravityTilt => EffectParams::GravityTilt,
             _ => EffectParams::AccelBiasDrift(AccelBiasDrift { rate: d("rate") }),
         }
@@ -838,15 +692,9 @@ impl EffectParams {
             ) | (EffectParams::Backlash(_), EffectName::Backlash)
                 | (EffectParams::CyclicLead(_), EffectName::CyclicLead)
                 | (EffectParams::ScaleError(_), EffectName::ScaleError)
-                | (
-                    EffectParams::ThermalExpansion(_),
-                    EffectName::ThermalExpansion
-                )
+                | (EffectParams::ThermalExpansion(_), EffectName::ThermalExpansion)
                 | (EffectParams::ThermalDrift(_), EffectName::ThermalDrift)
-                | (
-                    EffectParams::InterpolationError(_),
-                    EffectName::InterpolationError
-                )
+                | (EffectParams::InterpolationError(_), EffectName::InterpolationError)
                 | (EffectParams::Coulomb(_), EffectName::Coulomb)
                 | (EffectParams::Viscous(_), EffectName::Viscous)
                 | (EffectParams::Stribeck(_), EffectName::Stribeck)
@@ -904,10 +752,7 @@ impl EffectParams {
     /// The set scalar parameters as (key, value) pairs in [`param_specs`] order, for JSON output
     /// (`"params": {"value": 6.1e-6}`) and for fitters that work on a parameter vector.
     pub fn scalars(&self, name: EffectName) -> Vec<(&'static str, f64)> {
-        param_specs(name)
-            .iter()
-            .filter_map(|s| self.get(s.key).map(|v| (s.key, v)))
-            .collect()
+        param_specs(name).iter().filter_map(|s| self.get(s.key).map(|v| (s.key, v))).collect()
     }
 
     /// The profile of an error motion, `None` for other effects.
@@ -954,20 +799,12 @@ pub struct Effect {
 impl Effect {
     /// The effect `name` on `axis` with the starting values of [`EffectParams::default_for`].
     pub fn default_for(name: EffectName, axis: char) -> Effect {
-        Effect {
-            name,
-            axis,
-            params: EffectParams::default_for(name),
-        }
+        Effect { name, axis, params: EffectParams::default_for(name) }
     }
 
     /// An error motion (positioning … yaw) with the given profile.
     pub fn error_motion(name: EffectName, axis: char, profile: Profile) -> Effect {
-        Effect {
-            name,
-            axis,
-            params: EffectParams::ErrorMotion(profile),
-        }
+        Effect { name, axis, params: EffectParams::ErrorMotion(profile) }
     }
 
     /// Checks every parameter against its admissible range (and the axis, and that the
@@ -976,22 +813,10 @@ impl Effect {
         let mut out: Vec<Problem> = Vec::new();
         let mut bad = |key: String, message: String| out.push(Problem { key, message });
         if !matches!(self.axis, 'x' | 'y' | 'z') {
-            bad(
-                "axis".into(),
-                format!(
-                    "expected an axis \"x\", \"y\" or \"z\", got {:?}",
-                    self.axis
-                ),
-            );
+            bad("axis".into(), format!("expected an axis \"x\", \"y\" or \"z\", got {:?}", self.axis));
         }
         if !self.params.fits(self.name) {
-            bad(
-                String::new(),
-                format!(
-                    "internal: parameters of another effect given for `{}`",
-                    self.name
-                ),
-            );
+            bad(String::new(), format!("internal: parameters of another effect given for `{}`", self.name));
             return out;
         }
         for s in param_specs(self.name) {
@@ -999,23 +824,14 @@ impl Effect {
                 if !s.range.contains(v) {
                     bad(
                         s.key.to_string(),
-                        format!(
-                            "expected {}{}, got {}",
-                            s.quantity,
-                            s.range.describe(),
-                            fmt_num(v)
-                        ),
+                        format!("expected {}{}, got {}", s.quantity, s.range.describe(), fmt_num(v)),
                     );
                 }
             }
         }
         match &self.params {
             EffectParams::ErrorMotion(p) => {
-                let q = if self.name.is_translational() {
-                    LENGTH
-                } else {
-                    ANGLE
-                };
+                let q = if self.name.is_translational() { LENGTH } else { ANGLE };
                 validate_profile(p, q, &mut bad);
             }
             EffectParams::CyclicLead(c) => {
@@ -1061,52 +877,34 @@ fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, Str
             Term::Poly(c) => {
                 for (i, ci) in c.iter().enumerate() {
                     if !ci.is_finite() {
-                        bad(
-                            format!("poly[{i}]"),
-                            format!("expected a finite coefficient, got {ci}"),
-                        );
+                        bad(format!("poly[{i}]"), format!("expected a finite coefficient, got {ci}"));
                     }
                 }
             }
             Term::Harmonics(h) => {
                 for (i, hi) in h.iter().enumerate() {
                     if !hi.amplitude.is_finite() {
-                        bad(
-                            format!("harmonics[{i}].amplitude"),
-                            format!("expected {quantity}, got {}", hi.amplitude),
-                        );
+                        bad(format!("harmonics[{i}].amplitude"), format!("expected {quantity}, got {}", hi.amplitude));
                     }
                     if !Range::Positive.contains(hi.wavelength) {
                         bad(
                             format!("harmonics[{i}].wavelength"),
-                            format!(
-                                "expected a wavelength in metres > 0, got {}",
-                                fmt_num(hi.wavelength)
-                            ),
+                            format!("expected a wavelength in metres > 0, got {}", fmt_num(hi.wavelength)),
                         );
                     }
                     if !hi.phase.is_finite() {
-                        bad(
-                            format!("harmonics[{i}].phase"),
-                            format!("expected a phase in radians, got {}", hi.phase),
-                        );
+                        bad(format!("harmonics[{i}].phase"), format!("expected a phase in radians, got {}", hi.phase));
                     }
                 }
             }
             Term::Random { spec, .. } => {
                 if !Range::NonNegative.contains(spec.rms) {
-                    bad(
-                        "random.rms".into(),
-                        format!("expected {quantity} ≥ 0, got {}", fmt_num(spec.rms)),
-                    );
+                    bad("random.rms".into(), format!("expected {quantity} ≥ 0, got {}", fmt_num(spec.rms)));
                 }
                 if !Range::Positive.contains(spec.correlation_length) {
                     bad(
                         "random.correlation_length".into(),
-                        format!(
-                            "expected a length in metres > 0, got {}",
-                            fmt_num(spec.correlation_length)
-                        ),
+                        format!("expected a length in metres > 0, got {}", fmt_num(spec.correlation_length)),
                     );
                 }
             }
@@ -1124,10 +922,7 @@ fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, Str
                     continue;
                 }
                 if let Some(i) = x.iter().chain(y.iter()).position(|v| !v.is_finite()) {
-                    bad(
-                        "table".into(),
-                        format!("expected finite numbers, got a non-finite one at entry {i}"),
-                    );
+                    bad("table".into(), format!("expected finite numbers, got a non-finite one at entry {i}"));
                 }
                 if let Some(i) = x.windows(2).position(|w| w[1] <= w[0]) {
                     bad(
@@ -1185,16 +980,12 @@ pub struct EffectSet {
 impl EffectSet {
     /// The effect `name` on `axis`, if switched on.
     pub fn get(&self, name: EffectName, axis: char) -> Option<&Effect> {
-        self.effects
-            .iter()
-            .find(|e| e.name == name && e.axis == axis)
+        self.effects.iter().find(|e| e.name == name && e.axis == axis)
     }
 
     /// Mutable access to the effect `name` on `axis`.
     pub fn get_mut(&mut self, name: EffectName, axis: char) -> Option<&mut Effect> {
-        self.effects
-            .iter_mut()
-            .find(|e| e.name == name && e.axis == axis)
+        self.effects.iter_mut().find(|e| e.name == name && e.axis == axis)
     }
 
     /// The profile of the error motion `name` on `axis`, if switched on.
@@ -1204,11 +995,7 @@ impl EffectSet {
 
     /// Adds an effect, replacing (and returning) one with the same name and axis.
     pub fn insert(&mut self, effect: Effect) -> Option<Effect> {
-        match self
-            .effects
-            .iter_mut()
-            .find(|e| e.name == effect.name && e.axis == effect.axis)
-        {
+        match self.effects.iter_mut().find(|e| e.name == effect.name && e.axis == effect.axis) {
             Some(slot) => Some(std::mem::replace(slot, effect)),
             None => {
                 self.effects.push(effect);
@@ -1219,10 +1006,7 @@ impl EffectSet {
 
     /// Removes and returns the effect `name` on `axis`.
     pub fn remove(&mut self, name: EffectName, axis: char) -> Option<Effect> {
-        let i = self
-            .effects
-            .iter()
-            .position(|e| e.name == name && e.axis == axis)?;
+        let i = self.effects.iter().position(|e| e.name == name && e.axis == axis)?;
         Some(self.effects.remove(i))
     }
 
@@ -1230,9 +1014,7 @@ impl EffectSet {
     /// occurs once, `effects.NAME[k]` (k-th of that name) when it occurs on several axes.
     pub fn key_path(&self, i: usize) -> String {
         let name = self.effects[i].name;
-        let same: Vec<usize> = (0..self.effects.len())
-            .filter(|&j| self.effects[j].name == name)
-            .collect();
+        let same: Vec<usize> = (0..self.effects.len()).filter(|&j| self.effects[j].name == name).collect();
         if same.len() == 1 {
             format!("effects.{name}")
         } else {
@@ -1247,25 +1029,15 @@ impl EffectSet {
         let mut out: Vec<Problem> = Vec::new();
         for (i, e) in self.effects.iter().enumerate() {
             let path = self.key_path(i);
-            if self.effects[..i]
-                .iter()
-                .any(|f| f.name == e.name && f.axis == e.axis)
-            {
+            if self.effects[..i].iter().any(|f| f.name == e.name && f.axis == e.axis) {
                 out.push(Problem {
                     key: path.clone(),
                     message: format!("`{}` is given twice for axis {}", e.name, e.axis),
                 });
             }
             for p in e.validate() {
-                let key = if p.key.is_empty() {
-                    path.clone()
-                } else {
-                    format!("{path}.{}", p.key)
-                };
-                out.push(Problem {
-                    key,
-                    message: p.message,
-                });
+                let key = if p.key.is_empty() { path.clone() } else { format!("{path}.{}", p.key) };
+                out.push(Problem { key, message: p.message });
             }
         }
         out
@@ -1285,14 +1057,7 @@ impl EffectSet {
             Some(EffectParams::Coulomb(c)) => c.fc,
             _ => 0.0,
         };
-        let mut law = FrictionLaw {
-            fc: fc0,
-            fs: fc0,
-            vs: 1.0,
-            shape: 2.0,
-            fv: 0.0,
-            lugre: None,
-        };
+        let mut law = FrictionLaw { fc: fc0, fs: fc0, vs: 1.0, shape: 2.0, fv: 0.0, lugre: None };
         if let Some(EffectParams::Viscous(v)) = viscous.map(|e| &e.params) {
             law.fv = v.fv;
         }
@@ -1336,10 +1101,7 @@ mod tests {
 
     #[test]
     fn iso_symbols_of_the_x_axis_are_those_of_iso_230_1() {
-        let s: Vec<String> = EffectName::ERROR_MOTIONS
-            .iter()
-            .map(|n| n.iso230_symbol('x').unwrap())
-            .collect();
+        let s: Vec<String> = EffectName::ERROR_MOTIONS.iter().map(|n| n.iso230_symbol('x').unwrap()).collect();
         assert_eq!(s, ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"]);
         assert_eq!(EffectName::Backlash.iso230_symbol('x'), None);
     }
@@ -1364,10 +1126,7 @@ mod tests {
         set.insert(Effect {
             name: EffectName::Resonance,
             axis: 'x',
-            params: EffectParams::Resonance(Resonance {
-                frequency: 120.0,
-                damping: 1.0,
-            }),
+            params: EffectParams::Resonance(Resonance { frequency: 120.0, damping: 1.0 }),
         });
         set.insert(Effect {
             name: EffectName::CyclicLead,
@@ -1392,13 +1151,10 @@ mod tests {
     #[test]
     fn duplicate_name_and_axis_is_a_problem_but_other_axes_are_not() {
         let mut set = EffectSet::default();
-        set.effects
-            .push(Effect::default_for(EffectName::Backlash, 'x'));
-        set.effects
-            .push(Effect::default_for(EffectName::Backlash, 'y'));
+        set.effects.push(Effect::default_for(EffectName::Backlash, 'x'));
+        set.effects.push(Effect::default_for(EffectName::Backlash, 'y'));
         assert!(set.validate().is_empty());
-        set.effects
-            .push(Effect::default_for(EffectName::Backlash, 'x'));
+        set.effects.push(Effect::default_for(EffectName::Backlash, 'x'));
         let p = set.validate();
         assert_eq!(p.len(), 1);
         assert_eq!(p[0].key, "effects.backlash[2]");
@@ -1407,11 +1163,7 @@ mod tests {
     #[test]
     fn effect_equations_match_hand_worked_numbers() {
         // Thermal expansion: 11.5e-6 · 0.5 m · 2 K · (1 − e^−1) at t = τ.
-        let th = ThermalExpansion {
-            alpha: 11.5e-6,
-            delta_t: 2.0,
-            tau: 600.0,
-        };
+        let th = ThermalExpansion { alpha: 11.5e-6, delta_t: 2.0, tau: 600.0 };
         let want = 11.5e-6 * 0.5 * 2.0 * (1.0 - (-1.0f64).exp());
         assert!((th.value(0.5, 600.0) - want).abs() < 1e-22);
         assert_eq!(th.value(0.5, -1.0), 0.0);
@@ -1420,36 +1172,19 @@ mod tests {
             period: 0.01,
             amplitude: 1.5e-6,
             phase: 0.0,
-            harmonics: vec![LeadHarmonic {
-                order: 2,
-                amplitude: 0.5e-6,
-                phase: 0.0,
-            }],
+            harmonics: vec![LeadHarmonic { order: 2, amplitude: 0.5e-6, phase: 0.0 }],
         };
         // sin(π/2) = 1, sin(π) ≈ 1.2e-16: 1.5e-6 within 1e-18 (rounding of π).
         assert!((cl.value(0.0025) - 1.5e-6).abs() < 1e-18);
         // Stribeck: at v = vs, Fc + (Fs − Fc)/e, plus Fv·v.
         let mut set = EffectSet::default();
-        set.insert(Effect {
-            name: EffectName::Coulomb,
-            axis: 'x',
-            params: EffectParams::Coulomb(Coulomb { fc: 1.0 }),
-        });
+        set.insert(Effect { name: EffectName::Coulomb, axis: 'x', params: EffectParams::Coulomb(Coulomb { fc: 1.0 }) });
         set.insert(Effect {
             name: EffectName::Stribeck,
             axis: 'x',
-            params: EffectParams::Stribeck(Stribeck {
-                fc: None,
-                fs: 1.5,
-                vs: 1e-3,
-                shape: 2.0,
-            }),
+            params: EffectParams::Stribeck(Stribeck { fc: None, fs: 1.5, vs: 1e-3, shape: 2.0 }),
         });
-        set.insert(Effect {
-            name: EffectName::Viscous,
-            axis: 'x',
-            params: EffectParams::Viscous(Viscous { fv: 0.4 }),
-        });
+        set.insert(Effect { name: EffectName::Viscous, axis: 'x', params: EffectParams::Viscous(Viscous { fv: 0.4 }) });
         let law = set.friction('x').unwrap();
         let f = law.steady_force(-1e-3);
         let want = -(1.0 + 0.5 / std::f64::consts::E) - 0.4e-3;

@@ -3,28 +3,8 @@
 //! command + e. The chain is the linear scale in a closed loop, or the screw and rotary encoder in a
 //! semi-closed loop (where cyclic lead error and backlash also reach the table).
 
+use crate::effects::{ThermalDrift, ThermalExpansion};
 use crate::profile::Profile;
-use serde::{Deserialize, Serialize};
-
-/// Thermal expansion of the measuring chain: e = α·x·ΔT(t), ΔT(t) = ΔT∞·(1 − exp(−t/τ)).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ThermalExpansion {
-    /// Expansion coefficient, 1/K.
-    pub alpha: f64,
-    /// Final temperature rise ΔT∞, K.
-    pub delta_t: f64,
-    /// Time constant, s.
-    pub tau: f64,
-}
-
-/// Thermal drift: an offset independent of position, e = d∞·(1 − exp(−t/τ)).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ThermalDrift {
-    /// Final offset, m.
-    pub value: f64,
-    /// Time constant, s.
-    pub tau: f64,
-}
 
 /// The position- and time-dependent error of the feedback chain.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -41,21 +21,12 @@ impl FeedbackErrors {
     pub fn error(&self, x: f64, t: f64) -> f64 {
         let mut e = if self.along.is_zero() { 0.0 } else { self.along.value(x) };
         if let Some(th) = &self.thermal_expansion {
-            e += th.alpha * x * th.delta_t * rise(t, th.tau);
+            e += th.value(x, t);
         }
         if let Some(d) = &self.thermal_drift {
-            e += d.value * rise(t, d.tau);
+            e += d.value_at(t);
         }
         e
-    }
-}
-
-/// 1 − exp(−t/τ) (a step for τ = 0).
-fn rise(t: f64, tau: f64) -> f64 {
-    if tau > 0.0 {
-        1.0 - (-t / tau).exp()
-    } else {
-        1.0
     }
 }
 

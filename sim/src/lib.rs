@@ -18,4 +18,5 @@ pub mod profile;
 pub mod rng;
 pub mod sensors;
 pub mod servo;
+pub mod truth;
 pub mod urdf;

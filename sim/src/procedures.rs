@@ -12,7 +12,7 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 /// Procedure names of FORMAT.md §1.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ProcedureKind {
     Positioning,
@@ -23,6 +23,19 @@ pub enum ProcedureKind {
 }
 
 impl ProcedureKind {
+    pub const ALL: [ProcedureKind; 5] = [
+        ProcedureKind::Positioning,
+        ProcedureKind::ConstantVelocity,
+        ProcedureKind::Crawl,
+        ProcedureKind::FrictionSweep,
+        ProcedureKind::Free,
+    ];
+
+    /// Parses a manifest `procedure` string.
+    pub fn parse(s: &str) -> Option<ProcedureKind> {
+        ProcedureKind::ALL.iter().copied().find(|p| p.as_str() == s)
+    }
+
     pub fn as_str(&self) -> &'static str {
         match self {
             ProcedureKind::Positioning => "positioning",
@@ -212,11 +225,56 @@ pub struct RunTruth {
     pub samples: Vec<Sample>,
 }
 
-/// A run's data as a measurement set holds it (FORMAT.md §1), SI units.
-#[derive(Clone, Debug, PartialEq)]
+/// A run's data as a measurement set holds it (FORMAT.md §1), SI units. Time series: `t` then
+/// columns (`x_cmd` and sensors). Point table (positioning): `target`, `run` (1..n), `direction`
+/// (+1/−1), optional `t`, then the sensors' deviations or readings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum RunData {
-    TimeSeries { t: Vec<f64>, columns: Vec<(String, Vec<f64>)> },
-    PointTable { target: Vec<f64>, run: Vec<u32>, direction: Vec<i8>, t: Vec<f64>, columns: Vec<(String, Vec<f64>)> },
+    TimeSeries {
+        t: Vec<f64>,
+        columns: Vec<(String, Vec<f64>)>,
+    },
+    PointTable {
+        target: Vec<f64>,
+        run: Vec<u32>,
+        direction: Vec<i8>,
+        t: Option<Vec<f64>>,
+        columns: Vec<(String, Vec<f64>)>,
+    },
+}
+
+impl RunData {
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        match self {
+            RunData::TimeSeries { t, .. } => t.len(),
+            RunData::PointTable { target, .. } => target.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The data columns (sensors, and `x_cmd` for a time series).
+    pub fn columns(&self) -> &[(String, Vec<f64>)] {
+        match self {
+            RunData::TimeSeries { columns, .. } | RunData::PointTable { columns, .. } => columns,
+        }
+    }
+
+    /// A column by name.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.columns().iter().find(|(n, _)| n == name).map(|(_, v)| v.as_slice())
+    }
+
+    /// The time column, if any.
+    pub fn t(&self) -> Option<&[f64]> {
+        match self {
+            RunData::TimeSeries { t, .. } => Some(t),
+            RunData::PointTable { t, .. } => t.as_deref(),
+        }
+    }
 }
 
 /// A run as measured: metadata and data.
@@ -477,7 +535,7 @@ pub fn read_run(
             target: visits.iter().map(|a| a.target).collect(),
             run: visits.iter().map(|a| a.run).collect(),
             direction: visits.iter().map(|a| a.direction).collect(),
-            t: visits.iter().map(|a| truth.samples[a.last].t).collect(),
+            t: Some(visits.iter().map(|a| truth.samples[a.last].t).collect()),
             columns: columns
                 .into_iter()
                 .filter(|(s, _)| s.kind != SensorKind::Command)

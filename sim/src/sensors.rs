@@ -16,7 +16,7 @@ use rapier3d_f64::glamx::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 
 /// Sensor kinds, named as in FORMAT.md §1.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SensorKind {
     Command,
@@ -30,9 +30,36 @@ pub enum SensorKind {
     MotorForce,
     Velocity,
     Temperature,
+    /// Air pressure, Pa (vmt addition, for the laser's Edlén correction).
+    Pressure,
+    /// Relative humidity, ratio (vmt addition; `percent` unit allowed).
+    Humidity,
 }
 
 impl SensorKind {
+    /// Every kind.
+    pub const ALL: [SensorKind; 13] = [
+        SensorKind::Command,
+        SensorKind::EncoderRotary,
+        SensorKind::EncoderLinear,
+        SensorKind::LaserLinear,
+        SensorKind::LaserStraightness,
+        SensorKind::LaserAngular,
+        SensorKind::LaserVector,
+        SensorKind::Accelerometer,
+        SensorKind::MotorForce,
+        SensorKind::Velocity,
+        SensorKind::Temperature,
+        SensorKind::Pressure,
+        SensorKind::Humidity,
+    ];
+
+    /// Parses a manifest `kind` string.
+    pub fn parse(s: &str) -> Option<SensorKind> {
+        SensorKind::ALL.iter().copied().find(|k| k.as_str() == s)
+    }
+
+    /// The name as written in manifests, e.g. `laser_linear`.
     pub fn as_str(&self) -> &'static str {
         match self {
             SensorKind::Command => "command",
@@ -46,6 +73,8 @@ impl SensorKind {
             SensorKind::MotorForce => "motor_force",
             SensorKind::Velocity => "velocity",
             SensorKind::Temperature => "temperature",
+            SensorKind::Pressure => "pressure",
+            SensorKind::Humidity => "humidity",
         }
     }
 
@@ -248,6 +277,8 @@ pub fn true_readings(
             out
         }
         SensorKind::Temperature => samples.iter().map(|_| 20.0 + 273.15).collect(),
+        SensorKind::Pressure => samples.iter().map(|_| spec.air.unwrap_or(Air::REFERENCE).pressure).collect(),
+        SensorKind::Humidity => samples.iter().map(|_| spec.air.unwrap_or(Air::REFERENCE).humidity / 100.0).collect(),
     })
 }
 

@@ -1,0 +1,121 @@
+//! From the named effects of a truth (FORMAT.md §2, `effects`) to the physics of one axis: where each
+//! effect acts in the simulator. Geometric error motions shape the guideway; scale error, interpolation
+//! error, thermal expansion and drift distort the feedback chain; cyclic lead error and backlash live in
+//! the screw; friction on the guideway; a resonance is a column mode; servo lag sets the loop gains;
+//! accelerometer bias drift is a sensor property. Gravity through tilt and Abbe offsets need no
+//! parameter: they follow from the geometry.
+
+use crate::axis_sim::{AxisTruth, GuideFriction, StructuralMode};
+use crate::effects::{EffectName, EffectParams, EffectSet};
+use crate::friction::{LugreParams, StribeckParams};
+use crate::geometry::ErrorMotions;
+use crate::machine::AxisModel;
+use crate::profile::{Harmonic, Profile, Term};
+
+/// What a truth does to one axis beyond `AxisTruth`: changes to the machine model and to sensors.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Adjustments {
+    /// servo_lag: the position-loop gain K_v (1/s) without velocity feed-forward.
+    pub servo_kv: Option<f64>,
+    /// accel_bias_drift: bias random walk of every accelerometer, m/s²/√s.
+    pub accel_bias_drift: Option<f64>,
+}
+
+/// Builds the physics of axis `axis` from an effect set. `model` gives the moving body's height for
+/// the resonance mode shape. Errors name the effect that cannot act on this machine.
+pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(AxisTruth, Adjustments), String> {
+    let motion = |n: EffectName| set.error_motion(n, axis).cloned().unwrap_or_default();
+    let mut truth = AxisTruth {
+        motions: ErrorMotions {
+            positioning: motion(EffectName::Positioning),
+            straightness_y: motion(EffectName::StraightnessY),
+            straightness_z: motion(EffectName::StraightnessZ),
+            roll: motion(EffectName::Roll),
+            pitch: motion(EffectName::Pitch),
+            yaw: motion(EffectName::Yaw),
+        },
+        ..Default::default()
+    };
+    let mut adj = Adjustments::default();
+    let is_screw = matches!(model.drive, crate::drive::DriveConfig::BallScrew(_));
+    let mut along: Vec<Term> = Vec::new();
+    for e in set.effects.iter().filter(|e| e.axis == axis) {
+        let need_screw = |what: &str| {
+            if is_screw {
+                Ok(())
+            } else {
+                Err(format!(
+                    "effect `{what}` on axis {axis} needs a ball-screw drive ([axis.drive] kind = \"ball_screw\")"
+                ))
+            }
+        };
+        match &e.params {
+            EffectParams::ScaleError(s) => along.push(Term::Poly(vec![0.0, s.value])),
+            EffectParams::InterpolationError(i) => along.push(Term::Harmonics(vec![Harmonic {
+                amplitude: i.amplitude,
+                wavelength: i.period,
+                phase: i.phase,
+            }])),
+            EffectParams::ThermalExpansion(t) => truth.feedback.thermal_expansion = Some(t.clone()),
+            EffectParams::ThermalDrift(d) => truth.feedback.thermal_drift = Some(d.clone()),
+            EffectParams::CyclicLead(c) => {
+                need_screw("cyclic_lead")?;
+                let mut h = vec![Harmonic { amplitude: c.amplitude, wavelength: c.period, phase: c.phase }];
+                h.extend(c.harmonics.iter().map(|k| Harmonic {
+                    amplitude: k.amplitude,
+                    wavelength: c.period / k.order as f64,
+                    phase: k.phase,
+                }));
+                truth.lead_error = Profile::harmonics(h);
+            }
+            EffectParams::Backlash(b) => {
+                need_screw("backlash")?;
+                truth.backlash = b.value;
+            }
+            EffectParams::Resonance(r) => {
+                let height = model.links.iter().map(|(_, f)| model.body_to_axis(f.translation).z).fold(0.0, f64::max);
+                truth.mode =
+                    Some(StructuralMode { frequency: r.frequency, damping: r.damping, height: height.max(0.1) })
+            }
+            EffectParams::ServoLag(s) => adj.servo_kv = Some(s.kv),
+            EffectParams::AccelBiasDrift(d) => adj.accel_bias_drift = Some(d.rate),
+            _ => {}
+        }
+    }
+    if !along.is_empty() {
+        truth.feedback.along = Profile { terms: along };
+    }
+    truth.friction = match set.friction(axis) {
+        None => GuideFriction::None,
+        Some(law) => match law.lugre {
+            Some([sigma0, sigma1]) => GuideFriction::LuGre(LugreParams {
+                sigma0,
+                sigma1,
+                sigma2: law.fv,
+                fc: law.fc,
+                fs: law.fs.max(law.fc),
+                vs: law.vs,
+                delta: law.shape,
+            }),
+            None => GuideFriction::Stribeck(StribeckParams {
+                fc: law.fc,
+                fs: law.fs.max(law.fc),
+                vs: law.vs,
+                delta: law.shape,
+                fv: law.fv,
+            }),
+        },
+    };
+    Ok((truth, adj))
+}
+
+impl Adjustments {
+    /// Applies the servo-lag gain to a machine model: K_p = K_v, no velocity or acceleration feed-forward.
+    pub fn apply(&self, model: &mut AxisModel) {
+        if let Some(kv) = self.servo_kv {
+            model.servo.kp = kv;
+            model.servo.velocity_feed_forward = false;
+            model.servo.acceleration_feed_forward = false;
+        }
+    }
+}
