@@ -4,7 +4,7 @@
 
 use crate::error::VmtError;
 use crate::estimate::{run_estimators, Check, Quantity};
-use crate::measurement::{self, MeasurementSet, UnitChoice};
+use crate::measurement::{self, MeasurementSet, SensorKind, UnitChoice};
 use crate::scenario::Scenario;
 use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set, truth_extras};
 use std::path::{Path, PathBuf};
@@ -129,4 +129,72 @@ pub fn summary_table(set: &MeasurementSet) -> String {
         s += &format!("{:<16} {:<18} {:>8}  {}\n", r.name, r.procedure.as_str(), r.data.len(), chans.join(", "));
     }
     s
+}
+
+/// `vmt iso230-2 PATH`: ISO 230-2 evaluation of a positioning test, from a measurement set directory
+/// (a point-table run and one of its deviation columns) or from an ecmc `.dat` file (key=value format).
+pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool) -> Result<i32, VmtError> {
+    use vmt_estimators::iso230_2::{dat::parse_dat, evaluate_bidirectional};
+    let (label, targets, up, down) = if path.is_dir() {
+        let set = measurement::read(path)?;
+        let r = match run {
+            Some(n) => set.run(n).ok_or_else(|| VmtError::bad(path, "runs", format!("no run named `{n}`")))?,
+            None => set
+                .runs
+                .iter()
+                .find(|r| r.procedure == measurement::Procedure::Positioning)
+                .ok_or_else(|| VmtError::bad(path, "runs", "expected a positioning run (point table)"))?,
+        };
+        let col = match sensor {
+            Some(s) => s.to_string(),
+            None => set
+                .sensors
+                .iter()
+                .find(|s| r.data.column(&s.name).is_some() && s.kind == SensorKind::LaserLinear)
+                .or_else(|| set.sensors.iter().find(|s| r.data.column(&s.name).is_some()))
+                .map(|s| s.name.clone())
+                .ok_or_else(|| VmtError::bad(path, format!("run {}", r.name), "expected a sensor column"))?,
+        };
+        let rec = vmt_sim::procedures::RunRecord {
+            name: r.name.clone(),
+            procedure: r.procedure,
+            feed: r.feed,
+            direction: r.direction,
+            start_time: r.start_time.unwrap_or(0.0),
+            data: r.data.clone(),
+        };
+        let (t, u, d) = crate::estimate::point_table_deviations(&rec, &col).ok_or_else(|| {
+            VmtError::bad(path, format!("run {}", r.name), format!("expected a point table with column `{col}`"))
+        })?;
+        (format!("{} / {} / {}", path.display(), r.name, col), t, u, d)
+    } else {
+        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading", e))?;
+        let dat = parse_dat(&text).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+        (path.display().to_string(), dat.targets, dat.up, dat.down)
+    };
+    let res = evaluate_bidirectional(&targets, &up, &down).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&res).map_err(|e| VmtError::Internal(e.to_string()))?);
+        return Ok(0);
+    }
+    let um = |v: f64| format!("{:10.3}", v * 1e6);
+    println!("ISO 230-2:2014 evaluation of {label} (µm)");
+    println!("{:>12} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}", "target mm", "x̄↑", "x̄↓", "x̄", "B_i", "R↑_i", "R↓_i", "R_i");
+    for t in &res.targets {
+        println!(
+            "{:>12.3} {} {} {} {} {} {} {}",
+            t.target * 1e3,
+            um(t.up.mean),
+            um(t.down.mean),
+            um(t.mean_bidirectional),
+            um(t.reversal),
+            um(t.up.repeatability),
+            um(t.down.repeatability),
+            um(t.repeatability)
+        );
+    }
+    println!("A {}  A↑ {}  A↓ {}", um(res.a), um(res.a_up), um(res.a_down));
+    println!("E {}  E↑ {}  E↓ {}  M {}", um(res.e), um(res.e_up), um(res.e_down), um(res.m));
+    println!("R {}  R↑ {}  R↓ {}  B {}  B̄ {}", um(res.r), um(res.r_up), um(res.r_down), um(res.b), um(res.b_mean));
+    Ok(0)
 }

@@ -37,6 +37,19 @@ enum Command {
         #[arg(long, default_value = "si")]
         units: String,
     },
+    /// ISO 230-2 evaluation of a positioning test: a measurement set directory or an ecmc .dat file.
+    #[command(name = "iso230-2")]
+    Iso230_2 {
+        path: PathBuf,
+        /// Run of the measurement set (default: the first positioning run).
+        #[arg(long)]
+        run: Option<String>,
+        /// Deviation column (default: the first linear laser of the run).
+        #[arg(long)]
+        sensor: Option<String>,
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 fn main() -> ExitCode {
@@ -44,6 +57,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run { scenario, out, json } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
         Command::Simulate { scenario, out, units } => vmt::cli::simulate(scenario.as_deref(), &out, &units).map(|_| 0),
+        Command::Iso230_2 { path, run, sensor, json } => vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json),
     };
     match result {
         Ok(code) => ExitCode::from(code as u8),

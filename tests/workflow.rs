@@ -1,0 +1,157 @@
+//! Whole workflows through the `vmt` binary and library (issue 2): determinism, sensor-noise
+//! independence, round trips of simulated measurement sets, and bad input (exit code 2, a message that
+//! names the file and the place).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn vmt() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_vmt"))
+}
+
+fn small() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml")
+}
+
+/// All files of a directory, sorted, with their bytes.
+fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut v: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read(&p).unwrap()))
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn same_scenario_and_seed_give_bit_identical_files_on_1_and_2_threads() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut outs = Vec::new();
+    for (i, threads) in ["1", "2", "2"].iter().enumerate() {
+        let out = tmp.path().join(format!("out{i}"));
+        let st = vmt().args(["simulate"]).arg(small()).arg("-o").arg(&out).env("RAYON_NUM_THREADS", threads).status().unwrap();
+        assert!(st.success());
+        outs.push(files(&out));
+    }
+    assert!(outs[0].len() >= 5, "manifest, runs and truth expected");
+    assert_eq!(outs[0], outs[1], "1 vs 2 threads differ");
+    assert_eq!(outs[1], outs[2], "two runs on 2 threads differ");
+}
+
+#[test]
+fn adding_a_sensor_leaves_the_noise_of_the_others_unchanged() {
+    let text = std::fs::read_to_string(small()).unwrap();
+    let base = vmt::scenario::Scenario::parse(&text, &small(), small().parent()).unwrap();
+    let extra = text.replace(
+        "sensors = [\"scale\", \"laser_x3\", \"laser_y1\"]",
+        "sensors = [\"laser_x1\", \"scale\", \"laser_x3\", \"laser_y1\"]",
+    );
+    assert_ne!(extra, text);
+    let more = vmt::scenario::Scenario::parse(&extra, &small(), small().parent()).unwrap();
+    let a = vmt::cli::simulate_set(&base).unwrap();
+    let b = vmt::cli::simulate_set(&more).unwrap();
+    let (ra, rb) = (a.run("iso").unwrap(), b.run("iso").unwrap());
+    assert!(rb.data.column("laser_x1").is_some());
+    for col in ["laser_x3", "laser_y1", "scale"] {
+        assert_eq!(ra.data.column(col), rb.data.column(col), "{col} changed when laser_x1 was added");
+    }
+}
+
+#[test]
+fn a_simulated_measurement_set_round_trips_through_its_files() {
+    let sc = vmt::scenario::Scenario::load(&small()).unwrap();
+    let set = vmt::cli::simulate_set(&sc).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    for units in [vmt::measurement::UnitChoice::Si, vmt::measurement::UnitChoice::Metrology] {
+        let dir = tmp.path().join(format!("{units:?}"));
+        vmt::measurement::write(&set, &dir, units).unwrap();
+        let back = vmt::measurement::read(&dir).unwrap();
+        for (r, b) in set.runs.iter().zip(&back.runs) {
+            for ((n, v), (nb, vb)) in r.data.columns().iter().zip(b.data.columns()) {
+                assert_eq!(n, nb);
+                for (x, y) in v.iter().zip(vb) {
+                    // SI: bit-identical. Human units (µm, mm): within 2 ulp of the conversion.
+                    let tol = if units == vmt::measurement::UnitChoice::Si { 0.0 } else { 4.5e-16 * x.abs() };
+                    assert!((x - y).abs() <= tol, "{}/{n}: {x} vs {y}", r.name);
+                }
+            }
+        }
+    }
+}
+
+/// Runs vmt with `args`, expects exit code 2 and a message containing every `needles`.
+fn expect_bad_input(args: &[&std::ffi::OsStr], needles: &[&str]) {
+    let out = vmt().args(args).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "exit code for {args:?}; stderr: {err}");
+    for n in needles {
+        assert!(err.contains(n), "message `{err}` does not name `{n}`");
+    }
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+fn scenario_with(dir: &Path, from: &str, to: &str) -> PathBuf {
+    let text = std::fs::read_to_string(small()).unwrap();
+    assert!(text.contains(from), "test setup: `{from}` not in the scenario");
+    let p = dir.join("scenario.toml");
+    std::fs::write(&p, text.replacen(from, to, 1)).unwrap();
+    p
+}
+
+#[test]
+fn malformed_urdf_is_rejected_with_its_file_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::write(
+        tmp.path().join("bad.urdf"),
+        r#"<robot name="r"><link name="a"/><joint name="j" type="fixed"><parent link="nowhere"/><child link="a"/></joint></robot>"#,
+    )
+    .unwrap();
+    let p = scenario_with(tmp.path(), "machine = \"slide_column\"", "machine = \"bad.urdf\"");
+    expect_bad_input(&["run".as_ref(), p.as_os_str()], &["bad.urdf", "nowhere"]);
+}
+
+#[test]
+fn scenario_with_an_unknown_key_is_rejected_with_line_and_key() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = scenario_with(tmp.path(), "seed = ", "colour = \"red\"\nseed = ");
+    expect_bad_input(&["simulate".as_ref(), p.as_os_str(), "-o".as_ref(), tmp.path().join("o").as_os_str()], &["scenario.toml", "line", "colour"]);
+}
+
+#[test]
+fn scenario_with_a_value_out_of_range_is_rejected_with_its_key_path() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = scenario_with(tmp.path(), "sigma = 20e-9", "sigma = -20e-9");
+    expect_bad_input(&["run".as_ref(), p.as_os_str()], &["scenario.toml", "sigma", "≥ 0"]);
+    let p = scenario_with(tmp.path(), "start = 0.3", "start = 1.7");
+    expect_bad_input(&["run".as_ref(), p.as_os_str()], &["scenario.toml", "procedures[0]", "travel"]);
+}
+
+#[test]
+fn csv_with_a_missing_column_or_nan_is_rejected_with_file_line_and_column() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("set");
+    let st = vmt().arg("simulate").arg(small()).arg("-o").arg(&dir).status().unwrap();
+    assert!(st.success());
+    let csv = dir.join("iso.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    // NaN in the third data row of laser_x3.
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let mut cells: Vec<String> = lines[3].split(',').map(str::to_string).collect();
+    let col = text.lines().next().unwrap().split(',').position(|h| h == "laser_x3").unwrap();
+    cells[col] = "NaN".into();
+    lines[3] = cells.join(",");
+    std::fs::write(&csv, lines.join("\n") + "\n").unwrap();
+    expect_bad_input(&["iso230-2".as_ref(), dir.as_os_str()], &["iso.csv", "line 4", "laser_x3"]);
+    // Missing `direction` column.
+    let no_dir: Vec<String> = text
+        .lines()
+        .map(|l| {
+            let c: Vec<&str> = l.split(',').collect();
+            c.iter().enumerate().filter(|(i, _)| *i != 2).map(|(_, s)| *s).collect::<Vec<_>>().join(",")
+        })
+        .collect();
+    assert!(text.lines().next().unwrap().split(',').nth(2) == Some("direction"));
+    std::fs::write(&csv, no_dir.join("\n") + "\n").unwrap();
+    expect_bad_input(&["iso230-2".as_ref(), dir.as_os_str()], &["iso.csv", "direction"]);
+}
