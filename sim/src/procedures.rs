@@ -167,14 +167,18 @@ pub enum ProcedureSpec {
     },
     /// Friction sweep (DESIGN.md §6, issue 3): constant-velocity passes over decades of speed, each speed in
     /// both directions, for the steady-state friction curve F(v) from the motor force. One time-series run
-    /// per speed and direction (FORMAT.md §1: `procedure = "friction_sweep"`, `feed` = the speed, `direction`
-    /// = ±1), named `{name}_{i}_pos` / `{name}_{i}_neg` with i = 1.. in increasing speed. The + pass starts
-    /// at `start` and moves up, the − pass starts at `end` and moves down; each accelerates at the axis's
-    /// max_accel a, cruises `settle` s (default 1 s) to reach steady state (at creep speeds the
-    /// servo first has to build up the break-away force Fs and then catch up the lag, ~0.5 s on slide_column), then is sampled at `rate` Hz
-    /// (default 1 kHz) for a window of min(`duration`, T_c − settle) s, where T_c = (end − start − v²/a)/v is
-    /// the cruise time the travel allows (default duration 0.5 s; fast passes get shorter windows). The
-    /// steady-state friction is the window mean of the motor force (minus the URDF axis damping·v).
+    /// per speed and direction (FORMAT.md §1: `procedure = "friction_sweep"`, `feed` = the speed,
+    /// `direction` = ±1), named `{name}_{i}_pos` / `{name}_{i}_neg` with i = 1.. in increasing speed.
+    ///
+    /// The + pass starts at `start` and moves up, the − pass starts at `end` and moves down; after 0.5 s at
+    /// rest each accelerates at the axis's max_accel a, cruises `settle` s (default 1 s) to reach steady
+    /// state (at creep speeds the servo first builds up the break-away force Fs, then catches up its lag:
+    /// ~0.5 s on slide_column), then is sampled at `rate` Hz (default 1 kHz) for a window of
+    /// min(`duration`, T_c − settle) s, T_c = (end − start − v²/a)/v the cruise time the travel allows
+    /// (default duration 0.5 s; fast passes get shorter windows). The steady-state friction is the window
+    /// mean of the motor force minus the URDF axis damping·v; where the axis is in a stick-slip limit cycle
+    /// the mean is only steady if the window spans many cycles.
+    ///
     /// Speeds: `speeds` (m/s) if given, else `per_decade` log-spaced speeds per decade from `v_min` to
     /// `v_max` inclusive (defaults 2 per decade, 1e-5 to 0.1 m/s: four decades).
     FrictionSweep {
@@ -266,14 +270,16 @@ pub fn friction_sweep_window(
     }
     if !(end > start && a > 0.0 && settle >= 0.0 && duration > 0.0 && rate > 0.0 && v > 0.0) {
         return Err(format!(
-            "friction sweep: expected end > start, accel > 0, settle ≥ 0, duration > 0, rate > 0, speed > 0; got start {start}, end {end}, accel {a}, settle {settle}, duration {duration}, rate {rate}, speed {v}"
+            "friction sweep: expected end > start, accel > 0, settle ≥ 0, duration > 0, rate > 0, speed > 0; \
+             got start {start}, end {end}, accel {a}, settle {settle}, duration {duration}, rate {rate}, speed {v}"
         ));
     }
     let cruise = (end - start - v * v / a) / v;
     let window = duration.min(cruise - settle);
     if window * rate < 10.0 {
         return Err(format!(
-            "friction sweep: at {v} m/s the travel [{start}, {end}] m leaves {:.4} s of steady cruise after {settle} s of settling (ramps at {a} m/s²); at least 10 samples at {rate} Hz are needed",
+            "friction sweep: at {v} m/s the travel [{start}, {end}] m leaves {:.4} s of steady cruise after \
+             {settle} s of settling (ramps at {a} m/s²); at least 10 samples at {rate} Hz are needed",
             cruise - settle
         ));
     }

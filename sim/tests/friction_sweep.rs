@@ -66,7 +66,8 @@ fn sweep_follows_stribeck(delta: f64) {
         let rel = (f_mean / predicted - 1.0).abs();
         worst = worst.max(rel);
         println!(
-            "{:>12} v_cmd {v_cmd:+.3e} v̄ {v_mean:+.4e} F̄ {f_mean:+9.3} N predicted {predicted:+9.3} N ({:+.3} %), ripple [{f_min:.1}, {f_max:.1}]",
+            "{:>12} v_cmd {v_cmd:+.3e} v̄ {v_mean:+.4e} F̄ {f_mean:+9.3} N predicted {predicted:+9.3} N ({:+.3} %), \
+             ripple [{f_min:.1}, {f_max:.1}]",
             rec.name,
             100.0 * (f_mean / predicted - 1.0)
         );
