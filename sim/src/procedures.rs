@@ -83,6 +83,18 @@ fn d_crawl_settle() -> f64 {
 fn d_settle() -> f64 {
     0.2
 }
+fn d_sweep_settle() -> f64 {
+    1.0
+}
+fn d_sweep_duration() -> f64 {
+    0.5
+}
+fn d_sweep_rate() -> f64 {
+    1000.0
+}
+fn d_per_decade() -> u32 {
+    2
+}
 
 /// A procedure as a scenario declares it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -166,15 +178,165 @@ pub enum ProcedureSpec {
         overrun: f64,
         sensors: Vec<String>,
     },
+    /// Friction sweep (DESIGN.md §6, issue 3): constant-velocity passes over decades of speed, each speed in
+    /// both directions, for the steady-state friction curve F(v) from the motor force. One time-series run
+    /// per speed and direction (FORMAT.md §1: `procedure = "friction_sweep"`, `feed` = the speed,
+    /// `direction` = ±1), named `{name}_{i}_pos` / `{name}_{i}_neg` with i = 1.. in increasing speed.
+    ///
+    /// The + pass starts at `start` and moves up, the − pass starts at `end` and moves down; after 0.5 s at
+    /// rest each accelerates at the axis's max_accel a, cruises `settle` s (default 1 s) to reach steady
+    /// state (at creep speeds the servo first builds up the break-away force Fs, then catches up its lag:
+    /// ~0.5 s on slide_column), then is sampled at `rate` Hz (default 1 kHz) for a window of
+    /// min(`duration`, T_c − settle) s, T_c = (end − start − v²/a)/v the cruise time the travel allows
+    /// (default duration 0.5 s; fast passes get shorter windows). The steady-state friction is the window
+    /// mean of the motor force minus the URDF axis damping·v; where the axis is in a stick-slip limit cycle
+    /// the mean is only steady if the window spans many cycles.
+    ///
+    /// Speeds: `speeds` (m/s) if given, else `per_decade` log-spaced speeds per decade from `v_min` to
+    /// `v_max` inclusive (defaults 2 per decade, 1e-5 to 0.1 m/s: four decades).
+    FrictionSweep {
+        name: String,
+        #[serde(default)]
+        speeds: Option<Vec<f64>>,
+        #[serde(default = "d_sweep_vmin")]
+        v_min: f64,
+        #[serde(default = "d_sweep_vmax")]
+        v_max: f64,
+        #[serde(default = "d_per_decade")]
+        per_decade: u32,
+        start: f64,
+        end: f64,
+        #[serde(default = "d_sweep_settle")]
+        settle: f64,
+        #[serde(default = "d_sweep_duration")]
+        duration: f64,
+        #[serde(default = "d_sweep_rate")]
+        rate: f64,
+        sensors: Vec<String>,
+    },
+}
+
+fn d_sweep_vmin() -> f64 {
+    1e-5
+}
+fn d_sweep_vmax() -> f64 {
+    0.1
+}
+
+/// Speeds of a friction sweep, m/s, increasing: the given `speeds` (sorted), else v_k = v_min·10^(k/n) for
+/// k = 0..=K with n = `per_decade`, K = round(n·log10(v_max/v_min)) (so v_max is the last one up to the
+/// rounding of the decade count). Errors on non-positive or non-finite speeds, v_max ≤ v_min, n = 0,
+/// or duplicate speeds.
+pub fn friction_sweep_speeds(
+    speeds: Option<&[f64]>,
+    v_min: f64,
+    v_max: f64,
+    per_decade: u32,
+) -> Result<Vec<f64>, String> {
+    let mut v: Vec<f64> = match speeds {
+        Some(s) => s.to_vec(),
+        None => {
+            if !(v_min.is_finite() && v_min > 0.0 && v_max.is_finite() && v_max > v_min) {
+                return Err(format!(
+                    "friction sweep: expected 0 < v_min < v_max (finite, m/s), got v_min {v_min}, v_max {v_max}"
+                ));
+            }
+            if per_decade == 0 {
+                return Err("friction sweep: per_decade must be at least 1".into());
+            }
+            let n = per_decade as f64;
+            let k = (n * (v_max / v_min).log10()).round() as i32;
+            (0..=k).map(|i| v_min * 10f64.powf(i as f64 / n)).collect()
+        }
+    };
+    if v.is_empty() {
+        return Err("friction sweep: expected at least one speed".into());
+    }
+    if let Some(bad) = v.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+        return Err(format!("friction sweep: speeds must be finite and > 0 m/s, got {bad}"));
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    if let Some(w) = v.windows(2).find(|w| w[1] <= w[0]) {
+        return Err(format!("friction sweep: speeds must be distinct, got {} twice", w[0]));
+    }
+    Ok(v)
+}
+
+/// Length (s) of the sampled window of a friction-sweep pass at speed v (m/s) over [start, end] (m) with
+/// acceleration a (m/s²): min(duration, T_c − settle), T_c = (end − start − v²/a)/v the cruise time left
+/// after the two ramps of v²/(2a). Errors when fewer than 10 samples at `rate` (Hz) would remain, so
+/// the caller lowers the speed, widens the travel or shortens `settle`.
+#[allow(clippy::too_many_arguments)]
+pub fn friction_sweep_window(
+    v: f64,
+    start: f64,
+    end: f64,
+    a: f64,
+    settle: f64,
+    duration: f64,
+    rate: f64,
+) -> Result<f64, String> {
+    for (k, x) in [("start", start), ("end", end), ("settle", settle), ("duration", duration), ("rate", rate)] {
+        if !x.is_finite() {
+            return Err(format!("friction sweep: {k} must be finite, got {x}"));
+        }
+    }
+    if !(end > start && a > 0.0 && settle >= 0.0 && duration > 0.0 && rate > 0.0 && v > 0.0) {
+        return Err(format!(
+            "friction sweep: expected end > start, accel > 0, settle ≥ 0, duration > 0, rate > 0, speed > 0; \
+             got start {start}, end {end}, accel {a}, settle {settle}, duration {duration}, rate {rate}, speed {v}"
+        ));
+    }
+    let cruise = (end - start - v * v / a) / v;
+    let window = duration.min(cruise - settle);
+    if window * rate < 10.0 {
+        return Err(format!(
+            "friction sweep: at {v} m/s the travel [{start}, {end}] m leaves {:.4} s of steady cruise after \
+             {settle} s of settling (ramps at {a} m/s²); at least 10 samples at {rate} Hz are needed",
+            cruise - settle
+        ));
+    }
+    Ok(window)
 }
 
 impl ProcedureSpec {
+    /// Checks what the simulation of this procedure needs beyond the scenario's checks (FrictionSweep: its
+    /// speeds, and a steady window at every speed within [start, end] at the axis's max_accel; every
+    /// speed ≤ the axis's max_feed). Other procedures: Ok.
+    pub fn check(&self, model: &AxisModel) -> Result<(), String> {
+        if let ProcedureSpec::FrictionSweep {
+            speeds,
+            v_min,
+            v_max,
+            per_decade,
+            start,
+            end,
+            settle,
+            duration,
+            rate,
+            ..
+        } = self
+        {
+            for v in friction_sweep_speeds(speeds.as_deref(), *v_min, *v_max, *per_decade)? {
+                if v > model.max_feed * (1.0 + 1e-9) {
+                    return Err(format!(
+                        "friction sweep: speed {v} m/s exceeds the axis's max feed {} m/s",
+                        model.max_feed
+                    ));
+                }
+                friction_sweep_window(v, *start, *end, model.max_accel, *settle, *duration, *rate)?;
+            }
+        }
+        Ok(())
+    }
+
     pub fn name(&self) -> &str {
         match self {
             ProcedureSpec::ConstantVelocity { name, .. }
             | ProcedureSpec::Positioning { name, .. }
             | ProcedureSpec::Crawl { name, .. }
-            | ProcedureSpec::NineLine { name, .. } => name,
+            | ProcedureSpec::NineLine { name, .. }
+            | ProcedureSpec::FrictionSweep { name, .. } => name,
         }
     }
 
@@ -183,7 +345,8 @@ impl ProcedureSpec {
             ProcedureSpec::ConstantVelocity { sensors, .. }
             | ProcedureSpec::Positioning { sensors, .. }
             | ProcedureSpec::Crawl { sensors, .. }
-            | ProcedureSpec::NineLine { sensors, .. } => sensors,
+            | ProcedureSpec::NineLine { sensors, .. }
+            | ProcedureSpec::FrictionSweep { sensors, .. } => sensors,
         }
     }
 }
@@ -306,7 +469,8 @@ pub fn irregular_targets(start: f64, end: f64, n: usize, seed: u64, name: &str) 
         .collect()
 }
 
-/// Simulates a procedure; returns one truth per run.
+/// Simulates a procedure; returns one truth per run. A friction sweep that fails
+/// [`ProcedureSpec::check`] yields no runs (check it first: the scenario loader does).
 pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &ProcedureSpec, seed: u64) -> Vec<RunTruth> {
     match spec {
         ProcedureSpec::ConstantVelocity { name, speeds, start, end, high_rate, direction, settle, sensors } => {
@@ -407,6 +571,54 @@ pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &Procedur
                 *overrun,
                 sensors,
             )]
+        }
+        ProcedureSpec::FrictionSweep {
+            name,
+            speeds,
+            v_min,
+            v_max,
+            per_decade,
+            start,
+            end,
+            settle,
+            duration,
+            rate,
+            sensors,
+        } => {
+            if spec.check(model).is_err() {
+                return Vec::new();
+            }
+            let speeds = friction_sweep_speeds(speeds.as_deref(), *v_min, *v_max, *per_decade).unwrap_or_default();
+            let a = model.max_accel;
+            let mut out = Vec::with_capacity(2 * speeds.len());
+            for (i, &v) in speeds.iter().enumerate() {
+                let Ok(window) = friction_sweep_window(v, *start, *end, a, *settle, *duration, *rate) else {
+                    return Vec::new();
+                };
+                for s in [1.0f64, -1.0] {
+                    let from = if s > 0.0 { *start } else { *end };
+                    let mut plan = MotionPlan::starting_at(from);
+                    // The body settles on its bearings at rest first (their rocking moves the reference point).
+                    plan.dwell(0.5);
+                    // Ramp v²/(2a), cruise settle + window (+ one sample period), ramp down.
+                    let length = v * v / a + v * (settle + window + 1.0 / rate);
+                    let (t0, _) = plan.move_to(from + s * length, v, a);
+                    let t_first = t0 + v / a + settle;
+                    let n = (window * rate).round() as usize;
+                    let times: Vec<f64> = (0..=n).map(|k| t_first + k as f64 / rate).collect();
+                    out.push(RunTruth {
+                        name: format!("{name}_{}_{}", i + 1, if s > 0.0 { "pos" } else { "neg" }),
+                        procedure: ProcedureKind::FrictionSweep,
+                        feed: Some(v),
+                        direction: Some(s as i8),
+                        start_time: 0.0,
+                        sensors: sensors.clone(),
+                        layout: Layout::TimeSeries { rate: *rate },
+                        samples: simulate(model, errors, &plan, &times).samples,
+                    });
+                }
+            }
+            out
         }
     }
 }
@@ -558,5 +770,34 @@ fn sample_rate(samples: &[Sample]) -> f64 {
     match samples {
         [a, b, ..] if b.t > a.t => 1.0 / (b.t - a.t),
         _ => 1.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sweep_speeds_are_log_spaced_and_bad_ones_rejected() {
+        // 2 per decade over 4 decades: 9 speeds, 1e-5 · 10^(k/2).
+        let v = friction_sweep_speeds(None, 1e-5, 0.1, 2).unwrap();
+        assert_eq!(v.len(), 9);
+        assert!((v[1] / 1e-5 - 10f64.sqrt()).abs() < 1e-12 && (v[8] / 0.1 - 1.0).abs() < 1e-12);
+        assert_eq!(friction_sweep_speeds(Some(&[0.2, 0.01]), 0.0, 0.0, 0).unwrap(), vec![0.01, 0.2]);
+        assert!(friction_sweep_speeds(None, 0.1, 1e-5, 2).unwrap_err().contains("v_min < v_max"));
+        assert!(friction_sweep_speeds(None, f64::NAN, 0.1, 2).is_err());
+        assert!(friction_sweep_speeds(None, 1e-5, 0.1, 0).is_err());
+        assert!(friction_sweep_speeds(Some(&[0.1, -0.1]), 0.0, 0.0, 0).unwrap_err().contains("> 0"));
+        assert!(friction_sweep_speeds(Some(&[0.1, 0.1]), 0.0, 0.0, 0).unwrap_err().contains("distinct"));
+    }
+
+    #[test]
+    fn sweep_window_shrinks_at_high_speed_and_fails_when_the_travel_is_too_short() {
+        // Slow: the full duration. 0.5 m/s over 0.8 m at 2 m/s²: cruise (0.8 − 0.125)/0.5 = 1.35 s,
+        // minus 1 s settle leaves 0.35 s.
+        assert_eq!(friction_sweep_window(1e-4, 0.1, 0.9, 2.0, 1.0, 0.5, 1000.0).unwrap(), 0.5);
+        assert!((friction_sweep_window(0.5, 0.1, 0.9, 2.0, 1.0, 0.5, 1000.0).unwrap() - 0.35).abs() < 1e-12);
+        assert!(friction_sweep_window(0.5, 0.1, 0.5, 2.0, 1.0, 0.5, 1000.0).unwrap_err().contains("10 samples"));
+        assert!(friction_sweep_window(0.1, 0.1, 0.9, 2.0, f64::NAN, 0.5, 1000.0).is_err());
     }
 }
