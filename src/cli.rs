@@ -179,7 +179,10 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
     }
     let um = |v: f64| format!("{:10.3}", v * 1e6);
     println!("ISO 230-2:2014 evaluation of {label} (µm)");
-    println!("{:>12} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}", "target mm", "x̄↑", "x̄↓", "x̄", "B_i", "R↑_i", "R↓_i", "R_i");
+    println!(
+        "{:>12} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "target mm", "x̄↑", "x̄↓", "x̄", "B_i", "R↑_i", "R↓_i", "R_i"
+    );
     for t in &res.targets {
         println!(
             "{:>12.3} {} {} {} {} {} {} {}",

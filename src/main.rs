@@ -57,7 +57,9 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run { scenario, out, json } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
         Command::Simulate { scenario, out, units } => vmt::cli::simulate(scenario.as_deref(), &out, &units).map(|_| 0),
-        Command::Iso230_2 { path, run, sensor, json } => vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json),
+        Command::Iso230_2 { path, run, sensor, json } => {
+            vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json)
+        }
     };
     match result {
         Ok(code) => ExitCode::from(code as u8),

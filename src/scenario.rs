@@ -273,6 +273,7 @@ fn validate_procedures(
                     return Err((at("duration"), "expected duration > 0, rate > 0 and settle ≥ 0".into()));
                 }
             }
+            ProcedureSpec::FrictionSweep { .. } => p.check(axis).map_err(|m| (at("speeds"), m))?,
             ProcedureSpec::NineLine { start, end, step, feed, dwell, average, rate, overrun, .. } => {
                 in_travel("start", *start)?;
                 in_travel("end", *end)?;

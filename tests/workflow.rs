@@ -30,7 +30,14 @@ fn same_scenario_and_seed_give_bit_identical_files_on_1_and_2_threads() {
     let mut outs = Vec::new();
     for (i, threads) in ["1", "2", "2"].iter().enumerate() {
         let out = tmp.path().join(format!("out{i}"));
-        let st = vmt().args(["simulate"]).arg(small()).arg("-o").arg(&out).env("RAYON_NUM_THREADS", threads).status().unwrap();
+        let st = vmt()
+            .args(["simulate"])
+            .arg(small())
+            .arg("-o")
+            .arg(&out)
+            .env("RAYON_NUM_THREADS", threads)
+            .status()
+            .unwrap();
         assert!(st.success());
         outs.push(files(&out));
     }
@@ -115,7 +122,10 @@ fn malformed_urdf_is_rejected_with_its_file_named() {
 fn scenario_with_an_unknown_key_is_rejected_with_line_and_key() {
     let tmp = tempfile::tempdir().unwrap();
     let p = scenario_with(tmp.path(), "seed = ", "colour = \"red\"\nseed = ");
-    expect_bad_input(&["simulate".as_ref(), p.as_os_str(), "-o".as_ref(), tmp.path().join("o").as_os_str()], &["scenario.toml", "line", "colour"]);
+    expect_bad_input(
+        &["simulate".as_ref(), p.as_os_str(), "-o".as_ref(), tmp.path().join("o").as_os_str()],
+        &["scenario.toml", "line", "colour"],
+    );
 }
 
 #[test]
