@@ -16,6 +16,16 @@ pub enum EstimatorSpec {
     /// ISO 230-2 evaluation of a positioning run read by a linear laser: E, M and B̄ compared with the
     /// values of the injected deviations at the laser's measuring point.
     Iso230_2 { run: String, sensor: String, tolerance: f64 },
+    /// Straightness from an accelerometer's constant-velocity runs (seed 000, and the SNR-weighted
+    /// fusion), compared with the lateral motion of its mount point band-limited to the recoverable
+    /// wavelengths; `tolerance` bounds the RMS difference.
+    AccelStraightness {
+        procedure: String,
+        sensor: String,
+        #[serde(default)]
+        method: Option<String>,
+        tolerance: f64,
+    },
 }
 
 /// What a check compares (for units in the table).
@@ -40,6 +50,31 @@ pub struct Check {
 }
 
 impl Check {
+    /// A profile comparison: RMS of the injected and recovered profiles, and the RMS of their difference
+    /// as the difference (the check passes when it is within the tolerance).
+    pub fn profile(
+        error: impl Into<String>,
+        quantity: Quantity,
+        truth: &[f64],
+        estimate: &[f64],
+        tolerance: f64,
+    ) -> Check {
+        let rms = |v: &mut dyn Iterator<Item = f64>| {
+            let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
+            (s / n.max(1) as f64).sqrt()
+        };
+        let difference = rms(&mut truth.iter().zip(estimate).map(|(a, b)| b - a));
+        Check {
+            error: error.into(),
+            quantity,
+            injected: rms(&mut truth.iter().copied()),
+            recovered: rms(&mut estimate.iter().copied()),
+            difference,
+            tolerance,
+            pass: difference <= tolerance,
+        }
+    }
+
     pub fn new(error: impl Into<String>, quantity: Quantity, injected: f64, recovered: f64, tolerance: f64) -> Check {
         let difference = recovered - injected;
         Check {
@@ -98,32 +133,99 @@ pub fn run_estimators(sc: &Scenario, runs: &[RunRecord], errors: &ErrorMotions) 
                 })?;
                 let est = evaluate_bidirectional(&targets, &up, &down)
                     .map_err(|e| VmtError::bad(&sc.source, "estimators", format!("ISO 230-2 of run `{run}`: {e}")))?;
-                let spec = sc.sensors.iter().find(|s| &s.name == sensor).expect("validated sensor");
+                let spec = sc.sensors.iter().find(|s| &s.name == sensor).ok_or_else(|| {
+                    VmtError::bad(&sc.source, "estimators", format!("sensor `{sensor}` is not declared"))
+                })?;
                 let r = spec.axis_position(&sc.axis).map_err(|m| VmtError::bad(&sc.source, "sensors", m))?;
                 let truth = iso_truth(errors, r, &targets)?;
-                checks.push(Check::new(
-                    format!("ISO 230-2 E ({sensor})"),
-                    Quantity::Length,
-                    truth.e,
-                    est.e,
+                for (label, t, e) in [("E", truth.e, est.e), ("M", truth.m, est.m), ("B̄", truth.b_mean, est.b_mean)] {
+                    checks.push(Check::new(
+                        format!("ISO 230-2 {label} ({sensor})"),
+                        Quantity::Length,
+                        t,
+                        e,
+                        *tolerance,
+                    ));
+                }
+            }
+            EstimatorSpec::AccelStraightness { procedure, sensor, method, tolerance } => {
+                checks.push(accel_straightness_check(
+                    sc,
+                    runs,
+                    errors,
+                    procedure,
+                    sensor,
+                    method.as_deref(),
                     *tolerance,
-                ));
-                checks.push(Check::new(
-                    format!("ISO 230-2 M ({sensor})"),
-                    Quantity::Length,
-                    truth.m,
-                    est.m,
-                    *tolerance,
-                ));
-                checks.push(Check::new(
-                    format!("ISO 230-2 B̄ ({sensor})"),
-                    Quantity::Length,
-                    truth.b_mean,
-                    est.b_mean,
-                    *tolerance,
-                ));
+                )?);
             }
         }
     }
     Ok(checks)
+}
+
+/// The accelerometer straightness check of one sensor (seed 000 / SNR-weighted fusion).
+fn accel_straightness_check(
+    sc: &Scenario,
+    runs: &[RunRecord],
+    errors: &ErrorMotions,
+    procedure: &str,
+    sensor: &str,
+    method: Option<&str>,
+    tolerance: f64,
+) -> Result<Check, VmtError> {
+    use vmt_estimators::accel_straightness::{
+        estimate_straightness, zero_phase_highpass, AccelRun, FusionMethod, StraightnessConfig,
+    };
+    let bad = |m: String| VmtError::bad(&sc.source, format!("estimators ({procedure}/{sensor})"), m);
+    let method = match method.unwrap_or("snr_weighted") {
+        "snr_weighted" => FusionMethod::SnrWeighted,
+        "spatial_continuity" | "seed000" => FusionMethod::SpatialContinuity,
+        other => {
+            return Err(bad(format!("method: expected \"snr_weighted\" or \"spatial_continuity\", got \"{other}\"")))
+        }
+    };
+    let mut acc_runs = Vec::new();
+    for r in runs.iter().filter(|r| r.name.starts_with(&format!("{procedure}_"))) {
+        let RunData::TimeSeries { t, columns } = &r.data else { continue };
+        let a = columns
+            .iter()
+            .find(|(n, _)| n == sensor)
+            .ok_or_else(|| bad(format!("run `{}` has no column `{sensor}`", r.name)))?;
+        let x = &columns.iter().find(|(n, _)| n == "x_cmd").ok_or_else(|| bad("no x_cmd column".into()))?.1;
+        acc_runs.push(AccelRun {
+            speed: r.feed.unwrap_or(0.0),
+            sample_rate: 1.0 / (t[1] - t[0]),
+            start_position: x[0],
+            direction: r.direction.unwrap_or(1) as i32,
+            acceleration: a.1.clone(),
+        });
+    }
+    if acc_runs.is_empty() {
+        return Err(bad(format!("no constant-velocity runs named `{procedure}_*`")));
+    }
+    let cfg = StraightnessConfig { method, ..Default::default() };
+    let est = estimate_straightness(&acc_runs, &cfg).map_err(|e| bad(e.to_string()))?;
+    let spec = sc.sensors.iter().find(|s| s.name == sensor).ok_or_else(|| bad("sensor not declared".into()))?;
+    let r = rapier3d_f64::glamx::DVec3::from_array(spec.axis_position(&sc.axis).map_err(bad)?);
+    let u = spec.unit_direction();
+    let truth: Vec<f64> = est.positions.iter().map(|&x| u.dot(errors.deviation(x, r))).collect();
+    // Compare within the recoverable band: the same zero-phase high-pass at the band's longest wavelength
+    // applied to truth and estimate (the accelerometer cannot see longer wavelengths), evaluated on the
+    // interior 80 % of the range (edge transients of the filter), least-squares line removed.
+    let dx = (est.positions[est.positions.len() - 1] - est.positions[0]).abs() / (est.positions.len() - 1) as f64;
+    let hp =
+        |p: &[f64]| zero_phase_highpass(p, 1.0 / est.band.max_wavelength, 1.0 / dx).map_err(|e| bad(e.to_string()));
+    let (truth, estimate) = (hp(&truth)?, hp(&est.straightness)?);
+    let n = est.positions.len();
+    let (i0, i1) = (n / 10, n - n / 10);
+    let xs = &est.positions[i0..i1];
+    let detrend = |p: &[f64]| vmt_estimators::line::remove_line(xs, &p[i0..i1]);
+    let (truth, estimate) = (detrend(&truth), detrend(&estimate));
+    let name = format!(
+        "straightness {sensor} ({}–{} mm band)",
+        (est.band.min_wavelength * 1e3).round(),
+        (est.band.max_wavelength * 1e3).round()
+    );
+    Ok(Check::profile(name, Quantity::Length, &truth, &estimate, tolerance))
 }
