@@ -58,7 +58,7 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     let set = to_measurement_set(&sc, &runs)?;
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| default_out(&sc));
     measurement::write_with_extras(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc)?)?;
-    let checks = run_estimators(&sc, &runs, &ph.truth.motions)?;
+    let checks = run_estimators(&sc, &ph, &runs)?;
     let failed: Vec<&Check> = checks.iter().filter(|c| !c.pass).collect();
     if json {
         let v = serde_json::json!({"scenario": sc.source, "checks": checks, "pass": failed.is_empty()});

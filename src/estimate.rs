@@ -4,6 +4,7 @@
 
 use crate::error::VmtError;
 use crate::scenario::Scenario;
+use crate::simulate::Physics;
 use serde::{Deserialize, Serialize};
 use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
 use vmt_sim::geometry::ErrorMotions;
@@ -16,6 +17,25 @@ pub enum EstimatorSpec {
     /// ISO 230-2 evaluation of a positioning run read by a linear laser: E, M and B̄ compared with the
     /// values of the injected deviations at the laser's measuring point.
     Iso230_2 { run: String, sensor: String, tolerance: f64 },
+    /// Laser line-set identification (seeds 001, 003) of the six error motions from a point-table run
+    /// read by several lasers (the 9-line / three-point design): general least squares with one zero
+    /// offset per laser line. Translations are compared with `tolerance_translation` (m RMS), angles
+    /// with `tolerance_angle` (rad RMS), in the identifier's conventions (EXX and angles relative to the
+    /// first target, straightness about its least-squares line).
+    LaserLines { run: String, sensors: Vec<String>, tolerance_translation: f64, tolerance_angle: f64 },
+    /// Compensation table (seed 004): a variable-step table from the mean bidirectional deviations of a
+    /// positioning run, applied in the simulated CNC; the test is repeated at other irregular targets and
+    /// E and A must fall to at most `max_ratio` of their values before compensation.
+    Compensation {
+        run: String,
+        sensor: String,
+        #[serde(default = "default_max_ratio")]
+        max_ratio: f64,
+        #[serde(default = "default_pearson")]
+        pearson: f64,
+        #[serde(default = "default_residual")]
+        residual: f64,
+    },
     /// Straightness from an accelerometer's constant-velocity runs (seed 000, and the SNR-weighted
     /// fusion), compared with the lateral motion of its mount point band-limited to the recoverable
     /// wavelengths; `tolerance` bounds the RMS difference.
@@ -26,6 +46,16 @@ pub enum EstimatorSpec {
         method: Option<String>,
         tolerance: f64,
     },
+}
+
+fn default_max_ratio() -> f64 {
+    0.3
+}
+fn default_pearson() -> f64 {
+    0.98
+}
+fn default_residual() -> f64 {
+    0.5e-6
 }
 
 /// What a check compares (for units in the table).
@@ -50,6 +80,20 @@ pub struct Check {
 }
 
 impl Check {
+    /// A reduction: `before` → `after`, passing when after ≤ max_ratio·before. Shown as injected =
+    /// before, recovered = after, difference = after − before, tolerance = max_ratio·before.
+    pub fn reduction(error: impl Into<String>, before: f64, after: f64, max_ratio: f64) -> Check {
+        Check {
+            error: error.into(),
+            quantity: Quantity::Length,
+            injected: before,
+            recovered: after,
+            difference: after - before,
+            tolerance: max_ratio * before,
+            pass: after <= max_ratio * before,
+        }
+    }
+
     /// A profile comparison: RMS of the injected and recovered profiles, and the RMS of their difference
     /// as the difference (the check passes when it is within the tolerance).
     pub fn profile(
@@ -115,7 +159,8 @@ pub fn iso_truth(errors: &ErrorMotions, r: [f64; 3], targets: &[f64]) -> Result<
 }
 
 /// Runs every estimator of a scenario on its recording and returns the checks.
-pub fn run_estimators(sc: &Scenario, runs: &[RunRecord], errors: &ErrorMotions) -> Result<Vec<Check>, VmtError> {
+pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result<Vec<Check>, VmtError> {
+    let errors = &ph.truth.motions;
     let mut checks = Vec::new();
     for spec in &sc.estimators {
         match spec {
@@ -147,6 +192,20 @@ pub fn run_estimators(sc: &Scenario, runs: &[RunRecord], errors: &ErrorMotions) 
                         *tolerance,
                     ));
                 }
+            }
+            EstimatorSpec::LaserLines { run, sensors, tolerance_translation, tolerance_angle } => {
+                checks.extend(laser_lines_checks(
+                    sc,
+                    runs,
+                    errors,
+                    run,
+                    sensors,
+                    *tolerance_translation,
+                    *tolerance_angle,
+                )?);
+            }
+            EstimatorSpec::Compensation { run, sensor, max_ratio, pearson, residual } => {
+                checks.extend(compensation_checks(sc, ph, runs, run, sensor, *max_ratio, *pearson, *residual)?);
             }
             EstimatorSpec::AccelStraightness { procedure, sensor, method, tolerance } => {
                 checks.push(accel_straightness_check(
@@ -228,4 +287,115 @@ fn accel_straightness_check(
         (est.band.max_wavelength * 1e3).round()
     );
     Ok(Check::profile(name, Quantity::Length, &truth, &estimate, tolerance))
+}
+
+/// The six error motions identified from the laser lines of a point-table run, compared with the truth.
+fn laser_lines_checks(
+    sc: &Scenario,
+    runs: &[RunRecord],
+    errors: &ErrorMotions,
+    run: &str,
+    sensors: &[String],
+    tol_t: f64,
+    tol_a: f64,
+) -> Result<Vec<Check>, VmtError> {
+    use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, IdOptions, Model, Reading};
+    let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (laser_lines {run})"), m);
+    let rec = runs.iter().find(|r| r.name == run).ok_or_else(|| bad(format!("no run `{run}`")))?;
+    let RunData::PointTable { target, columns, .. } = &rec.data else {
+        return Err(bad("expected a point table".into()));
+    };
+    let mut readings = Vec::new();
+    for (line, name) in sensors.iter().enumerate() {
+        let spec = sc
+            .sensors
+            .iter()
+            .find(|s| &s.name == name)
+            .ok_or_else(|| bad(format!("sensor `{name}` is not declared")))?;
+        let values = &columns.iter().find(|(n, _)| n == name).ok_or_else(|| bad(format!("no column `{name}`")))?.1;
+        let point = spec.axis_position(&sc.axis).map_err(bad)?;
+        let sigma = (spec.sigma.powi(2) + spec.resolution.powi(2) / 12.0).sqrt().max(1e-12);
+        for (&x, &v) in target.iter().zip(values) {
+            readings.push(Reading {
+                q: vec![x],
+                point,
+                direction: spec.unit_direction().to_array(),
+                value: v,
+                sigma,
+                line: Some(line),
+            });
+        }
+    }
+    let mut nodes = target.clone();
+    nodes.sort_by(f64::total_cmp);
+    nodes.dedup();
+    let model = Model { axes: vec![AxisModel::with_nodes(AxisName::X, &nodes)], squareness: false };
+    let id = identify(&readings, &model, &IdOptions::default()).map_err(|e| bad(e.to_string()))?;
+    let mut checks = Vec::new();
+    for (i, sym) in ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"].iter().enumerate() {
+        let p = id.profile(sym).ok_or_else(|| bad(format!("identifier returned no {sym}")))?;
+        let mut truth: Vec<f64> = p.positions.iter().map(|&x| errors.by_index(i).value(x)).collect();
+        if i == 1 || i == 2 {
+            truth = vmt_estimators::line::remove_line(&p.positions, &truth);
+        } else {
+            let t0 = errors.by_index(i).value(model.axes[0].reference_position);
+            truth.iter_mut().for_each(|v| *v -= t0);
+        }
+        let (q, tol) = if i < 3 { (Quantity::Length, tol_t) } else { (Quantity::Angle, tol_a) };
+        let name = format!("{sym} {} (laser lines)", vmt_sim::geometry::ERROR_MOTION_NAMES[i]);
+        checks.push(Check::profile(name, q, &truth, &p.values, tol));
+    }
+    if !id.unobservable.is_empty() {
+        return Err(bad(format!("the laser lines leave unobservable: {}", id.unobservable.join("; "))));
+    }
+    Ok(checks)
+}
+
+/// Seed 004's compensation loop: table from the ISO test, applied in the CNC, test repeated.
+#[allow(clippy::too_many_arguments)]
+fn compensation_checks(
+    sc: &Scenario,
+    ph: &Physics,
+    runs: &[RunRecord],
+    run: &str,
+    sensor: &str,
+    max_ratio: f64,
+    pearson: f64,
+    residual: f64,
+) -> Result<Vec<Check>, VmtError> {
+    use vmt_estimators::compensation::{variable_step_table, VariableStepParams};
+    use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureSpec};
+    let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (compensation {run})"), m);
+    let iso = |rec: &RunRecord| -> Result<AxisResult, VmtError> {
+        let (t, u, d) = point_table_deviations(rec, sensor)
+            .ok_or_else(|| bad(format!("run `{}` has no point-table column `{sensor}`", rec.name)))?;
+        evaluate_bidirectional(&t, &u, &d).map_err(|e| bad(e.to_string()))
+    };
+    let rec = runs.iter().find(|r| r.name == run).ok_or_else(|| bad(format!("no run `{run}`")))?;
+    let before = iso(rec)?;
+    let positions: Vec<f64> = before.targets.iter().map(|t| t.target).collect();
+    let deviations: Vec<f64> = before.targets.iter().map(|t| t.mean_bidirectional).collect();
+    let params = VariableStepParams { min_abs_pearson: pearson, max_abs_residual: residual, ..Default::default() };
+    let table = variable_step_table(&positions, &deviations, &params).map_err(|e| bad(e.to_string()))?.table;
+    let mut model = ph.model.clone();
+    model.compensation = vmt_sim::profile::Profile {
+        terms: vec![vmt_sim::profile::Term::Table { x: table.positions.clone(), y: table.corrections.clone() }],
+    };
+    let spec = sc.procedures.iter().find(|p| p.name() == run).ok_or_else(|| bad(format!("no procedure `{run}`")))?;
+    let ProcedureSpec::Positioning { .. } = spec else { return Err(bad("expected a positioning procedure".into())) };
+    let mut verify = spec.clone();
+    if let ProcedureSpec::Positioning { name, targets, n_targets, .. } = &mut verify {
+        // Re-test at other irregular targets (targets derive from the procedure name), as many as before.
+        *n_targets = targets.as_ref().map_or(*n_targets, Vec::len);
+        *targets = None;
+        *name = format!("{run}_after_compensation");
+    }
+    let truths = simulate_procedure(&model, &ph.truth, &verify, sc.seed);
+    let after_rec = read_run(&model, &ph.truth, &truths[0], &ph.sensors, sc.seed).map_err(bad)?;
+    let after = iso(&after_rec)?;
+    let label = format!("{} nodes", table.positions.len());
+    Ok(vec![
+        Check::reduction(format!("E after compensation ({label})"), before.e, after.e, max_ratio),
+        Check::reduction(format!("A after compensation ({label})"), before.a, after.a, max_ratio),
+    ])
 }
