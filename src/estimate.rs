@@ -36,6 +36,8 @@ pub enum EstimatorSpec {
         #[serde(default = "default_residual")]
         residual: f64,
     },
+    /// Stick-slip index (seed 002) of each crawl run of a procedure, compared with expected values.
+    Ssi { procedure: String, sensor: String, expected: Vec<f64>, tolerance: Vec<f64> },
     /// Straightness from an accelerometer's constant-velocity runs (seed 000, and the SNR-weighted
     /// fusion), compared with the lateral motion of its mount point band-limited to the recoverable
     /// wavelengths; `tolerance` bounds the RMS difference.
@@ -206,6 +208,28 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
             }
             EstimatorSpec::Compensation { run, sensor, max_ratio, pearson, residual } => {
                 checks.extend(compensation_checks(sc, ph, runs, run, sensor, *max_ratio, *pearson, *residual)?);
+            }
+            EstimatorSpec::Ssi { procedure, sensor, expected, tolerance } => {
+                let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (ssi {procedure})"), m);
+                let crawl: Vec<&RunRecord> =
+                    runs.iter().filter(|r| r.name.starts_with(&format!("{procedure}_"))).collect();
+                if crawl.len() != expected.len() || expected.len() != tolerance.len() {
+                    return Err(bad(format!(
+                        "{} runs but {} expected values and {} tolerances",
+                        crawl.len(),
+                        expected.len(),
+                        tolerance.len()
+                    )));
+                }
+                let q = sc.sensors.iter().find(|s| &s.name == sensor).map(|s| s.resolution).filter(|&q| q > 0.0);
+                for ((r, e), tol) in crawl.iter().zip(expected).zip(tolerance) {
+                    let RunData::TimeSeries { t, .. } = &r.data else { return Err(bad("expected time series".into())) };
+                    let x = r.data.column(sensor).ok_or_else(|| bad(format!("run `{}` has no `{sensor}`", r.name)))?;
+                    let res =
+                        vmt_estimators::ssi::stick_slip_index(x, t[1] - t[0], q).map_err(|e| bad(e.to_string()))?;
+                    let feed = r.feed.unwrap_or(0.0) * 60_000.0;
+                    checks.push(Check::new(format!("SSI at {feed:.0} mm/min"), Quantity::Ratio, *e, res.ssi, *tol));
+                }
             }
             EstimatorSpec::AccelStraightness { procedure, sensor, method, tolerance } => {
                 checks.push(accel_straightness_check(

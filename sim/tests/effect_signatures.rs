@@ -5,7 +5,8 @@
 mod common;
 use vmt_sim::axis_sim::{simulate, AxisTruth, GRAVITY};
 use vmt_sim::drive::{BallScrewConfig, DriveConfig, FeedbackKind};
-use vmt_sim::feedback::{FeedbackErrors, ThermalExpansion};
+use vmt_sim::effects::ThermalExpansion;
+use vmt_sim::feedback::FeedbackErrors;
 use vmt_sim::machine::AxisModel;
 use vmt_sim::motion::MotionPlan;
 use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureSpec, RunData};
@@ -46,7 +47,7 @@ fn positioning(model: &AxisModel, truth: &AxisTruth, targets: Vec<f64>, runs: u3
     let t = simulate_procedure(model, truth, &spec, 11);
     let rec = read_run(model, truth, &t[0], &[laser()], 11).unwrap();
     let RunData::PointTable { target, t, columns, .. } = rec.data else { panic!("positioning is a point table") };
-    Table { target, t, dev: columns[0].1.clone() }
+    Table { target, t: t.expect("point tables from the simulator carry t"), dev: columns[0].1.clone() }
 }
 
 /// Least squares y ≈ Σ c_j·f_j(x) by the normal equations (a handful of well-conditioned columns).
@@ -119,7 +120,7 @@ fn thermal_expansion_grows_with_position_and_time_as_alpha_x_delta_t() {
     // δ = α·x·ΔT∞·(1 − e^(−t/τ)) at a time scale the test can afford.
     let th = ThermalExpansion { alpha: 11.5e-6, delta_t: 3.0, tau: 10.0 };
     let truth = AxisTruth {
-        feedback: FeedbackErrors { thermal_expansion: Some(th), ..Default::default() },
+        feedback: FeedbackErrors { thermal_expansion: Some(th.clone()), ..Default::default() },
         ..Default::default()
     };
     let average = 0.1;
