@@ -58,7 +58,10 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     let set = to_measurement_set(&sc, &runs)?;
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| default_out(&sc));
     measurement::write_with_extras(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc)?)?;
-    let checks = run_estimators(&sc, &ph, &runs)?;
+    let est = run_estimators(&sc, &ph, &runs)?;
+    let checks = &est.checks;
+    let html = out.join("report.html");
+    crate::report::write_run_report(&sc, &set, &est, &html)?;
     let failed: Vec<&Check> = checks.iter().filter(|c| !c.pass).collect();
     if json {
         let v = serde_json::json!({"scenario": sc.source, "checks": checks, "pass": failed.is_empty()});
@@ -66,8 +69,9 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     } else {
         println!("vmt run: {} — {}", sc.source.display(), sc.description);
         println!("{}", summary_table(&set));
-        println!("{}", check_table(&checks));
+        println!("{}", check_table(checks));
         println!("measurement set: {}", out.join("data").display());
+        println!("report: {}", html.display());
         if failed.is_empty() {
             println!("all {} estimates within tolerance", checks.len());
         } else {

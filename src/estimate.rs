@@ -7,6 +7,7 @@ use crate::scenario::Scenario;
 use crate::simulate::Physics;
 use serde::{Deserialize, Serialize};
 use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
+use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::procedures::{RunData, RunRecord};
 
@@ -73,6 +74,9 @@ pub enum Quantity {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Check {
     pub error: String,
+    /// Index of the figure (in `Estimates::figures`) that shows this estimate.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub figure: Option<usize>,
     pub quantity: Quantity,
     pub injected: f64,
     pub recovered: f64,
@@ -87,6 +91,7 @@ impl Check {
     pub fn reduction(error: impl Into<String>, before: f64, after: f64, max_ratio: f64) -> Check {
         Check {
             error: error.into(),
+            figure: None,
             quantity: Quantity::Length,
             injected: before,
             recovered: after,
@@ -112,6 +117,7 @@ impl Check {
         let difference = rms(&mut truth.iter().zip(estimate).map(|(a, b)| b - a));
         Check {
             error: error.into(),
+            figure: None,
             quantity,
             injected: rms(&mut truth.iter().copied()),
             recovered: rms(&mut estimate.iter().copied()),
@@ -125,6 +131,7 @@ impl Check {
         let difference = recovered - injected;
         Check {
             error: error.into(),
+            figure: None,
             quantity,
             injected,
             recovered,
@@ -132,6 +139,57 @@ impl Check {
             tolerance,
             pass: difference.abs() <= tolerance,
         }
+    }
+}
+
+/// A line figure of profiles against position: x in mm, y in µm (lengths) or µrad (angles).
+pub fn profile_figure(title: String, q: Quantity, x: &[f64], series: &[(&str, &[f64], SeriesStyle)]) -> Figure {
+    let (y_label, y_unit) = match q {
+        Quantity::Length => ("deviation", "µm"),
+        Quantity::Angle => ("angle", "µrad"),
+        Quantity::Ratio => ("value", ""),
+    };
+    let scale = if q == Quantity::Ratio { 1.0 } else { 1e6 };
+    Figure {
+        title,
+        x_label: "position".into(),
+        x_unit: "mm".into(),
+        y_label: y_label.into(),
+        y_unit: y_unit.into(),
+        series: series
+            .iter()
+            .map(|(label, y, style)| Series {
+                label: label.to_string(),
+                x: x.iter().map(|v| v * 1e3).collect(),
+                y: y.iter().map(|v| v * scale).collect(),
+                style: *style,
+            })
+            .collect(),
+        kind: FigureKind::Line,
+        log_x: false,
+        log_y: false,
+    }
+}
+
+/// The result of the estimators: the checks (rows of the table) and the figures they point to.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Estimates {
+    pub checks: Vec<Check>,
+    #[serde(skip)]
+    pub figures: Vec<Figure>,
+}
+
+impl Estimates {
+    /// Adds checks shown by a figure (a figure with the same title as an earlier one is shared).
+    fn push(&mut self, checks: Vec<Check>, figure: Figure) {
+        let idx = match self.figures.iter().position(|f| f.title == figure.title) {
+            Some(i) => i,
+            None => {
+                self.figures.push(figure);
+                self.figures.len() - 1
+            }
+        };
+        self.checks.extend(checks.into_iter().map(|c| Check { figure: Some(idx), ..c }));
     }
 }
 
@@ -160,54 +218,56 @@ pub fn iso_truth(errors: &ErrorMotions, r: [f64; 3], targets: &[f64]) -> Result<
     evaluate_bidirectional(targets, &dev, &dev).map_err(|e| VmtError::Internal(e.to_string()))
 }
 
-/// Runs every estimator of a scenario on its recording and returns the checks.
-pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result<Vec<Check>, VmtError> {
+/// Runs every estimator of a scenario on its recording and returns the checks with their figures.
+pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result<Estimates, VmtError> {
     let errors = &ph.truth.motions;
-    let mut checks = Vec::new();
+    let mut out = Estimates::default();
     for spec in &sc.estimators {
         match spec {
             EstimatorSpec::Iso230_2 { run, sensor, tolerance } => {
-                let rec = runs
+                let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (iso230_2 {run})"), m);
+                let rec = runs.iter().find(|r| &r.name == run).ok_or_else(|| bad(format!("no run `{run}`")))?;
+                let (targets, up, down) = point_table_deviations(rec, sensor)
+                    .ok_or_else(|| bad(format!("run `{run}` is not a point table with sensor `{sensor}`")))?;
+                let est = evaluate_bidirectional(&targets, &up, &down).map_err(|e| bad(e.to_string()))?;
+                let spec = sc
+                    .sensors
                     .iter()
-                    .find(|r| &r.name == run)
-                    .ok_or_else(|| VmtError::bad(&sc.source, "estimators", format!("no run `{run}`")))?;
-                let (targets, up, down) = point_table_deviations(rec, sensor).ok_or_else(|| {
-                    VmtError::bad(
-                        &sc.source,
-                        "estimators",
-                        format!("run `{run}` is not a point table with sensor `{sensor}`"),
-                    )
-                })?;
-                let est = evaluate_bidirectional(&targets, &up, &down)
-                    .map_err(|e| VmtError::bad(&sc.source, "estimators", format!("ISO 230-2 of run `{run}`: {e}")))?;
-                let spec = sc.sensors.iter().find(|s| &s.name == sensor).ok_or_else(|| {
-                    VmtError::bad(&sc.source, "estimators", format!("sensor `{sensor}` is not declared"))
-                })?;
-                let r = spec.axis_position(&sc.axis).map_err(|m| VmtError::bad(&sc.source, "sensors", m))?;
+                    .find(|s| &s.name == sensor)
+                    .ok_or_else(|| bad(format!("sensor `{sensor}` is not declared")))?;
+                let r = spec.axis_position(&sc.axis).map_err(bad)?;
                 let truth = iso_truth(errors, r, &targets)?;
-                for (label, t, e) in [("E", truth.e, est.e), ("M", truth.m, est.m), ("B̄", truth.b_mean, est.b_mean)] {
-                    checks.push(Check::new(
-                        format!("ISO 230-2 {label} ({sensor})"),
-                        Quantity::Length,
-                        t,
-                        e,
-                        *tolerance,
-                    ));
-                }
+                let checks = [("E", truth.e, est.e), ("M", truth.m, est.m), ("B̄", truth.b_mean, est.b_mean)]
+                    .into_iter()
+                    .map(|(label, t, e)| {
+                        Check::new(format!("ISO 230-2 {label} ({sensor})"), Quantity::Length, t, e, *tolerance)
+                    })
+                    .collect();
+                let injected: Vec<f64> = truth.targets.iter().map(|t| t.mean_bidirectional).collect();
+                let mean_up: Vec<f64> = est.targets.iter().map(|t| t.up.mean).collect();
+                let mean_down: Vec<f64> = est.targets.iter().map(|t| t.down.mean).collect();
+                let fig = profile_figure(
+                    format!("ISO 230-2 positioning test, {sensor}: mean deviations per target"),
+                    Quantity::Length,
+                    &targets,
+                    &[
+                        ("injected δx", &injected, SeriesStyle::Line),
+                        ("measured x̄↑", &mean_up, SeriesStyle::Points),
+                        ("measured x̄↓", &mean_down, SeriesStyle::Points),
+                    ],
+                );
+                out.push(checks, fig);
             }
             EstimatorSpec::LaserLines { run, sensors, tolerance_translation, tolerance_angle } => {
-                checks.extend(laser_lines_checks(
-                    sc,
-                    runs,
-                    errors,
-                    run,
-                    sensors,
-                    *tolerance_translation,
-                    *tolerance_angle,
-                )?);
+                for (c, f) in
+                    laser_lines_checks(sc, runs, errors, run, sensors, *tolerance_translation, *tolerance_angle)?
+                {
+                    out.push(vec![c], f);
+                }
             }
             EstimatorSpec::Compensation { run, sensor, max_ratio, pearson, residual } => {
-                checks.extend(compensation_checks(sc, ph, runs, run, sensor, *max_ratio, *pearson, *residual)?);
+                let (checks, fig) = compensation_checks(sc, ph, runs, run, sensor, *max_ratio, *pearson, *residual)?;
+                out.push(checks, fig);
             }
             EstimatorSpec::Ssi { procedure, sensor, expected, tolerance } => {
                 let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (ssi {procedure})"), m);
@@ -225,26 +285,43 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 for ((r, e), tol) in crawl.iter().zip(expected).zip(tolerance) {
                     let RunData::TimeSeries { t, .. } = &r.data else { return Err(bad("expected time series".into())) };
                     let x = r.data.column(sensor).ok_or_else(|| bad(format!("run `{}` has no `{sensor}`", r.name)))?;
-                    let res =
-                        vmt_estimators::ssi::stick_slip_index(x, t[1] - t[0], q).map_err(|e| bad(e.to_string()))?;
+                    let dt = t[1] - t[0];
+                    let res = vmt_estimators::ssi::stick_slip_index(x, dt, q).map_err(|e| bad(e.to_string()))?;
                     let feed = r.feed.unwrap_or(0.0) * 60_000.0;
-                    checks.push(Check::new(format!("SSI at {feed:.0} mm/min"), Quantity::Ratio, *e, res.ssi, *tol));
+                    let v: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]) / dt * 60_000.0).collect();
+                    let fig = Figure {
+                        title: format!(
+                            "crawl at {feed:.0} mm/min: velocity from the differentiated {sensor} (SSI {:.2})",
+                            res.ssi
+                        ),
+                        x_label: "time".into(),
+                        x_unit: "s".into(),
+                        y_label: "velocity".into(),
+                        y_unit: "mm/min".into(),
+                        series: vec![Series {
+                            label: sensor.clone(),
+                            x: t[1..].to_vec(),
+                            y: v,
+                            style: SeriesStyle::Line,
+                        }],
+                        kind: FigureKind::Line,
+                        log_x: false,
+                        log_y: false,
+                    };
+                    out.push(
+                        vec![Check::new(format!("SSI at {feed:.0} mm/min"), Quantity::Ratio, *e, res.ssi, *tol)],
+                        fig,
+                    );
                 }
             }
             EstimatorSpec::AccelStraightness { procedure, sensor, method, tolerance } => {
-                checks.push(accel_straightness_check(
-                    sc,
-                    runs,
-                    errors,
-                    procedure,
-                    sensor,
-                    method.as_deref(),
-                    *tolerance,
-                )?);
+                let (c, f) =
+                    accel_straightness_check(sc, runs, errors, procedure, sensor, method.as_deref(), *tolerance)?;
+                out.push(vec![c], f);
             }
         }
     }
-    Ok(checks)
+    Ok(out)
 }
 
 /// The accelerometer straightness check of one sensor (seed 000 / SNR-weighted fusion).
@@ -256,7 +333,7 @@ fn accel_straightness_check(
     sensor: &str,
     method: Option<&str>,
     tolerance: f64,
-) -> Result<Check, VmtError> {
+) -> Result<(Check, Figure), VmtError> {
     use vmt_estimators::accel_straightness::{
         estimate_straightness, zero_phase_highpass, AccelRun, FusionMethod, StraightnessConfig,
     };
@@ -310,7 +387,13 @@ fn accel_straightness_check(
         (est.band.min_wavelength * 1e3).round(),
         (est.band.max_wavelength * 1e3).round()
     );
-    Ok(Check::profile(name, Quantity::Length, &truth, &estimate, tolerance))
+    let fig = profile_figure(
+        format!("{name}: injected vs recovered"),
+        Quantity::Length,
+        xs,
+        &[("injected (same band)", &truth, SeriesStyle::Line), ("recovered", &estimate, SeriesStyle::Dashed)],
+    );
+    Ok((Check::profile(name, Quantity::Length, &truth, &estimate, tolerance), fig))
 }
 
 /// The six error motions identified from the laser lines of a point-table run, compared with the truth.
@@ -322,7 +405,7 @@ fn laser_lines_checks(
     sensors: &[String],
     tol_t: f64,
     tol_a: f64,
-) -> Result<Vec<Check>, VmtError> {
+) -> Result<Vec<(Check, Figure)>, VmtError> {
     use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, IdOptions, Model, Reading};
     let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (laser_lines {run})"), m);
     let rec = runs.iter().find(|r| r.name == run).ok_or_else(|| bad(format!("no run `{run}`")))?;
@@ -367,7 +450,13 @@ fn laser_lines_checks(
         }
         let (q, tol) = if i < 3 { (Quantity::Length, tol_t) } else { (Quantity::Angle, tol_a) };
         let name = format!("{sym} {} (laser lines)", vmt_sim::geometry::ERROR_MOTION_NAMES[i]);
-        checks.push(Check::profile(name, q, &truth, &p.values, tol));
+        let fig = profile_figure(
+            format!("{name}: injected vs identified"),
+            q,
+            &p.positions,
+            &[("injected", &truth, SeriesStyle::Line), ("identified", &p.values, SeriesStyle::Points)],
+        );
+        checks.push((Check::profile(name, q, &truth, &p.values, tol), fig));
     }
     if !id.unobservable.is_empty() {
         return Err(bad(format!("the laser lines leave unobservable: {}", id.unobservable.join("; "))));
@@ -386,7 +475,7 @@ fn compensation_checks(
     max_ratio: f64,
     pearson: f64,
     residual: f64,
-) -> Result<Vec<Check>, VmtError> {
+) -> Result<(Vec<Check>, Figure), VmtError> {
     use vmt_estimators::compensation::{variable_step_table, VariableStepParams};
     use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureSpec};
     let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (compensation {run})"), m);
@@ -418,8 +507,26 @@ fn compensation_checks(
     let after_rec = read_run(&model, &ph.truth, &truths[0], &ph.sensors, sc.seed).map_err(bad)?;
     let after = iso(&after_rec)?;
     let label = format!("{} nodes", table.positions.len());
-    Ok(vec![
-        Check::reduction(format!("E after compensation ({label})"), before.e, after.e, max_ratio),
-        Check::reduction(format!("A after compensation ({label})"), before.a, after.a, max_ratio),
-    ])
+    let after_t: Vec<f64> = after.targets.iter().map(|t| t.target).collect();
+    let after_dev: Vec<f64> = after.targets.iter().map(|t| t.mean_bidirectional).collect();
+    let mut fig = profile_figure(
+        format!("compensation (seed 004, variable-step table of {label}): mean deviation before and after"),
+        Quantity::Length,
+        &positions,
+        &[("before", &deviations, SeriesStyle::Line), ("table", &table.corrections, SeriesStyle::Points)],
+    );
+    fig.series.push(Series {
+        label: "after (other targets)".into(),
+        x: after_t.iter().map(|v| v * 1e3).collect(),
+        y: after_dev.iter().map(|v| v * 1e6).collect(),
+        style: SeriesStyle::Line,
+    });
+    fig.series[1].x = table.positions.iter().map(|v| v * 1e3).collect();
+    Ok((
+        vec![
+            Check::reduction(format!("E after compensation ({label})"), before.e, after.e, max_ratio),
+            Check::reduction(format!("A after compensation ({label})"), before.a, after.a, max_ratio),
+        ],
+        fig,
+    ))
 }
