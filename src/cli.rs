@@ -205,3 +205,71 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
     println!("R {}  R↑ {}  R↓ {}  B {}  B̄ {}", um(res.r), um(res.r_up), um(res.r_down), um(res.b), um(res.b_mean));
     Ok(0)
 }
+
+/// `vmt study SCENARIO --vary sensors.NAME.KEY=V1,V2 --trials N [--shard i/n] -o DIR`: writes
+/// `trials.csv` (every trial), `summary.csv` (mean and p95 per value and estimate) and `study.svg`.
+pub fn study(path: &Path, vary: &str, trials: usize, shard: Option<&str>, out: &Path) -> Result<i32, VmtError> {
+    use crate::study::{run_study, Vary};
+    let vary = Vary::parse(vary)?;
+    let shard = match shard {
+        None => (0, 1),
+        Some(s) => {
+            let (i, n) = s.split_once('/').ok_or_else(|| VmtError::Usage(format!("--shard {s}: expected i/n")))?;
+            let (i, n): (usize, usize) = (
+                i.parse().map_err(|_| VmtError::Usage(format!("--shard {s}: i must be a number")))?,
+                n.parse().map_err(|_| VmtError::Usage(format!("--shard {s}: n must be a number")))?,
+            );
+            if n == 0 || i >= n {
+                return Err(VmtError::Usage(format!("--shard {s}: expected 0 ≤ i < n")));
+            }
+            (i, n)
+        }
+    };
+    let sc = Scenario::load(path)?;
+    let bar = indicatif::ProgressBar::new_spinner();
+    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        bar.set_message(format!("{} values × {trials} trials", vary.values.len()));
+        bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    } else {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let rows = run_study(&sc, &vary, trials, shard)?;
+    bar.finish_and_clear();
+    write_study(&rows, &format!("sensors.{}.{}", vary.sensor, vary.key), out)
+}
+
+/// `vmt study merge OUT SHARD_DIRS…`: joins the trials of shards and writes the same outputs as one run.
+pub fn study_merge(out: &Path, shards: &[PathBuf]) -> Result<i32, VmtError> {
+    let mut rows = Vec::new();
+    for d in shards {
+        rows.extend(crate::study::read_rows(&d.join("trials.csv"))?);
+    }
+    write_study(&rows, "varied parameter", out)
+}
+
+fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path) -> Result<i32, VmtError> {
+    use crate::study::{rows_csv, summarize, summary_svg};
+    let summary = summarize(rows);
+    std::fs::create_dir_all(out).map_err(|e| VmtError::io(out, "creating the output directory", e))?;
+    let mut s = String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate\n");
+    for r in &summary {
+        s += &format!("{},\"{}\",{},{},{},{}\n", r.value, r.estimate, r.trials, r.mean_abs, r.p95_abs, r.pass_rate);
+    }
+    measurement::write_file_atomic(&out.join("trials.csv"), rows_csv(rows).as_bytes())?;
+    measurement::write_file_atomic(&out.join("summary.csv"), s.as_bytes())?;
+    measurement::write_file_atomic(&out.join("study.svg"), summary_svg(&summary, label)?.as_bytes())?;
+    println!("{:>12}  {:<40} {:>7} {:>12} {:>12} {:>6}", "value", "estimate", "trials", "mean |d|", "p95 |d|", "pass");
+    for r in &summary {
+        println!(
+            "{:>12.3e}  {:<40} {:>7} {:>12.3e} {:>12.3e} {:>5.0}%",
+            r.value,
+            r.estimate,
+            r.trials,
+            r.mean_abs,
+            r.p95_abs,
+            100.0 * r.pass_rate
+        );
+    }
+    println!("wrote {}", out.display());
+    Ok(0)
+}

@@ -382,13 +382,13 @@ fn accel_straightness_check(
     let xs = &est.positions[i0..i1];
     let detrend = |p: &[f64]| vmt_estimators::line::remove_line(xs, &p[i0..i1]);
     let (truth, estimate) = (detrend(&truth), detrend(&estimate));
-    let name = format!(
-        "straightness {sensor} ({}–{} mm band)",
-        (est.band.min_wavelength * 1e3).round(),
-        (est.band.max_wavelength * 1e3).round()
-    );
+    let name = format!("straightness {sensor} (accelerometer)");
     let fig = profile_figure(
-        format!("{name}: injected vs recovered"),
+        format!(
+            "{name}: injected vs recovered in the recoverable band {:.0}–{:.0} mm",
+            est.band.min_wavelength * 1e3,
+            est.band.max_wavelength * 1e3
+        ),
         Quantity::Length,
         xs,
         &[("injected (same band)", &truth, SeriesStyle::Line), ("recovered", &estimate, SeriesStyle::Dashed)],

@@ -37,6 +37,23 @@ enum Command {
         #[arg(long, default_value = "si")]
         units: String,
     },
+    /// Monte Carlo tolerance study over a sensor parameter (physics simulated once), or `study merge`.
+    Study {
+        /// Scenario file, or `merge` to join shard outputs.
+        scenario: PathBuf,
+        /// With `merge`: the shard output directories.
+        shards: Vec<PathBuf>,
+        /// The varied parameter, e.g. sensors.acc_z.noise_density=1e-7,3e-7,1e-6
+        #[arg(long)]
+        vary: Option<String>,
+        #[arg(long, default_value_t = 100)]
+        trials: usize,
+        /// Compute only trials k with k mod n = i (for a cluster job array), e.g. 0/4.
+        #[arg(long)]
+        shard: Option<String>,
+        #[arg(short, long)]
+        out: PathBuf,
+    },
     /// ISO 230-2 evaluation of a positioning test: a measurement set directory or an ecmc .dat file.
     #[command(name = "iso230-2")]
     Iso230_2 {
@@ -57,6 +74,16 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run { scenario, out, json } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
         Command::Simulate { scenario, out, units } => vmt::cli::simulate(scenario.as_deref(), &out, &units).map(|_| 0),
+        Command::Study { scenario, shards, vary, trials, shard, out } => {
+            if scenario.as_os_str() == "merge" {
+                vmt::cli::study_merge(&out, &shards)
+            } else {
+                match vary {
+                    Some(v) => vmt::cli::study(&scenario, &v, trials, shard.as_deref(), &out),
+                    None => Err(vmt::error::VmtError::Usage("study needs --vary sensors.NAME.KEY=V1,V2,…".into())),
+                }
+            }
+        }
         Command::Iso230_2 { path, run, sensor, json } => {
             vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json)
         }

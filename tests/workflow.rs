@@ -165,3 +165,42 @@ fn csv_with_a_missing_column_or_nan_is_rejected_with_file_line_and_column() {
     std::fs::write(&csv, no_dir.join("\n") + "\n").unwrap();
     expect_bad_input(&["iso230-2".as_ref(), dir.as_os_str()], &["iso.csv", "direction"]);
 }
+
+#[test]
+fn a_study_gives_identical_trials_on_1_and_2_threads_and_shards_merge_to_the_same_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/study_accel.toml");
+    let run = |threads: &str, shard: Option<&str>, out: &Path| {
+        let mut c = vmt();
+        c.args(["study"])
+            .arg(&scenario)
+            .args(["--vary", "sensors.acc_z.noise_density=3e-7,3e-6", "--trials", "6", "-o"])
+            .arg(out);
+        if let Some(s) = shard {
+            c.args(["--shard", s]);
+        }
+        let st = c.env("RAYON_NUM_THREADS", threads).output().unwrap();
+        assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+        std::fs::read_to_string(out.join("trials.csv")).unwrap()
+    };
+    let one = run("1", None, &tmp.path().join("one"));
+    let two = run("2", None, &tmp.path().join("two"));
+    assert_eq!(one, two, "trials differ between 1 and 2 threads");
+    assert_eq!(one.lines().count(), 1 + 2 * 6, "header + 2 values × 6 trials × 1 estimate");
+    run("2", Some("0/2"), &tmp.path().join("s0"));
+    run("1", Some("1/2"), &tmp.path().join("s1"));
+    let st = vmt()
+        .args(["study", "merge"])
+        .arg(tmp.path().join("s0"))
+        .arg(tmp.path().join("s1"))
+        .arg("-o")
+        .arg(tmp.path().join("merged"))
+        .output()
+        .unwrap();
+    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert_eq!(
+        std::fs::read_to_string(tmp.path().join("merged/trials.csv")).unwrap(),
+        one,
+        "merged shards differ from one run"
+    );
+}

@@ -1,0 +1,202 @@
+//! Workflow `study`: a Monte Carlo tolerance study over one sensor parameter (DESIGN.md §6, §9). The
+//! physics is simulated once; every trial redraws the sensor noise with its own seed (derived from the
+//! scenario seed, the value index and the trial number), so the results are the same on any number of
+//! threads and shards can be computed on different machines and merged.
+
+use crate::error::VmtError;
+use crate::estimate::run_estimators;
+use crate::scenario::Scenario;
+use crate::simulate::{physics, read_all, simulate_truth};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::Path;
+
+/// The varied parameter: `sensors.NAME.KEY` with KEY one of sigma, noise_density, bias, resolution,
+/// scale_factor, bias_drift.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Vary {
+    pub sensor: String,
+    pub key: String,
+    pub values: Vec<f64>,
+}
+
+impl Vary {
+    /// Parses `sensors.acc_z.noise_density=1e-7,2e-7`.
+    pub fn parse(s: &str) -> Result<Vary, VmtError> {
+        let usage = |m: &str| VmtError::Usage(format!("--vary {s}: {m} (expected sensors.NAME.KEY=V1,V2,…)"));
+        let (path, vals) = s.split_once('=').ok_or_else(|| usage("no `=`"))?;
+        let parts: Vec<&str> = path.split('.').collect();
+        let [root, sensor, key] = parts.as_slice() else { return Err(usage("expected three dot-separated parts")) };
+        if *root != "sensors" {
+            return Err(usage("only sensor parameters can be varied without new physics"));
+        }
+        if !["sigma", "noise_density", "bias", "resolution", "scale_factor", "bias_drift"].contains(key) {
+            return Err(usage(&format!("unknown sensor key `{key}`")));
+        }
+        let values = vals
+            .split(',')
+            .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0))
+            .collect::<Option<Vec<f64>>>()
+            .ok_or_else(|| usage("values must be finite numbers ≥ 0"))?;
+        if values.is_empty() {
+            return Err(usage("no values"));
+        }
+        Ok(Vary { sensor: sensor.to_string(), key: key.to_string(), values })
+    }
+}
+
+/// One trial's result for one estimate.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TrialRow {
+    pub value: f64,
+    pub trial: usize,
+    pub estimate: String,
+    pub difference: f64,
+    pub pass: bool,
+}
+
+/// Runs trials `k` with k % shard.1 == shard.0 of every value.
+pub fn run_study(sc: &Scenario, vary: &Vary, trials: usize, shard: (usize, usize)) -> Result<Vec<TrialRow>, VmtError> {
+    let ph = physics(sc)?;
+    if !ph.sensors.iter().any(|s| s.name == vary.sensor) {
+        return Err(VmtError::Usage(format!("--vary: no sensor `{}` in the scenario", vary.sensor)));
+    }
+    let truths = simulate_truth(sc, &ph);
+    let jobs: Vec<(usize, usize)> = (0..vary.values.len())
+        .flat_map(|i| (0..trials).filter(|k| k % shard.1 == shard.0).map(move |k| (i, k)))
+        .collect();
+    let rows: Result<Vec<Vec<TrialRow>>, VmtError> = jobs
+        .par_iter()
+        .map(|&(i, k)| {
+            let mut p = ph.clone();
+            let v = vary.values[i];
+            for s in p.sensors.iter_mut().filter(|s| s.name == vary.sensor) {
+                *s = s.resolved();
+                match vary.key.as_str() {
+                    "sigma" => s.sigma = v,
+                    "noise_density" => s.noise_density = v,
+                    "bias" => s.bias = v,
+                    "resolution" => s.resolution = v,
+                    "scale_factor" => s.scale_factor = v,
+                    _ => s.bias_drift = v,
+                }
+                s.preset = None;
+            }
+            let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/{i}/{k}"));
+            let runs = read_all(sc, &p, &truths, seed)?;
+            let est = run_estimators(sc, &p, &runs)?;
+            Ok(est
+                .checks
+                .into_iter()
+                .map(|c| TrialRow { value: v, trial: k, estimate: c.error, difference: c.difference, pass: c.pass })
+                .collect())
+        })
+        .collect();
+    Ok(rows?.into_iter().flatten().collect())
+}
+
+/// CSV of trial rows (value, trial, estimate, difference, pass), sorted so shards merge to the same file.
+pub fn rows_csv(rows: &[TrialRow]) -> String {
+    let mut rows = rows.to_vec();
+    rows.sort_by(|a, b| a.value.total_cmp(&b.value).then(a.trial.cmp(&b.trial)).then(a.estimate.cmp(&b.estimate)));
+    let mut s = String::from("value,trial,estimate,difference,pass\n");
+    for r in rows {
+        s += &format!("{},{},\"{}\",{},{}\n", r.value, r.trial, r.estimate.replace('"', "'"), r.difference, r.pass);
+    }
+    s
+}
+
+/// Reads a CSV written by `rows_csv`.
+pub fn read_rows(path: &Path) -> Result<Vec<TrialRow>, VmtError> {
+    let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading", e))?;
+    let mut rdr = csv::ReaderBuilder::new().from_reader(text.as_bytes());
+    let mut out = Vec::new();
+    for (i, rec) in rdr.records().enumerate() {
+        let rec = rec.map_err(|e| VmtError::bad(path, format!("line {}", i + 2), e.to_string()))?;
+        let f = |j: usize| rec.get(j).unwrap_or("");
+        let num = |j: usize| {
+            f(j).parse::<f64>().map_err(|_| {
+                VmtError::bad(path, format!("line {}", i + 2), format!("expected a number, got `{}`", f(j)))
+            })
+        };
+        out.push(TrialRow {
+            value: num(0)?,
+            trial: num(1)? as usize,
+            estimate: f(2).to_string(),
+            difference: num(3)?,
+            pass: f(4) == "true",
+        });
+    }
+    Ok(out)
+}
+
+/// Summary per (value, estimate): trials, mean |difference|, 95th percentile of |difference|, pass rate.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SummaryRow {
+    pub value: f64,
+    pub estimate: String,
+    pub trials: usize,
+    pub mean_abs: f64,
+    pub p95_abs: f64,
+    pub pass_rate: f64,
+}
+
+pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
+    let mut keys: Vec<(f64, String)> = rows.iter().map(|r| (r.value, r.estimate.clone())).collect();
+    keys.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    keys.dedup();
+    keys.into_iter()
+        .map(|(v, e)| {
+            let mut d: Vec<f64> =
+                rows.iter().filter(|r| r.value == v && r.estimate == e).map(|r| r.difference.abs()).collect();
+            d.sort_by(f64::total_cmp);
+            let n = d.len();
+            let passed = rows.iter().filter(|r| r.value == v && r.estimate == e && r.pass).count();
+            SummaryRow {
+                value: v,
+                estimate: e,
+                trials: n,
+                mean_abs: d.iter().sum::<f64>() / n.max(1) as f64,
+                p95_abs: d[((0.95 * n as f64).ceil() as usize).clamp(1, n) - 1],
+                pass_rate: passed as f64 / n.max(1) as f64,
+            }
+        })
+        .collect()
+}
+
+/// An SVG plot of mean and p95 |difference| against the varied value, one pair of series per estimate.
+pub fn summary_svg(summary: &[SummaryRow], x_label: &str) -> Result<String, VmtError> {
+    use vmt_report::{figure_svg, Figure, FigureKind, Series, SeriesStyle};
+    let mut names: Vec<&str> = summary.iter().map(|s| s.estimate.as_str()).collect();
+    names.dedup();
+    let mut series = Vec::new();
+    for n in names {
+        let pts: Vec<&SummaryRow> = summary.iter().filter(|s| s.estimate == n).collect();
+        let x: Vec<f64> = pts.iter().map(|s| s.value).collect();
+        series.push(Series {
+            label: format!("{n}: mean"),
+            x: x.clone(),
+            y: pts.iter().map(|s| s.mean_abs * 1e6).collect(),
+            style: SeriesStyle::Line,
+        });
+        series.push(Series {
+            label: format!("{n}: p95"),
+            x,
+            y: pts.iter().map(|s| s.p95_abs * 1e6).collect(),
+            style: SeriesStyle::Dashed,
+        });
+    }
+    let positive = summary.iter().all(|s| s.value > 0.0 && s.mean_abs > 0.0);
+    let fig = Figure {
+        title: "tolerance study: estimate error against the varied parameter".into(),
+        x_label: x_label.into(),
+        x_unit: "SI".into(),
+        y_label: "|difference|".into(),
+        y_unit: "µm or µrad".into(),
+        series,
+        kind: FigureKind::Line,
+        log_x: positive,
+        log_y: positive,
+    };
+    figure_svg(&fig, 900, 560).map_err(|e| VmtError::Internal(format!("study plot: {e}")))
+}
