@@ -16,7 +16,9 @@ fn workflows(c: &mut Criterion) {
             vmt::estimate::run_estimators(&sc, &ph, &runs).unwrap()
         })
     });
-    let study = Scenario::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/study_accel.toml"))).unwrap();
+    let study =
+        Scenario::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/study_accel.toml")))
+            .unwrap();
     let ph = vmt::simulate::physics(&study).unwrap();
     let truths = vmt::simulate::simulate_truth(&study, &ph);
     let mut seed = 0u64;

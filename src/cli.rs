@@ -273,3 +273,162 @@ fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path) -> Resu
     println!("wrote {}", out.display());
     Ok(0)
 }
+
+/// Reads a measurement set or says which directory failed.
+fn read_set(path: &Path) -> Result<MeasurementSet, VmtError> {
+    measurement::read(path)
+}
+
+/// `vmt ssi DATA [--sensor NAME]`: seed 002's stick-slip index of every time-series run (crawl first).
+pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtError> {
+    use vmt_estimators::ssi::stick_slip_index;
+    let set = read_set(path)?;
+    let mut results = Vec::new();
+    for r in &set.runs {
+        let measurement::RunData::TimeSeries { t, .. } = &r.data else { continue };
+        let s = match sensor {
+            Some(s) => set.sensor(s).ok_or_else(|| VmtError::bad(path, "sensors", format!("no sensor `{s}`")))?,
+            None => match set.sensors.iter().find(|s| {
+                matches!(s.kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary)
+                    && r.data.column(&s.name).is_some()
+            }) {
+                Some(s) => s,
+                None => continue,
+            },
+        };
+        let Some(x) = r.data.column(&s.name) else { continue };
+        if t.len() < 3 {
+            continue;
+        }
+        let res = stick_slip_index(x, t[1] - t[0], None)
+            .map_err(|e| VmtError::bad(path, format!("run {}", r.name), e.to_string()))?;
+        results
+            .push(serde_json::json!({"run": r.name, "sensor": s.name, "feed": r.feed, "ssi": res.ssi, "result": res}));
+    }
+    if results.is_empty() {
+        return Err(VmtError::bad(path, "runs", "expected a time-series run with an encoder column"));
+    }
+    if json {
+        println!("{}", serde_json::to_string_pretty(&results).map_err(|e| VmtError::Internal(e.to_string()))?);
+    } else {
+        println!("{:<16} {:<12} {:>12} {:>8}  verdict (SSI ≥ 1: crawling)", "run", "sensor", "feed mm/min", "SSI");
+        for r in &results {
+            let ssi = r["ssi"].as_f64().unwrap_or(f64::NAN);
+            let feed = r["feed"].as_f64().map_or("-".to_string(), |f| format!("{:.1}", f * 60_000.0));
+            println!(
+                "{:<16} {:<12} {:>12} {:>8.3}  {}",
+                r["run"].as_str().unwrap_or(""),
+                r["sensor"].as_str().unwrap_or(""),
+                feed,
+                ssi,
+                if ssi >= 1.0 { "crawling" } else { "smooth" }
+            );
+        }
+    }
+    Ok(0)
+}
+
+/// `vmt friction DATA [--sensor NAME]`: Stribeck parameters from the friction-sweep runs (mean motor force
+/// per constant-velocity run against its signed feed), nonlinear least squares with standard errors.
+pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtError> {
+    use vmt_estimators::friction_id::{fit_stribeck, StribeckFitOptions};
+    let set = read_set(path)?;
+    let name = match sensor {
+        Some(s) => s.to_string(),
+        None => set
+            .sensors
+            .iter()
+            .find(|s| s.kind == SensorKind::MotorForce)
+            .map(|s| s.name.clone())
+            .ok_or_else(|| VmtError::bad(path, "sensors", "expected a motor_force sensor"))?,
+    };
+    let (mut v, mut f) = (Vec::new(), Vec::new());
+    for r in set.runs.iter().filter(|r| r.procedure == measurement::Procedure::FrictionSweep) {
+        let (Some(feed), Some(col)) = (r.feed, r.data.column(&name)) else { continue };
+        v.push(feed * r.direction.unwrap_or(1) as f64);
+        f.push(col.iter().sum::<f64>() / col.len().max(1) as f64);
+    }
+    if v.len() < 6 {
+        return Err(VmtError::bad(
+            path,
+            "runs",
+            format!("expected at least 6 friction_sweep runs with `{name}`, got {}", v.len()),
+        ));
+    }
+    let fit =
+        fit_stribeck(&v, &f, &StribeckFitOptions::default()).map_err(|e| VmtError::bad(path, "runs", e.to_string()))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&fit).map_err(|e| VmtError::Internal(e.to_string()))?);
+    } else {
+        let c = &fit.coefficients;
+        println!("Stribeck fit of {} sweep points (residual RMS {:.3} N):", v.len(), fit.residual_rms);
+        println!(
+            "  Fc {:.3} N  Fs {:.3} N  vs {:.4e} m/s  shape {:.3}  Fv {:.3} N·s/m",
+            c.fc, c.fs, c.vs, c.delta, c.fv
+        );
+    }
+    Ok(0)
+}
+
+/// `vmt compensate DATA -o TABLE.csv [--controller]`: seed 004's variable-step compensation table from the
+/// mean bidirectional deviations of a positioning run; `--equidistant N` for the controller-style table.
+pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Option<usize>) -> Result<i32, VmtError> {
+    use vmt_estimators::compensation::{
+        equidistant_table, export_controller_table, variable_step_table, VariableStepParams,
+    };
+    use vmt_estimators::iso230_2::evaluate_bidirectional;
+    let set = read_set(path)?;
+    let run = set
+        .runs
+        .iter()
+        .find(|r| r.procedure == measurement::Procedure::Positioning)
+        .ok_or_else(|| VmtError::bad(path, "runs", "expected a positioning run"))?;
+    let col = sensor.map(str::to_string).or_else(|| {
+        set.sensors
+            .iter()
+            .find(|s| s.kind == SensorKind::LaserLinear && run.data.column(&s.name).is_some())
+            .map(|s| s.name.clone())
+    });
+    let col = col.ok_or_else(|| VmtError::bad(path, format!("run {}", run.name), "expected a laser_linear column"))?;
+    let rec = vmt_sim::procedures::RunRecord {
+        name: run.name.clone(),
+        procedure: run.procedure,
+        feed: run.feed,
+        direction: run.direction,
+        start_time: 0.0,
+        data: run.data.clone(),
+    };
+    let (t, u, d) = crate::estimate::point_table_deviations(&rec, &col)
+        .ok_or_else(|| VmtError::bad(path, format!("run {}", run.name), format!("no column `{col}`")))?;
+    let iso = evaluate_bidirectional(&t, &u, &d).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+    let dev: Vec<f64> = iso.targets.iter().map(|x| x.mean_bidirectional).collect();
+    let text = match equidistant {
+        None => {
+            let table = variable_step_table(&t, &dev, &VariableStepParams::default())
+                .map_err(|e| VmtError::bad(path, "", e.to_string()))?
+                .table;
+            let mut s = String::from("position[mm],correction[um]\n");
+            for (p, c) in table.positions.iter().zip(&table.corrections) {
+                s += &format!("{},{}\n", p * 1e3, c * 1e6);
+            }
+            s
+        }
+        Some(n) => {
+            let table = equidistant_table(&t, &dev, n).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+            let ctl = export_controller_table(&table).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+            let mut s = format!(
+                "# controller table: start {} mm, spacing {} mm, corrections in 0.1 µm\n",
+                ctl.start * 1e3,
+                ctl.spacing * 1e3
+            );
+            s += "index,correction_0p1um\n";
+            for (i, c) in ctl.corrections_0p1um.iter().enumerate() {
+                s += &format!("{i},{c}\n");
+            }
+            s
+        }
+    };
+    measurement::write_file_atomic(out, text.as_bytes())?;
+    println!("wrote {} (from run {}, sensor {col}; E before {:.3} µm)", out.display(), run.name, iso.e * 1e6);
+    Ok(0)
+}

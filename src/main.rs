@@ -54,6 +54,33 @@ enum Command {
         #[arg(short, long)]
         out: PathBuf,
     },
+    /// Stick-slip index (seed 002) of the time-series runs of a measurement set.
+    Ssi {
+        data: PathBuf,
+        #[arg(long)]
+        sensor: Option<String>,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Stribeck friction parameters from the friction-sweep runs of a measurement set.
+    Friction {
+        data: PathBuf,
+        #[arg(long)]
+        sensor: Option<String>,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Compensation table (seed 004) from the positioning run of a measurement set.
+    Compensate {
+        data: PathBuf,
+        #[arg(long)]
+        sensor: Option<String>,
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Write an equidistant controller-style table of N points (0.1 µm units) instead.
+        #[arg(long)]
+        equidistant: Option<usize>,
+    },
     /// ISO 230-2 evaluation of a positioning test: a measurement set directory or an ecmc .dat file.
     #[command(name = "iso230-2")]
     Iso230_2 {
@@ -83,6 +110,11 @@ fn main() -> ExitCode {
                     None => Err(vmt::error::VmtError::Usage("study needs --vary sensors.NAME.KEY=V1,V2,…".into())),
                 }
             }
+        }
+        Command::Ssi { data, sensor, json } => vmt::cli::ssi(&data, sensor.as_deref(), json),
+        Command::Friction { data, sensor, json } => vmt::cli::friction(&data, sensor.as_deref(), json),
+        Command::Compensate { data, sensor, out, equidistant } => {
+            vmt::cli::compensate(&data, sensor.as_deref(), &out, equidistant)
         }
         Command::Iso230_2 { path, run, sensor, json } => {
             vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json)
