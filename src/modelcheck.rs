@@ -686,9 +686,8 @@ fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> Result<Fitte
     // Every fitted effect must be seen by some channel.
     for me in model.effects.iter().filter(|m| m.fit && m.effect.axis == model.axis && predicts(m.effect.name)) {
         let sh = shape(me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER));
-        let h: Vec<f64> = sh.hypers.iter().map(|_| 1e-2).collect();
-        let seen = columns(&st, me.effect.name, &sh, &h).iter().any(|c| c.iter().any(|v| *v != 0.0));
-        if !seen {
+        let period = me.given.iter().any(|g| g == "period").then(|| me.effect.params.get("period")).flatten();
+        if !visible(&st, me.effect.name, &sh, period) {
             return Err(bad(format!(
                 "the model fits `{}` on axis {}, but no channel of the data sees it: {}",
                 me.effect.name,
@@ -712,18 +711,24 @@ fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> Result<Fitte
                 let r = &fs.residual[k0..k0 + c.y.len()];
                 k0 += c.y.len();
                 if est[j] {
-                    let s = estimate_noise_sigma(r).map_err(|e| {
-                        bad(format!(
-                            "sensor `{}` in run `{}` has no sigma in the manifest and its {} readings are too \
-                             few to estimate it ({e}); give `sigma` for the sensor",
-                            c.sensor,
-                            c.run,
-                            c.y.len()
-                        ))
-                    })?;
+                    let (s, how) = match repeatability_sigma(c, r) {
+                        Some(s) => (s, "pooled spread of repeated readings at each target and direction"),
+                        None => (
+                            estimate_noise_sigma(r).map_err(|e| {
+                                bad(format!(
+                                    "sensor `{}` in run `{}` has no sigma in the manifest and its {} readings are \
+                                     too few to estimate it ({e}); give `sigma` for the sensor",
+                                    c.sensor,
+                                    c.run,
+                                    c.y.len()
+                                ))
+                            })?,
+                            "successive differences of the residual",
+                        ),
+                    };
                     sig[j] = s;
                     notes.push(format!(
-                        "sigma of `{}` in run `{}` estimated from the residual (successive differences): {} m",
+                        "sigma of `{}` in run `{}` estimated from the data ({how}): {} m",
                         c.sensor,
                         c.run,
                         fmt_num(s)
@@ -737,6 +742,32 @@ fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> Result<Fitte
     Err(VmtError::Internal("fit loop ended".into()))
 }
 
+/// Minimum degrees of freedom of the repeatability estimate of σ (relative error ≈ 1/√(2·dof) ≤ 22 %).
+const MIN_REPEAT_DOF: usize = 10;
+
+/// σ of one reading from repeated approaches (ISO 230-2 repeatability): the residual grouped by
+/// (target, direction), σ̂² = Σ (r − r̄_group)² / (N − G); None with fewer than
+/// [`MIN_REPEAT_DOF`] degrees of freedom or a zero spread.
+fn repeatability_sigma(c: &Channel, r: &[f64]) -> Option<f64> {
+    let mut groups: BTreeMap<(u64, i8), Vec<f64>> = BTreeMap::new();
+    for i in 0..r.len() {
+        groups.entry((c.x[i].to_bits(), if c.d[i] > 0.0 { 1 } else { -1 })).or_default().push(r[i]);
+    }
+    let dof = r.len().checked_sub(groups.len())?;
+    if dof < MIN_REPEAT_DOF {
+        return None;
+    }
+    let ss: f64 = groups
+        .values()
+        .map(|g| {
+            let m = g.iter().sum::<f64>() / g.len() as f64;
+            g.iter().map(|v| (v - m).powi(2)).sum::<f64>()
+        })
+        .sum();
+    let s = (ss / dof as f64).sqrt();
+    (s > 0.0).then_some(s)
+}
+
 /// Per-sample σ from per-channel σ (NaN → 1: unweighted first pass).
 fn st_sigma(st: &Stack, sig: &[f64]) -> Vec<f64> {
     let mut v = Vec::with_capacity(st.n);
@@ -744,6 +775,20 @@ fn st_sigma(st: &Stack, sig: &[f64]) -> Vec<f64> {
         v.extend(std::iter::repeat(if s.is_finite() { *s } else { 1.0 }).take(c.y.len()));
     }
     v
+}
+
+/// True when some channel sees effect `name` (a non-zero column) at the hyper-parameter `fixed`, or
+/// at some value of its search grid.
+fn visible(st: &Stack, name: EffectName, sh: &Shape, fixed: Option<f64>) -> bool {
+    let grid: Vec<f64> = match (fixed, sh.hypers.first()) {
+        (Some(v), _) => vec![v],
+        (None, Some(h)) => hyper_grid(st, name, h).0,
+        (None, None) => vec![1.0],
+    };
+    grid.iter().any(|g| {
+        let h: Vec<f64> = sh.hypers.iter().map(|_| *g).collect();
+        columns(st, name, sh, &h).iter().any(|c| c.iter().any(|v| *v != 0.0))
+    })
 }
 
 /// What data shows an effect (for the "missing channel" message and the advice).
@@ -878,11 +923,7 @@ fn candidate_names(model: &Model, st: &Stack) -> Vec<EffectName> {
         .iter()
         .copied()
         .filter(|n| predicts(*n) && model.get(*n, model.axis).is_none())
-        .filter(|n| {
-            let sh = candidate_shape(*n);
-            let h: Vec<f64> = sh.hypers.iter().map(|_| 1e-2).collect();
-            columns(st, *n, &sh, &h).iter().any(|c| c.iter().any(|v| *v != 0.0))
-        })
+        .filter(|n| visible(st, *n, &candidate_shape(*n), None))
         .collect()
 }
 
