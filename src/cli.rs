@@ -432,3 +432,93 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
     println!("wrote {} (from run {}, sensor {col}; E before {:.3} µm)", out.display(), run.name, iso.e * 1e6);
     Ok(0)
 }
+/// Reads a model and a measurement set for the model-check commands.
+fn model_and_data(model: &Path, data: &Path) -> Result<(crate::model::Model, MeasurementSet), VmtError> {
+    let m = crate::model::read_model(model)?;
+    let set = measurement::read(data)?;
+    Ok((m, set))
+}
+
+fn print_json<T: serde::Serialize>(v: &T) -> Result<(), VmtError> {
+    println!("{}", serde_json::to_string_pretty(v).map_err(|e| VmtError::Internal(e.to_string()))?);
+    Ok(())
+}
+
+/// `vmt compare --model M --data D [--json]`: fit the model's free parameters, predict, report the
+/// residual (FORMAT.md §4).
+pub fn compare(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
+    let (m, set) = model_and_data(model, data)?;
+    let r = crate::modelcheck::compare(&m, &set, data)?;
+    if json {
+        print_json(&r)?;
+    } else {
+        print!("{}", crate::modelcheck::compare_text(&r));
+    }
+    Ok(0)
+}
+
+/// `vmt diagnose --model M --data D [--json]`: rank the effects the model lacks (FORMAT.md §4).
+pub fn diagnose(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
+    let (m, set) = model_and_data(model, data)?;
+    let r = crate::modelcheck::diagnose(&m, &set, data)?;
+    if json {
+        print_json(&r)?;
+    } else {
+        print!("{}", crate::modelcheck::diagnose_text(&r));
+    }
+    Ok(0)
+}
+
+/// `vmt add --model M --effect NAME [--from-diagnosis] [--data D] -o M2`: writes the model with the
+/// effect added (`fit = true`; with `--from-diagnosis` starting from the diagnosed parameters, which
+/// needs `--data`). With `--data`, appends (model, normalised RMS) of the input model (if the history
+/// is empty) and of the new model to `history.json` beside M2.
+pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>, out: &Path) -> Result<i32, VmtError> {
+    use vmt_sim::effects::EffectName;
+    let m = crate::model::read_model(model)?;
+    let name: EffectName =
+        effect.parse().map_err(|e: vmt_sim::effects::UnknownEffect| VmtError::Usage(format!("--effect: {e}")))?;
+    let set = match data {
+        Some(d) => Some(measurement::read(d)?),
+        None if from_diagnosis => {
+            return Err(VmtError::Usage("--from-diagnosis needs --data (the diagnosis is computed again)".into()))
+        }
+        None => None,
+    };
+    let entry = match (&set, from_diagnosis, data) {
+        (Some(s), true, Some(d)) => {
+            let diag = crate::modelcheck::diagnose(&m, s, d)?;
+            Some(diag.ranking.into_iter().find(|r| r.effect == name.as_str()).ok_or_else(|| {
+                VmtError::bad(d, "", format!("the diagnosis has no candidate `{name}` on these data"))
+            })?)
+        }
+        _ => None,
+    };
+    let mut m2 = crate::modelcheck::add_effect(&m, name, entry.as_ref()).map_err(|e| VmtError::bad(model, "", e))?;
+    m2.source = out.to_path_buf();
+    crate::model::write_model(&m2, out)?;
+    eprintln!("wrote {} ({} added, fit = true)", out.display(), name);
+    if let (Some(s), Some(d)) = (&set, data) {
+        let hpath = crate::modelcheck::history_path(out);
+        let mut entries = Vec::new();
+        if crate::modelcheck::read_history(&hpath).unwrap_or_default().is_empty() {
+            let r0 = crate::modelcheck::compare(&m, s, d)?;
+            entries.push(crate::modelcheck::HistoryEntry {
+                model: model.display().to_string(),
+                data: d.display().to_string(),
+                added: String::new(),
+                normalized_rms: r0.normalized_rms,
+            });
+        }
+        let r1 = crate::modelcheck::compare(&m2, s, d)?;
+        entries.push(crate::modelcheck::HistoryEntry {
+            model: out.display().to_string(),
+            data: d.display().to_string(),
+            added: name.as_str().to_string(),
+            normalized_rms: r1.normalized_rms,
+        });
+        crate::modelcheck::append_history(&hpath, &entries)?;
+        eprintln!("normalised RMS now {:.3} (history in {})", r1.normalized_rms, hpath.display());
+    }
+    Ok(0)
+}

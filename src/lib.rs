@@ -7,6 +7,7 @@ pub mod error;
 pub mod estimate;
 pub mod measurement;
 pub mod model;
+pub mod modelcheck;
 pub mod report;
 pub mod scenario;
 pub mod simulate;

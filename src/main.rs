@@ -94,6 +94,38 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Fit a model's free parameters to a measurement set and report the residual (DESIGN.md §8).
+    Compare {
+        #[arg(long)]
+        model: PathBuf,
+        #[arg(long)]
+        data: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Rank the effects a model lacks by how much of the residual they explain (ΔBIC, verdicts).
+    Diagnose {
+        #[arg(long)]
+        model: PathBuf,
+        #[arg(long)]
+        data: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write the model with an effect added (fit = true); keeps history.json beside the output.
+    Add {
+        #[arg(long)]
+        model: PathBuf,
+        #[arg(long)]
+        effect: String,
+        /// Start from the parameters the diagnosis found (needs --data).
+        #[arg(long)]
+        from_diagnosis: bool,
+        #[arg(long)]
+        data: Option<PathBuf>,
+        #[arg(short, long)]
+        out: PathBuf,
+    },
 }
 
 fn main() -> ExitCode {
@@ -118,6 +150,11 @@ fn main() -> ExitCode {
         }
         Command::Iso230_2 { path, run, sensor, json } => {
             vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json)
+        }
+        Command::Compare { model, data, json } => vmt::cli::compare(&model, &data, json),
+        Command::Diagnose { model, data, json } => vmt::cli::diagnose(&model, &data, json),
+        Command::Add { model, effect, from_diagnosis, data, out } => {
+            vmt::cli::add(&model, &effect, from_diagnosis, data.as_deref(), &out)
         }
     };
     match result {

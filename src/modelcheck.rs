@@ -1,0 +1,1205 @@
+//! The model-check loop (DESIGN.md §8): `vmt compare`, `vmt diagnose`, `vmt add`.
+//!
+//! Phase 1 predicts the deviation columns of positioning point tables (FORMAT.md §1: `target`,
+//! `run`, `direction`, optional `t`, then deviations actual − target) from a model (FORMAT.md §2).
+//! For a sensor with unit direction u and measuring point r (axis frame, m), at target x, approach
+//! direction d = ±1 and time t (run `start_time` + the table's `t`, s), the first-order model is
+//!
+//! ```text
+//! ŷ = o_ch + u·(E(x) + ε(x) × r)                           (error motions, ISO 230-1, axis frame)
+//!          + s_drive·[ −d·b/2 + A_l·sin(2πx/p_l + φ_l) ]        (backlash b, cyclic lead)
+//!          + s_chain·[ k·x + α·ΔT∞·x·(1 − e^{−t/τ}) + d∞·(1 − e^{−t/τ}) + A_i·sin(2πx/p_i + φ_i) ]
+//! ```
+//!
+//! with E = (EXX, EYX, EZX), ε = (EAX, EBX, ECX) and o_ch an offset per channel (run, sensor) for
+//! the zeroing of the instrument. Signs follow the simulator (`vmt_sim::axis_sim`): the table
+//! lands at command + EXX + e(x, t) (feedback-chain error e: scale error k, thermal, interpolation);
+//! in a semi-closed loop the screw's lead error adds to it and backlash makes the table lag the
+//! motor by b/2, so the ISO 230-2 reversal value is B = x̄↑ − x̄↓ = −b. For a laser
+//! s_drive = s_chain = u·axis; a linear scale (`encoder_linear`, reading x − EXX − e) sees only the
+//! drive terms (s_drive = 1, s_chain = 0, no error motions); a rotary encoder only its offset.
+//!
+//! Everything is linear in the unknowns except periods and time constants, which are searched on
+//! a grid and refined by golden-section search on the weighted residual sum of squares with the
+//! linear parameters eliminated (variable projection; Golub & Pereyra 1973). The statistics and
+//! the candidate ranking come from `vmt_estimators::modelcheck`.
+//!
+//! Not predicted in phase 1: time-series runs (friction, resonance, gravity tilt: DESIGN.md §8
+//! phase 2), squareness (needs two axes), servo lag (no effect on settled readings). They are
+//! listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
+//! degree `order` (default 3) without its constant term (the offsets carry it).
+
+use crate::error::{fmt_num, VmtError};
+use crate::measurement::{write_file_atomic, MeasurementSet, Procedure, RunData, SensorKind};
+use crate::model::{Model, ModelEffect};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::f64::consts::TAU as TWO_PI;
+use std::path::{Path, PathBuf};
+use vmt_estimators::modelcheck::{
+    autocorrelation, bin_by_edges, bin_by_label, estimate_noise_sigma, fit_percent, fit_signature, frequency_grid,
+    ljung_box, ls_periodogram, rank_candidates, uniform_edges, Candidate, DiagnoseConfig, HyperParameter, RankingEntry,
+    Sigma, Verdict,
+};
+use vmt_sim::effects::{Effect, EffectName, EffectParams};
+use vmt_sim::profile::{Profile, Term};
+
+/// Default polynomial degree of a fitted error motion (FORMAT.md §2 `order`).
+pub const DEFAULT_ORDER: u32 = 3;
+/// Starting α of a thermal expansion when the model gives none, 1/K (steel).
+const ALPHA_STEEL: f64 = 11.5e-6;
+
+// ------------------------------------------------------------------------------------------
+// Channels.
+
+/// One predicted channel: a deviation column of a point-table run, with the geometry of its sensor.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Channel {
+    /// Run name.
+    pub run: String,
+    /// Sensor (column) name.
+    pub sensor: String,
+    /// Sensor kind.
+    pub kind: SensorKind,
+    /// Sensitive direction in the axis frame (unit vector).
+    pub u: [f64; 3],
+    /// Measuring point, axis frame, m.
+    pub r: [f64; 3],
+    /// Target positions x, m.
+    pub x: Vec<f64>,
+    /// Approach directions d = ±1.
+    pub d: Vec<f64>,
+    /// Run numbers (1..n).
+    pub cycle: Vec<u32>,
+    /// Times t, s since the start of the session (run start_time + the table's `t`).
+    pub t: Vec<f64>,
+    /// Measured deviations, m.
+    pub y: Vec<f64>,
+    /// 1σ noise from the manifest (None or 0 → estimated).
+    pub sigma: Option<f64>,
+}
+
+impl Channel {
+    /// Sensitivity to the drive terms (backlash, cyclic lead): u·axis for a laser, 1 for a linear
+    /// scale, 0 for a rotary encoder.
+    fn s_drive(&self) -> f64 {
+        match self.kind {
+            SensorKind::EncoderLinear => 1.0,
+            SensorKind::EncoderRotary => 0.0,
+            _ => self.u[0],
+        }
+    }
+
+    /// Sensitivity to the feedback-chain terms (scale error, thermal, interpolation): u·axis for a
+    /// laser, 0 for encoders (they read the chain itself).
+    fn s_chain(&self) -> f64 {
+        if self.is_laser() {
+            self.u[0]
+        } else {
+            0.0
+        }
+    }
+
+    fn is_laser(&self) -> bool {
+        matches!(self.kind, SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector)
+    }
+
+    /// Sensitivity to error motion `name`: u_i for translations, (r × u)_i for rotations
+    /// (u·(ε × r) = ε·(r × u)); 0 for encoders.
+    fn s_motion(&self, name: EffectName) -> f64 {
+        if !self.is_laser() {
+            return 0.0;
+        }
+        let [ux, uy, uz] = self.u;
+        let [rx, ry, rz] = self.r;
+        let rxu = [ry * uz - rz * uy, rz * ux - rx * uz, rx * uy - ry * ux];
+        match name {
+            EffectName::Positioning => ux,
+            EffectName::StraightnessY => uy,
+            EffectName::StraightnessZ => uz,
+            EffectName::Roll => rxu[0],
+            EffectName::Pitch => rxu[1],
+            EffectName::Yaw => rxu[2],
+            _ => 0.0,
+        }
+    }
+}
+
+/// A machine-frame direction in the axis frame of axis `axis` (the inverse of the simulator's
+/// rotation taking X onto the axis: y → (u_y, −u_x, u_z), z → (u_z, u_y, −u_x)).
+fn to_axis_frame(u: [f64; 3], axis: char) -> [f64; 3] {
+    match axis {
+        'y' => [u[1], -u[0], u[2]],
+        'z' => [u[2], u[1], -u[0]],
+        _ => u,
+    }
+}
+
+/// The channels of `set` that phase 1 predicts for axis `axis`: every deviation column of every
+/// positioning point table of that axis whose sensor is a laser (linear, straightness, vector) or
+/// an encoder. Returns the channels and notes on what was skipped.
+pub fn channels(set: &MeasurementSet, axis: char) -> (Vec<Channel>, Vec<String>) {
+    let mut out: Vec<Channel> = Vec::new();
+    let mut notes: Vec<String> = Vec::new();
+    for run in &set.runs {
+        let RunData::PointTable { target, run: cyc, direction, t, columns } = &run.data else {
+            notes.push(format!(
+                "run `{}` ({}): a time series; phase 1 predicts point tables only",
+                run.name,
+                run.procedure.as_str()
+            ));
+            continue;
+        };
+        if run.axis != axis {
+            notes.push(format!("run `{}` moves axis {}, the model's axis is {axis}", run.name, run.axis));
+            continue;
+        }
+        let t0 = run.start_time.unwrap_or(0.0);
+        let times: Vec<f64> = match t {
+            Some(t) => t.iter().map(|v| t0 + v).collect(),
+            None => vec![t0; target.len()],
+        };
+        for (name, values) in columns {
+            let Some(s) = set.sensor(name) else { continue };
+            let ok = matches!(
+                s.kind,
+                SensorKind::LaserLinear
+                    | SensorKind::LaserStraightness
+                    | SensorKind::LaserVector
+                    | SensorKind::EncoderLinear
+                    | SensorKind::EncoderRotary
+            );
+            if !ok {
+                notes.push(format!("run `{}`, sensor `{name}` ({}): not predicted", run.name, s.kind.as_str()));
+                continue;
+            }
+            out.push(Channel {
+                run: run.name.clone(),
+                sensor: name.clone(),
+                kind: s.kind,
+                u: to_axis_frame(s.direction, axis),
+                r: s.position,
+                x: target.clone(),
+                d: direction.iter().map(|&v| f64::from(v)).collect(),
+                cycle: cyc.clone(),
+                t: times.clone(),
+                y: values.clone(),
+                sigma: s.sigma.filter(|v| *v > 0.0),
+            });
+        }
+    }
+    (out, notes)
+}
+
+// ------------------------------------------------------------------------------------------
+// Signatures of the effects on the stacked samples.
+
+/// 1 − exp(−t/τ) for t > 0 (a step for τ = 0), 0 before t = 0 (as the simulator's thermal effects).
+fn rise(t: f64, tau: f64) -> f64 {
+    if t <= 0.0 {
+        0.0
+    } else if tau <= 0.0 {
+        1.0
+    } else {
+        -(-t / tau).exp_m1()
+    }
+}
+
+/// The stacked samples of all channels, with per-sample sensitivities.
+struct Stack<'a> {
+    chans: &'a [Channel],
+    n: usize,
+}
+
+impl<'a> Stack<'a> {
+    fn new(chans: &'a [Channel]) -> Stack<'a> {
+        Stack { chans, n: chans.iter().map(|c| c.y.len()).sum() }
+    }
+
+    /// One column: f(channel, sample index) over all samples.
+    fn col(&self, f: impl Fn(&Channel, usize) -> f64) -> Vec<f64> {
+        let mut v = Vec::with_capacity(self.n);
+        for c in self.chans {
+            for i in 0..c.y.len() {
+                v.push(f(c, i));
+            }
+        }
+        v
+    }
+
+    fn y(&self) -> Vec<f64> {
+        self.col(|c, i| c.y[i])
+    }
+
+    /// Offset columns, one per channel.
+    fn offsets(&self) -> Vec<Vec<f64>> {
+        (0..self.chans.len())
+            .map(|k| {
+                let mut v = Vec::with_capacity(self.n);
+                for (j, c) in self.chans.iter().enumerate() {
+                    v.extend(std::iter::repeat(if j == k { 1.0 } else { 0.0 }).take(c.y.len()));
+                }
+                v
+            })
+            .collect()
+    }
+
+    fn t_span(&self) -> (f64, f64) {
+        let ts = self.col(|c, i| c.t[i]);
+        let lo = ts.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = ts.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (lo, hi)
+    }
+}
+
+/// How an effect's signature is parameterised: names of its linear coefficients and of its
+/// nonlinear hyper-parameters (periods, time constants).
+#[derive(Clone, Debug, PartialEq)]
+struct Shape {
+    coefs: Vec<String>,
+    hypers: Vec<&'static str>,
+    /// Lowest power of a polynomial error motion (1 in a model; 2 for the positioning candidate,
+    /// whose linear term is the scale error's signature).
+    first_power: u32,
+    order: u32,
+}
+
+/// True for the effects phase 1 can predict in a point table.
+pub fn predicts(name: EffectName) -> bool {
+    name.is_error_motion()
+        || matches!(
+            name,
+            EffectName::Backlash
+                | EffectName::CyclicLead
+                | EffectName::ScaleError
+                | EffectName::ThermalExpansion
+                | EffectName::ThermalDrift
+                | EffectName::InterpolationError
+        )
+}
+
+fn shape(name: EffectName, first_power: u32, order: u32) -> Shape {
+    let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<String>>();
+    let (coefs, hypers): (Vec<String>, Vec<&'static str>) = match name {
+        n if n.is_error_motion() => ((first_power..=order).map(|k| format!("c{k}")).collect(), vec![]),
+        EffectName::Backlash | EffectName::ScaleError => (s(&["value"]), vec![]),
+        EffectName::CyclicLead | EffectName::InterpolationError => (s(&["a_sin", "a_cos"]), vec!["period"]),
+        EffectName::ThermalExpansion => (s(&["alpha_delta_t"]), vec!["tau"]),
+        EffectName::ThermalDrift => (s(&["value"]), vec!["tau"]),
+        _ => (vec![], vec![]),
+    };
+    Shape { coefs, hypers, first_power, order }
+}
+
+/// Design columns of effect `name` at hyper-parameters `h` (in the order of [`shape`]).
+fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>> {
+    match name {
+        n if n.is_error_motion() => {
+            (sh.first_power..=sh.order).map(|k| st.col(|c, i| c.s_motion(n) * c.x[i].powi(k as i32))).collect()
+        }
+        EffectName::Backlash => vec![st.col(|c, i| -0.5 * c.d[i] * c.s_drive())],
+        EffectName::ScaleError => vec![st.col(|c, i| c.x[i] * c.s_chain())],
+        EffectName::CyclicLead | EffectName::InterpolationError => {
+            let p = h[0];
+            if !phases_spread(st, p) {
+                return vec![vec![0.0; st.n], vec![0.0; st.n]];
+            }
+            let drive = name == EffectName::CyclicLead;
+            let s = move |c: &Channel| if drive { c.s_drive() } else { c.s_chain() };
+            vec![st.col(|c, i| s(c) * (TWO_PI * c.x[i] / p).sin()), st.col(|c, i| s(c) * (TWO_PI * c.x[i] / p).cos())]
+        }
+        EffectName::ThermalExpansion => vec![st.col(|c, i| c.s_chain() * c.x[i] * rise(c.t[i], h[0]))],
+        EffectName::ThermalDrift => vec![st.col(|c, i| c.s_chain() * rise(c.t[i], h[0]))],
+        _ => vec![],
+    }
+}
+
+/// True when the phases 2πx/p of the distinct targets spread around the circle (mean resultant
+/// length R = |mean e^{iθ}| ≤ 0.5, and 0.1 ≤ mean sin²θ ≤ 0.9 so both quadratures vary), so that a sinusoid of period p is distinguishable from a
+/// constant on these targets; false at an alias (targets a whole number of periods apart).
+fn phases_spread(st: &Stack, p: f64) -> bool {
+    let mut xs: Vec<f64> = st.chans.iter().flat_map(|c| c.x.iter().copied()).collect();
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    if xs.len() < 3 || !(p > 0.0) {
+        return false;
+    }
+    let m = xs.len() as f64;
+    let (sc, cc) = xs.iter().fold((0.0, 0.0), |(a, b), x| (a + (TWO_PI * x / p).sin(), b + (TWO_PI * x / p).cos()));
+    // Both quadratures must vary: at p = 2 µm on targets rounded to 1 µm the sine vanishes.
+    let s2: f64 = xs.iter().map(|x| (TWO_PI * x / p).sin().powi(2)).sum::<f64>() / m;
+    (sc * sc + cc * cc).sqrt() / m <= 0.5 && (0.1..=0.9).contains(&s2)
+}
+
+/// The prediction of a known (not fitted) effect at every sample.
+fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
+    match (&e.params, e.name) {
+        (EffectParams::ErrorMotion(prof), n) => st.col(|c, i| c.s_motion(n) * prof.value(c.x[i])),
+        (EffectParams::Backlash(b), _) => st.col(|c, i| -0.5 * c.d[i] * c.s_drive() * b.value),
+        (EffectParams::ScaleError(s), _) => st.col(|c, i| c.s_chain() * s.value * c.x[i]),
+        (EffectParams::CyclicLead(l), _) => st.col(|c, i| c.s_drive() * l.value(c.x[i])),
+        (EffectParams::InterpolationError(ie), _) => st.col(|c, i| c.s_chain() * ie.value(c.x[i])),
+        (EffectParams::ThermalExpansion(th), _) => st.col(|c, i| c.s_chain() * th.value(c.x[i], c.t[i])),
+        (EffectParams::ThermalDrift(dr), _) => st.col(|c, i| c.s_chain() * dr.value_at(c.t[i])),
+        _ => vec![0.0; st.n],
+    }
+}
+
+/// Log-spaced grid of `n` values from `lo` to `hi`.
+fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    let (a, b) = (lo.ln(), hi.ln());
+    (0..n).map(|k| (a + (b - a) * k as f64 / (n - 1).max(1) as f64).exp()).collect()
+}
+
+/// Search grid of a hyper-parameter on these data: time constants from a quarter of the time span
+/// to ten times it (a faster process looks like a constant, which the offsets and the scale error
+/// already carry); screw leads 2–60 mm; encoder signal periods from the common scale gratings.
+fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>, bool) {
+    match (name, hyper) {
+        (_, "tau") => {
+            let (lo, hi) = st.t_span();
+            let span = (hi - lo).max(1.0);
+            (log_grid(span / 4.0, span * 10.0, 40), true)
+        }
+        (EffectName::CyclicLead, _) => (log_grid(2e-3, 60e-3, 120), true),
+        // Signal periods of common linear and rotary scales (Heidenhain, Renishaw): 2–200 µm.
+        _ => (vec![2e-6, 4e-6, 8e-6, 10e-6, 20e-6, 40e-6, 100e-6, 200e-6], false),
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Fitting a model.
+
+/// A fitted effect of the model: its shape, hyper-parameters and where its columns sit.
+#[derive(Clone, Debug)]
+struct FitTerm {
+    index: usize,
+    name: EffectName,
+    shape: Shape,
+    /// Hyper-parameter values and whether each is searched (not given).
+    hyper: Vec<f64>,
+    searched: Vec<bool>,
+}
+
+/// The result of fitting a model to the channels.
+struct FitState {
+    terms: Vec<FitTerm>,
+    /// All linear columns: offsets first, then each term's.
+    cols: Vec<Vec<f64>>,
+    coefs: Vec<f64>,
+    residual: Vec<f64>,
+    n_offsets: usize,
+}
+
+fn design(st: &Stack, terms: &[FitTerm]) -> Vec<Vec<f64>> {
+    let mut cols = st.offsets();
+    for t in terms {
+        cols.extend(columns(st, t.name, &t.shape, &t.hyper));
+    }
+    cols
+}
+
+/// Drops columns that are all zero (an effect no channel sees) so the solver sees a clean design;
+/// returns the kept indices.
+fn solve(r: &[f64], cols: &[Vec<f64>], sigma: &Sigma) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let keep: Vec<usize> = (0..cols.len()).filter(|&j| cols[j].iter().any(|v| *v != 0.0)).collect();
+    let sub: Vec<Vec<f64>> = keep.iter().map(|&j| cols[j].clone()).collect();
+    if sub.is_empty() {
+        return Ok((vec![0.0; cols.len()], r.to_vec()));
+    }
+    let fit = fit_signature(r, &sub, sigma).map_err(|e| e.to_string())?;
+    let mut beta = vec![0.0; cols.len()];
+    for (k, &j) in keep.iter().enumerate() {
+        beta[j] = if fit.coefficients[k].is_finite() { fit.coefficients[k] } else { 0.0 };
+    }
+    Ok((beta, fit.residual))
+}
+
+fn weighted_ss(r: &[f64], w: &[f64]) -> f64 {
+    r.iter().zip(w).map(|(a, b)| (a * b).powi(2)).sum()
+}
+
+/// Golden-section minimum of f on [a, b] (log scale), `iters` iterations.
+fn golden(a: f64, b: f64, iters: usize, f: &mut dyn FnMut(f64) -> f64) -> f64 {
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut la, mut lb) = (a.ln(), b.ln());
+    let mut c = lb - g * (lb - la);
+    let mut d = la + g * (lb - la);
+    let (mut fc, mut fd) = (f(c.exp()), f(d.exp()));
+    for _ in 0..iters {
+        if fc < fd {
+            lb = d;
+            d = c;
+            fd = fc;
+            c = lb - g * (lb - la);
+            fc = f(c.exp());
+        } else {
+            la = c;
+            c = d;
+            fc = fd;
+            d = la + g * (lb - la);
+            fd = f(d.exp());
+        }
+    }
+    0.5 * (la.exp() + lb.exp())
+}
+
+fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) -> Result<FitState, String> {
+    let mut known = vec![0.0; st.n];
+    let mut terms: Vec<FitTerm> = Vec::new();
+    for (index, me) in model.effects.iter().enumerate() {
+        if me.effect.axis != model.axis || !predicts(me.effect.name) {
+            continue;
+        }
+        if !me.fit {
+            for (k, v) in known_prediction(st, &me.effect).into_iter().enumerate() {
+                known[k] += v;
+            }
+            continue;
+        }
+        let sh = shape(me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER));
+        let mut hyper = Vec::new();
+        let mut searched = Vec::new();
+        for h in &sh.hypers {
+            let given = me.given.iter().any(|g| g == h);
+            let start = me.effect.params.get(h).unwrap_or(1.0);
+            // A given period (screw lead, signal period) is held; a given τ is a starting value.
+            hyper.push(if given { start } else { f64::NAN });
+            searched.push(!(given && *h == "period"));
+        }
+        terms.push(FitTerm { index, name: me.effect.name, shape: sh, hyper, searched });
+    }
+    let y = st.y();
+    let r0: Vec<f64> = y.iter().zip(&known).map(|(a, b)| a - b).collect();
+    // Start every searched hyper-parameter in the middle of its grid (or at its given value), then
+    // sweep: per hyper-parameter a grid search and a golden-section refinement, the others held.
+    let grids: Vec<Vec<(Vec<f64>, bool)>> = terms
+        .iter()
+        .map(|t| {
+            (0..t.hyper.len())
+                .map(|hi| {
+                    let v = t.hyper[hi];
+                    if v.is_finite() {
+                        (log_grid(v / 10.0, v * 10.0, 21), true)
+                    } else {
+                        hyper_grid(st, t.name, t.shape.hypers[hi])
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    for (t, g) in terms.iter_mut().zip(&grids) {
+        for (hi, (grid, _)) in g.iter().enumerate() {
+            if t.hyper[hi].is_nan() {
+                t.hyper[hi] = grid[grid.len() / 2];
+            }
+        }
+    }
+    let n_searched: usize = terms.iter().map(|t| t.searched.iter().filter(|s| **s).count()).sum();
+    let sweeps = if n_searched > 1 { 2 } else { 1 };
+    for _ in 0..sweeps {
+        for ti in 0..terms.len() {
+            for hi in 0..terms[ti].hyper.len() {
+                if !terms[ti].searched[hi] {
+                    continue;
+                }
+                let (grid, refine) = &grids[ti][hi];
+                let eval = |v: f64, terms: &mut Vec<FitTerm>| -> f64 {
+                    terms[ti].hyper[hi] = v;
+                    match solve(&r0, &design(st, terms), sigma) {
+                        Ok((_, r)) => weighted_ss(&r, w),
+                        Err(_) => f64::INFINITY,
+                    }
+                };
+                let mut best = (f64::INFINITY, grid[0]);
+                for &g in grid {
+                    let s = eval(g, &mut terms);
+                    if s < best.0 {
+                        best = (s, g);
+                    }
+                }
+                let mut v = best.1;
+                if *refine && grid.len() > 1 {
+                    let k = grid.iter().position(|g| *g == best.1).unwrap_or(0);
+                    let a = grid[k.saturating_sub(1)];
+                    let b = grid[(k + 1).min(grid.len() - 1)];
+                    let mut tt = terms.clone();
+                    v = golden(a, b, 40, &mut |x| eval(x, &mut tt));
+                    if eval(v, &mut terms) > best.0 {
+                        v = best.1;
+                    }
+                }
+                terms[ti].hyper[hi] = v;
+            }
+        }
+    }
+    let cols = design(st, &terms);
+    let (coefs, residual) = solve(&r0, &cols, sigma)?;
+    Ok(FitState { terms, cols, coefs, residual, n_offsets: st.chans.len() })
+}
+
+/// The fitted parameters of each term as effect parameters (FORMAT.md §2 keys).
+fn term_params(fs: &FitState, model: &Model) -> BTreeMap<String, BTreeMap<String, f64>> {
+    let mut out = BTreeMap::new();
+    let mut j = fs.n_offsets;
+    for t in &fs.terms {
+        let k = t.shape.coefs.len();
+        let c = &fs.coefs[j..j + k];
+        j += k;
+        let me = &model.effects[t.index];
+        out.insert(t.name.as_str().to_string(), describe(t.name, &t.shape, c, &t.hyper, &me.effect.params));
+    }
+    out
+}
+
+/// Linear coefficients + hyper-parameters → the effect's parameters by FORMAT.md §2 key.
+fn describe(name: EffectName, sh: &Shape, c: &[f64], h: &[f64], start: &EffectParams) -> BTreeMap<String, f64> {
+    let mut m = BTreeMap::new();
+    match name {
+        n if n.is_error_motion() => {
+            for (k, v) in c.iter().enumerate() {
+                m.insert(format!("c{}", sh.first_power as usize + k), *v);
+            }
+        }
+        EffectName::CyclicLead | EffectName::InterpolationError => {
+            m.insert("period".into(), h[0]);
+            m.insert("amplitude".into(), c[0].hypot(c[1]));
+            m.insert("phase".into(), c[1].atan2(c[0]));
+        }
+        EffectName::ThermalExpansion => {
+            let alpha = start.get("alpha").filter(|a| *a != 0.0).unwrap_or(ALPHA_STEEL);
+            m.insert("alpha".into(), alpha);
+            m.insert("delta_t".into(), c[0] / alpha);
+            m.insert("tau".into(), h[0]);
+        }
+        EffectName::ThermalDrift => {
+            m.insert("value".into(), c[0]);
+            m.insert("tau".into(), h[0]);
+        }
+        _ => {
+            m.insert("value".into(), c[0]);
+        }
+    }
+    m
+}
+
+// ------------------------------------------------------------------------------------------
+// Reports.
+
+/// One channel of `vmt compare` (FORMAT.md §4 `channels[]`, plus details).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ChannelReport {
+    /// Run name.
+    pub run: String,
+    /// Sensor name.
+    pub sensor: String,
+    /// RMS of the residual, SI unit of the channel (m).
+    pub rms: f64,
+    /// RMS of residual/σ.
+    pub normalized_rms: f64,
+    /// NRMSE fit, % : 100·(1 − ‖y − ŷ‖/‖y − ȳ‖).
+    pub fit_percent: f64,
+    /// The σ used, m.
+    pub sigma: f64,
+    /// True when σ was estimated from the residual (the manifest gives none).
+    pub sigma_estimated: bool,
+    /// Fitted offset (instrument zero), m.
+    pub offset: f64,
+    /// Fraction of autocorrelation lags outside ±1.96/√n (white: about 5 %).
+    pub acf_fraction_outside: Option<f64>,
+    /// Ljung–Box p-value of the residual in acquisition order (small: not white).
+    pub ljung_box_p: Option<f64>,
+    /// Residual by approach direction: (direction, mean, rms).
+    pub by_direction: Vec<(i8, f64, f64)>,
+    /// Residual by run number (cycle): (cycle, mean, rms).
+    pub by_cycle: Vec<(u32, f64, f64)>,
+    /// Residual by position bin: (lower, upper, mean, rms), m.
+    pub by_position: Vec<(f64, f64, f64, f64)>,
+    /// Residual by time bin: (lower, upper, mean, rms), s.
+    pub by_time: Vec<(f64, f64, f64, f64)>,
+    /// Strongest spatial periods of the residual: (wavelength m, amplitude m), from a
+    /// least-squares periodogram over position.
+    pub spectrum_peaks: Vec<(f64, f64)>,
+}
+
+/// One iteration of the loop, as kept in `history.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HistoryEntry {
+    /// Model file.
+    pub model: String,
+    /// Data it was compared with.
+    pub data: String,
+    /// Effect added to reach it (empty for the starting model).
+    pub added: String,
+    /// Normalised RMS of the residual.
+    pub normalized_rms: f64,
+}
+
+/// `vmt compare` (FORMAT.md §4; extra keys allowed).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CompareReport {
+    /// Model file.
+    pub model: String,
+    /// Data directory.
+    pub data: String,
+    /// Per channel.
+    pub channels: Vec<ChannelReport>,
+    /// RMS of residual/σ over all samples of all channels.
+    pub normalized_rms: f64,
+    /// Fitted parameters by effect.
+    pub fitted: BTreeMap<String, BTreeMap<String, f64>>,
+    /// Number of samples.
+    pub n: usize,
+    /// Number of fitted parameters (offsets included).
+    pub n_params: usize,
+    /// What was skipped or estimated.
+    pub notes: Vec<String>,
+    /// Iterations so far (history.json beside the model), if any.
+    pub history: Vec<HistoryEntry>,
+}
+
+/// `vmt diagnose` (FORMAT.md §4).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiagnoseReport {
+    /// Normalised RMS of the model's residual.
+    pub normalized_rms: f64,
+    /// Candidates, best first.
+    pub ranking: Vec<RankingEntry>,
+    /// What to do next.
+    pub advice: String,
+    /// Notes (skipped channels, estimated σ).
+    pub notes: Vec<String>,
+}
+
+/// Everything a compare computes, for diagnose to build on.
+struct Fitted<'a> {
+    st: Stack<'a>,
+    fs: FitState,
+    sig: Vec<f64>,
+    est: Vec<bool>,
+    notes: Vec<String>,
+}
+
+fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> Result<Fitted<'a>, VmtError> {
+    let st = Stack::new(chans);
+    let bad = |m: String| VmtError::bad(data, "", m);
+    // Every fitted effect must be seen by some channel.
+    for me in model.effects.iter().filter(|m| m.fit && m.effect.axis == model.axis && predicts(m.effect.name)) {
+        let sh = shape(me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER));
+        let period = me.given.iter().any(|g| g == "period").then(|| me.effect.params.get("period")).flatten();
+        if !visible(&st, me.effect.name, &sh, period) {
+            return Err(bad(format!(
+                "the model fits `{}` on axis {}, but no channel of the data sees it: {}",
+                me.effect.name,
+                me.effect.axis,
+                needs(me.effect.name)
+            )));
+        }
+    }
+    let mut notes = Vec::new();
+    // Pass 1: weights from the known σ (1 where unknown); estimate the unknown σ from the residual.
+    let mut sig: Vec<f64> = chans.iter().map(|c| c.sigma.unwrap_or(f64::NAN)).collect();
+    let est: Vec<bool> = sig.iter().map(|s| s.is_nan()).collect();
+    for pass in 0..2 {
+        let per = st_sigma(&st, &sig);
+        let w: Vec<f64> = per.iter().map(|s| 1.0 / s).collect();
+        let sigma = Sigma::PerSample(per);
+        let fs = fit_model_on(&st, model, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
+        if pass == 0 && est.iter().any(|e| *e) {
+            let mut k0 = 0;
+            for (j, c) in chans.iter().enumerate() {
+                let r = &fs.residual[k0..k0 + c.y.len()];
+                k0 += c.y.len();
+                if est[j] {
+                    let (s, how) = match repeatability_sigma(c, r) {
+                        Some(s) => (s, "pooled spread of repeated readings at each target and direction"),
+                        None => (
+                            estimate_noise_sigma(r).map_err(|e| {
+                                bad(format!(
+                                    "sensor `{}` in run `{}` has no sigma in the manifest and its {} readings are \
+                                     too few to estimate it ({e}); give `sigma` for the sensor",
+                                    c.sensor,
+                                    c.run,
+                                    c.y.len()
+                                ))
+                            })?,
+                            "successive differences of the residual",
+                        ),
+                    };
+                    sig[j] = s;
+                    notes.push(format!(
+                        "sigma of `{}` in run `{}` estimated from the data ({how}): {} m",
+                        c.sensor,
+                        c.run,
+                        fmt_num(s)
+                    ));
+                }
+            }
+            continue;
+        }
+        return Ok(Fitted { st, fs, sig, est, notes });
+    }
+    Err(VmtError::Internal("fit loop ended".into()))
+}
+
+/// Minimum degrees of freedom of the repeatability estimate of σ (relative error ≈ 1/√(2·dof) ≤ 22 %).
+const MIN_REPEAT_DOF: usize = 10;
+
+/// σ of one reading from repeated approaches (ISO 230-2 repeatability): the residual grouped by
+/// (target, direction), σ̂² = Σ (r − r̄_group)² / (N − G); None with fewer than
+/// [`MIN_REPEAT_DOF`] degrees of freedom or a zero spread.
+fn repeatability_sigma(c: &Channel, r: &[f64]) -> Option<f64> {
+    let mut groups: BTreeMap<(u64, i8), Vec<f64>> = BTreeMap::new();
+    for i in 0..r.len() {
+        groups.entry((c.x[i].to_bits(), if c.d[i] > 0.0 { 1 } else { -1 })).or_default().push(r[i]);
+    }
+    let dof = r.len().checked_sub(groups.len())?;
+    if dof < MIN_REPEAT_DOF {
+        return None;
+    }
+    let ss: f64 = groups
+        .values()
+        .map(|g| {
+            let m = g.iter().sum::<f64>() / g.len() as f64;
+            g.iter().map(|v| (v - m).powi(2)).sum::<f64>()
+        })
+        .sum();
+    let s = (ss / dof as f64).sqrt();
+    (s > 0.0).then_some(s)
+}
+
+/// Per-sample σ from per-channel σ (NaN → 1: unweighted first pass).
+fn st_sigma(st: &Stack, sig: &[f64]) -> Vec<f64> {
+    let mut v = Vec::with_capacity(st.n);
+    for (c, s) in st.chans.iter().zip(sig) {
+        v.extend(std::iter::repeat(if s.is_finite() { *s } else { 1.0 }).take(c.y.len()));
+    }
+    v
+}
+
+/// True when some channel sees effect `name` (a non-zero column) at the hyper-parameter `fixed`, or
+/// at some value of its search grid.
+fn visible(st: &Stack, name: EffectName, sh: &Shape, fixed: Option<f64>) -> bool {
+    let grid: Vec<f64> = match (fixed, sh.hypers.first()) {
+        (Some(v), _) => vec![v],
+        (None, Some(h)) => hyper_grid(st, name, h).0,
+        (None, None) => vec![1.0],
+    };
+    grid.iter().any(|g| {
+        let h: Vec<f64> = sh.hypers.iter().map(|_| *g).collect();
+        columns(st, name, sh, &h).iter().any(|c| c.iter().any(|v| *v != 0.0))
+    })
+}
+
+/// What data shows an effect (for the "missing channel" message and the advice).
+fn needs(name: EffectName) -> &'static str {
+    match name {
+        EffectName::Positioning => "needs a laser_linear along the axis in a positioning run",
+        EffectName::StraightnessY | EffectName::StraightnessZ => {
+            "needs a laser_straightness across the axis in a positioning run"
+        }
+        EffectName::Roll | EffectName::Pitch | EffectName::Yaw => {
+            "needs a laser whose measuring point is offset from the axis (an Abbe offset) across its direction"
+        }
+        EffectName::Backlash | EffectName::CyclicLead => "needs a laser_linear or a linear scale in a positioning run",
+        _ => "needs a laser_linear along the axis in a positioning run",
+    }
+}
+
+fn load_channels(model: &Model, set: &MeasurementSet, data: &Path) -> Result<(Vec<Channel>, Vec<String>), VmtError> {
+    let (chans, mut notes) = channels(set, model.axis);
+    if chans.is_empty() {
+        return Err(VmtError::bad(
+            data,
+            "runs",
+            format!(
+                "no channel the model can be compared with: expected a positioning point table of axis {} with a \
+                 laser or encoder deviation column",
+                model.axis
+            ),
+        ));
+    }
+    for me in model.effects.iter().filter(|m| !predicts(m.effect.name)) {
+        notes.push(format!("effect `{}` is not predicted in point tables (phase 1): left out", me.effect.name));
+    }
+    Ok((chans, notes))
+}
+
+/// `vmt compare` on in-memory inputs: fits the model's free parameters to the point-table channels
+/// of `set` and reports residual statistics per channel and overall (module doc for the model;
+/// FORMAT.md §4 for the keys). `data` names the data in messages and the report.
+pub fn compare(model: &Model, set: &MeasurementSet, data: &Path) -> Result<CompareReport, VmtError> {
+    let (chans, mut notes) = load_channels(model, set, data)?;
+    let f = fit_all(model, &chans, data)?;
+    notes.extend(f.notes.iter().cloned());
+    let pred_total: Vec<f64> = f.st.y().iter().zip(&f.fs.residual).map(|(y, r)| y - r).collect();
+    let mut out = Vec::new();
+    let mut k0 = 0;
+    let mut sum_sq = 0.0;
+    for (j, c) in chans.iter().enumerate() {
+        let m = c.y.len();
+        let r = &f.fs.residual[k0..k0 + m];
+        let p = &pred_total[k0..k0 + m];
+        k0 += m;
+        let s = f.sig[j];
+        sum_sq += r.iter().map(|v| (v / s).powi(2)).sum::<f64>();
+        out.push(channel_report(c, r, p, s, f.est[j], f.fs.coefs[j]));
+    }
+    let n = f.st.n;
+    Ok(CompareReport {
+        model: model.source.display().to_string(),
+        data: data.display().to_string(),
+        channels: out,
+        normalized_rms: (sum_sq / n as f64).sqrt(),
+        fitted: term_params(&f.fs, model),
+        n,
+        n_params: f.fs.cols.len(),
+        notes,
+        history: read_history(&history_path(&model.source)).unwrap_or_default(),
+    })
+}
+
+fn channel_report(c: &Channel, r: &[f64], p: &[f64], s: f64, est: bool, offset: f64) -> ChannelReport {
+    let m = r.len();
+    let rms = (r.iter().map(|v| v * v).sum::<f64>() / m as f64).sqrt();
+    let lag = (m / 4).clamp(1, 20);
+    let acf = autocorrelation(r, lag).ok().map(|a| a.fraction_outside);
+    let lb = ljung_box(r, lag, 0).ok().map(|l| l.p_value);
+    let labels: Vec<i8> = c.d.iter().map(|d| if *d > 0.0 { 1 } else { -1 }).collect();
+    let by_direction =
+        bin_by_label(r, &labels).map(|b| b.into_iter().map(|x| (x.key, x.mean, x.rms)).collect()).unwrap_or_default();
+    let by_cycle =
+        bin_by_label(r, &c.cycle).map(|b| b.into_iter().map(|x| (x.key, x.mean, x.rms)).collect()).unwrap_or_default();
+    let ranged = |keys: &[f64]| -> Vec<(f64, f64, f64, f64)> {
+        let lo = keys.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = keys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if hi <= lo {
+            return Vec::new();
+        }
+        let edges = match uniform_edges(lo, hi + 1e-12 * (hi - lo).abs().max(1.0), 5) {
+            Ok(e) => e,
+            Err(_) => return Vec::new(),
+        };
+        bin_by_edges(r, keys, &edges)
+            .map(|b| {
+                b.bins
+                    .into_iter()
+                    .filter_map(|x| Some((x.lower, x.upper, x.mean?, x.rms?)))
+                    .collect::<Vec<(f64, f64, f64, f64)>>()
+            })
+            .unwrap_or_default()
+    };
+    let spectrum_peaks = frequency_grid(&c.x, 5.0, None)
+        .ok()
+        .and_then(|g| ls_periodogram(&c.x, r, &Sigma::Unknown, &g).ok())
+        .map(|pg| {
+            let mut idx: Vec<usize> = (0..pg.frequency.len()).collect();
+            idx.sort_by(|a, b| pg.amplitude[*b].total_cmp(&pg.amplitude[*a]));
+            idx.into_iter().take(3).map(|i| (1.0 / pg.frequency[i], pg.amplitude[i])).collect()
+        })
+        .unwrap_or_default();
+    ChannelReport {
+        run: c.run.clone(),
+        sensor: c.sensor.clone(),
+        rms,
+        normalized_rms: rms / s,
+        fit_percent: fit_percent(&c.y, p).unwrap_or(f64::NAN),
+        sigma: s,
+        sigma_estimated: est,
+        offset,
+        acf_fraction_outside: acf,
+        ljung_box_p: lb,
+        by_direction,
+        by_cycle,
+        by_position: ranged(&c.x),
+        by_time: ranged(&c.t),
+        spectrum_peaks,
+    }
+}
+
+/// The candidates for effects the model lacks that phase 1 can express, each with its shape.
+fn candidate_names(model: &Model, st: &Stack) -> Vec<EffectName> {
+    EffectName::ALL
+        .iter()
+        .copied()
+        .filter(|n| predicts(*n) && model.get(*n, model.axis).is_none())
+        .filter(|n| visible(st, *n, &candidate_shape(*n), None))
+        .collect()
+}
+
+/// A candidate's shape: error motions as a cubic without constant term; the positioning candidate
+/// without its linear term as well (a linear positioning error is the scale error's signature).
+fn candidate_shape(n: EffectName) -> Shape {
+    shape(n, if n == EffectName::Positioning { 2 } else { 1 }, DEFAULT_ORDER)
+}
+
+/// `vmt diagnose` on in-memory inputs: fits the model, then every catalogue effect the model lacks
+/// that these channels can show is fitted to the weighted residual together with the model's own
+/// linear columns, ranked by ΔBIC with verdicts (`vmt_estimators::modelcheck::rank_candidates`).
+pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<DiagnoseReport, VmtError> {
+    let (chans, mut notes) = load_channels(model, set, data)?;
+    let f = fit_all(model, &chans, data)?;
+    notes.extend(f.notes.iter().cloned());
+    let per = st_sigma(&f.st, &f.sig);
+    let nrms = (f.fs.residual.iter().zip(&per).map(|(r, s)| (r / s).powi(2)).sum::<f64>() / f.st.n as f64).sqrt();
+    let names = candidate_names(model, &f.st);
+    let st = &f.st;
+    let cands: Vec<Candidate> = names
+        .iter()
+        .map(|&n| {
+            let sh = candidate_shape(n);
+            let sh2 = sh.clone();
+            let coef: Vec<&str> = sh.coefs.iter().map(|s| s.as_str()).collect();
+            let mut c = Candidate::new(n.as_str(), &coef, move |h: &[f64]| {
+                let cols = columns(st, n, &sh2, h);
+                if cols.iter().all(|c| c.iter().all(|v| *v == 0.0)) {
+                    Err("the signature vanishes on these samples (an alias of a constant)".to_string())
+                } else {
+                    Ok(cols)
+                }
+            });
+            for hname in &sh.hypers {
+                let (grid, refine) = hyper_grid(st, n, hname);
+                c.hyper_parameters.push(HyperParameter { name: hname.to_string(), grid, refine });
+            }
+            let sh3 = sh.clone();
+            let start = EffectParams::default_for(n);
+            c.with_describe(move |coefs: &[f64], h: &[f64]| describe(n, &sh3, coefs, h, &start))
+        })
+        .collect();
+    let mut ranking: Vec<RankingEntry> = Vec::new();
+    if !cands.is_empty() {
+        let sigma = Sigma::PerSample(per.clone());
+        let base: Vec<Vec<f64>> = f.fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
+        let input =
+            vmt_estimators::modelcheck::ResidualInput { residual: &f.fs.residual, sigma: &sigma, base_columns: &base };
+        match rank_candidates(&input, &cands, &DiagnoseConfig::default()) {
+            Ok(d) => ranking = d.ranking,
+            Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) => {
+                notes.push("the model explains the data exactly: nothing to diagnose".into())
+            }
+            Err(e) => return Err(VmtError::bad(data, "", format!("diagnose: {e}"))),
+        }
+    }
+    let advice = advice(&ranking, nrms);
+    Ok(DiagnoseReport { normalized_rms: nrms, ranking, advice, notes })
+}
+
+/// What measurement separates two effects that fit the same signature on these data.
+pub fn separating_measurement(a: &str, b: &str) -> String {
+    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
+    let angular = |e: &str| matches!(e, "roll" | "pitch" | "yaw");
+    let linear = |e: &str| matches!(e, "positioning" | "straightness_y" | "straightness_z" | "scale_error");
+    if pair("thermal_expansion", "scale_error") || pair("thermal_expansion", "positioning") {
+        "repeat the positioning test later, when the machine is warm (runs at different times): thermal expansion \
+         grows with time, a scale error does not"
+            .into()
+    } else if a == "thermal_drift" || b == "thermal_drift" {
+        "record the readings over a longer time, or repeat the test after a pause: a drift grows with time".into()
+    } else if (angular(a) && linear(b)) || (angular(b) && linear(a)) || (angular(a) && angular(b)) {
+        "measure with a second laser at another height or lateral offset (a different Abbe offset), or with an \
+         angular laser: an angular error motion scales with the offset, a translation does not"
+            .into()
+    } else if pair("cyclic_lead", "interpolation_error") {
+        "measure at target spacings finer than the screw lead and than the scale's signal period".into()
+    } else if a == "backlash" || b == "backlash" {
+        "approach every target from both directions (bidirectional ISO 230-2 cycle)".into()
+    } else {
+        "measure at more positions, at other times or with a sensor at another offset, so that the two \
+         signatures differ"
+            .into()
+    }
+}
+
+/// The advice text of a diagnosis.
+fn advice(ranking: &[RankingEntry], nrms: f64) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    let sig: Vec<&RankingEntry> = ranking.iter().filter(|r| r.verdict == Verdict::Significant).collect();
+    for r in &sig {
+        parts.push(format!(
+            "`{}` is significant (ΔBIC {:.1}, explains {:.0} % of the residual): add it with \
+             `vmt add --effect {} --from-diagnosis`.",
+            r.effect,
+            r.delta_bic,
+            100.0 * r.explained,
+            r.effect
+        ));
+    }
+    let mut seen: Vec<(String, String)> = Vec::new();
+    for r in ranking.iter().filter(|r| r.verdict == Verdict::Inseparable) {
+        for o in &r.confused_with {
+            let key = if r.effect < *o { (r.effect.clone(), o.clone()) } else { (o.clone(), r.effect.clone()) };
+            if seen.contains(&key) {
+                continue;
+            }
+            parts.push(format!(
+                "`{}` and `{}` explain the residual equally well on these data and cannot be told apart: {}.",
+                key.0,
+                key.1,
+                separating_measurement(&key.0, &key.1)
+            ));
+            seen.push(key);
+        }
+    }
+    if parts.is_empty() {
+        parts.push(format!("no missing effect is significant at this noise level (normalised RMS {nrms:.2})."));
+        if nrms > 1.5 {
+            parts.push(
+                "The residual is above the noise but no catalogue effect explains it: look at the residual by \
+                 position, direction and time in `vmt compare`, or fit an error motion with a richer basis."
+                    .into(),
+            );
+        }
+    }
+    parts.join(" ")
+}
+
+// ------------------------------------------------------------------------------------------
+// vmt add and the history.
+
+/// The model with effect `name` (on the model's axis) added, `fit = true`; with `from` (a ranking
+/// entry of a diagnosis) its parameters are the starting values: error-motion polynomial
+/// coefficients `cK`, or the scalar parameters by key.
+pub fn add_effect(model: &Model, name: EffectName, from: Option<&RankingEntry>) -> Result<Model, String> {
+    if model.get(name, model.axis).is_some() {
+        return Err(format!("the model already has `{name}` on axis {}", model.axis));
+    }
+    let mut effect = Effect { name, axis: model.axis, params: EffectParams::default_for(name) };
+    let mut given: Vec<String> = Vec::new();
+    if let Some(r) = from {
+        if name.is_error_motion() {
+            let deg = r.params.keys().filter_map(|k| k.strip_prefix('c')?.parse::<usize>().ok()).max().unwrap_or(0);
+            let mut c = vec![0.0; deg + 1];
+            for (k, v) in &r.params {
+                if let Some(i) = k.strip_prefix('c').and_then(|s| s.parse::<usize>().ok()) {
+                    c[i] = *v;
+                }
+            }
+            effect.params = EffectParams::ErrorMotion(Profile { terms: vec![Term::Poly(c)] });
+            given.push("poly".into());
+        } else {
+            for (k, v) in &r.params {
+                if effect.params.set(k, *v) {
+                    given.push(k.clone());
+                }
+            }
+            // Amplitudes are ≥ 0 by the catalogue's ranges: fold a negative one into the phase.
+            if matches!(name, EffectName::Backlash) && effect.params.get("value").is_some_and(|v| v < 0.0) {
+                let v = effect.params.get("value").unwrap_or(0.0);
+                effect.params.set("value", v.abs());
+            }
+            if matches!(name, EffectName::ThermalDrift | EffectName::ThermalExpansion) {
+                if let Some(t) = effect.params.get("tau") {
+                    effect.params.set("tau", t.max(0.0));
+                }
+            }
+        }
+    }
+    if let Some(p) = effect.validate().into_iter().next() {
+        return Err(format!("{}: {}", p.key, p.message));
+    }
+    let mut m = model.clone();
+    m.insert(ModelEffect { effect, fit: true, basis: None, order: None, given });
+    Ok(m)
+}
+
+/// `history.json` beside a model file.
+pub fn history_path(model_path: &Path) -> PathBuf {
+    model_path.parent().map(|p| p.join("history.json")).unwrap_or_else(|| PathBuf::from("history.json"))
+}
+
+/// Reads a history file (an array of [`HistoryEntry`]); None if absent or unreadable.
+pub fn read_history(path: &Path) -> Option<Vec<HistoryEntry>> {
+    let text = std::fs::read_to_string(path).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
+/// Appends entries to a history file (written atomically).
+pub fn append_history(path: &Path, entries: &[HistoryEntry]) -> Result<(), VmtError> {
+    let mut h = read_history(path).unwrap_or_default();
+    h.extend(entries.iter().cloned());
+    let text = serde_json::to_string_pretty(&h).map_err(|e| VmtError::Internal(e.to_string()))?;
+    write_file_atomic(path, text.as_bytes())
+}
+
+// ------------------------------------------------------------------------------------------
+// Human-readable output.
+
+/// The text report of a compare.
+pub fn compare_text(r: &CompareReport) -> String {
+    let mut s = format!("vmt compare: model {} against {}\n", r.model, r.data);
+    s += &format!(
+        "{:<12} {:<14} {:>12} {:>10} {:>8} {:>10} {:>8}\n",
+        "run", "sensor", "rms µm", "rms/σ", "fit %", "σ µm", "LB p"
+    );
+    for c in &r.channels {
+        s += &format!(
+            "{:<12} {:<14} {:>12.4} {:>10.2} {:>8.1} {:>9.4}{} {:>8}\n",
+            c.run,
+            c.sensor,
+            c.rms * 1e6,
+            c.normalized_rms,
+            c.fit_percent,
+            c.sigma * 1e6,
+            if c.sigma_estimated { "*" } else { " " },
+            c.ljung_box_p.map_or("-".to_string(), |p| format!("{p:.3}"))
+        );
+        let dir: Vec<String> = c.by_direction.iter().map(|(d, m, _)| format!("{d:+}: {:.3}", m * 1e6)).collect();
+        s += &format!("    mean residual by direction (µm): {}\n", dir.join(", "));
+        let pos: Vec<String> = c
+            .by_position
+            .iter()
+            .map(|(a, b, m, _)| format!("{:.0}–{:.0} mm {:.3}", a * 1e3, b * 1e3, m * 1e6))
+            .collect();
+        s += &format!("    by position: {}\n", pos.join("; "));
+        if let Some((wl, a)) = c.spectrum_peaks.first() {
+            s += &format!("    strongest spatial period: {:.2} mm, amplitude {:.3} µm\n", wl * 1e3, a * 1e6);
+        }
+    }
+    s += &format!("normalised RMS (all samples): {:.3}   (1.0 = noise level; * σ estimated)\n", r.normalized_rms);
+    for (e, p) in &r.fitted {
+        let kv: Vec<String> = p.iter().map(|(k, v)| format!("{k} = {}", fmt_num(*v))).collect();
+        s += &format!("fitted {e}: {}\n", kv.join(", "));
+    }
+    for n in &r.notes {
+        s += &format!("note: {n}\n");
+    }
+    if !r.history.is_empty() {
+        s += "iterations (normalised RMS):\n";
+        let max = r.history.iter().map(|h| h.normalized_rms).fold(0.0, f64::max).max(1e-300);
+        for (i, h) in r.history.iter().enumerate() {
+            let bar = "#".repeat(((h.normalized_rms / max) * 40.0).round() as usize);
+            s += &format!("  {i:>2} {:>10.3} {bar} {} {}\n", h.normalized_rms, h.model, h.added);
+        }
+    }
+    s
+}
+
+/// The text report of a diagnosis.
+pub fn diagnose_text(r: &DiagnoseReport) -> String {
+    let mut s = format!("vmt diagnose: normalised RMS {:.3}\n", r.normalized_rms);
+    s += &format!("{:<22} {:>12} {:>10} {:<12} params\n", "effect", "ΔBIC", "explained", "verdict");
+    for e in &r.ranking {
+        let kv: Vec<String> = e.params.iter().map(|(k, v)| format!("{k}={}", fmt_num(*v))).collect();
+        let v = match e.verdict {
+            Verdict::Significant => "significant",
+            Verdict::Noise => "noise",
+            Verdict::Inseparable => "inseparable",
+        };
+        s += &format!("{:<22} {:>12.1} {:>10.3} {:<12} {}", e.effect, e.delta_bic, e.explained, v, kv.join(" "));
+        if !e.confused_with.is_empty() {
+            s += &format!("  (confused with {})", e.confused_with.join(", "));
+        }
+        s += "\n";
+    }
+    s += &format!("advice: {}\n", r.advice);
+    for n in &r.notes {
+        s += &format!("note: {n}\n");
+    }
+    s
+}
+
+/// True for a positioning procedure (used by callers that build sets).
+pub fn is_positioning(p: Procedure) -> bool {
+    p == Procedure::Positioning
+}
