@@ -522,3 +522,134 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
     }
     Ok(0)
 }
+
+/// `vmt identify DATA [--run R] [-o PROFILES.csv]`: the six error motions of the axis from the laser
+/// lines (linear and straightness lasers) of a point-table run, with standard errors (FORMAT.md §5 CSV).
+pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, json: bool) -> Result<i32, VmtError> {
+    use crate::estimate::{identify_laser_lines, LaserLine};
+    use crate::measurement::{ProfileColumn, ProfileTable};
+    use vmt_sim::effects::EffectName;
+    let set = read_set(path)?;
+    let r = match run {
+        Some(n) => set.run(n).ok_or_else(|| VmtError::bad(path, "runs", format!("no run named `{n}`")))?,
+        None => set
+            .runs
+            .iter()
+            .find(|r| {
+                matches!(r.data, measurement::RunData::PointTable { .. })
+                    && set.sensors.iter().filter(|s| is_laser_line(s.kind) && r.data.column(&s.name).is_some()).count()
+                        >= 2
+            })
+            .ok_or_else(|| VmtError::bad(path, "runs", "expected a point-table run with at least two laser lines"))?,
+    };
+    let measurement::RunData::PointTable { target, columns, .. } = &r.data else {
+        return Err(VmtError::bad(path, format!("run {}", r.name), "expected a point table"));
+    };
+    let lines: Vec<LaserLine> = set
+        .sensors
+        .iter()
+        .filter(|s| is_laser_line(s.kind) && r.data.column(&s.name).is_some())
+        .map(|s| LaserLine {
+            name: s.name.clone(),
+            point: s.position,
+            direction: s.direction,
+            sigma: s.sigma.unwrap_or(0.0),
+        })
+        .collect();
+    let (id, _) =
+        identify_laser_lines(target, columns, &lines).map_err(|m| VmtError::bad(path, format!("run {}", r.name), m))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&id).map_err(|e| VmtError::Internal(e.to_string()))?);
+    } else {
+        println!(
+            "identified from {} laser lines of run {}: rank {}, condition {:.3e}",
+            lines.len(),
+            r.name,
+            id.rank,
+            id.condition
+        );
+        for u in &id.unobservable {
+            println!("  not observable: {u}");
+        }
+        for p in &id.profiles {
+            let worst = p.std_errors.iter().flatten().cloned().fold(0.0, f64::max);
+            let peak = p.values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            println!("  {:<4} max |value| {:.4e}  max standard error {:.2e}", p.name, peak, worst);
+        }
+    }
+    if let Some(out) = out {
+        let syms = ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"];
+        let first = id.profile("EXX").ok_or_else(|| VmtError::Internal("no EXX profile".into()))?;
+        let columns = EffectName::ERROR_MOTIONS
+            .iter()
+            .zip(syms)
+            .filter_map(|(&effect, sym)| {
+                id.profile(sym).map(|p| ProfileColumn {
+                    axis: None,
+                    effect,
+                    values: p.values.clone(),
+                    sigma: Some(p.std_errors.iter().map(|s| s.unwrap_or(f64::NAN)).collect()),
+                })
+            })
+            .filter(|c| c.sigma.as_ref().is_some_and(|s| s.iter().all(|v| v.is_finite())))
+            .collect();
+        measurement::write_profiles(&ProfileTable { position: first.positions.clone(), columns }, out, UnitChoice::Si)?;
+        eprintln!("wrote {}", out.display());
+    }
+    Ok(0)
+}
+
+fn is_laser_line(k: SensorKind) -> bool {
+    matches!(k, SensorKind::LaserLinear | SensorKind::LaserStraightness)
+}
+
+/// `vmt score --truth T --estimate E`: compares two FORMAT.md §5 profile CSVs on the estimate's positions
+/// (the truth interpolated linearly), straightness about its least-squares line on both, positioning and
+/// angles relative to their first position; RMS and max difference per error motion.
+pub fn score(truth: &Path, estimate: &Path, json: bool) -> Result<i32, VmtError> {
+    let t = measurement::read_profiles(truth)?;
+    let e = measurement::read_profiles(estimate)?;
+    let interp = |xs: &[f64], ys: &[f64], x: f64| -> f64 {
+        let i = xs.partition_point(|&v| v <= x).clamp(1, xs.len() - 1);
+        let w = (x - xs[i - 1]) / (xs[i] - xs[i - 1]);
+        ys[i - 1] + w * (ys[i] - ys[i - 1])
+    };
+    let mut rows = Vec::new();
+    for c in &e.columns {
+        let Some(tc) = t.columns.iter().find(|tc| tc.effect == c.effect && tc.axis == c.axis) else { continue };
+        let tv: Vec<f64> = e.position.iter().map(|&x| interp(&t.position, &tc.values, x)).collect();
+        let straightness = matches!(
+            c.effect,
+            vmt_sim::effects::EffectName::StraightnessY | vmt_sim::effects::EffectName::StraightnessZ
+        );
+        let norm = |v: &[f64]| -> Vec<f64> {
+            if straightness {
+                vmt_estimators::line::remove_line(&e.position, v)
+            } else {
+                v.iter().map(|x| x - v[0]).collect()
+            }
+        };
+        let d: Vec<f64> = norm(&c.values).iter().zip(norm(&tv)).map(|(a, b)| a - b).collect();
+        let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
+        let max = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        rows.push(serde_json::json!({"effect": c.column_name(), "rms": rms, "max": max, "points": d.len()}));
+    }
+    if rows.is_empty() {
+        return Err(VmtError::bad(estimate, "line 1 (header)", "no error-motion column in common with the truth"));
+    }
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows).map_err(|e| VmtError::Internal(e.to_string()))?);
+    } else {
+        println!("{:<20} {:>14} {:>14} {:>8}", "error motion", "RMS diff", "max diff", "points");
+        for r in &rows {
+            println!(
+                "{:<20} {:>14.4e} {:>14.4e} {:>8}",
+                r["effect"].as_str().unwrap_or(""),
+                r["rms"].as_f64().unwrap_or(0.0),
+                r["max"].as_f64().unwrap_or(0.0),
+                r["points"]
+            );
+        }
+    }
+    Ok(0)
+}

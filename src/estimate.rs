@@ -396,6 +396,46 @@ fn accel_straightness_check(
     Ok((Check::profile(name, Quantity::Length, &truth, &estimate, tolerance), fig))
 }
 
+/// One laser line of a point table: its column, measuring point (axis frame, m), beam direction and the
+/// 1σ noise of a reading (m).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LaserLine {
+    pub name: String,
+    pub point: [f64; 3],
+    pub direction: [f64; 3],
+    pub sigma: f64,
+}
+
+/// Identifies the six error motions of one axis from the laser lines of a point table with the general
+/// least-squares identifier (seeds 001/003), one zero offset per line, values at the measured targets.
+pub fn identify_laser_lines(
+    target: &[f64],
+    columns: &[(String, Vec<f64>)],
+    lines: &[LaserLine],
+) -> Result<(vmt_estimators::laser_ls::Identification, vmt_estimators::laser_ls::Model), String> {
+    use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, IdOptions, Model, Reading};
+    let mut readings = Vec::new();
+    for (line, l) in lines.iter().enumerate() {
+        let values = &columns.iter().find(|(n, _)| *n == l.name).ok_or_else(|| format!("no column `{}`", l.name))?.1;
+        for (&x, &v) in target.iter().zip(values) {
+            readings.push(Reading {
+                q: vec![x],
+                point: l.point,
+                direction: l.direction,
+                value: v,
+                sigma: l.sigma.max(1e-12),
+                line: Some(line),
+            });
+        }
+    }
+    let mut nodes = target.to_vec();
+    nodes.sort_by(f64::total_cmp);
+    nodes.dedup();
+    let model = Model { axes: vec![AxisModel::with_nodes(AxisName::X, &nodes)], squareness: false };
+    let id = identify(&readings, &model, &IdOptions::default()).map_err(|e| e.to_string())?;
+    Ok((id, model))
+}
+
 /// The six error motions identified from the laser lines of a point-table run, compared with the truth.
 fn laser_lines_checks(
     sc: &Scenario,
@@ -406,38 +446,26 @@ fn laser_lines_checks(
     tol_t: f64,
     tol_a: f64,
 ) -> Result<Vec<(Check, Figure)>, VmtError> {
-    use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, IdOptions, Model, Reading};
     let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (laser_lines {run})"), m);
     let rec = runs.iter().find(|r| r.name == run).ok_or_else(|| bad(format!("no run `{run}`")))?;
     let RunData::PointTable { target, columns, .. } = &rec.data else {
         return Err(bad("expected a point table".into()));
     };
-    let mut readings = Vec::new();
-    for (line, name) in sensors.iter().enumerate() {
+    let mut lines = Vec::new();
+    for name in sensors {
         let spec = sc
             .sensors
             .iter()
             .find(|s| &s.name == name)
             .ok_or_else(|| bad(format!("sensor `{name}` is not declared")))?;
-        let values = &columns.iter().find(|(n, _)| n == name).ok_or_else(|| bad(format!("no column `{name}`")))?.1;
-        let point = spec.axis_position(&sc.axis).map_err(bad)?;
-        let sigma = (spec.sigma.powi(2) + spec.resolution.powi(2) / 12.0).sqrt().max(1e-12);
-        for (&x, &v) in target.iter().zip(values) {
-            readings.push(Reading {
-                q: vec![x],
-                point,
-                direction: spec.unit_direction().to_array(),
-                value: v,
-                sigma,
-                line: Some(line),
-            });
-        }
+        lines.push(LaserLine {
+            name: name.clone(),
+            point: spec.axis_position(&sc.axis).map_err(bad)?,
+            direction: spec.unit_direction().to_array(),
+            sigma: (spec.sigma.powi(2) + spec.resolution.powi(2) / 12.0).sqrt(),
+        });
     }
-    let mut nodes = target.clone();
-    nodes.sort_by(f64::total_cmp);
-    nodes.dedup();
-    let model = Model { axes: vec![AxisModel::with_nodes(AxisName::X, &nodes)], squareness: false };
-    let id = identify(&readings, &model, &IdOptions::default()).map_err(|e| bad(e.to_string()))?;
+    let (id, model) = identify_laser_lines(target, columns, &lines).map_err(bad)?;
     let mut checks = Vec::new();
     for (i, sym) in ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"].iter().enumerate() {
         let p = id.profile(sym).ok_or_else(|| bad(format!("identifier returned no {sym}")))?;

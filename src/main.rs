@@ -81,6 +81,26 @@ enum Command {
         #[arg(long)]
         equidistant: Option<usize>,
     },
+    /// The six error motions from the laser lines of a point-table run (seeds 001/003 identifier).
+    Identify {
+        data: PathBuf,
+        #[arg(long)]
+        run: Option<String>,
+        /// Write the profiles with standard errors (FORMAT.md §5).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Compare an estimate's profile CSV with the truth's (FORMAT.md §5): RMS and max per error motion.
+    Score {
+        #[arg(long)]
+        truth: PathBuf,
+        #[arg(long)]
+        estimate: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
     /// ISO 230-2 evaluation of a positioning test: a measurement set directory or an ecmc .dat file.
     #[command(name = "iso230-2")]
     Iso230_2 {
@@ -148,6 +168,8 @@ fn main() -> ExitCode {
         Command::Compensate { data, sensor, out, equidistant } => {
             vmt::cli::compensate(&data, sensor.as_deref(), &out, equidistant)
         }
+        Command::Identify { data, run, out, json } => vmt::cli::identify(&data, run.as_deref(), out.as_deref(), json),
+        Command::Score { truth, estimate, json } => vmt::cli::score(&truth, &estimate, json),
         Command::Iso230_2 { path, run, sensor, json } => {
             vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json)
         }
