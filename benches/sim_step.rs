@@ -30,5 +30,25 @@ fn step(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, step);
+/// The same step with the full drive: ball screw (rotor, axial stiffness, backlash) and LuGre friction.
+fn step_full_drive(c: &mut Criterion) {
+    use vmt_sim::axis_sim::GuideFriction;
+    use vmt_sim::drive::{BallScrewConfig, DriveConfig};
+    use vmt_sim::friction::LugreParams;
+    let text = include_str!("../urdf/slide_column.urdf");
+    let cfg = AxisConfig { drive: DriveConfig::BallScrew(BallScrewConfig::default()), ..AxisConfig::default() };
+    let model = AxisModel::build(&parse_urdf(text).unwrap(), &cfg).unwrap();
+    let lugre = LugreParams { sigma0: 1e8, sigma1: 2e4, sigma2: 800.0, fc: 150.0, fs: 250.0, vs: 1e-3, delta: 2.0 };
+    let truth = AxisTruth { backlash: 4e-6, friction: GuideFriction::LuGre(lugre), ..AxisTruth::default() };
+    let mut sim = AxisSim::new(&model, &truth, 0.2);
+    let mut x = 0.2;
+    c.bench_function("slide_column step, ball screw + backlash + LuGre", |b| {
+        b.iter(|| {
+            x += 0.01 * model.dt;
+            sim.step(Command { pos: x, vel: 0.01, acc: 0.0 });
+        })
+    });
+}
+
+criterion_group!(benches, step, step_full_drive);
 criterion_main!(benches);
