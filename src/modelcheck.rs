@@ -24,9 +24,14 @@
 //! linear parameters eliminated (variable projection; Golub & Pereyra 1973). The statistics and
 //! the candidate ranking come from `vmt_estimators::modelcheck`.
 //!
-//! Not predicted in phase 1: time-series runs (friction, resonance, gravity tilt: DESIGN.md §8
-//! phase 2), squareness (needs two axes), servo lag (no effect on settled readings). They are
-//! listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
+//! Phase 2 (friction): the `motor_force` column of a `friction_sweep` or `constant_velocity` time
+//! series, every sample at the run's steady velocity v = feed·direction, is predicted by
+//! F = o + Fc·sgn v + Fv·v + (Fs − Fc)·sgn v·exp(−(v/vs)²) (Coulomb, viscous, Stribeck with the
+//! catalogue's default shape δ = 2; the simulator's law, `vmt_sim::effects::EffectSet::friction`),
+//! with one force offset o per sensor; vs is searched like a period.
+//!
+//! Not predicted: accelerometers (resonance, gravity tilt), LuGre, squareness (needs two axes),
+//! servo lag (no effect on settled readings). They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
 //! degree `order` (default 3) without its constant term (the offsets carry it).
 
 use crate::error::{fmt_num, VmtError};
@@ -731,6 +736,8 @@ fn describe(name: EffectName, sh: &Shape, c: &[f64], h: &[f64], start: &EffectPa
 pub struct ChannelReport {
     /// Run name.
     pub run: String,
+    /// SI unit of the channel's values (`m` for deviations, `N` for motor forces).
+    pub unit: String,
     /// Sensor name.
     pub sensor: String,
     /// RMS of the residual, SI unit of the channel (m).
@@ -1040,6 +1047,7 @@ fn channel_report(c: &Channel, r: &[f64], p: &[f64], s: f64, est: bool, offset: 
         .unwrap_or_default();
     ChannelReport {
         run: c.run.clone(),
+        unit: if c.kind == SensorKind::MotorForce { "N".into() } else { "m".into() },
         sensor: c.sensor.clone(),
         rms,
         normalized_rms: rms / s,
@@ -1287,31 +1295,30 @@ pub fn append_history(path: &Path, entries: &[HistoryEntry]) -> Result<(), VmtEr
 pub fn compare_text(r: &CompareReport) -> String {
     let mut s = format!("vmt compare: model {} against {}\n", r.model, r.data);
     s += &format!(
-        "{:<12} {:<14} {:>12} {:>10} {:>8} {:>10} {:>8}\n",
-        "run", "sensor", "rms µm", "rms/σ", "fit %", "σ µm", "LB p"
+        "{:<12} {:<14} {:>12} {:>10} {:>8} {:>12} {:>8}\n",
+        "run", "sensor", "rms", "rms/σ", "fit %", "σ", "LB p"
     );
     for c in &r.channels {
+        // Deviations in µm, forces in N.
+        let (k, u) = if c.unit == "N" { (1.0, "N") } else { (1e6, "µm") };
         s += &format!(
-            "{:<12} {:<14} {:>12.4} {:>10.2} {:>8.1} {:>9.4}{} {:>8}\n",
+            "{:<12} {:<14} {:>9.4} {u:<2} {:>10.2} {:>8.1} {:>9.4} {u:<2}{} {:>8}\n",
             c.run,
             c.sensor,
-            c.rms * 1e6,
+            c.rms * k,
             c.normalized_rms,
             c.fit_percent,
-            c.sigma * 1e6,
+            c.sigma * k,
             if c.sigma_estimated { "*" } else { " " },
             c.ljung_box_p.map_or("-".to_string(), |p| format!("{p:.3}"))
         );
-        let dir: Vec<String> = c.by_direction.iter().map(|(d, m, _)| format!("{d:+}: {:.3}", m * 1e6)).collect();
-        s += &format!("    mean residual by direction (µm): {}\n", dir.join(", "));
-        let pos: Vec<String> = c
-            .by_position
-            .iter()
-            .map(|(a, b, m, _)| format!("{:.0}–{:.0} mm {:.3}", a * 1e3, b * 1e3, m * 1e6))
-            .collect();
+        let dir: Vec<String> = c.by_direction.iter().map(|(d, m, _)| format!("{d:+}: {:.3}", m * k)).collect();
+        s += &format!("    mean residual by direction ({u}): {}\n", dir.join(", "));
+        let pos: Vec<String> =
+            c.by_position.iter().map(|(a, b, m, _)| format!("{:.0}–{:.0} mm {:.3}", a * 1e3, b * 1e3, m * k)).collect();
         s += &format!("    by position: {}\n", pos.join("; "));
         if let Some((wl, a)) = c.spectrum_peaks.first() {
-            s += &format!("    strongest spatial period: {:.2} mm, amplitude {:.3} µm\n", wl * 1e3, a * 1e6);
+            s += &format!("    strongest spatial period: {:.2} mm, amplitude {:.3} {u}\n", wl * 1e3, a * k);
         }
     }
     s += &format!("normalised RMS (all samples): {:.3}   (1.0 = noise level; * σ estimated)\n", r.normalized_rms);
