@@ -24,9 +24,14 @@
 //! linear parameters eliminated (variable projection; Golub & Pereyra 1973). The statistics and
 //! the candidate ranking come from `vmt_estimators::modelcheck`.
 //!
-//! Not predicted in phase 1: time-series runs (friction, resonance, gravity tilt: DESIGN.md §8
-//! phase 2), squareness (needs two axes), servo lag (no effect on settled readings). They are
-//! listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
+//! Phase 2 (friction): the `motor_force` column of a `friction_sweep` or `constant_velocity` time
+//! series, every sample at the run's steady velocity v = feed·direction, is predicted by
+//! F = o + Fc·sgn v + Fv·v + (Fs − Fc)·sgn v·exp(−(v/vs)²) (Coulomb, viscous, Stribeck with the
+//! catalogue's default shape δ = 2; the simulator's law, `vmt_sim::effects::EffectSet::friction`),
+//! with one force offset o per sensor; vs is searched like a period.
+//!
+//! Not predicted: accelerometers (resonance, gravity tilt), LuGre, squareness (needs two axes),
+//! servo lag (no effect on settled readings). They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
 //! degree `order` (default 3) without its constant term (the offsets carry it).
 
 use crate::error::{fmt_num, VmtError};
@@ -73,7 +78,9 @@ pub struct Channel {
     pub cycle: Vec<u32>,
     /// Times t, s since the start of the session (run start_time + the table's `t`).
     pub t: Vec<f64>,
-    /// Measured deviations, m.
+    /// Velocity, m/s (the run's feed × direction for time series; 0 in point tables).
+    pub v: Vec<f64>,
+    /// Measured values: deviations (m) in point tables, motor force (N) in time series.
     pub y: Vec<f64>,
     /// 1σ noise from the manifest (None or 0 → estimated).
     pub sigma: Option<f64>,
@@ -85,8 +92,17 @@ impl Channel {
     fn s_drive(&self) -> f64 {
         match self.kind {
             SensorKind::EncoderLinear => 1.0,
-            SensorKind::EncoderRotary => 0.0,
-            _ => self.u[0],
+            _ if self.is_laser() => self.u[0],
+            _ => 0.0,
+        }
+    }
+
+    /// 1 for a motor-force channel (friction acts on it), 0 otherwise.
+    fn s_force(&self) -> f64 {
+        if self.kind == SensorKind::MotorForce {
+            1.0
+        } else {
+            0.0
         }
     }
 
@@ -142,18 +158,14 @@ pub fn channels(set: &MeasurementSet, axis: char) -> (Vec<Channel>, Vec<String>)
     let mut out: Vec<Channel> = Vec::new();
     let mut notes: Vec<String> = Vec::new();
     for run in &set.runs {
-        let RunData::PointTable { target, run: cyc, direction, t, columns } = &run.data else {
-            notes.push(format!(
-                "run `{}` ({}): a time series; phase 1 predicts point tables only",
-                run.name,
-                run.procedure.as_str()
-            ));
-            continue;
-        };
         if run.axis != axis {
             notes.push(format!("run `{}` moves axis {}, the model's axis is {axis}", run.name, run.axis));
             continue;
         }
+        let RunData::PointTable { target, run: cyc, direction, t, columns } = &run.data else {
+            time_series_channels(set, run, &mut out, &mut notes);
+            continue;
+        };
         let t0 = run.start_time.unwrap_or(0.0);
         let times: Vec<f64> = match t {
             Some(t) => t.iter().map(|v| t0 + v).collect(),
@@ -183,12 +195,60 @@ pub fn channels(set: &MeasurementSet, axis: char) -> (Vec<Channel>, Vec<String>)
                 d: direction.iter().map(|&v| f64::from(v)).collect(),
                 cycle: cyc.clone(),
                 t: times.clone(),
+                v: vec![0.0; target.len()],
                 y: values.clone(),
                 sigma: s.sigma.filter(|v| *v > 0.0),
             });
         }
     }
     (out, notes)
+}
+
+/// The motor-force channels of a constant-velocity or friction-sweep time series (phase 2): every
+/// sample at the run's steady velocity v = feed·direction (the procedures sample only the cruise),
+/// position from `x_cmd`. Other time-series channels are listed in `notes` as not predicted.
+fn time_series_channels(
+    set: &MeasurementSet,
+    run: &crate::measurement::Run,
+    out: &mut Vec<Channel>,
+    notes: &mut Vec<String>,
+) {
+    let RunData::TimeSeries { t, columns } = &run.data else { return };
+    let steady = matches!(run.procedure, Procedure::FrictionSweep | Procedure::ConstantVelocity);
+    let t0 = run.start_time.unwrap_or(0.0);
+    let x: Vec<f64> = run.data.column("x_cmd").map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; t.len()]);
+    for (name, values) in columns {
+        if name == "x_cmd" {
+            continue;
+        }
+        let Some(s) = set.sensor(name) else { continue };
+        match (s.kind, steady, run.feed) {
+            (SensorKind::MotorForce, true, Some(feed)) => {
+                let dir = f64::from(run.direction.unwrap_or(1));
+                out.push(Channel {
+                    run: run.name.clone(),
+                    sensor: name.clone(),
+                    kind: s.kind,
+                    u: [1.0, 0.0, 0.0],
+                    r: [0.0; 3],
+                    x: x.clone(),
+                    d: vec![dir; t.len()],
+                    cycle: vec![1; t.len()],
+                    t: t.iter().map(|v| t0 + v).collect(),
+                    v: vec![feed * dir; t.len()],
+                    y: values.clone(),
+                    sigma: s.sigma.filter(|v| *v > 0.0),
+                });
+            }
+            _ => notes.push(format!(
+                "run `{}` ({}), sensor `{name}` ({}): not predicted (time series: only the motor force of \
+                 constant-velocity and friction-sweep runs with a `feed`)",
+                run.name,
+                run.procedure.as_str(),
+                s.kind.as_str()
+            )),
+        }
+    }
 }
 
 // ------------------------------------------------------------------------------------------
@@ -209,11 +269,30 @@ fn rise(t: f64, tau: f64) -> f64 {
 struct Stack<'a> {
     chans: &'a [Channel],
     n: usize,
+    /// Offset group of each channel: one per (run, sensor) for deviations (the instrument is zeroed
+    /// per run), one per sensor for motor forces (a force bias, e.g. weight on an inclined axis,
+    /// does not change from run to run).
+    group: Vec<usize>,
+    n_groups: usize,
 }
 
 impl<'a> Stack<'a> {
     fn new(chans: &'a [Channel]) -> Stack<'a> {
-        Stack { chans, n: chans.iter().map(|c| c.y.len()).sum() }
+        let mut keys: Vec<String> = Vec::new();
+        let mut group = Vec::with_capacity(chans.len());
+        for c in chans {
+            let key = if c.kind == SensorKind::MotorForce {
+                format!("force/{}", c.sensor)
+            } else {
+                format!("{}/{}", c.run, c.sensor)
+            };
+            let g = keys.iter().position(|k| *k == key).unwrap_or_else(|| {
+                keys.push(key);
+                keys.len() - 1
+            });
+            group.push(g);
+        }
+        Stack { chans, n: chans.iter().map(|c| c.y.len()).sum(), group, n_groups: keys.len() }
     }
 
     /// One column: f(channel, sample index) over all samples.
@@ -231,13 +310,13 @@ impl<'a> Stack<'a> {
         self.col(|c, i| c.y[i])
     }
 
-    /// Offset columns, one per channel.
+    /// Offset columns, one per offset group.
     fn offsets(&self) -> Vec<Vec<f64>> {
-        (0..self.chans.len())
+        (0..self.n_groups)
             .map(|k| {
                 let mut v = Vec::with_capacity(self.n);
                 for (j, c) in self.chans.iter().enumerate() {
-                    v.extend(std::iter::repeat(if j == k { 1.0 } else { 0.0 }).take(c.y.len()));
+                    v.extend(std::iter::repeat(if self.group[j] == k { 1.0 } else { 0.0 }).take(c.y.len()));
                 }
                 v
             })
@@ -262,6 +341,8 @@ struct Shape {
     /// whose linear term is the scale error's signature).
     first_power: u32,
     order: u32,
+    /// Stribeck only: also fit the Coulomb level (the model has no `coulomb` effect).
+    with_fc: bool,
 }
 
 /// True for the effects phase 1 can predict in a point table.
@@ -275,10 +356,13 @@ pub fn predicts(name: EffectName) -> bool {
                 | EffectName::ThermalExpansion
                 | EffectName::ThermalDrift
                 | EffectName::InterpolationError
+                | EffectName::Coulomb
+                | EffectName::Viscous
+                | EffectName::Stribeck
         )
 }
 
-fn shape(name: EffectName, first_power: u32, order: u32) -> Shape {
+fn shape(name: EffectName, first_power: u32, order: u32, with_fc: bool) -> Shape {
     let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<String>>();
     let (coefs, hypers): (Vec<String>, Vec<&'static str>) = match name {
         n if n.is_error_motion() => ((first_power..=order).map(|k| format!("c{k}")).collect(), vec![]),
@@ -286,9 +370,13 @@ fn shape(name: EffectName, first_power: u32, order: u32) -> Shape {
         EffectName::CyclicLead | EffectName::InterpolationError => (s(&["a_sin", "a_cos"]), vec!["period"]),
         EffectName::ThermalExpansion => (s(&["alpha_delta_t"]), vec!["tau"]),
         EffectName::ThermalDrift => (s(&["value"]), vec!["tau"]),
+        EffectName::Coulomb => (s(&["fc"]), vec![]),
+        EffectName::Viscous => (s(&["fv"]), vec![]),
+        EffectName::Stribeck if with_fc => (s(&["fs_minus_fc", "fc"]), vec!["vs"]),
+        EffectName::Stribeck => (s(&["fs_minus_fc"]), vec!["vs"]),
         _ => (vec![], vec![]),
     };
-    Shape { coefs, hypers, first_power, order }
+    Shape { coefs, hypers, first_power, order, with_fc }
 }
 
 /// Design columns of effect `name` at hyper-parameters `h` (in the order of [`shape`]).
@@ -310,6 +398,17 @@ fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>>
         }
         EffectName::ThermalExpansion => vec![st.col(|c, i| c.s_chain() * c.x[i] * rise(c.t[i], h[0]))],
         EffectName::ThermalDrift => vec![st.col(|c, i| c.s_chain() * rise(c.t[i], h[0]))],
+        EffectName::Coulomb => vec![st.col(|c, i| c.s_force() * c.v[i].signum())],
+        EffectName::Viscous => vec![st.col(|c, i| c.s_force() * c.v[i])],
+        EffectName::Stribeck => {
+            // F = Fc·sgn v + (Fs − Fc)·sgn v·exp(−|v/vs|^δ), δ = 2 (the catalogue's default shape).
+            let vs = h[0];
+            let mut cols = vec![st.col(|c, i| c.s_force() * c.v[i].signum() * (-(c.v[i] / vs).abs().powi(2)).exp())];
+            if sh.with_fc {
+                cols.push(st.col(|c, i| c.s_force() * c.v[i].signum()));
+            }
+            cols
+        }
         _ => vec![],
     }
 }
@@ -341,6 +440,19 @@ fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
         (EffectParams::InterpolationError(ie), _) => st.col(|c, i| c.s_chain() * ie.value(c.x[i])),
         (EffectParams::ThermalExpansion(th), _) => st.col(|c, i| c.s_chain() * th.value(c.x[i], c.t[i])),
         (EffectParams::ThermalDrift(dr), _) => st.col(|c, i| c.s_chain() * dr.value_at(c.t[i])),
+        (EffectParams::Coulomb(f), _) => st.col(|c, i| c.s_force() * f.fc * c.v[i].signum()),
+        (EffectParams::Viscous(f), _) => st.col(|c, i| c.s_force() * f.fv * c.v[i]),
+        (EffectParams::Stribeck(f), _) => {
+            // The Coulomb part belongs to the `coulomb` effect unless `fc` is given here.
+            let fc = f.fc.unwrap_or(0.0);
+            st.col(|c, i| {
+                let v = c.v[i];
+                c.s_force()
+                    * v.signum()
+                    * (fc * (1.0 - (-(v / f.vs).abs().powf(f.shape)).exp())
+                        + f.fs * (-(v / f.vs).abs().powf(f.shape)).exp())
+            })
+        }
         _ => vec![0.0; st.n],
     }
 }
@@ -362,6 +474,8 @@ fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>, bool) {
             (log_grid(span / 4.0, span * 10.0, 40), true)
         }
         (EffectName::CyclicLead, _) => (log_grid(2e-3, 60e-3, 120), true),
+        // Stribeck velocities of machine-tool guideways: 10 µm/s to 100 mm/s.
+        (_, "vs") => (log_grid(1e-5, 0.1, 41), true),
         // Signal periods of common linear and rotary scales (Heidenhain, Renishaw): 2–200 µm.
         _ => (vec![2e-6, 4e-6, 8e-6, 10e-6, 20e-6, 40e-6, 100e-6, 200e-6], false),
     }
@@ -452,12 +566,19 @@ fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) -> Result<F
             continue;
         }
         if !me.fit {
-            for (k, v) in known_prediction(st, &me.effect).into_iter().enumerate() {
+            let mut e = me.effect.clone();
+            if let EffectParams::Stribeck(sp) = &mut e.params {
+                // The simulator's law: stribeck.fc unset takes the coulomb level.
+                if sp.fc.is_none() {
+                    sp.fc = model.get(EffectName::Coulomb, model.axis).and_then(|c| c.effect.params.get("fc"));
+                }
+            }
+            for (k, v) in known_prediction(st, &e).into_iter().enumerate() {
                 known[k] += v;
             }
             continue;
         }
-        let sh = shape(me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER));
+        let sh = shape(me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER), lacks_coulomb(model));
         let mut hyper = Vec::new();
         let mut searched = Vec::new();
         for h in &sh.hypers {
@@ -535,7 +656,7 @@ fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) -> Result<F
     }
     let cols = design(st, &terms);
     let (coefs, residual) = solve(&r0, &cols, sigma)?;
-    Ok(FitState { terms, cols, coefs, residual, n_offsets: st.chans.len() })
+    Ok(FitState { terms, cols, coefs, residual, n_offsets: st.n_groups })
 }
 
 /// The fitted parameters of each term as effect parameters (FORMAT.md §2 keys).
@@ -548,6 +669,14 @@ fn term_params(fs: &FitState, model: &Model) -> BTreeMap<String, BTreeMap<String
         j += k;
         let me = &model.effects[t.index];
         out.insert(t.name.as_str().to_string(), describe(t.name, &t.shape, c, &t.hyper, &me.effect.params));
+    }
+    // A Stribeck term without its own Fc rides on the model's Coulomb level: fs = Fc + (Fs − Fc).
+    if let Some(t) = fs.terms.iter().find(|t| t.name == EffectName::Stribeck && !t.shape.with_fc) {
+        let own = model.effects[t.index].effect.params.get("fc").unwrap_or(0.0);
+        let fc = coulomb_level(model, &out) - own;
+        if let Some(v) = out.get_mut("stribeck").and_then(|m| m.get_mut("fs")) {
+            *v += fc;
+        }
     }
     out
 }
@@ -576,6 +705,22 @@ fn describe(name: EffectName, sh: &Shape, c: &[f64], h: &[f64], start: &EffectPa
             m.insert("value".into(), c[0]);
             m.insert("tau".into(), h[0]);
         }
+        EffectName::Coulomb => {
+            m.insert("fc".into(), c[0]);
+        }
+        EffectName::Viscous => {
+            m.insert("fv".into(), c[0]);
+        }
+        EffectName::Stribeck => {
+            // fs = Fc + (Fs − Fc); Fc is this fit's own (with_fc) or the model's coulomb level.
+            let fc = if sh.with_fc { c[1] } else { start.get("fc").unwrap_or(0.0) };
+            if sh.with_fc {
+                m.insert("fc".into(), fc);
+            }
+            m.insert("fs".into(), fc + c[0]);
+            m.insert("vs".into(), h[0]);
+            m.insert("shape".into(), 2.0);
+        }
         _ => {
             m.insert("value".into(), c[0]);
         }
@@ -591,6 +736,8 @@ fn describe(name: EffectName, sh: &Shape, c: &[f64], h: &[f64], start: &EffectPa
 pub struct ChannelReport {
     /// Run name.
     pub run: String,
+    /// SI unit of the channel's values (`m` for deviations, `N` for motor forces).
+    pub unit: String,
     /// Sensor name.
     pub sensor: String,
     /// RMS of the residual, SI unit of the channel (m).
@@ -685,7 +832,7 @@ fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> Result<Fitte
     let bad = |m: String| VmtError::bad(data, "", m);
     // Every fitted effect must be seen by some channel.
     for me in model.effects.iter().filter(|m| m.fit && m.effect.axis == model.axis && predicts(m.effect.name)) {
-        let sh = shape(me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER));
+        let sh = shape(me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER), lacks_coulomb(model));
         let period = me.given.iter().any(|g| g == "period").then(|| me.effect.params.get("period")).flatten();
         if !visible(&st, me.effect.name, &sh, period) {
             return Err(bad(format!(
@@ -843,7 +990,7 @@ pub fn compare(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Compa
         k0 += m;
         let s = f.sig[j];
         sum_sq += r.iter().map(|v| (v / s).powi(2)).sum::<f64>();
-        out.push(channel_report(c, r, p, s, f.est[j], f.fs.coefs[j]));
+        out.push(channel_report(c, r, p, s, f.est[j], f.fs.coefs[f.st.group[j]]));
     }
     let n = f.st.n;
     Ok(CompareReport {
@@ -900,6 +1047,7 @@ fn channel_report(c: &Channel, r: &[f64], p: &[f64], s: f64, est: bool, offset: 
         .unwrap_or_default();
     ChannelReport {
         run: c.run.clone(),
+        unit: if c.kind == SensorKind::MotorForce { "N".into() } else { "m".into() },
         sensor: c.sensor.clone(),
         rms,
         normalized_rms: rms / s,
@@ -923,14 +1071,28 @@ fn candidate_names(model: &Model, st: &Stack) -> Vec<EffectName> {
         .iter()
         .copied()
         .filter(|n| predicts(*n) && model.get(*n, model.axis).is_none())
-        .filter(|n| visible(st, *n, &candidate_shape(*n), None))
+        .filter(|n| visible(st, *n, &candidate_shape(*n, lacks_coulomb(model)), None))
         .collect()
 }
 
 /// A candidate's shape: error motions as a cubic without constant term; the positioning candidate
 /// without its linear term as well (a linear positioning error is the scale error's signature).
-fn candidate_shape(n: EffectName) -> Shape {
-    shape(n, if n == EffectName::Positioning { 2 } else { 1 }, DEFAULT_ORDER)
+fn candidate_shape(n: EffectName, with_fc: bool) -> Shape {
+    shape(n, if n == EffectName::Positioning { 2 } else { 1 }, DEFAULT_ORDER, with_fc)
+}
+
+/// True when the model has no `coulomb` effect on its axis (a Stribeck term then fits its own Fc).
+fn lacks_coulomb(model: &Model) -> bool {
+    model.get(EffectName::Coulomb, model.axis).is_none()
+}
+
+/// The model's Coulomb level: fitted (`fitted`) or known, 0 without one, N.
+fn coulomb_level(model: &Model, fitted: &BTreeMap<String, BTreeMap<String, f64>>) -> f64 {
+    fitted
+        .get("coulomb")
+        .and_then(|m| m.get("fc").copied())
+        .or_else(|| model.get(EffectName::Coulomb, model.axis).and_then(|m| m.effect.params.get("fc")))
+        .unwrap_or(0.0)
 }
 
 /// `vmt diagnose` on in-memory inputs: fits the model, then every catalogue effect the model lacks
@@ -943,11 +1105,12 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     let per = st_sigma(&f.st, &f.sig);
     let nrms = (f.fs.residual.iter().zip(&per).map(|(r, s)| (r / s).powi(2)).sum::<f64>() / f.st.n as f64).sqrt();
     let names = candidate_names(model, &f.st);
+    let fc_ref = coulomb_level(model, &term_params(&f.fs, model));
     let st = &f.st;
     let cands: Vec<Candidate> = names
         .iter()
         .map(|&n| {
-            let sh = candidate_shape(n);
+            let sh = candidate_shape(n, lacks_coulomb(model));
             let sh2 = sh.clone();
             let coef: Vec<&str> = sh.coefs.iter().map(|s| s.as_str()).collect();
             let mut c = Candidate::new(n.as_str(), &coef, move |h: &[f64]| {
@@ -963,7 +1126,10 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
                 c.hyper_parameters.push(HyperParameter { name: hname.to_string(), grid, refine });
             }
             let sh3 = sh.clone();
-            let start = EffectParams::default_for(n);
+            let mut start = EffectParams::default_for(n);
+            if n == EffectName::Stribeck {
+                start.set("fc", fc_ref);
+            }
             c.with_describe(move |coefs: &[f64], h: &[f64]| describe(n, &sh3, coefs, h, &start))
         })
         .collect();
@@ -1129,31 +1295,30 @@ pub fn append_history(path: &Path, entries: &[HistoryEntry]) -> Result<(), VmtEr
 pub fn compare_text(r: &CompareReport) -> String {
     let mut s = format!("vmt compare: model {} against {}\n", r.model, r.data);
     s += &format!(
-        "{:<12} {:<14} {:>12} {:>10} {:>8} {:>10} {:>8}\n",
-        "run", "sensor", "rms µm", "rms/σ", "fit %", "σ µm", "LB p"
+        "{:<12} {:<14} {:>12} {:>10} {:>8} {:>12} {:>8}\n",
+        "run", "sensor", "rms", "rms/σ", "fit %", "σ", "LB p"
     );
     for c in &r.channels {
+        // Deviations in µm, forces in N.
+        let (k, u) = if c.unit == "N" { (1.0, "N") } else { (1e6, "µm") };
         s += &format!(
-            "{:<12} {:<14} {:>12.4} {:>10.2} {:>8.1} {:>9.4}{} {:>8}\n",
+            "{:<12} {:<14} {:>9.4} {u:<2} {:>10.2} {:>8.1} {:>9.4} {u:<2}{} {:>8}\n",
             c.run,
             c.sensor,
-            c.rms * 1e6,
+            c.rms * k,
             c.normalized_rms,
             c.fit_percent,
-            c.sigma * 1e6,
+            c.sigma * k,
             if c.sigma_estimated { "*" } else { " " },
             c.ljung_box_p.map_or("-".to_string(), |p| format!("{p:.3}"))
         );
-        let dir: Vec<String> = c.by_direction.iter().map(|(d, m, _)| format!("{d:+}: {:.3}", m * 1e6)).collect();
-        s += &format!("    mean residual by direction (µm): {}\n", dir.join(", "));
-        let pos: Vec<String> = c
-            .by_position
-            .iter()
-            .map(|(a, b, m, _)| format!("{:.0}–{:.0} mm {:.3}", a * 1e3, b * 1e3, m * 1e6))
-            .collect();
+        let dir: Vec<String> = c.by_direction.iter().map(|(d, m, _)| format!("{d:+}: {:.3}", m * k)).collect();
+        s += &format!("    mean residual by direction ({u}): {}\n", dir.join(", "));
+        let pos: Vec<String> =
+            c.by_position.iter().map(|(a, b, m, _)| format!("{:.0}–{:.0} mm {:.3}", a * 1e3, b * 1e3, m * k)).collect();
         s += &format!("    by position: {}\n", pos.join("; "));
         if let Some((wl, a)) = c.spectrum_peaks.first() {
-            s += &format!("    strongest spatial period: {:.2} mm, amplitude {:.3} µm\n", wl * 1e3, a * 1e6);
+            s += &format!("    strongest spatial period: {:.2} mm, amplitude {:.3} {u}\n", wl * 1e3, a * k);
         }
     }
     s += &format!("normalised RMS (all samples): {:.3}   (1.0 = noise level; * σ estimated)\n", r.normalized_rms);
