@@ -128,6 +128,11 @@ fn finite_nonneg(v: f64) -> bool {
     v.is_finite() && v >= 0.0
 }
 
+/// A positioning dwell: dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0.
+fn dwell_ok(dwell: f64, average: f64, rate: f64, overrun: f64) -> bool {
+    dwell > 0.0 && average > 0.0 && average <= dwell && rate > 0.0 && finite_nonneg(overrun)
+}
+
 /// Checks sensor values; returns the key path and message of the first problem.
 fn validate_sensors(sensors: &[SensorSpec], axis: &AxisModel) -> Result<(), (String, String)> {
     for (i, s) in sensors.iter().enumerate() {
@@ -247,13 +252,7 @@ fn validate_procedures(
                 if accel.is_some_and(|a| !(a > 0.0 && a.is_finite())) {
                     return Err((at("accel"), format!("expected an acceleration > 0 m/s², got {accel:?}")));
                 }
-                if *runs < 1
-                    || !(end > start)
-                    || !(*dwell > 0.0)
-                    || !(*average > 0.0 && average <= dwell)
-                    || !(*rate > 0.0)
-                    || !finite_nonneg(*overrun)
-                {
+                if *runs < 1 || !(end > start) || !dwell_ok(*dwell, *average, *rate, *overrun) {
                     return Err((
                         at("dwell"),
                         "expected runs ≥ 1, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into(),
@@ -278,13 +277,7 @@ fn validate_procedures(
                 in_travel("start", *start)?;
                 in_travel("end", *end)?;
                 feed_ok("feed", *feed)?;
-                if !(*step > 0.0)
-                    || !(end > start)
-                    || !(*dwell > 0.0)
-                    || !(*average > 0.0 && average <= dwell)
-                    || !(*rate > 0.0)
-                    || !finite_nonneg(*overrun)
-                {
+                if !(*step > 0.0) || !(end > start) || !dwell_ok(*dwell, *average, *rate, *overrun) {
                     return Err((
                         at("step"),
                         "expected step > 0, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into(),

@@ -10,19 +10,9 @@ use vmt_sim::sensors::{SensorKind, SensorSpec};
 
 fn laser() -> SensorSpec {
     SensorSpec {
-        name: "laser".into(),
-        kind: SensorKind::LaserLinear,
         position: Some([0.0, 0.0, 0.0]),
-        link: None,
         direction: [1.0, 0.0, 0.0],
-        sigma: 0.0,
-        resolution: 0.0,
-        noise_density: 0.0,
-        bias: 0.0,
-        scale_factor: 0.0,
-        highpass: 0.0,
-        preset: None,
-        ..SensorSpec::new("x", SensorKind::Command)
+        ..SensorSpec::new("laser", SensorKind::LaserLinear)
     }
 }
 

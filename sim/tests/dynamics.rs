@@ -21,19 +21,9 @@ fn noise_free_accelerometer_reads_v2_times_curvature_at_constant_speed() {
         ..Default::default()
     });
     let acc = SensorSpec {
-        name: "acc_z".into(),
-        kind: SensorKind::Accelerometer,
-        position: None,
         link: Some("accel_mount".into()),
         direction: [0.0, 0.0, 1.0],
-        sigma: 0.0,
-        resolution: 0.0,
-        noise_density: 0.0,
-        bias: 0.0,
-        scale_factor: 0.0,
-        highpass: 0.0,
-        preset: None,
-        ..SensorSpec::new("x", SensorKind::Command)
+        ..SensorSpec::new("acc_z", SensorKind::Accelerometer)
     };
     // Settle 1 s after reaching speed: the start-up ringing of the pitch mode (ζ = 0.05, ~110 Hz) has
     // decayed by e^-35 by then, so only the response to the guideway remains.
