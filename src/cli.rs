@@ -208,7 +208,14 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
 
 /// `vmt study SCENARIO --vary sensors.NAME.KEY=V1,V2 --trials N [--shard i/n] -o DIR`: writes
 /// `trials.csv` (every trial), `summary.csv` (mean and p95 per value and estimate) and `study.svg`.
-pub fn study(path: &Path, vary: &str, trials: usize, shard: Option<&str>, out: &Path) -> Result<i32, VmtError> {
+pub fn study(
+    path: &Path,
+    vary: &str,
+    trials: usize,
+    shard: Option<&str>,
+    estimator_cmd: Option<&str>,
+    out: &Path,
+) -> Result<i32, VmtError> {
     use crate::study::{run_study, Vary};
     let vary = Vary::parse(vary)?;
     let shard = match shard {
@@ -233,7 +240,8 @@ pub fn study(path: &Path, vary: &str, trials: usize, shard: Option<&str>, out: &
     } else {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    let rows = run_study(&sc, &vary, trials, shard)?;
+    let cmd = estimator_cmd.map(|c| crate::byo::CommandEstimator { command: c.to_string() });
+    let rows = run_study(&sc, &vary, trials, shard, cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator))?;
     bar.finish_and_clear();
     write_study(&rows, &format!("sensors.{}.{}", vary.sensor, vary.key), out)
 }
@@ -603,37 +611,10 @@ fn is_laser_line(k: SensorKind) -> bool {
     matches!(k, SensorKind::LaserLinear | SensorKind::LaserStraightness)
 }
 
-/// `vmt score --truth T --estimate E`: compares two FORMAT.md §5 profile CSVs on the estimate's positions
-/// (the truth interpolated linearly), straightness about its least-squares line on both, positioning and
-/// angles relative to their first position; RMS and max difference per error motion.
+/// `vmt score --truth T --estimate E`: compares two FORMAT.md §5 profile CSVs (crate::byo::score_profiles):
+/// RMS and max difference per error motion.
 pub fn score(truth: &Path, estimate: &Path, json: bool) -> Result<i32, VmtError> {
-    let t = measurement::read_profiles(truth)?;
-    let e = measurement::read_profiles(estimate)?;
-    let interp = |xs: &[f64], ys: &[f64], x: f64| -> f64 {
-        let i = xs.partition_point(|&v| v <= x).clamp(1, xs.len() - 1);
-        let w = (x - xs[i - 1]) / (xs[i] - xs[i - 1]);
-        ys[i - 1] + w * (ys[i] - ys[i - 1])
-    };
-    let mut rows = Vec::new();
-    for c in &e.columns {
-        let Some(tc) = t.columns.iter().find(|tc| tc.effect == c.effect && tc.axis == c.axis) else { continue };
-        let tv: Vec<f64> = e.position.iter().map(|&x| interp(&t.position, &tc.values, x)).collect();
-        let straightness = matches!(
-            c.effect,
-            vmt_sim::effects::EffectName::StraightnessY | vmt_sim::effects::EffectName::StraightnessZ
-        );
-        let norm = |v: &[f64]| -> Vec<f64> {
-            if straightness {
-                vmt_estimators::line::remove_line(&e.position, v)
-            } else {
-                v.iter().map(|x| x - v[0]).collect()
-            }
-        };
-        let d: Vec<f64> = norm(&c.values).iter().zip(norm(&tv)).map(|(a, b)| a - b).collect();
-        let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
-        let max = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        rows.push(serde_json::json!({"effect": c.column_name(), "rms": rms, "max": max, "points": d.len()}));
-    }
+    let rows = crate::byo::score_profiles(&measurement::read_profiles(truth)?, &measurement::read_profiles(estimate)?);
     if rows.is_empty() {
         return Err(VmtError::bad(estimate, "line 1 (header)", "no error-motion column in common with the truth"));
     }
@@ -642,13 +623,7 @@ pub fn score(truth: &Path, estimate: &Path, json: bool) -> Result<i32, VmtError>
     } else {
         println!("{:<20} {:>14} {:>14} {:>8}", "error motion", "RMS diff", "max diff", "points");
         for r in &rows {
-            println!(
-                "{:<20} {:>14.4e} {:>14.4e} {:>8}",
-                r["effect"].as_str().unwrap_or(""),
-                r["rms"].as_f64().unwrap_or(0.0),
-                r["max"].as_f64().unwrap_or(0.0),
-                r["points"]
-            );
+            println!("{:<20} {:>14.4e} {:>14.4e} {:>8}", r.effect, r.rms, r.max, r.points);
         }
     }
     Ok(0)

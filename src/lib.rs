@@ -2,6 +2,7 @@
 //! reports and the CLI.
 
 pub mod bundled;
+pub mod byo;
 pub mod cli;
 pub mod error;
 pub mod estimate;

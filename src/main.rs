@@ -51,6 +51,10 @@ enum Command {
         /// Compute only trials k with k mod n = i (for a cluster job array), e.g. 0/4.
         #[arg(long)]
         shard: Option<String>,
+        /// Run this program in every trial instead of the scenario's estimators: `CMD {data} {out}` reads
+        /// the measurement set at {data} and writes a FORMAT.md §5 profile CSV to {out}.
+        #[arg(long)]
+        estimator_cmd: Option<String>,
         #[arg(short, long)]
         out: PathBuf,
     },
@@ -153,12 +157,12 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run { scenario, out, json } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
         Command::Simulate { scenario, out, units } => vmt::cli::simulate(scenario.as_deref(), &out, &units).map(|_| 0),
-        Command::Study { scenario, shards, vary, trials, shard, out } => {
+        Command::Study { scenario, shards, vary, trials, shard, estimator_cmd, out } => {
             if scenario.as_os_str() == "merge" {
                 vmt::cli::study_merge(&out, &shards)
             } else {
                 match vary {
-                    Some(v) => vmt::cli::study(&scenario, &v, trials, shard.as_deref(), &out),
+                    Some(v) => vmt::cli::study(&scenario, &v, trials, shard.as_deref(), estimator_cmd.as_deref(), &out),
                     None => Err(vmt::error::VmtError::Usage("study needs --vary sensors.NAME.KEY=V1,V2,…".into())),
                 }
             }

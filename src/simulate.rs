@@ -126,6 +126,14 @@ pub fn truth_extras(sc: &Scenario) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
     let (toml_text, sidecars) = model_to_toml(&sc.truth, "truth")?;
     let mut out = vec![("truth.toml".to_string(), toml_text.into_bytes())];
     out.extend(sidecars.into_iter().map(|(n, t)| (n, t.into_bytes())));
+    let table = truth_profiles(sc)?;
+    let csv = measurement::profiles_csv(&table, Path::new("truth_profiles.csv"), UnitChoice::Si)?;
+    out.push(("truth_profiles.csv".to_string(), csv.into_bytes()));
+    Ok(out)
+}
+
+/// The six injected error motions every millimetre over the travel (FORMAT.md §5 table).
+pub fn truth_profiles(sc: &Scenario) -> Result<ProfileTable, VmtError> {
     let errors = error_motions(sc)?;
     let (lo, hi) = sc.axis.travel;
     let n = ((hi - lo) / 1e-3).round().max(1.0) as usize;
@@ -140,8 +148,5 @@ pub fn truth_extras(sc: &Scenario) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
             sigma: None,
         })
         .collect();
-    let table = ProfileTable { position, columns };
-    let csv = measurement::profiles_csv(&table, Path::new("truth_profiles.csv"), UnitChoice::Si)?;
-    out.push(("truth_profiles.csv".to_string(), csv.into_bytes()));
-    Ok(out)
+    Ok(ProfileTable { position, columns })
 }

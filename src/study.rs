@@ -3,10 +3,11 @@
 //! scenario seed, the value index and the trial number), so the results are the same on any number of
 //! threads and shards can be computed on different machines and merged.
 
+use crate::byo::{score_profiles, Estimator};
 use crate::error::VmtError;
 use crate::estimate::run_estimators;
 use crate::scenario::Scenario;
-use crate::simulate::{physics, read_all, simulate_truth};
+use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
@@ -55,8 +56,16 @@ pub struct TrialRow {
     pub pass: bool,
 }
 
-/// Runs trials `k` with k % shard.1 == shard.0 of every value.
-pub fn run_study(sc: &Scenario, vary: &Vary, trials: usize, shard: (usize, usize)) -> Result<Vec<TrialRow>, VmtError> {
+/// Runs trials `k` with k % shard.1 == shard.0 of every value. Each trial runs the scenario's estimators,
+/// or, with `estimator`, that estimator (e.g. a user's program) scored against the truth per error motion.
+pub fn run_study(
+    sc: &Scenario,
+    vary: &Vary,
+    trials: usize,
+    shard: (usize, usize),
+    estimator: Option<&dyn Estimator>,
+) -> Result<Vec<TrialRow>, VmtError> {
+    let truth_table = crate::simulate::truth_profiles(sc)?;
     let ph = physics(sc)?;
     if !ph.sensors.iter().any(|s| s.name == vary.sensor) {
         return Err(VmtError::Usage(format!("--vary: no sensor `{}` in the scenario", vary.sensor)));
@@ -84,6 +93,22 @@ pub fn run_study(sc: &Scenario, vary: &Vary, trials: usize, shard: (usize, usize
             }
             let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/{i}/{k}"));
             let runs = read_all(sc, &p, &truths, seed)?;
+            if let Some(e) = estimator {
+                let work = std::env::temp_dir().join(format!("vmt-study-{}-{i}-{k}", std::process::id()));
+                let set = to_measurement_set(sc, &runs)?;
+                let table = e.estimate(&set, &work);
+                let _ = std::fs::remove_dir_all(&work);
+                return Ok(score_profiles(&truth_table, &table?)
+                    .into_iter()
+                    .map(|r| TrialRow {
+                        value: v,
+                        trial: k,
+                        estimate: format!("{} RMS", r.effect),
+                        difference: r.rms,
+                        pass: true,
+                    })
+                    .collect());
+            }
             let est = run_estimators(sc, &p, &runs)?;
             Ok(est
                 .checks

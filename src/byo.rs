@@ -1,0 +1,140 @@
+//! Bring your own estimator: an estimator maps a measurement set to error-motion profiles (FORMAT.md §5),
+//! in process (the `Estimator` trait) or as any program (`CommandEstimator`: `CMD {data} {out}` reads the
+//! set at {data} and writes its profile CSV to {out}); `score_profiles` compares the result with the truth.
+
+use crate::error::VmtError;
+use crate::measurement::{self, MeasurementSet, ProfileTable, UnitChoice};
+use serde::Serialize;
+use std::path::Path;
+
+/// An estimator of error-motion profiles from a measurement set.
+pub trait Estimator: Sync {
+    /// A short name for tables.
+    fn name(&self) -> &str;
+    /// Estimates profiles; `work` is a scratch directory the estimator may use.
+    fn estimate(&self, set: &MeasurementSet, work: &Path) -> Result<ProfileTable, VmtError>;
+}
+
+/// A program run as `sh -c CMD` with `{data}` and `{out}` replaced by the paths of the measurement set
+/// and of the profile CSV it must write.
+pub struct CommandEstimator {
+    pub command: String,
+}
+
+impl Estimator for CommandEstimator {
+    fn name(&self) -> &str {
+        &self.command
+    }
+
+    fn estimate(&self, set: &MeasurementSet, work: &Path) -> Result<ProfileTable, VmtError> {
+        let data = work.join("data");
+        let out = work.join("estimate.csv");
+        measurement::write(set, &data, UnitChoice::Si)?;
+        let cmd =
+            self.command.replace("{data}", &data.display().to_string()).replace("{out}", &out.display().to_string());
+        let status = std::process::Command::new("sh")
+            .arg("-c")
+            .arg(&cmd)
+            .status()
+            .map_err(|e| VmtError::Usage(format!("--estimator-cmd: cannot run `{cmd}`: {e}")))?;
+        if !status.success() {
+            return Err(VmtError::Usage(format!("--estimator-cmd: `{cmd}` exited with {status}")));
+        }
+        measurement::read_profiles(&out)
+    }
+}
+
+/// One error motion's comparison: RMS and max of estimate − truth on the estimate's positions.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ScoreRow {
+    pub effect: String,
+    pub rms: f64,
+    pub max: f64,
+    pub points: usize,
+}
+
+/// Compares estimated profiles with the truth on the estimate's positions (truth interpolated linearly):
+/// straightness about its least-squares line on both sides, positioning and angles relative to their
+/// first position (the conventions of the laser identifier and of ISO 230-1).
+pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Vec<ScoreRow> {
+    use vmt_sim::effects::EffectName;
+    let interp = |xs: &[f64], ys: &[f64], x: f64| -> f64 {
+        if xs.len() < 2 {
+            return ys.first().copied().unwrap_or(0.0);
+        }
+        let i = xs.partition_point(|&v| v <= x).clamp(1, xs.len() - 1);
+        let w = (x - xs[i - 1]) / (xs[i] - xs[i - 1]);
+        ys[i - 1] + w * (ys[i] - ys[i - 1])
+    };
+    let mut rows = Vec::new();
+    for c in &est.columns {
+        let Some(tc) = truth.columns.iter().find(|tc| tc.effect == c.effect && tc.axis == c.axis) else { continue };
+        if c.values.is_empty() {
+            continue;
+        }
+        let tv: Vec<f64> = est.position.iter().map(|&x| interp(&truth.position, &tc.values, x)).collect();
+        let straightness = matches!(c.effect, EffectName::StraightnessY | EffectName::StraightnessZ);
+        let norm = |v: &[f64]| -> Vec<f64> {
+            if straightness {
+                vmt_estimators::line::remove_line(&est.position, v)
+            } else {
+                v.iter().map(|x| x - v[0]).collect()
+            }
+        };
+        let d: Vec<f64> = norm(&c.values).iter().zip(norm(&tv)).map(|(a, b)| a - b).collect();
+        rows.push(ScoreRow {
+            effect: c.column_name(),
+            rms: (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt(),
+            max: d.iter().fold(0.0f64, |m, x| m.max(x.abs())),
+            points: d.len(),
+        });
+    }
+    rows
+}
+
+/// The laser-lines identifier (seeds 001/003) as an in-process `Estimator`: the six error motions of the
+/// first point-table run that has at least two laser lines. Also the worked example of the trait.
+pub struct LaserLines;
+
+impl Estimator for LaserLines {
+    fn name(&self) -> &str {
+        "laser lines"
+    }
+
+    fn estimate(&self, set: &MeasurementSet, _work: &Path) -> Result<ProfileTable, VmtError> {
+        use crate::estimate::{identify_laser_lines, LaserLine};
+        use crate::measurement::{ProfileColumn, RunData, SensorKind};
+        let here = Path::new("<measurement set>");
+        let is_line = |k: SensorKind| matches!(k, SensorKind::LaserLinear | SensorKind::LaserStraightness);
+        for r in &set.runs {
+            let RunData::PointTable { target, columns, .. } = &r.data else { continue };
+            let lines: Vec<LaserLine> = set
+                .sensors
+                .iter()
+                .filter(|s| is_line(s.kind) && r.data.column(&s.name).is_some())
+                .map(|s| LaserLine {
+                    name: s.name.clone(),
+                    point: s.position,
+                    direction: s.direction,
+                    sigma: s.sigma.unwrap_or(0.0),
+                })
+                .collect();
+            if lines.len() < 2 {
+                continue;
+            }
+            let (id, _) = identify_laser_lines(target, columns, &lines)
+                .map_err(|m| VmtError::bad(here, format!("run {}", r.name), m))?;
+            let syms = ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"];
+            let position = id.profile("EXX").map(|p| p.positions.clone()).unwrap_or_default();
+            let columns = vmt_sim::effects::EffectName::ERROR_MOTIONS
+                .iter()
+                .zip(syms)
+                .filter_map(|(&effect, sym)| {
+                    id.profile(sym).map(|p| ProfileColumn { axis: None, effect, values: p.values.clone(), sigma: None })
+                })
+                .collect();
+            return Ok(ProfileTable { position, columns });
+        }
+        Err(VmtError::bad(here, "runs", "expected a point-table run with at least two laser lines"))
+    }
+}
