@@ -259,22 +259,29 @@ fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path) -> Resu
     use crate::study::{rows_csv, summarize, summary_svg};
     let summary = summarize(rows);
     std::fs::create_dir_all(out).map_err(|e| VmtError::io(out, "creating the output directory", e))?;
-    let mut s = String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate\n");
+    let mut s = String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate,cramer_rao_bound\n");
     for r in &summary {
-        s += &format!("{},\"{}\",{},{},{},{}\n", r.value, r.estimate, r.trials, r.mean_abs, r.p95_abs, r.pass_rate);
+        s += &format!(
+            "{},\"{}\",{},{},{},{},{}\n",
+            r.value, r.estimate, r.trials, r.mean_abs, r.p95_abs, r.pass_rate, r.bound
+        );
     }
     measurement::write_file_atomic(&out.join("trials.csv"), rows_csv(rows).as_bytes())?;
     measurement::write_file_atomic(&out.join("summary.csv"), s.as_bytes())?;
     measurement::write_file_atomic(&out.join("study.svg"), summary_svg(&summary, label)?.as_bytes())?;
-    println!("{:>12}  {:<40} {:>7} {:>12} {:>12} {:>6}", "value", "estimate", "trials", "mean |d|", "p95 |d|", "pass");
+    println!(
+        "{:>12}  {:<40} {:>7} {:>12} {:>12} {:>12} {:>6}",
+        "value", "estimate", "trials", "mean |d|", "p95 |d|", "CR bound", "pass"
+    );
     for r in &summary {
         println!(
-            "{:>12.3e}  {:<40} {:>7} {:>12.3e} {:>12.3e} {:>5.0}%",
+            "{:>12.3e}  {:<40} {:>7} {:>12.3e} {:>12.3e} {:>12.3e} {:>5.0}%",
             r.value,
             r.estimate,
             r.trials,
             r.mean_abs,
             r.p95_abs,
+            r.bound,
             100.0 * r.pass_rate
         );
     }

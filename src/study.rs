@@ -54,6 +54,8 @@ pub struct TrialRow {
     pub estimate: String,
     pub difference: f64,
     pub pass: bool,
+    /// Cramér–Rao bound of the difference, where one exists (NaN otherwise).
+    pub bound: f64,
 }
 
 /// Runs trials `k` with k % shard.1 == shard.0 of every value. Each trial runs the scenario's estimators,
@@ -106,6 +108,7 @@ pub fn run_study(
                         estimate: format!("{} RMS", r.effect),
                         difference: r.rms,
                         pass: true,
+                        bound: f64::NAN,
                     })
                     .collect());
             }
@@ -113,7 +116,14 @@ pub fn run_study(
             Ok(est
                 .checks
                 .into_iter()
-                .map(|c| TrialRow { value: v, trial: k, estimate: c.error, difference: c.difference, pass: c.pass })
+                .map(|c| TrialRow {
+                    value: v,
+                    trial: k,
+                    estimate: c.error,
+                    difference: c.difference,
+                    pass: c.pass,
+                    bound: c.bound.unwrap_or(f64::NAN),
+                })
                 .collect())
         })
         .collect();
@@ -124,9 +134,17 @@ pub fn run_study(
 pub fn rows_csv(rows: &[TrialRow]) -> String {
     let mut rows = rows.to_vec();
     rows.sort_by(|a, b| a.value.total_cmp(&b.value).then(a.trial.cmp(&b.trial)).then(a.estimate.cmp(&b.estimate)));
-    let mut s = String::from("value,trial,estimate,difference,pass\n");
+    let mut s = String::from("value,trial,estimate,difference,pass,bound\n");
     for r in rows {
-        s += &format!("{},{},\"{}\",{},{}\n", r.value, r.trial, r.estimate.replace('"', "'"), r.difference, r.pass);
+        s += &format!(
+            "{},{},\"{}\",{},{},{}\n",
+            r.value,
+            r.trial,
+            r.estimate.replace('"', "'"),
+            r.difference,
+            r.pass,
+            r.bound
+        );
     }
     s
 }
@@ -150,6 +168,7 @@ pub fn read_rows(path: &Path) -> Result<Vec<TrialRow>, VmtError> {
             estimate: f(2).to_string(),
             difference: num(3)?,
             pass: f(4) == "true",
+            bound: f(5).parse().unwrap_or(f64::NAN),
         });
     }
     Ok(out)
@@ -164,6 +183,8 @@ pub struct SummaryRow {
     pub mean_abs: f64,
     pub p95_abs: f64,
     pub pass_rate: f64,
+    /// Mean Cramér–Rao bound over the trials (NaN where none exists).
+    pub bound: f64,
 }
 
 pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
@@ -177,6 +198,8 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
             d.sort_by(f64::total_cmp);
             let n = d.len();
             let passed = rows.iter().filter(|r| r.value == v && r.estimate == e && r.pass).count();
+            let bounds: Vec<f64> = rows.iter().filter(|r| r.value == v && r.estimate == e).map(|r| r.bound).collect();
+            let bound = bounds.iter().sum::<f64>() / bounds.len().max(1) as f64;
             SummaryRow {
                 value: v,
                 estimate: e,
@@ -184,6 +207,7 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
                 mean_abs: d.iter().sum::<f64>() / n.max(1) as f64,
                 p95_abs: d[((0.95 * n as f64).ceil() as usize).clamp(1, n) - 1],
                 pass_rate: passed as f64 / n.max(1) as f64,
+                bound,
             }
         })
         .collect()
