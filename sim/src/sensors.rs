@@ -378,3 +378,23 @@ pub fn highpass_first_order(x: &[f64], fc: f64, fs: f64) -> Vec<f64> {
     }
     y
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn material_error_only_for_length_lasers_and_zero_by_default() {
+        let mut s = SensorSpec::new("l", SensorKind::LaserLinear);
+        // Defaults: 20 °C, steel, assumed = true: no error, gain exactly 1.
+        assert_eq!((s.material_scale_error(), s.gain()), (0.0, 1.0));
+        s.material_temperature = 22.0;
+        s.assumed_material_temperature = Some(20.0);
+        // α·2 K with T_a = 20 °C: exact, to rounding of 2.3e-5 (1e-20).
+        assert!((s.material_scale_error() - 2.0 * STEEL_ALPHA).abs() < 1e-20);
+        // Straightness and angular optics are not normalised to 20 °C.
+        for kind in [SensorKind::LaserStraightness, SensorKind::LaserAngular, SensorKind::Accelerometer] {
+            assert_eq!(SensorSpec { kind, ..s.clone() }.material_scale_error(), 0.0, "{kind:?}");
+        }
+    }
+}
