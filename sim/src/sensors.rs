@@ -145,10 +145,35 @@ pub struct SensorSpec {
     /// Lasers: the air the laser's compensation assumes (default: the actual air, no error).
     #[serde(default)]
     pub assumed_air: Option<Air>,
+    /// Linear lasers: the true temperature of the measured machine/workpiece, °C (default 20 °C, the
+    /// ISO 1 reference temperature).
+    #[serde(default = "default_material_temperature")]
+    pub material_temperature: f64,
+    /// Linear lasers: the expansion coefficient the laser normalises with, 1/K (default 11.5e-6, steel).
+    #[serde(default = "default_material_alpha")]
+    pub material_alpha: f64,
+    /// Linear lasers: the material temperature the laser's material sensor reports and the normalisation
+    /// to 20 °C uses, °C (default: the true material temperature, no error).
+    #[serde(default)]
+    pub assumed_material_temperature: Option<f64>,
 }
 
 fn default_direction() -> [f64; 3] {
     [1.0, 0.0, 0.0]
+}
+
+/// ISO 1 reference temperature of dimensional metrology, °C.
+pub const REFERENCE_TEMPERATURE: f64 = 20.0;
+
+/// Expansion coefficient of steel used as the default material of a laser's normalisation, 1/K.
+pub const STEEL_ALPHA: f64 = 11.5e-6;
+
+fn default_material_temperature() -> f64 {
+    REFERENCE_TEMPERATURE
+}
+
+fn default_material_alpha() -> f64 {
+    STEEL_ALPHA
 }
 
 impl SensorSpec {
@@ -171,6 +196,9 @@ impl SensorSpec {
             tilt: [0.0; 3],
             air: None,
             assumed_air: None,
+            material_temperature: REFERENCE_TEMPERATURE,
+            material_alpha: STEEL_ALPHA,
+            assumed_material_temperature: None,
         }
     }
 
@@ -223,6 +251,32 @@ impl SensorSpec {
         let actual = self.air.unwrap_or(Air::REFERENCE);
         let assumed = self.assumed_air.unwrap_or(actual);
         edlen_index(&actual, HENE_WAVELENGTH_UM) / edlen_index(&assumed, HENE_WAVELENGTH_UM) - 1.0
+    }
+
+    /// Relative scale error of a length-measuring laser (`laser_linear`, `laser_vector`) from its material
+    /// normalisation to 20 °C (ISO 1; DESIGN.md §4/§5). A part whose 20 °C length is L is, at the true
+    /// temperature T, L·(1 + α·(T − 20)) long; the laser divides what it measures by 1 + α·(T_a − 20) with
+    /// the assumed (sensed) temperature T_a, so it reads L·(1 + α·(T − 20))/(1 + α·(T_a − 20)):
+    /// a relative error
+    ///   e = α·(T − T_a)/(1 + α·(T_a − 20)) = α·(T − T_a)·(1 − α·(T_a − 20) + …),
+    /// to first order α·(T − T_a). Zero for the other kinds, whose readings are not normalised.
+    pub fn material_scale_error(&self) -> f64 {
+        if !matches!(self.kind, SensorKind::LaserLinear | SensorKind::LaserVector) {
+            return 0.0;
+        }
+        let t = self.material_temperature;
+        let ta = self.assumed_material_temperature.unwrap_or(t);
+        self.material_alpha * (t - ta) / (1.0 + self.material_alpha * (ta - REFERENCE_TEMPERATURE))
+    }
+
+    /// Overall gain of the sensor on the true reading, 1 + s: for lasers the product of the independent
+    /// factors (1 + s)·(1 + e_air)·(1 + e_material), first order 1 + s + e_air + e_material.
+    pub fn gain(&self) -> f64 {
+        if self.is_laser() {
+            (1.0 + self.scale_factor) * (1.0 + self.air_scale_error()) * (1.0 + self.material_scale_error())
+        } else {
+            1.0 + self.scale_factor
+        }
     }
 
     fn is_laser(&self) -> bool {
@@ -284,12 +338,13 @@ pub fn true_readings(
 
 /// Applies a sensor's errors and seeded noise to noise-free readings sampled at `fs` (Hz):
 /// y = Q[HP((1 + s)·x + b + w) + n], n ~ N(0, σ²) with σ from `sigma` or ρ·√(fs/2), w the bias random
-/// walk (increments N(0, rate²/fs)), s the scale factor (plus the air's Edlén error for lasers),
-/// Q quantisation.
+/// walk (increments N(0, rate²/fs), one per sample from the first, so w at sample k has variance
+/// (k + 1)·rate²/fs), 1 + s the gain ([`SensorSpec::gain`]: the scale factor, and for lasers also the
+/// air's Edlén error and the material normalisation error), Q quantisation.
 pub fn apply_errors(spec: &SensorSpec, truth: &[f64], fs: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let sigma = if spec.noise_density > 0.0 { spec.noise_density * (fs / 2.0).sqrt() } else { spec.sigma };
-    let scale = spec.scale_factor + if spec.is_laser() { spec.air_scale_error() } else { 0.0 };
-    let mut out: Vec<f64> = truth.iter().map(|x| (1.0 + scale) * x + spec.bias).collect();
+    let gain = spec.gain();
+    let mut out: Vec<f64> = truth.iter().map(|x| gain * x + spec.bias).collect();
     if spec.bias_drift > 0.0 && fs > 0.0 {
         let step = spec.bias_drift / fs.sqrt();
         let mut w = 0.0;
@@ -322,4 +377,24 @@ pub fn highpass_first_order(x: &[f64], fc: f64, fs: f64) -> Vec<f64> {
         y.push(if i == 0 { 0.0 } else { alpha * (y[i - 1] + xi - x[i - 1]) });
     }
     y
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn material_error_only_for_length_lasers_and_zero_by_default() {
+        let mut s = SensorSpec::new("l", SensorKind::LaserLinear);
+        // Defaults: 20 °C, steel, assumed = true: no error, gain exactly 1.
+        assert_eq!((s.material_scale_error(), s.gain()), (0.0, 1.0));
+        s.material_temperature = 22.0;
+        s.assumed_material_temperature = Some(20.0);
+        // α·2 K with T_a = 20 °C: exact, to rounding of 2.3e-5 (1e-20).
+        assert!((s.material_scale_error() - 2.0 * STEEL_ALPHA).abs() < 1e-20);
+        // Straightness and angular optics are not normalised to 20 °C.
+        for kind in [SensorKind::LaserStraightness, SensorKind::LaserAngular, SensorKind::Accelerometer] {
+            assert_eq!(SensorSpec { kind, ..s.clone() }.material_scale_error(), 0.0, "{kind:?}");
+        }
+    }
 }
