@@ -163,6 +163,19 @@ fn validate_sensors(sensors: &[SensorSpec], axis: &AxisModel) -> Result<(), (Str
                 format!("expected bias finite and |scale_factor| < 0.5, got {} and {}", s.bias, s.scale_factor),
             ));
         }
+        let temps = [Some(s.material_temperature), s.assumed_material_temperature];
+        if !temps.iter().flatten().all(|t| t.is_finite() && (-50.0..=150.0).contains(t)) {
+            return Err((
+                at("material_temperature"),
+                format!("expected temperatures in °C within −50…150, got {temps:?}"),
+            ));
+        }
+        if !(s.material_alpha.is_finite() && s.material_alpha.abs() < 1e-3) {
+            return Err((
+                at("material_alpha"),
+                format!("expected an expansion coefficient |α| < 1e-3 1/K, got {}", s.material_alpha),
+            ));
+        }
         if let Some(p) = s.position {
             if !p.iter().all(|v| v.is_finite() && v.abs() < 100.0) {
                 return Err((at("position"), format!("expected a point within 100 m, got {p:?}")));
