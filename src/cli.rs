@@ -52,6 +52,11 @@ fn default_out(sc: &Scenario) -> PathBuf {
 /// `vmt run [SCENARIO]`: simulate, estimate, print the table; exit 1 if any estimate misses its tolerance.
 pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, VmtError> {
     let sc = load_scenario(path)?;
+    let bar = spinner(&format!(
+        "simulating {} procedures and running {} estimators",
+        sc.procedures.len(),
+        sc.estimators.len()
+    ));
     let ph = physics(&sc)?;
     let truths = simulate_truth(&sc, &ph);
     let runs = read_all(&sc, &ph, &truths, sc.seed)?;
@@ -63,6 +68,7 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     let html = out.join("report.html");
     crate::report::write_run_report(&sc, &set, &est, &html)?;
     let failed: Vec<&Check> = checks.iter().filter(|c| !c.pass).collect();
+    bar.finish_and_clear();
     if json {
         let v = serde_json::json!({"scenario": sc.source, "checks": checks, "pass": failed.is_empty()});
         println!("{}", serde_json::to_string_pretty(&v).map_err(|e| VmtError::Internal(e.to_string()))?);
@@ -84,6 +90,18 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
         }
     }
     Ok(if failed.is_empty() { 0 } else { 1 })
+}
+
+/// A spinner on stderr when it is a terminal; hidden otherwise (CI logs, pipes).
+fn spinner(message: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new_spinner();
+    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        bar.set_message(message.to_string());
+        bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    } else {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    bar
 }
 
 /// Value in display units: µm for lengths, µrad for angles.
@@ -233,13 +251,7 @@ pub fn study(
         }
     };
     let sc = Scenario::load(path)?;
-    let bar = indicatif::ProgressBar::new_spinner();
-    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
-        bar.set_message(format!("{} values × {trials} trials", vary.values.len()));
-        bar.enable_steady_tick(std::time::Duration::from_millis(200));
-    } else {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
+    let bar = spinner(&format!("{} values × {trials} trials", vary.values.len()));
     let cmd = estimator_cmd.map(|c| crate::byo::CommandEstimator { command: c.to_string() });
     let rows = run_study(&sc, &vary, trials, shard, cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator))?;
     bar.finish_and_clear();
