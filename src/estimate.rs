@@ -183,6 +183,9 @@ pub struct Estimates {
     pub checks: Vec<Check>,
     #[serde(skip)]
     pub figures: Vec<Figure>,
+    /// Tables an estimator reports in full (e.g. the ISO 230-2 table).
+    #[serde(skip)]
+    pub tables: Vec<vmt_report::Table>,
 }
 
 impl Estimates {
@@ -196,6 +199,43 @@ impl Estimates {
             }
         };
         self.checks.extend(checks.into_iter().map(|c| Check { figure: Some(idx), ..c }));
+    }
+}
+
+/// The standard's table of an ISO 230-2 evaluation: per target, then the axis values (µm).
+pub fn iso_table(caption: &str, r: &AxisResult) -> vmt_report::Table {
+    let um = |v: f64| format!("{:.3}", v * 1e6);
+    let mut rows: Vec<Vec<String>> = r
+        .targets
+        .iter()
+        .map(|t| {
+            vec![
+                format!("{:.3}", t.target * 1e3),
+                um(t.up.mean),
+                um(t.down.mean),
+                um(t.mean_bidirectional),
+                um(t.reversal),
+                um(t.up.repeatability),
+                um(t.down.repeatability),
+                um(t.repeatability),
+            ]
+        })
+        .collect();
+    rows.push(vec![
+        "axis".into(),
+        format!("E↑ {}", um(r.e_up)),
+        format!("E↓ {}", um(r.e_down)),
+        format!("E {} / M {}", um(r.e), um(r.m)),
+        format!("B {} / B̄ {}", um(r.b), um(r.b_mean)),
+        format!("R↑ {}", um(r.r_up)),
+        format!("R↓ {}", um(r.r_down)),
+        format!("R {} / A {}", um(r.r), um(r.a)),
+    ]);
+    vmt_report::Table {
+        caption: caption.to_string(),
+        header: ["target mm", "x̄↑", "x̄↓", "x̄", "B_i", "R↑_i", "R↓_i", "R_i"].map(String::from).to_vec(),
+        rows,
+        highlight: Vec::new(),
     }
 }
 
@@ -263,6 +303,7 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                     ],
                 );
                 out.push(checks, fig);
+                out.tables.push(iso_table(&format!("ISO 230-2:2014 evaluation of run {run}, {sensor} (µm)"), &est));
             }
             EstimatorSpec::LaserLines { run, sensors, tolerance_translation, tolerance_angle } => {
                 for (c, f) in

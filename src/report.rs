@@ -83,6 +83,12 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
                 tables: Vec::new(),
             },
             Section {
+                heading: "Tables of the estimators".into(),
+                text: Vec::new(),
+                figures: Vec::new(),
+                tables: est.tables.clone(),
+            },
+            Section {
                 heading: "What was measured".into(),
                 text: vec![format!("Machine {}, seed {}.", sc.machine_name, sc.seed)],
                 figures: Vec::new(),
