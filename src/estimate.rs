@@ -189,6 +189,11 @@ pub struct Estimates {
 }
 
 impl Estimates {
+    /// Adds a figure that illustrates an estimator without being the figure of a check.
+    fn push_figure(&mut self, figure: Figure) {
+        self.figures.push(figure);
+    }
+
     /// Adds checks shown by a figure (a figure with the same title as an earlier one is shared).
     fn push(&mut self, checks: Vec<Check>, figure: Figure) {
         let idx = match self.figures.iter().position(|f| f.title == figure.title) {
@@ -362,9 +367,10 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 }
             }
             EstimatorSpec::AccelStraightness { procedure, sensor, method, tolerance } => {
-                let (c, f) =
+                let (c, f, stages) =
                     accel_straightness_check(sc, runs, errors, procedure, sensor, method.as_deref(), *tolerance)?;
                 out.push(vec![c], f);
+                stages.into_iter().for_each(|g| out.push_figure(g));
             }
         }
     }
@@ -380,7 +386,7 @@ fn accel_straightness_check(
     sensor: &str,
     method: Option<&str>,
     tolerance: f64,
-) -> Result<(Check, Figure), VmtError> {
+) -> Result<(Check, Figure, Vec<Figure>), VmtError> {
     use vmt_estimators::accel_straightness::{
         estimate_straightness, zero_phase_highpass, AccelRun, FusionMethod, StraightnessConfig,
     };
@@ -461,7 +467,48 @@ fn accel_straightness_check(
         &[("injected (same band)", &truth, SeriesStyle::Line), ("recovered", &estimate, SeriesStyle::Dashed)],
     );
     let check = Check { bound: Some(bound), ..Check::profile(name, Quantity::Length, &truth, &estimate, tolerance) };
-    Ok((check, fig))
+    // The pipeline stage by stage (seed 000): raw acceleration per speed, then each speed's displacement
+    // after Kalman filter, double integration and zero-phase high-pass; the fused result is `fig`.
+    let mut raw = Figure {
+        title: format!("{sensor}, stage 1: acceleration of each constant-velocity pass (mean removed)"),
+        x_label: "position".into(),
+        x_unit: "mm".into(),
+        y_label: "acceleration".into(),
+        y_unit: "mm/s²".into(),
+        series: Vec::new(),
+        kind: FigureKind::Line,
+        log_x: false,
+        log_y: false,
+    };
+    let mut disp = Figure {
+        title: format!(
+            "{sensor}, stage 2: displacement of each pass (Kalman, double integration, zero-phase high-pass)"
+        ),
+        y_label: "displacement".into(),
+        y_unit: "µm".into(),
+        ..raw.clone()
+    };
+    for (r, d) in acc_runs.iter().zip(&est.runs) {
+        let x = vmt_estimators::accel_straightness::run_positions(r).map_err(|e| bad(e.to_string()))?;
+        let mean = r.acceleration.iter().sum::<f64>() / r.acceleration.len() as f64;
+        let label = format!("{:.0} mm/s", r.speed * 1e3);
+        raw.series.push(Series {
+            label: label.clone(),
+            x: x.iter().map(|v| v * 1e3).collect(),
+            y: r.acceleration.iter().map(|a| (a - mean) * 1e3).collect(),
+            style: SeriesStyle::Line,
+        });
+        let cutoff = d.cutoff_wavelength.unwrap_or(est.band.max_wavelength);
+        if let Ok((u, _)) = vmt_estimators::accel_straightness::seed_run_displacement(r, cutoff, true) {
+            disp.series.push(Series {
+                label,
+                x: x.iter().map(|v| v * 1e3).collect(),
+                y: u.iter().map(|v| v * 1e6).collect(),
+                style: SeriesStyle::Line,
+            });
+        }
+    }
+    Ok((check, fig, vec![raw, disp]))
 }
 
 /// One laser line of a point table: its column, measuring point (axis frame, m), beam direction and the
