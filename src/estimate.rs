@@ -6,6 +6,7 @@ use crate::error::VmtError;
 use crate::scenario::Scenario;
 use crate::simulate::Physics;
 use serde::{Deserialize, Serialize};
+use std::path::Path;
 use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
 use vmt_sim::geometry::ErrorMotions;
@@ -39,6 +40,17 @@ pub enum EstimatorSpec {
     },
     /// Stick-slip index (seed 002) of each crawl run of a procedure, compared with expected values.
     Ssi { procedure: String, sensor: String, expected: Vec<f64>, tolerance: Vec<f64> },
+    /// The model-check loop (DESIGN.md §8) run automatically: compare the starting model (`model`, a
+    /// vmt-model/1 file relative to the scenario) with the recording, diagnose, add the best significant
+    /// effect, repeat (at most `max_steps`). Checks that the `expected` effects are found and that the final
+    /// normalised RMS is at most `tolerance`.
+    ModelCheck {
+        model: String,
+        expected: Vec<String>,
+        #[serde(default = "default_steps")]
+        max_steps: usize,
+        tolerance: f64,
+    },
     /// Straightness from an accelerometer's constant-velocity runs (seed 000, and the SNR-weighted
     /// fusion), compared with the lateral motion of its mount point band-limited to the recoverable
     /// wavelengths; `tolerance` bounds the RMS difference.
@@ -49,6 +61,10 @@ pub enum EstimatorSpec {
         method: Option<String>,
         tolerance: f64,
     },
+}
+
+fn default_steps() -> usize {
+    3
 }
 
 fn default_max_ratio() -> f64 {
@@ -366,6 +382,10 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                     );
                 }
             }
+            EstimatorSpec::ModelCheck { model, expected, max_steps, tolerance } => {
+                let (checks, fig) = model_check_loop(sc, runs, model, expected, *max_steps, *tolerance)?;
+                out.push(checks, fig);
+            }
             EstimatorSpec::AccelStraightness { procedure, sensor, method, tolerance } => {
                 let (c, f, stages) =
                     accel_straightness_check(sc, runs, errors, procedure, sensor, method.as_deref(), *tolerance)?;
@@ -672,4 +692,70 @@ fn compensation_checks(
         ],
         fig,
     ))
+}
+
+/// The model-check loop run to its end on a recording: normalised RMS per iteration and the effects added.
+fn model_check_loop(
+    sc: &Scenario,
+    runs: &[RunRecord],
+    model: &str,
+    expected: &[String],
+    max_steps: usize,
+    tolerance: f64,
+) -> Result<(Vec<Check>, Figure), VmtError> {
+    use crate::modelcheck::{add_effect, compare, diagnose};
+    use vmt_estimators::modelcheck::Verdict;
+    let base = sc.source.parent().unwrap_or(Path::new("."));
+    let mut m = crate::model::read_model(&base.join(model))?;
+    let set = crate::simulate::to_measurement_set(sc, runs)?;
+    let mut history = vec![compare(&m, &set, &sc.source)?.normalized_rms];
+    let mut added: Vec<String> = Vec::new();
+    for _ in 0..max_steps {
+        let d = diagnose(&m, &set, &sc.source)?;
+        let Some(top) = d.ranking.iter().find(|r| r.verdict == Verdict::Significant) else { break };
+        let name: vmt_sim::effects::EffectName =
+            top.effect.parse().map_err(|e: vmt_sim::effects::UnknownEffect| VmtError::Internal(e.to_string()))?;
+        m = add_effect(&m, name, Some(top)).map_err(|e| VmtError::bad(&sc.source, "estimators (model_check)", e))?;
+        added.push(top.effect.clone());
+        history.push(compare(&m, &set, &sc.source)?.normalized_rms);
+    }
+    let mut checks: Vec<Check> = expected
+        .iter()
+        .map(|e| {
+            let found = if added.contains(e) { 1.0 } else { 0.0 };
+            Check::new(format!("model-check loop finds {e}"), Quantity::Ratio, 1.0, found, 0.0)
+        })
+        .collect();
+    let last = *history.last().unwrap_or(&f64::NAN);
+    checks.push(Check {
+        pass: last <= tolerance,
+        tolerance,
+        ..Check::new(
+            format!("normalised RMS after {} step(s)", added.len()),
+            Quantity::Ratio,
+            history[0],
+            last,
+            tolerance,
+        )
+    });
+    let fig = Figure {
+        title: format!(
+            "model-check loop: normalised residual RMS per iteration (added: {})",
+            if added.is_empty() { "nothing".into() } else { added.join(", ") }
+        ),
+        x_label: "iteration".into(),
+        x_unit: String::new(),
+        y_label: "normalised RMS".into(),
+        y_unit: "1 = noise".into(),
+        series: vec![Series {
+            label: "residual / σ".into(),
+            x: (0..history.len()).map(|i| i as f64).collect(),
+            y: history.clone(),
+            style: SeriesStyle::Points,
+        }],
+        kind: FigureKind::Line,
+        log_x: false,
+        log_y: history.iter().all(|v| *v > 0.0),
+    };
+    Ok((checks, fig))
 }
