@@ -383,8 +383,9 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 }
             }
             EstimatorSpec::ModelCheck { model, expected, max_steps, tolerance } => {
-                let (checks, fig) = model_check_loop(sc, runs, model, expected, *max_steps, *tolerance)?;
+                let (checks, fig, residuals) = model_check_loop(sc, runs, model, expected, *max_steps, *tolerance)?;
                 out.push(checks, fig);
+                out.push_figure(residuals);
             }
             EstimatorSpec::AccelStraightness { procedure, sensor, method, tolerance } => {
                 let (c, f, stages) =
@@ -702,13 +703,15 @@ fn model_check_loop(
     expected: &[String],
     max_steps: usize,
     tolerance: f64,
-) -> Result<(Vec<Check>, Figure), VmtError> {
+) -> Result<(Vec<Check>, Figure, Figure), VmtError> {
     use crate::modelcheck::{add_effect, compare, diagnose};
     use vmt_estimators::modelcheck::Verdict;
     let base = sc.source.parent().unwrap_or(Path::new("."));
     let mut m = crate::model::read_model(&base.join(model))?;
     let set = crate::simulate::to_measurement_set(sc, runs)?;
-    let mut history = vec![compare(&m, &set, &sc.source)?.normalized_rms];
+    let first = compare(&m, &set, &sc.source)?;
+    let mut history = vec![first.normalized_rms];
+    let mut last_report = first.clone();
     let mut added: Vec<String> = Vec::new();
     for _ in 0..max_steps {
         let d = diagnose(&m, &set, &sc.source)?;
@@ -717,7 +720,8 @@ fn model_check_loop(
             top.effect.parse().map_err(|e: vmt_sim::effects::UnknownEffect| VmtError::Internal(e.to_string()))?;
         m = add_effect(&m, name, Some(top)).map_err(|e| VmtError::bad(&sc.source, "estimators (model_check)", e))?;
         added.push(top.effect.clone());
-        history.push(compare(&m, &set, &sc.source)?.normalized_rms);
+        last_report = compare(&m, &set, &sc.source)?;
+        history.push(last_report.normalized_rms);
     }
     let mut checks: Vec<Check> = expected
         .iter()
@@ -757,5 +761,26 @@ fn model_check_loop(
         log_x: false,
         log_y: history.iter().all(|v| *v > 0.0),
     };
-    Ok((checks, fig))
+    // Residual RMS by position of the first channel, before and after the loop.
+    let by_pos = |r: &crate::modelcheck::CompareReport, label: &str| -> Option<Series> {
+        let c = r.channels.first()?;
+        Some(Series {
+            label: format!("{label} ({} / {})", c.run, c.sensor),
+            x: c.by_position.iter().map(|b| 0.5 * (b.0 + b.1) * 1e3).collect(),
+            y: c.by_position.iter().map(|b| b.3 * 1e6).collect(),
+            style: SeriesStyle::Line,
+        })
+    };
+    let residuals = Figure {
+        title: "model-check loop: residual RMS by position, starting model and final model".into(),
+        x_label: "position".into(),
+        x_unit: "mm".into(),
+        y_label: "residual RMS".into(),
+        y_unit: "µm (or N for force channels)".into(),
+        series: [by_pos(&first, "starting model"), by_pos(&last_report, "final model")].into_iter().flatten().collect(),
+        kind: FigureKind::Line,
+        log_x: false,
+        log_y: false,
+    };
+    Ok((checks, fig, residuals))
 }

@@ -266,3 +266,14 @@ fn a_study_can_run_a_users_estimator_command_and_the_in_process_trait_agrees() {
     // 20 nm noise: within issue 5's 0.1 µm / 0.5 µrad (both < 1e-7 in SI).
     assert!(rows.iter().all(|r| r.rms < 1e-7), "{rows:?}");
 }
+
+#[test]
+fn run_exits_1_and_names_the_estimates_that_missed_their_tolerance() {
+    let tmp = tempfile::tempdir().unwrap();
+    // An impossible tolerance: the ISO 230-2 values cannot be within 1e-15 m with 20 nm laser noise.
+    let p = scenario_with(tmp.path(), "tolerance = 0.1e-6", "tolerance = 1e-15");
+    let out = vmt().arg("run").arg(&p).arg("--out").arg(tmp.path().join("o")).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(text.contains("missed their tolerance") && text.contains("ISO 230-2 E (laser_x3)"), "{text}");
+}
