@@ -497,9 +497,13 @@ fn accel_scenario(truth: &str, mount: &str, direction: &str, sigma: f64, speeds:
 /// first and significant at its temporal frequency, and adding it must lower the normalised RMS.
 #[test]
 fn accelerometer_hidden_resonance_is_found_at_its_frequency() {
-    let truth = "[truth.effects.straightness_y]\nrandom = { rms = 0.3e-6, correlation_length = 0.0005, seed = 5 }\n\
+    let truth = "[truth.effects.straightness_y]\nrandom = { rms = 0.3e-6, correlation_length = 0.001, seed = 5 }\n\
                  [truth.effects.resonance]\nfrequency = 45.0\ndamping = 0.02\n";
-    let text = accel_scenario(truth, "link = \"mp3\"", "[0.0, 1.0, 0.0]", 1e-3, "[0.1, 0.2, 0.4]", 1200.0);
+    let text = accel_scenario(truth, "link = \"mp3\"", "[0.0, 1.0, 0.0]", 1e-3, "[0.1, 0.2]", 1200.0);
+    // The carriage on its bearing blocks is a mode of its own (≈ 102 Hz across the rail with the
+    // lesson's 1e9 N/m blocks; diagnose finds it when it is there: a fixed temporal frequency too).
+    // Stiffer blocks (1e10 N/m, ×3.2 in frequency) move it out of the way of the column mode.
+    let text = text.replace("stiffness_y = 1e9", "stiffness_y = 1e10");
     let sc = Scenario::parse(&text, Path::new("resonance.toml"), None).unwrap();
     let model = model_fitting(&[]);
     for (seed, set) in [1u64, 2].iter().zip(sets(&sc, &[1, 2])) {
