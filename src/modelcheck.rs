@@ -30,8 +30,29 @@
 //! catalogue's default shape δ = 2; the simulator's law, `vmt_sim::effects::EffectSet::friction`),
 //! with one force offset o per sensor; vs is searched like a period.
 //!
-//! Not predicted: accelerometers (resonance, gravity tilt), LuGre, squareness (needs two axes),
-//! servo lag (no effect on settled readings). They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
+//! Phase 3 (accelerometers): the readings of an `accelerometer` in a `constant_velocity` run with a
+//! `feed` (time t, position from `x_cmd`) are predicted by
+//!
+//! ```text
+//! a = o_ch + g·τ_s(x) + Σ_segments [A_k·sin(2πf·t) + B_k·cos(2πf·t)]·1{t ∈ segment k}
+//! ```
+//!
+//! with o_ch an offset per (run, sensor) (bias, gravity through the mounting tilt), g·τ_s(x) the
+//! gravity seen through the tilt of sensor s's sensitive axis u at position x (`gravity_tilt`; the
+//! simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted as a
+//! polynomial Σ c_k·x^k, k = 1..3, per sensor, shared by its runs: the same function of position at
+//! every speed) and a `resonance` at a temporal frequency f shared by all runs (searched on a
+//! 0.5 Hz grid, 5–200 Hz below 0.4× the slowest sampling rate), its amplitude and phase free per
+//! segment of [`RESONANCE_SEGMENT`] s of each channel (a mode driven by a random guideway profile is
+//! a narrow-band random process). The damping is not resolved (the starting value is reported).
+//! The guideway's own acceleration v²·d²(u·δ)/dx² (straightness, angles × offsets) is NOT
+//! predicted: it stays in the residual, which is normalised by the manifest's σ (or σ estimated
+//! from successive differences), so the normalised RMS of an accelerometer channel stays far above
+//! 1 when the guideway is rough. A broadband residual that grows with speed can then make a strong
+//! line of the fastest run (or an aliased one) win the resonance search: see the tests.
+//!
+//! Not predicted: LuGre, squareness (needs two axes), servo lag (no effect on settled readings),
+//! the guideway part of accelerometer readings. They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
 //! degree `order` (default 3) without its constant term (the offsets carry it).
 
 use crate::error::{fmt_num, VmtError};
@@ -1119,13 +1140,14 @@ fn load_channels(model: &Model, set: &MeasurementSet, data: &Path) -> Result<(Ve
             "runs",
             format!(
                 "no channel the model can be compared with: expected a positioning point table of axis {} with a \
-                 laser or encoder deviation column",
+                 laser or encoder deviation column, or a constant-velocity or friction-sweep time series with a \
+                 `feed` and a motor_force or accelerometer column",
                 model.axis
             ),
         ));
     }
     for me in model.effects.iter().filter(|m| !predicts(m.effect.name)) {
-        notes.push(format!("effect `{}` is not predicted in point tables (phase 1): left out", me.effect.name));
+        notes.push(format!("effect `{}` is not predicted (module doc): left out", me.effect.name));
     }
     Ok((chans, notes))
 }
