@@ -42,7 +42,7 @@
 //! simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted as a
 //! polynomial Σ c_k·x^k, k = 1..3, per sensor, shared by its runs: the same function of position at
 //! every speed) and a `resonance` at a temporal frequency f shared by all runs (searched on a
-//! 0.5 Hz grid, 5–200 Hz below 0.4× the slowest sampling rate), its amplitude and phase free per
+//! 1 Hz grid, 5–200 Hz below 0.4× the slowest sampling rate), its amplitude and phase free per
 //! segment of [`RESONANCE_SEGMENT`] s of each channel (a mode driven by a random guideway profile is
 //! a narrow-band random process). The damping is not resolved (the starting value is reported).
 //! The guideway's own acceleration v²·d²(u·δ)/dx² (straightness, angles × offsets) is NOT
@@ -631,12 +631,12 @@ fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>, bool) {
         // Stribeck velocities of machine-tool guideways: 10 µm/s to 100 mm/s.
         (_, "vs") => (log_grid(1e-5, 0.1, 41), true),
         // Structural modes of machine-tool columns and frames: 5–200 Hz, capped at 0.4× the slowest
-        // accelerometer rate (below Nyquist), in steps of 0.5 Hz (finer than the 1/0.2 s = 5 Hz
-        // resolution of a segment), refined by golden section.
+        // accelerometer rate (below Nyquist), in steps of 1 Hz (five points across the 1/0.2 s =
+        // 5 Hz resolution of a segment), refined by golden section.
         (_, "frequency") => {
             let hi = accel_min_rate(st).map_or(200.0, |f| (0.4 * f).min(200.0)).max(6.0);
-            let n = ((hi - 5.0) / 0.5).floor() as usize + 1;
-            ((0..n).map(|k| 5.0 + 0.5 * k as f64).collect(), true)
+            let n = (hi - 5.0).floor() as usize + 1;
+            ((0..n).map(|k| 5.0 + k as f64).collect(), true)
         }
         // Signal periods of common linear and rotary scales (Heidenhain, Renishaw): 2–200 µm.
         _ => (vec![2e-6, 4e-6, 8e-6, 10e-6, 20e-6, 40e-6, 100e-6, 200e-6], false),

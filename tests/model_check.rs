@@ -492,9 +492,13 @@ fn accel_scenario(truth: &str, mount: &str, direction: &str, sigma: f64, speeds:
 }
 
 /// Accelerometers, resonance: a 45 Hz column mode (ζ = 0.02) excited by a fine random straightness
-/// (0.3 µm rms, 0.5 mm correlation length), seen by a y accelerometer at the column top (link mp3)
-/// in runs at 0.1, 0.2 and 0.4 m/s; the model has nothing for it. Diagnose must rank `resonance`
-/// first and significant at its temporal frequency, and adding it must lower the normalised RMS.
+/// (0.3 µm rms, 1 mm correlation length), seen by a y accelerometer at the column top (link mp3)
+/// in runs at 0.1 and 0.2 m/s; the model has nothing for it. Diagnose must rank `resonance` first
+/// and significant at its temporal frequency, and adding it must lower the normalised RMS (not to
+/// the noise level: the guideway's own acceleration v²·EYX'' is not predicted, module doc).
+/// Known limit: with a 0.5 mm correlation length and a run at 0.4 m/s that guideway acceleration
+/// (growing as v²) holds a stronger narrow line near 102–109 Hz than the column mode, and the
+/// search locks on it; so does the carriage's own mode on 1e9 N/m blocks (≈ 102 Hz).
 #[test]
 fn accelerometer_hidden_resonance_is_found_at_its_frequency() {
     let truth = "[truth.effects.straightness_y]\nrandom = { rms = 0.3e-6, correlation_length = 0.001, seed = 5 }\n\
@@ -508,10 +512,11 @@ fn accelerometer_hidden_resonance_is_found_at_its_frequency() {
     let model = model_fitting(&[]);
     for (seed, set) in [1u64, 2].iter().zip(sets(&sc, &[1, 2])) {
         let label = format!("hidden resonance, seed {seed}");
-        let d = diagnose(&model, &set, Path::new("sim")).unwrap();
-        eprintln!("{label}: {:?}", d.ranking.iter().map(|r| (&r.effect, r.delta_bic)).collect::<Vec<_>>());
+        let t0 = std::time::Instant::now();
         let (before, after, m1) = step(&model, &set, EffectName::Resonance, &label);
-        let f = d.ranking[0].params["frequency"];
+        eprintln!("{label}: diagnose + add + compare {:.1} s", t0.elapsed().as_secs_f64());
+        // The diagnosed frequency, as `add --from-diagnosis` wrote it into the model.
+        let f = m1.effects[0].effect.params.get("frequency").unwrap();
         let c = compare(&m1, &set, Path::new("sim")).unwrap();
         let f1 = c.fitted["resonance"]["frequency"];
         eprintln!("{label}: frequency {f:.2} Hz (after add {f1:.2} Hz), normalised RMS {before:.2} → {after:.3}");
