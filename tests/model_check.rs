@@ -496,9 +496,9 @@ fn accel_scenario(truth: &str, mount: &str, direction: &str, sigma: f64, speeds:
 /// in runs at 0.1 and 0.2 m/s; the model has nothing for it. Diagnose must rank `resonance` first
 /// and significant at its temporal frequency, and adding it must lower the normalised RMS (not to
 /// the noise level: the guideway's own acceleration v²·EYX'' is not predicted, module doc).
-/// Known limit: with a 0.5 mm correlation length and a run at 0.4 m/s that guideway acceleration
-/// (growing as v²) holds a stronger narrow line near 102–109 Hz than the column mode, and the
-/// search locks on it; so does the carriage's own mode on 1e9 N/m blocks (≈ 102 Hz).
+/// Known limit: with a 0.5 mm correlation length (runs at 0.1–0.4 m/s) that guideway acceleration
+/// is broadband up to Nyquist and far stronger than the mode; the search then locks on a line of
+/// it near 106–110 Hz. The carriage's own mode on the lesson's 1e9 N/m blocks (≈ 102 Hz) also wins.
 #[test]
 fn accelerometer_hidden_resonance_is_found_at_its_frequency() {
     let truth = "[truth.effects.straightness_y]\nrandom = { rms = 0.3e-6, correlation_length = 0.001, seed = 5 }\n\
