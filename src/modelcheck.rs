@@ -1556,3 +1556,64 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
 pub fn is_positioning(p: Procedure) -> bool {
     p == Procedure::Positioning
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An accelerometer channel of `m` samples at 100 Hz from t = 0, x = 0.1·t.
+    fn accel(run: &str, m: usize) -> Channel {
+        let t: Vec<f64> = (0..m).map(|i| i as f64 / 100.0).collect();
+        Channel {
+            run: run.into(),
+            sensor: "acc".into(),
+            kind: SensorKind::Accelerometer,
+            u: [0.0, 1.0, 0.0],
+            r: [0.0; 3],
+            x: t.iter().map(|t| 0.1 * t).collect(),
+            d: vec![1.0; m],
+            cycle: vec![1; m],
+            t: t.clone(),
+            v: vec![0.1; m],
+            y: vec![0.0; m],
+            sigma: Some(1e-3),
+        }
+    }
+
+    /// 100 samples over 0.99 s → ⌈0.99/0.2⌉ = 5 segments; every sample falls in exactly one, and
+    /// each resonance column pair is non-zero only on its own segment.
+    #[test]
+    fn resonance_segments_cover_every_sample_once() {
+        let chans = vec![accel("a", 100), accel("b", 20)];
+        let st = Stack::new(&chans);
+        let segs = resonance_segments(&st);
+        // Run b: 20 samples over 0.19 s → 1 segment.
+        assert_eq!(segs.iter().filter(|s| s.0 == 0).count(), 5);
+        assert_eq!(segs.iter().filter(|s| s.0 == 1).count(), 1);
+        let sh = shape(&st, EffectName::Resonance, 1, DEFAULT_ORDER, false);
+        assert_eq!(sh.coefs.len(), 12);
+        let cols = columns(&st, EffectName::Resonance, &sh, &[45.0]);
+        for k in 0..st.n {
+            // sin² + cos² = 1 on the one segment holding sample k, 0 elsewhere.
+            let s: f64 = cols.iter().map(|c| c[k] * c[k]).sum();
+            assert!((s - 1.0).abs() < 1e-12, "sample {k}: {s}");
+        }
+    }
+
+    /// The gravity-tilt column of x^k on an accelerometer is g·x^k (g = 9.80665 m/s²), shared by the
+    /// sensor's runs; a laser channel gets 0.
+    #[test]
+    fn gravity_tilt_columns_are_g_times_powers_of_x() {
+        let mut laser = accel("c", 3);
+        laser.kind = SensorKind::LaserLinear;
+        laser.sensor = "laser".into();
+        let chans = vec![accel("a", 10), accel("b", 10), laser];
+        let st = Stack::new(&chans);
+        let sh = shape(&st, EffectName::GravityTilt, 1, 3, false);
+        assert_eq!(sh.coefs, vec!["acc_c1", "acc_c2", "acc_c3"]);
+        let cols = columns(&st, EffectName::GravityTilt, &sh, &[]);
+        // Sample 5 of run b: x = 0.1·0.05 = 0.005 m; c2 column = g·x².
+        assert!((cols[1][15] - GRAVITY * 0.005f64.powi(2)).abs() < 1e-15);
+        assert!(cols.iter().all(|c| c[20..].iter().all(|v| *v == 0.0)));
+    }
+}
