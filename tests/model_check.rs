@@ -474,3 +474,128 @@ fn friction_sweep_hidden_stribeck_and_viscous_are_found() {
         assert!(after <= NOISE_LEVEL_NRMS, "{label}: {after}");
     }
 }
+
+/// A constant-velocity scenario on the lesson machine: runs at `speeds` (m/s) over [0.3, 0.7] m,
+/// `high_rate` Hz at the highest speed (equal sample counts), one accelerometer `acc` mounted at
+/// `mount` (a `link = ...` or `position = [...]` line) sensing along `direction`, σ per sample
+/// `sigma` (m/s²); `truth` holds `[truth.effects.*]` tables.
+fn accel_scenario(truth: &str, mount: &str, direction: &str, sigma: f64, speeds: &str, high_rate: f64) -> String {
+    let lesson = std::fs::read_to_string(lesson("backlash").join("scenario.toml")).unwrap();
+    let head = lesson.split("[truth]").next().unwrap();
+    format!(
+        "{head}[truth]\nmachine = \"slide_column\"\naxis = \"x\"\n{truth}\n\
+         [[sensors]]\nname = \"x_cmd\"\nkind = \"command\"\n\
+         [[sensors]]\nname = \"acc\"\nkind = \"accelerometer\"\n{mount}\ndirection = {direction}\nsigma = {sigma:e}\n\
+         [[procedures]]\nkind = \"constant_velocity\"\nname = \"cv\"\nspeeds = {speeds}\nstart = 0.3\nend = 0.7\n\
+         settle = 0.3\nhigh_rate = {high_rate}\nsensors = [\"x_cmd\", \"acc\"]\n"
+    )
+}
+
+/// Accelerometers, resonance: a 45 Hz column mode (ζ = 0.02) excited by a fine random straightness
+/// (0.3 µm rms, 1 mm correlation length), seen by a y accelerometer at the column top (link mp3)
+/// in runs at 0.1 and 0.2 m/s; the model has nothing for it. Diagnose must rank `resonance` first
+/// and significant at its temporal frequency, and adding it must lower the normalised RMS (not to
+/// the noise level: the guideway's own acceleration v²·EYX'' is not predicted, module doc).
+/// Known limit: with a 0.5 mm correlation length (runs at 0.1–0.4 m/s) that guideway acceleration
+/// is broadband up to Nyquist and far stronger than the mode; the search then locks on a line of
+/// it near 106–110 Hz. The carriage's own mode on the lesson's 1e9 N/m blocks (≈ 102 Hz) also wins.
+#[test]
+fn accelerometer_hidden_resonance_is_found_at_its_frequency() {
+    let truth = "[truth.effects.straightness_y]\nrandom = { rms = 0.3e-6, correlation_length = 0.001, seed = 5 }\n\
+                 [truth.effects.resonance]\nfrequency = 45.0\ndamping = 0.02\n";
+    let text = accel_scenario(truth, "link = \"mp3\"", "[0.0, 1.0, 0.0]", 1e-3, "[0.1, 0.2]", 1200.0);
+    // The carriage on its bearing blocks is a mode of its own (≈ 102 Hz across the rail with the
+    // lesson's 1e9 N/m blocks; diagnose finds it when it is there: a fixed temporal frequency too).
+    // Stiffer blocks (1e10 N/m, ×3.2 in frequency) move it out of the way of the column mode.
+    let text = text.replace("stiffness_y = 1e9", "stiffness_y = 1e10");
+    let sc = Scenario::parse(&text, Path::new("resonance.toml"), None).unwrap();
+    let model = model_fitting(&[]);
+    for (seed, set) in [1u64, 2].iter().zip(sets(&sc, &[1, 2])) {
+        let label = format!("hidden resonance, seed {seed}");
+        let t0 = std::time::Instant::now();
+        let (before, after, m1) = step(&model, &set, EffectName::Resonance, &label);
+        eprintln!("{label}: diagnose + add + compare {:.1} s", t0.elapsed().as_secs_f64());
+        // The diagnosed frequency, as `add --from-diagnosis` wrote it into the model.
+        let f = m1.effects[0].effect.params.get("frequency").unwrap();
+        let c = compare(&m1, &set, Path::new("sim")).unwrap();
+        let f1 = c.fitted["resonance"]["frequency"];
+        eprintln!("{label}: frequency {f:.2} Hz (after add {f1:.2} Hz), normalised RMS {before:.2} → {after:.3}");
+        // The brief's 1 Hz: below the half-power bandwidth 2ζf = 1.8 Hz of the mode.
+        assert!((f - 45.0).abs() < 1.0 && (f1 - 45.0).abs() < 1.0, "{label}: {f} {f1}");
+        assert!(after < before, "{label}");
+    }
+}
+
+/// Accelerometers, gravity through tilt: a roll EAX(x) = 20 µrad·sin(2πx/0.5 m) tilts a
+/// y-sensitive accelerometer on the axis line (no Abbe offset, so the roll moves it by nothing and
+/// only g·EAX ≈ 0.2 mm/s² shows), at 0.1, 0.2 and 0.4 m/s; the model has nothing for it. Diagnose
+/// must rank `gravity_tilt` first and significant, and adding it must lower the normalised RMS.
+#[test]
+fn accelerometer_hidden_gravity_tilt_is_found() {
+    let truth = "[truth.effects.roll]\nharmonics = [{ amplitude = 20e-6, wavelength = 0.5, phase = 0.3 }]\n";
+    let text = accel_scenario(truth, "position = [0.0, 0.0, 0.0]", "[0.0, 1.0, 0.0]", 1e-4, "[0.1, 0.2, 0.4]", 300.0);
+    let sc = Scenario::parse(&text, Path::new("gravity.toml"), None).unwrap();
+    let model = model_fitting(&[]);
+    for (seed, set) in [1u64, 2].iter().zip(sets(&sc, &[1, 2])) {
+        let label = format!("hidden gravity_tilt, seed {seed}");
+        let d = diagnose(&model, &set, Path::new("sim")).unwrap();
+        eprintln!("{label}: {:?}", d.ranking.iter().map(|r| (&r.effect, r.delta_bic)).collect::<Vec<_>>());
+        let (before, after, m1) = step(&model, &set, EffectName::GravityTilt, &label);
+        // The fitted tilt of the y accelerometer is the roll EAX (reading g·EAX to first order), up
+        // to a constant (the offsets carry it): compared relative to x = 0.5 m over the range.
+        let f = &compare(&m1, &set, Path::new("sim")).unwrap().fitted["gravity_tilt"];
+        let tau = |x: f64| (1..=3).map(|k| f[&format!("tilt_acc_c{k}")] * x.powi(k)).sum::<f64>();
+        let roll = |x: f64| 20e-6 * (std::f64::consts::TAU * x / 0.5 + 0.3).sin();
+        let err = (0..=40)
+            .map(|i| 0.3 + 0.01 * i as f64)
+            .map(|x| ((tau(x) - tau(0.5)) - (roll(x) - roll(0.5))).abs())
+            .fold(0.0, f64::max);
+        eprintln!("{label}: normalised RMS {before:.2} → {after:.3}; tilt error {:.2} µrad", err * 1e6);
+        assert!(after < before, "{label}");
+        // No guideway acceleration reaches this sensor (no straightness, no offset from the roll
+        // axis), so after the add the residual is the 0.1 mm/s² noise: the noise-level bound.
+        assert!(after <= NOISE_LEVEL_NRMS, "{label}: {after}");
+        // The model is a cubic: the best cubic through the true roll (least squares on the same
+        // grid, relative to x = 0.5 m) misses it by `floor`; the fit may add 1 µrad (5 % of the
+        // roll) for the noise (0.1 mm/s² per sample ≈ 10 µrad, averaged over 900 samples).
+        let floor = cubic_misfit(&|x| roll(x) - roll(0.5));
+        eprintln!("{label}: best-cubic floor {:.2} µrad", floor * 1e6);
+        assert!(err < floor + 1e-6, "{label}: {err} (floor {floor})");
+    }
+}
+
+/// Max |f(x) − p(x)| over x = 0.3, 0.31, …, 0.7 m of the least-squares cubic p through f on that
+/// grid with p(0.5) = f(0.5) (normal equations in u = x − 0.5, Gaussian elimination).
+fn cubic_misfit(f: &dyn Fn(f64) -> f64) -> f64 {
+    let xs: Vec<f64> = (0..=40).map(|i| 0.3 + 0.01 * i as f64).collect();
+    let mut a = [[0.0f64; 4]; 3];
+    for &x in &xs {
+        let u = x - 0.5;
+        let row = [u, u * u, u * u * u];
+        let y = f(x) - f(0.5);
+        for i in 0..3 {
+            for j in 0..3 {
+                a[i][j] += row[i] * row[j];
+            }
+            a[i][3] += row[i] * y;
+        }
+    }
+    for k in 0..3 {
+        for i in k + 1..3 {
+            let m = a[i][k] / a[k][k];
+            for j in k..4 {
+                a[i][j] -= m * a[k][j];
+            }
+        }
+    }
+    let mut c = [0.0f64; 3];
+    for i in (0..3).rev() {
+        c[i] = (a[i][3] - (i + 1..3).map(|j| a[i][j] * c[j]).sum::<f64>()) / a[i][i];
+    }
+    xs.iter()
+        .map(|&x| {
+            let u = x - 0.5;
+            ((f(x) - f(0.5)) - (c[0] * u + c[1] * u * u + c[2] * u * u * u)).abs()
+        })
+        .fold(0.0, f64::max)
+}
