@@ -92,6 +92,63 @@ pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Vec<ScoreRow>
     rows
 }
 
+/// The laser lines (linear and straightness lasers) of a point-table run of a measurement set, identified:
+/// the run `run` or else the first point-table run with at least two lines. Returns the run's name, the
+/// number of lines and the identification.
+pub fn identify_set(
+    set: &MeasurementSet,
+    run: Option<&str>,
+) -> Result<(String, usize, vmt_estimators::laser_ls::Identification), String> {
+    use crate::estimate::{identify_laser_lines, LaserLine};
+    use crate::measurement::{RunData, SensorKind};
+    let is_line = |k: SensorKind| matches!(k, SensorKind::LaserLinear | SensorKind::LaserStraightness);
+    let lines_of = |r: &crate::measurement::Run| -> Vec<LaserLine> {
+        set.sensors
+            .iter()
+            .filter(|s| is_line(s.kind) && r.data.column(&s.name).is_some())
+            .map(|s| LaserLine {
+                name: s.name.clone(),
+                point: s.position,
+                direction: s.direction,
+                sigma: s.sigma.unwrap_or(0.0),
+            })
+            .collect()
+    };
+    let r = match run {
+        Some(n) => set.run(n).ok_or_else(|| format!("no run named `{n}`"))?,
+        None => set
+            .runs
+            .iter()
+            .find(|r| matches!(r.data, RunData::PointTable { .. }) && lines_of(r).len() >= 2)
+            .ok_or("expected a point-table run with at least two laser lines")?,
+    };
+    let RunData::PointTable { target, columns, .. } = &r.data else {
+        return Err(format!("run {} is not a point table", r.name));
+    };
+    let lines = lines_of(r);
+    let (id, _) = identify_laser_lines(target, columns, &lines).map_err(|m| format!("run {}: {m}", r.name))?;
+    Ok((r.name.clone(), lines.len(), id))
+}
+
+/// The six identified error motions as a FORMAT.md §5 table, with their standard errors as `NAME_sigma`
+/// when every one is known.
+pub fn profiles_of(id: &vmt_estimators::laser_ls::Identification) -> ProfileTable {
+    use crate::measurement::ProfileColumn;
+    let syms = ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"];
+    let position = id.profile("EXX").map(|p| p.positions.clone()).unwrap_or_default();
+    let columns = vmt_sim::effects::EffectName::ERROR_MOTIONS
+        .iter()
+        .zip(syms)
+        .filter_map(|(&effect, sym)| {
+            id.profile(sym).map(|p| {
+                let sigma: Option<Vec<f64>> = p.std_errors.iter().copied().collect();
+                ProfileColumn { axis: None, effect, values: p.values.clone(), sigma }
+            })
+        })
+        .collect();
+    ProfileTable { position, columns }
+}
+
 /// The laser-lines identifier (seeds 001/003) as an in-process `Estimator`: the six error motions of the
 /// first point-table run that has at least two laser lines. Also the worked example of the trait.
 pub struct LaserLines;
@@ -102,39 +159,8 @@ impl Estimator for LaserLines {
     }
 
     fn estimate(&self, set: &MeasurementSet, _work: &Path) -> Result<ProfileTable, VmtError> {
-        use crate::estimate::{identify_laser_lines, LaserLine};
-        use crate::measurement::{ProfileColumn, RunData, SensorKind};
-        let here = Path::new("<measurement set>");
-        let is_line = |k: SensorKind| matches!(k, SensorKind::LaserLinear | SensorKind::LaserStraightness);
-        for r in &set.runs {
-            let RunData::PointTable { target, columns, .. } = &r.data else { continue };
-            let lines: Vec<LaserLine> = set
-                .sensors
-                .iter()
-                .filter(|s| is_line(s.kind) && r.data.column(&s.name).is_some())
-                .map(|s| LaserLine {
-                    name: s.name.clone(),
-                    point: s.position,
-                    direction: s.direction,
-                    sigma: s.sigma.unwrap_or(0.0),
-                })
-                .collect();
-            if lines.len() < 2 {
-                continue;
-            }
-            let (id, _) = identify_laser_lines(target, columns, &lines)
-                .map_err(|m| VmtError::bad(here, format!("run {}", r.name), m))?;
-            let syms = ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"];
-            let position = id.profile("EXX").map(|p| p.positions.clone()).unwrap_or_default();
-            let columns = vmt_sim::effects::EffectName::ERROR_MOTIONS
-                .iter()
-                .zip(syms)
-                .filter_map(|(&effect, sym)| {
-                    id.profile(sym).map(|p| ProfileColumn { axis: None, effect, values: p.values.clone(), sigma: None })
-                })
-                .collect();
-            return Ok(ProfileTable { position, columns });
-        }
-        Err(VmtError::bad(here, "runs", "expected a point-table run with at least two laser lines"))
+        let (_, _, id) =
+            identify_set(set, None).map_err(|m| VmtError::bad(Path::new("<measurement set>"), "runs", m))?;
+        Ok(profiles_of(&id))
     }
 }

@@ -553,47 +553,14 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
 /// `vmt identify DATA [--run R] [-o PROFILES.csv]`: the six error motions of the axis from the laser
 /// lines (linear and straightness lasers) of a point-table run, with standard errors (FORMAT.md §5 CSV).
 pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, json: bool) -> Result<i32, VmtError> {
-    use crate::estimate::{identify_laser_lines, LaserLine};
-    use crate::measurement::{ProfileColumn, ProfileTable};
-    use vmt_sim::effects::EffectName;
     let set = read_set(path)?;
-    let r = match run {
-        Some(n) => set.run(n).ok_or_else(|| VmtError::bad(path, "runs", format!("no run named `{n}`")))?,
-        None => set
-            .runs
-            .iter()
-            .find(|r| {
-                matches!(r.data, measurement::RunData::PointTable { .. })
-                    && set.sensors.iter().filter(|s| is_laser_line(s.kind) && r.data.column(&s.name).is_some()).count()
-                        >= 2
-            })
-            .ok_or_else(|| VmtError::bad(path, "runs", "expected a point-table run with at least two laser lines"))?,
-    };
-    let measurement::RunData::PointTable { target, columns, .. } = &r.data else {
-        return Err(VmtError::bad(path, format!("run {}", r.name), "expected a point table"));
-    };
-    let lines: Vec<LaserLine> = set
-        .sensors
-        .iter()
-        .filter(|s| is_laser_line(s.kind) && r.data.column(&s.name).is_some())
-        .map(|s| LaserLine {
-            name: s.name.clone(),
-            point: s.position,
-            direction: s.direction,
-            sigma: s.sigma.unwrap_or(0.0),
-        })
-        .collect();
-    let (id, _) =
-        identify_laser_lines(target, columns, &lines).map_err(|m| VmtError::bad(path, format!("run {}", r.name), m))?;
+    let (run, n_lines, id) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
     if json {
         println!("{}", serde_json::to_string_pretty(&id).map_err(|e| VmtError::Internal(e.to_string()))?);
     } else {
         println!(
-            "identified from {} laser lines of run {}: rank {}, condition {:.3e}",
-            lines.len(),
-            r.name,
-            id.rank,
-            id.condition
+            "identified from {n_lines} laser lines of run {run}: rank {}, condition {:.3e}",
+            id.rank, id.condition
         );
         for u in &id.unobservable {
             println!("  not observable: {u}");
@@ -605,29 +572,10 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, json: bool) 
         }
     }
     if let Some(out) = out {
-        let syms = ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"];
-        let first = id.profile("EXX").ok_or_else(|| VmtError::Internal("no EXX profile".into()))?;
-        let columns = EffectName::ERROR_MOTIONS
-            .iter()
-            .zip(syms)
-            .filter_map(|(&effect, sym)| {
-                id.profile(sym).map(|p| ProfileColumn {
-                    axis: None,
-                    effect,
-                    values: p.values.clone(),
-                    sigma: Some(p.std_errors.iter().map(|s| s.unwrap_or(f64::NAN)).collect()),
-                })
-            })
-            .filter(|c| c.sigma.as_ref().is_some_and(|s| s.iter().all(|v| v.is_finite())))
-            .collect();
-        measurement::write_profiles(&ProfileTable { position: first.positions.clone(), columns }, out, UnitChoice::Si)?;
+        measurement::write_profiles(&crate::byo::profiles_of(&id), out, UnitChoice::Si)?;
         eprintln!("wrote {}", out.display());
     }
     Ok(0)
-}
-
-fn is_laser_line(k: SensorKind) -> bool {
-    matches!(k, SensorKind::LaserLinear | SensorKind::LaserStraightness)
 }
 
 /// `vmt score --truth T --estimate E`: compares two FORMAT.md §5 profile CSVs (crate::byo::score_profiles):
