@@ -199,28 +199,13 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
         println!("{}", serde_json::to_string_pretty(&res).map_err(|e| VmtError::Internal(e.to_string()))?);
         return Ok(0);
     }
-    let um = |v: f64| format!("{:10.3}", v * 1e6);
-    println!("ISO 230-2:2014 evaluation of {label} (µm)");
-    println!(
-        "{:>12} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
-        "target mm", "x̄↑", "x̄↓", "x̄", "B_i", "R↑_i", "R↓_i", "R_i"
-    );
-    for t in &res.targets {
-        println!(
-            "{:>12.3} {} {} {} {} {} {} {}",
-            t.target * 1e3,
-            um(t.up.mean),
-            um(t.down.mean),
-            um(t.mean_bidirectional),
-            um(t.reversal),
-            um(t.up.repeatability),
-            um(t.down.repeatability),
-            um(t.repeatability)
-        );
+    let table = crate::estimate::iso_table(&format!("ISO 230-2:2014 evaluation of {label} (µm)"), &res);
+    println!("{}", table.caption);
+    let line = |cells: &[String]| cells.iter().map(|c| format!("{c:>12}")).collect::<Vec<_>>().join(" ");
+    println!("{}", line(&table.header));
+    for row in &table.rows {
+        println!("{}", line(row));
     }
-    println!("A {}  A↑ {}  A↓ {}", um(res.a), um(res.a_up), um(res.a_down));
-    println!("E {}  E↑ {}  E↓ {}  M {}", um(res.e), um(res.e_up), um(res.e_down), um(res.m));
-    println!("R {}  R↑ {}  R↓ {}  B {}  B̄ {}", um(res.r), um(res.r_up), um(res.r_down), um(res.b), um(res.b_mean));
     Ok(0)
 }
 

@@ -250,7 +250,17 @@ pub fn iso_table(caption: &str, r: &AxisResult) -> vmt_report::Table {
         format!("B {} / B̄ {}", um(r.b), um(r.b_mean)),
         format!("R↑ {}", um(r.r_up)),
         format!("R↓ {}", um(r.r_down)),
-        format!("R {} / A {}", um(r.r), um(r.a)),
+        format!("R {}", um(r.r)),
+    ]);
+    rows.push(vec![
+        "accuracy".into(),
+        format!("A↑ {}", um(r.a_up)),
+        format!("A↓ {}", um(r.a_down)),
+        format!("A {}", um(r.a)),
+        String::new(),
+        String::new(),
+        String::new(),
+        String::new(),
     ]);
     vmt_report::Table {
         caption: caption.to_string(),
