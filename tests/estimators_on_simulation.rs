@@ -1,59 +1,8 @@
 //! Estimators applied to simulated measurements (issue 4): friction identification from a simulated
-//! friction sweep, the stick-slip index of the crawl preset, and the default scenario's `vmt run`.
+//! friction sweep (through `vmt friction`), the stick-slip index of the crawl preset, the default
+//! scenario's `vmt run`, and the model-check loop on a lesson.
 
 use std::path::Path;
-use vmt_estimators::friction_id::{fit_stribeck, StribeckFitOptions, StribeckShape};
-use vmt_sim::axis_sim::{AxisTruth, GuideFriction};
-use vmt_sim::friction::StribeckParams;
-use vmt_sim::machine::{AxisConfig, AxisModel};
-use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureSpec};
-use vmt_sim::sensors::{SensorKind, SensorSpec};
-use vmt_sim::urdf::parse_urdf;
-
-#[test]
-fn stribeck_parameters_are_recovered_from_a_simulated_friction_sweep() {
-    let model =
-        AxisModel::build(&parse_urdf(include_str!("../urdf/slide_column.urdf")).unwrap(), &AxisConfig::default())
-            .unwrap();
-    let injected = StribeckParams { fc: 150.0, fs: 250.0, vs: 2e-3, delta: 1.5, fv: 1000.0 };
-    let truth = AxisTruth { friction: GuideFriction::Stribeck(injected.clone()), ..Default::default() };
-    let force = SensorSpec { sigma: 0.5, ..SensorSpec::new("force", SensorKind::MotorForce) };
-    let spec = ProcedureSpec::FrictionSweep {
-        name: "sweep".into(),
-        speeds: None,
-        v_min: 1e-5,
-        v_max: 0.1,
-        per_decade: 3,
-        start: 0.05,
-        end: 0.95,
-        settle: 1.0,
-        duration: 0.5,
-        rate: 1000.0,
-        sensors: vec!["force".into()],
-    };
-    let (mut v, mut f) = (Vec::new(), Vec::new());
-    for run in simulate_procedure(&model, &truth, &spec, 7) {
-        let rec = read_run(&model, &truth, &run, std::slice::from_ref(&force), 7).unwrap();
-        let col = rec.data.column("force").unwrap();
-        v.push(rec.feed.unwrap() * rec.direction.unwrap() as f64);
-        f.push(col.iter().sum::<f64>() / col.len() as f64);
-    }
-    assert!(v.len() >= 26, "four decades at 3 per decade, both directions: {} runs", v.len());
-    let fit =
-        fit_stribeck(&v, &f, &StribeckFitOptions { shape: StribeckShape::Exponential, ..Default::default() }).unwrap();
-    let c = &fit.coefficients;
-    println!("fitted {c:?}");
-    // Issue 4: each parameter within 5 % (force noise 0.5 N per sample averaged over 500 samples).
-    for (name, got, want) in [
-        ("fc", c.fc, injected.fc),
-        ("fs", c.fs, injected.fs),
-        ("vs", c.vs, injected.vs),
-        ("delta", c.delta, injected.delta),
-        ("fv", c.fv, injected.fv),
-    ] {
-        assert!((got / want - 1.0).abs() < 0.05, "{name}: fitted {got}, injected {want}");
-    }
-}
 
 #[test]
 fn crawl_preset_gives_seed_002_stick_slip_indices_through_the_workflow() {
@@ -104,4 +53,29 @@ fn vmt_run_on_a_lesson_runs_the_model_check_loop_to_the_noise_floor() {
     );
     let html = std::fs::read_to_string(tmp.path().join("report.html")).unwrap();
     assert!(html.contains("normalised residual RMS per iteration"));
+}
+
+#[test]
+fn vmt_friction_identifies_the_stribeck_curve_of_the_friction_sweep_scenario() {
+    let tmp = tempfile::tempdir().unwrap();
+    let vmt = env!("CARGO_BIN_EXE_vmt");
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/friction_sweep.toml");
+    let data = tmp.path().join("sweep");
+    assert!(std::process::Command::new(vmt)
+        .arg("simulate")
+        .arg(&scenario)
+        .arg("-o")
+        .arg(&data)
+        .status()
+        .unwrap()
+        .success());
+    let out = std::process::Command::new(vmt).arg("friction").arg(&data).arg("--json").output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let fit: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let c = &fit["coefficients"];
+    // Issue 4: the injected Stribeck parameters within 5 % (scenario truth: 150 N, 250 N, 2 mm/s, 1.5, 1000 N·s/m).
+    for (key, want) in [("fc", 150.0), ("fs", 250.0), ("vs", 2e-3), ("delta", 1.5), ("fv", 1000.0)] {
+        let got = c[key].as_f64().unwrap();
+        assert!((got / want - 1.0).abs() < 0.05, "{key}: {got} vs {want}");
+    }
 }
