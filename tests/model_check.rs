@@ -536,7 +536,7 @@ fn accelerometer_hidden_gravity_tilt_is_found() {
     let text = accel_scenario(truth, "position = [0.0, 0.0, 0.0]", "[0.0, 1.0, 0.0]", 1e-4, "[0.1, 0.2, 0.4]", 300.0);
     let sc = Scenario::parse(&text, Path::new("gravity.toml"), None).unwrap();
     let model = model_fitting(&[]);
-    for (seed, set) in [1u64, 2].iter().zip(sets(&sc, &[1, 2])) {
+    for (seed, set) in [1u64, 2, 3, 4, 5].iter().zip(sets(&sc, &[1, 2, 3, 4, 5])) {
         let label = format!("hidden gravity_tilt, seed {seed}");
         let d = diagnose(&model, &set, Path::new("sim")).unwrap();
         eprintln!("{label}: {:?}", d.ranking.iter().map(|r| (&r.effect, r.delta_bic)).collect::<Vec<_>>());
