@@ -241,7 +241,6 @@ fn time_series_channels(
 ) {
     let RunData::TimeSeries { t, columns } = &run.data else { return };
     let steady = matches!(run.procedure, Procedure::FrictionSweep | Procedure::ConstantVelocity);
-    let t0 = run.start_time.unwrap_or(0.0);
     let x: Vec<f64> = run.data.column("x_cmd").map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; t.len()]);
     for (name, values) in columns {
         if name == "x_cmd" {
@@ -250,38 +249,20 @@ fn time_series_channels(
         let Some(s) = set.sensor(name) else { continue };
         match (s.kind, steady, run.feed) {
             (SensorKind::Accelerometer, _, Some(feed)) if run.procedure == Procedure::ConstantVelocity => {
-                let dir = f64::from(run.direction.unwrap_or(1));
-                out.push(Channel {
-                    run: run.name.clone(),
-                    sensor: name.clone(),
-                    kind: s.kind,
-                    u: to_axis_frame(s.direction, run.axis),
-                    r: s.position,
-                    x: x.clone(),
-                    d: vec![dir; t.len()],
-                    cycle: vec![1; t.len()],
-                    t: t.iter().map(|v| t0 + v).collect(),
-                    v: vec![feed * dir; t.len()],
-                    y: values.clone(),
-                    sigma: s.sigma.filter(|v| *v > 0.0),
-                });
+                out.push(steady_channel(
+                    run,
+                    name,
+                    s,
+                    to_axis_frame(s.direction, run.axis),
+                    s.position,
+                    &x,
+                    t,
+                    feed,
+                    values,
+                ));
             }
             (SensorKind::MotorForce, true, Some(feed)) => {
-                let dir = f64::from(run.direction.unwrap_or(1));
-                out.push(Channel {
-                    run: run.name.clone(),
-                    sensor: name.clone(),
-                    kind: s.kind,
-                    u: [1.0, 0.0, 0.0],
-                    r: [0.0; 3],
-                    x: x.clone(),
-                    d: vec![dir; t.len()],
-                    cycle: vec![1; t.len()],
-                    t: t.iter().map(|v| t0 + v).collect(),
-                    v: vec![feed * dir; t.len()],
-                    y: values.clone(),
-                    sigma: s.sigma.filter(|v| *v > 0.0),
-                });
+                out.push(steady_channel(run, name, s, [1.0, 0.0, 0.0], [0.0; 3], &x, t, feed, values));
             }
             _ => notes.push(format!(
                 "run `{}` ({}), sensor `{name}` ({}): not predicted (time series: only the motor force of \
@@ -294,19 +275,43 @@ fn time_series_channels(
     }
 }
 
+/// A channel of a constant-feed time-series run: every sample at the run's signed feed, cycle 1, times
+/// offset by the run's start time; `u`, `r` the sensor's direction and point in the axis frame.
+#[allow(clippy::too_many_arguments)]
+fn steady_channel(
+    run: &crate::measurement::Run,
+    name: &str,
+    s: &crate::measurement::Sensor,
+    u: [f64; 3],
+    r: [f64; 3],
+    x: &[f64],
+    t: &[f64],
+    feed: f64,
+    values: &[f64],
+) -> Channel {
+    let dir = f64::from(run.direction.unwrap_or(1));
+    let t0 = run.start_time.unwrap_or(0.0);
+    Channel {
+        run: run.name.clone(),
+        sensor: name.to_string(),
+        kind: s.kind,
+        u,
+        r,
+        x: x.to_vec(),
+        d: vec![dir; t.len()],
+        cycle: vec![1; t.len()],
+        t: t.iter().map(|v| t0 + v).collect(),
+        v: vec![feed * dir; t.len()],
+        y: values.to_vec(),
+        sigma: s.sigma.filter(|v| *v > 0.0),
+    }
+}
+
 // ------------------------------------------------------------------------------------------
 // Signatures of the effects on the stacked samples.
 
-/// 1 − exp(−t/τ) for t > 0 (a step for τ = 0), 0 before t = 0 (as the simulator's thermal effects).
-fn rise(t: f64, tau: f64) -> f64 {
-    if t <= 0.0 {
-        0.0
-    } else if tau <= 0.0 {
-        1.0
-    } else {
-        -(-t / tau).exp_m1()
-    }
-}
+// 1 − exp(−t/τ) for t > 0 (a step for τ = 0), 0 before t = 0: the simulator's thermal rise.
+use vmt_sim::effects::rise;
 
 /// The stacked samples of all channels, with per-sample sensitivities.
 struct Stack<'a> {

@@ -453,8 +453,8 @@ impl ThermalExpansion {
     }
 }
 
-/// 1 − exp(−t/τ) for t ≥ 0 (a step when τ = 0), 0 before t = 0.
-fn rise(t: f64, tau: f64) -> f64 {
+/// 1 − exp(−t/τ) for t ≥ 0 (a step when τ = 0), 0 before t = 0: the rise of the thermal effects.
+pub fn rise(t: f64, tau: f64) -> f64 {
     if t <= 0.0 {
         0.0
     } else if tau <= 0.0 {
