@@ -289,13 +289,24 @@ impl Job<'_> {
         let mut builder = ChartBuilder::on(root);
         builder.margin(12).margin_right(24).x_label_area_size(52).y_label_area_size(78);
         if self.draw_title && !fig.title.is_empty() {
-            builder.caption(&fig.title, (FONT, 22));
+            builder.caption(&fig.title, (FONT, 24));
         }
         let mut chart = builder.build_cartesian_2d(x_spec, y_spec).map_err(|e| e.to_string())?;
 
         let x_span: f64 = if fig.log_x { 0.0 } else { self.x_range.1 - self.x_range.0 };
         let y_span: f64 = if fig.log_y { 0.0 } else { self.y_range.1 - self.y_range.0 };
         let x_fmt = move |v: &f64| format_tick(*v, x_span);
+        // Bar charts: about one x tick per bar group, so categories 1, 2, 3 are not labelled 1.5, 2.5.
+        let x_labels: usize = match self.bars {
+            Some(_) => {
+                let mut centres: Vec<f64> =
+                    self.prepared.iter().flat_map(|p| p.points.iter().map(|&(x, _)| x)).collect();
+                centres.sort_by(|a, b| a.total_cmp(b));
+                centres.dedup();
+                (centres.len() + 1).clamp(2, 9)
+            }
+            None => 9,
+        };
         let y_fmt = move |v: &f64| format_tick(*v, y_span);
         chart
             .configure_mesh()
@@ -303,10 +314,11 @@ impl Job<'_> {
             .y_desc(axis_title(&fig.y_label, &fig.y_unit))
             .x_label_formatter(&x_fmt)
             .y_label_formatter(&y_fmt)
-            .x_labels(9)
+            .x_labels(x_labels)
             .y_labels(8)
-            .axis_desc_style((FONT, 17))
-            .label_style((FONT, 14))
+            .max_light_lines(if fig.log_x || fig.log_y { 9 } else { 4 })
+            .axis_desc_style((FONT, 19))
+            .label_style((FONT, 16))
             .bold_line_style(RGBColor(0xd0, 0xd4, 0xda))
             .light_line_style(RGBColor(0xee, 0xf0, 0xf3))
             .axis_style(RGBColor(0x30, 0x30, 0x30))
@@ -376,7 +388,7 @@ impl Job<'_> {
             chart
                 .configure_series_labels()
                 .position(position)
-                .label_font((FONT, 15))
+                .label_font((FONT, 16))
                 .background_style(WHITE.mix(0.85))
                 .border_style(RGBColor(0xb0, 0xb0, 0xb0))
                 .margin(10)
@@ -391,9 +403,9 @@ impl Job<'_> {
         let fig: &Figure = self.fig;
         let n_labels: usize = self.prepared.iter().filter(|p| !p.series.label.is_empty()).count();
         let max_chars: usize = self.prepared.iter().map(|p| p.series.label.chars().count()).max().unwrap_or(0);
-        // Legend size estimate in pixels: ~7.5 px per character at 15 px font, sample + margins 50 px,
+        // Legend size estimate in pixels: ~8 px per character at the 16-unit legend font, sample + margins 50 px,
         // 20 px per entry; as a fraction of the plotting area.
-        let w_frac: f64 = ((max_chars as f64 * 7.5 + 50.0) / plot_w.max(1) as f64).min(1.0);
+        let w_frac: f64 = ((max_chars as f64 * 8.0 + 50.0) / plot_w.max(1) as f64).min(1.0);
         let h_frac: f64 = ((n_labels as f64 * 20.0 + 20.0) / plot_h.max(1) as f64).min(1.0);
         let norm = |v: f64, range: (f64, f64), log: bool| -> f64 {
             let (a, b) = (to_axis(range.0, log), to_axis(range.1, log));
