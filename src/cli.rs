@@ -71,7 +71,7 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     bar.finish_and_clear();
     if json {
         let v = serde_json::json!({"scenario": sc.source, "checks": checks, "pass": failed.is_empty()});
-        println!("{}", serde_json::to_string_pretty(&v).map_err(|e| VmtError::Internal(e.to_string()))?);
+        print_json(&v)?;
     } else {
         println!("vmt run: {} — {}", sc.source.display(), sc.description);
         println!("{}", summary_table(&set));
@@ -196,7 +196,7 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
     };
     let res = evaluate_bidirectional(&targets, &up, &down).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
     if json {
-        println!("{}", serde_json::to_string_pretty(&res).map_err(|e| VmtError::Internal(e.to_string()))?);
+        print_json(&res)?;
         return Ok(0);
     }
     let table = crate::estimate::iso_table(&format!("ISO 230-2:2014 evaluation of {label} (µm)"), &res);
@@ -286,15 +286,10 @@ fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path) -> Resu
     Ok(0)
 }
 
-/// Reads a measurement set or says which directory failed.
-fn read_set(path: &Path) -> Result<MeasurementSet, VmtError> {
-    measurement::read(path)
-}
-
 /// `vmt ssi DATA [--sensor NAME]`: seed 002's stick-slip index of every time-series run (crawl first).
 pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtError> {
     use vmt_estimators::ssi::stick_slip_index;
-    let set = read_set(path)?;
+    let set = measurement::read(path)?;
     let mut results = Vec::new();
     for r in &set.runs {
         let measurement::RunData::TimeSeries { t, .. } = &r.data else { continue };
@@ -321,7 +316,7 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
         return Err(VmtError::bad(path, "runs", "expected a time-series run with an encoder column"));
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&results).map_err(|e| VmtError::Internal(e.to_string()))?);
+        print_json(&results)?;
     } else {
         println!("{:<16} {:<12} {:>12} {:>8}  verdict (SSI ≥ 1: crawling)", "run", "sensor", "feed mm/min", "SSI");
         for r in &results {
@@ -344,7 +339,7 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
 /// per constant-velocity run against its signed feed), nonlinear least squares with standard errors.
 pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtError> {
     use vmt_estimators::friction_id::{fit_stribeck, StribeckFitOptions};
-    let set = read_set(path)?;
+    let set = measurement::read(path)?;
     let name = match sensor {
         Some(s) => s.to_string(),
         None => set
@@ -370,7 +365,7 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
     let fit =
         fit_stribeck(&v, &f, &StribeckFitOptions::default()).map_err(|e| VmtError::bad(path, "runs", e.to_string()))?;
     if json {
-        println!("{}", serde_json::to_string_pretty(&fit).map_err(|e| VmtError::Internal(e.to_string()))?);
+        print_json(&fit)?;
     } else {
         let c = &fit.coefficients;
         println!("Stribeck fit of {} sweep points (residual RMS {:.3} N):", v.len(), fit.residual_rms);
@@ -389,7 +384,7 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
         equidistant_table, export_controller_table, variable_step_table, VariableStepParams,
     };
     use vmt_estimators::iso230_2::evaluate_bidirectional;
-    let set = read_set(path)?;
+    let set = measurement::read(path)?;
     let run = set
         .runs
         .iter()
@@ -538,10 +533,10 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
 /// `vmt identify DATA [--run R] [-o PROFILES.csv]`: the six error motions of the axis from the laser
 /// lines (linear and straightness lasers) of a point-table run, with standard errors (FORMAT.md §5 CSV).
 pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, json: bool) -> Result<i32, VmtError> {
-    let set = read_set(path)?;
+    let set = measurement::read(path)?;
     let (run, n_lines, id) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
     if json {
-        println!("{}", serde_json::to_string_pretty(&id).map_err(|e| VmtError::Internal(e.to_string()))?);
+        print_json(&id)?;
     } else {
         println!(
             "identified from {n_lines} laser lines of run {run}: rank {}, condition {:.3e}",
@@ -571,7 +566,7 @@ pub fn score(truth: &Path, estimate: &Path, json: bool) -> Result<i32, VmtError>
         return Err(VmtError::bad(estimate, "line 1 (header)", "no error-motion column in common with the truth"));
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&rows).map_err(|e| VmtError::Internal(e.to_string()))?);
+        print_json(&rows)?;
     } else {
         println!("{:<20} {:>14} {:>14} {:>8}", "error motion", "RMS diff", "max diff", "points");
         for r in &rows {
