@@ -651,7 +651,7 @@ fn compensation_checks(
     residual: f64,
 ) -> Result<(Vec<Check>, Figure), VmtError> {
     use vmt_estimators::compensation::{variable_step_table, VariableStepParams};
-    use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureSpec};
+    use vmt_sim::procedures::{plan_procedure, read_run, simulate_run, ProcedureSpec};
     let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (compensation {run})"), m);
     let iso = |rec: &RunRecord| -> Result<AxisResult, VmtError> {
         let (t, u, d) = point_table_deviations(rec, sensor)
@@ -677,8 +677,11 @@ fn compensation_checks(
         *targets = None;
         *name = format!("{run}_after_compensation");
     }
-    let truths = simulate_procedure(&model, &ph.truth, &verify, sc.seed);
-    let after_rec = read_run(&model, &ph.truth, &truths[0], &ph.sensors, sc.seed).map_err(bad)?;
+    // The re-test follows the scenario's session (time-dependent effects have moved on meanwhile).
+    let session_end = crate::simulate::session_plan(sc, ph).last().map_or(0.0, |(r, t0)| t0 + r.duration());
+    let plan = plan_procedure(&model, &verify, sc.seed);
+    let truth = simulate_run(&model, &ph.truth, &plan[0], session_end);
+    let after_rec = read_run(&model, &ph.truth, &truth, &ph.sensors, sc.seed).map_err(bad)?;
     let after = iso(&after_rec)?;
     let label = format!("{} nodes", table.positions.len());
     let after_t: Vec<f64> = after.targets.iter().map(|t| t.target).collect();

@@ -1,6 +1,7 @@
-//! Workflow `simulate`: scenario → machine → recording. The physics of each procedure is simulated
-//! once (in parallel: procedures are independent and each is deterministic, so the result does not
-//! depend on the number of threads); the sensors then read the truth with noise seeded per run and
+//! Workflow `simulate`: scenario → machine → recording. The procedures are planned into runs placed
+//! one after another on the session clock, and the physics of each run is simulated once (in
+//! parallel: each run is deterministic given its plan and start time, so the result does not depend
+//! on the number of threads); the sensors then read the truth with noise seeded per run and
 //! sensor (so a tolerance study can redraw the noise without redoing the physics).
 
 use crate::error::VmtError;
@@ -13,7 +14,7 @@ use vmt_sim::axis_sim::AxisTruth;
 use vmt_sim::effects::EffectName;
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::machine::AxisModel;
-use vmt_sim::procedures::{read_run, simulate_procedure, RunRecord, RunTruth};
+use vmt_sim::procedures::{plan_procedure, read_run, session_schedule, simulate_run, RunPlan, RunRecord, RunTruth};
 use vmt_sim::sensors::SensorSpec;
 use vmt_sim::truth::axis_physics;
 
@@ -54,15 +55,19 @@ pub fn error_motions(sc: &Scenario) -> Result<ErrorMotions, VmtError> {
     Ok(physics(sc)?.truth.motions)
 }
 
-/// Noise-free truth traces of every procedure of a scenario, in scenario order.
+/// The runs of every procedure of a scenario, in scenario order, with their session start times: the
+/// runs follow one another without a pause from t = 0 (`vmt_sim::procedures::session_schedule`).
+pub fn session_plan(sc: &Scenario, ph: &Physics) -> Vec<(RunPlan, f64)> {
+    let runs: Vec<RunPlan> = sc.procedures.iter().flat_map(|p| plan_procedure(&ph.model, p, sc.seed)).collect();
+    let starts = session_schedule(&runs, 0.0);
+    runs.into_iter().zip(starts).collect()
+}
+
+/// Noise-free truth traces of every run of a scenario, in scenario order. Runs are simulated in
+/// parallel: each is deterministic given its plan and session start, so the result does not depend on
+/// the number of threads.
 pub fn simulate_truth(sc: &Scenario, ph: &Physics) -> Vec<RunTruth> {
-    sc.procedures
-        .par_iter()
-        .map(|p| simulate_procedure(&ph.model, &ph.truth, p, sc.seed))
-        .collect::<Vec<_>>()
-        .into_iter()
-        .flatten()
-        .collect()
+    session_plan(sc, ph).par_iter().map(|(r, t0)| simulate_run(&ph.model, &ph.truth, r, *t0)).collect()
 }
 
 /// Sensor readings of every run, noise seeded by `seed`.

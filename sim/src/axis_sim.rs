@@ -173,6 +173,8 @@ pub struct AxisSim<'a> {
     mode: (DVec3, DVec3),
     last_vel: Option<DVec3>,
     steps: u64,
+    /// Session time at the start of this run, s: time-dependent effects see session_start + time().
+    session_start: f64,
     ey: DVec3,
     ez: DVec3,
 }
@@ -181,13 +183,20 @@ impl<'a> AxisSim<'a> {
     /// A run starting at rest at axis position x0, the body placed on its rest pose lowered by the static
     /// sag of the bearings under gravity.
     pub fn new(model: &'a AxisModel, truth: &'a AxisTruth, x0: f64) -> AxisSim<'a> {
+        AxisSim::in_session(model, truth, x0, 0.0)
+    }
+
+    /// As [`AxisSim::new`], for a run that starts `session_start` s into the measurement session: the
+    /// time-dependent effects of the feedback chain (thermal expansion, thermal drift) are evaluated at
+    /// session time session_start + t.
+    pub fn in_session(model: &'a AxisModel, truth: &'a AxisTruth, x0: f64, session_start: f64) -> AxisSim<'a> {
         let mut world = PhysicsWorld::new();
         world.gravity = DVec3::new(0.0, 0.0, -GRAVITY);
         world.integration_parameters.dt = model.dt;
         world.integration_parameters.num_solver_iterations = 1;
         let ey = model.axis_rotation * DVec3::Y;
         let ez = model.axis_rotation * DVec3::Z;
-        let x_act0 = x0 + truth.motions.positioning.value(x0) + truth.feedback.error(x0, 0.0);
+        let x_act0 = x0 + truth.motions.positioning.value(x0) + truth.feedback.error(x0, session_start);
         let rest = model.rest_pose(&truth.motions, x0);
         let sag = -ez.z * model.mass * GRAVITY / (model.blocks.len() as f64 * model.k_z);
         let start = rest.translation + model.axis * (x_act0 - x0) + DVec3::new(0.0, 0.0, sag);
@@ -209,6 +218,7 @@ impl<'a> AxisSim<'a> {
             mode: (DVec3::ZERO, DVec3::ZERO),
             last_vel: None,
             steps: 0,
+            session_start,
             ey,
             ez,
         };
@@ -251,7 +261,7 @@ impl<'a> AxisSim<'a> {
 
     /// Error of the positioning chain at x now: EXX(x) + feedback-chain error e(x, t), m.
     fn chain_error(&self, x: f64) -> f64 {
-        self.truth.motions.positioning.value(x) + self.truth.feedback.error(x, self.time())
+        self.truth.motions.positioning.value(x) + self.truth.feedback.error(x, self.session_start + self.time())
     }
 
     /// Nominal axis position (what the machine believes) for a table at x: x − EXX(x) − e(x, t).
@@ -389,8 +399,20 @@ impl<'a> AxisSim<'a> {
 /// Simulates a motion plan and returns the truth sampled at `record_times` (s, increasing), linearly
 /// interpolated between physics steps.
 pub fn simulate(model: &AxisModel, truth: &AxisTruth, plan: &MotionPlan, record_times: &[f64]) -> Trace {
+    simulate_in_session(model, truth, plan, record_times, 0.0)
+}
+
+/// As [`simulate`], for a run that starts `session_start` s into the measurement session (the
+/// recorded times stay relative to the run's start).
+pub fn simulate_in_session(
+    model: &AxisModel,
+    truth: &AxisTruth,
+    plan: &MotionPlan,
+    record_times: &[f64],
+    session_start: f64,
+) -> Trace {
     let x0 = plan.at(0.0).pos;
-    let mut sim = AxisSim::new(model, truth, x0);
+    let mut sim = AxisSim::in_session(model, truth, x0, session_start);
     let t_end = record_times.last().copied().unwrap_or(0.0).max(0.0);
     let mut out = Vec::with_capacity(record_times.len());
     let mut next = 0;

@@ -1,9 +1,11 @@
 //! Measurement procedures (DESIGN.md §6): what a metrologist runs on the machine. Each procedure is
-//! simulated once into noise-free truth traces (`simulate_procedure`); sensors then read them with
+//! planned into runs (commanded motion and record times, `plan_procedure`), the runs are placed one
+//! after another on the session clock (`session_schedule`: time-dependent effects carry over between
+//! runs) and simulated once into noise-free truth traces (`simulate_run`); sensors then read them with
 //! seeded noise (`read_run`), as often as a tolerance study needs.
 
 use crate::axis_sim::AxisTruth;
-use crate::axis_sim::{simulate, Sample};
+use crate::axis_sim::{simulate_in_session, Sample};
 use crate::machine::AxisModel;
 use crate::motion::MotionPlan;
 use crate::rng::source_rng;
@@ -469,11 +471,80 @@ pub fn irregular_targets(start: f64, end: f64, n: usize, seed: u64, name: &str) 
         .collect()
 }
 
-/// Simulates a procedure; returns one truth per run. A friction sweep that fails
+/// The commanded motion of one run and the times at which its truth is recorded (run time, s), before
+/// any physics: what a procedure asks of the machine.
+#[derive(Clone, Debug)]
+pub struct RunPlan {
+    pub name: String,
+    pub procedure: ProcedureKind,
+    pub feed: Option<f64>,
+    pub direction: Option<i8>,
+    pub sensors: Vec<String>,
+    pub layout: Layout,
+    pub plan: MotionPlan,
+    pub record_times: Vec<f64>,
+}
+
+impl RunPlan {
+    /// How long the run occupies the machine, s: the end of its motion plan or its last recorded
+    /// sample, whichever is later.
+    pub fn duration(&self) -> f64 {
+        self.plan.end_time().max(self.record_times.last().copied().unwrap_or(0.0))
+    }
+}
+
+/// Session start time of each run when the runs follow one another without a pause, in order, the
+/// first starting at `t0` (s): start_k = t0 + Σ_{i<k} duration_i. This is the session clock that
+/// time-dependent effects (thermal expansion, thermal drift) are evaluated on, so that they carry
+/// over from one run to the next, as on a real machine warming up during a measurement session.
+pub fn session_schedule(runs: &[RunPlan], t0: f64) -> Vec<f64> {
+    runs.iter()
+        .scan(t0, |t, r| {
+            let start = *t;
+            *t += r.duration();
+            Some(start)
+        })
+        .collect()
+}
+
+/// Simulates one run starting at session time `start_time` (s) and returns its noise-free truth.
+pub fn simulate_run(model: &AxisModel, truth: &AxisTruth, run: &RunPlan, start_time: f64) -> RunTruth {
+    RunTruth {
+        name: run.name.clone(),
+        procedure: run.procedure,
+        feed: run.feed,
+        direction: run.direction,
+        start_time,
+        sensors: run.sensors.clone(),
+        layout: run.layout.clone(),
+        samples: simulate_in_session(model, truth, &run.plan, &run.record_times, start_time).samples,
+    }
+}
+
+/// Simulates a procedure whose first run starts at session time 0, the others following it without
+/// a pause ([`session_schedule`]); returns one truth per run. A friction sweep that fails
 /// [`ProcedureSpec::check`] yields no runs (check it first: the scenario loader does).
 pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &ProcedureSpec, seed: u64) -> Vec<RunTruth> {
+    let runs = plan_procedure(model, spec, seed);
+    let starts = session_schedule(&runs, 0.0);
+    runs.iter().zip(starts).map(|(r, t0)| simulate_run(model, errors, r, t0)).collect()
+}
+
+/// The runs of a procedure as commanded motions and record times (no physics). A friction sweep that
+/// fails [`ProcedureSpec::check`] yields no runs.
+pub fn plan_procedure(model: &AxisModel, spec: &ProcedureSpec, seed: u64) -> Vec<RunPlan> {
+    let time_series = |name: String, procedure, v: f64, direction: i8, rate: f64, plan, record_times| RunPlan {
+        name,
+        procedure,
+        feed: Some(v),
+        direction: Some(direction),
+        sensors: spec.sensors().to_vec(),
+        layout: Layout::TimeSeries { rate },
+        plan,
+        record_times,
+    };
     match spec {
-        ProcedureSpec::ConstantVelocity { name, speeds, start, end, high_rate, direction, settle, sensors } => {
+        ProcedureSpec::ConstantVelocity { name, speeds, start, end, high_rate, direction, settle, .. } => {
             let vmax = speeds.iter().cloned().fold(0.0, f64::max);
             let n = (high_rate * (end - start).abs() / vmax).round() as usize;
             let labels: Vec<String> = if speeds.len() == 3 {
@@ -481,14 +552,15 @@ pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &Procedur
             } else {
                 (1..=speeds.len()).map(|i| format!("{name}_{i}")).collect()
             };
-            let mut sorted: Vec<(usize, f64)> = speeds.iter().cloned().enumerate().collect();
-            sorted.sort_by(|a, b| a.1.total_cmp(&b.1));
+            let mut sorted: Vec<f64> = speeds.clone();
+            sorted.sort_by(f64::total_cmp);
+            let d: i8 = if *direction >= 0 { 1 } else { -1 };
             sorted
                 .iter()
                 .zip(labels)
-                .map(|(&(_, v), label)| {
+                .map(|(&v, label)| {
                     let rate = high_rate * v / vmax;
-                    let (from, to) = if *direction >= 0 { (*start, *end) } else { (*end, *start) };
+                    let (from, to) = if d > 0 { (*start, *end) } else { (*end, *start) };
                     let s = (to - from).signum();
                     let ramp = v * v / (2.0 * model.max_accel) + v * settle;
                     let mut plan = MotionPlan::starting_at(from - s * ramp);
@@ -496,17 +568,7 @@ pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &Procedur
                     let (t0, _) = plan.move_to(to + s * ramp, v, model.max_accel);
                     let t_first = t0 + v / model.max_accel + settle;
                     let times: Vec<f64> = (0..=n).map(|i| t_first + (i as f64 - 1.0) / rate).collect();
-                    let samples = simulate(model, errors, &plan, &times).samples;
-                    RunTruth {
-                        name: label,
-                        procedure: ProcedureKind::ConstantVelocity,
-                        feed: Some(v),
-                        direction: Some(if *direction >= 0 { 1 } else { -1 }),
-                        start_time: 0.0,
-                        sensors: sensors.clone(),
-                        layout: Layout::TimeSeries { rate },
-                        samples,
-                    }
+                    time_series(label, ProcedureKind::ConstantVelocity, v, d, rate, plan, times)
                 })
                 .collect()
         }
@@ -523,54 +585,33 @@ pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &Procedur
             rate,
             overrun,
             accel,
-            sensors,
+            ..
         } => {
             let targets = targets.clone().unwrap_or_else(|| irregular_targets(*start, *end, *n_targets, seed, name));
             let a = accel.unwrap_or(model.max_accel);
-            vec![positioning_cycle(
-                model, errors, name, &targets, *runs, *feed, a, *dwell, *average, *rate, *overrun, sensors,
-            )]
+            let cycle = Cycle { runs: *runs, feed: *feed, accel: a, dwell: *dwell, average: *average, rate: *rate };
+            vec![positioning_cycle(name, &targets, &cycle, *overrun, spec.sensors())]
         }
-        ProcedureSpec::Crawl { name, feeds, start, duration, rate, settle, direction, sensors } => feeds
+        ProcedureSpec::Crawl { name, feeds, start, duration, rate, settle, direction, .. } => feeds
             .iter()
             .enumerate()
             .map(|(i, &v)| {
-                let s = if *direction >= 0 { 1.0 } else { -1.0 };
+                let s: i8 = if *direction >= 0 { 1 } else { -1 };
                 let mut plan = MotionPlan::starting_at(*start);
                 plan.dwell(0.2);
-                let (t0, _) = plan.move_to(start + s * v * (settle + duration + 1.0), v, model.max_accel);
+                let (t0, _) = plan.move_to(start + f64::from(s) * v * (settle + duration + 1.0), v, model.max_accel);
                 let t_first = t0 + v / model.max_accel + settle;
                 let n = (duration * rate).round() as usize;
                 let times: Vec<f64> = (0..=n).map(|k| t_first + (k as f64 - 1.0) / rate).collect();
-                RunTruth {
-                    name: format!("{name}_{}", i + 1),
-                    procedure: ProcedureKind::Crawl,
-                    feed: Some(v),
-                    direction: Some(s as i8),
-                    start_time: 0.0,
-                    sensors: sensors.clone(),
-                    layout: Layout::TimeSeries { rate: *rate },
-                    samples: simulate(model, errors, &plan, &times).samples,
-                }
+                time_series(format!("{name}_{}", i + 1), ProcedureKind::Crawl, v, s, *rate, plan, times)
             })
             .collect(),
-        ProcedureSpec::NineLine { name, start, end, step, feed, dwell, average, rate, overrun, sensors } => {
+        ProcedureSpec::NineLine { name, start, end, step, feed, dwell, average, rate, overrun, .. } => {
             let n = ((end - start) / step).round() as usize;
             let targets: Vec<f64> = (0..=n).map(|i| start + step * i as f64).collect();
-            vec![positioning_cycle(
-                model,
-                errors,
-                name,
-                &targets,
-                1,
-                *feed,
-                model.max_accel,
-                *dwell,
-                *average,
-                *rate,
-                *overrun,
-                sensors,
-            )]
+            let cycle =
+                Cycle { runs: 1, feed: *feed, accel: model.max_accel, dwell: *dwell, average: *average, rate: *rate };
+            vec![positioning_cycle(name, &targets, &cycle, *overrun, spec.sensors())]
         }
         ProcedureSpec::FrictionSweep {
             name,
@@ -583,7 +624,7 @@ pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &Procedur
             settle,
             duration,
             rate,
-            sensors,
+            ..
         } => {
             if spec.check(model).is_err() {
                 return Vec::new();
@@ -595,27 +636,19 @@ pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &Procedur
                 let Ok(window) = friction_sweep_window(v, *start, *end, a, *settle, *duration, *rate) else {
                     return Vec::new();
                 };
-                for s in [1.0f64, -1.0] {
-                    let from = if s > 0.0 { *start } else { *end };
+                for s in [1i8, -1] {
+                    let from = if s > 0 { *start } else { *end };
                     let mut plan = MotionPlan::starting_at(from);
                     // The body settles on its bearings at rest first (their rocking moves the reference point).
                     plan.dwell(0.5);
                     // Ramp v²/(2a), cruise settle + window (+ one sample period), ramp down.
                     let length = v * v / a + v * (settle + window + 1.0 / rate);
-                    let (t0, _) = plan.move_to(from + s * length, v, a);
+                    let (t0, _) = plan.move_to(from + f64::from(s) * length, v, a);
                     let t_first = t0 + v / a + settle;
                     let n = (window * rate).round() as usize;
                     let times: Vec<f64> = (0..=n).map(|k| t_first + k as f64 / rate).collect();
-                    out.push(RunTruth {
-                        name: format!("{name}_{}_{}", i + 1, if s > 0.0 { "pos" } else { "neg" }),
-                        procedure: ProcedureKind::FrictionSweep,
-                        feed: Some(v),
-                        direction: Some(s as i8),
-                        start_time: 0.0,
-                        sensors: sensors.clone(),
-                        layout: Layout::TimeSeries { rate: *rate },
-                        samples: simulate(model, errors, &plan, &times).samples,
-                    });
+                    let label = format!("{name}_{}_{}", i + 1, if s > 0 { "pos" } else { "neg" });
+                    out.push(time_series(label, ProcedureKind::FrictionSweep, v, s, *rate, plan, times));
                 }
             }
             out
@@ -623,67 +656,63 @@ pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &Procedur
     }
 }
 
-/// ISO 230-2 linear cycle: for each run, approach every target upwards (from below the first target by
-/// `overrun`), then every target downwards (from above the last by `overrun`).
-#[allow(clippy::too_many_arguments)]
-fn positioning_cycle(
-    model: &AxisModel,
-    errors: &AxisTruth,
-    name: &str,
-    targets: &[f64],
+/// How a positioning cycle moves and reads: `runs` bidirectional runs at `feed` (m/s) and `accel`
+/// (m/s²), a `dwell` (s) at each target whose last `average` s are read at `rate` (Hz).
+struct Cycle {
     runs: u32,
     feed: f64,
-    a: f64,
+    accel: f64,
     dwell: f64,
     average: f64,
     rate: f64,
-    overrun: f64,
-    sensors: &[String],
-) -> RunTruth {
+}
+
+/// ISO 230-2 linear cycle: for each run, approach every target upwards (from below the first target by
+/// `overrun`), then every target downwards (from above the last by `overrun`).
+fn positioning_cycle(name: &str, targets: &[f64], c: &Cycle, overrun: f64, sensors: &[String]) -> RunPlan {
     let first = targets[0];
     let last = targets[targets.len() - 1];
     let mut plan = MotionPlan::starting_at(first - overrun);
     plan.dwell(0.3);
     let mut windows = Vec::new();
     let mut visits_meta = Vec::new();
-    for run in 1..=runs {
+    for run in 1..=c.runs {
         if run > 1 {
-            plan.move_to(first - overrun, feed, a);
+            plan.move_to(first - overrun, c.feed, c.accel);
         }
         for &x in targets {
-            plan.move_to(x, feed, a);
-            let (_, t1) = plan.dwell(dwell);
+            plan.move_to(x, c.feed, c.accel);
+            let (_, t1) = plan.dwell(c.dwell);
             windows.push(t1);
             visits_meta.push((x, run, 1i8));
         }
-        plan.move_to(last + overrun, feed, a);
+        plan.move_to(last + overrun, c.feed, c.accel);
         for &x in targets.iter().rev() {
-            plan.move_to(x, feed, a);
-            let (_, t1) = plan.dwell(dwell);
+            plan.move_to(x, c.feed, c.accel);
+            let (_, t1) = plan.dwell(c.dwell);
             windows.push(t1);
             visits_meta.push((x, run, -1i8));
         }
     }
-    let per = ((average * rate).round() as usize).max(1);
+    let per = ((c.average * c.rate).round() as usize).max(1);
     let mut times = Vec::with_capacity(windows.len() * per);
     let mut visits = Vec::with_capacity(windows.len());
     for (t1, (target, run, direction)) in windows.iter().zip(visits_meta) {
         let first = times.len();
         for k in 0..per {
-            times.push(t1 - (per - 1 - k) as f64 / rate);
+            times.push(t1 - (per - 1 - k) as f64 / c.rate);
         }
         visits.push(Visit { target, run, direction, first, last: times.len() - 1 });
     }
-    let samples = simulate(model, errors, &plan, &times).samples;
-    RunTruth {
+    RunPlan {
         name: name.to_string(),
         procedure: ProcedureKind::Positioning,
-        feed: Some(feed),
+        feed: Some(c.feed),
         direction: None,
-        start_time: 0.0,
         sensors: sensors.to_vec(),
         layout: Layout::PointTable { visits },
-        samples,
+        plan,
+        record_times: times,
     }
 }
 
