@@ -199,7 +199,7 @@ fn validate_procedures(
     let tol = 1e-9;
     for (i, p) in procs.iter().enumerate() {
         let at = |k: &str| format!("procedures[{i}] ({}).{k}", p.name());
-        if procs[..i].iter().any(|o| o.name() == p.name()) {
+        if !p.name().is_empty() && procs[..i].iter().any(|o| o.name() == p.name()) {
             return Err((at("name"), "procedure names must be unique".into()));
         }
         for s in p.sensors() {
@@ -295,6 +295,11 @@ fn validate_procedures(
                         at("step"),
                         "expected step > 0, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into(),
                     ));
+                }
+            }
+            ProcedureSpec::Pause { duration, .. } => {
+                if !finite_nonneg(*duration) {
+                    return Err((at("duration"), format!("expected a pause of ≥ 0 s, got {duration}")));
                 }
             }
         }

@@ -14,7 +14,7 @@ use vmt_sim::axis_sim::AxisTruth;
 use vmt_sim::effects::EffectName;
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::machine::AxisModel;
-use vmt_sim::procedures::{plan_procedure, read_run, session_schedule, simulate_run, RunPlan, RunRecord, RunTruth};
+use vmt_sim::procedures::{plan_session, read_run, simulate_run, RunPlan, RunRecord, RunTruth};
 use vmt_sim::sensors::SensorSpec;
 use vmt_sim::truth::axis_physics;
 
@@ -56,11 +56,10 @@ pub fn error_motions(sc: &Scenario) -> Result<ErrorMotions, VmtError> {
 }
 
 /// The runs of every procedure of a scenario, in scenario order, with their session start times: the
-/// runs follow one another without a pause from t = 0 (`vmt_sim::procedures::session_schedule`).
+/// runs follow one another from t = 0, `pause` procedures advancing the clock
+/// (`vmt_sim::procedures::plan_session`).
 pub fn session_plan(sc: &Scenario, ph: &Physics) -> Vec<(RunPlan, f64)> {
-    let runs: Vec<RunPlan> = sc.procedures.iter().flat_map(|p| plan_procedure(&ph.model, p, sc.seed)).collect();
-    let starts = session_schedule(&runs, 0.0);
-    runs.into_iter().zip(starts).collect()
+    plan_session(&ph.model, &sc.procedures, sc.seed)
 }
 
 /// Noise-free truth traces of every run of a scenario, in scenario order. Runs are simulated in

@@ -216,6 +216,15 @@ pub enum ProcedureSpec {
         rate: f64,
         sensors: Vec<String>,
     },
+    /// A break in the session: the machine stands still for `duration` s (warm-up, a night) before the
+    /// next procedure; nothing is recorded, but time-dependent effects (thermal expansion, thermal
+    /// drift) go on evolving on the session clock — repeating a test after a pause is what separates
+    /// a thermal expansion from a scale error.
+    Pause {
+        #[serde(default)]
+        name: String,
+        duration: f64,
+    },
 }
 
 fn d_sweep_vmin() -> f64 {
@@ -338,7 +347,8 @@ impl ProcedureSpec {
             | ProcedureSpec::Positioning { name, .. }
             | ProcedureSpec::Crawl { name, .. }
             | ProcedureSpec::NineLine { name, .. }
-            | ProcedureSpec::FrictionSweep { name, .. } => name,
+            | ProcedureSpec::FrictionSweep { name, .. }
+            | ProcedureSpec::Pause { name, .. } => name,
         }
     }
 
@@ -349,6 +359,7 @@ impl ProcedureSpec {
             | ProcedureSpec::Crawl { sensors, .. }
             | ProcedureSpec::NineLine { sensors, .. }
             | ProcedureSpec::FrictionSweep { sensors, .. } => sensors,
+            ProcedureSpec::Pause { .. } => &[],
         }
     }
 }
@@ -507,6 +518,25 @@ pub fn session_schedule(runs: &[RunPlan], t0: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The runs of a measurement session, each with its session start time (s): the procedures in order,
+/// their runs back to back from t = 0 ([`session_schedule`]), a [`ProcedureSpec::Pause`] advancing the
+/// clock by its duration.
+pub fn plan_session(model: &AxisModel, procedures: &[ProcedureSpec], seed: u64) -> Vec<(RunPlan, f64)> {
+    let mut clock = 0.0;
+    let mut out = Vec::new();
+    for p in procedures {
+        if let ProcedureSpec::Pause { duration, .. } = p {
+            clock += duration;
+            continue;
+        }
+        let runs = plan_procedure(model, p, seed);
+        let starts = session_schedule(&runs, clock);
+        clock = runs.last().zip(starts.last()).map_or(clock, |(r, t0)| t0 + r.duration());
+        out.extend(runs.into_iter().zip(starts));
+    }
+    out
+}
+
 /// Simulates one run starting at session time `start_time` (s) and returns its noise-free truth.
 pub fn simulate_run(model: &AxisModel, truth: &AxisTruth, run: &RunPlan, start_time: f64) -> RunTruth {
     RunTruth {
@@ -531,7 +561,7 @@ pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &Procedur
 }
 
 /// The runs of a procedure as commanded motions and record times (no physics). A friction sweep that
-/// fails [`ProcedureSpec::check`] yields no runs.
+/// fails [`ProcedureSpec::check`], and a pause, yield no runs.
 pub fn plan_procedure(model: &AxisModel, spec: &ProcedureSpec, seed: u64) -> Vec<RunPlan> {
     let time_series = |name: String, procedure, v: f64, direction: i8, rate: f64, plan, record_times| RunPlan {
         name,
@@ -653,6 +683,7 @@ pub fn plan_procedure(model: &AxisModel, spec: &ProcedureSpec, seed: u64) -> Vec
             }
             out
         }
+        ProcedureSpec::Pause { .. } => Vec::new(),
     }
 }
 
