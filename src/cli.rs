@@ -442,7 +442,7 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
 /// Reads a model and a measurement set for the model-check commands.
 fn model_and_data(model: &Path, data: &Path) -> Result<(crate::model::Model, MeasurementSet), VmtError> {
     let m = crate::model::read_model(model)?;
-    let set = measurement::read(data)?;
+    let set = measurement::read_data(data)?;
     Ok((m, set))
 }
 
@@ -486,7 +486,7 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
     let name: EffectName =
         effect.parse().map_err(|e: vmt_sim::effects::UnknownEffect| VmtError::Usage(format!("--effect: {e}")))?;
     let set = match data {
-        Some(d) => Some(measurement::read(d)?),
+        Some(d) => Some(measurement::read_data(d)?),
         None if from_diagnosis => {
             return Err(VmtError::Usage("--from-diagnosis needs --data (the diagnosis is computed again)".into()))
         }

@@ -15,6 +15,20 @@ struct Cli {
     command: Command,
 }
 
+/// A model checked against a measurement set (`vmt compare`, `vmt diagnose`).
+#[derive(clap::Args)]
+struct ModelAndData {
+    /// The model (`vmt-model/1`, FORMAT.md §2).
+    #[arg(long)]
+    model: PathBuf,
+    /// The measurement set directory (FORMAT.md §1) or an ISO 230-2 `.dat` file.
+    #[arg(long)]
+    data: PathBuf,
+    /// Print JSON (FORMAT.md §4) instead of the text report.
+    #[arg(long)]
+    json: bool,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Simulate a scenario and run its estimators (no argument: the bundled default scenario).
@@ -119,23 +133,9 @@ enum Command {
         json: bool,
     },
     /// Fit a model's free parameters to a measurement set and report the residual (DESIGN.md §8).
-    Compare {
-        #[arg(long)]
-        model: PathBuf,
-        #[arg(long)]
-        data: PathBuf,
-        #[arg(long)]
-        json: bool,
-    },
+    Compare(ModelAndData),
     /// Rank the effects a model lacks by how much of the residual they explain (ΔBIC, verdicts).
-    Diagnose {
-        #[arg(long)]
-        model: PathBuf,
-        #[arg(long)]
-        data: PathBuf,
-        #[arg(long)]
-        json: bool,
-    },
+    Diagnose(ModelAndData),
     /// Write the model with an effect added (fit = true); keeps history.json beside the output.
     Add {
         #[arg(long)]
@@ -177,8 +177,8 @@ fn main() -> ExitCode {
         Command::Iso230_2 { path, run, sensor, json } => {
             vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json)
         }
-        Command::Compare { model, data, json } => vmt::cli::compare(&model, &data, json),
-        Command::Diagnose { model, data, json } => vmt::cli::diagnose(&model, &data, json),
+        Command::Compare(a) => vmt::cli::compare(&a.model, &a.data, a.json),
+        Command::Diagnose(a) => vmt::cli::diagnose(&a.model, &a.data, a.json),
         Command::Add { model, effect, from_diagnosis, data, out } => {
             vmt::cli::add(&model, &effect, from_diagnosis, data.as_deref(), &out)
         }

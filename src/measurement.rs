@@ -570,6 +570,63 @@ fn is_safe_relative(file: &str) -> bool {
     !file.is_empty() && p.components().all(|c| matches!(c, Component::Normal(_)))
 }
 
+/// Reads what `--data` names: a measurement set directory ([`read`]), or an ISO 230-2 test in the
+/// ecmc key=value `.dat` format (a file; [`from_iso230_2_dat`]).
+pub fn read_data(path: &Path) -> Result<MeasurementSet, VmtError> {
+    if path.is_file() && path.extension().is_some_and(|e| e.eq_ignore_ascii_case("dat")) {
+        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the ISO 230-2 test", e))?;
+        let dat =
+            vmt_estimators::iso230_2::dat::parse_dat(&text).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+        return Ok(from_iso230_2_dat(&dat));
+    }
+    read(path)
+}
+
+/// An ISO 230-2 test (`.dat`) as a measurement set: one reference sensor `ref` (a linear laser along
+/// the axis at its reference point, σ unknown) and one point-table run `iso` holding the deviations
+/// in the order of the ISO cycle (per cycle: every target upwards, then downwards).
+pub fn from_iso230_2_dat(dat: &vmt_estimators::iso230_2::dat::DatFile) -> MeasurementSet {
+    let cycles = dat.up.iter().chain(&dat.down).map(Vec::len).min().unwrap_or(0);
+    let mut order: Vec<usize> = (0..dat.targets.len()).collect();
+    order.sort_by(|a, b| dat.targets[*a].total_cmp(&dat.targets[*b]));
+    let (mut target, mut run, mut direction, mut y) = (vec![], vec![], vec![], vec![]);
+    for j in 0..cycles {
+        for (d, readings, targets) in
+            [(1i8, &dat.up, order.clone()), (-1, &dat.down, order.iter().rev().copied().collect())]
+        {
+            for i in targets {
+                target.push(dat.targets[i]);
+                run.push(j as u32 + 1);
+                direction.push(d);
+                y.push(readings[i][j]);
+            }
+        }
+    }
+    MeasurementSet {
+        description: Some("ISO 230-2 test (.dat)".into()),
+        machine: None,
+        seed: None,
+        sensors: vec![Sensor {
+            name: "ref".into(),
+            kind: SensorKind::LaserLinear,
+            axis: 'x',
+            position: [0.0; 3],
+            direction: [1.0, 0.0, 0.0],
+            sigma: None,
+        }],
+        runs: vec![Run {
+            name: "iso".into(),
+            file: "iso.csv".into(),
+            procedure: Procedure::Positioning,
+            axis: 'x',
+            start_time: None,
+            feed: None,
+            direction: None,
+            data: RunData::PointTable { target, run, direction, t: None, columns: vec![("ref".into(), y)] },
+        }],
+    }
+}
+
 /// Reads a measurement set from directory `dir`: `manifest.toml` (format `vmt-measurements/1`,
 /// unknown keys rejected) and every run's CSV, converted to SI. Every problem is a
 /// [`VmtError::BadInput`] naming the file and the key path or line and column.

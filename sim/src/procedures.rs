@@ -49,53 +49,29 @@ impl ProcedureKind {
     }
 }
 
-fn d_dwell() -> f64 {
-    1.0
+/// Defaults of the procedures' optional keys (serde `default = "..."` needs a function per value).
+macro_rules! defaults {
+    ($($name:ident: $t:ty = $v:expr;)*) => { $(fn $name() -> $t { $v })* };
 }
-fn d_average() -> f64 {
-    0.2
-}
-fn d_rate() -> f64 {
-    500.0
-}
-fn d_runs() -> u32 {
-    5
-}
-fn d_targets() -> usize {
-    11
-}
-fn d_high_rate() -> f64 {
-    1200.0
-}
-fn d_one() -> i8 {
-    1
-}
-fn d_overrun() -> f64 {
-    0.005
-}
-fn d_duration() -> f64 {
-    1.0
-}
-fn d_crawl_rate() -> f64 {
-    2000.0
-}
-fn d_crawl_settle() -> f64 {
-    2.0
-}
-fn d_settle() -> f64 {
-    0.2
-}
-fn d_sweep_settle() -> f64 {
-    1.0
-}
-fn d_sweep_duration() -> f64 {
-    0.5
-}
-fn d_sweep_rate() -> f64 {
-    1000.0
-}
-fn d_per_decade() -> u32 {
-    2
+defaults! {
+    d_dwell: f64 = 1.0;
+    d_average: f64 = 0.2;
+    d_rate: f64 = 500.0;
+    d_runs: u32 = 5;
+    d_targets: usize = 11;
+    d_high_rate: f64 = 1200.0;
+    d_one: i8 = 1;
+    d_overrun: f64 = 0.005;
+    d_duration: f64 = 1.0;
+    d_crawl_rate: f64 = 2000.0;
+    d_crawl_settle: f64 = 2.0;
+    d_settle: f64 = 0.2;
+    d_sweep_settle: f64 = 1.0;
+    d_sweep_duration: f64 = 0.5;
+    d_sweep_rate: f64 = 1000.0;
+    d_per_decade: u32 = 2;
+    d_sweep_vmin: f64 = 1e-5;
+    d_sweep_vmax: f64 = 0.1;
 }
 
 /// A procedure as a scenario declares it.
@@ -225,13 +201,6 @@ pub enum ProcedureSpec {
         name: String,
         duration: f64,
     },
-}
-
-fn d_sweep_vmin() -> f64 {
-    1e-5
-}
-fn d_sweep_vmax() -> f64 {
-    0.1
 }
 
 /// Speeds of a friction sweep, m/s, increasing: the given `speeds` (sorted), else v_k = v_min·10^(k/n) for
