@@ -79,3 +79,94 @@ fn vmt_friction_identifies_the_stribeck_curve_of_the_friction_sweep_scenario() {
         assert!((got / want - 1.0).abs() < 0.05, "{key}: {got} vs {want}");
     }
 }
+
+#[test]
+fn diag_accel_default() {
+    use vmt_estimators::accel_straightness::*;
+    let mut sc =
+        vmt::scenario::Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/default.toml")).unwrap();
+    sc.procedures.retain(|p| p.name() == "cv");
+    let ph = vmt::simulate::physics(&sc).unwrap();
+    let truths = vmt::simulate::simulate_truth(&sc, &ph);
+    let runs = vmt::simulate::read_all(&sc, &ph, &truths, sc.seed).unwrap();
+    for sensor in ["acc_z", "acc_y"] {
+        let acc = vmt::estimate::accel_runs(&runs, "cv", sensor).unwrap();
+        let spec = sc.sensors.iter().find(|s| s.name == sensor).unwrap();
+        let best = vmt::estimate::accel_config(spec, &sc.axis, None).unwrap();
+        for (label, cfg) in [
+            ("old", StraightnessConfig::default()),
+            ("cos", StraightnessConfig { basis: SpectralBasis::Cosine, ..Default::default() }),
+            (
+                "cos+ac",
+                StraightnessConfig {
+                    basis: SpectralBasis::Cosine,
+                    ac_coupling_hz: best.ac_coupling_hz,
+                    ..Default::default()
+                },
+            ),
+            ("best", best.clone()),
+        ] {
+            let est = estimate_straightness(&acc, &cfg).unwrap();
+            let rr = rapier3d_f64::glamx::DVec3::from_array(spec.axis_position(&sc.axis).unwrap());
+            let u = spec.unit_direction();
+            let m = &ph.truth.motions;
+            let curv: Vec<f64> = est
+                .positions
+                .iter()
+                .map(|&x| {
+                    let e = rapier3d_f64::glamx::DVec3::new(
+                        m.positioning.eval3(x)[2],
+                        m.straightness_y.eval3(x)[2],
+                        m.straightness_z.eval3(x)[2],
+                    );
+                    let r = rapier3d_f64::glamx::DVec3::new(m.roll.eval3(x)[2], m.pitch.eval3(x)[2], m.yaw.eval3(x)[2]);
+                    u.dot(e + r.cross(rr))
+                })
+                .collect();
+            let tb =
+                integrate_curvature_cosine(&est.positions, &curv, est.band.min_wavelength, est.band.max_wavelength)
+                    .unwrap();
+            let err: Vec<f64> = est.straightness.iter().zip(&tb).map(|(a, b)| a - b).collect();
+            let err = vmt_estimators::line::remove_line(&est.positions, &err);
+            let rms = (err.iter().map(|e| e * e).sum::<f64>() / err.len() as f64).sqrt();
+            eprintln!(
+                "{sensor} {label} band {:.4}..{:.4} rms {rms:.3e} rhos {:?}",
+                est.band.min_wavelength,
+                est.band.max_wavelength,
+                est.runs.iter().map(|r| r.noise_density / 9.80665e-6).collect::<Vec<_>>()
+            );
+            for wl in [0.08, 0.1, 0.25, 0.3, 0.35] {
+                let x = &est.positions;
+                let h = fit_harmonic_amplitude(x, &err.iter().map(|e| -e).collect::<Vec<_>>(), 1.0, wl).unwrap();
+                let k = 2.0 * std::f64::consts::PI / wl;
+                let amp = h.amplitude * k * k;
+                let cr = est.harmonic_std(wl).unwrap();
+                eprintln!(
+                    "  λ={wl}: |err| {amp:.3e} CR {cr:.3e} ratio {:.2} (sin {:.2} cos {:.2})",
+                    amp / cr,
+                    h.sin * k * k / cr,
+                    h.cos * k * k / cr
+                );
+            }
+            if let Some(t) = &est.tilt {
+                let roll: Vec<f64> = est.positions.iter().map(|&x| m.roll.value(x)).collect();
+                let rb = band_limit_cosine(
+                    &est.positions,
+                    &roll,
+                    est.band.min_wavelength,
+                    est.tilt_max_wavelength.unwrap(),
+                    false,
+                )
+                .unwrap();
+                let d: Vec<f64> = t.iter().zip(&rb).map(|(a, b)| a - b).collect();
+                let d = vmt_estimators::line::remove_line(&est.positions, &d);
+                let rr_ = (d.iter().map(|e| e * e).sum::<f64>() / d.len() as f64).sqrt();
+                let rt = (rb.iter().map(|e| e * e).sum::<f64>() / d.len() as f64).sqrt();
+                eprintln!(
+                    "  tilt vs roll: rms diff {rr_:.3e} rad (roll rms {rt:.3e}); CR at 0.35 {:?}",
+                    est.tilt_std(0.35).unwrap()
+                );
+            }
+        }
+    }
+}

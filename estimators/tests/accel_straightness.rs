@@ -234,6 +234,7 @@ fn mems_noise_grows_bound_and_error_in_proportion() {
         min_wavelength: None,
         max_wavelength: Some(0.3),
         seed_kalman: true,
+        ..StraightnessConfig::default()
     };
     let mut res = Vec::new();
     for (rho, seed0) in [(0.5 * UG, 100u64), (25.0 * UG, 200u64)] {
@@ -277,6 +278,7 @@ fn fusion_beats_every_single_speed_alone() {
         min_wavelength: None,
         max_wavelength: Some(0.3),
         seed_kalman: true,
+        ..StraightnessConfig::default()
     };
     let mut ms_fused = 0.0;
     let mut ms_single = [0.0f64; 3];
