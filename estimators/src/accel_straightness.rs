@@ -872,6 +872,11 @@ pub struct StraightnessConfig {
     /// DC-coupled MEMS), undone per run by [`undo_ac_coupling`] and accounted for in the weights. Default 0.
     #[serde(default)]
     pub ac_coupling_hz: f64,
+    /// SNR method with tilt separation: shortest tilt wavelength kept (m); default `L/20`. The tilt bound
+    /// per coefficient hardly depends on λ (no integration), so every extra short-wavelength bin adds
+    /// noise `σ_T²/2` to the tilt profile's mean square: roll errors of guideways are long-wave.
+    #[serde(default)]
+    pub tilt_min_wavelength: Option<f64>,
 }
 
 fn default_basis() -> SpectralBasis {
@@ -890,6 +895,7 @@ impl Default for StraightnessConfig {
             basis: SpectralBasis::Periodic,
             separate_gravity_tilt: false,
             ac_coupling_hz: 0.0,
+            tilt_min_wavelength: None,
         }
     }
 }
@@ -943,12 +949,15 @@ pub struct StraightnessEstimate {
     #[serde(default)]
     pub ac_coupling_hz: f64,
     /// Gravity tilt of the sensitive axis `τ(x)` (rad) on `positions`, band
-    /// `[band.min_wavelength, tilt_max_wavelength]`, mean removed; `None` unless separated.
+    /// `[tilt_min_wavelength, tilt_max_wavelength]`, mean removed; `None` unless separated.
     #[serde(default)]
     pub tilt: Option<Vec<f64>>,
     /// Longest tilt wavelength kept (m): `2L` in the cosine basis, `L` in the DFT (all bins `k ≥ 1`).
     #[serde(default)]
     pub tilt_max_wavelength: Option<f64>,
+    /// Shortest tilt wavelength kept (m).
+    #[serde(default)]
+    pub tilt_min_wavelength: Option<f64>,
 }
 
 impl StraightnessEstimate {
@@ -1310,6 +1319,10 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
                 min_wavelength: band.min_wavelength,
                 max_wavelength: if band.empty { band.min_wavelength * 0.5 } else { band.max_wavelength },
                 tilt_max_wavelength: t_max,
+                tilt_min_wavelength: match config.tilt_min_wavelength {
+                    Some(w) => positive("tilt_min_wavelength (m)", w)?,
+                    None => travel / 20.0,
+                },
                 ac_coupling_hz: ac,
                 separate_gravity_tilt: sep,
             };
@@ -1368,6 +1381,7 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
         ac_coupling_hz: if config.method == FusionMethod::SnrWeighted { ac } else { 0.0 },
         tilt,
         tilt_max_wavelength: tilt_max,
+        tilt_min_wavelength: tilt_max.map(|_| config.tilt_min_wavelength.unwrap_or(travel / 20.0)),
     })
 }
 
@@ -1568,8 +1582,10 @@ pub struct FusedProfiles {
 pub struct FusionSettings {
     /// Spectral basis.
     pub basis: SpectralBasis,
-    /// Shortest wavelength kept (m), straightness and tilt.
+    /// Shortest straightness wavelength kept (m).
     pub min_wavelength: f64,
+    /// Shortest tilt wavelength kept (m).
+    pub tilt_min_wavelength: f64,
     /// Longest straightness wavelength kept (m).
     pub max_wavelength: f64,
     /// Longest tilt wavelength kept (m) (the tilt is not integrated, so its bound does not grow as λ²).
@@ -1639,6 +1655,7 @@ pub fn fuse_multi_speed(
     positive("minimum wavelength (m)", settings.min_wavelength)?;
     positive("maximum wavelength (m)", settings.max_wavelength)?;
     positive("tilt maximum wavelength (m)", settings.tilt_max_wavelength)?;
+    positive("tilt minimum wavelength (m)", settings.tilt_min_wavelength)?;
     let g = STANDARD_GRAVITY;
     if settings.separate_gravity_tilt {
         // Identifiability does not depend on κ except through the AC weights: check at one bin.
@@ -1669,7 +1686,7 @@ pub fn fuse_multi_speed(
         let wl = 2.0 * PI / kappa;
         let in_e = wl >= settings.min_wavelength && wl <= settings.max_wavelength;
         let in_t =
-            settings.separate_gravity_tilt && wl >= settings.min_wavelength && wl <= settings.tilt_max_wavelength;
+            settings.separate_gravity_tilt && wl >= settings.tilt_min_wavelength && wl <= settings.tilt_max_wavelength;
         if !in_e && !in_t {
             continue;
         }
@@ -1907,6 +1924,64 @@ mod tests {
         };
         assert!(estimate_straightness(&[run], &StraightnessConfig::default()).is_err());
         assert!(estimate_straightness(&[], &StraightnessConfig::default()).is_err());
+    }
+
+    #[test]
+    fn ac_coupling_is_undone_exactly_and_dct_round_trips() {
+        // Forward RC high-pass as the simulator's piezo model (y_0 = 0): the inverse returns x − x_0 to
+        // rounding (≈ 1e-15 relative over 500 samples).
+        let fs = 400.0;
+        let x: Vec<f64> = (0..500).map(|i| 9.8 + 0.01 * (i as f64 * 0.05).sin() + 1e-4 * i as f64).collect();
+        let alpha = (1.0 / (2.0 * PI * 0.2)) / (1.0 / (2.0 * PI * 0.2) + 1.0 / fs);
+        let mut y = vec![0.0; x.len()];
+        for i in 1..x.len() {
+            y[i] = alpha * (y[i - 1] + x[i] - x[i - 1]);
+        }
+        let back = undo_ac_coupling(&y, 0.2, fs).unwrap();
+        for i in 0..x.len() {
+            assert!((back[i] - (x[i] - x[0])).abs() < 1e-10, "{i}");
+        }
+        assert!(undo_ac_coupling(&y, -1.0, fs).is_err());
+        // DCT-II then its inverse is the identity; X_1 of a half cosine is M/2 (orthogonality).
+        let m = 37;
+        let v: Vec<f64> = (0..m).map(|j| (PI * (j as f64 + 0.5) / m as f64).cos()).collect();
+        let c = dct2(&v);
+        assert!((c[1] - m as f64 / 2.0).abs() < 1e-12 && c[0].abs() < 1e-12 && c[2].abs() < 1e-12);
+        let r = idct2(&c);
+        assert!(v.iter().zip(&r).all(|(a, b)| (a - b).abs() < 1e-12));
+    }
+
+    #[test]
+    fn cosine_integration_is_exact_up_to_a_quadratic_on_a_non_periodic_profile() {
+        // E = sin(2πx/0.37 + 0.4) on [0, 1) (2.7 cycles, non-periodic), E'' analytic; all bins kept. The
+        // cosine integration returns E minus a quadratic: after removing the LS quadratic from the
+        // difference the residual is below 1e-3 of the amplitude (midpoint-rule aliasing, dx = 1 mm).
+        let m = 1000;
+        let x: Vec<f64> = (0..m).map(|j| j as f64 * 1e-3).collect();
+        let k = 2.0 * PI / 0.37;
+        let e: Vec<f64> = x.iter().map(|&x| (k * x + 0.4).sin()).collect();
+        let c: Vec<f64> = e.iter().map(|v| -k * k * v).collect();
+        let out = integrate_curvature_cosine(&x, &c, 1e-9, 1e9).unwrap();
+        let d: Vec<f64> = out.iter().zip(&e).map(|(a, b)| a - b).collect();
+        // LS quadratic removal via two line removals on (x, x²) is not exact: use the normal equations.
+        let mut a = [[0.0f64; 3]; 3];
+        let mut r = [0.0f64; 3];
+        for (xi, di) in x.iter().zip(&d) {
+            let row = [1.0, xi - 0.5, (xi - 0.5).powi(2)];
+            for i in 0..3 {
+                r[i] += row[i] * di;
+                for j in 0..3 {
+                    a[i][j] += row[i] * row[j];
+                }
+            }
+        }
+        let q = solve3(a, r).unwrap();
+        let worst = x
+            .iter()
+            .zip(&d)
+            .map(|(xi, di)| (di - q[0] - q[1] * (xi - 0.5) - q[2] * (xi - 0.5).powi(2)).abs())
+            .fold(0.0f64, f64::max);
+        assert!(worst < 1e-3, "residual {worst}");
     }
 
     #[test]
