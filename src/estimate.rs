@@ -408,6 +408,66 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
     Ok(out)
 }
 
+/// The accelerometer runs `<procedure>_*` of `sensor` as the estimator takes them: speed and direction
+/// from the run, sample rate from the time column, start position from the `x_cmd` column.
+pub fn accel_runs(
+    runs: &[RunRecord],
+    procedure: &str,
+    sensor: &str,
+) -> Result<Vec<vmt_estimators::accel_straightness::AccelRun>, String> {
+    let mut acc_runs = Vec::new();
+    for r in runs.iter().filter(|r| r.name.starts_with(&format!("{procedure}_"))) {
+        let RunData::TimeSeries { t, columns } = &r.data else { continue };
+        let a = columns
+            .iter()
+            .find(|(n, _)| n == sensor)
+            .ok_or_else(|| format!("run `{}` has no column `{sensor}`", r.name))?;
+        let x = &columns.iter().find(|(n, _)| n == "x_cmd").ok_or_else(|| "no x_cmd column".to_string())?.1;
+        if t.len() < 2 || x.is_empty() {
+            return Err(format!("run `{}` has fewer than two samples", r.name));
+        }
+        acc_runs.push(vmt_estimators::accel_straightness::AccelRun {
+            speed: r.feed.unwrap_or(0.0),
+            sample_rate: 1.0 / (t[1] - t[0]),
+            start_position: x[0],
+            direction: r.direction.unwrap_or(1) as i32,
+            acceleration: a.1.clone(),
+        });
+    }
+    if acc_runs.is_empty() {
+        return Err(format!("no constant-velocity runs named `{procedure}_*`"));
+    }
+    Ok(acc_runs)
+}
+
+/// The estimator settings `vmt run` uses for an accelerometer (issue 4): SNR-weighted fusion in the cosine
+/// basis (no wrap-around leakage on non-periodic profiles), the sensor's AC coupling undone (its resolved
+/// `highpass` corner: 0.2 Hz for the piezo preset), and the gravity tilt separated when the sensitive axis
+/// is horizontal and across the motion (|world z| < 0.5 and |along-motion| < 0.5: a Y sensor on an X axis
+/// reads g·EAX). `method` "spatial_continuity"/"seed000" selects the seed's pipeline instead.
+pub fn accel_config(
+    spec: &vmt_sim::sensors::SensorSpec,
+    axis: &vmt_sim::machine::AxisModel,
+    method: Option<&str>,
+) -> Result<vmt_estimators::accel_straightness::StraightnessConfig, String> {
+    use vmt_estimators::accel_straightness::{FusionMethod, SpectralBasis, StraightnessConfig};
+    let method = match method.unwrap_or("snr_weighted") {
+        "snr_weighted" => FusionMethod::SnrWeighted,
+        "spatial_continuity" | "seed000" => FusionMethod::SpatialContinuity,
+        other => return Err(format!("method: expected \"snr_weighted\" or \"spatial_continuity\", got \"{other}\"")),
+    };
+    let resolved = spec.resolved();
+    let w = axis.home.rotation * (axis.axis_rotation * spec.unit_direction());
+    let across_horizontal = w.z.abs() < 0.5 && w.dot(axis.axis).abs() < 0.5;
+    Ok(StraightnessConfig {
+        method,
+        basis: SpectralBasis::Cosine,
+        ac_coupling_hz: resolved.highpass,
+        separate_gravity_tilt: across_horizontal,
+        ..Default::default()
+    })
+}
+
 /// The accelerometer straightness check of one sensor (seed 000 / SNR-weighted fusion).
 fn accel_straightness_check(
     sc: &Scenario,
@@ -418,39 +478,12 @@ fn accel_straightness_check(
     method: Option<&str>,
     tolerance: f64,
 ) -> Result<(Check, Figure, Vec<Figure>), VmtError> {
-    use vmt_estimators::accel_straightness::{
-        estimate_straightness, zero_phase_highpass, AccelRun, FusionMethod, StraightnessConfig,
-    };
+    use vmt_estimators::accel_straightness::{estimate_straightness, zero_phase_highpass};
     let bad = |m: String| VmtError::bad(&sc.source, format!("estimators ({procedure}/{sensor})"), m);
-    let method = match method.unwrap_or("snr_weighted") {
-        "snr_weighted" => FusionMethod::SnrWeighted,
-        "spatial_continuity" | "seed000" => FusionMethod::SpatialContinuity,
-        other => {
-            return Err(bad(format!("method: expected \"snr_weighted\" or \"spatial_continuity\", got \"{other}\"")))
-        }
-    };
-    let mut acc_runs = Vec::new();
-    for r in runs.iter().filter(|r| r.name.starts_with(&format!("{procedure}_"))) {
-        let RunData::TimeSeries { t, columns } = &r.data else { continue };
-        let a = columns
-            .iter()
-            .find(|(n, _)| n == sensor)
-            .ok_or_else(|| bad(format!("run `{}` has no column `{sensor}`", r.name)))?;
-        let x = &columns.iter().find(|(n, _)| n == "x_cmd").ok_or_else(|| bad("no x_cmd column".into()))?.1;
-        acc_runs.push(AccelRun {
-            speed: r.feed.unwrap_or(0.0),
-            sample_rate: 1.0 / (t[1] - t[0]),
-            start_position: x[0],
-            direction: r.direction.unwrap_or(1) as i32,
-            acceleration: a.1.clone(),
-        });
-    }
-    if acc_runs.is_empty() {
-        return Err(bad(format!("no constant-velocity runs named `{procedure}_*`")));
-    }
-    let cfg = StraightnessConfig { method, ..Default::default() };
-    let est = estimate_straightness(&acc_runs, &cfg).map_err(|e| bad(e.to_string()))?;
+    let acc_runs = accel_runs(runs, procedure, sensor).map_err(bad)?;
     let spec = sc.sensors.iter().find(|s| s.name == sensor).ok_or_else(|| bad("sensor not declared".into()))?;
+    let cfg = accel_config(spec, &sc.axis, method).map_err(bad)?;
+    let est = estimate_straightness(&acc_runs, &cfg).map_err(|e| bad(e.to_string()))?;
     let r = rapier3d_f64::glamx::DVec3::from_array(spec.axis_position(&sc.axis).map_err(bad)?);
     let u = spec.unit_direction();
     let truth: Vec<f64> = est.positions.iter().map(|&x| u.dot(errors.deviation(x, r))).collect();
@@ -466,20 +499,28 @@ fn accel_straightness_check(
     let xs = &est.positions[i0..i1];
     let detrend = |p: &[f64]| vmt_estimators::line::remove_line(xs, &p[i0..i1]);
     let (truth, estimate) = (detrend(&truth), detrend(&estimate));
-    // Cramér–Rao bound of the in-band RMS error: each harmonic λ_k = L/k in the band contributes its
-    // per-quadrature variance σ_k² (combined over the speeds), so RMS ≥ √(Σ_k σ_k²).
-    let speeds: Vec<f64> = est.runs.iter().map(|r| r.speed).collect();
-    let rhos: Vec<f64> = est.runs.iter().map(|r| r.noise_density).collect();
+    // Cramér–Rao bound of the in-band RMS error: each basis function in the band (λ_k = P/k, P = L for
+    // the DFT, 2L for the cosine basis) has amplitude variance σ_k² per quadrature (the bound that applies:
+    // joint when the tilt is separated) and a sinusoid of amplitude A has mean square A²/2. A DFT bin has
+    // two quadratures (σ_k² in all), a cosine coefficient one (σ_k²/2): RMS² ≥ Σ_k c·σ_k².
+    let period = match est.basis {
+        vmt_estimators::accel_straightness::SpectralBasis::Periodic => est.travel,
+        vmt_estimators::accel_straightness::SpectralBasis::Cosine => 2.0 * est.travel,
+    };
+    let per_bin = match est.basis {
+        vmt_estimators::accel_straightness::SpectralBasis::Periodic => 1.0,
+        vmt_estimators::accel_straightness::SpectralBasis::Cosine => 0.5,
+    };
     let mut var = 0.0;
     let mut k = 1;
     loop {
-        let lam = est.travel / k as f64;
+        let lam = period / k as f64;
         if lam < est.band.min_wavelength {
             break;
         }
         if lam <= est.band.max_wavelength {
-            if let Ok(s) = vmt_estimators::accel_straightness::cramer_rao_runs(&rhos, &speeds, est.travel, lam) {
-                var += s * s;
+            if let Ok(s) = est.harmonic_std(lam) {
+                var += per_bin * s * s;
             }
         }
         k += 1;

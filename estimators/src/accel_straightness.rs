@@ -628,6 +628,16 @@ pub fn recoverable_band(
     // σ at λ = 1 m scales as λ²: σ(λ) = σ(1)·λ².
     let s1 = cramer_rao_runs(noise_densities, speeds, travel, 1.0)?;
     let noise_limit = (amplitude_threshold / s1).sqrt();
+    Ok(band_from_limits(min_wavelength, cutoff_limit, noise_limit, amplitude_threshold))
+}
+
+/// The band `[min_wavelength, min(noise_limit, cutoff_limit)]` with its note (see [`recoverable_band`]).
+fn band_from_limits(
+    min_wavelength: f64,
+    cutoff_limit: f64,
+    noise_limit: f64,
+    amplitude_threshold: f64,
+) -> RecoverableBand {
     let (max_wl, by) = if noise_limit <= cutoff_limit { (noise_limit, "noise") } else { (cutoff_limit, "cutoff") };
     let empty = max_wl <= min_wavelength;
     let note = if empty {
@@ -644,7 +654,7 @@ pub fn recoverable_band(
              in the estimate"
         )
     };
-    Ok(RecoverableBand {
+    RecoverableBand {
         min_wavelength,
         max_wavelength: max_wl,
         noise_limit_wavelength: noise_limit,
@@ -653,7 +663,7 @@ pub fn recoverable_band(
         max_wavelength_limited_by: by.to_string(),
         empty,
         note,
-    })
+    }
 }
 
 // ---------------------------------------------------------------------------------------------------
@@ -848,6 +858,29 @@ pub struct StraightnessConfig {
     /// Seed method only: apply the seed's AR(1) Kalman filter (default true). Setting it false skips that
     /// step, to see what it costs (it is a causal shrinkage filter, see [`kalman_filter_ar1`]).
     pub seed_kalman: bool,
+    /// SNR method: spectral basis of the fusion (default [`SpectralBasis::Periodic`], the DFT of
+    /// DESIGN.md §7; [`SpectralBasis::Cosine`] has no wrap-around leakage on non-periodic profiles).
+    #[serde(default = "default_basis")]
+    pub basis: SpectralBasis,
+    /// SNR method: estimate the gravity tilt `τ(x)` of the sensitive axis jointly with the straightness
+    /// (needs ≥ 2 distinct speeds; see [`fuse_multi_speed`]). Use it for a horizontal sensor across the
+    /// motion (a Y accelerometer reads `g·EAX`); for a vertical sensor the tilt coupling is second order
+    /// (`g·(1 − cos τ)`). Default false.
+    #[serde(default)]
+    pub separate_gravity_tilt: bool,
+    /// SNR method: first-order AC-coupling corner of the sensor (Hz; 0.2 Hz for the piezo preset, 0 for
+    /// DC-coupled MEMS), undone per run by [`undo_ac_coupling`] and accounted for in the weights. Default 0.
+    #[serde(default)]
+    pub ac_coupling_hz: f64,
+    /// SNR method with tilt separation: shortest tilt wavelength kept (m); default `L/20`. The tilt bound
+    /// per coefficient hardly depends on λ (no integration), so every extra short-wavelength bin adds
+    /// noise `σ_T²/2` to the tilt profile's mean square: roll errors of guideways are long-wave.
+    #[serde(default)]
+    pub tilt_min_wavelength: Option<f64>,
+}
+
+fn default_basis() -> SpectralBasis {
+    SpectralBasis::Periodic
 }
 
 impl Default for StraightnessConfig {
@@ -859,6 +892,10 @@ impl Default for StraightnessConfig {
             min_wavelength: None,
             max_wavelength: None,
             seed_kalman: true,
+            basis: SpectralBasis::Periodic,
+            separate_gravity_tilt: false,
+            ac_coupling_hz: 0.0,
+            tilt_min_wavelength: None,
         }
     }
 }
@@ -902,18 +939,47 @@ pub struct StraightnessEstimate {
     pub crossover_wavenumbers: Vec<f64>,
     /// Per run, in input order.
     pub runs: Vec<RunDiagnostics>,
+    /// SNR method: spectral basis used.
+    #[serde(default = "default_basis")]
+    pub basis: SpectralBasis,
+    /// SNR method: true when the gravity tilt was estimated jointly ([`fuse_multi_speed`]).
+    #[serde(default)]
+    pub gravity_tilt_separated: bool,
+    /// AC-coupling corner undone (Hz), 0 for none.
+    #[serde(default)]
+    pub ac_coupling_hz: f64,
+    /// Gravity tilt of the sensitive axis `τ(x)` (rad) on `positions`, band
+    /// `[tilt_min_wavelength, tilt_max_wavelength]`, mean removed; `None` unless separated.
+    #[serde(default)]
+    pub tilt: Option<Vec<f64>>,
+    /// Longest tilt wavelength kept (m): `2L` in the cosine basis, `L` in the DFT (all bins `k ≥ 1`).
+    #[serde(default)]
+    pub tilt_max_wavelength: Option<f64>,
+    /// Shortest tilt wavelength kept (m).
+    #[serde(default)]
+    pub tilt_min_wavelength: Option<f64>,
 }
 
 impl StraightnessEstimate {
     /// Predicted noise standard deviation (m) of one quadrature component of the harmonic at `wavelength`
-    /// in this estimate: SNR method — the combined Cramér–Rao bound ([`cramer_rao_runs`]); seed method —
+    /// in this estimate: SNR method — the combined Cramér–Rao bound that applies ([`cramer_rao_harmonic`]:
+    /// joint when the tilt was separated, with the AC-coupling loss; equal to [`cramer_rao_runs`] for a
+    /// DC-coupled sensor without separation); seed method —
     /// `√(Σ w_i²·σ_i²)` with the crossover weights `w_i` of [`continuity_weights`] (ignores the Kalman
     /// filter's and high-pass's gain, so it is a guide, not a bound).
     pub fn harmonic_std(&self, wavelength: f64) -> Result<f64> {
         let rhos: Vec<f64> = self.runs.iter().map(|r| r.noise_density).collect();
         let speeds: Vec<f64> = self.runs.iter().map(|r| r.speed).collect();
         match self.method {
-            FusionMethod::SnrWeighted => cramer_rao_runs(&rhos, &speeds, self.travel, wavelength),
+            FusionMethod::SnrWeighted => Ok(cramer_rao_harmonic(
+                &rhos,
+                &speeds,
+                self.travel,
+                wavelength,
+                self.ac_coupling_hz,
+                self.gravity_tilt_separated,
+            )?
+            .straightness),
             FusionMethod::SpatialContinuity => {
                 let kappa = 2.0 * PI / positive("wavelength (m)", wavelength)?;
                 let order = speed_order(&speeds);
@@ -930,6 +996,17 @@ impl StraightnessEstimate {
 }
 
 impl StraightnessEstimate {
+    /// Cramér–Rao bound (rad) of one quadrature component of the tilt harmonic at `wavelength` in the
+    /// joint model ([`cramer_rao_harmonic`]); `None` when the tilt was not separated.
+    pub fn tilt_std(&self, wavelength: f64) -> Result<Option<f64>> {
+        if !self.gravity_tilt_separated {
+            return Ok(None);
+        }
+        let rhos: Vec<f64> = self.runs.iter().map(|r| r.noise_density).collect();
+        let speeds: Vec<f64> = self.runs.iter().map(|r| r.speed).collect();
+        Ok(cramer_rao_harmonic(&rhos, &speeds, self.travel, wavelength, self.ac_coupling_hz, true)?.tilt_joint)
+    }
+
     /// Seed method: deterministic gain (dimensionless) of the seed pipeline for a harmonic of
     /// `wavelength`, ignoring the Kalman filter and the edges:
     /// `G(κ) = Σ_i w_i(κ)·|H_i|²·((ω_i/2)/tan(ω_i/2))²`, with `w_i` the crossover weights, `|H_i|²` the
@@ -1173,8 +1250,15 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
         })
         .collect();
 
+    let ac = config.ac_coupling_hz;
+    if !(ac >= 0.0 && ac.is_finite()) {
+        return Err(AccelStraightnessError::BadInput(format!("ac_coupling_hz must be finite and >= 0, got {ac}")));
+    }
+    let simple_snr = config.basis == SpectralBasis::Periodic && !config.separate_gravity_tilt && ac == 0.0;
+    let mut tilt = None;
+    let mut tilt_max = None;
     let (profile, band, crossovers) = match config.method {
-        FusionMethod::SnrWeighted => {
+        FusionMethod::SnrWeighted if simple_snr => {
             let band = recoverable_band(&rhos, &speeds, travel, config.amplitude_threshold, min_wl, max_wl)?;
             let total: f64 = speeds.iter().zip(&rhos).map(|(v, r)| v.powi(3) / (r * r)).sum();
             let mut curv = Vec::with_capacity(runs.len());
@@ -1190,6 +1274,67 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
                 fuse_snr_weighted(&curv, &speeds, &rhos, travel, band.min_wavelength, band.max_wavelength)?
             };
             (prof, band, Vec::new())
+        }
+        FusionMethod::SnrWeighted => {
+            // Noise limit of the bound that applies (AC loss, joint model): σ(λ) increases with λ, bisect
+            // in log λ for σ(λ) = threshold.
+            let sep = config.separate_gravity_tilt;
+            let sigma =
+                |wl: f64| -> Result<f64> { Ok(cramer_rao_harmonic(&rhos, &speeds, travel, wl, ac, sep)?.straightness) };
+            let thr = config.amplitude_threshold;
+            let (mut lo, mut hi) = (min_wl * 1e-3, travel * 1e3);
+            let noise_limit = if sigma(hi)? <= thr {
+                hi
+            } else if sigma(lo)? > thr {
+                lo
+            } else {
+                for _ in 0..200 {
+                    let mid = (lo * hi).sqrt();
+                    if sigma(mid)? <= thr {
+                        lo = mid
+                    } else {
+                        hi = mid
+                    }
+                }
+                lo
+            };
+            let band = band_from_limits(min_wl, max_wl, noise_limit, thr);
+            let total: f64 = speeds.iter().zip(&rhos).map(|(v, r)| v.powi(3) / (r * r)).sum();
+            let mut acc = Vec::with_capacity(runs.len());
+            for (i, r) in runs.iter().enumerate() {
+                let a = undo_ac_coupling(&r.acceleration, ac, r.sample_rate)?;
+                let am = mean(&a);
+                let a: Vec<f64> = a.iter().map(|v| v - am).collect();
+                let a = resample_run(r, &a, &grid);
+                let am = mean(&a);
+                acc.push(a.iter().map(|v| v - am).collect::<Vec<f64>>());
+                diags[i].snr_share = Some(r.speed.powi(3) / (rhos[i] * rhos[i]) / total);
+            }
+            let t_max = match config.basis {
+                SpectralBasis::Periodic => travel,
+                SpectralBasis::Cosine => 2.0 * travel,
+            };
+            let settings = FusionSettings {
+                basis: config.basis,
+                min_wavelength: band.min_wavelength,
+                max_wavelength: if band.empty { band.min_wavelength * 0.5 } else { band.max_wavelength },
+                tilt_max_wavelength: t_max,
+                tilt_min_wavelength: match config.tilt_min_wavelength {
+                    Some(w) => positive("tilt_min_wavelength (m)", w)?,
+                    None => travel / 20.0,
+                },
+                ac_coupling_hz: ac,
+                separate_gravity_tilt: sep,
+            };
+            let fused = fuse_multi_speed(&acc, &speeds, &rhos, travel, &settings)?;
+            if sep {
+                tilt_max = Some(t_max);
+                tilt = fused.tilt.map(|t| {
+                    let tm = mean(&t);
+                    t.iter().map(|v| v - tm).collect::<Vec<f64>>()
+                });
+            }
+            (fused.straightness, band, Vec::new())
         }
         FusionMethod::SpatialContinuity => {
             let mut cut = Vec::with_capacity(runs.len());
@@ -1231,7 +1376,426 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
         band,
         crossover_wavenumbers: crossovers,
         runs: diags,
+        basis: config.basis,
+        gravity_tilt_separated: config.separate_gravity_tilt && config.method == FusionMethod::SnrWeighted,
+        ac_coupling_hz: if config.method == FusionMethod::SnrWeighted { ac } else { 0.0 },
+        tilt,
+        tilt_max_wavelength: tilt_max,
+        tilt_min_wavelength: tilt_max.map(|_| config.tilt_min_wavelength.unwrap_or(travel / 20.0)),
     })
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Cosine basis, AC coupling, gravity-tilt separation (issue 4)
+// ---------------------------------------------------------------------------------------------------
+
+/// Spectral basis in which [`fuse_multi_speed`] fuses the speeds and integrates the curvature.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum SpectralBasis {
+    /// DFT over the period `P = M·Δx`, `κ_k = 2πk/P`: exact for profiles periodic over `P`; otherwise the
+    /// end mismatch of the periodic extension leaks into the band ∝ 1/k ([`fuse_snr_weighted`]).
+    Periodic,
+    /// DCT-II over `L = M·Δx`, `κ_k = πk/L` (even extension, period `2L`): exact up to a quadratic for
+    /// any smooth profile, periodic or not. For `k ≥ 1`, integrating by parts twice,
+    ///
+    /// ```text
+    /// (E'')_k = (2/L)·(E'(L)·(−1)^k − E'(0)) − κ_k²·E_k
+    /// ```
+    ///
+    /// and the quadratic `q` with `q'(0) = E'(0)`, `q'(L) = E'(L)` has `q'' = const` (no `k ≥ 1`
+    /// content) and `q_k = (2/L)·(E'(L)·(−1)^k − E'(0))/κ_k²`; hence `−(E'')_k/κ_k² = (E − q)_k`: the
+    /// cosine-domain double integration returns `E` minus a quadratic, which is unobservable anyway (a
+    /// line is the reference, a parabola equals the unknown offset). No wrap-around leakage.
+    Cosine,
+}
+
+/// DCT-II (unnormalised), `X_k = Σ_{j<M} x_j·cos(πk(j + ½)/M)`, `k = 0…M−1`, computed with one real FFT
+/// of the even extension `y = [x_0 … x_{M−1}, x_{M−1} … x_0]`: `Y_k = 2·e^{iπk/2M}·X_k`.
+pub fn dct2(x: &[f64]) -> Vec<f64> {
+    let m = x.len();
+    if m == 0 {
+        return Vec::new();
+    }
+    let mut y: Vec<f64> = x.iter().chain(x.iter().rev()).copied().collect();
+    let spec = rfft(&mut y);
+    (0..m)
+        .map(|k| {
+            let ph = -PI * k as f64 / (2.0 * m as f64);
+            0.5 * (spec[k] * Complex::new(ph.cos(), ph.sin())).re
+        })
+        .collect()
+}
+
+/// Inverse of [`dct2`] (DCT-III), `x_j = X_0/M + (2/M)·Σ_{k≥1} X_k·cos(πk(j + ½)/M)`, by one inverse
+/// real FFT of length `2M`.
+pub fn idct2(c: &[f64]) -> Vec<f64> {
+    let m = c.len();
+    if m == 0 {
+        return Vec::new();
+    }
+    let mut spec = vec![Complex::new(0.0, 0.0); m + 1];
+    for (k, s) in spec.iter_mut().enumerate().take(m) {
+        let ph = PI * k as f64 / (2.0 * m as f64);
+        *s = Complex::new(ph.cos(), ph.sin()) * (2.0 * c[k]);
+    }
+    let y = irfft(&mut spec, 2 * m);
+    y[..m].to_vec()
+}
+
+/// Undoes a first-order AC coupling (RC high-pass) of corner `corner_hz` applied to a record sampled at
+/// `sample_rate`: the sensor model `y_n = α·(y_{n−1} + x_n − x_{n−1})`, `α = RC/(RC + 1/fs)`,
+/// `RC = 1/(2π·f_c)` (a piezo accelerometer has no DC response) is inverted exactly,
+///
+/// ```text
+/// x̂_0 = 0,   x̂_n = x̂_{n−1} + y_n/α − y_{n−1}
+/// ```
+///
+/// so `x̂ = x − x_0` (the lost DC is an unknown constant, like the offset). Noise added after the
+/// coupling becomes red: its density at `f` is multiplied by `|1/α − e^{−iω}|/|1 − e^{−iω}| ≈
+/// √(1 + (f_c/f)²)` ([`coefficient_information`] accounts for it). `corner_hz = 0` returns the record.
+pub fn undo_ac_coupling(y: &[f64], corner_hz: f64, sample_rate: f64) -> Result<Vec<f64>> {
+    finite_slice("AC-coupled record", y)?;
+    positive("sample rate (Hz)", sample_rate)?;
+    if !(corner_hz >= 0.0 && corner_hz.is_finite()) {
+        return Err(AccelStraightnessError::BadInput(format!(
+            "AC-coupling corner must be finite and >= 0 Hz, got {corner_hz}"
+        )));
+    }
+    if corner_hz == 0.0 || y.is_empty() {
+        return Ok(y.to_vec());
+    }
+    let rc = 1.0 / (2.0 * PI * corner_hz);
+    let alpha = rc / (rc + 1.0 / sample_rate);
+    let mut out = Vec::with_capacity(y.len());
+    let mut x = 0.0;
+    out.push(x);
+    for w in y.windows(2) {
+        x += w[1] / alpha - w[0];
+        out.push(x);
+    }
+    Ok(out)
+}
+
+/// Fisher information (s⁴/m²) that one run carries about one quadrature coefficient of the acceleration
+/// it sees at wavenumber `κ` (rad/m): `q = T/ρ_eff²` with `T = L/v` the duration over the travel and
+/// `ρ_eff² = ρ²·(1 + (f_c/f)²)`, `f = v·κ/2π` the temporal frequency, `f_c` the AC-coupling corner (0
+/// for a DC-coupled sensor): white noise after a first-order high-pass, referred to its input.
+/// With `f_c = 0`, `v⁴κ⁴·q` is the reciprocal of [`cramer_rao_amplitude`]².
+pub fn coefficient_information(speed: f64, travel: f64, noise_density: f64, ac_coupling_hz: f64, kappa: f64) -> f64 {
+    let f = speed * kappa / (2.0 * PI);
+    let hp = if ac_coupling_hz > 0.0 { 1.0 + (ac_coupling_hz / f).powi(2) } else { 1.0 };
+    travel / (speed * noise_density * noise_density * hp)
+}
+
+/// Cramér–Rao bounds of one harmonic of the multi-speed model, per quadrature component.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HarmonicBound {
+    /// Wavelength `λ` (m).
+    pub wavelength: f64,
+    /// Bound on the straightness amplitude (m) when the tilt is known (zero), `1/(κ²·√(Σ q_i v_i⁴))`.
+    pub straightness_tilt_known: f64,
+    /// Bound on the straightness amplitude (m) with the tilt a second unknown (joint model), or `None`
+    /// when the tilt is not estimated.
+    pub straightness_joint: Option<f64>,
+    /// Bound on the tilt amplitude (rad) in the joint model.
+    pub tilt_joint: Option<f64>,
+    /// The straightness bound that applies to the estimate (joint when the tilt is separated).
+    pub straightness: f64,
+}
+
+/// Cramér–Rao bound per harmonic of the multi-speed accelerometer model
+///
+/// ```text
+/// a_i(x) = v_i²·E''(x) + g·τ(x) + b_i + n_i,   harmonic: α_i = −v_i²κ²·Y + g·T
+/// ```
+///
+/// with run information `q_i` ([`coefficient_information`]). Fisher matrix of `(Y, T)`:
+/// `F = Σ q_i·[[v_i⁴κ⁴, −v_i²κ²g], [−v_i²κ²g, g²]]`, so
+///
+/// ```text
+/// T known:  σ_Y² = 1/(κ⁴·S₄)
+/// joint:    σ_Y² = S₀/(κ⁴·D),   σ_T² = S₄/(g²·D),   D = S₀·S₄ − S₂²,   S_p = Σ q_i·v_i^p
+/// ```
+///
+/// The joint bound is larger by `1/√(1 − S₂²/(S₀S₄))` (Cauchy–Schwarz: > 1 unless all speeds are equal,
+/// when `D = 0` and the model is not identifiable). Follows DESIGN.md §7 and the issue-4 brief.
+pub fn cramer_rao_harmonic(
+    noise_densities: &[f64],
+    speeds: &[f64],
+    travel: f64,
+    wavelength: f64,
+    ac_coupling_hz: f64,
+    joint_tilt: bool,
+) -> Result<HarmonicBound> {
+    if noise_densities.len() != speeds.len() || speeds.is_empty() {
+        return Err(AccelStraightnessError::BadInput(format!(
+            "one noise density per speed expected (at least one): {} densities for {} speeds",
+            noise_densities.len(),
+            speeds.len()
+        )));
+    }
+    let kappa = 2.0 * PI / positive("wavelength (m)", wavelength)?;
+    positive("travel (m)", travel)?;
+    finite("AC-coupling corner (Hz)", ac_coupling_hz)?;
+    let (mut s0, mut s2, mut s4) = (0.0, 0.0, 0.0);
+    for (i, (&r, &v)) in noise_densities.iter().zip(speeds).enumerate() {
+        positive(&format!("noise_densities[{i}]"), r)?;
+        positive(&format!("speeds[{i}]"), v)?;
+        let q = coefficient_information(v, travel, r, ac_coupling_hz, kappa);
+        s0 += q;
+        s2 += q * v * v;
+        s4 += q * v.powi(4);
+    }
+    let k4 = kappa.powi(4);
+    let known = 1.0 / (k4 * s4).sqrt();
+    let (sj, tj) = if joint_tilt {
+        let d = s0 * s4 - s2 * s2;
+        if !(d > 1e-9 * s0 * s4) {
+            return Err(AccelStraightnessError::BadInput(format!(
+                "gravity-tilt separation needs at least two distinct speeds, got {speeds:?}"
+            )));
+        }
+        (Some((s0 / (k4 * d)).sqrt()), Some((s4 / (STANDARD_GRAVITY * STANDARD_GRAVITY * d)).sqrt()))
+    } else {
+        (None, None)
+    };
+    Ok(HarmonicBound {
+        wavelength,
+        straightness_tilt_known: known,
+        straightness_joint: sj,
+        tilt_joint: tj,
+        straightness: sj.unwrap_or(known),
+    })
+}
+
+/// Profiles returned by [`fuse_multi_speed`] on the common grid.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FusedProfiles {
+    /// Straightness (m), band-limited, before the reference line is removed.
+    pub straightness: Vec<f64>,
+    /// Gravity tilt `τ(x)` of the sensitive axis (rad), mean removed, when separated.
+    pub tilt: Option<Vec<f64>>,
+}
+
+/// Settings of [`fuse_multi_speed`] other than the data.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FusionSettings {
+    /// Spectral basis.
+    pub basis: SpectralBasis,
+    /// Shortest straightness wavelength kept (m).
+    pub min_wavelength: f64,
+    /// Shortest tilt wavelength kept (m).
+    pub tilt_min_wavelength: f64,
+    /// Longest straightness wavelength kept (m).
+    pub max_wavelength: f64,
+    /// Longest tilt wavelength kept (m) (the tilt is not integrated, so its bound does not grow as λ²).
+    pub tilt_max_wavelength: f64,
+    /// AC-coupling corner of the sensor (Hz), 0 for DC coupled: enters the weights.
+    pub ac_coupling_hz: f64,
+    /// Estimate the gravity tilt jointly.
+    pub separate_gravity_tilt: bool,
+}
+
+/// Multi-speed fusion of accelerometer runs (DESIGN.md §7 with the issue-4 gravity-tilt separation).
+///
+/// `accelerations[i]` are run `i`'s acceleration samples (m/s², mean removed, AC coupling undone) on a
+/// common uniform grid of `M` points spanning `L = M·Δx` (`travel`). In the chosen basis
+/// ([`SpectralBasis`]) every coefficient `k ≥ 1` of wavenumber `κ_k` obeys, per run,
+///
+/// ```text
+/// A_i,k = v_i²·K_k + g·T_k + noise,   Var = 1/q_i(κ_k)   (q_i from [`coefficient_information`])
+/// ```
+///
+/// with `K_k` the curvature coefficient and `T_k` the tilt coefficient (`τ` the tilt of the sensitive
+/// axis: a horizontal sensor across the motion sees `g·sin τ ≈ g·τ`, roll for a Y sensor). Weighted least
+/// squares over the runs, per coefficient:
+///
+/// ```text
+/// tilt separated:  [S₄  gS₂; gS₂  g²S₀]·[K; T] = [Σq v² A; g·Σq A],   S_p = Σ q_i v_i^p
+/// tilt ignored:    K = Σ q_i v_i² A_i / S₄          (the inverse-variance fusion of fuse_snr_weighted)
+/// ```
+///
+/// then `E_k = −K_k/κ_k²` inside `[min_wavelength, max_wavelength]` and `T_k` inside
+/// `[min_wavelength, tilt_max_wavelength]`, inverted to the grid. Both are the Gauss–Markov (minimum
+/// variance unbiased) estimates of the model and reach [`cramer_rao_harmonic`]; with one speed or equal
+/// speeds the separation is not identifiable and an error is returned. The speeds' `v²` scaling is what
+/// tells straightness (seen ∝ v²) from tilt (seen independent of v).
+pub fn fuse_multi_speed(
+    accelerations: &[Vec<f64>],
+    speeds: &[f64],
+    noise_densities: &[f64],
+    travel: f64,
+    settings: &FusionSettings,
+) -> Result<FusedProfiles> {
+    if accelerations.is_empty() {
+        return Err(AccelStraightnessError::BadInput("fusion needs at least one run".into()));
+    }
+    if speeds.len() != accelerations.len() || noise_densities.len() != accelerations.len() {
+        return Err(AccelStraightnessError::BadInput(format!(
+            "{} acceleration profiles need as many speeds and noise densities, got {} and {}",
+            accelerations.len(),
+            speeds.len(),
+            noise_densities.len()
+        )));
+    }
+    let m = accelerations[0].len();
+    for (i, a) in accelerations.iter().enumerate() {
+        if a.len() != m {
+            return Err(AccelStraightnessError::BadInput(format!(
+                "acceleration profile {i} has {} samples, profile 0 has {m}",
+                a.len()
+            )));
+        }
+        min_len(&format!("acceleration profile {i}"), a, 4)?;
+        finite_slice(&format!("acceleration profile {i}"), a)?;
+        positive(&format!("speeds[{i}]"), speeds[i])?;
+        positive(&format!("noise_densities[{i}]"), noise_densities[i])?;
+    }
+    positive("travel (m)", travel)?;
+    positive("minimum wavelength (m)", settings.min_wavelength)?;
+    positive("maximum wavelength (m)", settings.max_wavelength)?;
+    positive("tilt maximum wavelength (m)", settings.tilt_max_wavelength)?;
+    positive("tilt minimum wavelength (m)", settings.tilt_min_wavelength)?;
+    let g = STANDARD_GRAVITY;
+    if settings.separate_gravity_tilt {
+        // Identifiability does not depend on κ except through the AC weights: check at one bin.
+        cramer_rao_harmonic(noise_densities, speeds, travel, travel, settings.ac_coupling_hz, true)?;
+    }
+    // Coefficients per run: complex for the DFT (k = 0…M/2), real for the DCT (k = 0…M−1).
+    let (spectra, kappa_step): (Vec<Vec<Complex<f64>>>, f64) = match settings.basis {
+        SpectralBasis::Periodic => (
+            accelerations
+                .iter()
+                .map(|a| {
+                    let mut b = a.clone();
+                    rfft(&mut b)
+                })
+                .collect(),
+            2.0 * PI / travel,
+        ),
+        SpectralBasis::Cosine => (
+            accelerations.iter().map(|a| dct2(a).into_iter().map(|c| Complex::new(c, 0.0)).collect()).collect(),
+            PI / travel,
+        ),
+    };
+    let nb = spectra[0].len();
+    let mut e_coef = vec![Complex::new(0.0, 0.0); nb];
+    let mut t_coef = vec![Complex::new(0.0, 0.0); nb];
+    for k in 1..nb {
+        let kappa = kappa_step * k as f64;
+        let wl = 2.0 * PI / kappa;
+        let in_e = wl >= settings.min_wavelength && wl <= settings.max_wavelength;
+        let in_t =
+            settings.separate_gravity_tilt && wl >= settings.tilt_min_wavelength && wl <= settings.tilt_max_wavelength;
+        if !in_e && !in_t {
+            continue;
+        }
+        let (mut s0, mut s2, mut s4) = (0.0, 0.0, 0.0);
+        let (mut r2, mut r0) = (Complex::new(0.0, 0.0), Complex::new(0.0, 0.0));
+        for i in 0..spectra.len() {
+            let v = speeds[i];
+            let q = coefficient_information(v, travel, noise_densities[i], settings.ac_coupling_hz, kappa);
+            s0 += q;
+            s2 += q * v * v;
+            s4 += q * v.powi(4);
+            r2 += spectra[i][k] * (q * v * v);
+            r0 += spectra[i][k] * q;
+        }
+        let (curv, tilt) = if settings.separate_gravity_tilt {
+            // [S4, g S2; g S2, g² S0]·[K; T] = [r2; g r0]; Cramer's rule, det = g²(S0 S4 − S2²).
+            let d = s0 * s4 - s2 * s2;
+            ((r2 * s0 - r0 * s2) / d, (r0 * s4 - r2 * s2) / (g * d))
+        } else {
+            (r2 / s4, Complex::new(0.0, 0.0))
+        };
+        if in_e {
+            e_coef[k] = -curv / (kappa * kappa);
+        }
+        if in_t {
+            t_coef[k] = tilt;
+        }
+    }
+    let back = |c: &mut Vec<Complex<f64>>| -> Vec<f64> {
+        match settings.basis {
+            SpectralBasis::Periodic => irfft(c, m),
+            SpectralBasis::Cosine => idct2(&c.iter().map(|z| z.re).collect::<Vec<f64>>()),
+        }
+    };
+    let straightness = back(&mut e_coef);
+    let tilt = if settings.separate_gravity_tilt { Some(back(&mut t_coef)) } else { None };
+    Ok(FusedProfiles { straightness, tilt })
+}
+
+/// Band-limits a profile on a uniform grid in the cosine basis ([`SpectralBasis::Cosine`]): DCT-II, keep
+/// `k ≥ 1` with `λ_k = 2L/k` in `[min_wavelength, max_wavelength]` (`L = M·Δx`), inverse, least-squares
+/// line removed when `remove_reference_line`. Applied to a noise-free curvature through
+/// [`integrate_curvature_cosine`] it gives what the estimator targets.
+pub fn band_limit_cosine(
+    positions: &[f64],
+    profile: &[f64],
+    min_wavelength: f64,
+    max_wavelength: f64,
+    remove_reference_line: bool,
+) -> Result<Vec<f64>> {
+    if positions.len() != profile.len() {
+        return Err(AccelStraightnessError::BadInput(format!(
+            "positions ({}) and profile ({}) differ in length",
+            positions.len(),
+            profile.len()
+        )));
+    }
+    let dx = check_uniform(positions)?;
+    finite_slice("profile", profile)?;
+    positive("minimum wavelength (m)", min_wavelength)?;
+    positive("maximum wavelength (m)", max_wavelength)?;
+    let l = profile.len() as f64 * dx;
+    let mut c = dct2(profile);
+    for (k, v) in c.iter_mut().enumerate() {
+        let wl = if k == 0 { f64::INFINITY } else { 2.0 * l / k as f64 };
+        if k == 0 || wl < min_wavelength || wl > max_wavelength {
+            *v = 0.0;
+        }
+    }
+    let out = idct2(&c);
+    Ok(if remove_reference_line { remove_line(positions, &out) } else { out })
+}
+
+/// Straightness (m) from a noise-free curvature profile `E''` (1/m) on a uniform grid, band-limited in
+/// the cosine basis exactly as [`fuse_multi_speed`] does: `E_k = −(E'')_k/κ_k²`, `κ_k = πk/L`, kept for
+/// `λ_k` in `[min_wavelength, max_wavelength]`, least-squares line removed. Equals `E` minus a quadratic
+/// when the band holds all of `E`'s content ([`SpectralBasis::Cosine`]). The band-limited truth of tests.
+pub fn integrate_curvature_cosine(
+    positions: &[f64],
+    curvature: &[f64],
+    min_wavelength: f64,
+    max_wavelength: f64,
+) -> Result<Vec<f64>> {
+    if positions.len() != curvature.len() {
+        return Err(AccelStraightnessError::BadInput(format!(
+            "positions ({}) and curvature ({}) differ in length",
+            positions.len(),
+            curvature.len()
+        )));
+    }
+    let dx = check_uniform(positions)?;
+    finite_slice("curvature", curvature)?;
+    positive("minimum wavelength (m)", min_wavelength)?;
+    positive("maximum wavelength (m)", max_wavelength)?;
+    let l = curvature.len() as f64 * dx;
+    let mut c = dct2(curvature);
+    for (k, v) in c.iter_mut().enumerate() {
+        let keep = k > 0 && {
+            let wl = 2.0 * l / k as f64;
+            wl >= min_wavelength && wl <= max_wavelength
+        };
+        *v = if keep {
+            let kappa = PI * k as f64 / l;
+            -*v / (kappa * kappa)
+        } else {
+            0.0
+        };
+    }
+    Ok(remove_line(positions, &idct2(&c)))
 }
 
 #[cfg(test)]
@@ -1360,6 +1924,64 @@ mod tests {
         };
         assert!(estimate_straightness(&[run], &StraightnessConfig::default()).is_err());
         assert!(estimate_straightness(&[], &StraightnessConfig::default()).is_err());
+    }
+
+    #[test]
+    fn ac_coupling_is_undone_exactly_and_dct_round_trips() {
+        // Forward RC high-pass as the simulator's piezo model (y_0 = 0): the inverse returns x − x_0 to
+        // rounding (≈ 1e-15 relative over 500 samples).
+        let fs = 400.0;
+        let x: Vec<f64> = (0..500).map(|i| 9.8 + 0.01 * (i as f64 * 0.05).sin() + 1e-4 * i as f64).collect();
+        let alpha = (1.0 / (2.0 * PI * 0.2)) / (1.0 / (2.0 * PI * 0.2) + 1.0 / fs);
+        let mut y = vec![0.0; x.len()];
+        for i in 1..x.len() {
+            y[i] = alpha * (y[i - 1] + x[i] - x[i - 1]);
+        }
+        let back = undo_ac_coupling(&y, 0.2, fs).unwrap();
+        for i in 0..x.len() {
+            assert!((back[i] - (x[i] - x[0])).abs() < 1e-10, "{i}");
+        }
+        assert!(undo_ac_coupling(&y, -1.0, fs).is_err());
+        // DCT-II then its inverse is the identity; X_1 of a half cosine is M/2 (orthogonality).
+        let m = 37;
+        let v: Vec<f64> = (0..m).map(|j| (PI * (j as f64 + 0.5) / m as f64).cos()).collect();
+        let c = dct2(&v);
+        assert!((c[1] - m as f64 / 2.0).abs() < 1e-12 && c[0].abs() < 1e-12 && c[2].abs() < 1e-12);
+        let r = idct2(&c);
+        assert!(v.iter().zip(&r).all(|(a, b)| (a - b).abs() < 1e-12));
+    }
+
+    #[test]
+    fn cosine_integration_is_exact_up_to_a_quadratic_on_a_non_periodic_profile() {
+        // E = sin(2πx/0.37 + 0.4) on [0, 1) (2.7 cycles, non-periodic), E'' analytic; all bins kept. The
+        // cosine integration returns E minus a quadratic: after removing the LS quadratic from the
+        // difference the residual is below 1e-3 of the amplitude (midpoint-rule aliasing, dx = 1 mm).
+        let m = 1000;
+        let x: Vec<f64> = (0..m).map(|j| j as f64 * 1e-3).collect();
+        let k = 2.0 * PI / 0.37;
+        let e: Vec<f64> = x.iter().map(|&x| (k * x + 0.4).sin()).collect();
+        let c: Vec<f64> = e.iter().map(|v| -k * k * v).collect();
+        let out = integrate_curvature_cosine(&x, &c, 1e-9, 1e9).unwrap();
+        let d: Vec<f64> = out.iter().zip(&e).map(|(a, b)| a - b).collect();
+        // LS quadratic removal via two line removals on (x, x²) is not exact: use the normal equations.
+        let mut a = [[0.0f64; 3]; 3];
+        let mut r = [0.0f64; 3];
+        for (xi, di) in x.iter().zip(&d) {
+            let row = [1.0, xi - 0.5, (xi - 0.5).powi(2)];
+            for i in 0..3 {
+                r[i] += row[i] * di;
+                for j in 0..3 {
+                    a[i][j] += row[i] * row[j];
+                }
+            }
+        }
+        let q = solve3(a, r).unwrap();
+        let worst = x
+            .iter()
+            .zip(&d)
+            .map(|(xi, di)| (di - q[0] - q[1] * (xi - 0.5) - q[2] * (xi - 0.5).powi(2)).abs())
+            .fold(0.0f64, f64::max);
+        assert!(worst < 1e-3, "residual {worst}");
     }
 
     #[test]
