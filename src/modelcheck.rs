@@ -30,29 +30,53 @@
 //! catalogue's default shape δ = 2; the simulator's law, `vmt_sim::effects::EffectSet::friction`),
 //! with one force offset o per sensor; vs is searched like a period.
 //!
-//! Phase 3 (accelerometers): the readings of an `accelerometer` in a `constant_velocity` run with a
-//! `feed` (time t, position from `x_cmd`) are predicted by
+//! Phase 3 (accelerometers): the readings of an `accelerometer` (body-frame sensitive direction u,
+//! measuring point r) in a `constant_velocity` run with a `feed` (time t, position from `x_cmd`,
+//! velocity v = feed·direction) are predicted by
 //!
 //! ```text
-//! a = o_ch + g·τ_s(x) + Σ_segments [A_k·sin(2πf·t) + B_k·cos(2πf·t)]·1{t ∈ segment k}
+//! a_i = o_ch + v²·u·[Ē''(x_{i−1}, x_i) + ε̄''(x_{i−1}, x_i) × r] + g·τ_s(x_i) + a_mode,i
 //! ```
 //!
-//! with o_ch an offset per (run, sensor) (bias, gravity through the mounting tilt), g·τ_s(x) the
-//! gravity seen through the tilt of sensor s's sensitive axis u at position x (`gravity_tilt`; the
-//! simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted as a
-//! polynomial Σ c_k·x^k, k = 1..3, per sensor, shared by its runs: the same function of position at
-//! every speed) and a `resonance` at a temporal frequency f shared by all runs (searched on a
-//! 1 Hz grid, 5–200 Hz below 0.4× the slowest sampling rate), its amplitude and phase free per
-//! segment of [`RESONANCE_SEGMENT`] s of each channel (a mode driven by a random guideway profile is
-//! a narrow-band random process). The damping is not resolved (the starting value is reported).
-//! The guideway's own acceleration v²·d²(u·δ)/dx² (straightness, angles × offsets) is NOT
-//! predicted: it stays in the residual, which is normalised by the manifest's σ (or σ estimated
-//! from successive differences), so the normalised RMS of an accelerometer channel stays far above
-//! 1 when the guideway is rough. A broadband residual that grows with speed can then make a strong
-//! line of the fastest run (or an aliased one) win the resonance search: see the tests.
+//! - o_ch: an offset per (run, sensor) (bias, gravity through the mounting tilt).
+//! - The guideway's own acceleration of the measuring point, d²/dt² u·(E + ε × r) at constant v:
+//!   the error motions' second derivatives averaged over the sample interval, Ē''(a, b) =
+//!   (E'(b) − E'(a))/(b − a) with x_{i−1} = x_i − v·Δt_i, because the simulator's reading is the
+//!   difference of the point velocities at successive samples over Δt (`vmt_sim::sensors`). The
+//!   sensitivities are a laser's (u_i for translations, (r × u)_i for angles) times v². Given error
+//!   motions use their profiles' slopes (Ē'' as `Profile::mean_second_derivative` computes it:
+//!   polynomials, harmonics and random profiles by their analytic slopes, a table by its
+//!   piecewise-constant slope, i.e. the slope jumps at its knots); fitted ones (c_k·x^k) give the columns v²·s·k·(x_i^{k−1} −
+//!   x_{i−1}^{k−1})/(x_i − x_{i−1}) ≈ v²·s·k(k−1)·x^{k−2}, with the same coefficients c_k as the
+//!   lasers' columns (one unknown per coefficient shared by lasers and accelerometers).
+//! - g·τ_s(x): gravity seen through the tilt of sensor s's sensitive axis (`gravity_tilt`; the
+//!   simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted
+//!   as a polynomial Σ c_k·x^k, k = 1..3, per sensor, shared by its runs). The error-motion columns
+//!   leave gravity out: a given roll or pitch does not predict its g·τ (add `gravity_tilt`).
+//! - a_mode: a `resonance`, a structural mode q̈ + 2ζω·q̇ + ω²·q = −u·a_ref(t) driven by the
+//!   acceleration of the axis reference point (the simulator's base excitation, `StructuralMode`),
+//!   read as φ·q̈ (φ the mode shape at the sensor). Where the model predicts that excitation on a
+//!   channel (given translation error motions: a_ref = v²·E''(x(t)), x between samples at v), the
+//!   mode is the forced response to it (integrated exactly with the input held at its mean over
+//!   0.1 ms steps) from rest at the sample before the first, with a gain φ per sensor, plus the free
+//!   vibration from the unknown state at that instant (two columns per channel); f (5–200 Hz, 1 Hz grid,
+//!   below 0.4× the slowest sampling rate) and ζ (0.5–10 %) are searched. Where it does not
+//!   (no given straightness: the excitation is an unknown random profile), the mode is a narrow-band
+//!   random process: sin/cos of 2πf·t with amplitude and phase free per segment of
+//!   [`RESONANCE_SEGMENT`] s of each channel; ζ is then not resolved (held at its start, 2 %).
+//!   Fitted error motions do not enter the excitation: a polynomial's acceleration varies far
+//!   slower than a mode, whose response to it is quasi-static (q ≈ −a/ω², q̈ ≈ 0).
 //!
-//! Not predicted: LuGre, squareness (needs two axes), servo lag (no effect on settled readings),
-//! the guideway part of accelerometer readings. They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
+//! Not predicted in phase 3: the carriage's own dynamics on its bearing blocks (it follows the
+//! geometry only quasi-statically, with a relative error ≈ (f/f_b)² at frequency f below its
+//! bearing mode f_b: a normalised RMS far above 1 when the guideway's band reaches f_b, see the
+//! tests), the servo's ripple, the excitation by fitted error motions, gravity through given
+//! angles, and a guideway that the model does not give (its broadband acceleration stays in the
+//! residual, normalised by the manifest's σ or σ estimated from successive differences; a strong
+//! line of it can then win the resonance search).
+//!
+//! Not predicted: LuGre, squareness (needs two axes), servo lag (no effect on settled readings).
+//! They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
 //! degree `order` (default 3) without its constant term (the offsets carry it).
 
 use crate::error::{fmt_num, VmtError};
@@ -373,8 +397,9 @@ struct Stack<'a> {
 }
 
 /// Time step of the mode integration, s: at most this long (and at least 4 steps per sample
-/// interval). The input is held linear over a step (first-order hold): for the guideway's
-/// acceleration up to 100 Hz the hold's error is ≈ (ωh)²/8 ≈ 5·10⁻⁵ of it.
+/// interval). The input is held at its mean over each step, so that its impulse (the velocity it
+/// gives) is exact; the hold's error on a sinusoid of the guideway's band (≤ 100 Hz) is
+/// ≈ (ωh)²/24 ≈ 2·10⁻⁵ of it.
 const MODE_STEP: f64 = 1e-4;
 
 /// The base acceleration that drives a structural mode, as the model predicts it on one
@@ -382,8 +407,8 @@ const MODE_STEP: f64 = 1e-4;
 /// reference point (r = 0: the angles do not move it) from the model's given error motions, with
 /// x(τ) = x_i + v·(τ − t_i) between samples. It is tabulated from t_{−1} = t_0 − Δt_0 (the sample
 /// before the first, whose velocity the first reading is differenced against): interval i
-/// (t_{i−1} → t_i) holds `steps[i]` steps of length Δt_i/steps[i] and the input at both ends of
-/// every step (steps[i] + 1 values).
+/// (t_{i−1} → t_i) holds `steps[i]` steps of length Δt_i/steps[i] and the input's mean over each
+/// step, v²·u·Ē''(x_k, x_{k+1}) (`Profile::mean_second_derivative`: a table's slope jumps count).
 #[derive(Clone, Debug)]
 struct Excitation {
     steps: Vec<usize>,
@@ -438,11 +463,9 @@ impl Excitation {
                 return None;
             }
             let m = mode_steps(dt);
-            let vals: Vec<f64> = (0..=m)
-                .map(|k| {
-                    let x = c.x[i] - v * dt * (1.0 - k as f64 / m as f64);
-                    v * v * motions.iter().map(|(s, p)| s * p.eval3(x)[2]).sum::<f64>()
-                })
+            let x = |k: usize| c.x[i] - v * dt * (1.0 - k as f64 / m as f64);
+            let vals: Vec<f64> = (0..m)
+                .map(|k| v * v * motions.iter().map(|(s, p)| s * p.mean_second_derivative(x(k), x(k + 1))).sum::<f64>())
                 .collect();
             steps.push(m);
             input.push(vals);
@@ -503,8 +526,8 @@ impl StepMap {
 
 /// Interval means of q̈ of a mode q̈ + 2ζω·q̇ + ω²·q = −a(τ) over each sample interval of channel
 /// `c`, (q̇_i − q̇_{i−1})/Δt_i (what the simulator's accelerometer reads of a point moving by q), from
-/// the state (q, q̇) = `start` at t_{−1}, with the input a from `ex` (None: free vibration); exact
-/// for an input linear over each step ([`StepMap`]). ω = 2πf, f in Hz.
+/// the state (q, q̇) = `start` at t_{−1}, with the input a from `ex` (None: free vibration) held at
+/// its mean over each step ([`StepMap`], [`MODE_STEP`]). ω = 2πf, f in Hz.
 fn mode_response(c: &Channel, ex: Option<&Excitation>, f: f64, zeta: f64, start: (f64, f64)) -> Vec<f64> {
     let mut x = [start.0, start.1];
     let mut map: Option<StepMap> = None;
@@ -524,8 +547,8 @@ fn mode_response(c: &Channel, ex: Option<&Excitation>, f: f64, zeta: f64, start:
         };
         let v0 = x[1];
         for k in 0..m {
-            let (a0, a1) = ex.map_or((0.0, 0.0), |e| (e.input[i][k], e.input[i][k + 1]));
-            x = mp.step(x, a0, a1);
+            let a = ex.map_or(0.0, |e| e.input[i][k]);
+            x = mp.step(x, a, a);
         }
         out.push((x[1] - v0) / dt);
     }
@@ -650,8 +673,8 @@ pub fn predicts(name: EffectName) -> bool {
 /// sin/cos with amplitudes per segment follow it.
 const RESONANCE_SEGMENT: f64 = 0.2;
 
-/// The resonance segments of the accelerometer channels: (channel index, segment number, start
-/// time, end time), s. A channel is cut into ⌈T/`RESONANCE_SEGMENT`⌉ equal segments of its time span
+/// The resonance segments of the accelerometer channels without a predicted mode excitation
+/// (module doc): (channel index, segment number, start time, end time), s. A channel is cut into ⌈T/`RESONANCE_SEGMENT`⌉ equal segments of its time span
 /// (a segment needs ≥ 8 samples, else the channel is one segment).
 fn resonance_segments(st: &Stack) -> Vec<(usize, usize, f64, f64)> {
     let mut out = Vec::new();
@@ -1427,7 +1450,8 @@ fn needs(name: EffectName) -> &'static str {
     match name {
         EffectName::Positioning => "needs a laser_linear along the axis in a positioning run",
         EffectName::StraightnessY | EffectName::StraightnessZ => {
-            "needs a laser_straightness across the axis in a positioning run"
+            "needs a laser_straightness across the axis in a positioning run, or an accelerometer across the axis \
+             in a constant-velocity run"
         }
         EffectName::Roll | EffectName::Pitch | EffectName::Yaw => {
             "needs a laser whose measuring point is offset from the axis (an Abbe offset) across its direction"
@@ -1943,8 +1967,8 @@ mod tests {
     /// Forced at resonance by a(τ) = A·sin(ωτ) with ζ = 0.2: after the transient (e^{−ζω·2 s} ≈
     /// e^{−25}) q̈ = −A·cos(ωτ)/(2ζ) (|H| = 1/(2ζω²) at ω, q = A·cos(ωτ)/(2ζω²)), read as the mean
     /// of q̈ over each 10 ms interval: the exact mean of that cosine, to 1e-5 of A/(2ζ) (the input
-    /// is held linear over 0.1 ms steps, which shrinks a sinusoid by ≈ (ωh)²/12 = 3.3e-6 at
-    /// 10 Hz; measured 3.3e-6).
+    /// is held at its mean over 0.1 ms steps, which shrinks a sinusoid by ≈ (ωh)²/24 = 1.6e-6 at
+    /// 10 Hz).
     #[test]
     fn forced_mode_response_at_resonance_has_gain_one_over_two_zeta() {
         let c = accel("a", 300);
@@ -1955,7 +1979,11 @@ mod tests {
                 let m = mode_steps(0.01);
                 // τ counts from t_{−1} = −Δt: interval i (t_i − Δt → t_i) starts at τ = t_i.
                 let t0 = c.t[i];
-                let vals = (0..=m).map(|k| amp * (w * (t0 + 0.01 * k as f64 / m as f64)).sin()).collect();
+                // The mean of A·sin(ωτ) over each step.
+                let tk = |k: usize| t0 + 0.01 * k as f64 / m as f64;
+                let vals = (0..m)
+                    .map(|k| amp * ((w * tk(k)).cos() - (w * tk(k + 1)).cos()) / (w * (tk(k + 1) - tk(k))))
+                    .collect();
                 (m, vals)
             })
             .unzip();
