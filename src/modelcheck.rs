@@ -69,8 +69,9 @@
 //!
 //! Not predicted in phase 3: the carriage's own dynamics on its bearing blocks (it follows the
 //! geometry only quasi-statically, with a relative error ≈ (f/f_b)² at frequency f below its
-//! bearing mode f_b: a normalised RMS far above 1 when the guideway's band reaches f_b, see the
-//! tests), the servo's ripple, the excitation by fitted error motions, gravity through given
+//! bearing mode f_b: a normalised RMS far above 1 when the guideway's band reaches f_b, and when it
+//! comes within ≈ f_b/5 diagnose already reports these dynamics as a `resonance` near the band's
+//! top, see tests/model_check.rs `guideway_scenario`), the servo's ripple, the excitation by fitted error motions, gravity through given
 //! angles, and a guideway that the model does not give (its broadband acceleration stays in the
 //! residual, normalised by the manifest's σ or σ estimated from successive differences; a strong
 //! line of it can then win the resonance search).
