@@ -1947,6 +1947,23 @@ mod tests {
         assert_eq!(l.motion_response(2, EffectName::StraightnessY, |x| p.value(x), |x| p.eval3(x)[1]), p.value(0.002));
     }
 
+    /// Fitted straightness c_k·x^k on an accelerometer (u = y, v = 0.1 m/s, Δt = 0.01 s, so
+    /// x_{i−1} = x_i − 1 mm): the c1 column is 0 (a slope has no acceleration), c2 is v²·2 = 0.02,
+    /// c3 is v²·3·(x_i² − x_{i−1}²)/(x_i − x_{i−1}) = 0.03·(x_i + x_{i−1}) m/s² per unit c_k.
+    #[test]
+    fn fitted_straightness_columns_on_an_accelerometer_are_mean_curvatures_times_v2() {
+        let chans = vec![accel("a", 10)];
+        let st = Stack::new(&chans);
+        let sh = shape(&st, EffectName::StraightnessY, 1, 3, false);
+        let cols = columns(&st, EffectName::StraightnessY, &sh, &[]);
+        for i in 0..10 {
+            let x = chans[0].x[i];
+            assert_eq!(cols[0][i], 0.0);
+            assert!((cols[1][i] - 0.02).abs() < 1e-14, "{}", cols[1][i]);
+            assert!((cols[2][i] - 0.03 * (2.0 * x - 0.001)).abs() < 1e-14, "{}", cols[2][i]);
+        }
+    }
+
     /// Free vibration from (q, q̇) = (1, 0): q̇(t) = −(ω²/ω_d)·e^{−ζωt}·sin(ω_d·t), ω_d = ω·√(1 − ζ²);
     /// the reading is (q̇_i − q̇_{i−1})/Δt from t_{−1} = −Δt (the sample times start at 0 and t_{−1}
     /// is the integration's zero). Agreement to 1e-9 of ω² (the step map's RK4 error is ≈ 1e-14).
