@@ -30,29 +30,54 @@
 //! catalogue's default shape δ = 2; the simulator's law, `vmt_sim::effects::EffectSet::friction`),
 //! with one force offset o per sensor; vs is searched like a period.
 //!
-//! Phase 3 (accelerometers): the readings of an `accelerometer` in a `constant_velocity` run with a
-//! `feed` (time t, position from `x_cmd`) are predicted by
+//! Phase 3 (accelerometers): the readings of an `accelerometer` (body-frame sensitive direction u,
+//! measuring point r) in a `constant_velocity` run with a `feed` (time t, position from `x_cmd`,
+//! velocity v = feed·direction) are predicted by
 //!
 //! ```text
-//! a = o_ch + g·τ_s(x) + Σ_segments [A_k·sin(2πf·t) + B_k·cos(2πf·t)]·1{t ∈ segment k}
+//! a_i = o_ch + v²·u·[Ē''(x_{i−1}, x_i) + ε̄''(x_{i−1}, x_i) × r] + g·τ_s(x_i) + a_mode,i
 //! ```
 //!
-//! with o_ch an offset per (run, sensor) (bias, gravity through the mounting tilt), g·τ_s(x) the
-//! gravity seen through the tilt of sensor s's sensitive axis u at position x (`gravity_tilt`; the
-//! simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted as a
-//! polynomial Σ c_k·x^k, k = 1..3, per sensor, shared by its runs: the same function of position at
-//! every speed) and a `resonance` at a temporal frequency f shared by all runs (searched on a
-//! 1 Hz grid, 5–200 Hz below 0.4× the slowest sampling rate), its amplitude and phase free per
-//! segment of [`RESONANCE_SEGMENT`] s of each channel (a mode driven by a random guideway profile is
-//! a narrow-band random process). The damping is not resolved (the starting value is reported).
-//! The guideway's own acceleration v²·d²(u·δ)/dx² (straightness, angles × offsets) is NOT
-//! predicted: it stays in the residual, which is normalised by the manifest's σ (or σ estimated
-//! from successive differences), so the normalised RMS of an accelerometer channel stays far above
-//! 1 when the guideway is rough. A broadband residual that grows with speed can then make a strong
-//! line of the fastest run (or an aliased one) win the resonance search: see the tests.
+//! - o_ch: an offset per (run, sensor) (bias, gravity through the mounting tilt).
+//! - The guideway's own acceleration of the measuring point, d²/dt² u·(E + ε × r) at constant v:
+//!   the error motions' second derivatives averaged over the sample interval, Ē''(a, b) =
+//!   (E'(b) − E'(a))/(b − a) with x_{i−1} = x_i − v·Δt_i, because the simulator's reading is the
+//!   difference of the point velocities at successive samples over Δt (`vmt_sim::sensors`). The
+//!   sensitivities are a laser's (u_i for translations, (r × u)_i for angles) times v². Given error
+//!   motions use their profiles' slopes (Ē'' as `Profile::mean_second_derivative` computes it:
+//!   polynomials, harmonics and random profiles by their analytic slopes, a table by its
+//!   piecewise-constant slope, i.e. the slope jumps at its knots); fitted ones (c_k·x^k) give the columns v²·s·k·(x_i^{k−1} −
+//!   x_{i−1}^{k−1})/(x_i − x_{i−1}) ≈ v²·s·k(k−1)·x^{k−2}, with the same coefficients c_k as the
+//!   lasers' columns (one unknown per coefficient shared by lasers and accelerometers).
+//! - g·τ_s(x): gravity seen through the tilt of sensor s's sensitive axis (`gravity_tilt`; the
+//!   simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted
+//!   as a polynomial Σ c_k·x^k, k = 1..3, per sensor, shared by its runs). The error-motion columns
+//!   leave gravity out: a given roll or pitch does not predict its g·τ (add `gravity_tilt`).
+//! - a_mode: a `resonance`, a structural mode q̈ + 2ζω·q̇ + ω²·q = −u·a_ref(t) driven by the
+//!   acceleration of the axis reference point (the simulator's base excitation, `StructuralMode`),
+//!   read as φ·q̈ (φ the mode shape at the sensor). Where the model predicts that excitation on a
+//!   channel (given translation error motions: a_ref = v²·E''(x(t)), x between samples at v), the
+//!   mode is the forced response to it (integrated exactly with the input held at its mean over
+//!   0.1 ms steps) from rest at the sample before the first, with a gain φ per sensor, plus the free
+//!   vibration from the unknown state at that instant (two columns per channel); f (5–200 Hz, 1 Hz grid,
+//!   below 0.4× the slowest sampling rate) and ζ (0.5–10 %) are searched. Where it does not
+//!   (no given straightness: the excitation is an unknown random profile), the mode is a narrow-band
+//!   random process: sin/cos of 2πf·t with amplitude and phase free per segment of
+//!   [`RESONANCE_SEGMENT`] s of each channel; ζ is then not resolved (held at its start, 2 %).
+//!   Fitted error motions do not enter the excitation: a polynomial's acceleration varies far
+//!   slower than a mode, whose response to it is quasi-static (q ≈ −a/ω², q̈ ≈ 0).
 //!
-//! Not predicted: LuGre, squareness (needs two axes), servo lag (no effect on settled readings),
-//! the guideway part of accelerometer readings. They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
+//! Not predicted in phase 3: the carriage's own dynamics on its bearing blocks (it follows the
+//! geometry only quasi-statically, with a relative error ≈ (f/f_b)² at frequency f below its
+//! bearing mode f_b: a normalised RMS far above 1 when the guideway's band reaches f_b, and when it
+//! comes within ≈ f_b/5 diagnose already reports these dynamics as a `resonance` near the band's
+//! top, see tests/model_check.rs `guideway_scenario`), the servo's ripple, the excitation by fitted error motions, gravity through given
+//! angles, and a guideway that the model does not give (its broadband acceleration stays in the
+//! residual, normalised by the manifest's σ or σ estimated from successive differences; a strong
+//! line of it can then win the resonance search).
+//!
+//! Not predicted: LuGre, squareness (needs two axes), servo lag (no effect on settled readings).
+//! They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
 //! degree `order` (default 3) without its constant term (the offsets carry it).
 
 use crate::error::{fmt_num, VmtError};
@@ -147,9 +172,10 @@ impl Channel {
     }
 
     /// Sensitivity to error motion `name`: u_i for translations, (r × u)_i for rotations
-    /// (u·(ε × r) = ε·(r × u)); 0 for encoders.
+    /// (u·(ε × r) = ε·(r × u)), for lasers (to the motion itself) and accelerometers (to its mean
+    /// second derivative, see [`Channel::motion_response`]); 0 for encoders and motor forces.
     fn s_motion(&self, name: EffectName) -> f64 {
-        if !self.is_laser() {
+        if !self.is_laser() && !self.is_accel() {
             return 0.0;
         }
         let [ux, uy, uz] = self.u;
@@ -164,6 +190,50 @@ impl Channel {
             EffectName::Yaw => rxu[2],
             _ => 0.0,
         }
+    }
+}
+
+impl Channel {
+    /// Response of sample `i` to an error motion `name` whose profile has value `value(x)` and slope
+    /// `slope(x)` (first derivative in position):
+    ///
+    /// ```text
+    /// laser:          s·P(x_i)
+    /// accelerometer:  s·v_i·(P'(x_i) − P'(x_i − v_i·Δt_i))/Δt_i = s·v_i²·P̄''(x_i − v_i·Δt_i, x_i)
+    /// ```
+    ///
+    /// with s = [`Channel::s_motion`] (u_i or (r × u)_i). The accelerometer term is the guideway's
+    /// acceleration of the measuring point at constant velocity v, d²/dt² u·(E + ε × r) = v²·u·(E'' +
+    /// ε'' × r), averaged over the sample interval Δt_i (t_i − t_{i−1}; the first sample takes the
+    /// second's) as the simulator's reading is (difference of point velocities at successive
+    /// samples, `vmt_sim::sensors::true_readings`). Gravity through the angles (g·tilt) is not in
+    /// it: that is the `gravity_tilt` effect.
+    fn motion_response(
+        &self,
+        i: usize,
+        name: EffectName,
+        value: impl Fn(f64) -> f64,
+        slope: impl Fn(f64) -> f64,
+    ) -> f64 {
+        let s = self.s_motion(name);
+        if s == 0.0 {
+            return 0.0;
+        }
+        if self.is_laser() {
+            return s * value(self.x[i]);
+        }
+        let dt = match i {
+            0 if self.t.len() > 1 => self.t[1] - self.t[0],
+            0 => 0.0,
+            _ => self.t[i] - self.t[i - 1],
+        };
+        let v = self.v[i];
+        if !(dt > 0.0) || v == 0.0 {
+            return 0.0;
+        }
+        let xb = self.x[i];
+        let xa = xb - v * dt;
+        s * v * (slope(xb) - slope(xa)) / dt
     }
 }
 
@@ -322,9 +392,178 @@ struct Stack<'a> {
     /// does not change from run to run).
     group: Vec<usize>,
     n_groups: usize,
+    /// Per channel: the base excitation of a structural mode predicted by the model (accelerometer
+    /// channels only; None where the model predicts none), see [`Excitation`].
+    excitation: Vec<Option<Excitation>>,
+}
+
+/// Time step of the mode integration, s: at most this long (and at least 4 steps per sample
+/// interval). The input is held at its mean over each step, so that its impulse (the velocity it
+/// gives) is exact; the hold's error on a sinusoid of the guideway's band (≤ 100 Hz) is
+/// ≈ (ωh)²/24 ≈ 2·10⁻⁵ of it.
+const MODE_STEP: f64 = 1e-4;
+
+/// The base acceleration that drives a structural mode, as the model predicts it on one
+/// accelerometer channel: u·a_ref(τ) = v²·u·E''(x(τ)), the guideway acceleration of the axis
+/// reference point (r = 0: the angles do not move it) from the model's given error motions, with
+/// x(τ) = x_i + v·(τ − t_i) between samples. It is tabulated from t_{−1} = t_0 − Δt_0 (the sample
+/// before the first, whose velocity the first reading is differenced against): interval i
+/// (t_{i−1} → t_i) holds `steps[i]` steps of length Δt_i/steps[i] and the input's mean over each
+/// step, v²·u·Ē''(x_k, x_{k+1}) (`Profile::mean_second_derivative`: a table's slope jumps count).
+#[derive(Clone, Debug)]
+struct Excitation {
+    steps: Vec<usize>,
+    input: Vec<Vec<f64>>,
+}
+
+/// Sample interval before sample i of a channel, s (the first sample takes the second's).
+fn sample_interval(c: &Channel, i: usize) -> f64 {
+    match i {
+        0 if c.t.len() > 1 => c.t[1] - c.t[0],
+        0 => 0.0,
+        _ => c.t[i] - c.t[i - 1],
+    }
+}
+
+/// Number of mode-integration steps over a sample interval `dt` (s).
+fn mode_steps(dt: f64) -> usize {
+    ((dt / MODE_STEP).ceil() as usize).max(4)
+}
+
+impl Excitation {
+    /// The excitation of channel `c` by the given (not fitted) translation error motions of
+    /// `model` (EXX, EYX, EZX with their profiles); None for a non-accelerometer channel, a channel
+    /// without velocity or a non-increasing time, or when no given translation reaches u.
+    fn of(c: &Channel, model: &Model) -> Option<Excitation> {
+        if !c.is_accel() || c.t.len() < 2 {
+            return None;
+        }
+        let motions: Vec<(f64, &Profile)> = model
+            .effects
+            .iter()
+            .filter(|m| !m.fit && m.effect.axis == model.axis)
+            .filter_map(|m| match (&m.effect.params, m.effect.name) {
+                (EffectParams::ErrorMotion(p), n)
+                    if matches!(n, EffectName::Positioning | EffectName::StraightnessY | EffectName::StraightnessZ) =>
+                {
+                    let s = c.s_motion(n);
+                    (s != 0.0 && !p.is_zero()).then_some((s, p))
+                }
+                _ => None,
+            })
+            .collect();
+        if motions.is_empty() {
+            return None;
+        }
+        let mut steps = Vec::with_capacity(c.t.len());
+        let mut input = Vec::with_capacity(c.t.len());
+        for i in 0..c.t.len() {
+            let dt = sample_interval(c, i);
+            let v = c.v[i];
+            if !(dt > 0.0) || !dt.is_finite() || v == 0.0 {
+                return None;
+            }
+            let m = mode_steps(dt);
+            let x = |k: usize| c.x[i] - v * dt * (1.0 - k as f64 / m as f64);
+            let vals: Vec<f64> = (0..m)
+                .map(|k| v * v * motions.iter().map(|(s, p)| s * p.mean_second_derivative(x(k), x(k + 1))).sum::<f64>())
+                .collect();
+            steps.push(m);
+            input.push(vals);
+        }
+        Some(Excitation { steps, input })
+    }
+}
+
+/// The exact one-step map of the mode q̈ + 2ζω·q̇ + ω²·q = −a(τ) over a step h with a linear
+/// input from a₀ to a₁: (q, q̇)(h) = Φ·(q, q̇)(0) + g₀·a₀ + g₁·a₁. Φ, g₀ and g₁ are the responses to
+/// the unit states and to the inputs 1 − τ/h and τ/h, integrated by classical RK4 in 32 sub-steps
+/// (ωh/32 ≤ 0.004 at 200 Hz and h = 0.1 ms: error ≈ 10⁻¹⁴).
+#[derive(Clone, Copy, Debug)]
+struct StepMap {
+    h: f64,
+    phi: [[f64; 2]; 2],
+    g0: [f64; 2],
+    g1: [f64; 2],
+}
+
+impl StepMap {
+    fn new(f: f64, zeta: f64, h: f64) -> StepMap {
+        let w = TWO_PI * f;
+        let n = 32;
+        let hs = h / n as f64;
+        let run = |x0: [f64; 2], a: &dyn Fn(f64) -> f64| -> [f64; 2] {
+            let d = |tau: f64, x: [f64; 2]| [x[1], -a(tau) - 2.0 * zeta * w * x[1] - w * w * x[0]];
+            let mut x = x0;
+            for k in 0..n {
+                let tau = k as f64 * hs;
+                let k1 = d(tau, x);
+                let k2 = d(tau + 0.5 * hs, [x[0] + 0.5 * hs * k1[0], x[1] + 0.5 * hs * k1[1]]);
+                let k3 = d(tau + 0.5 * hs, [x[0] + 0.5 * hs * k2[0], x[1] + 0.5 * hs * k2[1]]);
+                let k4 = d(tau + hs, [x[0] + hs * k3[0], x[1] + hs * k3[1]]);
+                for j in 0..2 {
+                    x[j] += hs / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+                }
+            }
+            x
+        };
+        let c0 = run([1.0, 0.0], &|_| 0.0);
+        let c1 = run([0.0, 1.0], &|_| 0.0);
+        StepMap {
+            h,
+            phi: [[c0[0], c1[0]], [c0[1], c1[1]]],
+            g0: run([0.0, 0.0], &|tau| 1.0 - tau / h),
+            g1: run([0.0, 0.0], &|tau| tau / h),
+        }
+    }
+
+    fn step(&self, x: [f64; 2], a0: f64, a1: f64) -> [f64; 2] {
+        [
+            self.phi[0][0] * x[0] + self.phi[0][1] * x[1] + self.g0[0] * a0 + self.g1[0] * a1,
+            self.phi[1][0] * x[0] + self.phi[1][1] * x[1] + self.g0[1] * a0 + self.g1[1] * a1,
+        ]
+    }
+}
+
+/// Interval means of q̈ of a mode q̈ + 2ζω·q̇ + ω²·q = −a(τ) over each sample interval of channel
+/// `c`, (q̇_i − q̇_{i−1})/Δt_i (what the simulator's accelerometer reads of a point moving by q), from
+/// the state (q, q̇) = `start` at t_{−1}, with the input a from `ex` (None: free vibration) held at
+/// its mean over each step ([`StepMap`], [`MODE_STEP`]). ω = 2πf, f in Hz.
+fn mode_response(c: &Channel, ex: Option<&Excitation>, f: f64, zeta: f64, start: (f64, f64)) -> Vec<f64> {
+    let mut x = [start.0, start.1];
+    let mut map: Option<StepMap> = None;
+    let mut out = Vec::with_capacity(c.t.len());
+    for i in 0..c.t.len() {
+        let dt = sample_interval(c, i);
+        if !(dt > 0.0) {
+            out.push(0.0);
+            continue;
+        }
+        let m = ex.map_or(mode_steps(dt), |e| e.steps[i]);
+        let h = dt / m as f64;
+        // Sample intervals repeat: the map is rebuilt only when the step changes (≥ 1 ppb).
+        let mp = match map {
+            Some(mp) if (mp.h - h).abs() <= 1e-9 * h => mp,
+            _ => *map.insert(StepMap::new(f, zeta, h)),
+        };
+        let v0 = x[1];
+        for k in 0..m {
+            let a = ex.map_or(0.0, |e| e.input[i][k]);
+            x = mp.step(x, a, a);
+        }
+        out.push((x[1] - v0) / dt);
+    }
+    out
 }
 
 impl<'a> Stack<'a> {
+    /// The stack of `chans` with the structural-mode excitation the model `model` predicts.
+    fn with_model(chans: &'a [Channel], model: &Model) -> Stack<'a> {
+        let mut st = Stack::new(chans);
+        st.excitation = chans.iter().map(|c| Excitation::of(c, model)).collect();
+        st
+    }
+
     fn new(chans: &'a [Channel]) -> Stack<'a> {
         let mut keys: Vec<String> = Vec::new();
         let mut group = Vec::with_capacity(chans.len());
@@ -340,7 +579,13 @@ impl<'a> Stack<'a> {
             });
             group.push(g);
         }
-        Stack { chans, n: chans.iter().map(|c| c.y.len()).sum(), group, n_groups: keys.len() }
+        Stack {
+            chans,
+            n: chans.iter().map(|c| c.y.len()).sum(),
+            group,
+            n_groups: keys.len(),
+            excitation: vec![None; chans.len()],
+        }
     }
 
     /// One column: f(channel, sample index) over all samples.
@@ -429,13 +674,13 @@ pub fn predicts(name: EffectName) -> bool {
 /// sin/cos with amplitudes per segment follow it.
 const RESONANCE_SEGMENT: f64 = 0.2;
 
-/// The resonance segments of the accelerometer channels: (channel index, segment number, start
-/// time, end time), s. A channel is cut into ⌈T/`RESONANCE_SEGMENT`⌉ equal segments of its time span
+/// The resonance segments of the accelerometer channels without a predicted mode excitation
+/// (module doc): (channel index, segment number, start time, end time), s. A channel is cut into ⌈T/`RESONANCE_SEGMENT`⌉ equal segments of its time span
 /// (a segment needs ≥ 8 samples, else the channel is one segment).
 fn resonance_segments(st: &Stack) -> Vec<(usize, usize, f64, f64)> {
     let mut out = Vec::new();
     for (j, c) in st.chans.iter().enumerate() {
-        if !c.is_accel() || c.t.len() < 8 {
+        if !c.is_accel() || c.t.len() < 8 || st.excitation[j].is_some() {
             continue;
         }
         let lo = c.t.iter().copied().fold(f64::INFINITY, f64::min);
@@ -459,6 +704,18 @@ fn resonance_segments(st: &Stack) -> Vec<(usize, usize, f64, f64)> {
 fn accel_sensors(st: &Stack) -> Vec<String> {
     let mut out: Vec<String> = Vec::new();
     for c in st.chans.iter().filter(|c| c.is_accel()) {
+        if !out.contains(&c.sensor) {
+            out.push(c.sensor.clone());
+        }
+    }
+    out
+}
+
+/// Names of the accelerometer sensors with a predicted mode excitation on some channel, in order
+/// of appearance.
+fn excited_sensors(st: &Stack) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for (c, _) in st.chans.iter().zip(&st.excitation).filter(|(_, e)| e.is_some()) {
         if !out.contains(&c.sensor) {
             out.push(c.sensor.clone());
         }
@@ -497,11 +754,15 @@ fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, with_fc: bo
         EffectName::Stribeck if with_fc => (s(&["fs_minus_fc", "fc"]), vec!["vs"]),
         EffectName::Stribeck => (s(&["fs_minus_fc"]), vec!["vs"]),
         EffectName::Resonance => {
-            let names = resonance_segments(st)
-                .iter()
-                .flat_map(|(j, k, _, _)| [format!("sin_{j}_{k}"), format!("cos_{j}_{k}")])
-                .collect();
-            (names, vec!["frequency"])
+            let mut names: Vec<String> = excited_sensors(st).iter().map(|a| format!("gain_{a}")).collect();
+            for (j, _) in st.excitation.iter().enumerate().filter(|(_, e)| e.is_some()) {
+                names.push(format!("free_q_{j}"));
+                names.push(format!("free_v_{j}"));
+            }
+            names.extend(
+                resonance_segments(st).iter().flat_map(|(j, k, _, _)| [format!("sin_{j}_{k}"), format!("cos_{j}_{k}")]),
+            );
+            (names, vec!["frequency", "damping"])
         }
         EffectName::GravityTilt => {
             (accel_sensors(st).iter().flat_map(|a| (1..=order).map(move |k| format!("{a}_c{k}"))).collect(), vec![])
@@ -515,7 +776,13 @@ fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, with_fc: bo
 fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>> {
     match name {
         n if n.is_error_motion() => {
-            (sh.first_power..=sh.order).map(|k| st.col(|c, i| c.s_motion(n) * c.x[i].powi(k as i32))).collect()
+            // c_k·x^k: the same coefficient for lasers (x^k) and accelerometers (slope k·x^(k−1)).
+            (sh.first_power..=sh.order)
+                .map(|k| {
+                    let kf = k as f64;
+                    st.col(|c, i| c.motion_response(i, n, |x| x.powi(k as i32), |x| kf * x.powi(k as i32 - 1)))
+                })
+                .collect()
         }
         EffectName::Backlash => vec![st.col(|c, i| -0.5 * c.d[i] * c.s_drive())],
         EffectName::ScaleError => vec![st.col(|c, i| c.x[i] * c.s_chain())],
@@ -542,9 +809,36 @@ fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>>
             cols
         }
         EffectName::Resonance => {
-            // Narrow band at the temporal frequency f: sin/cos of 2πf·t per segment of each channel.
-            let f = h[0];
+            let (f, zeta) = (h[0], h[1]);
             let mut cols = Vec::new();
+            // Forced response to the predicted base acceleration, gain φ (the mode shape at the
+            // sensor) per sensor: φ·mean q̈ with q driven by −u·a_ref from rest at t_{−1}.
+            let responses: Vec<Option<Vec<f64>>> = st
+                .chans
+                .iter()
+                .zip(&st.excitation)
+                .map(|(c, e)| e.as_ref().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))))
+                .collect();
+            for a in excited_sensors(st) {
+                cols.push(st.col_j(|c, i, j| match &responses[j] {
+                    Some(r) if c.sensor == a => r[i],
+                    _ => 0.0,
+                }));
+            }
+            // Free vibration from the unknown state at t_{−1} (q₀ = 1/ω², q̇₀ = 1/ω: unit scale),
+            // per excited channel.
+            let w = TWO_PI * f;
+            for (j, c) in st.chans.iter().enumerate() {
+                if st.excitation[j].is_none() {
+                    continue;
+                }
+                for start in [(1.0 / (w * w), 0.0), (0.0, 1.0 / w)] {
+                    let r = mode_response(c, None, f, zeta, start);
+                    cols.push(st.col_j(|_, i, jj| if jj == j { r[i] } else { 0.0 }));
+                }
+            }
+            // Channels without a predicted excitation: narrow band at the temporal frequency f,
+            // sin/cos of 2πf·t per segment.
             for (j, _, a, b) in resonance_segments(st) {
                 let inside = move |c: &Channel, i: usize, jj: usize| jj == j && c.t[i] >= a && c.t[i] < b;
                 cols.push(st.col_j(|c, i, jj| if inside(c, i, jj) { (TWO_PI * f * c.t[i]).sin() } else { 0.0 }));
@@ -592,7 +886,9 @@ fn phases_spread(st: &Stack, p: f64) -> bool {
 /// The prediction of a known (not fitted) effect at every sample.
 fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
     match (&e.params, e.name) {
-        (EffectParams::ErrorMotion(prof), n) => st.col(|c, i| c.s_motion(n) * prof.value(c.x[i])),
+        (EffectParams::ErrorMotion(prof), n) => {
+            st.col(|c, i| c.motion_response(i, n, |x| prof.value(x), |x| prof.eval3(x)[1]))
+        }
         (EffectParams::Backlash(b), _) => st.col(|c, i| -0.5 * c.d[i] * c.s_drive() * b.value),
         (EffectParams::ScaleError(s), _) => st.col(|c, i| c.s_chain() * s.value * c.x[i]),
         (EffectParams::CyclicLead(l), _) => st.col(|c, i| c.s_drive() * l.value(c.x[i])),
@@ -642,6 +938,16 @@ fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>, bool) {
             let hi = accel_min_rate(st).map_or(200.0, |f| (0.4 * f).min(200.0)).max(6.0);
             let n = (hi - 5.0).floor() as usize + 1;
             ((0..n).map(|k| 5.0 + k as f64).collect(), true)
+        }
+        // Damping ratios of machine-tool structural modes, 0.5–10 % (bolted and welded frames; a
+        // column's first bending mode is typically 2–5 %); only the forced response resolves it,
+        // so without a predicted excitation it is held at 2 % (not searched).
+        (_, "damping") => {
+            if st.excitation.iter().any(|e| e.is_some()) {
+                (log_grid(0.005, 0.1, 6), true)
+            } else {
+                (vec![0.02], false)
+            }
         }
         // Signal periods of common linear and rotary scales (Heidenhain, Renishaw): 2–200 µm.
         _ => (vec![2e-6, 4e-6, 8e-6, 10e-6, 20e-6, 40e-6, 100e-6, 200e-6], false),
@@ -752,8 +1058,10 @@ fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) -> Result<F
             let given = me.given.iter().any(|g| g == h);
             let start = me.effect.params.get(h).unwrap_or(1.0);
             // A given period (screw lead, signal period) is held; a given τ is a starting value.
-            hyper.push(if given { start } else { f64::NAN });
-            searched.push(!(given && *h == "period"));
+            // A damping that these data cannot resolve (no predicted excitation) is held.
+            let resolvable = *h != "damping" || hyper_grid(st, me.effect.name, h).1;
+            hyper.push(if given || !resolvable { start } else { f64::NAN });
+            searched.push(!(given && *h == "period") && resolvable);
             let _ = st;
         }
         terms.push(FitTerm { index, name: me.effect.name, shape: sh, hyper, searched });
@@ -893,11 +1201,23 @@ fn describe(name: EffectName, sh: &Shape, c: &[f64], h: &[f64], start: &EffectPa
             m.insert("shape".into(), 2.0);
         }
         EffectName::Resonance => {
-            // The damping is not resolved by segment-wise amplitudes: the starting value is kept.
+            // Frequency and damping; the forced response's gain per sensor (the mode shape φ at
+            // the sensor, dimensionless); the RMS amplitude of the narrow-band segments, m/s².
             m.insert("frequency".into(), h[0]);
-            m.insert("damping".into(), start.get("damping").unwrap_or(0.02));
-            let rms = (c.iter().map(|v| v * v).sum::<f64>() / (c.len().max(1) as f64)).sqrt();
-            m.insert("amplitude_rms".into(), rms * std::f64::consts::SQRT_2 / 2.0);
+            m.insert("damping".into(), h[1]);
+            let mut seg: Vec<f64> = Vec::new();
+            for (k, v) in sh.coefs.iter().zip(c) {
+                if k.starts_with("gain_") {
+                    m.insert(k.clone(), *v);
+                } else if k.starts_with("sin_") || k.starts_with("cos_") {
+                    seg.push(*v);
+                }
+            }
+            if !seg.is_empty() {
+                let rms = (seg.iter().map(|v| v * v).sum::<f64>() / seg.len() as f64).sqrt();
+                m.insert("amplitude_rms".into(), rms * std::f64::consts::SQRT_2 / 2.0);
+            }
+            let _ = start;
         }
         EffectName::GravityTilt => {
             // Tilt of each sensor's sensitive axis, rad: Σ_k c_k·x^k (x in m), by sensor.
@@ -1012,7 +1332,7 @@ struct Fitted<'a> {
 }
 
 fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> Result<Fitted<'a>, VmtError> {
-    let st = Stack::new(chans);
+    let st = Stack::with_model(chans, model);
     let bad = |m: String| VmtError::bad(data, "", m);
     // Every fitted effect must be seen by some channel.
     for me in model.effects.iter().filter(|m| m.fit && m.effect.axis == model.axis && predicts(m.effect.name)) {
@@ -1111,6 +1431,10 @@ fn st_sigma(st: &Stack, sig: &[f64]) -> Vec<f64> {
 /// True when some channel sees effect `name` (a non-zero column) at the hyper-parameter `fixed`, or
 /// at some value of its search grid.
 fn visible(st: &Stack, name: EffectName, sh: &Shape, fixed: Option<f64>) -> bool {
+    if name == EffectName::Resonance {
+        // Any excited channel or any narrow-band segment (sin/cos are never both zero).
+        return st.excitation.iter().any(|e| e.is_some()) || !resonance_segments(st).is_empty();
+    }
     let grid: Vec<f64> = match (fixed, sh.hypers.first()) {
         (Some(v), _) => vec![v],
         (None, Some(h)) => hyper_grid(st, name, h).0,
@@ -1127,7 +1451,8 @@ fn needs(name: EffectName) -> &'static str {
     match name {
         EffectName::Positioning => "needs a laser_linear along the axis in a positioning run",
         EffectName::StraightnessY | EffectName::StraightnessZ => {
-            "needs a laser_straightness across the axis in a positioning run"
+            "needs a laser_straightness across the axis in a positioning run, or an accelerometer across the axis \
+             in a constant-velocity run"
         }
         EffectName::Roll | EffectName::Pitch | EffectName::Yaw => {
             "needs a laser whose measuring point is offset from the axis (an Abbe offset) across its direction"
@@ -1597,11 +1922,96 @@ mod tests {
         assert_eq!(segs.iter().filter(|s| s.0 == 1).count(), 1);
         let sh = shape(&st, EffectName::Resonance, 1, DEFAULT_ORDER, false);
         assert_eq!(sh.coefs.len(), 12);
-        let cols = columns(&st, EffectName::Resonance, &sh, &[45.0]);
+        let cols = columns(&st, EffectName::Resonance, &sh, &[45.0, 0.02]);
         for k in 0..st.n {
             // sin² + cos² = 1 on the one segment holding sample k, 0 elsewhere.
             let s: f64 = cols.iter().map(|c| c[k] * c[k]).sum();
             assert!((s - 1.0).abs() < 1e-12, "sample {k}: {s}");
+        }
+    }
+
+    /// A y accelerometer at 0.1 m/s sampled at 100 Hz over a straightness EYX = 3e-6·x² (1/m):
+    /// E'' = 6e-6 /m everywhere, so each reading is v²·E'' = 0.01·6e-6 = 6e-8 m/s², and a pitch
+    /// (r = 0: r × u = 0) gives nothing. A laser sees the profile itself.
+    #[test]
+    fn guideway_acceleration_of_a_parabola_is_v2_times_its_curvature() {
+        let c = accel("a", 10);
+        let p = Profile::poly(vec![0.0, 0.0, 3e-6]);
+        for i in 0..10 {
+            let a = c.motion_response(i, EffectName::StraightnessY, |x| p.value(x), |x| p.eval3(x)[1]);
+            assert!((a - 6e-8).abs() < 1e-20, "sample {i}: {a}");
+            assert_eq!(c.motion_response(i, EffectName::Pitch, |x| p.value(x), |x| p.eval3(x)[1]), 0.0);
+        }
+        let mut l = accel("l", 3);
+        l.kind = SensorKind::LaserStraightness;
+        assert_eq!(l.motion_response(2, EffectName::StraightnessY, |x| p.value(x), |x| p.eval3(x)[1]), p.value(0.002));
+    }
+
+    /// Fitted straightness c_k·x^k on an accelerometer (u = y, v = 0.1 m/s, Δt = 0.01 s, so
+    /// x_{i−1} = x_i − 1 mm): the c1 column is 0 (a slope has no acceleration), c2 is v²·2 = 0.02,
+    /// c3 is v²·3·(x_i² − x_{i−1}²)/(x_i − x_{i−1}) = 0.03·(x_i + x_{i−1}) m/s² per unit c_k.
+    #[test]
+    fn fitted_straightness_columns_on_an_accelerometer_are_mean_curvatures_times_v2() {
+        let chans = vec![accel("a", 10)];
+        let st = Stack::new(&chans);
+        let sh = shape(&st, EffectName::StraightnessY, 1, 3, false);
+        let cols = columns(&st, EffectName::StraightnessY, &sh, &[]);
+        for i in 0..10 {
+            let x = chans[0].x[i];
+            assert_eq!(cols[0][i], 0.0);
+            assert!((cols[1][i] - 0.02).abs() < 1e-14, "{}", cols[1][i]);
+            assert!((cols[2][i] - 0.03 * (2.0 * x - 0.001)).abs() < 1e-14, "{}", cols[2][i]);
+        }
+    }
+
+    /// Free vibration from (q, q̇) = (1, 0): q̇(t) = −(ω²/ω_d)·e^{−ζωt}·sin(ω_d·t), ω_d = ω·√(1 − ζ²);
+    /// the reading is (q̇_i − q̇_{i−1})/Δt from t_{−1} = −Δt (the sample times start at 0 and t_{−1}
+    /// is the integration's zero). Agreement to 1e-9 of ω² (the step map's RK4 error is ≈ 1e-14).
+    #[test]
+    fn free_mode_response_matches_the_damped_oscillator() {
+        let c = accel("a", 100);
+        let (f, z): (f64, f64) = (12.0, 0.05);
+        let w = TWO_PI * f;
+        let wd = w * (1.0 - z * z).sqrt();
+        let qd = |t: f64| -(w * w / wd) * (-z * w * t).exp() * (wd * t).sin();
+        let r = mode_response(&c, None, f, z, (1.0, 0.0));
+        for i in 0..100 {
+            let (t1, t0) = (c.t[i] + 0.01, c.t[i]);
+            let want = (qd(t1) - qd(t0)) / 0.01;
+            assert!((r[i] - want).abs() < 1e-9 * w * w, "sample {i}: {} {want}", r[i]);
+        }
+    }
+
+    /// Forced at resonance by a(τ) = A·sin(ωτ) with ζ = 0.2: after the transient (e^{−ζω·2 s} ≈
+    /// e^{−25}) q̈ = −A·cos(ωτ)/(2ζ) (|H| = 1/(2ζω²) at ω, q = A·cos(ωτ)/(2ζω²)), read as the mean
+    /// of q̈ over each 10 ms interval: the exact mean of that cosine, to 1e-5 of A/(2ζ) (the input
+    /// is held at its mean over 0.1 ms steps, which shrinks a sinusoid by ≈ (ωh)²/24 = 1.6e-6 at
+    /// 10 Hz).
+    #[test]
+    fn forced_mode_response_at_resonance_has_gain_one_over_two_zeta() {
+        let c = accel("a", 300);
+        let (f, z, amp): (f64, f64, f64) = (10.0, 0.2, 1.0);
+        let w = TWO_PI * f;
+        let (steps, input): (Vec<usize>, Vec<Vec<f64>>) = (0..300)
+            .map(|i| {
+                let m = mode_steps(0.01);
+                // τ counts from t_{−1} = −Δt: interval i (t_i − Δt → t_i) starts at τ = t_i.
+                let t0 = c.t[i];
+                // The mean of A·sin(ωτ) over each step.
+                let tk = |k: usize| t0 + 0.01 * k as f64 / m as f64;
+                let vals = (0..m)
+                    .map(|k| amp * ((w * tk(k)).cos() - (w * tk(k + 1)).cos()) / (w * (tk(k + 1) - tk(k))))
+                    .collect();
+                (m, vals)
+            })
+            .unzip();
+        let ex = Excitation { steps, input };
+        let r = mode_response(&c, Some(&ex), f, z, (0.0, 0.0));
+        for i in 200..300 {
+            // Interval i runs from τ = t_i to t_i + Δt (τ from t_{−1}); mean of −A·cos(ωτ)/(2ζ).
+            let (a, b) = (c.t[i], c.t[i] + 0.01);
+            let want = -amp / (2.0 * z) * ((w * b).sin() - (w * a).sin()) / (w * 0.01);
+            assert!((r[i] - want).abs() < 1e-5 * amp / (2.0 * z), "sample {i}: {} {want}", r[i]);
         }
     }
 

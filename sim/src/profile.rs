@@ -152,6 +152,31 @@ impl Profile {
             [acc[0] + e[0], acc[1] + e[1], acc[2] + e[2]]
         })
     }
+
+    /// Mean second derivative over [a, b] (1/m times the profile's unit):
+    ///
+    /// ```text
+    /// P̄''(a, b) = (P'(b) − P'(a)) / (b − a)            (P''(a) when b = a)
+    /// ```
+    ///
+    /// This is what an accelerometer that averages over one sample interval sees of a profile
+    /// crossed at constant velocity v: the mean acceleration v²·P̄'' between the positions of two
+    /// successive samples (the simulator's reading is the difference of the point velocities
+    /// v·(1 + P') at the two samples over the interval, `vmt_sim::sensors::true_readings`). Per
+    /// term: polynomials and harmonics by their analytic slopes; a random profile by the analytic
+    /// slope of its cosines (−a·k·sin(kx + φ)), the same sum the simulator evaluates; a table is
+    /// linear between its knots, so its slope is piecewise constant and P̄'' counts the slope jump at
+    /// every knot inside [a, b] (a Dirac in P'', which the point value `eval3` reports as 0).
+    /// Non-finite inputs give NaN.
+    pub fn mean_second_derivative(&self, a: f64, b: f64) -> f64 {
+        if !(a.is_finite() && b.is_finite()) {
+            return f64::NAN;
+        }
+        if a == b {
+            return self.eval3(a)[2];
+        }
+        (self.eval3(b)[1] - self.eval3(a)[1]) / (b - a)
+    }
 }
 
 #[cfg(test)]
@@ -188,6 +213,24 @@ mod tests {
         let rms = (ss / n as f64).sqrt();
         // 64 cosines: the sample RMS scatters by about 1/sqrt(64·2) ≈ 10 %; allow 30 %.
         assert!((rms / 1e-6 - 1.0).abs() < 0.3, "rms {rms}");
+    }
+
+    #[test]
+    fn mean_second_derivative_is_exact_for_polys_and_counts_table_knots() {
+        // 1 + 2x + 3x² + 4x³: P' = 2 + 6x + 12x²; over [1, 2]: (2 + 12 + 48 − 20)/1 = 42,
+        // the mean of P'' = 6 + 24x over [1, 2] (6 + 24·1.5 = 42).
+        let p = Profile::poly(vec![1.0, 2.0, 3.0, 4.0]);
+        assert!((p.mean_second_derivative(1.0, 2.0) - 42.0).abs() < 1e-12);
+        assert_eq!(p.mean_second_derivative(1.0, 1.0), 6.0 + 24.0);
+        // Table with a slope jump from 0 to 2 at x = 1: over [0.5, 1.5] the mean curvature is 2/1.
+        let t = Profile { terms: vec![Term::Table { x: vec![0.0, 1.0, 2.0], y: vec![0.0, 0.0, 2.0] }] };
+        assert!((t.mean_second_derivative(0.5, 1.5) - 2.0).abs() < 1e-12);
+        assert_eq!(t.mean_second_derivative(1.2, 1.7), 0.0);
+        // A random profile: the mean over a short interval tends to the point value.
+        let r = Profile { terms: vec![Term::random(RandomProfile { rms: 1e-6, correlation_length: 0.01, seed: 3 })] };
+        let (m, d2) = (r.mean_second_derivative(0.3, 0.3 + 1e-7), r.eval3(0.3 + 0.5e-7)[2]);
+        assert!((m - d2).abs() < 1e-6 * d2.abs().max(1e-3), "{m} {d2}");
+        assert!(r.mean_second_derivative(f64::NAN, 0.0).is_nan());
     }
 
     #[test]
