@@ -9,7 +9,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use vmt::measurement::{MeasurementSet, Procedure, Run, RunData, Sensor, SensorKind};
+use vmt::measurement::{MeasurementSet, RunData};
 use vmt::model::{read_model, Model, ModelEffect};
 use vmt::modelcheck::{add_effect, compare, diagnose};
 use vmt::scenario::Scenario;
@@ -273,7 +273,7 @@ fn real_iso230_2_data_the_loop_reduces_the_residual() {
         let path = dir.join(file);
         let text = std::fs::read_to_string(&path).unwrap();
         let dat = vmt_estimators::iso230_2::dat::parse_dat(&text).unwrap();
-        let set = dat_set(&dat);
+        let set = vmt::measurement::from_iso230_2_dat(&dat);
         let m0 = model_fitting(&[]);
         let c0 = compare(&m0, &set, &path).unwrap();
         // The loop: add the best significant candidate until none is left (at most 4 steps); the
@@ -301,53 +301,6 @@ fn real_iso230_2_data_the_loop_reduces_the_residual() {
         assert!(steps.len() >= 3, "{file}: the loop must add at least one effect: {steps:?}");
         eprintln!("{file}: {}", steps.join(" → "));
         assert!(c0.notes.iter().any(|n| n.contains("estimated")), "σ estimated and said so");
-    }
-}
-
-/// An ISO 230-2 `.dat` test as a measurement set: one reference sensor along the axis at the
-/// reference point without σ, readings in the order of the ISO cycle (per cycle: up, then down).
-fn dat_set(dat: &vmt_estimators::iso230_2::dat::DatFile) -> MeasurementSet {
-    let nt = dat.targets.len();
-    let cycles = dat.up[0].len().min(dat.down[0].len());
-    let mut order: Vec<usize> = (0..nt).collect();
-    order.sort_by(|a, b| dat.targets[*a].total_cmp(&dat.targets[*b]));
-    let (mut target, mut run, mut direction, mut y) = (vec![], vec![], vec![], vec![]);
-    for j in 0..cycles {
-        for &i in &order {
-            target.push(dat.targets[i]);
-            run.push(j as u32 + 1);
-            direction.push(1i8);
-            y.push(dat.up[i][j]);
-        }
-        for &i in order.iter().rev() {
-            target.push(dat.targets[i]);
-            run.push(j as u32 + 1);
-            direction.push(-1i8);
-            y.push(dat.down[i][j]);
-        }
-    }
-    MeasurementSet {
-        description: None,
-        machine: None,
-        seed: None,
-        sensors: vec![Sensor {
-            name: "ref".into(),
-            kind: SensorKind::LaserLinear,
-            axis: 'x',
-            position: [0.0; 3],
-            direction: [1.0, 0.0, 0.0],
-            sigma: None,
-        }],
-        runs: vec![Run {
-            name: "iso".into(),
-            file: "iso.csv".into(),
-            procedure: Procedure::Positioning,
-            axis: 'x',
-            start_time: None,
-            feed: None,
-            direction: None,
-            data: RunData::PointTable { target, run, direction, t: None, columns: vec![("ref".into(), y)] },
-        }],
     }
 }
 
