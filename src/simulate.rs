@@ -202,8 +202,28 @@ pub fn truth_extras(sc: &Scenario) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
     Ok(out)
 }
 
-/// The six injected error motions every millimetre over the travel (FORMAT.md §5 table).
+/// The six injected error motions every millimetre over the travel (FORMAT.md §5 table); for a
+/// multi-axis scenario the six of every axis of the chain, prefixed by the axis (`y.pitch`), every
+/// millimetre from the lowest lower to the highest upper travel end of the axes.
 pub fn truth_profiles(sc: &Scenario) -> Result<ProfileTable, VmtError> {
+    if let Some(chain) = &sc.chain {
+        let lo = chain.travels().iter().map(|t| t.0).fold(f64::INFINITY, f64::min);
+        let hi = chain.travels().iter().map(|t| t.1).fold(f64::NEG_INFINITY, f64::max);
+        let n = ((hi - lo) / 1e-3).round().max(1.0) as usize;
+        let position: Vec<f64> = (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect();
+        let mut columns = Vec::new();
+        for a in &chain.axes {
+            for (i, &effect) in EffectName::ERROR_MOTIONS.iter().enumerate() {
+                columns.push(ProfileColumn {
+                    axis: Some(a.letter),
+                    effect,
+                    values: position.iter().map(|&x| a.motions.by_index(i).value(x)).collect(),
+                    sigma: None,
+                });
+            }
+        }
+        return Ok(ProfileTable { position, columns });
+    }
     let errors = error_motions(sc)?;
     let (lo, hi) = sc.axis.travel;
     let n = ((hi - lo) / 1e-3).round().max(1.0) as usize;

@@ -4,9 +4,46 @@
 
 use std::path::{Path, PathBuf};
 use vmt::estimate::identify_chain_lines;
+use vmt::measurement::{self, UnitChoice};
 use vmt::scenario::Scenario;
 use vmt::simulate::{chain_truths, read_chain};
-use vmt_sim::chain::SquarenessAngles;
+use vmt::simulate::{to_measurement_set, truth_extras};
+use vmt_sim::chain::{LineTruth, SquarenessAngles};
+use vmt_sim::procedures::RunData;
+
+/// `vmt simulate`'s output for the scenario: the set is written with truth.toml (carrying the three
+/// squareness values) and truth_profiles.csv (x., y., z. columns), and reads back unchanged.
+fn written_set_reads_back(sc: &Scenario, truths: &[(usize, LineTruth)]) {
+    let runs = read_chain(sc, truths, sc.seed);
+    let set = to_measurement_set(sc, &runs).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("set");
+    measurement::write_with_extras(&set, &out, UnitChoice::Si, &truth_extras(sc).unwrap()).unwrap();
+    let back = measurement::read(&out).unwrap();
+    assert_eq!(back.runs.len(), 16);
+    let fxy = back.runs.iter().find(|r| r.name == "lines_fxy").unwrap();
+    assert_eq!(fxy.axis, 'x');
+    let RunData::PointTable { target, .. } = &fxy.data else { panic!("fxy is not a point table") };
+    // 6 stops every 100 mm of x and y: the line coordinate of the last is 0.5·√2 m.
+    assert_eq!(target.len(), 6);
+    assert!((target[5] - 0.5 * 2f64.sqrt()).abs() < 1e-12);
+    let orig = runs.iter().find(|r| r.name == "lines_fxy").unwrap();
+    // Round trip of the laser column: the CSV prints the shortest round-trip digits.
+    assert_eq!(fxy.data.column("fxy"), orig.data.column("fxy"));
+    let laser = back.sensor("fxy").unwrap();
+    assert!((laser.direction[0] - 0.5f64.sqrt()).abs() < 1e-15 && laser.axis == 'z');
+    let truth = std::fs::read_to_string(out.join("truth.toml")).unwrap();
+    for v in [
+        "[effects.squareness_xy]\nvalue = 2e-5",
+        "[effects.squareness_xz]\nvalue = -1.5e-5",
+        "[effects.squareness_yz]\nvalue = 1e-5",
+    ] {
+        assert!(truth.contains(v), "truth.toml lacks {v:?}:\n{truth}");
+    }
+    let profiles = measurement::read_profiles(&out.join("truth_profiles.csv")).unwrap();
+    let names: Vec<String> = profiles.columns.iter().map(|c| c.column_name()).collect();
+    assert!(names.contains(&"y.pitch".to_string()) && names.contains(&"z.yaw".to_string()), "{names:?}");
+}
 
 fn scenario_path() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/squareness_3axis.toml")
@@ -46,12 +83,15 @@ const K_SIGMA: f64 = 4.0;
 const BIAS: f64 = 1e-8;
 
 /// Recovered squareness [EC0Y, EB0Z, EA0Z] with 1σ, and the effective injected values, per seed.
-fn recover(sc: &Scenario, seeds: &[u64]) -> (Vec<([f64; 3], [f64; 3])>, SquarenessAngles) {
-    let truths = chain_truths(sc);
+fn recover(
+    sc: &Scenario,
+    truths: &[(usize, LineTruth)],
+    seeds: &[u64],
+) -> (Vec<([f64; 3], [f64; 3])>, SquarenessAngles) {
     let mut out = Vec::new();
     let mut eff = SquarenessAngles::default();
     for &seed in seeds {
-        let runs = read_chain(sc, &truths, seed);
+        let runs = read_chain(sc, truths, seed);
         let ci = identify_chain_lines(sc, &runs, "lines").unwrap();
         eff = sc.chain.as_ref().unwrap().effective_squareness(&ci.positions);
         let mut v = [0.0; 3];
@@ -73,10 +113,12 @@ fn squareness_is_recovered_over_three_seeds_and_vanishes_without_it() {
     let raw = sc.chain.as_ref().unwrap().squareness.to_array();
     assert_eq!(raw, [20e-6, -15e-6, 10e-6]);
     let seeds = [1, 2, 3];
-    let (with, eff) = recover(&sc, &seeds);
+    let truths = chain_truths(&sc);
+    let (with, eff) = recover(&sc, &truths, &seeds);
+    written_set_reads_back(&sc, &truths);
     let sc0 = Scenario::parse(&without_squareness(&text), &scenario_path(), scenario_path().parent()).unwrap();
     assert_eq!(sc0.chain.as_ref().unwrap().squareness.to_array(), [0.0; 3]);
-    let (without, eff0) = recover(&sc0, &seeds);
+    let (without, eff0) = recover(&sc0, &chain_truths(&sc0), &seeds);
     // The lines see the injected angle plus the trend of the error motions (the same in both truths):
     // the difference of the effective values is the injected value (exact: both are linear in it).
     for k in 0..3 {
@@ -114,7 +156,7 @@ fn squareness_is_recovered_over_three_seeds_and_vanishes_without_it() {
 fn a_perfect_machine_has_squareness_within_noise_of_zero() {
     let text = perfect(&scenario_text());
     let sc = Scenario::parse(&text, &scenario_path(), scenario_path().parent()).unwrap();
-    let (est, eff) = recover(&sc, &[7, 8]);
+    let (est, eff) = recover(&sc, &chain_truths(&sc), &[7, 8]);
     assert_eq!(eff.to_array(), [0.0; 3]);
     for (v, s) in est {
         for k in 0..3 {
