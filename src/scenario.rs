@@ -171,6 +171,20 @@ fn build_chain(
             ));
         }
     }
+    let letters: Vec<char> = axes.iter().filter_map(|a| a.chars().last().map(|c| c.to_ascii_lowercase())).collect();
+    if let Some(e) = set.effects.iter().find(|e| {
+        !matches!(e.name, EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz)
+            && !letters.contains(&e.axis)
+    }) {
+        return Err((
+            format!("truth.effects.{}", e.name),
+            format!(
+                "effect on axis {}, which is not in the chain (axes = {axes:?}): expected one of {}",
+                e.axis,
+                letters.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(", ")
+            ),
+        ));
+    }
     let configs: Vec<AxisConfig> = axes.iter().map(|a| AxisConfig { joint: a.clone(), ..raw.axis.clone() }).collect();
     let tool = raw.tool.as_deref().unwrap_or("tool");
     let chain = ChainModel::build(machine, &configs, &set, tool).map_err(|e| ("axes".to_string(), e.to_string()))?;

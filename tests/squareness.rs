@@ -177,6 +177,10 @@ fn bad_multi_axis_input_is_refused_with_the_place() {
     assert_eq!(e.exit_code(), 2);
     let m = e.to_string();
     assert!(m.contains("squareness_3axis.toml") && m.contains("axes[1]") && m.contains("unknown axis `w`"), "{m}");
+    // an effect on an axis outside the chain
+    let e = parse(&text.replace("axes = [\"x\", \"y\", \"z\"]", "axes = [\"x\", \"y\"]"));
+    let m = e.to_string();
+    assert!(m.contains("truth.effects.") && m.contains("effect on axis z, which is not in the chain"), "{m}");
     // squareness on a single-axis scenario
     let single = text.replace("axes = [\"x\", \"y\", \"z\"]\n", "").replace("tool = \"tool\"", "");
     let single = single[..single.find("[[chain_procedures]]").unwrap()].to_string();

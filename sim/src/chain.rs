@@ -63,7 +63,7 @@ use crate::procedures::{ProcedureKind, RunData, RunRecord, Visit};
 use crate::profile::{Profile, Term};
 use crate::rng::source_rng;
 use crate::truth::{axis_physics, Adjustments};
-use crate::urdf::{Frame, MachineStructure, MassProps};
+use crate::urdf::{Frame, MachineStructure};
 use rand_distr::{Distribution, Normal};
 use rapier3d_f64::glamx::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
@@ -322,7 +322,7 @@ impl ChainModel {
                 merged = merged.combine(&m.bodies[up.child].mass.transformed(&f));
             }
             let mut s = m.clone();
-            s.bodies[child].mass = MassProps { ..merged };
+            s.bodies[child].mass = merged;
             let n_blocks = s.bodies[child].links.iter().filter(|(n, _)| n.starts_with("block")).count();
             if cfg.guideway.blocks.is_empty() && n_blocks < 3 {
                 let rot = DQuat::from_rotation_arc(DVec3::X, joints[j].axis);
@@ -345,7 +345,7 @@ impl ChainModel {
             let mut sq = DQuat::IDENTITY;
             for &a in &letters[..j] {
                 if let Some((theta, c)) = squareness.pair(a, letter) {
-                    sq = sq * coordinate_rotation(c, theta);
+                    sq *= coordinate_rotation(c, theta);
                 }
             }
             axes.push(ChainAxis { letter, model, truth, motions, squareness: sq });
@@ -431,8 +431,9 @@ impl ChainModel {
     /// between the least-squares lines of the paths of the tool reference point (r = 0) along each
     /// axis over `positions[j]` (m), the other axes at their first position, from the first-order
     /// deviation: EC0Y' = −(s_yx + s_xy), EB0Z' = s_zx + s_xz, EA0Z' = −(s_zy + s_yz), with s_ab the
-    /// least-squares slope of δ_a along axis b. Equal to the injected angles when the straightness
-    /// profiles have no linear trend and the angles are zero at the reference positions.
+    /// least-squares slope of δ_a along axis b. Equal to the injected angles when the error motions
+    /// do not tilt the tool point's paths (no linear trend in the straightness at the tool point, the
+    /// angular errors' lever-arm terms included, and no angle at the reference positions).
     pub fn effective_squareness(&self, positions: &[Vec<f64>]) -> SquarenessAngles {
         let q0: Vec<f64> = positions.iter().map(|p| p.first().copied().unwrap_or(0.0)).collect();
         let idx = |l: char| self.axes.iter().position(|a| a.letter == l);
