@@ -94,6 +94,17 @@ fn recover(
         let runs = read_chain(sc, truths, seed);
         let ci = identify_chain_lines(sc, &runs, "lines").unwrap();
         eff = sc.chain.as_ref().unwrap().effective_squareness(&ci.positions);
+        let id = &ci.identification;
+        println!(
+            "seed {seed}: {} readings, rank {} of {} parameters, condition {:.3e}, variance factor {:.2}; \
+             not observable: {}",
+            id.n_readings,
+            id.rank,
+            id.params.len(),
+            id.condition,
+            id.variance_factor,
+            id.unobservable.join("; ")
+        );
         let mut v = [0.0; 3];
         let mut s = [0.0; 3];
         for (k, name) in ["EC0Y", "EB0Z", "EA0Z"].iter().enumerate() {
