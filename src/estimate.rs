@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
+use vmt_sim::effects::EffectName;
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::procedures::{RunData, RunRecord};
 
@@ -68,7 +69,9 @@ pub enum EstimatorSpec {
     /// the chain: injected as laser lines see it (`ChainModel::effective_squareness`, the angles between
     /// the least-squares lines of the tool point's paths) against recovered, with the tolerance
     /// `k_sigma`·σ + `bias` (σ the identifier's standard error, rad; `bias` the quasi-static bound of the
-    /// simulated composition, rad).
+    /// simulated composition, rad). Also one check per angular error motion the lines determine: RMS of
+    /// (identified − injected, relative to the reference position) within `k_sigma`·RMS(σ) +
+    /// `bias_angle` (rad, default `bias`).
     #[serde(rename = "laser_lines_3d")]
     LaserLines3d {
         procedure: String,
@@ -76,6 +79,8 @@ pub enum EstimatorSpec {
         k_sigma: f64,
         #[serde(default)]
         bias: f64,
+        #[serde(default)]
+        bias_angle: Option<f64>,
     },
 }
 
@@ -417,9 +422,11 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 out.push(checks, fig);
                 out.push_figure(residuals);
             }
-            EstimatorSpec::LaserLines3d { procedure, k_sigma, bias } => {
-                let (checks, fig) = laser_lines_3d_checks(sc, runs, procedure, *k_sigma, *bias)?;
-                out.push(checks, fig);
+            EstimatorSpec::LaserLines3d { procedure, k_sigma, bias, bias_angle } => {
+                let bias_angle = bias_angle.unwrap_or(*bias);
+                for (checks, fig) in laser_lines_3d_checks(sc, runs, procedure, *k_sigma, *bias, bias_angle)? {
+                    out.push(checks, fig);
+                }
             }
             EstimatorSpec::AccelStraightness { procedure, sensor, method, tolerance } => {
                 let (c, f, stages) =
@@ -753,10 +760,15 @@ fn laser_lines_3d_checks(
     procedure: &str,
     k_sigma: f64,
     bias: f64,
-) -> Result<(Vec<Check>, Figure), VmtError> {
+    bias_angle: f64,
+) -> Result<Vec<(Vec<Check>, Figure)>, VmtError> {
     let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (laser_lines_3d {procedure})"), m);
-    if !(k_sigma.is_finite() && k_sigma > 0.0 && bias.is_finite() && bias >= 0.0) {
-        return Err(bad(format!("expected k_sigma > 0 and bias ≥ 0 rad, got {k_sigma} and {bias}")));
+    if !(k_sigma.is_finite() && k_sigma > 0.0 && bias.is_finite() && bias >= 0.0)
+        || !(bias_angle.is_finite() && bias_angle >= 0.0)
+    {
+        return Err(bad(format!(
+            "expected k_sigma > 0, bias ≥ 0 and bias_angle ≥ 0 (rad), got {k_sigma}, {bias} and {bias_angle}"
+        )));
     }
     let chain = sc.chain.as_ref().ok_or_else(|| bad("needs a multi-axis scenario (axes = [...])".into()))?;
     let ci = identify_chain_lines(sc, runs, procedure).map_err(bad)?;
@@ -827,7 +839,35 @@ fn laser_lines_3d_checks(
         log_x: false,
         log_y: false,
     };
-    Ok((checks, fig))
+    let mut out = vec![(checks, fig)];
+    // The angular error motions the lines determine (every reported value has a standard error):
+    // the carriage's rotation is the same at every point of it, so the truth is the injected angle
+    // relative to its value at the reference position (laser_ls's reporting convention).
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
+    for (j, a) in chain.axes.iter().enumerate() {
+        for (k, effect) in [EffectName::Roll, EffectName::Pitch, EffectName::Yaw].into_iter().enumerate() {
+            let Some(iso) = effect.iso230_symbol(a.letter) else { continue };
+            let Some(p) = ci.identification.profile(&iso) else { continue };
+            let Some(sig) = p.std_errors.iter().copied().collect::<Option<Vec<f64>>>() else { continue };
+            let profile = a.motions.by_index(3 + k);
+            let r0 = profile.value(ci.model.axes[j].reference_position);
+            let truth: Vec<f64> = p.positions.iter().map(|&q| profile.value(q) - r0).collect();
+            let s = rms(&sig);
+            let name = format!("{iso} {}.{effect} (laser lines 3D)", a.letter);
+            let fig = profile_figure(
+                format!("{name}: injected vs identified (±{:.3} µrad RMS 1σ)", s * 1e6),
+                Quantity::Angle,
+                &p.positions,
+                &[("injected", &truth, SeriesStyle::Line), ("identified", &p.values, SeriesStyle::Points)],
+            );
+            let check = Check {
+                bound: Some(s),
+                ..Check::profile(name, Quantity::Angle, &truth, &p.values, k_sigma * s + bias_angle)
+            };
+            out.push((vec![check], fig));
+        }
+    }
+    Ok(out)
 }
 
 #[allow(clippy::too_many_arguments)]
