@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
+use vmt_sim::effects::EffectName;
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::procedures::{RunData, RunRecord};
 
@@ -61,6 +62,30 @@ pub enum EstimatorSpec {
         method: Option<String>,
         tolerance: f64,
     },
+    /// Laser line-set identification of a multi-axis chain (seed 001; issue 3): every line of the chain
+    /// procedure `procedure` (`[[chain_procedures]]`, kind `laser_lines`) fed to
+    /// `vmt_estimators::laser_ls::identify` with the chain's axes (six error motions each, as values at
+    /// the joint positions the lines stop at) and `squareness: true`. One check per squareness angle of
+    /// the chain: injected as laser lines see it (`ChainModel::effective_squareness`, the angles between
+    /// the least-squares lines of the tool point's paths) against recovered, with the tolerance
+    /// `k_sigma`·σ + `bias` (σ the identifier's standard error, rad; `bias` the quasi-static bound of the
+    /// simulated composition, rad). Also one check per angular error motion the lines determine: RMS of
+    /// (identified − injected, relative to the reference position) within `k_sigma`·RMS(σ) +
+    /// `bias_angle` (rad, default `bias`).
+    #[serde(rename = "laser_lines_3d")]
+    LaserLines3d {
+        procedure: String,
+        #[serde(default = "default_k_sigma")]
+        k_sigma: f64,
+        #[serde(default)]
+        bias: f64,
+        #[serde(default)]
+        bias_angle: Option<f64>,
+    },
+}
+
+fn default_k_sigma() -> f64 {
+    4.0
 }
 
 fn default_steps() -> usize {
@@ -397,6 +422,12 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 out.push(checks, fig);
                 out.push_figure(residuals);
             }
+            EstimatorSpec::LaserLines3d { procedure, k_sigma, bias, bias_angle } => {
+                let bias_angle = bias_angle.unwrap_or(*bias);
+                for (checks, fig) in laser_lines_3d_checks(sc, runs, procedure, *k_sigma, *bias, bias_angle)? {
+                    out.push(checks, fig);
+                }
+            }
             EstimatorSpec::AccelStraightness { procedure, sensor, method, tolerance } => {
                 let (c, f, stages) =
                     accel_straightness_check(sc, runs, errors, procedure, sensor, method.as_deref(), *tolerance)?;
@@ -680,6 +711,206 @@ fn laser_lines_checks(
 }
 
 /// Seed 004's compensation loop: table from the ISO test, applied in the CNC, test repeated.
+/// The result of [`identify_chain_lines`]: the identification, the model it used and the node
+/// positions of each axis (m, chain order).
+#[derive(Clone, Debug, Serialize)]
+pub struct ChainIdentification {
+    pub identification: vmt_estimators::laser_ls::Identification,
+    pub model: vmt_estimators::laser_ls::Model,
+    pub positions: Vec<Vec<f64>>,
+}
+
+/// Identifies the 3 × 6 error motions and the squareness of a chain from the laser-line runs of the
+/// chain procedure `procedure` (seed 001; DESIGN.md §7): every reading is u·δ(q, r) + offset of its
+/// line (`vmt_estimators::laser_ls` model, one unknown zero per line), q from the runs' `x_cmd`, `y_cmd`,
+/// `z_cmd` columns, r and u from the line, σ the procedure's `sigma` (1e-12 m if zero). Each error
+/// motion is parameterised by its values at the distinct joint positions of its axis (piecewise
+/// linear), the reference position being the lowest.
+pub fn identify_chain_lines(sc: &Scenario, runs: &[RunRecord], procedure: &str) -> Result<ChainIdentification, String> {
+    use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, IdOptions, Model, Reading};
+    let chain = sc.chain.as_ref().ok_or("laser_lines_3d needs a multi-axis scenario (axes = [...])")?;
+    let letters = chain.letters();
+    let mut readings = Vec::new();
+    let mut n_lines = 0;
+    for rec in runs {
+        let Some((spec, line)) = crate::simulate::chain_line(sc, &rec.name) else { continue };
+        if spec.name != procedure {
+            continue;
+        }
+        let RunData::PointTable { columns, .. } = &rec.data else {
+            return Err(format!("run `{}` is not a point table", rec.name));
+        };
+        let col = |n: &str| {
+            columns
+                .iter()
+                .find(|(c, _)| c == n)
+                .map(|(_, v)| v)
+                .ok_or_else(|| format!("run `{}` has no column `{n}`", rec.name))
+        };
+        let qs: Vec<&Vec<f64>> = letters.iter().map(|l| col(&format!("{l}_cmd"))).collect::<Result<_, _>>()?;
+        let values = col(&line.name)?;
+        for (i, &v) in values.iter().enumerate() {
+            readings.push(Reading {
+                q: qs.iter().map(|c| c[i]).collect(),
+                point: line.point,
+                direction: line.beam().to_array(),
+                value: v,
+                sigma: spec.sigma.max(1e-12),
+                line: Some(n_lines),
+            });
+        }
+        n_lines += 1;
+    }
+    if readings.is_empty() {
+        return Err(format!("no laser-line runs of chain procedure `{procedure}`"));
+    }
+    let mut positions = Vec::new();
+    let mut axes = Vec::new();
+    for (j, l) in letters.iter().enumerate() {
+        let mut p: Vec<f64> = readings.iter().map(|r| r.q[j]).collect();
+        p.sort_by(f64::total_cmp);
+        // Stops computed as from + (to − from)·k/(n − 1) differ by float rounding: one node per 1 nm.
+        p.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+        if p.len() < 2 {
+            return Err(format!("the lines stop at only one position of axis {l}: at least two are needed"));
+        }
+        let name = match l {
+            'x' => AxisName::X,
+            'y' => AxisName::Y,
+            _ => AxisName::Z,
+        };
+        axes.push(AxisModel::with_nodes(name, &p));
+        positions.push(p);
+    }
+    // Snap each reading's q onto its node (float rounding of the stops) so the basis is exact there.
+    for r in &mut readings {
+        for (j, q) in r.q.iter_mut().enumerate() {
+            if let Some(n) = positions[j].iter().find(|n| (**n - *q).abs() < 1e-9) {
+                *q = *n;
+            }
+        }
+    }
+    let model = Model { axes, squareness: true };
+    let identification = identify(&readings, &model, &IdOptions::default()).map_err(|e| e.to_string())?;
+    Ok(ChainIdentification { identification, model, positions })
+}
+
+fn laser_lines_3d_checks(
+    sc: &Scenario,
+    runs: &[RunRecord],
+    procedure: &str,
+    k_sigma: f64,
+    bias: f64,
+    bias_angle: f64,
+) -> Result<Vec<(Vec<Check>, Figure)>, VmtError> {
+    let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (laser_lines_3d {procedure})"), m);
+    if !(k_sigma.is_finite() && k_sigma > 0.0 && bias.is_finite() && bias >= 0.0)
+        || !(bias_angle.is_finite() && bias_angle >= 0.0)
+    {
+        return Err(bad(format!(
+            "expected k_sigma > 0, bias ≥ 0 and bias_angle ≥ 0 (rad), got {k_sigma}, {bias} and {bias_angle}"
+        )));
+    }
+    let chain = sc.chain.as_ref().ok_or_else(|| bad("needs a multi-axis scenario (axes = [...])".into()))?;
+    let ci = identify_chain_lines(sc, runs, procedure).map_err(bad)?;
+    let injected = chain.effective_squareness(&ci.positions);
+    let letters = chain.letters();
+    let mut checks = Vec::new();
+    let (mut names, mut inj, mut rec, mut raw) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (effect, iso, (a, b)) in [
+        ("squareness_xy", "EC0Y", ('x', 'y')),
+        ("squareness_xz", "EB0Z", ('x', 'z')),
+        ("squareness_yz", "EA0Z", ('y', 'z')),
+    ] {
+        if !(letters.contains(&a) && letters.contains(&b)) {
+            continue;
+        }
+        let est = ci.identification.squareness(effect).ok_or_else(|| bad(format!("identifier returned no {iso}")))?;
+        let sigma = est.std_error.ok_or_else(|| {
+            bad(format!("{iso} is not observable with these lines: add a diagonal in the {a}{b} plane"))
+        })?;
+        let truth = injected.pair(a, b).map_or(0.0, |(t, _)| t);
+        let check = Check {
+            bound: Some(sigma),
+            ..Check::new(
+                format!("{iso} {effect} (laser lines 3D, ±{:.3} µrad 1σ)", sigma * 1e6),
+                Quantity::Angle,
+                truth,
+                est.value,
+                k_sigma * sigma + bias,
+            )
+        };
+        checks.push(check);
+        names.push(iso);
+        inj.push(truth);
+        rec.push(est.value);
+        raw.push(chain.squareness.pair(a, b).map_or(0.0, |(t, _)| t));
+    }
+    let x: Vec<f64> = (1..=names.len()).map(|i| i as f64).collect();
+    let fig = Figure {
+        title: format!(
+            "squareness from the laser line set `{procedure}` ({}): injected vs recovered, µrad",
+            names.join(", ")
+        ),
+        x_label: "angle (1 = first listed)".into(),
+        x_unit: String::new(),
+        y_label: "angle".into(),
+        y_unit: "µrad".into(),
+        series: vec![
+            Series {
+                label: "injected".into(),
+                x: x.clone(),
+                y: inj.iter().map(|v| v * 1e6).collect(),
+                style: SeriesStyle::Line,
+            },
+            Series {
+                label: "recovered".into(),
+                x: x.clone(),
+                y: rec.iter().map(|v| v * 1e6).collect(),
+                style: SeriesStyle::Line,
+            },
+            Series {
+                label: "squareness value of the truth (without the error motions' trends)".into(),
+                x,
+                y: raw.iter().map(|v| v * 1e6).collect(),
+                style: SeriesStyle::Line,
+            },
+        ],
+        kind: FigureKind::Bar,
+        log_x: false,
+        log_y: false,
+    };
+    let mut out = vec![(checks, fig)];
+    // The angular error motions the lines determine (every reported value has a standard error):
+    // the carriage's rotation is the same at every point of it, so the truth is the injected angle
+    // relative to its value at the reference position (laser_ls's reporting convention).
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
+    for (j, a) in chain.axes.iter().enumerate() {
+        for (k, effect) in [EffectName::Roll, EffectName::Pitch, EffectName::Yaw].into_iter().enumerate() {
+            let Some(iso) = effect.iso230_symbol(a.letter) else { continue };
+            let Some(p) = ci.identification.profile(&iso) else { continue };
+            let Some(sig) = p.std_errors.iter().copied().collect::<Option<Vec<f64>>>() else { continue };
+            let profile = a.motions.by_index(3 + k);
+            let r0 = profile.value(ci.model.axes[j].reference_position);
+            let truth: Vec<f64> = p.positions.iter().map(|&q| profile.value(q) - r0).collect();
+            let s = rms(&sig);
+            let name = format!("{iso} {}.{effect} (laser lines 3D)", a.letter);
+            let fig = profile_figure(
+                format!("{name}: injected vs identified (±{:.3} µrad RMS 1σ)", s * 1e6),
+                Quantity::Angle,
+                &p.positions,
+                &[("injected", &truth, SeriesStyle::Line), ("identified", &p.values, SeriesStyle::Points)],
+            );
+            let check = Check {
+                bound: Some(s),
+                ..Check::profile(name, Quantity::Angle, &truth, &p.values, k_sigma * s + bias_angle)
+            };
+            out.push((vec![check], fig));
+        }
+    }
+    Ok(out)
+}
+
 #[allow(clippy::too_many_arguments)]
 fn compensation_checks(
     sc: &Scenario,

@@ -8,6 +8,8 @@ use crate::estimate::EstimatorSpec;
 use crate::model::{self, Model};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
+use vmt_sim::chain::{ChainModel, ChainProcedureSpec};
+use vmt_sim::effects::EffectName;
 use vmt_sim::machine::{AxisConfig, AxisModel};
 use vmt_sim::procedures::ProcedureSpec;
 use vmt_sim::sensors::{SensorKind, SensorSpec};
@@ -31,6 +33,16 @@ struct RawScenario {
     procedures: Vec<ProcedureSpec>,
     #[serde(default)]
     estimators: Vec<EstimatorSpec>,
+    /// Multi-axis scenario (issue 3): the prismatic joints of the chain in order from the bed, e.g.
+    /// `["x", "y", "z"]`, each simulated with the shared `[axis]` config (its `joint` replaced).
+    #[serde(default)]
+    axes: Option<Vec<String>>,
+    /// Multi-axis scenario: the tool link, the measuring reference point (default `"tool"`).
+    #[serde(default)]
+    tool: Option<String>,
+    /// Procedures on the whole chain (`kind = "laser_lines"`), multi-axis scenarios only.
+    #[serde(default)]
+    chain_procedures: Vec<ChainProcedureSpec>,
 }
 
 /// A loaded, validated scenario.
@@ -48,6 +60,10 @@ pub struct Scenario {
     pub sensors: Vec<SensorSpec>,
     pub procedures: Vec<ProcedureSpec>,
     pub estimators: Vec<EstimatorSpec>,
+    /// Multi-axis scenarios (`axes = [...]`): the chain of axes with the truth injected.
+    pub chain: Option<ChainModel>,
+    /// Procedures on the chain (`[[chain_procedures]]`).
+    pub chain_procedures: Vec<ChainProcedureSpec>,
 }
 
 impl Scenario {
@@ -78,7 +94,11 @@ impl Scenario {
         }
         let base_dir = base.map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
         let machine = load_machine(&raw.machine, base, source)?;
-        let axis = AxisModel::build(&machine, &raw.axis).map_err(|e| bad("axis", e.to_string()))?;
+        let axis_cfg = match raw.axes.as_deref() {
+            Some([first, ..]) => AxisConfig { joint: first.clone(), ..raw.axis.clone() },
+            _ => raw.axis.clone(),
+        };
+        let axis = AxisModel::build(&machine, &axis_cfg).map_err(|e| bad("axis", e.to_string()))?;
         let truth = match &raw.truth {
             toml::Value::String(file) => model::read_model(&base_dir.join(file))?,
             toml::Value::Table(t) => model::parse_model(t, source, &base_dir, "truth")?,
@@ -86,6 +106,7 @@ impl Scenario {
         };
         validate_sensors(&raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
         validate_procedures(&raw.procedures, &raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
+        let chain = build_chain(&raw, &machine, &truth).map_err(|(p, m)| bad(&p, m))?;
         Ok(Scenario {
             source: source.to_path_buf(),
             description: raw.description,
@@ -97,8 +118,88 @@ impl Scenario {
             sensors: raw.sensors,
             procedures: raw.procedures,
             estimators: raw.estimators,
+            chain,
+            chain_procedures: raw.chain_procedures,
         })
     }
+}
+
+/// The chain of a multi-axis scenario (None without `axes`), with its procedures checked; a
+/// single-axis scenario may not carry squareness, `tool` or chain procedures. Returns the key path
+/// and message of the first problem.
+fn build_chain(
+    raw: &RawScenario,
+    machine: &MachineStructure,
+    truth: &Model,
+) -> Result<Option<ChainModel>, (String, String)> {
+    let set = truth.effect_set();
+    let Some(axes) = &raw.axes else {
+        if let Some(e) = set
+            .effects
+            .iter()
+            .find(|e| matches!(e.name, EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz))
+        {
+            return Err((
+                format!("truth.effects.{}", e.name),
+                "squareness is an angle between two axes: it needs a multi-axis scenario (axes = [\"x\", \"y\", \"z\"] on a machine such as vmc_3axis)".into(),
+            ));
+        }
+        if !raw.chain_procedures.is_empty() {
+            return Err((
+                "chain_procedures".into(),
+                "chain procedures need a multi-axis scenario (axes = [...])".into(),
+            ));
+        }
+        if raw.tool.is_some() {
+            return Err(("tool".into(), "`tool` belongs to a multi-axis scenario (axes = [...])".into()));
+        }
+        return Ok(None);
+    };
+    if axes.is_empty() || axes.len() > 3 {
+        return Err(("axes".into(), format!("expected 1 to 3 axes, e.g. [\"x\", \"y\", \"z\"], got {}", axes.len())));
+    }
+    for (i, a) in axes.iter().enumerate() {
+        let letter = a.chars().last().map(|c| c.to_ascii_lowercase());
+        if !matches!(letter, Some('x' | 'y' | 'z')) || machine.axis_by_joint(a).is_none() {
+            let known: Vec<&str> = machine.axes.iter().map(|j| j.joint.as_str()).collect();
+            return Err((
+                format!("axes[{i}]"),
+                format!(
+                    "unknown axis `{a}`: expected a prismatic joint of the machine named for its axis x, y or z ({})",
+                    known.join(", ")
+                ),
+            ));
+        }
+    }
+    let letters: Vec<char> = axes.iter().filter_map(|a| a.chars().last().map(|c| c.to_ascii_lowercase())).collect();
+    if let Some(e) = set.effects.iter().find(|e| {
+        !matches!(e.name, EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz)
+            && !letters.contains(&e.axis)
+    }) {
+        return Err((
+            format!("truth.effects.{}", e.name),
+            format!(
+                "effect on axis {}, which is not in the chain (axes = {axes:?}): expected one of {}",
+                e.axis,
+                letters.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(", ")
+            ),
+        ));
+    }
+    let configs: Vec<AxisConfig> = axes.iter().map(|a| AxisConfig { joint: a.clone(), ..raw.axis.clone() }).collect();
+    let tool = raw.tool.as_deref().unwrap_or("tool");
+    let chain = ChainModel::build(machine, &configs, &set, tool).map_err(|e| ("axes".to_string(), e.to_string()))?;
+    for (i, p) in raw.chain_procedures.iter().enumerate() {
+        let at = |k: &str| format!("chain_procedures[{i}] ({}).{k}", p.name());
+        if raw.chain_procedures[..i].iter().any(|o| o.name() == p.name())
+            || raw.procedures.iter().any(|o| o.name() == p.name())
+        {
+            return Err((at("name"), "procedure names must be unique".into()));
+        }
+        match p {
+            ChainProcedureSpec::LaserLines(l) => l.check(&chain).map_err(|(k, m)| (at(&k), m))?,
+        }
+    }
+    Ok(Some(chain))
 }
 
 /// Loads a machine by bundled name or URDF path (relative to `base`).

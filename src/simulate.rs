@@ -11,6 +11,9 @@ use crate::scenario::Scenario;
 use rayon::prelude::*;
 use std::path::Path;
 use vmt_sim::axis_sim::AxisTruth;
+use vmt_sim::chain::{
+    dominant_axis, read_line, simulate_laser_lines, ChainProcedureSpec, LaserLineSpec, LaserLinesSpec, LineTruth,
+};
 use vmt_sim::effects::EffectName;
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::machine::AxisModel;
@@ -69,14 +72,62 @@ pub fn simulate_truth(sc: &Scenario, ph: &Physics) -> Vec<RunTruth> {
     session_plan(sc, ph).par_iter().map(|(r, t0)| simulate_run(&ph.model, &ph.truth, r, *t0)).collect()
 }
 
-/// Sensor readings of every run, noise seeded by `seed`.
+/// Sensor readings of every run, noise seeded by `seed`; a multi-axis scenario's chain procedures
+/// are simulated here (see [`chain_truths`]) and read after the single-axis runs.
 pub fn read_all(sc: &Scenario, ph: &Physics, truths: &[RunTruth], seed: u64) -> Result<Vec<RunRecord>, VmtError> {
-    truths
+    let mut runs = truths
         .iter()
         .map(|t| {
             read_run(&ph.model, &ph.truth, t, &ph.sensors, seed).map_err(|m| VmtError::bad(&sc.source, "sensors", m))
         })
+        .collect::<Result<Vec<RunRecord>, VmtError>>()?;
+    runs.extend(read_chain(sc, &chain_truths(sc), seed));
+    Ok(runs)
+}
+
+/// Noise-free truth of every line of every chain procedure of a multi-axis scenario (lines simulated
+/// in parallel; each is deterministic), with the index of its procedure. Empty for one axis.
+pub fn chain_truths(sc: &Scenario) -> Vec<(usize, LineTruth)> {
+    let Some(chain) = &sc.chain else { return Vec::new() };
+    let jobs: Vec<(usize, LaserLinesSpec)> = sc
+        .chain_procedures
+        .iter()
+        .enumerate()
+        .flat_map(|(i, p)| match p {
+            ChainProcedureSpec::LaserLines(l) => {
+                l.lines.iter().map(move |line| (i, LaserLinesSpec { lines: vec![line.clone()], ..l.clone() }))
+            }
+        })
+        .collect();
+    jobs.par_iter()
+        .map(|(i, spec)| simulate_laser_lines(chain, spec).into_iter().map(|t| (*i, t)).collect::<Vec<_>>())
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
         .collect()
+}
+
+/// The laser readings of the chain lines (point tables, FORMAT.md §1), noise seeded by `seed`.
+pub fn read_chain(sc: &Scenario, truths: &[(usize, LineTruth)], seed: u64) -> Vec<RunRecord> {
+    let Some(chain) = &sc.chain else { return Vec::new() };
+    truths
+        .iter()
+        .map(|(i, t)| {
+            let sigma = match &sc.chain_procedures[*i] {
+                ChainProcedureSpec::LaserLines(l) => l.sigma,
+            };
+            read_line(chain, t, sigma, seed)
+        })
+        .collect()
+}
+
+/// The chain line of a run name `{procedure}_{line}`: (procedure spec, line).
+pub fn chain_line<'a>(sc: &'a Scenario, run: &str) -> Option<(&'a LaserLinesSpec, &'a LaserLineSpec)> {
+    sc.chain_procedures.iter().find_map(|p| match p {
+        ChainProcedureSpec::LaserLines(l) => {
+            l.lines.iter().find(|line| format!("{}_{}", l.name, line.name) == run).map(|line| (l, line))
+        }
+    })
 }
 
 /// 1σ of one reading of a sensor as written in the manifest: white noise and quantisation combined,
@@ -101,13 +152,32 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
             sigma: reading_sigma(s),
         });
     }
+    if let Some(chain) = &sc.chain {
+        // Each chain line's laser: reflector on the last body at the line's point, beam along it.
+        let last = chain.letters().last().copied().unwrap_or('z');
+        for r in runs {
+            if let Some((spec, line)) = chain_line(sc, &r.name) {
+                sensors.push(Sensor {
+                    name: line.name.clone(),
+                    kind: SensorKind::LaserLinear,
+                    axis: last,
+                    position: line.point,
+                    direction: line.beam().to_array(),
+                    sigma: (spec.sigma > 0.0).then_some(spec.sigma),
+                });
+            }
+        }
+    }
     let runs = runs
         .iter()
         .map(|r| Run {
             name: r.name.clone(),
             file: format!("{}.csv", r.name),
             procedure: r.procedure,
-            axis,
+            axis: match (&sc.chain, chain_line(sc, &r.name)) {
+                (Some(chain), Some((_, line))) => dominant_axis(chain, line),
+                _ => axis,
+            },
             start_time: Some(r.start_time),
             feed: r.feed,
             direction: r.direction,
@@ -136,8 +206,28 @@ pub fn truth_extras(sc: &Scenario) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
     Ok(out)
 }
 
-/// The six injected error motions every millimetre over the travel (FORMAT.md §5 table).
+/// The six injected error motions every millimetre over the travel (FORMAT.md §5 table); for a
+/// multi-axis scenario the six of every axis of the chain, prefixed by the axis (`y.pitch`), every
+/// millimetre from the lowest lower to the highest upper travel end of the axes.
 pub fn truth_profiles(sc: &Scenario) -> Result<ProfileTable, VmtError> {
+    if let Some(chain) = &sc.chain {
+        let lo = chain.travels().iter().map(|t| t.0).fold(f64::INFINITY, f64::min);
+        let hi = chain.travels().iter().map(|t| t.1).fold(f64::NEG_INFINITY, f64::max);
+        let n = ((hi - lo) / 1e-3).round().max(1.0) as usize;
+        let position: Vec<f64> = (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect();
+        let mut columns = Vec::new();
+        for a in &chain.axes {
+            for (i, &effect) in EffectName::ERROR_MOTIONS.iter().enumerate() {
+                columns.push(ProfileColumn {
+                    axis: Some(a.letter),
+                    effect,
+                    values: position.iter().map(|&x| a.motions.by_index(i).value(x)).collect(),
+                    sigma: None,
+                });
+            }
+        }
+        return Ok(ProfileTable { position, columns });
+    }
     let errors = error_motions(sc)?;
     let (lo, hi) = sc.axis.travel;
     let n = ((hi - lo) / 1e-3).round().max(1.0) as usize;

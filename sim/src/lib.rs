@@ -5,6 +5,7 @@
 
 pub mod air;
 pub mod axis_sim;
+pub mod chain;
 pub mod drive;
 pub mod effects;
 pub mod feedback;

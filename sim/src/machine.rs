@@ -113,6 +113,17 @@ pub struct AxisModel {
 impl AxisModel {
     /// Builds the model of the axis `cfg.joint` of a machine structure.
     pub fn build(m: &MachineStructure, cfg: &AxisConfig) -> Result<AxisModel, MachineError> {
+        AxisModel::build_inner(m, cfg, false)
+    }
+
+    /// Builds the model of the axis `cfg.joint` whose parent may be a moving body (a carriage of a
+    /// stacked chain, see `chain`): the parent is treated as rigid ground, so every frame of the model
+    /// (home, axis, gravity along −Z) is the parent body's frame at its nominal pose.
+    pub fn build_on_parent(m: &MachineStructure, cfg: &AxisConfig) -> Result<AxisModel, MachineError> {
+        AxisModel::build_inner(m, cfg, true)
+    }
+
+    fn build_inner(m: &MachineStructure, cfg: &AxisConfig, stacked: bool) -> Result<AxisModel, MachineError> {
         let ax = m.axis_by_joint(&cfg.joint).ok_or_else(|| {
             MachineError::NoJoint(
                 cfg.joint.clone(),
@@ -120,7 +131,7 @@ impl AxisModel {
             )
         })?;
         let bad = |what: String| MachineError::Invalid(cfg.joint.clone(), what);
-        if m.bodies[ax.parent].name != m.bodies[0].name {
+        if !stacked && m.bodies[ax.parent].name != m.bodies[0].name {
             return Err(bad(
                 "vmt simulates axes whose parent is the fixed base; stacked axes are not supported yet".into()
             ));
