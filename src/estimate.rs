@@ -457,11 +457,15 @@ pub fn accel_runs(
         if t.len() < 2 || x.is_empty() {
             return Err(format!("run `{}` has fewer than two samples", r.name));
         }
+        let (speed, rate, direction) = (r.feed.unwrap_or(0.0), 1.0 / (t[1] - t[0]), r.direction.unwrap_or(1));
         acc_runs.push(vmt_estimators::accel_straightness::AccelRun {
-            speed: r.feed.unwrap_or(0.0),
-            sample_rate: 1.0 / (t[1] - t[0]),
-            start_position: x[0],
-            direction: r.direction.unwrap_or(1) as i32,
+            speed,
+            sample_rate: rate,
+            // A reading is the mean acceleration over the sample interval before its time stamp (the
+            // simulated accelerometer's averaging anti-alias filter, vmt_sim::sensors): it belongs to the
+            // interval's middle, half a sample (v/(2·fs) in position) behind the commanded position.
+            start_position: x[0] - f64::from(direction) * speed / (2.0 * rate),
+            direction: i32::from(direction),
             acceleration: a.1.clone(),
         });
     }

@@ -106,7 +106,8 @@ struct AccelOutcome {
     roll_band: Vec<f64>,
 }
 
-fn default_cv(preset: vmt_sim::sensors::AccelPreset) -> Vec<(&'static str, AccelOutcome)> {
+/// Noise seeds `None` → the scenario's own seed; the physics is simulated once for all of them.
+fn default_cv(preset: vmt_sim::sensors::AccelPreset, seeds: &[Option<u64>]) -> Vec<Vec<(&'static str, AccelOutcome)>> {
     use rapier3d_f64::glamx::DVec3;
     use vmt_estimators::accel_straightness::*;
     let mut sc =
@@ -117,36 +118,87 @@ fn default_cv(preset: vmt_sim::sensors::AccelPreset) -> Vec<(&'static str, Accel
     }
     let ph = vmt::simulate::physics(&sc).unwrap();
     let truths = vmt::simulate::simulate_truth(&sc, &ph);
-    let runs = vmt::simulate::read_all(&sc, &ph, &truths, sc.seed).unwrap();
     let m = &ph.truth.motions;
-    let mut out = Vec::new();
-    for sensor in ["acc_y", "acc_z"] {
-        let spec = sc.sensors.iter().find(|s| s.name == sensor).unwrap();
-        let cfg = vmt::estimate::accel_config(spec, &sc.axis, None).unwrap();
-        let acc = vmt::estimate::accel_runs(&runs, "cv", sensor).unwrap();
-        let est = estimate_straightness(&acc, &cfg).unwrap();
-        let r = DVec3::from_array(spec.axis_position(&sc.axis).unwrap());
-        let u = spec.unit_direction();
-        let curv: Vec<f64> = est
-            .positions
-            .iter()
-            .map(|&x| {
-                let e =
-                    DVec3::new(m.positioning.eval3(x)[2], m.straightness_y.eval3(x)[2], m.straightness_z.eval3(x)[2]);
-                let a = DVec3::new(m.roll.eval3(x)[2], m.pitch.eval3(x)[2], m.yaw.eval3(x)[2]);
-                u.dot(e + a.cross(r))
-            })
-            .collect();
-        let truth = integrate_curvature_cosine(&est.positions, &curv, est.band.min_wavelength, est.band.max_wavelength)
-            .unwrap();
-        let err: Vec<f64> = est.straightness.iter().zip(&truth).map(|(a, b)| a - b).collect();
-        let roll: Vec<f64> = est.positions.iter().map(|&x| m.roll.value(x)).collect();
-        let tmax = est.tilt_max_wavelength.unwrap_or(2.0 * est.travel);
-        let tmin = est.tilt_min_wavelength.unwrap_or(est.band.min_wavelength);
-        let roll_band = band_limit_cosine(&est.positions, &roll, tmin, tmax, false).unwrap();
-        out.push((sensor, AccelOutcome { est, err, roll_band }));
+    let mut all = Vec::new();
+    for seed in seeds {
+        let runs = vmt::simulate::read_all(&sc, &ph, &truths, seed.unwrap_or(sc.seed)).unwrap();
+        let mut out = Vec::new();
+        for sensor in ["acc_y", "acc_z"] {
+            let spec = sc.sensors.iter().find(|s| s.name == sensor).unwrap();
+            let cfg = vmt::estimate::accel_config(spec, &sc.axis, None).unwrap();
+            let acc = vmt::estimate::accel_runs(&runs, "cv", sensor).unwrap();
+            let est = estimate_straightness(&acc, &cfg).unwrap();
+            let r = DVec3::from_array(spec.axis_position(&sc.axis).unwrap());
+            let u = spec.unit_direction();
+            let curv: Vec<f64> = est
+                .positions
+                .iter()
+                .map(|&x| {
+                    let e = DVec3::new(
+                        m.positioning.eval3(x)[2],
+                        m.straightness_y.eval3(x)[2],
+                        m.straightness_z.eval3(x)[2],
+                    );
+                    let a = DVec3::new(m.roll.eval3(x)[2], m.pitch.eval3(x)[2], m.yaw.eval3(x)[2]);
+                    u.dot(e + a.cross(r))
+                })
+                .collect();
+            let truth =
+                integrate_curvature_cosine(&est.positions, &curv, est.band.min_wavelength, est.band.max_wavelength)
+                    .unwrap();
+            let err: Vec<f64> = est.straightness.iter().zip(&truth).map(|(a, b)| a - b).collect();
+            let roll: Vec<f64> = est.positions.iter().map(|&x| m.roll.value(x)).collect();
+            let tmax = est.tilt_max_wavelength.unwrap_or(2.0 * est.travel);
+            let tmin = est.tilt_min_wavelength.unwrap_or(est.band.min_wavelength);
+            let roll_band = band_limit_cosine(&est.positions, &roll, tmin, tmax, false).unwrap();
+            out.push((sensor, AccelOutcome { est, err, roll_band }));
+        }
+        all.push(out);
     }
-    out
+    all
+}
+
+/// Issue 4, "the achieved error within 3× the Cramér–Rao bound at each injected harmonic", as the
+/// statistical statement it is: over the scenario's own noise seed and 16 others (same physics), each
+/// quadrature component of each injected harmonic inside the recoverable band, in units of its bound.
+/// For an efficient unbiased estimator these are unit Gaussians: (a) their RMS over the 17 seeds exceeds
+/// 1.41 with probability 1 % (χ with 17 degrees of freedom), so RMS ≤ 1.5 allows that plus a small bias;
+/// (b) |component| > 3 happens with probability 0.27 % per component, 0.37 expected among the 136 draws,
+/// so at most 2 may exceed 3 (P(≥ 3) ≈ 0.6 %) and none may exceed 4.
+/// Measured: one draw above 3 (acc_y, 250 mm, cos, 3.12 at the scenario's seed; the 16 other seeds at
+/// most 2.16 there); RMS per component 0.64–1.37, means within ±0.8. Before the readings were placed at the middle of their
+/// averaging interval (half a sample behind x_cmd, `vmt::estimate::accel_runs`) acc_y at 80 mm sat at
+/// −3.2 on average (a 0.19 mm shift at 0.45 m/s).
+#[test]
+fn default_scenario_accelerometer_harmonics_are_efficient_over_noise_seeds() {
+    let mut seeds = vec![None];
+    seeds.extend((1..=16).map(Some));
+    let all = default_cv(vmt_sim::sensors::AccelPreset::Piezo, &seeds);
+    // (sensor, λ, component) → ratios over seeds
+    let mut ratios: std::collections::BTreeMap<(&str, String, &str), Vec<f64>> = Default::default();
+    for per_seed in &all {
+        for (sensor, o) in per_seed {
+            let injected = if *sensor == "acc_y" { INJECTED_Y } else { INJECTED_Z };
+            for &wl in injected.iter().filter(|&&w| w >= o.est.band.min_wavelength && w <= o.est.band.max_wavelength) {
+                let (s, c) = components(&o.est.positions, &o.err, wl);
+                let cr = o.est.harmonic_std(wl).unwrap();
+                ratios.entry((sensor, format!("{wl}"), "sin")).or_default().push(s / cr);
+                ratios.entry((sensor, format!("{wl}"), "cos")).or_default().push(c / cr);
+            }
+        }
+    }
+    assert_eq!(ratios.len(), 8, "two in-band harmonics per sensor, two components each: {:?}", ratios.keys());
+    let mut above3 = 0;
+    for ((sensor, wl, comp), r) in &ratios {
+        let mean = r.iter().sum::<f64>() / r.len() as f64;
+        let rms_r = rms(r);
+        let max = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        above3 += r.iter().filter(|v| v.abs() > 3.0).count();
+        eprintln!("{sensor} λ={wl} m {comp}: error/CR mean {mean:+.2}, RMS {rms_r:.2}, max |·| {max:.2}, scenario seed {:+.2}", r[0]);
+        assert!(rms_r <= 1.5, "{sensor} λ={wl} {comp}: RMS {rms_r}");
+        assert!(max <= 4.0, "{sensor} λ={wl} {comp}: max {max}");
+    }
+    assert!(above3 <= 2, "{above3} components above 3× CR");
 }
 
 /// Injected straightness harmonics of the default scenario (m): EYX and EZX wavelengths.
@@ -156,8 +208,8 @@ const INJECTED_Z: [f64; 3] = [1.2, 0.3, 0.1];
 #[test]
 fn default_scenario_accelerometers_meet_rms_and_cramer_rao_piezo_then_mems() {
     use vmt_sim::sensors::AccelPreset;
-    let piezo = default_cv(AccelPreset::Piezo);
-    let mems = default_cv(AccelPreset::Mems);
+    let piezo = default_cv(AccelPreset::Piezo, &[None]).remove(0);
+    let mems = default_cv(AccelPreset::Mems, &[None]).remove(0);
     for ((sensor, p), (_, q)) in piezo.iter().zip(&mems) {
         let injected = if *sensor == "acc_y" { INJECTED_Y } else { INJECTED_Z };
         for (label, o) in [("piezo", p), ("mems", q)] {
@@ -188,21 +240,8 @@ fn default_scenario_accelerometers_meet_rms_and_cramer_rao_piezo_then_mems() {
             if label == "piezo" {
                 // Issue 4: 0.3 µm RMS against the band-limited truth.
                 assert!(e_rms < 0.3e-6, "{sensor}: RMS {e_rms}");
-                for &wl in
-                    injected.iter().filter(|&&w| w >= o.est.band.min_wavelength && w <= o.est.band.max_wavelength)
-                {
-                    let (s, c) = components(x, &o.err, wl);
-                    let cr = o.est.harmonic_std(wl).unwrap();
-                    // Issue 4: each quadrature component within 3× its Cramér–Rao bound (3σ: 0.27 % per
-                    // component for unbiased Gaussian errors). Exception, NOT loosened but left unasserted
-                    // and reported: acc_y at 250 mm reaches 3.04× (cos component) at the scenario's noise
-                    // seed, while over 12 other noise seeds (older full-range metric) this component had
-                    // mean −0.27 CR and std 0.76 CR: no bias found, cause not established.
-                    if *sensor == "acc_y" && wl == 0.25 {
-                        continue;
-                    }
-                    assert!(s.abs() <= 3.0 * cr && c.abs() <= 3.0 * cr, "{sensor} λ={wl}: ({s}, {c}) vs CR {cr}");
-                }
+                // The per-harmonic Cramér–Rao check is statistical: see
+                // `default_scenario_accelerometer_harmonics_are_efficient_over_noise_seeds`.
             }
             if let Some(t) = &o.est.tilt {
                 let d: Vec<f64> = t.iter().zip(&o.roll_band).map(|(a, b)| a - b).collect();
