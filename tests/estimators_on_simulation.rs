@@ -162,13 +162,13 @@ fn default_cv(preset: vmt_sim::sensors::AccelPreset, seeds: &[Option<u64>]) -> V
 /// statistical statement it is: over the scenario's own noise seed and 16 others (same physics), each
 /// quadrature component of each injected harmonic inside the recoverable band, in units of its bound.
 /// For an efficient unbiased estimator these are unit Gaussians: (a) their RMS over the 17 seeds exceeds
-/// 1.41 with probability 1 % (χ with 17 degrees of freedom), so RMS ≤ 1.5 allows that plus a small bias;
+/// 1.40 with probability 1 % (χ with 17 degrees of freedom), so RMS ≤ 1.5 allows that plus a small bias;
 /// (b) |component| > 3 happens with probability 0.27 % per component, 0.37 expected among the 136 draws,
 /// so at most 2 may exceed 3 (P(≥ 3) ≈ 0.6 %) and none may exceed 4.
 /// Measured: one draw above 3 (acc_y, 250 mm, cos, 3.12 at the scenario's seed; the 16 other seeds at
-/// most 2.16 there); RMS per component 0.64–1.37, means within ±0.8. Before the readings were placed at the middle of their
-/// averaging interval (half a sample behind x_cmd, `vmt::estimate::accel_runs`) acc_y at 80 mm sat at
-/// −3.2 on average (a 0.19 mm shift at 0.45 m/s).
+/// most 2.16 there); RMS per component 0.64–1.37, means within ±0.8. Before the readings were placed at
+/// the middle of their averaging interval (half a sample behind x_cmd, `vmt::estimate::accel_runs`)
+/// acc_y at 80 mm sat at −3.2 on average (a 0.19 mm shift at 0.45 m/s).
 #[test]
 fn default_scenario_accelerometer_harmonics_are_efficient_over_noise_seeds() {
     let mut seeds = vec![None];
