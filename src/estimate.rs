@@ -513,7 +513,9 @@ fn accel_straightness_check(
     method: Option<&str>,
     tolerance: f64,
 ) -> Result<(Check, Figure, Vec<Figure>), VmtError> {
-    use vmt_estimators::accel_straightness::{estimate_straightness, zero_phase_highpass};
+    use vmt_estimators::accel_straightness::{
+        estimate_straightness, integrate_curvature_cosine, zero_phase_highpass, SpectralBasis,
+    };
     let bad = |m: String| VmtError::bad(&sc.source, format!("estimators ({procedure}/{sensor})"), m);
     let acc_runs = accel_runs(runs, procedure, sensor).map_err(bad)?;
     let spec = sc.sensors.iter().find(|s| s.name == sensor).ok_or_else(|| bad("sensor not declared".into()))?;
@@ -521,30 +523,45 @@ fn accel_straightness_check(
     let est = estimate_straightness(&acc_runs, &cfg).map_err(|e| bad(e.to_string()))?;
     let r = rapier3d_f64::glamx::DVec3::from_array(spec.axis_position(&sc.axis).map_err(bad)?);
     let u = spec.unit_direction();
-    let truth: Vec<f64> = est.positions.iter().map(|&x| u.dot(errors.deviation(x, r))).collect();
-    // Compare within the recoverable band: the same zero-phase high-pass at the band's longest wavelength
-    // applied to truth and estimate (the accelerometer cannot see longer wavelengths), evaluated on the
-    // interior 80 % of the range (edge transients of the filter), least-squares line removed.
-    let dx = (est.positions[est.positions.len() - 1] - est.positions[0]).abs() / (est.positions.len() - 1) as f64;
-    let hp =
-        |p: &[f64]| zero_phase_highpass(p, 1.0 / est.band.max_wavelength, 1.0 / dx).map_err(|e| bad(e.to_string()));
-    let (truth, estimate) = (hp(&truth)?, hp(&est.straightness)?);
-    let n = est.positions.len();
-    let (i0, i1) = (n / 10, n - n / 10);
-    let xs = &est.positions[i0..i1];
-    let detrend = |p: &[f64]| vmt_estimators::line::remove_line(xs, &p[i0..i1]);
-    let (truth, estimate) = (detrend(&truth), detrend(&estimate));
+    let (xs, truth, estimate) = match est.basis {
+        // The truth band-limited by the estimator's own operator: the mount point's noise-free curvature
+        // u·(E'' + ε''×r) integrated in the cosine basis over the recoverable band, over the whole range.
+        SpectralBasis::Cosine => {
+            let curvature: Vec<f64> = est.positions.iter().map(|&x| u.dot(errors.curvature(x, r))).collect();
+            let (lo, hi) = (est.band.min_wavelength, est.band.max_wavelength);
+            let truth =
+                integrate_curvature_cosine(&est.positions, &curvature, lo, hi).map_err(|e| bad(e.to_string()))?;
+            let estimate = vmt_estimators::line::remove_line(&est.positions, &est.straightness);
+            (&est.positions[..], truth, estimate)
+        }
+        // The DFT pipeline: the same zero-phase high-pass at the band's longest wavelength applied to truth
+        // and estimate (the accelerometer cannot see longer wavelengths), evaluated on the interior 80 % of
+        // the range (edge transients of the filter), least-squares line removed.
+        SpectralBasis::Periodic => {
+            let truth: Vec<f64> = est.positions.iter().map(|&x| u.dot(errors.deviation(x, r))).collect();
+            let n = est.positions.len();
+            let dx = (est.positions[n - 1] - est.positions[0]).abs() / (n - 1) as f64;
+            let hp = |p: &[f64]| {
+                zero_phase_highpass(p, 1.0 / est.band.max_wavelength, 1.0 / dx).map_err(|e| bad(e.to_string()))
+            };
+            let (truth, estimate) = (hp(&truth)?, hp(&est.straightness)?);
+            let (i0, i1) = (n / 10, n - n / 10);
+            let xs = &est.positions[i0..i1];
+            let detrend = |p: &[f64]| vmt_estimators::line::remove_line(xs, &p[i0..i1]);
+            (xs, detrend(&truth), detrend(&estimate))
+        }
+    };
     // Cramér–Rao bound of the in-band RMS error: each basis function in the band (λ_k = P/k, P = L for
     // the DFT, 2L for the cosine basis) has amplitude variance σ_k² per quadrature (the bound that applies:
     // joint when the tilt is separated) and a sinusoid of amplitude A has mean square A²/2. A DFT bin has
     // two quadratures (σ_k² in all), a cosine coefficient one (σ_k²/2): RMS² ≥ Σ_k c·σ_k².
     let period = match est.basis {
-        vmt_estimators::accel_straightness::SpectralBasis::Periodic => est.travel,
-        vmt_estimators::accel_straightness::SpectralBasis::Cosine => 2.0 * est.travel,
+        SpectralBasis::Periodic => est.travel,
+        SpectralBasis::Cosine => 2.0 * est.travel,
     };
     let per_bin = match est.basis {
-        vmt_estimators::accel_straightness::SpectralBasis::Periodic => 1.0,
-        vmt_estimators::accel_straightness::SpectralBasis::Cosine => 0.5,
+        SpectralBasis::Periodic => 1.0,
+        SpectralBasis::Cosine => 0.5,
     };
     let mut var = 0.0;
     let mut k = 1;

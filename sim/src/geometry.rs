@@ -42,6 +42,14 @@ impl ErrorMotions {
         self.translation(x) + self.rotation(x).cross(r)
     }
 
+    /// δ''(r) = E''(x) + ε''(x) × r: second derivative with respect to position of the deviation of body
+    /// point r (1/m times m): what an accelerometer at r reads, times v², at constant velocity v.
+    pub fn curvature(&self, x: f64, r: DVec3) -> DVec3 {
+        let d = |p: &Profile| p.eval3(x)[2];
+        let e = DVec3::new(d(&self.positioning), d(&self.straightness_y), d(&self.straightness_z));
+        e + DVec3::new(d(&self.roll), d(&self.pitch), d(&self.yaw)).cross(r)
+    }
+
     /// Derivatives with respect to position of (translation, rotation): (E'(x), ε'(x)).
     pub fn slope(&self, x: f64) -> (DVec3, DVec3) {
         let d = |p: &Profile| p.eval3(x)[1];
