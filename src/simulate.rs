@@ -65,23 +65,34 @@ pub fn session_plan(sc: &Scenario, ph: &Physics) -> Vec<(RunPlan, f64)> {
     plan_session(&ph.model, &sc.procedures, sc.seed)
 }
 
-/// Noise-free truth traces of every run of a scenario, in scenario order. Runs are simulated in
-/// parallel: each is deterministic given its plan and session start, so the result does not depend on
-/// the number of threads.
-pub fn simulate_truth(sc: &Scenario, ph: &Physics) -> Vec<RunTruth> {
-    session_plan(sc, ph).par_iter().map(|(r, t0)| simulate_run(&ph.model, &ph.truth, r, *t0)).collect()
+/// The noise-free truth of a scenario's session: the runs of the single-axis procedures and, for a
+/// multi-axis scenario, the lines of its chain procedures. Computed once; read with noise as often
+/// as a study needs ([`read_all`]).
+#[derive(Clone, Debug)]
+pub struct SessionTruth {
+    pub runs: Vec<RunTruth>,
+    /// (index of the chain procedure, line truth).
+    pub lines: Vec<(usize, LineTruth)>,
 }
 
-/// Sensor readings of every run, noise seeded by `seed`; a multi-axis scenario's chain procedures
-/// are simulated here (see [`chain_truths`]) and read after the single-axis runs.
-pub fn read_all(sc: &Scenario, ph: &Physics, truths: &[RunTruth], seed: u64) -> Result<Vec<RunRecord>, VmtError> {
+/// Noise-free truth of every run of a scenario, in scenario order, and of every chain line. Runs are
+/// simulated in parallel: each is deterministic given its plan and session start, so the result does
+/// not depend on the number of threads.
+pub fn simulate_truth(sc: &Scenario, ph: &Physics) -> SessionTruth {
+    let runs = session_plan(sc, ph).par_iter().map(|(r, t0)| simulate_run(&ph.model, &ph.truth, r, *t0)).collect();
+    SessionTruth { runs, lines: chain_truths(sc) }
+}
+
+/// Sensor readings of every run, noise seeded by `seed`: the single-axis runs, then the chain lines.
+pub fn read_all(sc: &Scenario, ph: &Physics, truths: &SessionTruth, seed: u64) -> Result<Vec<RunRecord>, VmtError> {
     let mut runs = truths
+        .runs
         .iter()
         .map(|t| {
             read_run(&ph.model, &ph.truth, t, &ph.sensors, seed).map_err(|m| VmtError::bad(&sc.source, "sensors", m))
         })
         .collect::<Result<Vec<RunRecord>, VmtError>>()?;
-    runs.extend(read_chain(sc, &chain_truths(sc), seed));
+    runs.extend(read_chain(sc, &truths.lines, seed));
     Ok(runs)
 }
 
