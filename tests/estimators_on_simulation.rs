@@ -33,26 +33,31 @@ fn default_run_exits_zero_with_every_estimate_within_tolerance() {
     assert!(text.contains("all 13 estimates within tolerance"), "{text}");
 }
 
+/// Lessons through `vmt run`: `drift_and_lead` (two hidden effects found one after the other) and
+/// `warm_up` (a thermal expansion found from a cold and a warm test on the session clock); the
+/// tolerances are in the lesson files (normalised RMS ≤ 1.3).
 #[test]
 fn vmt_run_on_a_lesson_runs_the_model_check_loop_to_the_noise_floor() {
-    let tmp = tempfile::tempdir().unwrap();
-    let lesson = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/lessons/drift_and_lead/scenario.toml");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_vmt"))
-        .arg("run")
-        .arg(&lesson)
-        .arg("--out")
-        .arg(tmp.path())
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    // Two hidden effects found one after the other; tolerances in the lesson file (normalised RMS ≤ 1.3).
-    assert_eq!(out.status.code(), Some(0), "{text}{}", String::from_utf8_lossy(&out.stderr));
-    assert!(
-        text.contains("model-check loop finds cyclic_lead") && text.contains("model-check loop finds thermal_drift"),
-        "{text}"
-    );
-    let html = std::fs::read_to_string(tmp.path().join("report.html")).unwrap();
-    assert!(html.contains("normalised residual RMS per iteration"));
+    for (lesson, hidden) in
+        [("drift_and_lead", &["cyclic_lead", "thermal_drift"][..]), ("warm_up", &["thermal_expansion"][..])]
+    {
+        let tmp = tempfile::tempdir().unwrap();
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/lessons").join(lesson).join("scenario.toml");
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_vmt"))
+            .arg("run")
+            .arg(&path)
+            .arg("--out")
+            .arg(tmp.path())
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(out.status.code(), Some(0), "{lesson}: {text}{}", String::from_utf8_lossy(&out.stderr));
+        for h in hidden {
+            assert!(text.contains(&format!("model-check loop finds {h}")), "{lesson}: {text}");
+        }
+        let html = std::fs::read_to_string(tmp.path().join("report.html")).unwrap();
+        assert!(html.contains("normalised residual RMS per iteration"));
+    }
 }
 
 #[test]

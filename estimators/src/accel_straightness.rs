@@ -1726,6 +1726,41 @@ pub fn fuse_multi_speed(
     Ok(FusedProfiles { straightness, tilt })
 }
 
+/// The cosine-basis filter shared by [`band_limit_cosine`] and [`integrate_curvature_cosine`]: DCT-II of
+/// `profile` on a uniform grid, coefficient k ≥ 1 multiplied by `gain(κ_k)` (κ_k = πk/L, L = M·Δx) when
+/// its wavelength λ_k = 2L/k lies in `[min_wavelength, max_wavelength]` and zeroed otherwise (k = 0
+/// always), inverse DCT.
+fn cosine_band_filter(
+    positions: &[f64],
+    profile: &[f64],
+    what: &str,
+    min_wavelength: f64,
+    max_wavelength: f64,
+    gain: impl Fn(f64) -> f64,
+) -> Result<Vec<f64>> {
+    if positions.len() != profile.len() {
+        return Err(AccelStraightnessError::BadInput(format!(
+            "positions ({}) and {what} ({}) differ in length",
+            positions.len(),
+            profile.len()
+        )));
+    }
+    let dx = check_uniform(positions)?;
+    finite_slice(what, profile)?;
+    positive("minimum wavelength (m)", min_wavelength)?;
+    positive("maximum wavelength (m)", max_wavelength)?;
+    let l = profile.len() as f64 * dx;
+    let mut c = dct2(profile);
+    for (k, v) in c.iter_mut().enumerate() {
+        let keep = k > 0 && {
+            let wl = 2.0 * l / k as f64;
+            wl >= min_wavelength && wl <= max_wavelength
+        };
+        *v = if keep { *v * gain(PI * k as f64 / l) } else { 0.0 };
+    }
+    Ok(idct2(&c))
+}
+
 /// Band-limits a profile on a uniform grid in the cosine basis ([`SpectralBasis::Cosine`]): DCT-II, keep
 /// `k ≥ 1` with `λ_k = 2L/k` in `[min_wavelength, max_wavelength]` (`L = M·Δx`), inverse, least-squares
 /// line removed when `remove_reference_line`. Applied to a noise-free curvature through
@@ -1737,26 +1772,7 @@ pub fn band_limit_cosine(
     max_wavelength: f64,
     remove_reference_line: bool,
 ) -> Result<Vec<f64>> {
-    if positions.len() != profile.len() {
-        return Err(AccelStraightnessError::BadInput(format!(
-            "positions ({}) and profile ({}) differ in length",
-            positions.len(),
-            profile.len()
-        )));
-    }
-    let dx = check_uniform(positions)?;
-    finite_slice("profile", profile)?;
-    positive("minimum wavelength (m)", min_wavelength)?;
-    positive("maximum wavelength (m)", max_wavelength)?;
-    let l = profile.len() as f64 * dx;
-    let mut c = dct2(profile);
-    for (k, v) in c.iter_mut().enumerate() {
-        let wl = if k == 0 { f64::INFINITY } else { 2.0 * l / k as f64 };
-        if k == 0 || wl < min_wavelength || wl > max_wavelength {
-            *v = 0.0;
-        }
-    }
-    let out = idct2(&c);
+    let out = cosine_band_filter(positions, profile, "profile", min_wavelength, max_wavelength, |_| 1.0)?;
     Ok(if remove_reference_line { remove_line(positions, &out) } else { out })
 }
 
@@ -1770,32 +1786,9 @@ pub fn integrate_curvature_cosine(
     min_wavelength: f64,
     max_wavelength: f64,
 ) -> Result<Vec<f64>> {
-    if positions.len() != curvature.len() {
-        return Err(AccelStraightnessError::BadInput(format!(
-            "positions ({}) and curvature ({}) differ in length",
-            positions.len(),
-            curvature.len()
-        )));
-    }
-    let dx = check_uniform(positions)?;
-    finite_slice("curvature", curvature)?;
-    positive("minimum wavelength (m)", min_wavelength)?;
-    positive("maximum wavelength (m)", max_wavelength)?;
-    let l = curvature.len() as f64 * dx;
-    let mut c = dct2(curvature);
-    for (k, v) in c.iter_mut().enumerate() {
-        let keep = k > 0 && {
-            let wl = 2.0 * l / k as f64;
-            wl >= min_wavelength && wl <= max_wavelength
-        };
-        *v = if keep {
-            let kappa = PI * k as f64 / l;
-            -*v / (kappa * kappa)
-        } else {
-            0.0
-        };
-    }
-    Ok(remove_line(positions, &idct2(&c)))
+    let gain = |kappa: f64| -1.0 / (kappa * kappa);
+    let out = cosine_band_filter(positions, curvature, "curvature", min_wavelength, max_wavelength, gain)?;
+    Ok(remove_line(positions, &out))
 }
 
 #[cfg(test)]
