@@ -854,7 +854,13 @@ fn laser_lines_3d_checks(
         let check = Check {
             bound: Some(sigma),
             ..Check::new(
-                format!("{iso} {effect} (laser lines 3D, ±{:.3} µrad 1σ)", sigma * 1e6),
+                // "Injected" is the ISO 230-1 squareness the lines measure: the angle between the
+                // least-squares lines of the axes' paths, i.e. the injected angle plus the paths' slopes.
+                format!(
+                    "{iso} {effect} (laser lines 3D, ±{:.3} µrad 1σ; {:.3} µrad + path slopes)",
+                    sigma * 1e6,
+                    chain.squareness.pair(a, b).map_or(0.0, |(t, _)| t) * 1e6
+                ),
                 Quantity::Angle,
                 truth,
                 est.value,
