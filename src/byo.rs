@@ -130,6 +130,55 @@ pub fn identify_set(
     Ok((r.name.clone(), lines.len(), id))
 }
 
+/// Multi-axis laser lines of a measurement set (the seed 001 line set of a chain, e.g. what `vmt simulate`
+/// writes for `scenarios/squareness_3axis.toml`): every point-table run with commanded positions of at
+/// least two axes (`x_cmd`, `y_cmd`, `z_cmd` columns), each laser column a reading u·δ(q, r) + the
+/// line's zero, r the sensor's `position` (offset from the tool reference point) and u its `direction`.
+/// Returns None when the set has no such run, else (number of lines, the 21-error identification with
+/// squareness). Every laser needs its `sigma` (the weights and standard errors depend on it).
+pub fn identify_axes_set(
+    set: &MeasurementSet,
+) -> Result<Option<(usize, crate::estimate::ChainIdentification)>, String> {
+    use crate::measurement::{RunData, SensorKind};
+    use vmt_estimators::laser_ls::Reading;
+    let has = |r: &crate::measurement::Run, l: char| r.data.column(&format!("{l}_cmd")).is_some();
+    let letters: Vec<char> = ['x', 'y', 'z'].into_iter().filter(|&l| set.runs.iter().any(|r| has(r, l))).collect();
+    let multi = |r: &crate::measurement::Run| {
+        matches!(r.data, RunData::PointTable { .. }) && letters.iter().filter(|&&l| has(r, l)).count() >= 2
+    };
+    if letters.len() < 2 || !set.runs.iter().any(multi) {
+        return Ok(None);
+    }
+    let mut readings = Vec::new();
+    let mut n_lines = 0;
+    for r in set.runs.iter().filter(|r| multi(r)) {
+        let RunData::PointTable { columns, .. } = &r.data else { continue };
+        let qs = crate::estimate::axis_commands(&r.name, columns, &letters)?;
+        for (name, values) in columns {
+            let Some(s) = set.sensor(name).filter(|s| {
+                matches!(s.kind, SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector)
+            }) else {
+                continue;
+            };
+            let sigma = s.sigma.filter(|v| *v > 0.0).ok_or_else(|| {
+                format!("sensor `{name}`: the 21-error identification needs the laser's `sigma` in the manifest")
+            })?;
+            for (i, &v) in values.iter().enumerate() {
+                readings.push(Reading {
+                    q: qs.iter().map(|c| c[i]).collect(),
+                    point: s.position,
+                    direction: s.direction,
+                    value: v,
+                    sigma,
+                    line: Some(n_lines),
+                });
+            }
+            n_lines += 1;
+        }
+    }
+    crate::estimate::identify_axis_readings(readings, &letters).map(|id| Some((n_lines, id)))
+}
+
 /// The six identified error motions as a FORMAT.md §5 table, with their standard errors as `NAME_sigma`
 /// when every one is known.
 pub fn profiles_of(id: &vmt_estimators::laser_ls::Identification) -> ProfileTable {

@@ -534,6 +534,11 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
 /// lines (linear and straightness lasers) of a point-table run, with standard errors (FORMAT.md §5 CSV).
 pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, json: bool) -> Result<i32, VmtError> {
     let set = measurement::read(path)?;
+    if run.is_none() {
+        if let Some((n_lines, ci)) = crate::byo::identify_axes_set(&set).map_err(|m| VmtError::bad(path, "runs", m))? {
+            return identify_axes(path, n_lines, &ci, out, json);
+        }
+    }
     let (run, n_lines, id) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
     if json {
         print_json(&id)?;
@@ -554,6 +559,48 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, json: bool) 
     if let Some(out) = out {
         measurement::write_profiles(&crate::byo::profiles_of(&id), out, UnitChoice::Si)?;
         eprintln!("wrote {}", out.display());
+    }
+    Ok(0)
+}
+
+/// `vmt identify` on a multi-axis line set: the 21-error identification with squareness.
+fn identify_axes(
+    path: &Path,
+    n_lines: usize,
+    ci: &crate::estimate::ChainIdentification,
+    out: Option<&Path>,
+    json: bool,
+) -> Result<i32, VmtError> {
+    if let Some(out) = out {
+        return Err(VmtError::bad(
+            out,
+            "",
+            "-o writes a single-axis profile table; for a multi-axis line set use --json (profiles per axis, squareness)",
+        ));
+    }
+    let id = &ci.identification;
+    if json {
+        print_json(ci)?;
+        return Ok(0);
+    }
+    println!(
+        "identified from {n_lines} laser lines of {} ({} axes): rank {}, condition {:.3e}",
+        path.display(),
+        ci.positions.len(),
+        id.rank,
+        id.condition
+    );
+    for u in &id.unobservable {
+        println!("  not observable: {u}");
+    }
+    for s in &id.squareness {
+        let sigma = s.std_error.map_or("not observable".to_string(), |e| format!("± {:.3} µrad", e * 1e6));
+        println!("  {} {:<14} {:>10.3} µrad {sigma}", s.name, s.effect, s.value * 1e6);
+    }
+    for p in &id.profiles {
+        let worst = p.std_errors.iter().flatten().cloned().fold(0.0, f64::max);
+        let peak = p.values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        println!("  {:<4} max |value| {:.4e}  max standard error {:.2e}", p.name, peak, worst);
     }
     Ok(0)
 }

@@ -748,7 +748,7 @@ pub struct ChainIdentification {
 /// motion is parameterised by its values at the distinct joint positions of its axis (piecewise
 /// linear), the reference position being the lowest.
 pub fn identify_chain_lines(sc: &Scenario, runs: &[RunRecord], procedure: &str) -> Result<ChainIdentification, String> {
-    use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, IdOptions, Model, Reading};
+    use vmt_estimators::laser_ls::Reading;
     let chain = sc.chain.as_ref().ok_or("laser_lines_3d needs a multi-axis scenario (axes = [...])")?;
     let letters = chain.letters();
     let mut readings = Vec::new();
@@ -761,15 +761,8 @@ pub fn identify_chain_lines(sc: &Scenario, runs: &[RunRecord], procedure: &str) 
         let RunData::PointTable { columns, .. } = &rec.data else {
             return Err(format!("run `{}` is not a point table", rec.name));
         };
-        let col = |n: &str| {
-            columns
-                .iter()
-                .find(|(c, _)| c == n)
-                .map(|(_, v)| v)
-                .ok_or_else(|| format!("run `{}` has no column `{n}`", rec.name))
-        };
-        let qs: Vec<&Vec<f64>> = letters.iter().map(|l| col(&format!("{l}_cmd"))).collect::<Result<_, _>>()?;
-        let values = col(&line.name)?;
+        let qs = axis_commands(&rec.name, columns, &letters)?;
+        let values = column_of(&rec.name, columns, &line.name)?;
         for (i, &v) in values.iter().enumerate() {
             readings.push(Reading {
                 q: qs.iter().map(|c| c[i]).collect(),
@@ -785,6 +778,31 @@ pub fn identify_chain_lines(sc: &Scenario, runs: &[RunRecord], procedure: &str) 
     if readings.is_empty() {
         return Err(format!("no laser-line runs of chain procedure `{procedure}`"));
     }
+    identify_axis_readings(readings, &letters)
+}
+
+/// Column `name` of run `run`'s point table.
+fn column_of<'a>(run: &str, columns: &'a [(String, Vec<f64>)], name: &str) -> Result<&'a Vec<f64>, String> {
+    columns.iter().find(|(c, _)| c == name).map(|(_, v)| v).ok_or_else(|| format!("run `{run}` has no column `{name}`"))
+}
+
+/// The commanded joint positions of a multi-axis point table, one column `{l}_cmd` per axis letter.
+pub fn axis_commands<'a>(
+    run: &str,
+    columns: &'a [(String, Vec<f64>)],
+    letters: &[char],
+) -> Result<Vec<&'a Vec<f64>>, String> {
+    letters.iter().map(|l| column_of(run, columns, &format!("{l}_cmd"))).collect()
+}
+
+/// The 21-error identification (laser_ls with squareness) of laser readings taken at joint positions
+/// `q` of the axes `letters` (chain order, bed first): each error motion is parameterised by its values
+/// at the distinct positions of its axis (piecewise linear), the reference position being the lowest.
+pub fn identify_axis_readings(
+    mut readings: Vec<vmt_estimators::laser_ls::Reading>,
+    letters: &[char],
+) -> Result<ChainIdentification, String> {
+    use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, IdOptions, Model};
     let mut positions = Vec::new();
     let mut axes = Vec::new();
     for (j, l) in letters.iter().enumerate() {

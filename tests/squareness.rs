@@ -43,6 +43,24 @@ fn written_set_reads_back(sc: &Scenario, truths: &[(usize, LineTruth)]) {
     let profiles = measurement::read_profiles(&out.join("truth_profiles.csv")).unwrap();
     let names: Vec<String> = profiles.columns.iter().map(|c| c.column_name()).collect();
     assert!(names.contains(&"y.pitch".to_string()) && names.contains(&"z.yaw".to_string()), "{names:?}");
+    // `vmt identify` on the written set alone (no scenario: geometry from the manifest and the x_cmd,
+    // y_cmd, z_cmd columns) gives the scenario path's squareness, to the digits the CSV carries.
+    let (n_lines, from_set) = vmt::byo::identify_axes_set(&back).unwrap().expect("a multi-axis line set");
+    let from_scenario = identify_chain_lines(sc, &runs, "lines").unwrap();
+    assert_eq!(n_lines, 16);
+    for name in ["squareness_xy", "squareness_xz", "squareness_yz"] {
+        let a = from_set.identification.squareness(name).unwrap();
+        let b = from_scenario.identification.squareness(name).unwrap();
+        // 1e-12 rad: the CSV round trip is exact; what is left is summation order in the solver.
+        assert!((a.value - b.value).abs() < 1e-12 && a.std_error.is_some(), "{name}: {} vs {}", a.value, b.value);
+    }
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_vmt"))
+        .arg("identify")
+        .arg(dir.path().join("set"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && text.contains("EC0Y squareness_xy"), "{text}");
 }
 
 fn scenario_path() -> PathBuf {
