@@ -12,7 +12,8 @@ use rayon::prelude::*;
 use std::path::Path;
 use vmt_sim::axis_sim::AxisTruth;
 use vmt_sim::chain::{
-    dominant_axis, read_line, simulate_laser_lines, ChainProcedureSpec, LaserLineSpec, LaserLinesSpec, LineTruth,
+    dominant_axis, plan_laser_lines, read_line, simulate_line, ChainProcedureSpec, LaserLineSpec, LaserLinesSpec,
+    LinePlan, LineTruth,
 };
 use vmt_sim::effects::EffectName;
 use vmt_sim::geometry::ErrorMotions;
@@ -79,8 +80,10 @@ pub struct SessionTruth {
 /// simulated in parallel: each is deterministic given its plan and session start, so the result does
 /// not depend on the number of threads.
 pub fn simulate_truth(sc: &Scenario, ph: &Physics) -> SessionTruth {
-    let runs = session_plan(sc, ph).par_iter().map(|(r, t0)| simulate_run(&ph.model, &ph.truth, r, *t0)).collect();
-    SessionTruth { runs, lines: chain_truths(sc) }
+    let plan = session_plan(sc, ph);
+    let end = plan.last().map_or(0.0, |(r, t0)| t0 + r.duration());
+    let runs = plan.par_iter().map(|(r, t0)| simulate_run(&ph.model, &ph.truth, r, *t0)).collect();
+    SessionTruth { runs, lines: chain_truths(sc, end) }
 }
 
 /// Sensor readings of every run, noise seeded by `seed`: the single-axis runs, then the chain lines.
@@ -96,26 +99,23 @@ pub fn read_all(sc: &Scenario, ph: &Physics, truths: &SessionTruth, seed: u64) -
     Ok(runs)
 }
 
-/// Noise-free truth of every line of every chain procedure of a multi-axis scenario (lines simulated
-/// in parallel; each is deterministic), with the index of its procedure. Empty for one axis.
-pub fn chain_truths(sc: &Scenario) -> Vec<(usize, LineTruth)> {
+/// Noise-free truth of every line of every chain procedure of a multi-axis scenario, with the index of
+/// its procedure; empty for one axis. The lines follow one another on the session clock from
+/// `session_start` (s: after the single-axis runs) and are simulated in parallel (each is deterministic
+/// given its plan and start time).
+pub fn chain_truths(sc: &Scenario, session_start: f64) -> Vec<(usize, LineTruth)> {
     let Some(chain) = &sc.chain else { return Vec::new() };
-    let jobs: Vec<(usize, LaserLinesSpec)> = sc
-        .chain_procedures
-        .iter()
-        .enumerate()
-        .flat_map(|(i, p)| match p {
-            ChainProcedureSpec::LaserLines(l) => {
-                l.lines.iter().map(move |line| (i, LaserLinesSpec { lines: vec![line.clone()], ..l.clone() }))
-            }
-        })
-        .collect();
-    jobs.par_iter()
-        .map(|(i, spec)| simulate_laser_lines(chain, spec).into_iter().map(|t| (*i, t)).collect::<Vec<_>>())
-        .collect::<Vec<_>>()
-        .into_iter()
-        .flatten()
-        .collect()
+    let mut clock = session_start;
+    let mut jobs: Vec<(usize, LinePlan, f64)> = Vec::new();
+    for (i, p) in sc.chain_procedures.iter().enumerate() {
+        let ChainProcedureSpec::LaserLines(l) = p;
+        for line in plan_laser_lines(chain, l) {
+            let start = clock;
+            clock += line.duration();
+            jobs.push((i, line, start));
+        }
+    }
+    jobs.par_iter().map(|(i, line, start)| (*i, simulate_line(chain, line, *start))).collect()
 }
 
 /// The laser readings of the chain lines (point tables, FORMAT.md §1), noise seeded by `seed`.

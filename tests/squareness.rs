@@ -142,12 +142,12 @@ fn squareness_is_recovered_over_three_seeds_and_vanishes_without_it() {
     let raw = sc.chain.as_ref().unwrap().squareness.to_array();
     assert_eq!(raw, [20e-6, -15e-6, 10e-6]);
     let seeds = [1, 2, 3];
-    let truths = chain_truths(&sc);
+    let truths = chain_truths(&sc, 0.0);
     let (with, eff) = recover(&sc, &truths, &seeds);
     written_set_reads_back(&sc, &truths);
     let sc0 = Scenario::parse(&without_squareness(&text), &scenario_path(), scenario_path().parent()).unwrap();
     assert_eq!(sc0.chain.as_ref().unwrap().squareness.to_array(), [0.0; 3]);
-    let (without, eff0) = recover(&sc0, &chain_truths(&sc0), &seeds);
+    let (without, eff0) = recover(&sc0, &chain_truths(&sc0, 0.0), &seeds);
     // The lines see the injected angle plus the trend of the error motions (the same in both truths):
     // the difference of the effective values is the injected value (exact: both are linear in it).
     for k in 0..3 {
@@ -185,7 +185,7 @@ fn squareness_is_recovered_over_three_seeds_and_vanishes_without_it() {
 fn a_perfect_machine_has_squareness_within_noise_of_zero() {
     let text = perfect(&scenario_text());
     let sc = Scenario::parse(&text, &scenario_path(), scenario_path().parent()).unwrap();
-    let (est, eff) = recover(&sc, &chain_truths(&sc), &[7, 8]);
+    let (est, eff) = recover(&sc, &chain_truths(&sc, 0.0), &[7, 8]);
     assert_eq!(eff.to_array(), [0.0; 3]);
     for (v, s) in est {
         for k in 0..3 {

@@ -54,7 +54,7 @@
 //! each axis's trapezoid scaled by |Δq_j|/|Δq| (feed and acceleration of the path given), so the
 //! tool point follows the commanded line (DESIGN.md §6 diagonal measurements of seed 001).
 
-use crate::axis_sim::{simulate, AxisTruth, Sample, Trace};
+use crate::axis_sim::{simulate_in_session, AxisTruth, Sample, Trace};
 use crate::effects::{EffectName, EffectParams, EffectSet};
 use crate::geometry::ErrorMotions;
 use crate::machine::{AxisConfig, AxisModel, MachineError};
@@ -536,7 +536,23 @@ impl ChainPlan {
 /// Simulates a chain plan axis by axis (each in its own rapier world, parent as rigid ground) and
 /// returns one trace per axis sampled at `record_times` (s, increasing).
 pub fn simulate_chain(chain: &ChainModel, plan: &ChainPlan, record_times: &[f64]) -> Vec<Trace> {
-    chain.axes.iter().zip(&plan.axes).map(|(a, p)| simulate(&a.model, &a.truth, p, record_times)).collect()
+    simulate_chain_in_session(chain, plan, record_times, 0.0)
+}
+
+/// As [`simulate_chain`], for a plan that starts `session_start` s into the measurement session (the
+/// session clock of `crate::procedures::plan_session`: time-dependent effects see session_start + t).
+pub fn simulate_chain_in_session(
+    chain: &ChainModel,
+    plan: &ChainPlan,
+    record_times: &[f64],
+    session_start: f64,
+) -> Vec<Trace> {
+    chain
+        .axes
+        .iter()
+        .zip(&plan.axes)
+        .map(|(a, p)| simulate_in_session(&a.model, &a.truth, p, record_times, session_start))
+        .collect()
 }
 
 fn d_dwell() -> f64 {
@@ -753,12 +769,33 @@ pub struct LineTruth {
     pub line: LaserLineSpec,
     /// Visits (target = distance along the line, m) with their sample windows.
     pub visits: Vec<Visit>,
+    /// Session time at the start of the line, s.
+    pub start_time: f64,
     /// One trace per axis (same times).
     pub traces: Vec<Trace>,
 }
 
-/// Simulates every line of a laser line set (check it first with [`LaserLinesSpec::check`]).
-pub fn simulate_laser_lines(chain: &ChainModel, spec: &LaserLinesSpec) -> Vec<LineTruth> {
+/// One line of a laser line set before any physics: the chain's commanded motion, the record times
+/// and the visits (target = distance along the line, m) with their sample windows.
+#[derive(Clone, Debug)]
+pub struct LinePlan {
+    /// Run name `{procedure}_{line}`.
+    pub name: String,
+    pub line: LaserLineSpec,
+    pub visits: Vec<Visit>,
+    pub plan: ChainPlan,
+    pub record_times: Vec<f64>,
+}
+
+impl LinePlan {
+    /// How long the line occupies the machine, s.
+    pub fn duration(&self) -> f64 {
+        self.plan.end.max(self.record_times.last().copied().unwrap_or(0.0))
+    }
+}
+
+/// Plans every line of a laser line set (check it first with [`LaserLinesSpec::check`]).
+pub fn plan_laser_lines(chain: &ChainModel, spec: &LaserLinesSpec) -> Vec<LinePlan> {
     let accel = spec.path_accel(chain);
     spec.lines
         .iter()
@@ -779,8 +816,38 @@ pub fn simulate_laser_lines(chain: &ChainModel, spec: &LaserLinesSpec) -> Vec<Li
                 let s = len * k as f64 / (line.n - 1) as f64;
                 visits.push(Visit { target: s, run: 1, direction: 1, first, last: times.len() - 1 });
             }
-            let traces = simulate_chain(chain, &plan, &times);
-            LineTruth { name: format!("{}_{}", spec.name, line.name), line: line.clone(), visits, traces }
+            LinePlan {
+                name: format!("{}_{}", spec.name, line.name),
+                line: line.clone(),
+                visits,
+                plan,
+                record_times: times,
+            }
+        })
+        .collect()
+}
+
+/// Simulates one planned line starting at session time `session_start` (s).
+pub fn simulate_line(chain: &ChainModel, p: &LinePlan, session_start: f64) -> LineTruth {
+    LineTruth {
+        name: p.name.clone(),
+        line: p.line.clone(),
+        visits: p.visits.clone(),
+        start_time: session_start,
+        traces: simulate_chain_in_session(chain, &p.plan, &p.record_times, session_start),
+    }
+}
+
+/// Simulates every line of a laser line set, back to back from session time 0 (check it first with
+/// [`LaserLinesSpec::check`]).
+pub fn simulate_laser_lines(chain: &ChainModel, spec: &LaserLinesSpec) -> Vec<LineTruth> {
+    let mut clock = 0.0;
+    plan_laser_lines(chain, spec)
+        .iter()
+        .map(|p| {
+            let t = simulate_line(chain, p, clock);
+            clock += p.duration();
+            t
         })
         .collect()
 }
@@ -828,7 +895,7 @@ pub fn read_line(chain: &ChainModel, truth: &LineTruth, sigma: f64, seed: u64) -
         procedure: ProcedureKind::Positioning,
         feed: None,
         direction: None,
-        start_time: 0.0,
+        start_time: truth.start_time,
         data: RunData::PointTable {
             target: truth.visits.iter().map(|v| v.target).collect(),
             run: truth.visits.iter().map(|v| v.run).collect(),
