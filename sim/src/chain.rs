@@ -760,18 +760,12 @@ impl LaserLinesSpec {
     }
 }
 
-/// The noise-free truth of one laser line: per-axis samples at the averaging windows.
+/// The noise-free truth of one line: its plan, its session start time (s) and one trace per axis
+/// (same times).
 #[derive(Clone, Debug)]
 pub struct LineTruth {
-    /// Run name `{procedure}_{line}`.
-    pub name: String,
-    /// The line.
-    pub line: LaserLineSpec,
-    /// Visits (target = distance along the line, m) with their sample windows.
-    pub visits: Vec<Visit>,
-    /// Session time at the start of the line, s.
+    pub plan: LinePlan,
     pub start_time: f64,
-    /// One trace per axis (same times).
     pub traces: Vec<Trace>,
 }
 
@@ -830,9 +824,7 @@ pub fn plan_laser_lines(chain: &ChainModel, spec: &LaserLinesSpec) -> Vec<LinePl
 /// Simulates one planned line starting at session time `session_start` (s).
 pub fn simulate_line(chain: &ChainModel, p: &LinePlan, session_start: f64) -> LineTruth {
     LineTruth {
-        name: p.name.clone(),
-        line: p.line.clone(),
-        visits: p.visits.clone(),
+        plan: p.clone(),
         start_time: session_start,
         traces: simulate_chain_in_session(chain, &p.plan, &p.record_times, session_start),
     }
@@ -855,14 +847,15 @@ pub fn simulate_laser_lines(chain: &ChainModel, spec: &LaserLinesSpec) -> Vec<Li
 /// Noise-free deviation u·(P_actual − P_nominal) (m) of a line's reflector, averaged over each visit's
 /// window, one value per visit.
 pub fn line_deviations(chain: &ChainModel, truth: &LineTruth) -> Vec<f64> {
-    let u = truth.line.beam();
-    let r = DVec3::from_array(truth.line.point);
+    let u = truth.plan.line.beam();
+    let r = DVec3::from_array(truth.plan.line.point);
     truth
+        .plan
         .visits
         .iter()
         .enumerate()
         .map(|(k, v)| {
-            let q = truth.line.target(k);
+            let q = truth.plan.line.target(k);
             let nominal = chain.nominal_point(&q, r);
             let mut sum = 0.0;
             for i in v.first..=v.last {
@@ -879,28 +872,31 @@ pub fn line_deviations(chain: &ChainModel, truth: &LineTruth) -> Vec<f64> {
 pub fn read_line(chain: &ChainModel, truth: &LineTruth, sigma: f64, seed: u64) -> RunRecord {
     let mut values = line_deviations(chain, truth);
     if sigma > 0.0 {
-        let mut rng = source_rng(seed, &format!("{}/{}", truth.name, truth.line.name));
+        let mut rng = source_rng(seed, &format!("{}/{}", truth.plan.name, truth.plan.line.name));
         if let Ok(n) = Normal::new(0.0, sigma) {
             values.iter_mut().for_each(|v| *v += n.sample(&mut rng));
         }
     }
     let mut columns = Vec::new();
     for (j, a) in chain.axes.iter().enumerate() {
-        columns.push((format!("{}_cmd", a.letter), (0..truth.visits.len()).map(|k| truth.line.target(k)[j]).collect()));
+        columns.push((
+            format!("{}_cmd", a.letter),
+            (0..truth.plan.visits.len()).map(|k| truth.plan.line.target(k)[j]).collect(),
+        ));
     }
-    columns.push((truth.line.name.clone(), values));
+    columns.push((truth.plan.line.name.clone(), values));
     let last_t = |v: &Visit| truth.traces.first().map_or(0.0, |t| t.samples[v.last].t);
     RunRecord {
-        name: truth.name.clone(),
+        name: truth.plan.name.clone(),
         procedure: ProcedureKind::Positioning,
         feed: None,
         direction: None,
         start_time: truth.start_time,
         data: RunData::PointTable {
-            target: truth.visits.iter().map(|v| v.target).collect(),
-            run: truth.visits.iter().map(|v| v.run).collect(),
-            direction: truth.visits.iter().map(|v| v.direction).collect(),
-            t: Some(truth.visits.iter().map(last_t).collect()),
+            target: truth.plan.visits.iter().map(|v| v.target).collect(),
+            run: truth.plan.visits.iter().map(|v| v.run).collect(),
+            direction: truth.plan.visits.iter().map(|v| v.direction).collect(),
+            t: Some(truth.plan.visits.iter().map(last_t).collect()),
             columns,
         },
     }
