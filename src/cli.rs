@@ -446,6 +446,16 @@ fn model_and_data(model: &Path, data: &Path) -> Result<(crate::model::Model, Mea
     Ok((m, set))
 }
 
+/// Prints a result as JSON (`--json`) or as the text `text` makes of it; exit code 0.
+fn print_result<T: serde::Serialize>(r: &T, json: bool, text: impl Fn(&T) -> String) -> Result<i32, VmtError> {
+    if json {
+        print_json(r)?;
+    } else {
+        print!("{}", text(r));
+    }
+    Ok(0)
+}
+
 fn print_json<T: serde::Serialize>(v: &T) -> Result<(), VmtError> {
     println!("{}", serde_json::to_string_pretty(v).map_err(|e| VmtError::Internal(e.to_string()))?);
     Ok(())
@@ -456,24 +466,14 @@ fn print_json<T: serde::Serialize>(v: &T) -> Result<(), VmtError> {
 pub fn compare(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
     let (m, set) = model_and_data(model, data)?;
     let r = crate::modelcheck::compare(&m, &set, data)?;
-    if json {
-        print_json(&r)?;
-    } else {
-        print!("{}", crate::modelcheck::compare_text(&r));
-    }
-    Ok(0)
+    print_result(&r, json, crate::modelcheck::compare_text)
 }
 
 /// `vmt diagnose --model M --data D [--json]`: rank the effects the model lacks (FORMAT.md §4).
 pub fn diagnose(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
     let (m, set) = model_and_data(model, data)?;
     let r = crate::modelcheck::diagnose(&m, &set, data)?;
-    if json {
-        print_json(&r)?;
-    } else {
-        print!("{}", crate::modelcheck::diagnose_text(&r));
-    }
-    Ok(0)
+    print_result(&r, json, crate::modelcheck::diagnose_text)
 }
 
 /// `vmt add --model M --effect NAME [--from-diagnosis] [--data D] -o M2`: writes the model with the

@@ -995,7 +995,7 @@ fn compensation_checks(
         *name = format!("{run}_after_compensation");
     }
     // The re-test follows the scenario's session (time-dependent effects have moved on meanwhile).
-    let session_end = crate::simulate::session_plan(sc, ph).last().map_or(0.0, |(r, t0)| t0 + r.duration());
+    let session_end = crate::simulate::session_end(&crate::simulate::session_plan(sc, ph));
     let plan = plan_procedure(&model, &verify, sc.seed);
     let truth = simulate_run(&model, &ph.truth, &plan[0], session_end);
     let after_rec = read_run(&model, &ph.truth, &truth, &ph.sensors, sc.seed).map_err(bad)?;

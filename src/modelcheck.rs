@@ -222,11 +222,7 @@ impl Channel {
         if self.is_laser() {
             return s * value(self.x[i]);
         }
-        let dt = match i {
-            0 if self.t.len() > 1 => self.t[1] - self.t[0],
-            0 => 0.0,
-            _ => self.t[i] - self.t[i - 1],
-        };
+        let dt = sample_interval(self, i);
         let v = self.v[i];
         if !(dt > 0.0) || v == 0.0 {
             return 0.0;

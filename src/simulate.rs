@@ -66,6 +66,11 @@ pub fn session_plan(sc: &Scenario, ph: &Physics) -> Vec<(RunPlan, f64)> {
     plan_session(&ph.model, &sc.procedures, sc.seed)
 }
 
+/// Session time at which the last run of a session plan ends, s (0 for an empty plan).
+pub fn session_end(plan: &[(RunPlan, f64)]) -> f64 {
+    plan.last().map_or(0.0, |(r, t0)| t0 + r.duration())
+}
+
 /// The noise-free truth of a scenario's session: the runs of the single-axis procedures and, for a
 /// multi-axis scenario, the lines of its chain procedures. Computed once; read with noise as often
 /// as a study needs ([`read_all`]).
@@ -81,7 +86,7 @@ pub struct SessionTruth {
 /// not depend on the number of threads.
 pub fn simulate_truth(sc: &Scenario, ph: &Physics) -> SessionTruth {
     let plan = session_plan(sc, ph);
-    let end = plan.last().map_or(0.0, |(r, t0)| t0 + r.duration());
+    let end = session_end(&plan);
     let runs = plan.par_iter().map(|(r, t0)| simulate_run(&ph.model, &ph.truth, r, *t0)).collect();
     SessionTruth { runs, lines: chain_truths(sc, end) }
 }

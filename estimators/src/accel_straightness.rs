@@ -722,17 +722,7 @@ pub fn band_limit_profile(
     min_wavelength: f64,
     max_wavelength: f64,
 ) -> Result<Vec<f64>> {
-    if positions.len() != profile.len() {
-        return Err(AccelStraightnessError::BadInput(format!(
-            "positions ({}) and profile ({}) differ in length",
-            positions.len(),
-            profile.len()
-        )));
-    }
-    let dx = check_uniform(positions)?;
-    finite_slice("profile", profile)?;
-    positive("minimum wavelength (m)", min_wavelength)?;
-    positive("maximum wavelength (m)", max_wavelength)?;
+    let dx = check_band_input(positions, profile, "profile", min_wavelength, max_wavelength)?;
     let m = profile.len();
     let period = m as f64 * dx;
     let mut buf = profile.to_vec();
@@ -1726,6 +1716,29 @@ pub fn fuse_multi_speed(
     Ok(FusedProfiles { straightness, tilt })
 }
 
+/// Checks the input of a band filter: `profile` (named `what` in messages) as long as `positions`, the
+/// positions uniform, the values finite and both wavelengths (m) positive; returns the spacing Δx (m).
+fn check_band_input(
+    positions: &[f64],
+    profile: &[f64],
+    what: &str,
+    min_wavelength: f64,
+    max_wavelength: f64,
+) -> Result<f64> {
+    if positions.len() != profile.len() {
+        return Err(AccelStraightnessError::BadInput(format!(
+            "positions ({}) and {what} ({}) differ in length",
+            positions.len(),
+            profile.len()
+        )));
+    }
+    let dx = check_uniform(positions)?;
+    finite_slice(what, profile)?;
+    positive("minimum wavelength (m)", min_wavelength)?;
+    positive("maximum wavelength (m)", max_wavelength)?;
+    Ok(dx)
+}
+
 /// The cosine-basis filter shared by [`band_limit_cosine`] and [`integrate_curvature_cosine`]: DCT-II of
 /// `profile` on a uniform grid, coefficient k ≥ 1 multiplied by `gain(κ_k)` (κ_k = πk/L, L = M·Δx) when
 /// its wavelength λ_k = 2L/k lies in `[min_wavelength, max_wavelength]` and zeroed otherwise (k = 0
@@ -1738,17 +1751,7 @@ fn cosine_band_filter(
     max_wavelength: f64,
     gain: impl Fn(f64) -> f64,
 ) -> Result<Vec<f64>> {
-    if positions.len() != profile.len() {
-        return Err(AccelStraightnessError::BadInput(format!(
-            "positions ({}) and {what} ({}) differ in length",
-            positions.len(),
-            profile.len()
-        )));
-    }
-    let dx = check_uniform(positions)?;
-    finite_slice(what, profile)?;
-    positive("minimum wavelength (m)", min_wavelength)?;
-    positive("maximum wavelength (m)", max_wavelength)?;
+    let dx = check_band_input(positions, profile, what, min_wavelength, max_wavelength)?;
     let l = profile.len() as f64 * dx;
     let mut c = dct2(profile);
     for (k, v) in c.iter_mut().enumerate() {

@@ -221,13 +221,10 @@ fn snr_fusion_is_efficient_over_noise_draws() {
     }
 }
 
-#[test]
-fn mems_noise_grows_bound_and_error_in_proportion() {
-    // Same fixed band [4Δx, 0.3 m] for both sensors (threshold huge so noise does not move it). 20 draws
-    // each, different seeds. The CR bound scales exactly with ρ (×50); the achieved RMS error must grow by
-    // 25…100 (×50 within a factor 2: the RMS is dominated by a few long-wavelength bins, so each sensor's
-    // 20-draw RMS scatters by roughly ±15 %).
-    let cfg = |rho: f64| StraightnessConfig {
+/// SNR-weighted fusion at noise density `rho` over the fixed band [4Δx, 0.3 m] (amplitude threshold so
+/// high that the noise does not move the band).
+fn fixed_band_config(rho: f64) -> StraightnessConfig {
+    StraightnessConfig {
         method: FusionMethod::SnrWeighted,
         noise_density: Some(rho),
         amplitude_threshold: 1.0,
@@ -235,7 +232,16 @@ fn mems_noise_grows_bound_and_error_in_proportion() {
         max_wavelength: Some(0.3),
         seed_kalman: true,
         ..StraightnessConfig::default()
-    };
+    }
+}
+
+#[test]
+fn mems_noise_grows_bound_and_error_in_proportion() {
+    // Same fixed band [4Δx, 0.3 m] for both sensors (threshold huge so noise does not move it). 20 draws
+    // each, different seeds. The CR bound scales exactly with ρ (×50); the achieved RMS error must grow by
+    // 25…100 (×50 within a factor 2: the RMS is dominated by a few long-wavelength bins, so each sensor's
+    // 20-draw RMS scatters by roughly ±15 %).
+    let cfg = fixed_band_config;
     let mut res = Vec::new();
     for (rho, seed0) in [(0.5 * UG, 100u64), (25.0 * UG, 200u64)] {
         let mut ms = 0.0;
@@ -271,15 +277,7 @@ fn fusion_beats_every_single_speed_alone() {
     // fastest pass dominate. The draw-to-draw fluctuation of that difference (~6 effective degrees of
     // freedom per draw, 1200 in all) is ~1/4 of the expected gain, so "fused < each single" is a 4σ test.
     let rho = 0.5 * UG;
-    let cfg = StraightnessConfig {
-        method: FusionMethod::SnrWeighted,
-        noise_density: Some(rho),
-        amplitude_threshold: 1.0,
-        min_wavelength: None,
-        max_wavelength: Some(0.3),
-        seed_kalman: true,
-        ..StraightnessConfig::default()
-    };
+    let cfg = fixed_band_config(rho);
     let mut ms_fused = 0.0;
     let mut ms_single = [0.0f64; 3];
     let draws = 200;

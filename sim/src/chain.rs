@@ -555,17 +555,12 @@ pub fn simulate_chain_in_session(
         .collect()
 }
 
-fn d_dwell() -> f64 {
-    0.3
-}
-fn d_average() -> f64 {
-    0.1
-}
-fn d_rate() -> f64 {
-    500.0
-}
-fn d_settle() -> f64 {
-    1.0
+// Defaults of the laser-line procedure's optional keys.
+defaults! {
+    d_dwell: f64 = 0.3;
+    d_average: f64 = 0.1;
+    d_rate: f64 = 500.0;
+    d_settle: f64 = 1.0;
 }
 
 /// One laser line of a [`LaserLinesSpec`]: the tool moves along the straight joint-space line from

@@ -3,6 +3,12 @@
 //! the measurement procedures a metrologist runs. Plain data flows forward: scenario → machine →
 //! recording. No file I/O: URDF text is passed in.
 
+/// Default-value functions for serde's `default = "..."` (it needs a function per value):
+/// `defaults! { d_rate: f64 = 500.0; }` defines `fn d_rate() -> f64 { 500.0 }`.
+macro_rules! defaults {
+    ($($name:ident: $t:ty = $v:expr;)*) => { $(fn $name() -> $t { $v })* };
+}
+
 pub mod air;
 pub mod axis_sim;
 pub mod chain;

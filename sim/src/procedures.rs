@@ -49,10 +49,7 @@ impl ProcedureKind {
     }
 }
 
-/// Defaults of the procedures' optional keys (serde `default = "..."` needs a function per value).
-macro_rules! defaults {
-    ($($name:ident: $t:ty = $v:expr;)*) => { $(fn $name() -> $t { $v })* };
-}
+// Defaults of the procedures' optional keys.
 defaults! {
     d_dwell: f64 = 1.0;
     d_average: f64 = 0.2;
