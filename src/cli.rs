@@ -209,7 +209,59 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
     Ok(0)
 }
 
-/// `vmt study SCENARIO --vary sensors.NAME.KEY=V1,V2 --trials N [--shard i/n] -o DIR`: writes
+/// A job-array index variable of a cluster scheduler: (variable, first index the scheduler counts from
+/// — subtracted —, variable holding the first index if the scheduler sets one).
+const ARRAY_INDEX: [(&str, usize, Option<&str>); 5] = [
+    ("SLURM_ARRAY_TASK_ID", 0, Some("SLURM_ARRAY_TASK_MIN")),
+    ("HQ_TASK_ID", 0, None),
+    ("PBS_ARRAY_INDEX", 0, None),
+    ("PBS_ARRAYID", 0, None),
+    ("LSB_JOBINDEX", 1, None),
+];
+
+/// Job-array size variables: Slurm's task count; LSF's last index (arrays `[1-N]`).
+const ARRAY_COUNT: [&str; 2] = ["SLURM_ARRAY_TASK_COUNT", "LSB_JOBINDEX_END"];
+
+/// `--shard i/n`, or `--shard auto` (index and count from a Slurm, HyperQueue, PBS or LSF job array),
+/// or `--shard auto/n` (index from the scheduler, n given: HyperQueue and PBS do not export the array
+/// size). `env` reads an environment variable. Returns (i, n) with 0 ≤ i < n.
+pub fn parse_shard(s: &str, env: &dyn Fn(&str) -> Option<String>) -> Result<(usize, usize), VmtError> {
+    let usage = |m: String| VmtError::Usage(format!("--shard {s}: {m}"));
+    let num = |v: &str, what: &str| v.trim().parse::<usize>().map_err(|_| usage(format!("{what} must be a whole number, got `{v}`")));
+    let (i, n) = s.split_once('/').map_or((s, None), |(i, n)| (i, Some(n)));
+    let (i, n) = if i == "auto" {
+        let (var, first, min_var) = ARRAY_INDEX.iter().find(|(v, ..)| env(v).is_some()).ok_or_else(|| {
+            usage(format!(
+                "no job-array index in the environment (looked for {})",
+                ARRAY_INDEX.iter().map(|v| v.0).collect::<Vec<_>>().join(", ")
+            ))
+        })?;
+        let first = match min_var.and_then(|m| env(m).map(|v| (m, v))) {
+            Some((m, v)) => num(&v, m)?,
+            None => *first,
+        };
+        let raw = num(&env(var).unwrap_or_default(), var)?;
+        let i = raw.checked_sub(first).ok_or_else(|| usage(format!("{var} = {raw} is below the first index {first}")))?;
+        let n = match n {
+            Some(n) => num(n, "n")?,
+            None => {
+                let (cvar, c) = ARRAY_COUNT.iter().find_map(|c| env(c).map(|v| (*c, v))).ok_or_else(|| {
+                    usage(format!("{var} is set but the scheduler exports no array size: use --shard auto/N"))
+                })?;
+                num(&c, cvar)?
+            }
+        };
+        (i, n)
+    } else {
+        (num(i, "i")?, num(n.ok_or_else(|| usage("expected i/n, auto or auto/n".into()))?, "n")?)
+    };
+    if n == 0 || i >= n {
+        return Err(usage(format!("expected 0 ≤ i < n, got i = {i}, n = {n}")));
+    }
+    Ok((i, n))
+}
+
+/// `vmt study SCENARIO --vary sensors.NAME.KEY=V1,V2 --trials N [--shard i/n|auto] -o DIR`: writes
 /// `trials.csv` (every trial), `summary.csv` (mean and p95 per value and estimate) and `study.svg`.
 pub fn study(
     path: &Path,
@@ -223,17 +275,7 @@ pub fn study(
     let vary = Vary::parse(vary)?;
     let shard = match shard {
         None => (0, 1),
-        Some(s) => {
-            let (i, n) = s.split_once('/').ok_or_else(|| VmtError::Usage(format!("--shard {s}: expected i/n")))?;
-            let (i, n): (usize, usize) = (
-                i.parse().map_err(|_| VmtError::Usage(format!("--shard {s}: i must be a number")))?,
-                n.parse().map_err(|_| VmtError::Usage(format!("--shard {s}: n must be a number")))?,
-            );
-            if n == 0 || i >= n {
-                return Err(VmtError::Usage(format!("--shard {s}: expected 0 ≤ i < n")));
-            }
-            (i, n)
-        }
+        Some(s) => parse_shard(s, &|k| std::env::var(k).ok())?,
     };
     let sc = Scenario::load(path)?;
     let bar = spinner(&format!("{} values × {trials} trials", vary.values.len()));
@@ -621,4 +663,36 @@ pub fn score(truth: &Path, estimate: &Path, json: bool) -> Result<i32, VmtError>
         }
     }
     Ok(0)
+}
+
+#[cfg(test)]
+mod shard_tests {
+    use super::parse_shard;
+
+    fn env<'a>(vars: &'a [(&'a str, &'a str)]) -> impl Fn(&str) -> Option<String> + 'a {
+        move |k| vars.iter().find(|(n, _)| *n == k).map(|(_, v)| v.to_string())
+    }
+
+    #[test]
+    fn shard_auto_reads_each_scheduler_and_explicit_forms() {
+        assert_eq!(parse_shard("2/4", &env(&[])).unwrap(), (2, 4));
+        // Slurm `--array=1-4`: ids 1..4, min 1, count 4.
+        let slurm = [("SLURM_ARRAY_TASK_ID", "3"), ("SLURM_ARRAY_TASK_MIN", "1"), ("SLURM_ARRAY_TASK_COUNT", "4")];
+        assert_eq!(parse_shard("auto", &env(&slurm)).unwrap(), (2, 4));
+        // LSF `-J "s[1-8]"`: index 1-based, end 8.
+        assert_eq!(parse_shard("auto", &env(&[("LSB_JOBINDEX", "8"), ("LSB_JOBINDEX_END", "8")])).unwrap(), (7, 8));
+        // HyperQueue and PBS give the index only.
+        assert_eq!(parse_shard("auto/5", &env(&[("HQ_TASK_ID", "4")])).unwrap(), (4, 5));
+        assert_eq!(parse_shard("auto/2", &env(&[("PBS_ARRAY_INDEX", "1")])).unwrap(), (1, 2));
+        for (s, vars, msg) in [
+            ("auto", &[][..], "no job-array index"),
+            ("auto", &[("PBS_ARRAYID", "1")][..], "use --shard auto/N"),
+            ("auto/2", &[("HQ_TASK_ID", "2")][..], "0 ≤ i < n"),
+            ("auto", &[("SLURM_ARRAY_TASK_ID", "x"), ("SLURM_ARRAY_TASK_COUNT", "2")][..], "SLURM_ARRAY_TASK_ID must be"),
+            ("1", &[][..], "expected i/n"),
+        ] {
+            let e = parse_shard(s, &env(vars)).unwrap_err().to_string();
+            assert!(e.contains(msg), "{s}: {e}");
+        }
+    }
 }

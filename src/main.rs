@@ -62,7 +62,8 @@ enum Command {
         vary: Option<String>,
         #[arg(long, default_value_t = 100)]
         trials: usize,
-        /// Compute only trials k with k mod n = i (for a cluster job array), e.g. 0/4.
+        /// Compute only trials k with k mod n = i (for a cluster job array), e.g. 0/4; `auto` reads i and n
+        /// from a Slurm, HyperQueue, PBS or LSF job array (`auto/n` where the scheduler gives no size).
         #[arg(long)]
         shard: Option<String>,
         /// Run this program in every trial instead of the scenario's estimators: `CMD {data} {out}` reads

@@ -10,7 +10,7 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use vmt_sim::chain::{ChainModel, ChainProcedureSpec};
 use vmt_sim::effects::EffectName;
-use vmt_sim::machine::{AxisConfig, AxisModel};
+use vmt_sim::machine::{AxisConfig, AxisModel, Fidelity};
 use vmt_sim::procedures::ProcedureSpec;
 use vmt_sim::sensors::{SensorKind, SensorSpec};
 use vmt_sim::urdf::{parse_urdf, MachineStructure};
@@ -26,6 +26,9 @@ struct RawScenario {
     machine: String,
     #[serde(default)]
     axis: AxisConfig,
+    /// Integrator of the moving bodies: "fast" (default) or "reference" (rapier3d-f64).
+    #[serde(default)]
+    fidelity: Fidelity,
     truth: toml::Value,
     #[serde(default)]
     sensors: Vec<SensorSpec>,
@@ -81,7 +84,7 @@ impl Scenario {
     /// Parses scenario text; `base` is the directory relative paths are resolved against (None: only
     /// bundled machines and inline truths are allowed).
     pub fn parse(text: &str, source: &Path, base: Option<&Path>) -> Result<Scenario, VmtError> {
-        let raw: RawScenario = toml::from_str(text).map_err(|e| {
+        let mut raw: RawScenario = toml::from_str(text).map_err(|e| {
             let place = e.span().map(|s| {
                 let (line, col) = crate::error::line_col(text, s.start);
                 format!("line {line}, column {col}")
@@ -92,6 +95,7 @@ impl Scenario {
         if raw.format != "vmt-scenario/1" {
             return Err(bad("format", format!("expected \"vmt-scenario/1\", got \"{}\"", raw.format)));
         }
+        raw.axis.fidelity = raw.fidelity;
         let base_dir = base.map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
         let machine = load_machine(&raw.machine, base, source)?;
         let axis_cfg = match raw.axes.as_deref() {

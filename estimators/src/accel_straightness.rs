@@ -90,11 +90,12 @@ fn positive(what: &str, value: f64) -> Result<f64> {
     }
 }
 
+/// Every sample finite; the name of the first bad one (`what[i]`) is formatted only on error.
 fn finite_slice(what: &str, xs: &[f64]) -> Result<()> {
-    for (i, &x) in xs.iter().enumerate() {
-        finite(&format!("{what}[{i}]"), x)?;
+    match xs.iter().position(|x| !x.is_finite()) {
+        Some(i) => finite(&format!("{what}[{i}]"), xs[i]).map(|_| ()),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 fn min_len(what: &str, xs: &[f64], n: usize) -> Result<()> {

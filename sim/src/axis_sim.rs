@@ -9,7 +9,7 @@ use crate::drive::{dead_zone_force, DriveConfig, FeedbackKind};
 use crate::feedback::FeedbackErrors;
 use crate::friction::{lugre_step, stick_slip_step, LugreParams, StepInput, StribeckParams};
 use crate::geometry::ErrorMotions;
-use crate::machine::AxisModel;
+use crate::machine::{AxisModel, Fidelity};
 use crate::motion::{Command, MotionPlan};
 use crate::profile::Profile;
 use crate::servo::{quantise, servo_update, ServoState};
@@ -157,12 +157,155 @@ struct Motor {
     u_dot: f64,
 }
 
+/// Kinematic state of the moving body at one instant, world frame: the body frame's pose, the centre of
+/// mass, and the velocity of the centre of mass and the angular velocity (m, m/s, rad/s).
+#[derive(Clone, Copy, Debug)]
+struct BodyState {
+    pose: Pose,
+    com: DVec3,
+    linvel: DVec3,
+    angvel: DVec3,
+}
+
+impl BodyState {
+    /// Velocity of a world point p attached to the body: v + ω × (p − c), m/s.
+    fn velocity_at_point(&self, p: DVec3) -> DVec3 {
+        self.linvel + self.angvel.cross(p - self.com)
+    }
+}
+
+/// The moving body in rapier3d-f64 (the reference engine): one body, no collider, no joint.
+struct RapierBody {
+    world: PhysicsWorld,
+    handle: RigidBodyHandle,
+}
+
+/// The moving body integrated by vmt itself ([`Fidelity::Fast`]): the update rapier performs for a
+/// dynamic body with no collider, joint or contact, written out (semi-implicit Euler, step dt):
+///
+/// ```text
+/// v ← v + (F + m·g)/m · dt                         F: sum of the applied forces, N
+/// ω ← ω + I_w⁻¹·τ · dt                             τ: their torque about the centre of mass c, N·m
+/// ω ← gyroscopic correction (explicit −ω×Iω·dt, |L| preserved; rapier's per-substep pass)
+/// q ← normalise((½ω·dt, 1) ⊗ q);  c ← c + v·dt    (linearised rotation, as rapier's integrator)
+/// ```
+///
+/// with I_w⁻¹ = R·diag(1/I_p)·Rᵀ, R = q ∘ (principal frame); the principal decomposition is rapier's
+/// (`MassProperties::with_inertia_matrix`), so both engines integrate the same numbers.
+#[derive(Clone, Debug)]
+struct FastBody {
+    mprops: MassProperties,
+    principal_inertia: DVec3,
+    /// Orientation (of the body frame) and centre of mass, world frame.
+    rot: DQuat,
+    com: DVec3,
+    linvel: DVec3,
+    angvel: DVec3,
+}
+
+impl FastBody {
+    fn step(&mut self, force: DVec3, torque: DVec3, dt: f64) {
+        let mp = &self.mprops;
+        self.linvel += (force + DVec3::new(0.0, 0.0, -GRAVITY) * (1.0 / mp.inv_mass)) * mp.inv_mass * dt;
+        self.angvel += mp.world_inv_inertia(&self.rot) * torque * dt;
+        // Gyroscopic correction in the principal frame, angular momentum magnitude preserved.
+        let axes = self.rot * mp.principal_inertia_local_frame;
+        let w = axes.inverse() * self.angvel;
+        let l = self.principal_inertia * w;
+        let l_new = l - w.cross(l) * dt;
+        let n2 = l_new.length_squared();
+        if n2 != 0.0 {
+            self.angvel = axes * (mp.inv_principal_inertia * (l_new * (l.length_squared() / n2).sqrt()));
+        }
+        let h = self.angvel * (dt * 0.5);
+        self.rot = (DQuat::from_xyzw(h.x, h.y, h.z, 1.0) * self.rot).normalize();
+        self.com += self.linvel * dt;
+    }
+
+    fn state(&self) -> BodyState {
+        let origin = self.com - self.rot * self.mprops.local_com;
+        BodyState {
+            pose: Pose::from_parts(origin, self.rot),
+            com: self.com,
+            linvel: self.linvel,
+            angvel: self.angvel,
+        }
+    }
+}
+
+/// The moving body, in the engine the model's [`Fidelity`] selects.
+enum Body {
+    Reference(Box<RapierBody>),
+    Fast(Box<FastBody>),
+}
+
+impl Body {
+    fn new(fidelity: Fidelity, dt: f64, start: Pose, mprops: MassProperties) -> Body {
+        match fidelity {
+            Fidelity::Reference => {
+                let mut world = PhysicsWorld::new();
+                world.gravity = DVec3::new(0.0, 0.0, -GRAVITY);
+                world.integration_parameters.dt = dt;
+                world.integration_parameters.num_solver_iterations = 1;
+                let rb = RigidBodyBuilder::dynamic().pose(start).additional_mass_properties(mprops).can_sleep(false).build();
+                let handle = world.bodies.insert(rb);
+                Body::Reference(Box::new(RapierBody { world, handle }))
+            }
+            Fidelity::Fast => Body::Fast(Box::new(FastBody {
+                principal_inertia: mprops.principal_inertia(),
+                rot: start.rotation,
+                com: start * mprops.local_com,
+                linvel: DVec3::ZERO,
+                angvel: DVec3::ZERO,
+                mprops,
+            })),
+        }
+    }
+
+    fn state(&self) -> BodyState {
+        match self {
+            Body::Reference(r) => {
+                let rb = &r.world.bodies[r.handle];
+                BodyState { pose: *rb.position(), com: rb.center_of_mass(), linvel: rb.linvel(), angvel: rb.angvel() }
+            }
+            Body::Fast(f) => f.state(),
+        }
+    }
+
+    /// Applies the force (N, at the centre of mass) and torque (N·m) for one step and advances dt;
+    /// the rapier body is accessed mutably once.
+    fn step(&mut self, force: DVec3, torque: DVec3, dt: f64) {
+        match self {
+            Body::Reference(r) => {
+                let rb = &mut r.world.bodies[r.handle];
+                rb.reset_forces(false);
+                rb.reset_torques(false);
+                rb.add_force(force, false);
+                rb.add_torque(torque, false);
+                r.world.step();
+            }
+            Body::Fast(f) => f.step(force, torque, dt),
+        }
+    }
+
+    /// Adds dv to the velocity of the centre of mass, m/s.
+    fn kick(&mut self, dv: DVec3) {
+        match self {
+            Body::Reference(r) => {
+                let rb = &mut r.world.bodies[r.handle];
+                let v = rb.linvel();
+                rb.set_linvel(v + dv, true);
+            }
+            Body::Fast(f) => f.linvel += dv,
+        }
+    }
+}
+
 /// The mutable state of a simulation run of one axis.
 pub struct AxisSim<'a> {
     model: &'a AxisModel,
     truth: &'a AxisTruth,
-    world: PhysicsWorld,
-    body: RigidBodyHandle,
+    body: Body,
     servo: ServoState,
     motor: Motor,
     /// LuGre bristle deflection, m.
@@ -190,26 +333,17 @@ impl<'a> AxisSim<'a> {
     /// time-dependent effects of the feedback chain (thermal expansion, thermal drift) are evaluated at
     /// session time session_start + t.
     pub fn in_session(model: &'a AxisModel, truth: &'a AxisTruth, x0: f64, session_start: f64) -> AxisSim<'a> {
-        let mut world = PhysicsWorld::new();
-        world.gravity = DVec3::new(0.0, 0.0, -GRAVITY);
-        world.integration_parameters.dt = model.dt;
-        world.integration_parameters.num_solver_iterations = 1;
         let ey = model.axis_rotation * DVec3::Y;
         let ez = model.axis_rotation * DVec3::Z;
         let x_act0 = x0 + truth.motions.positioning.value(x0) + truth.feedback.error(x0, session_start);
         let rest = model.rest_pose(&truth.motions, x0);
         let sag = -ez.z * model.mass * GRAVITY / (model.blocks.len() as f64 * model.k_z);
         let start = rest.translation + model.axis * (x_act0 - x0) + DVec3::new(0.0, 0.0, sag);
-        let rb = RigidBodyBuilder::dynamic()
-            .pose(Pose::from_parts(start, rest.rotation))
-            .additional_mass_properties(MassProperties::with_inertia_matrix(model.com, model.mass, model.inertia))
-            .can_sleep(false)
-            .build();
-        let body = world.bodies.insert(rb);
+        let mprops = MassProperties::with_inertia_matrix(model.com, model.mass, model.inertia);
+        let body = Body::new(model.fidelity, model.dt, Pose::from_parts(start, rest.rotation), mprops);
         let mut sim = AxisSim {
             model,
             truth,
-            world,
             body,
             servo: ServoState::default(),
             motor: Motor::default(),
@@ -229,8 +363,7 @@ impl<'a> AxisSim<'a> {
 
     /// Motor position that puts the screw unloaded against the nut at the current body position.
     fn motor_rest_position(&self) -> f64 {
-        let rb = &self.world.bodies[self.body];
-        let x = self.axis_coordinate(rb);
+        let x = self.axis_coordinate(&self.body.state().pose);
         match &self.model.drive {
             DriveConfig::BallScrew(b) if b.feedback == FeedbackKind::Rotary => {
                 // u + e(u) + lead(u) = x: one fixed-point pass is exact to second order in the errors.
@@ -244,9 +377,7 @@ impl<'a> AxisSim<'a> {
 
     /// Adds a velocity change to the body at its centre of mass (an impulse-hammer test), m/s.
     pub fn kick(&mut self, dv: DVec3) {
-        let rb = &mut self.world.bodies[self.body];
-        let v = rb.linvel();
-        rb.set_linvel(v + dv, true);
+        self.body.kick(dv);
     }
 
     /// Time of the current state, s.
@@ -255,8 +386,8 @@ impl<'a> AxisSim<'a> {
     }
 
     /// Actual axis coordinate of the reference point (m): axis · (origin − home).
-    fn axis_coordinate(&self, rb: &RigidBody) -> f64 {
-        self.model.axis.dot(rb.position().translation - self.model.home.translation)
+    fn axis_coordinate(&self, pose: &Pose) -> f64 {
+        self.model.axis.dot(pose.translation - self.model.home.translation)
     }
 
     /// Error of the positioning chain at x now: EXX(x) + feedback-chain error e(x, t), m.
@@ -269,12 +400,12 @@ impl<'a> AxisSim<'a> {
         x_actual - self.chain_error(x_actual)
     }
 
-    /// Position feedback before quantisation: the scale (linear motor, closed loop) or the motor
-    /// (semi-closed loop), plus the CNC's compensation c(x).
-    fn raw_feedback(&self, x_actual: f64) -> f64 {
+    /// Position feedback before quantisation, given the nominal position q of the table: the scale
+    /// (linear motor, closed loop) or the motor (semi-closed loop), plus the CNC's compensation c(x).
+    fn raw_feedback(&self, q: f64) -> f64 {
         let fb = match &self.model.drive {
             DriveConfig::BallScrew(b) if b.feedback == FeedbackKind::Rotary => self.motor.u,
-            _ => self.nominal(x_actual),
+            _ => q,
         };
         if self.model.compensation.is_zero() {
             fb
@@ -285,24 +416,26 @@ impl<'a> AxisSim<'a> {
 
     /// Current truth sample.
     pub fn sample(&self, cmd: Command) -> Sample {
-        let rb = &self.world.bodies[self.body];
-        let pose = rb.position();
-        let x = self.axis_coordinate(rb);
+        let st = self.body.state();
+        let pose = st.pose;
+        let q = self.nominal(self.axis_coordinate(&pose));
+        let res = self.model.servo.resolution;
+        let scale = quantise(q, res);
         Sample {
             t: self.time(),
             cmd,
-            feedback: quantise(self.raw_feedback(x), self.model.servo.resolution),
-            scale: quantise(self.nominal(x), self.model.servo.resolution),
+            feedback: quantise(self.raw_feedback(q), res),
+            scale,
             motor: match self.model.drive {
-                DriveConfig::LinearMotor => quantise(self.nominal(x), self.model.servo.resolution),
-                DriveConfig::BallScrew(_) => quantise(self.motor.u, self.model.servo.resolution),
+                DriveConfig::LinearMotor => scale,
+                DriveConfig::BallScrew(_) => quantise(self.motor.u, res),
             },
             force: self.servo.force,
             friction: self.friction_force,
             pos: pose.translation,
             rot: (pose.rotation * self.model.home.rotation.inverse()).to_scaled_axis(),
-            vel: rb.velocity_at_point(pose.translation),
-            angvel: rb.angvel(),
+            vel: st.velocity_at_point(pose.translation),
+            angvel: st.angvel,
             mode: self.mode.0,
             mode_vel: self.mode.1,
         }
@@ -312,14 +445,13 @@ impl<'a> AxisSim<'a> {
     pub fn step(&mut self, cmd: Command) {
         let m = self.model;
         let ts = m.dt * m.servo_steps as f64;
-        let (x_act, q_dot, pose) = {
-            let rb = &self.world.bodies[self.body];
-            let p = *rb.position();
-            (self.axis_coordinate(rb), m.axis.dot(rb.velocity_at_point(p.translation)), p)
-        };
+        let st = self.body.state();
+        let pose = st.pose;
+        let x_act = self.axis_coordinate(&pose);
+        let q_dot = m.axis.dot(st.velocity_at_point(pose.translation));
         let q = self.nominal(x_act);
         if self.steps % m.servo_steps as u64 == 0 {
-            let fb = quantise(self.raw_feedback(x_act), m.servo.resolution);
+            let fb = quantise(self.raw_feedback(q), m.servo.resolution);
             // Velocity loop on the motor encoder for a ball screw, on the scale for a linear motor.
             let (vel_fb, mass) = match &m.drive {
                 DriveConfig::BallScrew(b) => (quantise(self.motor.u, m.servo.resolution), m.mass + b.rotor_mass()),
@@ -327,9 +459,10 @@ impl<'a> AxisSim<'a> {
             };
             servo_update(&m.servo, &mut self.servo, mass, ts, cmd.pos, cmd.vel, cmd.acc, fb, vel_fb);
         }
-        let rest = m.rest_pose(&self.truth.motions, q);
-        let (de, deps) = self.truth.motions.slope(q);
-        let (de, deps) = (m.axis_rotation * de, m.axis_rotation * deps);
+        // Every error motion evaluated once per step: value (rest pose) and slope (its velocity).
+        let at = self.truth.motions.at(q);
+        let rest = m.rest_pose_at(&at, q);
+        let (de, deps) = (m.axis_rotation * at.translation_slope, m.axis_rotation * at.rotation_slope);
         // Drive force on the body at the nut, and the motor's own motion.
         let f_drive = match &m.drive {
             DriveConfig::LinearMotor => self.servo.force,
@@ -363,29 +496,31 @@ impl<'a> AxisSim<'a> {
             },
         };
         self.friction_force = f_friction;
-        let rb = &mut self.world.bodies[self.body];
-        rb.reset_forces(false);
-        rb.reset_torques(false);
+        // Sum of the forces and their torque about the centre of mass.
+        let (mut force, mut torque) = (DVec3::ZERO, DVec3::ZERO);
+        let mut add = |f: DVec3, p: DVec3| {
+            force += f;
+            torque += (p - st.com).cross(f);
+        };
         for b in &m.blocks {
             let p = pose.transform_point(*b);
             let rb_rest = rest.rotation * *b;
             let d = p - (rest.translation + rb_rest);
             let v_rest = q_dot * (m.axis + de + deps.cross(rb_rest));
-            let dv = rb.velocity_at_point(p) - v_rest;
+            let dv = st.velocity_at_point(p) - v_rest;
             let f = -(m.k_y * d.dot(self.ey) + m.c_y * dv.dot(self.ey)) * self.ey
                 - (m.k_z * d.dot(self.ez) + m.c_z * dv.dot(self.ez)) * self.ez;
-            rb.add_force_at_point(f, p, false);
+            add(f, p);
         }
-        let nut = pose.transform_point(m.nut);
-        rb.add_force_at_point(m.axis * f_axis, nut, false);
+        add(m.axis * f_axis, pose.transform_point(m.nut));
         // Guideway friction acts in the plane of the bearing blocks, at the reference point.
-        rb.add_force_at_point(m.axis * f_friction, pose.translation, false);
-        self.world.step();
+        add(m.axis * f_friction, pose.translation);
+        self.body.step(force, torque, m.dt);
         self.steps += 1;
         if let Some(md) = &self.truth.mode {
             // Base excitation from the reference point's acceleration over the step; semi-implicit Euler.
-            let rb = &self.world.bodies[self.body];
-            let v = rb.velocity_at_point(rb.position().translation);
+            let st = self.body.state();
+            let v = st.velocity_at_point(st.pose.translation);
             let a_base = self.last_vel.map_or(DVec3::ZERO, |v0| (v - v0) / m.dt);
             self.last_vel = Some(v);
             let w = std::f64::consts::TAU * md.frequency;

@@ -59,10 +59,43 @@ impl ErrorMotions {
         )
     }
 
+    /// Value and slope of all six error motions at x, each profile evaluated once: what one physics
+    /// step needs (the guideway rest pose and its velocity, DESIGN.md §4).
+    pub fn at(&self, x: f64) -> MotionsAt {
+        let ev = |p: &Profile| p.eval3(x);
+        let [px, py, pz, rx, ry, rz] = [
+            ev(&self.positioning),
+            ev(&self.straightness_y),
+            ev(&self.straightness_z),
+            ev(&self.roll),
+            ev(&self.pitch),
+            ev(&self.yaw),
+        ];
+        MotionsAt {
+            translation: DVec3::new(px[0], py[0], pz[0]),
+            rotation: DVec3::new(rx[0], ry[0], rz[0]),
+            translation_slope: DVec3::new(px[1], py[1], pz[1]),
+            rotation_slope: DVec3::new(rx[1], ry[1], rz[1]),
+        }
+    }
+
     /// The profile of an error motion by its ISO 230-1 index: 0..6 = EXX, EYX, EZX, EAX, EBX, ECX.
     pub fn by_index(&self, i: usize) -> &Profile {
         [&self.positioning, &self.straightness_y, &self.straightness_z, &self.roll, &self.pitch, &self.yaw][i]
     }
+}
+
+/// The six error motions and their slopes at one axis position (axis frame).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MotionsAt {
+    /// [EXX, EYX, EZX], m.
+    pub translation: DVec3,
+    /// [EAX, EBX, ECX], rad.
+    pub rotation: DVec3,
+    /// d/dx of the translation, m/m.
+    pub translation_slope: DVec3,
+    /// d/dx of the rotation, rad/m.
+    pub rotation_slope: DVec3,
 }
 
 /// Effect names of the six error motions, in ISO index order (FORMAT.md §2).

@@ -3,7 +3,7 @@
 //! Like MuJoCo's mjModel: built once, never changed by a run; the run's state lives in `axis_sim`.
 
 use crate::drive::DriveConfig;
-use crate::geometry::ErrorMotions;
+use crate::geometry::{ErrorMotions, MotionsAt};
 use crate::servo::ServoConfig;
 use crate::urdf::{Frame, MachineStructure};
 use rapier3d_f64::glamx::{DQuat, DVec3};
@@ -45,6 +45,9 @@ pub struct AxisConfig {
     pub max_accel: f64,
     /// Physics time step, s.
     pub dt: f64,
+    /// Integrator of the moving body: set from the scenario's top-level `fidelity` key.
+    #[serde(skip)]
+    pub fidelity: Fidelity,
 }
 
 impl Default for AxisConfig {
@@ -58,8 +61,21 @@ impl Default for AxisConfig {
             max_feed: 0.5,
             max_accel: 2.0,
             dt: 1e-4,
+            fidelity: Fidelity::default(),
         }
     }
+}
+
+/// Which integrator advances the moving body (DESIGN.md §4 "multi-fidelity"; scenario key `fidelity`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Fidelity {
+    /// rapier3d-f64: the reference engine.
+    Reference,
+    /// vmt's own semi-implicit Euler of the same rigid body (the update rapier performs for a body
+    /// with no collider, joint or contact), held to the reference by `tests/fidelity.rs`.
+    #[default]
+    Fast,
 }
 
 /// Why an axis model could not be built.
@@ -101,6 +117,8 @@ pub struct AxisModel {
     pub max_feed: f64,
     pub max_accel: f64,
     pub dt: f64,
+    /// Integrator of the moving body.
+    pub fidelity: Fidelity,
     /// Servo period in physics steps.
     pub servo_steps: usize,
     /// Links of the moving body (name, placement in the body frame), for sensor mounting.
@@ -217,6 +235,7 @@ impl AxisModel {
             max_feed: if ax.velocity > 0.0 { cfg.max_feed.min(ax.velocity) } else { cfg.max_feed },
             max_accel: cfg.max_accel,
             dt: cfg.dt,
+            fidelity: cfg.fidelity,
             servo_steps,
             links: body.links.clone(),
             compensation: crate::profile::Profile::zero(),
@@ -236,8 +255,13 @@ impl AxisModel {
     /// Rest pose of the body frame at axis position x with the error motions applied (first order):
     /// translation home + axis·x + R_a·E(x), rotation (R_a·ε(x)) ∘ home rotation.
     pub fn rest_pose(&self, errors: &ErrorMotions, x: f64) -> Frame {
-        let e = self.axis_rotation * errors.translation(x);
-        let eps = self.axis_rotation * errors.rotation(x);
+        self.rest_pose_at(&errors.at(x), x)
+    }
+
+    /// As [`AxisModel::rest_pose`], from error motions already evaluated at x.
+    pub fn rest_pose_at(&self, at: &MotionsAt, x: f64) -> Frame {
+        let e = self.axis_rotation * at.translation;
+        let eps = self.axis_rotation * at.rotation;
         Frame {
             translation: self.home.translation + self.axis * x + e,
             rotation: DQuat::from_scaled_axis(eps) * self.home.rotation,
