@@ -26,7 +26,7 @@ struct RawScenario {
     machine: String,
     #[serde(default)]
     axis: AxisConfig,
-    /// Integrator of the moving bodies: "fast" (default) or "reference" (rapier3d-f64).
+    /// Integrator of the moving bodies: "reference" (rapier3d-f64, default) or "fast".
     #[serde(default)]
     fidelity: Fidelity,
     truth: toml::Value,

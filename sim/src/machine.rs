@@ -70,11 +70,12 @@ impl Default for AxisConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Fidelity {
-    /// rapier3d-f64: the reference engine.
+    /// rapier3d-f64: the reference engine (the default until `tests/fidelity.rs` has been seen to
+    /// pass on every bundled scenario; then the faster `Fast` becomes the default).
+    #[default]
     Reference,
     /// vmt's own semi-implicit Euler of the same rigid body (the update rapier performs for a body
     /// with no collider, joint or contact), held to the reference by `tests/fidelity.rs`.
-    #[default]
     Fast,
 }
 
