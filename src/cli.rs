@@ -230,7 +230,7 @@ pub fn parse_shard(s: &str, env: &dyn Fn(&str) -> Option<String>) -> Result<(usi
     let num = |v: &str, what: &str| v.trim().parse::<usize>().map_err(|_| usage(format!("{what} must be a whole number, got `{v}`")));
     let (i, n) = s.split_once('/').map_or((s, None), |(i, n)| (i, Some(n)));
     let (i, n) = if i == "auto" {
-        let (var, first, min_var) = ARRAY_INDEX.iter().find(|(v, ..)| env(v).is_some()).ok_or_else(|| {
+        let (var, first, min_var) = *ARRAY_INDEX.iter().find(|e| env(e.0).is_some()).ok_or_else(|| {
             usage(format!(
                 "no job-array index in the environment (looked for {})",
                 ARRAY_INDEX.iter().map(|v| v.0).collect::<Vec<_>>().join(", ")
@@ -238,14 +238,14 @@ pub fn parse_shard(s: &str, env: &dyn Fn(&str) -> Option<String>) -> Result<(usi
         })?;
         let first = match min_var.and_then(|m| env(m).map(|v| (m, v))) {
             Some((m, v)) => num(&v, m)?,
-            None => *first,
+            None => first,
         };
         let raw = num(&env(var).unwrap_or_default(), var)?;
         let i = raw.checked_sub(first).ok_or_else(|| usage(format!("{var} = {raw} is below the first index {first}")))?;
         let n = match n {
             Some(n) => num(n, "n")?,
             None => {
-                let (cvar, c) = ARRAY_COUNT.iter().find_map(|c| env(c).map(|v| (*c, v))).ok_or_else(|| {
+                let (cvar, c) = ARRAY_COUNT.iter().find_map(|&c| env(c).map(|v| (c, v))).ok_or_else(|| {
                     usage(format!("{var} is set but the scheduler exports no array size: use --shard auto/N"))
                 })?;
                 num(&c, cvar)?
