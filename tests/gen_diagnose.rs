@@ -275,6 +275,32 @@ fn rel(a: f64, b: f64) -> f64 {
     ((a - b) / b).abs()
 }
 
+/// Effects no data set of one axis can tell apart from hidden effect `e`, physically: a thermal
+/// expansion that settled before the test (τ short against the reading interval) is α·ΔT∞·x, a
+/// scale error. For these an `inseparable` verdict naming only them counts as naming `e`.
+fn physically_equivalent(e: Effect) -> &'static [&'static str] {
+    match e {
+        Effect::ScaleError => &["thermal_expansion"],
+        Effect::Backlash
+        | Effect::CyclicLead
+        | Effect::ThermalExpansion
+        | Effect::ThermalDrift
+        | Effect::Pitch
+        | Effect::Yaw
+        | Effect::Stribeck
+        | Effect::Viscous => &[],
+    }
+}
+
+/// The ranking entry names a hidden effect as `inseparable` only from its physical equivalents.
+fn equivalent_inseparable(d: &Draw, entry: &Value) -> bool {
+    let Some(h) = d.hidden.iter().find(|h| entry["effect"] == h.name()) else { return false };
+    let eq = physically_equivalent(*h);
+    entry["verdict"] == "inseparable"
+        && !eq.is_empty()
+        && entry["confused_with"].as_array().is_some_and(|c| c.iter().all(|n| eq.iter().any(|e| n == e)))
+}
+
 /// Follow the advice: diagnose, add the first-ranked significant effect, once per hidden effect;
 /// then compare and diagnose the final model.
 fn follow_loop(d: &Draw, dir: &Path) -> Result<LoopOutcome, String> {
@@ -284,7 +310,7 @@ fn follow_loop(d: &Draw, dir: &Path) -> Result<LoopOutcome, String> {
         let diag = diagnose(dir, &model)?;
         let top = &diag["ranking"][0];
         let eff = top["effect"].as_str().unwrap_or("").to_string();
-        let sig = top["verdict"] == "significant";
+        let sig = top["verdict"] == "significant" || equivalent_inseparable(d, top);
         if step == 0 {
             out.first = format!("{eff} ({})", top["verdict"].as_str().unwrap_or("?"));
             out.named_first = sig && d.hidden.iter().any(|h| h.name() == eff);
@@ -351,6 +377,11 @@ fn hidden_families() -> Vec<Family> {
 
 /// Hidden effects: per family, named first and significant, NRMS ≤ 1.3 after `add`, parameter
 /// errors ≤ 10 %. Issue 11: each rate ≥ 95 % over ≥ 30 draws (30 per family by default).
+/// "Named first": the first-ranked entry is a hidden effect with verdict `significant`, or
+/// `inseparable` from its physical equivalents only ([`physically_equivalent`]: a scale error from
+/// a settled thermal expansion). The loop then adds that entry (`vmt add --from-diagnosis`), once
+/// per hidden effect, following the first-ranked significant entry each time (a wrong add is
+/// counted). `VMT_GEN_FAMILY=LABEL[,LABEL]` restricts the run to some families.
 #[test]
 #[ignore = "issue 11: enable when diagnose meets it"]
 fn hidden_effects_are_named_first_and_adding_them_reaches_the_noise() {
@@ -360,7 +391,9 @@ fn hidden_effects_are_named_first_and_adding_them_reaches_the_noise() {
         "{:<38} {:>14} {:>14} {:>14} {:>12}  parameter errors ≤ 10 % (median rel. error)",
         "family", "named first", "NRMS≤1.3", "wrong adds", "new claims"
     );
-    for fam in hidden_families() {
+    let only: Option<Vec<String>> =
+        std::env::var("VMT_GEN_FAMILY").ok().map(|v| v.split(',').map(|s| s.trim().to_string()).collect());
+    for fam in hidden_families().into_iter().filter(|f| only.as_ref().is_none_or(|o| o.contains(&f.label()))) {
         let res = over_draws(&fam, n, follow_loop);
         let total = res.len();
         let mut first = 0;

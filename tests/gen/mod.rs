@@ -429,11 +429,16 @@ fn table_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64) -> Draw {
     };
     let (x_lo, x_hi) = (all_targets[0], all_targets[all_targets.len() - 1]);
 
+    // Scale error: separable from a fitted positioning profile only if the profile is known (a
+    // compensation table from an earlier calibration): then the model is told it. Its laser is on
+    // the scale's line (y = z = 0, Abbe-free as ISO 230-2 recommends): at an Abbe offset an
+    // unmodelled pitch or yaw of the carriage would give the same slope (z·EBX = k·x), and no
+    // method could tell them apart.
+    let want_scale = hides(Effect::ScaleError) || (complete && rng.gen_bool(0.1));
     // Sensors: one laser, or two at different heights (pitch) or lateral offsets (yaw).
-    let want_pitch = hides(Effect::Pitch) || (complete && rng.gen_bool(0.25));
-    let want_yaw = !want_pitch && (hides(Effect::Yaw) || (complete && rng.gen_bool(0.15)));
-    let y0 = rng.gen_range(-0.1..0.1);
-    let z0 = rng.gen_range(0.05..0.3);
+    let want_pitch = !want_scale && (hides(Effect::Pitch) || (complete && rng.gen_bool(0.25)));
+    let want_yaw = !want_scale && !want_pitch && (hides(Effect::Yaw) || (complete && rng.gen_bool(0.15)));
+    let (y0, z0) = if want_scale { (0.0, 0.0) } else { (rng.gen_range(-0.1..0.1), rng.gen_range(0.05..0.3)) };
     let mut lasers = vec![Laser { name: "laser_a".into(), y: y0, z: z0 }];
     if want_pitch {
         lasers.push(Laser { name: "laser_b".into(), y: y0, z: z0 + rng.gen_range(0.1..0.4) });
@@ -445,9 +450,6 @@ fn table_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64) -> Draw {
     }
     truth.positioning = Some({ let a = rng.gen_range(5e-6..50e-6); Profile::random(rng, x_lo, x_hi, a) });
 
-    // Scale error: separable from a fitted positioning profile only if the profile is known (a
-    // compensation table from an earlier calibration): then the model is told it.
-    let want_scale = hides(Effect::ScaleError) || (complete && rng.gen_bool(0.1));
     if want_scale {
         let k = rng.gen_range(5e-6..100e-6) * if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
         truth.scale = Some(k);
