@@ -90,16 +90,7 @@ impl Effect {
     ];
 
     fn is_friction(self) -> bool {
-        match self {
-            Effect::Stribeck | Effect::Viscous => true,
-            Effect::Backlash
-            | Effect::CyclicLead
-            | Effect::ScaleError
-            | Effect::ThermalExpansion
-            | Effect::ThermalDrift
-            | Effect::Pitch
-            | Effect::Yaw => false,
-        }
+        matches!(self, Effect::Stribeck | Effect::Viscous)
     }
 }
 
@@ -227,7 +218,10 @@ impl Friction {
     /// F(v) = o + Fc·sgn v + Fv·v + (Fs − Fc)·sgn v·exp(−|v/vs|^δ), N.
     pub fn force(&self, v: f64) -> f64 {
         let s = v.signum();
-        self.offset + self.fc * s + self.fv * v + (self.fs - self.fc) * s * (-(v / self.vs).abs().powf(self.shape)).exp()
+        self.offset
+            + self.fc * s
+            + self.fv * v
+            + (self.fs - self.fc) * s * (-(v / self.vs).abs().powf(self.shape)).exp()
     }
 }
 
@@ -349,7 +343,9 @@ pub fn draw(family: &Family, index: u64) -> Draw {
     match family {
         Family::CompleteFriction => friction_draw(&mut rng, family, index, &[]),
         Family::Hidden(h) if h.iter().all(|e| e.is_friction()) => friction_draw(&mut rng, family, index, h),
-        Family::CompletePointTable | Family::Hidden(_) | Family::UnresolvedCyclic => table_draw(&mut rng, family, index),
+        Family::CompletePointTable | Family::Hidden(_) | Family::UnresolvedCyclic => {
+            table_draw(&mut rng, family, index)
+        }
     }
 }
 
@@ -442,13 +438,22 @@ fn table_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64) -> Draw {
     let mut lasers = vec![Laser { name: "laser_a".into(), y: y0, z: z0 }];
     if want_pitch {
         lasers.push(Laser { name: "laser_b".into(), y: y0, z: z0 + rng.gen_range(0.1..0.4) });
-        truth.pitch = Some({ let a = rng.gen_range(5e-6..40e-6); Profile::random(rng, x_lo, x_hi, a) });
+        truth.pitch = Some({
+            let a = rng.gen_range(5e-6..40e-6);
+            Profile::random(rng, x_lo, x_hi, a)
+        });
     }
     if want_yaw {
         lasers.push(Laser { name: "laser_b".into(), y: y0 + rng.gen_range(0.1..0.4), z: z0 });
-        truth.yaw = Some({ let a = rng.gen_range(5e-6..40e-6); Profile::random(rng, x_lo, x_hi, a) });
+        truth.yaw = Some({
+            let a = rng.gen_range(5e-6..40e-6);
+            Profile::random(rng, x_lo, x_hi, a)
+        });
     }
-    truth.positioning = Some({ let a = rng.gen_range(5e-6..50e-6); Profile::random(rng, x_lo, x_hi, a) });
+    truth.positioning = Some({
+        let a = rng.gen_range(5e-6..50e-6);
+        Profile::random(rng, x_lo, x_hi, a)
+    });
 
     if want_scale {
         let k = rng.gen_range(5e-6..100e-6) * if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
@@ -466,7 +471,8 @@ fn table_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64) -> Draw {
     let has_t = want_expansion || want_drift || rng.gen_bool(0.5);
     let dt = rng.gen_range(3.0..10.0);
     let cycles_main = draw_cycles(rng, main.len());
-    let mut blocks = vec![Block { name: "iso".into(), targets: std::mem::take(&mut main), cycles: cycles_main, start_time: 0.0 }];
+    let mut blocks =
+        vec![Block { name: "iso".into(), targets: std::mem::take(&mut main), cycles: cycles_main, start_time: 0.0 }];
     let dur = |b: &Block| 2.0 * b.targets.len() as f64 * b.cycles as f64 * dt;
     if let Some(d) = dense_block {
         let cycles = rng.gen_range(2..=3);
@@ -493,7 +499,7 @@ fn table_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64) -> Draw {
     // Noise: σ 0.05–1 µm (log-uniform), capped for hidden effects at signature/MIN_SNR.
     let mut sigma = log_uniform(rng, 0.05e-6, 1e-6);
     for e in &hidden {
-        let sig = signature(&truth, *e, &lasers, x_lo, x_hi, t_end);
+        let sig = signature(&truth, *e, &lasers, &Reach { x_lo, x_hi, t_end, v_max: 0.0 });
         if !unresolved {
             sigma = sigma.min(sig / MIN_SNR);
         }
@@ -617,8 +623,19 @@ fn reading(tr: &Truth, l: &Laser, x: f64, d: f64, t: f64) -> f64 {
     y
 }
 
-/// Peak signature of effect `e` in the readings, m: what a method has to see above the noise.
-fn signature(tr: &Truth, e: Effect, lasers: &[Laser], x_lo: f64, x_hi: f64, t_end: f64) -> f64 {
+/// What a data set spans: positions (m), the session's end (s), the fastest feed (m/s).
+#[derive(Clone, Copy)]
+struct Reach {
+    x_lo: f64,
+    x_hi: f64,
+    t_end: f64,
+    v_max: f64,
+}
+
+/// Peak signature of effect `e` in the readings (m for lasers, N for the motor force): what a
+/// method has to see above the noise.
+fn signature(tr: &Truth, e: Effect, lasers: &[Laser], r: &Reach) -> f64 {
+    let Reach { x_lo, x_hi, t_end, v_max } = *r;
     let arm = |f: &dyn Fn(&Laser) -> f64| {
         let v: Vec<f64> = lasers.iter().map(f).collect();
         v.iter().cloned().fold(f64::NEG_INFINITY, f64::max) - v.iter().cloned().fold(f64::INFINITY, f64::min)
@@ -631,11 +648,14 @@ fn signature(tr: &Truth, e: Effect, lasers: &[Laser], x_lo: f64, x_hi: f64, t_en
         Effect::Backlash => tr.backlash.unwrap_or(0.0) / 2.0,
         Effect::CyclicLead => tr.cyclic.map_or(0.0, |c| c.1),
         Effect::ScaleError => tr.scale.map_or(0.0, |k| k.abs() * (x_hi - x_lo) / 2.0),
-        Effect::ThermalExpansion => tr.expansion.map_or(0.0, |(a, dt, tau)| a * dt * x_hi * (1.0 - (-t_end / tau).exp()) / 2.0),
+        Effect::ThermalExpansion => {
+            tr.expansion.map_or(0.0, |(a, dt, tau)| a * dt * x_hi * (1.0 - (-t_end / tau).exp()) / 2.0)
+        }
         Effect::ThermalDrift => tr.drift.map_or(0.0, |(v, tau)| v.abs() * (1.0 - (-t_end / tau).exp()) / 2.0),
         Effect::Pitch => tr.pitch.as_ref().map_or(0.0, |p| p2p(p) * arm(&|l| l.z) / 2.0),
         Effect::Yaw => tr.yaw.as_ref().map_or(0.0, |p| p2p(p) * arm(&|l| l.y) / 2.0),
-        Effect::Stribeck | Effect::Viscous => 0.0,
+        Effect::Stribeck => tr.friction.map_or(0.0, |f| f.fs - f.fc),
+        Effect::Viscous => tr.friction.map_or(0.0, |f| f.fv * v_max),
     }
 }
 
@@ -736,19 +756,9 @@ fn friction_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64, hidden: &[Ef
     let v_max = log_uniform(rng, 0.05, 0.3);
     let rate = rng.gen_range(200.0..1000.0);
     let mut sigma = rng.gen_range(0.5..5.0);
+    let tr = Truth { friction: Some(f), ..Truth::default() };
     for e in hidden {
-        let sig = match e {
-            Effect::Stribeck => f.fs - f.fc,
-            Effect::Viscous => f.fv * v_max,
-            Effect::Backlash
-            | Effect::CyclicLead
-            | Effect::ScaleError
-            | Effect::ThermalExpansion
-            | Effect::ThermalDrift
-            | Effect::Pitch
-            | Effect::Yaw => unreachable!("not a friction effect"),
-        };
-        sigma = f64::min(sigma, sig / MIN_SNR);
+        sigma = f64::min(sigma, signature(&tr, *e, &[], &Reach { x_lo: 0.0, x_hi: 0.0, t_end: 0.0, v_max }) / MIN_SNR);
     }
     let stated = sigma_stated(rng);
     let noise = Normal::new(0.0, sigma).unwrap();
@@ -814,7 +824,7 @@ fn friction_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64, hidden: &[Ef
         family: family.clone(),
         index,
         hidden: hidden.to_vec(),
-        truth: Truth { friction: Some(f), ..Truth::default() },
+        truth: tr,
         layout: None,
         sigma_true: sigma,
         sigma_stated: stated,
