@@ -221,6 +221,8 @@ fn complete_models_have_at_most_2_percent_false_alarms() {
     let mut errors = Vec::new();
     let mut total = 0;
     let mut by_effect: std::collections::BTreeMap<String, usize> = Default::default();
+    // (alarms, draws) by layout and by how the manifest states σ.
+    let mut by_kind: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
     let mut lines = Vec::new();
     for (fam, n) in [(Family::CompletePointTable, n_table), (Family::CompleteFriction, n_fric)] {
         for (d, r) in over_draws(&fam, n, |_, dir| diagnose(dir, "complete.toml")) {
@@ -229,6 +231,12 @@ fn complete_models_have_at_most_2_percent_false_alarms() {
                 Err(e) => errors.push(format!("{}: {e}", d.describe())),
                 Ok(diag) => {
                     let c = claims(&diag);
+                    let layout = d.layout.map_or("friction sweep".to_string(), |l| format!("layout {l:?}"));
+                    for k in [layout, format!("σ {:?}", d.sigma_stated)] {
+                        let e = by_kind.entry(k).or_default();
+                        e.0 += usize::from(!c.is_empty());
+                        e.1 += 1;
+                    }
                     if !c.is_empty() {
                         alarms += 1;
                         for cl in &c {
@@ -247,6 +255,9 @@ fn complete_models_have_at_most_2_percent_false_alarms() {
     eprintln!("{}", lines.join("\n"));
     eprintln!("false alarms (any `significant` claim): {} complete models", rate(alarms, total));
     eprintln!("  claims by effect (significant entries): {by_effect:?}");
+    for (k, (a, n)) in &by_kind {
+        eprintln!("  false alarms, {k}: {}", rate(*a, *n));
+    }
     eprintln!("  command failures: {}", rate(errors.len(), total));
     for e in &errors {
         eprintln!("  {e}");
