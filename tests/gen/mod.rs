@@ -257,7 +257,7 @@ pub struct Draw {
     /// True per-reading noise σ (m for lasers, N for the motor force).
     pub sigma_true: f64,
     pub sigma_stated: SigmaStated,
-    /// Minimum spacing of the targets, m (point tables).
+    /// Minimum spacing of the targets within a `[[runs]]` block, m (point tables).
     pub min_spacing: f64,
     /// Readings per (run, sensor) channel.
     pub channel_counts: Vec<((String, String), usize)>,
@@ -577,7 +577,8 @@ fn table_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64) -> Draw {
     data_files.insert(0, ("manifest.toml".into(), manifest));
 
     let model_files = table_models(&truth, &all_targets, &hidden);
-    let min_spacing = spacing(&all_targets);
+    // Within each block (blocks may interleave: their targets are not one layout).
+    let min_spacing = blocks.iter().map(|b| spacing(&b.targets)).fold(f64::INFINITY, f64::min);
     Draw {
         family: family.clone(),
         index,
