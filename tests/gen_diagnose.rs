@@ -282,7 +282,8 @@ struct LoopOutcome {
     params: Vec<(String, f64)>,
     /// Effects added by following the advice that are not hidden.
     wrong_adds: Vec<String>,
-    /// Significant claims on the final model (after a correct loop it is complete).
+    /// Significant claims on the final model when the loop added exactly the hidden effects (the
+    /// model is then complete: any claim is a false alarm).
     final_claims: Vec<String>,
 }
 
@@ -321,6 +322,7 @@ fn equivalent_inseparable(d: &Draw, entry: &Value) -> bool {
 fn follow_loop(d: &Draw, dir: &Path) -> Result<LoopOutcome, String> {
     let mut out = LoopOutcome::default();
     let mut model = "start.toml".to_string();
+    let mut added = 0;
     for step in 0..d.hidden.len() {
         let diag = diagnose(dir, &model)?;
         let top = &diag["ranking"][0];
@@ -338,6 +340,7 @@ fn follow_loop(d: &Draw, dir: &Path) -> Result<LoopOutcome, String> {
         }
         let next = format!("m{}.toml", step + 1);
         add(dir, &model, &eff, &next)?;
+        added += 1;
         model = next;
     }
     let c = compare(dir, &model)?;
@@ -371,7 +374,8 @@ fn follow_loop(d: &Draw, dir: &Path) -> Result<LoopOutcome, String> {
             Effect::Viscous => push("viscous fv", get("viscous", "fv"), tr.friction.unwrap().fv),
         }
     }
-    if out.wrong_adds.is_empty() && d.hidden.len() == 1 {
+    // Every hidden effect added and nothing else: the model is now complete.
+    if out.wrong_adds.is_empty() && added == d.hidden.len() {
         out.final_claims = claims(&diagnose(dir, &model)?).iter().map(ToString::to_string).collect();
     }
     Ok(out)
@@ -403,6 +407,13 @@ fn hidden_families() -> Vec<Family> {
 fn hidden_effects_are_named_first_and_adding_them_reaches_the_noise() {
     let n = draws_for(30);
     let mut failures = Vec::new();
+    eprintln!(
+        "Columns, as draws out of the family's count: named first = first-ranked entry is hidden and \
+         significant; NRMS≤1.3 = residual RMS / true σ after the adds; wrong adds = following the advice \
+         added an effect that was not hidden; new claims = the model the loop made complete gets a \
+         significant claim; parameter errors = draws within 10 % of the truth (median relative error; \
+         inf: the effect was never added)."
+    );
     eprintln!(
         "{:<38} {:>14} {:>14} {:>14} {:>12}  parameter errors ≤ 10 % (median rel. error)",
         "family", "named first", "NRMS≤1.3", "wrong adds", "new claims"
