@@ -394,19 +394,24 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     let names = candidate_names(model, &f.st);
     // Periodic candidates these positions cannot resolve: not searched, listed with a note.
     let mut unresolved: Vec<EffectName> = Vec::new();
+    let mut restricted: Option<String> = None;
     for n in [EffectName::CyclicLead, EffectName::InterpolationError] {
         if !names.contains(&n) && model.get(n, model.axis).is_none() && !f.st.chans.is_empty() {
             let sh = candidate_shape(&f.st, n, false);
-            if sh.hypers.first() == Some(&"period") && hyper_grid(&f.st, n, "period").0.is_empty() {
+            // Not visible: no period of its range resolvable, or the waves vanish on these positions.
+            // A cyclic lead acts on the drive, an interpolation error on the feedback chain.
+            let sees = |c: &Channel| if n == EffectName::CyclicLead { c.s_drive() } else { c.s_chain() } != 0.0;
+            if sh.hypers.first() == Some(&"period") && f.st.chans.iter().any(sees) {
                 unresolved.push(n);
             }
         } else if names.contains(&n) && n == EffectName::CyclicLead {
             if let Some(p) = shortest_resolvable_period(&f.st).filter(|p| *p > 2e-3) {
-                notes.push(format!(
+                restricted = Some(format!(
                     "cyclic_lead searched only at periods ≥ {} mm, the shortest these sample positions resolve \
                      (twice the gap between neighbouring targets); a shorter lead needs targets every ≤ P/3 over a period",
                     fmt_num(p * 1e3)
                 ));
+                notes.extend(restricted.clone());
             }
         }
     }
@@ -472,6 +477,10 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             list.join(", ")
         ));
         r.aliases = aliases;
+    }
+    // The cyclic-lead entry says which periods were not searched (and why), unless it has a note.
+    if let Some(r) = ranking.iter_mut().find(|r| r.effect == EffectName::CyclicLead.as_str() && r.note.is_none()) {
+        r.note = restricted;
     }
     for n in unresolved {
         let note = unresolved_period_note(&f.st, n);
