@@ -449,8 +449,10 @@ fn fit_prepared(
     })
 }
 
-/// Golden-section search for the maximum of `f` on [lo, hi]; returns (x, f(x)) of the best point.
-fn golden_max(f: &mut impl FnMut(f64) -> f64, lo: f64, hi: f64, iters: usize) -> (f64, f64) {
+/// Golden-section search for the maximum of `f` on [lo, hi] (Kiefer 1953; ratio (√5 − 1)/2, one
+/// new evaluation per iteration, at most `iters`); returns (x, f(x)) of the best point evaluated.
+/// The one line search of the model-check loop (`vmt::modelcheck` uses it on log scales).
+pub fn golden_max(f: &mut impl FnMut(f64) -> f64, lo: f64, hi: f64, iters: usize) -> (f64, f64) {
     let gr = (5f64.sqrt() - 1.0) / 2.0;
     let (mut a, mut b) = (lo, hi);
     let mut c = b - gr * (b - a);
