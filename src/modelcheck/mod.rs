@@ -104,6 +104,7 @@ const ALPHA_STEEL: f64 = 11.5e-6;
 
 mod add;
 mod channels;
+mod encoder;
 mod fit;
 mod report;
 mod signatures;
@@ -111,6 +112,7 @@ mod text;
 
 pub use add::*;
 pub use channels::*;
+pub use encoder::*;
 pub(crate) use fit::*;
 pub use report::*;
 pub use signatures::*;
@@ -141,6 +143,7 @@ mod tests {
             v: vec![0.1; m],
             y: vec![0.0; m],
             sigma: Some(1e-3),
+            encoder: None,
         }
     }
 

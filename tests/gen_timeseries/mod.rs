@@ -491,7 +491,7 @@ pub fn encoder_set(dir: &Path, seed: u64, hidden: EncoderHidden) -> EncoderTruth
     let iphi = d.uniform(0.0, std::f64::consts::TAU);
     let has_backlash = matches!(hidden, EncoderHidden::Backlash | EncoderHidden::CyclicLeadAndBacklash);
     let b = if has_backlash { d.log_uniform(2e-6, 20e-6) } else { 0.0 };
-    let servo_rate = [1000.0, 2000.0, 4000.0][(d.uniform(0.0, 2.999)) as usize];
+    let servo_rate: f64 = [1000.0, 2000.0, 4000.0][(d.uniform(0.0, 2.999)) as usize];
     let h = 1.0 / servo_rate;
     let sigma_scale = d.log_uniform(3e-9, 20e-9);
     let sigma_motor = d.log_uniform(3e-9, 20e-9);
@@ -511,7 +511,7 @@ pub fn encoder_set(dir: &Path, seed: u64, hidden: EncoderHidden) -> EncoderTruth
     let mut plans: Vec<Plan> = Vec::new();
     let v_pass = d.uniform(0.02, 0.12);
     let acc = d.uniform(0.5, 2.0);
-    let log_rate = [250.0, 500.0, 1000.0][(d.uniform(0.0, 2.999)) as usize].min(servo_rate);
+    let log_rate: f64 = [250.0_f64, 500.0, 1000.0][(d.uniform(0.0, 2.999)) as usize].min(servo_rate);
     let every = (servo_rate / log_rate).round() as usize;
     // A trapezoidal move from a to b at speed v (acceleration acc), 0.3 s still before and after.
     let trapezoid = |a: f64, b: f64, v: f64| -> (Vec<(f64, f64)>, usize, usize) {
