@@ -378,7 +378,12 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
         // On encoder time series the backlash is a play whose take-up at a reversal depends on it.
         EffectName::Backlash if st.chans.iter().any(|c| c.encoder.is_some()) => (s(&["value"]), vec!["play"]),
         EffectName::Backlash | EffectName::ScaleError => (s(&["value"]), vec![]),
-        EffectName::ServoLag => (s(&["gain"]), vec!["kv"]),
+        EffectName::ServoLag => {
+            // The gain, and per following channel the decay of its unknown starting state.
+            let mut names = s(&["gain"]);
+            names.extend(following_channels(st).map(|j| format!("start_{j}")));
+            (names, vec!["kv"])
+        }
         EffectName::CyclicLead | EffectName::InterpolationError => (s(&["a_sin", "a_cos"]), vec!["period"]),
         EffectName::ThermalExpansion => (s(&["alpha_delta_t"]), vec!["tau"]),
         EffectName::ThermalDrift => (s(&["value"]), vec!["tau"]),
@@ -436,7 +441,14 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
             for c in st.chans {
                 col.extend(following_error(c, h[0]));
             }
-            vec![col]
+            // A log starts a finite time after the last change of speed: the loop's state then
+            // decays as e^{−kv·(t − t₀)} from an unknown start, one column per following channel.
+            let mut cols = vec![col];
+            for j in following_channels(st) {
+                let t0 = st.chans[j].t.first().copied().unwrap_or(0.0);
+                cols.push(st.col_j(|c, i, jj| if jj == j { (-h[0] * (c.t[i] - t0)).exp() } else { 0.0 }));
+            }
+            cols
         }
         EffectName::ScaleError => vec![st.col(|c, i| c.x[i] * c.s_chain())],
         EffectName::CyclicLead | EffectName::InterpolationError => {

@@ -543,6 +543,7 @@ pub fn encoder_set(dir: &Path, seed: u64, hidden: EncoderHidden) -> EncoderTruth
         let to = ((0.3 + ta + tc) / h).floor() as usize;
         (c, from, to.max(from + 1))
     };
+    let pass_samples = d.uniform(1500.0, 3000.0);
     let first_dir = d.sign();
     for (k, dirn) in [first_dir, -first_dir].into_iter().enumerate() {
         let (a, bb) = if dirn > 0.0 { (x_lo, x_lo + travel) } else { (x_lo + travel, x_lo) };
@@ -555,14 +556,15 @@ pub fn encoder_set(dir: &Path, seed: u64, hidden: EncoderHidden) -> EncoderTruth
             cmd,
             log_from: from,
             log_to: to,
-            every,
+            // A controller trace of 1500–3000 samples per pass (a divisor of the servo rate).
+            every: ((to - from) as f64 / pass_samples).round().max(1.0) as usize,
         });
     }
-    // Crawls: 5–80 mm/min over 1.5–3 s, approached in the direction of travel.
+    // Crawls: 5–80 mm/min over 1–2 s, approached in the direction of travel.
     for k in 0..2 {
         let v = d.log_uniform(5.0, 80.0) / 60e3;
         let dirn = d.sign();
-        let dur = d.uniform(1.5, 3.0);
+        let dur = d.uniform(1.0, 2.0);
         let start = x_lo + d.uniform(0.2, 0.8) * travel;
         let mut cmd = Vec::new();
         let lead_in = 0.5 + 5.0 / kv;
