@@ -120,7 +120,9 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
     for (t, g) in terms.iter_mut().zip(&grids) {
         for (hi, (grid, _)) in g.iter().enumerate() {
             if t.hyper[hi].is_nan() {
-                t.hyper[hi] = grid[grid.len() / 2];
+                // An empty grid: no period these positions resolve; 0 makes the columns vanish.
+                t.hyper[hi] = grid.get(grid.len() / 2).copied().unwrap_or(0.0);
+                t.searched[hi] &= !grid.is_empty();
             }
         }
     }

@@ -104,11 +104,15 @@ pub(crate) struct Fitted<'a> {
 pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> Result<Fitted<'a>, VmtError> {
     let st = Stack::with_model(chans, model);
     let bad = |m: String| VmtError::bad(data, "", m);
-    // Every fitted effect must be seen by some channel.
+    let mut notes = Vec::new();
+    // Every fitted effect must be seen by some channel; a periodic one whose periods these
+    // positions cannot resolve is held at zero with a note (its aliases would fit per-target misfit).
     for me in model.effects.iter().filter(|m| m.fit && m.effect.axis == model.axis && predicts(m.effect.name)) {
         let sh = shape(&st, me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER), lacks_coulomb(model));
         let period = me.given.iter().any(|g| g == "period").then(|| me.effect.params.get("period")).flatten();
-        if !visible(&st, me.effect.name, &sh, period) {
+        if !visible(&st, me.effect.name, &sh, period) && sh.hypers.first() == Some(&"period") && st.n > 0 {
+            notes.push(format!("{} (held at zero in this fit)", unresolved_period_note(&st, me.effect.name)));
+        } else if !visible(&st, me.effect.name, &sh, period) {
             return Err(bad(format!(
                 "the model fits `{}` on axis {}, but no channel of the data sees it: {}",
                 me.effect.name,
@@ -117,7 +121,6 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
             )));
         }
     }
-    let mut notes = Vec::new();
     // Pass 1: weights from the known σ (1 where unknown); estimate the unknown σ from the residual.
     let mut sig: Vec<f64> = chans.iter().map(|c| c.sigma.unwrap_or(f64::NAN)).collect();
     let est: Vec<bool> = sig.iter().map(|s| s.is_nan()).collect();
@@ -393,6 +396,24 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     let per = st_sigma(&f.st, &f.sig);
     let nrms = (f.fs.residual.iter().zip(&per).map(|(r, s)| (r / s).powi(2)).sum::<f64>() / f.st.n as f64).sqrt();
     let names = candidate_names(model, &f.st);
+    // Periodic candidates these positions cannot resolve: not searched, listed with a note.
+    let mut unresolved: Vec<EffectName> = Vec::new();
+    for n in [EffectName::CyclicLead, EffectName::InterpolationError] {
+        if !names.contains(&n) && model.get(n, model.axis).is_none() && !f.st.chans.is_empty() {
+            let sh = candidate_shape(&f.st, n, false);
+            if sh.hypers.first() == Some(&"period") && hyper_grid(&f.st, n, "period").0.is_empty() {
+                unresolved.push(n);
+            }
+        } else if names.contains(&n) && n == EffectName::CyclicLead {
+            if let Some(p) = shortest_resolvable_period(&f.st).filter(|p| *p > 2e-3) {
+                notes.push(format!(
+                    "cyclic_lead searched only at periods ≥ {} mm, the shortest these sample positions resolve \
+                     (twice the gap between neighbouring targets); a shorter lead needs targets every ≤ P/3 over a period",
+                    fmt_num(p * 1e3)
+                ));
+            }
+        }
+    }
     let fc_ref = coulomb_level(model, &term_params(&f.fs, model));
     let st = &f.st;
     let cands: Vec<Candidate> = names
@@ -435,8 +456,60 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             Err(e) => return Err(VmtError::bad(data, "", format!("diagnose: {e}"))),
         }
     }
+    // A fitted period that other periods reproduce on these positions is not identified: the
+    // claim is `inseparable` from its aliases (the data cannot say which one), with the advice.
+    for r in ranking.iter_mut().filter(|r| r.verdict == Verdict::Significant) {
+        let Some(&p) = r.params.get("period") else { continue };
+        let Some(range) = r.effect.parse::<EffectName>().ok().and_then(period_range) else { continue };
+        let mut aliases = period_aliases(st, p, range);
+        aliases.truncate(8);
+        if aliases.is_empty() {
+            continue;
+        }
+        let list: Vec<String> = aliases.iter().map(|q| format!("{} mm", fmt_num(q * 1e3))).collect();
+        r.verdict = Verdict::Inseparable;
+        r.note = Some(format!(
+            "`{}` at a {} mm period fits these sample positions exactly as well as at {}: the period is not \
+             identified. Targets every ≤ P/3 over a period P, irregular spacing or a dense run would separate them",
+            r.effect,
+            fmt_num(p * 1e3),
+            list.join(", ")
+        ));
+        r.aliases = aliases;
+    }
+    for n in unresolved {
+        let note = unresolved_period_note(&f.st, n);
+        notes.push(note.clone());
+        ranking.push(RankingEntry {
+            effect: n.as_str().to_string(),
+            delta_bic: 0.0,
+            explained: 0.0,
+            verdict: Verdict::Noise,
+            params: BTreeMap::new(),
+            confused_with: vec![],
+            note: Some(note),
+            aliases: vec![],
+        });
+    }
     let advice = advice(&ranking, nrms);
     Ok(DiagnoseReport { normalized_rms: nrms, ranking, advice, notes })
+}
+
+/// Why a periodic effect is not searched on these positions, and what measurement would show it.
+pub(crate) fn unresolved_period_note(st: &Stack, name: EffectName) -> String {
+    let range = match name {
+        EffectName::CyclicLead => "2–60 mm (screw leads)",
+        _ => "2–200 µm (scale signal periods)",
+    };
+    let shortest = match shortest_resolvable_period(st) {
+        Some(p) => format!("the shortest period they resolve is {} mm", fmt_num(p * 1e3)),
+        None => "they resolve no period".to_string(),
+    };
+    format!(
+        "{name} not searched: its periods {range} are not resolvable on these sample positions ({shortest}; \
+         a shorter period is one of many aliases that fit the targets equally well). To see a period P, measure \
+         targets every ≤ P/3 over at least one period (a dense run) or at irregular spacing"
+    )
 }
 
 /// What measurement separates two effects that fit the same signature on these data.
@@ -494,6 +567,9 @@ pub(crate) fn advice(ranking: &[RankingEntry], nrms: f64) -> String {
             ));
             seen.push(key);
         }
+    }
+    for r in ranking.iter().filter(|r| r.verdict == Verdict::Inseparable && !r.aliases.is_empty()) {
+        parts.extend(r.note.clone());
     }
     if parts.is_empty() {
         parts.push(format!("no missing effect is significant at this noise level (normalised RMS {nrms:.2})."));

@@ -453,7 +453,7 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
         EffectName::ScaleError => vec![st.col(|c, i| c.x[i] * c.s_chain())],
         EffectName::CyclicLead | EffectName::InterpolationError => {
             let p = h[0];
-            if !phases_spread(st, p) {
+            if !phases_spread(st, p) || !period_resolvable(st, p) {
                 return vec![vec![0.0; st.n], vec![0.0; st.n]];
             }
             let drive = name == EffectName::CyclicLead;
@@ -548,6 +548,92 @@ pub(crate) fn phases_spread(st: &Stack, p: f64) -> bool {
     (sc * sc + cc * cc).sqrt() / m <= 0.5 && (0.1..=0.9).contains(&s2)
 }
 
+/// The distinct sample positions of all channels, sorted (m).
+fn distinct_positions(st: &Stack) -> Vec<f64> {
+    let mut xs: Vec<f64> = st.chans.iter().flat_map(|c| c.x.iter().copied()).collect();
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    xs
+}
+
+/// True when the sample positions can resolve a wave of period `p` (m) rather than one of its
+/// aliases: somewhere the positions sample it at least twice per period (every gap between
+/// neighbouring distinct positions ≤ p/2, the Nyquist condition in position) over a stretch at
+/// least one period long. On a regular grid of spacing Δ this is p ≥ 2Δ (and p ≤ the travel):
+/// a shorter period is one of infinitely many aliases p' with 1/p' = |1/p − k/Δ| that fit the
+/// targets equally well; on an irregular layout without such a dense stretch the phase at each
+/// target is unrelated to its neighbours' and the search would fit per-target misfit.
+pub(crate) fn period_resolvable(st: &Stack, p: f64) -> bool {
+    resolvable_on(&distinct_positions(st), p)
+}
+
+fn resolvable_on(xs: &[f64], p: f64) -> bool {
+    if !(p > 0.0) || xs.len() < 3 {
+        return false;
+    }
+    let mut start = xs[0];
+    for w in xs.windows(2) {
+        if w[1] - w[0] > 0.5 * p {
+            start = w[1];
+        } else if w[1] - start >= p {
+            return true;
+        }
+    }
+    false
+}
+
+/// The periods q (m, within `range`, the candidate's catalogue range, differing from `p` by more than 10 %) whose sine and cosine
+/// on these sample positions reproduce those of period `p` (each with R² ≥ 0.99 by a 2-column
+/// least-squares fit), i.e. fit any data exactly as well. On positions that lie on a lattice of
+/// spacing Δ (the smallest gap) these are 1/q = |1/p − k/Δ|, k = ±1, ±2, … (spatial aliasing).
+pub(crate) fn period_aliases(st: &Stack, p: f64, range: (f64, f64)) -> Vec<f64> {
+    let xs = distinct_positions(st);
+    let delta = xs.windows(2).map(|w| w[1] - w[0]).filter(|g| *g > 0.0).fold(f64::INFINITY, f64::min);
+    if !(p > 0.0) || !delta.is_finite() || xs.len() < 3 {
+        return vec![];
+    }
+    let wave = |q: f64| -> [Vec<f64>; 2] {
+        [xs.iter().map(|x| (TWO_PI * x / q).sin()).collect(), xs.iter().map(|x| (TWO_PI * x / q).cos()).collect()]
+    };
+    let target = wave(p);
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let reproduces = |q: f64| {
+        let [u, v] = wave(q);
+        let (uu, uv, vv) = (dot(&u, &u), dot(&u, &v), dot(&v, &v));
+        let det = uu * vv - uv * uv;
+        det > 1e-9 * uu * vv
+            && target.iter().all(|a| {
+                let (au, av) = (dot(a, &u), dot(a, &v));
+                let (cu, cv) = ((vv * au - uv * av) / det, (uu * av - uv * au) / det);
+                let explained = cu * au + cv * av;
+                let aa = dot(a, a);
+                aa <= 0.0 || explained >= 0.99 * aa
+            })
+    };
+    let mut out: Vec<f64> = Vec::new();
+    for k in 1..=400 {
+        for f in [1.0 / p + k as f64 / delta, (1.0 / p - k as f64 / delta).abs()] {
+            let q = 1.0 / f;
+            if (range.0..=range.1).contains(&q) && (q / p - 1.0).abs() > 0.1 && !out.iter().any(|o| (o / q - 1.0).abs() < 1e-6) && reproduces(q) {
+                out.push(q);
+            }
+        }
+    }
+    out.sort_by(f64::total_cmp);
+    out
+}
+
+/// The shortest period (m) these positions resolve ([`period_resolvable`]), to name in a note and
+/// in the advice; None when no stretch holds three positions.
+pub(crate) fn shortest_resolvable_period(st: &Stack) -> Option<f64> {
+    let xs = distinct_positions(st);
+    // Resolvable periods from the rule: p ≥ 2·(largest gap in a stretch) and p ≤ its length; the
+    // smallest such p over all stretches is found by trying p = 2·gap for every gap (sorted).
+    let mut gaps: Vec<f64> = xs.windows(2).map(|w| w[1] - w[0]).filter(|g| *g > 0.0).collect();
+    gaps.sort_by(f64::total_cmp);
+    gaps.into_iter().map(|g| 2.0 * g).find(|p| resolvable_on(&xs, *p))
+}
+
 /// The prediction of a known (not fitted) effect at every sample.
 pub(crate) fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
     match (&e.params, e.name) {
@@ -609,7 +695,8 @@ pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>
             let span = (hi - lo).max(1.0);
             (log_grid(span / 4.0, span * 10.0, 40), true)
         }
-        (EffectName::CyclicLead, _) => (log_grid(2e-3, 60e-3, 120), true),
+        // Screw leads 2–60 mm, only the periods these positions resolve (`period_resolvable`).
+        (EffectName::CyclicLead, _) => (resolvable_only(st, log_grid(2e-3, 60e-3, 120)), true),
         // Position-loop gains of machine tools, 2–500 1/s.
         (_, "kv") => (log_grid(2.0, 500.0, 41), true),
         // Play of a ball-screw transmission, 0.1–100 µm.
@@ -635,6 +722,63 @@ pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>
             }
         }
         // Signal periods of common linear and rotary scales (Heidenhain, Renishaw): 2–200 µm.
-        _ => (vec![2e-6, 4e-6, 8e-6, 10e-6, 20e-6, 40e-6, 100e-6, 200e-6], false),
+        _ => (resolvable_only(st, vec![2e-6, 4e-6, 8e-6, 10e-6, 20e-6, 40e-6, 100e-6, 200e-6]), false),
+    }
+}
+
+/// The catalogue range (m) of a periodic candidate's period: screw leads, scale signal periods.
+pub(crate) fn period_range(name: EffectName) -> Option<(f64, f64)> {
+    match name {
+        EffectName::CyclicLead => Some((2e-3, 60e-3)),
+        EffectName::InterpolationError => Some((2e-6, 200e-6)),
+        EffectName::Positioning
+        | EffectName::StraightnessY
+        | EffectName::StraightnessZ
+        | EffectName::Roll
+        | EffectName::Pitch
+        | EffectName::Yaw
+        | EffectName::Backlash
+        | EffectName::ScaleError
+        | EffectName::ThermalExpansion
+        | EffectName::ThermalDrift
+        | EffectName::Coulomb
+        | EffectName::Viscous
+        | EffectName::Stribeck
+        | EffectName::Resonance
+        | EffectName::GravityTilt
+        | EffectName::SquarenessXy
+        | EffectName::SquarenessXz
+        | EffectName::SquarenessYz
+        | EffectName::Lugre
+        | EffectName::ServoLag
+        | EffectName::AccelBiasDrift => None,
+    }
+}
+
+/// The periods of `grid` that the sample positions resolve (never search an alias).
+fn resolvable_only(st: &Stack, grid: Vec<f64>) -> Vec<f64> {
+    let xs = distinct_positions(st);
+    grid.into_iter().filter(|p| resolvable_on(&xs, *p)).collect()
+}
+
+#[cfg(test)]
+mod resolvability_tests {
+    use super::resolvable_on;
+
+    /// A regular 5 mm grid over 40 mm resolves periods from 2 × 5 = 10 mm to the 40 mm travel and
+    /// none below (every shorter period has an alias above 10 mm); an ISO-style irregular layout with
+    /// gaps of 40–60 mm resolves nothing in the cyclic-lead (≤ 60 mm) or interpolation ranges; a
+    /// dense run of 1 mm steps over 19 mm added to it resolves 2–19 mm.
+    #[test]
+    fn periods_resolvable_only_with_two_samples_per_period_over_a_period() {
+        let grid: Vec<f64> = (0..9).map(|k| k as f64 * 5e-3).collect();
+        assert!(!resolvable_on(&grid, 3.97e-3) && !resolvable_on(&grid, 9.9e-3));
+        assert!(resolvable_on(&grid, 10.1e-3) && resolvable_on(&grid, 40e-3) && !resolvable_on(&grid, 41e-3));
+        let iso = [0.0, 0.047, 0.101, 0.143, 0.2, 0.259, 0.3];
+        assert!(!resolvable_on(&iso, 60e-3) && !resolvable_on(&iso, 20e-6));
+        let mut dense: Vec<f64> = iso.to_vec();
+        dense.extend((1..20).map(|k| 0.101 + k as f64 * 1e-3));
+        dense.sort_by(f64::total_cmp);
+        assert!(resolvable_on(&dense, 2.1e-3) && resolvable_on(&dense, 19e-3) && !resolvable_on(&dense, 1.9e-3));
     }
 }

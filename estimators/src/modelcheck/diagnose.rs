@@ -162,6 +162,12 @@ pub struct RankingEntry {
     pub params: BTreeMap<String, f64>,
     /// Effects this one is inseparable from.
     pub confused_with: Vec<String>,
+    /// Why the candidate was not tried or cannot be seen in this data (FORMAT.md §4 optional `note`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+    /// Other periods (m) that fit exactly as well on these sample positions (optional `aliases`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub aliases: Vec<f64>,
 }
 
 /// The full fit of one candidate (details behind a [`RankingEntry`]).
@@ -606,6 +612,8 @@ fn rank_refs(
             verdict,
             params: f.params.clone(),
             confused_with,
+            note: None,
+            aliases: vec![],
         })
         .collect();
     Ok(Diagnosis { ranking, fits, stat_old: p.stat_old, n: p.n })
@@ -685,6 +693,8 @@ mod tests {
             verdict: Verdict::Significant,
             params: [("value".to_string(), 6.1e-6)].into_iter().collect(),
             confused_with: vec![],
+            note: None,
+            aliases: vec![],
         };
         let s = serde_json::to_string(&e).unwrap();
         assert_eq!(
