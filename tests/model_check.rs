@@ -17,6 +17,9 @@ use vmt::simulate::{physics, read_all, simulate_truth, to_measurement_set};
 use vmt_estimators::modelcheck::Verdict;
 use vmt_sim::effects::{Effect, EffectName, EffectParams};
 
+#[path = "common/realdata.rs"]
+mod realdata;
+
 /// After adding the hidden effect the residual must be at the noise level: normalised RMS ≤ 1.3.
 /// (1.0 is the noise floor, and with ~90 samples its scatter is about ±0.1; the simulator adds some
 /// nm of unmodelled servo settling to the 50 nm laser noise.)
@@ -258,13 +261,9 @@ fn thermal_expansion_and_scale_error_at_one_time_are_inseparable() {
 /// the residual RMS must fall. A positioning profile (cubic) must also reduce it.
 #[test]
 fn real_iso230_2_data_the_loop_reduces_the_residual() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let shared = [root.join("../shared"), root.join("../../shared")].into_iter().find(|p| p.is_dir());
-    let Some(shared) = shared else {
-        eprintln!("realdata not found beside the repository: skipped");
+    let Some(dir) = realdata::realdata("ecmc_iso230_2", "real_iso230_2_data_the_loop_reduces_the_residual") else {
         return;
     };
-    let dir = shared.join("realdata/ecmc_iso230_2");
     for file in [
         "ess_target_muts_logger/b02_x_target_x.md_ISO230.dat",
         "ess_target_muts_logger/b02_y_report_target_y.md_ISO230.dat",
