@@ -278,8 +278,7 @@ pub fn study(
     let sc = Scenario::load(path)?;
     let bar = spinner(&format!("{} values × {trials} trials", vary.values.len()));
     let cmd = estimator_cmd.map(|c| crate::byo::CommandEstimator { command: c.to_string() });
-    let rows =
-        run_study(&sc, &vary, trials, shard, cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator), tolerance)?;
+    let rows = run_study(&sc, &vary, trials, shard, cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator), tolerance)?;
     bar.finish_and_clear();
     write_study(&rows, &format!("sensors.{}.{}", vary.sensor, vary.key), out)
 }
@@ -317,7 +316,9 @@ fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path) -> Resu
     measurement::write_file_atomic(&out.join("study.svg"), summary_svg(&summary, label)?.as_bytes())?;
     let judged = summary.iter().all(|r| r.pass_rate.is_some());
     println!("value: {label} (SI); over the trials of each value: mean |d|, RMS of d and 95th percentile of |d|,");
-    println!("d = the estimate's difference from the truth (see the run table); CR bound = Cramér–Rao lower bound of RMS d");
+    println!(
+        "d = the estimate's difference from the truth (see the run table); CR bound = Cramér–Rao lower bound of RMS d"
+    );
     println!(
         "{:>10}  {:<40} {:>6} {:>14} {:>14} {:>14} {:>14}{}",
         "value",
@@ -623,7 +624,10 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, units: &str,
     }
     let (run, n_lines, id) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
     if json {
-        print_json("vmt-identify/1", &IdentifyJson { unobservable_profiles: unobservable_profiles(&id.profiles), result: &id })?;
+        print_json(
+            "vmt-identify/1",
+            &IdentifyJson { unobservable_profiles: unobservable_profiles(&id.profiles), result: &id },
+        )?;
     } else {
         println!(
             "identified from {n_lines} laser lines of run {run}: rank {}, condition {:.3e}",

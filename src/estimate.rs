@@ -312,7 +312,8 @@ pub const CHECK_HEADER: [&str; 8] =
     ["error", "statistic", "injected", "recovered", "difference", "tolerance", "pass rule", "pass"];
 
 /// What the columns of the result table mean, printed under it.
-pub const CHECK_LEGEND: &str = "difference = recovered − injected; for `RMS of profile` rows, injected and recovered are the \
+pub const CHECK_LEGEND: &str =
+    "difference = recovered − injected; for `RMS of profile` rows, injected and recovered are the \
 RMS of each profile over the positions and difference is the RMS of their point-by-point difference (not the \
 difference of the two RMS values). Each row passes by the rule in its `pass rule` column.";
 
@@ -478,14 +479,15 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                     .ok_or_else(|| bad(format!("sensor `{sensor}` is not declared")))?;
                 let r = spec.axis_position(&sc.axis).map_err(bad)?;
                 let truth = iso_truth(errors, r, &targets)?;
-                let checks = [("E", "e", truth.e, est.e), ("M", "m", truth.m, est.m), ("B̄", "b_mean", truth.b_mean, est.b_mean)]
-                    .into_iter()
-                    .map(|(label, id, t, e)| {
-                        Check::new(format!("ISO 230-2 {label} ({sensor})"), Quantity::Length, t, e, *tolerance)
-                            .with_id(format!("iso230_2.{sensor}.{id}"))
-                            .with_statistic(format!("ISO 230-2 {label}"))
-                    })
-                    .collect();
+                let checks =
+                    [("E", "e", truth.e, est.e), ("M", "m", truth.m, est.m), ("B̄", "b_mean", truth.b_mean, est.b_mean)]
+                        .into_iter()
+                        .map(|(label, id, t, e)| {
+                            Check::new(format!("ISO 230-2 {label} ({sensor})"), Quantity::Length, t, e, *tolerance)
+                                .with_id(format!("iso230_2.{sensor}.{id}"))
+                                .with_statistic(format!("ISO 230-2 {label}"))
+                        })
+                        .collect();
                 let injected: Vec<f64> = truth.targets.iter().map(|t| t.mean_bidirectional).collect();
                 let mean_up: Vec<f64> = est.targets.iter().map(|t| t.up.mean).collect();
                 let mean_down: Vec<f64> = est.targets.iter().map(|t| t.down.mean).collect();
@@ -700,8 +702,9 @@ fn accel_straightness_check(
     let post = |p: &[f64]| -> Result<Vec<f64>, VmtError> {
         let p = match est.basis {
             SpectralBasis::Cosine => p.to_vec(),
-            SpectralBasis::Periodic => zero_phase_highpass(p, 1.0 / est.band.max_wavelength, 1.0 / dx)
-                .map_err(|e| bad(e.to_string()))?,
+            SpectralBasis::Periodic => {
+                zero_phase_highpass(p, 1.0 / est.band.max_wavelength, 1.0 / dx).map_err(|e| bad(e.to_string()))?
+            }
         };
         Ok(vmt_estimators::line::remove_line(xs, &p[i0..i1]))
     };
@@ -771,11 +774,8 @@ fn accel_straightness_check(
         }
         let Ok(s) = sigma_k(lam) else { continue };
         for &phase in phases {
-            let phi: Vec<f64> = est
-                .positions
-                .iter()
-                .map(|&x| (2.0 * std::f64::consts::PI * (x - x0) / lam - phase).cos())
-                .collect();
+            let phi: Vec<f64> =
+                est.positions.iter().map(|&x| (2.0 * std::f64::consts::PI * (x - x0) / lam - phase).cos()).collect();
             let p = post(&phi)?;
             var += s * s * p.iter().map(|v| v * v).sum::<f64>() / p.len() as f64;
         }

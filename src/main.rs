@@ -194,7 +194,15 @@ fn main() -> ExitCode {
                 vmt::cli::study_merge(&out, &shards)
             } else {
                 match vary {
-                    Some(v) => vmt::cli::study(&scenario, &v, trials, shard.as_deref(), estimator_cmd.as_deref(), tolerance, &out),
+                    Some(v) => vmt::cli::study(
+                        &scenario,
+                        &v,
+                        trials,
+                        shard.as_deref(),
+                        estimator_cmd.as_deref(),
+                        tolerance,
+                        &out,
+                    ),
                     None => Err(vmt::error::VmtError::Usage("study needs --vary sensors.NAME.KEY=V1,V2,…".into())),
                 }
             }

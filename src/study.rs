@@ -260,11 +260,11 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
             let n = d.len();
             let judged: Vec<bool> =
                 rows.iter().filter(|r| r.value == v && r.estimate == e).filter_map(|r| r.pass).collect();
-            let pass_rate = (judged.len() == n)
-                .then(|| judged.iter().filter(|&&p| p).count() as f64 / n.max(1) as f64);
+            let pass_rate = (judged.len() == n).then(|| judged.iter().filter(|&&p| p).count() as f64 / n.max(1) as f64);
             let bounds: Vec<f64> = rows.iter().filter(|r| r.value == v && r.estimate == e).map(|r| r.bound).collect();
             let bound = bounds.iter().sum::<f64>() / bounds.len().max(1) as f64;
-            let quantity = rows.iter().find(|r| r.value == v && r.estimate == e).map_or(Quantity::Ratio, |r| r.quantity);
+            let quantity =
+                rows.iter().find(|r| r.value == v && r.estimate == e).map_or(Quantity::Ratio, |r| r.quantity);
             SummaryRow {
                 value: v,
                 estimate: e,

@@ -44,7 +44,8 @@ fn friction_set(dir: &Path) -> PathBuf {
             v.abs(),
             if v > 0.0 { 1 } else { -1 }
         );
-        let rows: String = (0..20).map(|k| format!("{},{}\n", k as f64 * 0.01, f + 0.5 * ((k % 3) as f64 - 1.0))).collect();
+        let rows: String =
+            (0..20).map(|k| format!("{},{}\n", k as f64 * 0.01, f + 0.5 * ((k % 3) as f64 - 1.0))).collect();
         std::fs::write(set.join(format!("s{i}.csv")), format!("t,force\n{rows}")).unwrap();
     }
     std::fs::write(set.join("manifest.toml"), manifest).unwrap();
@@ -85,7 +86,11 @@ fn every_json_output_is_an_object_whose_first_key_is_a_versioned_format() {
     let run_out = t.join("run");
     let small = root().join("tests/data/small.toml");
     let cases: Vec<(&str, Vec<String>, &str)> = vec![
-        ("run", vec!["run".into(), small.display().to_string(), "--out".into(), run_out.display().to_string()], "vmt-run/1"),
+        (
+            "run",
+            vec!["run".into(), small.display().to_string(), "--out".into(), run_out.display().to_string()],
+            "vmt-run/1",
+        ),
         ("compare", vec!["compare".into(), "--model".into(), m.into(), "--data".into(), d.into()], "vmt-compare/1"),
         ("diagnose", vec!["diagnose".into(), "--model".into(), m.into(), "--data".into(), d.into()], "vmt-diagnose/1"),
         ("identify", vec!["identify".into(), d.into()], "vmt-identify/1"),
@@ -94,7 +99,13 @@ fn every_json_output_is_an_object_whose_first_key_is_a_versioned_format() {
         ("friction", vec!["friction".into(), friction.display().to_string()], "vmt-friction/1"),
         (
             "score",
-            vec!["score".into(), "--truth".into(), truth.display().to_string(), "--estimate".into(), est.display().to_string()],
+            vec![
+                "score".into(),
+                "--truth".into(),
+                truth.display().to_string(),
+                "--estimate".into(),
+                est.display().to_string(),
+            ],
             "vmt-score/1",
         ),
     ];

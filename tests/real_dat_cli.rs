@@ -17,7 +17,8 @@ fn vmt(args: &[&str]) -> (i32, String, String) {
 
 #[test]
 fn compare_and_diagnose_take_an_iso230_2_dat_file_as_data() {
-    let Some(dir) = realdata::realdata("ecmc_iso230_2", "compare_and_diagnose_take_an_iso230_2_dat_file_as_data") else {
+    let Some(dir) = realdata::realdata("ecmc_iso230_2", "compare_and_diagnose_take_an_iso230_2_dat_file_as_data")
+    else {
         return;
     };
     let dat = dir.join("ess_target_muts_logger/b02_x_target_x.md_ISO230.dat");

@@ -112,7 +112,10 @@ mod friction_realdata {
 
     #[test]
     fn rack_pinion_author_processing_lands_within_15_percent_of_the_published_coefficients() {
-        let Some(d) = prepare("rack_pinion_author_processing_lands_within_15_percent_of_the_published_coefficients") else { return };
+        let Some(d) = prepare("rack_pinion_author_processing_lands_within_15_percent_of_the_published_coefficients")
+        else {
+            return;
+        };
         println!("{} samples on the servo timebase, dt = {} s", d.t.len(), d.dt);
         let mf = friction_from_motion(&d.v_raw, &d.force_raw, 24.7, d.dt, Some(30.0), FilterMode::Causal).unwrap();
         let (v, f) = window(&mf.v, &mf.friction);
