@@ -160,7 +160,7 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Fit a model's free parameters to a measurement set and report the residual (DESIGN.md §8).
+    /// Fit a model's free parameters to a measurement set and report the residual (model-check loop, docs/methods.md).
     Compare(ModelAndData),
     /// Rank the effects a model lacks by how much of the residual they explain (ΔBIC, verdicts).
     Diagnose(ModelAndData),

@@ -157,7 +157,7 @@ fn run_outputs_of_two_scenarios_with_the_same_file_name_do_not_overwrite_each_ot
 /// tomllib), run in every trial of a study. With 20 nm laser noise it recovers the six error motions to
 /// about 0.02–0.05 µm / µrad RMS (mean of 10 readings per target and laser, lever arms ≈ 1 m), so:
 /// - 0.2e-6 (0.2 µm, 0.2 µrad) is met in every trial: exit 0, pass 100 %;
-/// - 1e-9 (1 nm) is below the noise of a mean of 10 readings (σ ≈ 6 nm): every trial misses, exit 1.
+/// - 1e-9 (1 nm) is below the noise of the estimate (≈ 10 nm): trials miss it, exit 1.
 #[test]
 fn the_python_example_estimator_passes_a_tolerance_it_meets_and_fails_one_it_misses() {
     let python = Command::new("python3").args(["-c", "import sys, tomllib; print(sys.version)"]).output();
@@ -187,10 +187,17 @@ fn the_python_example_estimator_passes_a_tolerance_it_meets_and_fails_one_it_mis
     assert_eq!(met.status.code(), Some(0), "{met_text}\n{}", String::from_utf8_lossy(&met.stderr));
     assert_eq!(missed.status.code(), Some(1), "{missed_text}\n{}", String::from_utf8_lossy(&missed.stderr));
     let motions = ["positioning", "straightness_y", "straightness_z", "roll", "pitch", "yaw"];
+    let pass_rate = |text: &str, m: &str| -> f64 {
+        let row = text.lines().find(|l| l.contains(&format!("{m} RMS"))).unwrap_or_else(|| panic!("{m}: {text}"));
+        let cells: Vec<&str> = row.split_whitespace().collect();
+        assert_eq!(cells.last(), Some(&"%"), "{row}");
+        cells[cells.len() - 2].parse().unwrap()
+    };
     for m in motions {
-        let row = |t: &str| t.lines().find(|l| l.contains(&format!("{m} RMS"))).unwrap_or("").to_string();
-        assert!(row(&met_text).ends_with("100.0 %"), "{m}: {met_text}");
-        assert!(row(&missed_text).ends_with("0.0 %") && !row(&missed_text).ends_with("100.0 %"), "{m}: {missed_text}");
+        assert_eq!(pass_rate(&met_text, m), 100.0, "{m}: {met_text}");
+        // 1 nm is passed only by chance: straightness over 4 positions about its least-squares line rests
+        // on 2 degrees of freedom and fell below 1 nm in 1 of 18 rows when this test was written.
+        assert!(pass_rate(&missed_text, m) < 50.0, "{m}: {missed_text}");
     }
     // Without a tolerance no pass/fail is claimed.
     let none = vmt()
