@@ -3,7 +3,7 @@
 //! bad input).
 
 use crate::error::VmtError;
-use crate::estimate::{run_estimators, Check, Quantity};
+use crate::estimate::{display, run_estimators, Check, Quantity, CHECK_HEADER, CHECK_LEGEND};
 use crate::measurement::{self, MeasurementSet, SensorKind, UnitChoice};
 use crate::scenario::Scenario;
 use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set, truth_extras};
@@ -43,10 +43,28 @@ fn parse_units(units: &str) -> Result<UnitChoice, VmtError> {
     }
 }
 
-/// Default output directory of `vmt run`: vmt-out/<scenario file stem>.
-fn default_out(sc: &Scenario) -> PathBuf {
-    let stem = sc.source.file_stem().and_then(|s| s.to_str()).unwrap_or("scenario");
-    PathBuf::from("vmt-out").join(stem)
+/// Default output directory of `vmt run`: `vmt-out/` followed by the scenario's path without its
+/// extension, a leading `scenarios/` and any root or `..` (so `scenarios/default.toml` → `vmt-out/default`,
+/// `scenarios/lessons/backlash/scenario.toml` → `vmt-out/lessons/backlash/scenario`): two scenarios with
+/// the same file name never write over each other's outputs.
+pub fn default_out(source: &Path) -> PathBuf {
+    use std::path::Component;
+    let rel = source.with_extension("");
+    let parts: Vec<&std::ffi::OsStr> = rel
+        .components()
+        .filter_map(|c| match c {
+            Component::Normal(p) => Some(p),
+            Component::Prefix(_) | Component::RootDir | Component::CurDir | Component::ParentDir => None,
+        })
+        .collect();
+    let skip = usize::from(parts.len() > 1 && parts[0] == "scenarios");
+    let mut out = PathBuf::from("vmt-out");
+    if parts.len() == skip {
+        out.push("scenario");
+    } else {
+        out.extend(&parts[skip..]);
+    }
+    out
 }
 
 /// `vmt run [SCENARIO]`: simulate, estimate, print the table; exit 1 if any estimate misses its tolerance.
@@ -61,7 +79,7 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     let truths = simulate_truth(&sc, &ph);
     let runs = read_all(&sc, &ph, &truths, sc.seed)?;
     let set = to_measurement_set(&sc, &runs)?;
-    let out = out.map(Path::to_path_buf).unwrap_or_else(|| default_out(&sc));
+    let out = out.map(Path::to_path_buf).unwrap_or_else(|| default_out(&sc.source));
     measurement::write_with_extras(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc)?)?;
     let est = run_estimators(&sc, &ph, &runs)?;
     let checks = &est.checks;
@@ -70,8 +88,14 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     let failed: Vec<&Check> = checks.iter().filter(|c| !c.pass).collect();
     bar.finish_and_clear();
     if json {
-        let v = serde_json::json!({"scenario": sc.source, "checks": checks, "pass": failed.is_empty()});
-        print_json(&v)?;
+        let v = serde_json::json!({
+            "scenario": sc.source,
+            "data": out.join("data"),
+            "report": html,
+            "checks": checks_by_id(checks),
+            "pass": failed.is_empty()
+        });
+        print_json("vmt-run/1", &v)?;
     } else {
         println!("vmt run: {} — {}", sc.source.display(), sc.description);
         println!("{}", summary_table(&set));
@@ -92,6 +116,21 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     Ok(if failed.is_empty() { 0 } else { 1 })
 }
 
+/// The checks keyed by their stable ids (a repeated id gets `#2`, `#3`, … in table order).
+fn checks_by_id(checks: &[Check]) -> std::collections::BTreeMap<String, &Check> {
+    let mut map = std::collections::BTreeMap::new();
+    for c in checks {
+        let mut id = c.id.clone();
+        let mut k = 1;
+        while map.contains_key(&id) {
+            k += 1;
+            id = format!("{}#{k}", c.id);
+        }
+        map.insert(id, c);
+    }
+    map
+}
+
 /// A spinner on stderr when it is a terminal; hidden otherwise (CI logs, pipes).
 fn spinner(message: &str) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new_spinner();
@@ -104,31 +143,23 @@ fn spinner(message: &str) -> indicatif::ProgressBar {
     bar
 }
 
-/// Value in display units: µm for lengths, µrad for angles.
-fn display(q: Quantity, v: f64) -> String {
-    match q {
-        Quantity::Length => format!("{:.3} µm", v * 1e6),
-        Quantity::Angle => format!("{:.3} µrad", v * 1e6),
-        Quantity::Ratio => format!("{v:.3}"),
-    }
-}
-
-/// The table of checks: error, injected, recovered, difference, tolerance, pass.
+/// The table of checks ([`Check::cells`] under [`CHECK_HEADER`]), its legend and each row's note.
 pub fn check_table(checks: &[Check]) -> String {
-    let mut s = format!(
-        "{:<34} {:>14} {:>14} {:>14} {:>14}  {}\n",
-        "error", "injected", "recovered", "difference", "tolerance", "pass"
-    );
+    let line = |c: &[String]| {
+        format!(
+            "{:<36} {:<20} {:>14} {:>14} {:>14} {:>14}  {:<27} {}\n",
+            c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]
+        )
+    };
+    let mut s = line(&CHECK_HEADER.map(String::from));
     for c in checks {
-        s += &format!(
-            "{:<34} {:>14} {:>14} {:>14} {:>14}  {}\n",
-            c.error,
-            display(c.quantity, c.injected),
-            display(c.quantity, c.recovered),
-            display(c.quantity, c.difference),
-            display(c.quantity, c.tolerance),
-            if c.pass { "pass" } else { "FAIL" }
-        );
+        s += &line(&c.cells());
+    }
+    s += &format!("{CHECK_LEGEND}\n");
+    for c in checks {
+        if let Some(n) = &c.note {
+            s += &format!("  {}: {n}\n", c.error);
+        }
     }
     s
 }
@@ -196,7 +227,7 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
     };
     let res = evaluate_bidirectional(&targets, &up, &down).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
     if json {
-        print_json(&res)?;
+        print_json("vmt-iso230-2/1", &res)?;
         return Ok(0);
     }
     let table = crate::estimate::iso_table(&format!("ISO 230-2:2014 evaluation of {label} (µm)"), &res);
@@ -269,8 +300,17 @@ pub fn study(
     trials: usize,
     shard: Option<&str>,
     estimator_cmd: Option<&str>,
+    tolerance: Option<f64>,
     out: &Path,
 ) -> Result<i32, VmtError> {
+    if tolerance.is_some() && estimator_cmd.is_none() {
+        return Err(VmtError::Usage(
+            "--tolerance applies to --estimator-cmd; the scenario's estimators carry their own tolerances".into(),
+        ));
+    }
+    if let Some(t) = tolerance.filter(|t| !(t.is_finite() && *t >= 0.0)) {
+        return Err(VmtError::Usage(format!("--tolerance: expected a finite number ≥ 0 (SI: m or rad), got {t}")));
+    }
     use crate::study::{run_study, Vary};
     let vary = Vary::parse(vary)?;
     let shard = match shard {
@@ -280,7 +320,7 @@ pub fn study(
     let sc = Scenario::load(path)?;
     let bar = spinner(&format!("{} values × {trials} trials", vary.values.len()));
     let cmd = estimator_cmd.map(|c| crate::byo::CommandEstimator { command: c.to_string() });
-    let rows = run_study(&sc, &vary, trials, shard, cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator))?;
+    let rows = run_study(&sc, &vary, trials, shard, cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator), tolerance)?;
     bar.finish_and_clear();
     write_study(&rows, &format!("sensors.{}.{}", vary.sensor, vary.key), out)
 }
@@ -298,33 +338,60 @@ fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path) -> Resu
     use crate::study::{rows_csv, summarize, summary_svg};
     let summary = summarize(rows);
     std::fs::create_dir_all(out).map_err(|e| VmtError::io(out, "creating the output directory", e))?;
-    let mut s = String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate,cramer_rao_bound\n");
+    let mut s = String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate,cramer_rao_bound,rms,quantity\n");
     for r in &summary {
         s += &format!(
-            "{},\"{}\",{},{},{},{},{}\n",
-            r.value, r.estimate, r.trials, r.mean_abs, r.p95_abs, r.pass_rate, r.bound
-        );
-    }
-    measurement::write_file_atomic(&out.join("trials.csv"), rows_csv(rows).as_bytes())?;
-    measurement::write_file_atomic(&out.join("summary.csv"), s.as_bytes())?;
-    measurement::write_file_atomic(&out.join("study.svg"), summary_svg(&summary, label)?.as_bytes())?;
-    println!(
-        "{:>12}  {:<40} {:>7} {:>12} {:>12} {:>12} {:>6}",
-        "value", "estimate", "trials", "mean |d|", "p95 |d|", "CR bound", "pass"
-    );
-    for r in &summary {
-        println!(
-            "{:>12.3e}  {:<40} {:>7} {:>12.3e} {:>12.3e} {:>12.3e} {:>5.0}%",
+            "{},\"{}\",{},{},{},{},{},{},{}\n",
             r.value,
             r.estimate,
             r.trials,
             r.mean_abs,
             r.p95_abs,
+            r.pass_rate.map_or(String::new(), |p| p.to_string()),
             r.bound,
-            100.0 * r.pass_rate
+            r.rms,
+            crate::study::quantity_id(r.quantity)
+        );
+    }
+    measurement::write_file_atomic(&out.join("trials.csv"), rows_csv(rows).as_bytes())?;
+    measurement::write_file_atomic(&out.join("summary.csv"), s.as_bytes())?;
+    measurement::write_file_atomic(&out.join("study.svg"), summary_svg(&summary, label)?.as_bytes())?;
+    let judged = summary.iter().all(|r| r.pass_rate.is_some());
+    println!("value: {label} (SI); over the trials of each value: mean |d|, RMS of d and 95th percentile of |d|,");
+    println!(
+        "d = the estimate's difference from the truth (see the run table); CR bound = Cramér–Rao lower bound of RMS d"
+    );
+    println!(
+        "{:>10}  {:<40} {:>6} {:>14} {:>14} {:>14} {:>14}{}",
+        "value",
+        "estimate",
+        "trials",
+        "mean |d|",
+        "RMS d",
+        "p95 |d|",
+        "CR bound",
+        if judged { "  pass (d ≤ tolerance)" } else { "" }
+    );
+    for r in &summary {
+        let bound = if r.bound.is_finite() { display(r.quantity, r.bound) } else { "-".to_string() };
+        println!(
+            "{:>10.3e}  {:<40} {:>6} {:>14} {:>14} {:>14} {:>14}{}",
+            r.value,
+            r.estimate,
+            r.trials,
+            display(r.quantity, r.mean_abs),
+            display(r.quantity, r.rms),
+            display(r.quantity, r.p95_abs),
+            bound,
+            r.pass_rate.map_or(String::new(), |p| format!("  {:>5.1} %", 100.0 * p))
         );
     }
     println!("wrote {}", out.display());
+    let missed = rows.iter().filter(|r| r.pass == Some(false)).count();
+    if missed > 0 {
+        println!("{missed} of {} trial estimates missed their tolerance", rows.len());
+        return Ok(1);
+    }
     Ok(0)
 }
 
@@ -358,7 +425,7 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
         return Err(VmtError::bad(path, "runs", "expected a time-series run with an encoder column"));
     }
     if json {
-        print_json(&results)?;
+        print_json("vmt-ssi/1", &serde_json::json!({ "runs": results }))?;
     } else {
         println!("{:<16} {:<12} {:>12} {:>8}  verdict (SSI ≥ 1: crawling)", "run", "sensor", "feed mm/min", "SSI");
         for r in &results {
@@ -407,7 +474,7 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
     let fit =
         fit_stribeck(&v, &f, &StribeckFitOptions::default()).map_err(|e| VmtError::bad(path, "runs", e.to_string()))?;
     if json {
-        print_json(&fit)?;
+        print_json("vmt-friction/1", &fit)?;
     } else {
         let c = &fit.coefficients;
         println!("Stribeck fit of {} sweep points (residual RMS {:.3} N):", v.len(), fit.residual_rms);
@@ -489,17 +556,32 @@ fn model_and_data(model: &Path, data: &Path) -> Result<(crate::model::Model, Mea
 }
 
 /// Prints a result as JSON (`--json`) or as the text `text` makes of it; exit code 0.
-fn print_result<T: serde::Serialize>(r: &T, json: bool, text: impl Fn(&T) -> String) -> Result<i32, VmtError> {
+fn print_result<T: serde::Serialize>(
+    format: &str,
+    r: &T,
+    json: bool,
+    text: impl Fn(&T) -> String,
+) -> Result<i32, VmtError> {
     if json {
-        print_json(r)?;
+        print_json(format, r)?;
     } else {
         print!("{}", text(r));
     }
     Ok(0)
 }
 
-fn print_json<T: serde::Serialize>(v: &T) -> Result<(), VmtError> {
-    println!("{}", serde_json::to_string_pretty(v).map_err(|e| VmtError::Internal(e.to_string()))?);
+/// Prints `v` (which must serialize to a JSON object) as one JSON object whose first key is
+/// `"format": format` (`vmt-NAME/VERSION`, docs/formats.md), the rest in `v`'s own key order.
+fn print_json<T: serde::Serialize>(format: &str, v: &T) -> Result<(), VmtError> {
+    let internal = |m: String| VmtError::Internal(format!("{format} JSON: {m}"));
+    let text = serde_json::to_string_pretty(v).map_err(|e| internal(e.to_string()))?;
+    let body = text.strip_prefix('{').ok_or_else(|| internal("the output is not a JSON object".into()))?;
+    let id = serde_json::to_string(format).map_err(|e| internal(e.to_string()))?;
+    if body.trim() == "}" {
+        println!("{{\n  \"format\": {id}\n}}");
+    } else {
+        println!("{{\n  \"format\": {id},{body}");
+    }
     Ok(())
 }
 
@@ -508,14 +590,14 @@ fn print_json<T: serde::Serialize>(v: &T) -> Result<(), VmtError> {
 pub fn compare(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
     let (m, set) = model_and_data(model, data)?;
     let r = crate::modelcheck::compare(&m, &set, data)?;
-    print_result(&r, json, crate::modelcheck::compare_text)
+    print_result("vmt-compare/1", &r, json, crate::modelcheck::compare_text)
 }
 
 /// `vmt diagnose --model M --data D [--json]`: rank the effects the model lacks (FORMAT.md §4).
 pub fn diagnose(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
     let (m, set) = model_and_data(model, data)?;
     let r = crate::modelcheck::diagnose(&m, &set, data)?;
-    print_result(&r, json, crate::modelcheck::diagnose_text)
+    print_result("vmt-diagnose/1", &r, json, crate::modelcheck::diagnose_text)
 }
 
 /// `vmt add --model M --effect NAME [--from-diagnosis] [--data D] -o M2`: writes the model with the
@@ -574,7 +656,8 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
 
 /// `vmt identify DATA [--run R] [-o PROFILES.csv]`: the six error motions of the axis from the laser
 /// lines (linear and straightness lasers) of a point-table run, with standard errors (FORMAT.md §5 CSV).
-pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, json: bool) -> Result<i32, VmtError> {
+pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, units: &str, json: bool) -> Result<i32, VmtError> {
+    let units = parse_units(units)?;
     let set = measurement::read(path)?;
     if run.is_none() {
         if let Some((n_lines, ci)) = crate::byo::identify_axes_set(&set).map_err(|m| VmtError::bad(path, "runs", m))? {
@@ -583,7 +666,10 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, json: bool) 
     }
     let (run, n_lines, id) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
     if json {
-        print_json(&id)?;
+        print_json(
+            "vmt-identify/1",
+            &IdentifyJson { unobservable_profiles: unobservable_profiles(&id.profiles), result: &id },
+        )?;
     } else {
         println!(
             "identified from {n_lines} laser lines of run {run}: rank {}, condition {:.3e}",
@@ -592,14 +678,10 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, json: bool) 
         for u in &id.unobservable {
             println!("  not observable: {u}");
         }
-        for p in &id.profiles {
-            let worst = p.std_errors.iter().flatten().cloned().fold(0.0, f64::max);
-            let peak = p.values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            println!("  {:<4} max |value| {:.4e}  max standard error {:.2e}", p.name, peak, worst);
-        }
+        print_profiles(&id.profiles);
     }
     if let Some(out) = out {
-        measurement::write_profiles(&crate::byo::profiles_of(&id), out, UnitChoice::Si)?;
+        measurement::write_profiles(&crate::byo::profiles_of(&id), out, units)?;
         eprintln!("wrote {}", out.display());
     }
     Ok(0)
@@ -622,7 +704,8 @@ fn identify_axes(
     }
     let id = &ci.identification;
     if json {
-        print_json(ci)?;
+        let unobservable_profiles = unobservable_profiles(&id.profiles);
+        print_json("vmt-identify-chain/1", &IdentifyJson { unobservable_profiles, result: ci })?;
         return Ok(0);
     }
     println!(
@@ -639,12 +722,47 @@ fn identify_axes(
         let sigma = s.std_error.map_or("not observable".to_string(), |e| format!("± {:.3} µrad", e * 1e6));
         println!("  {} {:<14} {:>10.3} µrad {sigma}", s.name, s.effect, s.value * 1e6);
     }
-    for p in &id.profiles {
-        let worst = p.std_errors.iter().flatten().cloned().fold(0.0, f64::max);
-        let peak = p.values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        println!("  {:<4} max |value| {:.4e}  max standard error {:.2e}", p.name, peak, worst);
-    }
+    print_profiles(&id.profiles);
     Ok(0)
+}
+
+/// `vmt identify --json`: the identification, whose standard errors are `null` where a value is not
+/// observable, and the names of the profiles with such values.
+#[derive(serde::Serialize)]
+struct IdentifyJson<'a, T: serde::Serialize> {
+    #[serde(flatten)]
+    result: &'a T,
+    /// Profiles (ISO 230-1 names) with at least one position whose value the lines do not determine.
+    unobservable_profiles: Vec<&'a str>,
+}
+
+fn unobservable_profiles(profiles: &[vmt_estimators::laser_ls::ProfileEstimate]) -> Vec<&str> {
+    profiles.iter().filter(|p| p.std_errors.iter().any(Option::is_none)).map(|p| p.name.as_str()).collect()
+}
+
+/// The identified profiles, one line each: peak |value| and largest standard error in µm or µrad, or
+/// "unobservable" where the readings do not determine the value (never a number for those).
+fn print_profiles(profiles: &[vmt_estimators::laser_ls::ProfileEstimate]) {
+    for p in profiles {
+        let q = if p.component < 3 { Quantity::Length } else { Quantity::Angle };
+        let peak = p.values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let missing = p.std_errors.iter().filter(|e| e.is_none()).count();
+        let worst = p.std_errors.iter().flatten().cloned().fold(0.0, f64::max);
+        let se = match missing {
+            0 => format!("largest standard error (1σ) {}", display(q, worst)),
+            m if m == p.std_errors.len() => "unobservable from these lines".to_string(),
+            m => format!(
+                "unobservable at {m} of {} positions; elsewhere largest standard error (1σ) {}",
+                p.std_errors.len(),
+                display(q, worst)
+            ),
+        };
+        if missing == p.std_errors.len() {
+            println!("  {:<4} {se}", p.name);
+        } else {
+            println!("  {:<4} peak |value| {:>12}  {se}", p.name, display(q, peak));
+        }
+    }
 }
 
 /// `vmt score --truth T --estimate E`: compares two FORMAT.md §5 profile CSVs (crate::byo::score_profiles):
@@ -655,11 +773,14 @@ pub fn score(truth: &Path, estimate: &Path, json: bool) -> Result<i32, VmtError>
         return Err(VmtError::bad(estimate, "line 1 (header)", "no error-motion column in common with the truth"));
     }
     if json {
-        print_json(&rows)?;
+        print_json("vmt-score/1", &serde_json::json!({ "rows": rows }))?;
     } else {
-        println!("{:<20} {:>14} {:>14} {:>8}", "error motion", "RMS diff", "max diff", "points");
+        println!("difference d = estimate − truth on the estimate's positions (straightness about its least-squares");
+        println!("line, the other motions relative to their first position)");
+        println!("{:<20} {:>14} {:>14} {:>8}", "error motion", "RMS of d", "max |d|", "points");
         for r in &rows {
-            println!("{:<20} {:>14.4e} {:>14.4e} {:>8}", r.effect, r.rms, r.max, r.points);
+            let q = crate::study::motion_quantity(&r.effect);
+            println!("{:<20} {:>14} {:>14} {:>8}", r.effect, display(q, r.rms), display(q, r.max), r.points);
         }
     }
     Ok(0)

@@ -18,13 +18,13 @@ struct Cli {
 /// A model checked against a measurement set (`vmt compare`, `vmt diagnose`).
 #[derive(clap::Args)]
 struct ModelAndData {
-    /// The model (`vmt-model/1`, FORMAT.md §2).
+    /// The model (`vmt-model/1`, docs/formats.md).
     #[arg(long)]
     model: PathBuf,
-    /// The measurement set directory (FORMAT.md §1) or an ISO 230-2 `.dat` file.
+    /// The measurement set directory (docs/formats.md) or an ISO 230-2 `.dat` file.
     #[arg(long)]
     data: PathBuf,
-    /// Print JSON (FORMAT.md §4) instead of the text report.
+    /// Print JSON (`vmt-compare/1` / `vmt-diagnose/1`, docs/formats.md) instead of the text report.
     #[arg(long)]
     json: bool,
 }
@@ -33,16 +33,18 @@ struct ModelAndData {
 enum Command {
     /// Simulate a scenario and run its estimators (no argument: the bundled default scenario).
     Run {
+        /// Scenario file (`vmt-scenario/1`, docs/formats.md); default: the bundled scenarios/default.toml.
         scenario: Option<PathBuf>,
         /// Directory for the measurement set and report (default: vmt-out/<scenario name>).
         #[arg(short, long)]
         out: Option<PathBuf>,
-        /// Print machine-readable JSON instead of the table.
+        /// Print JSON (`vmt-run/1`, docs/formats.md) instead of the table: the checks, the data and report paths.
         #[arg(long)]
         json: bool,
     },
-    /// Simulate a scenario and write its measurement set (FORMAT.md §1) with the truth beside it.
+    /// Simulate a scenario and write its measurement set (docs/formats.md) with the truth beside it.
     Simulate {
+        /// Scenario file (`vmt-scenario/1`); default: the bundled scenarios/default.toml.
         scenario: Option<PathBuf>,
         /// Output directory (written atomically).
         #[arg(short, long)]
@@ -60,69 +62,94 @@ enum Command {
         /// The varied parameter, e.g. sensors.acc_z.noise_density=1e-7,3e-7,1e-6
         #[arg(long)]
         vary: Option<String>,
-        #[arg(long, default_value_t = 100)]
+        /// Monte Carlo trials per value (each redraws the sensor noise; at least 1).
+        #[arg(long, default_value_t = 100, value_parser = clap::builder::TypedValueParser::map(clap::value_parser!(u64).range(1..), |n| n as usize))]
         trials: usize,
         /// Compute only trials k with k mod n = i (for a cluster job array), e.g. 0/4; `auto` reads i and n
         /// from a Slurm, HyperQueue, PBS or LSF job array (`auto/n` where the scheduler gives no size).
         #[arg(long)]
         shard: Option<String>,
         /// Run this program in every trial instead of the scenario's estimators: `CMD {data} {out}` reads
-        /// the measurement set at {data} and writes a FORMAT.md §5 profile CSV to {out}.
+        /// the measurement set at {data} and writes a profile CSV (docs/formats.md) to {out}.
         #[arg(long)]
         estimator_cmd: Option<String>,
+        /// With --estimator-cmd: the largest RMS difference (SI: m for straightness/positioning, rad for
+        /// angles) an error motion may show and pass; without it no pass column is printed.
+        #[arg(long)]
+        tolerance: Option<f64>,
+        /// Output directory for trials.csv, summary.csv and study.svg.
         #[arg(short, long)]
         out: PathBuf,
     },
-    /// Stick-slip index (seed 002) of the time-series runs of a measurement set.
+    /// Stick-slip (crawl) index of the time-series runs (encoder method, docs/methods.md).
     Ssi {
+        /// Measurement set directory (docs/formats.md).
         data: PathBuf,
+        /// Position column to use (default: the first encoder of each run).
         #[arg(long)]
         sensor: Option<String>,
+        /// Print JSON (`vmt-ssi/1`) instead of the table.
         #[arg(long)]
         json: bool,
     },
     /// Stribeck friction parameters from the friction-sweep runs of a measurement set.
     Friction {
+        /// Measurement set directory (docs/formats.md).
         data: PathBuf,
+        /// Motor-force column (default: the first motor_force sensor).
         #[arg(long)]
         sensor: Option<String>,
+        /// Print JSON (`vmt-friction/1`) instead of the text.
         #[arg(long)]
         json: bool,
     },
-    /// Compensation table (seed 004) from the positioning run of a measurement set.
+    /// Variable-step compensation table (docs/methods.md) from the positioning run of a measurement set.
     Compensate {
+        /// Measurement set directory (docs/formats.md).
         data: PathBuf,
+        /// Deviation column (default: the first linear laser of the run).
         #[arg(long)]
         sensor: Option<String>,
+        /// Output CSV of the table.
         #[arg(short, long)]
         out: PathBuf,
         /// Write an equidistant controller-style table of N points (0.1 µm units) instead.
         #[arg(long)]
         equidistant: Option<usize>,
     },
-    /// The six error motions from the laser lines of a point-table run (seeds 001/003 identifier).
+    /// Error motions (and squareness) from laser lines: least-squares line-set identification (docs/methods.md).
     Identify {
+        /// Measurement set directory (docs/formats.md) holding laser-line point tables.
         data: PathBuf,
+        /// Run to use (default: the set's line runs).
         #[arg(long)]
         run: Option<String>,
-        /// Write the profiles with standard errors (FORMAT.md §5).
+        /// Write the profiles with standard errors (profile CSV, docs/formats.md).
         #[arg(short, long)]
         out: Option<PathBuf>,
+        /// Units of the -o CSV: "si" (m, rad) or "human" (mm positions, µm, µrad).
+        #[arg(long, default_value = "si")]
+        units: String,
+        /// Print JSON (`vmt-identify/1`) instead of the text.
         #[arg(long)]
         json: bool,
     },
-    /// Compare an estimate's profile CSV with the truth's (FORMAT.md §5): RMS and max per error motion.
+    /// Compare an estimate's profile CSV with the truth's (docs/formats.md): RMS and max per error motion.
     Score {
+        /// The truth profile CSV (e.g. truth_profiles.csv beside a simulated set).
         #[arg(long)]
         truth: PathBuf,
+        /// The estimate profile CSV (same columns: position, then one per error motion).
         #[arg(long)]
         estimate: PathBuf,
+        /// Print JSON (`vmt-score/1`) instead of the table.
         #[arg(long)]
         json: bool,
     },
     /// ISO 230-2 evaluation of a positioning test: a measurement set directory or an ecmc .dat file.
     #[command(name = "iso230-2")]
     Iso230_2 {
+        /// Measurement set directory or ecmc ISO 230-2 .dat file.
         path: PathBuf,
         /// Run of the measurement set (default: the first positioning run).
         #[arg(long)]
@@ -130,24 +157,29 @@ enum Command {
         /// Deviation column (default: the first linear laser of the run).
         #[arg(long)]
         sensor: Option<String>,
+        /// Print JSON (`vmt-iso230-2/1`) instead of the table.
         #[arg(long)]
         json: bool,
     },
-    /// Fit a model's free parameters to a measurement set and report the residual (DESIGN.md §8).
+    /// Fit a model's free parameters to a measurement set and report the residual (model-check loop, docs/methods.md).
     Compare(ModelAndData),
     /// Rank the effects a model lacks by how much of the residual they explain (ΔBIC, verdicts).
     Diagnose(ModelAndData),
     /// Write the model with an effect added (fit = true); keeps history.json beside the output.
     Add {
+        /// The model to extend (`vmt-model/1`).
         #[arg(long)]
         model: PathBuf,
-        #[arg(long)]
+        /// The effect to add (its name in the model format).
+        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(vmt_sim::effects::EffectName::ALL.map(|n| n.as_str())))]
         effect: String,
         /// Start from the parameters the diagnosis found (needs --data).
         #[arg(long)]
         from_diagnosis: bool,
+        /// Measurement set the diagnosis and the history's normalised RMS are computed on.
         #[arg(long)]
         data: Option<PathBuf>,
+        /// Output model file (history.json is kept beside it).
         #[arg(short, long)]
         out: PathBuf,
     },
@@ -158,12 +190,20 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run { scenario, out, json } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
         Command::Simulate { scenario, out, units } => vmt::cli::simulate(scenario.as_deref(), &out, &units).map(|_| 0),
-        Command::Study { scenario, shards, vary, trials, shard, estimator_cmd, out } => {
+        Command::Study { scenario, shards, vary, trials, shard, estimator_cmd, tolerance, out } => {
             if scenario.as_os_str() == "merge" {
                 vmt::cli::study_merge(&out, &shards)
             } else {
                 match vary {
-                    Some(v) => vmt::cli::study(&scenario, &v, trials, shard.as_deref(), estimator_cmd.as_deref(), &out),
+                    Some(v) => vmt::cli::study(
+                        &scenario,
+                        &v,
+                        trials,
+                        shard.as_deref(),
+                        estimator_cmd.as_deref(),
+                        tolerance,
+                        &out,
+                    ),
                     None => Err(vmt::error::VmtError::Usage("study needs --vary sensors.NAME.KEY=V1,V2,…".into())),
                 }
             }
@@ -173,7 +213,9 @@ fn main() -> ExitCode {
         Command::Compensate { data, sensor, out, equidistant } => {
             vmt::cli::compensate(&data, sensor.as_deref(), &out, equidistant)
         }
-        Command::Identify { data, run, out, json } => vmt::cli::identify(&data, run.as_deref(), out.as_deref(), json),
+        Command::Identify { data, run, out, units, json } => {
+            vmt::cli::identify(&data, run.as_deref(), out.as_deref(), &units, json)
+        }
         Command::Score { truth, estimate, json } => vmt::cli::score(&truth, &estimate, json),
         Command::Iso230_2 { path, run, sensor, json } => {
             vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json)
@@ -190,5 +232,35 @@ fn main() -> ExitCode {
             eprintln!("vmt: {e}");
             ExitCode::from(e.exit_code() as u8)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+
+    /// Every subcommand and every argument (positional or option) has a help line, at every depth.
+    #[test]
+    fn every_command_and_argument_has_help() {
+        fn walk(cmd: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for a in cmd.get_arguments() {
+                let builtin = matches!(a.get_id().as_str(), "help" | "version");
+                if !builtin && a.get_help().is_none() && a.get_long_help().is_none() {
+                    missing.push(format!("{path} {}", a.get_id()));
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                if sub.get_about().is_none() && sub.get_name() != "help" {
+                    missing.push(format!("{path} {} (the command)", sub.get_name()));
+                }
+                walk(sub, &format!("{path} {}", sub.get_name()), missing);
+            }
+        }
+        let cmd = Cli::command();
+        cmd.clone().debug_assert();
+        let mut missing = Vec::new();
+        walk(&cmd, "vmt", &mut missing);
+        assert!(missing.is_empty(), "arguments without a help line: {missing:#?}");
     }
 }

@@ -146,6 +146,14 @@ pub fn fmt_f64(x: f64) -> String {
     }
 }
 
+/// `x` rounded to `digits` significant decimal digits (the nearest f64 to that decimal).
+pub fn round_significant(x: f64, digits: usize) -> f64 {
+    if x == 0.0 || !x.is_finite() {
+        return x;
+    }
+    format!("{x:.*e}", digits.saturating_sub(1)).parse().unwrap_or(x)
+}
+
 /// Formats an f64 as a TOML float (always with `.` or `e`, so it stays a float).
 pub fn fmt_toml_f64(x: f64) -> String {
     let s = fmt_f64(x);
@@ -878,9 +886,10 @@ fn write_unit(dim: Dimension, position_like: bool, choice: UnitChoice) -> Unit {
     crate::units::unit(sym).unwrap_or_else(|| dim.si())
 }
 
-/// A header cell `name[unit]`, or `name` for SI.
-fn header_cell(name: &str, u: &Unit) -> String {
-    if u.is_si() {
+/// A header cell `name[unit]`, or `name` for SI; under `--units human` every cell names its unit,
+/// SI ones too (`t[s]`, `acc_z[m/s^2]`, `force[N]`), so that no column of such a file is unitless.
+fn header_cell(name: &str, u: &Unit, choice: UnitChoice) -> String {
+    if u.is_si() && (choice == UnitChoice::Si || u.dimension == Dimension::Ratio) {
         name.to_string()
     } else {
         format!("{name}[{}]", u.symbol)
@@ -916,7 +925,10 @@ fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, Str
                             u.symbol
                         ));
                     }
-                    out.push_str(&fmt_f64(x));
+                    // A value converted out of SI (m → mm) carries the conversion's rounding noise
+                    // (0.33595 m → 335.95000000000005 mm): written to 12 significant digits, far
+                    // below any instrument's resolution. SI values are written exactly.
+                    out.push_str(&fmt_f64(if u.is_si() { x } else { round_significant(x, 12) }));
                 }
                 Col::Int(v) => out.push_str(&v[i]),
             }
@@ -933,19 +945,19 @@ fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> Result<String,
     let time_u = write_unit(Dimension::Time, true, units);
     match &run.data {
         RunData::TimeSeries { t, .. } => {
-            header.push(header_cell("t", &time_u));
+            header.push(header_cell("t", &time_u, units));
             cols.push(Col::Num(time_u, t));
         }
         RunData::PointTable { target, run: rn, direction, t, .. } => {
             let lu = write_unit(Dimension::Length, true, units);
-            header.push(header_cell("target", &lu));
+            header.push(header_cell("target", &lu, units));
             cols.push(Col::Num(lu, target));
             header.push("run".into());
             cols.push(Col::Int(rn.iter().map(|r| r.to_string()).collect()));
             header.push("direction".into());
             cols.push(Col::Int(direction.iter().map(|d| d.to_string()).collect()));
             if let Some(t) = t {
-                header.push(header_cell("t", &time_u));
+                header.push(header_cell("t", &time_u, units));
                 cols.push(Col::Num(time_u, t));
             }
         }
@@ -959,7 +971,7 @@ fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> Result<String,
             None => (Dimension::Length, true),
         };
         let u = write_unit(dim, pos, units);
-        header.push(header_cell(name, &u));
+        header.push(header_cell(name, &u, units));
         cols.push(Col::Num(u, v));
     }
     csv_text(&header, &cols, run.data.len())
@@ -974,7 +986,7 @@ fn toml_f64_array(v: &[f64]) -> String {
 /// The manifest text of a set.
 fn manifest_text(set: &MeasurementSet) -> Result<String, VmtError> {
     let mut s = String::new();
-    s.push_str("# vmt measurement set (FORMAT.md §1); CSV values in SI unless a header says [unit]\n");
+    s.push_str("# vmt measurement set (vmt-measurements/1, docs/formats.md §1); CSV values in SI unless a header says [unit]\n");
     s.push_str(&format!("format = {}\n", toml_str(FORMAT_ID)));
     if let Some(d) = &set.description {
         s.push_str(&format!("description = {}\n", toml_str(d)));
@@ -1236,16 +1248,16 @@ pub fn write_profiles(table: &ProfileTable, path: &Path, units: UnitChoice) -> R
 pub fn profiles_csv(table: &ProfileTable, path: &Path, units: UnitChoice) -> Result<String, VmtError> {
     validate_profiles(table, path)?;
     let pu = write_unit(Dimension::Length, true, units);
-    let mut header: Vec<String> = vec![header_cell("position", &pu)];
+    let mut header: Vec<String> = vec![header_cell("position", &pu, units)];
     let mut cols: Vec<Col<'_>> = vec![Col::Num(pu, &table.position)];
     for c in &table.columns {
         let dim = if c.effect.is_translational() { Dimension::Length } else { Dimension::Angle };
         let u = write_unit(dim, false, units);
         let name = c.column_name();
-        header.push(header_cell(&name, &u));
+        header.push(header_cell(&name, &u, units));
         cols.push(Col::Num(u, &c.values));
         if let Some(s) = &c.sigma {
-            header.push(header_cell(&format!("{name}_sigma"), &u));
+            header.push(header_cell(&format!("{name}_sigma"), &u, units));
             cols.push(Col::Num(u, s));
         }
     }

@@ -482,7 +482,7 @@ fn profile_lines(
 pub fn model_to_toml(model: &Model, stem: &str) -> Result<(String, Vec<(String, String)>), VmtError> {
     let mut out = String::new();
     let mut sidecars: Vec<(String, String)> = Vec::new();
-    out.push_str("# vmt model (FORMAT.md §2); SI units: m, rad, s, N, K\n");
+    out.push_str("# vmt model (vmt-model/1, docs/formats.md §2); SI units: m, rad, s, N, K\n");
     out.push_str(&format!("format = {}\n", toml_str(MODEL_FORMAT)));
     if let Some(m) = &model.machine {
         out.push_str(&format!("machine = {}\n", toml_str(m)));

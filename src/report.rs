@@ -2,19 +2,11 @@
 //! result table, a figure for every estimate, and what was measured.
 
 use crate::error::VmtError;
-use crate::estimate::{Estimates, Quantity};
+use crate::estimate::{Estimates, CHECK_HEADER, CHECK_LEGEND};
 use crate::measurement::MeasurementSet;
 use crate::scenario::Scenario;
 use std::path::Path;
 use vmt_report::{render_html, write_atomic, Report, RowStatus, Section, Table};
-
-fn fmt(q: Quantity, v: f64) -> String {
-    match q {
-        Quantity::Length => format!("{:.3} µm", v * 1e6),
-        Quantity::Angle => format!("{:.3} µrad", v * 1e6),
-        Quantity::Ratio => format!("{v:.3}"),
-    }
-}
 
 /// Builds the report of a run: the table of checks (each row names its figure), then the figures.
 pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Report {
@@ -22,23 +14,15 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
         .checks
         .iter()
         .map(|c| {
-            vec![
-                c.error.clone(),
-                fmt(c.quantity, c.injected),
-                fmt(c.quantity, c.recovered),
-                fmt(c.quantity, c.difference),
-                fmt(c.quantity, c.tolerance),
-                if c.pass { "pass".into() } else { "FAIL".into() },
-                c.figure.map_or(String::new(), |i| format!("Figure {}", i + 1)),
-            ]
+            let mut row = c.cells().to_vec();
+            row.push(c.figure.map_or(String::new(), |i| format!("Figure {}", i + 1)));
+            row
         })
         .collect();
     let highlight = est.checks.iter().map(|c| if c.pass { RowStatus::Pass } else { RowStatus::Fail }).collect();
     let table = Table {
         caption: "Each estimate against the injected truth, with the tolerance it must meet".into(),
-        header: ["error", "injected", "recovered", "difference", "tolerance", "pass", "figure"]
-            .map(String::from)
-            .to_vec(),
+        header: CHECK_HEADER.iter().chain(&["figure"]).map(|h| h.to_string()).collect(),
         rows,
         highlight,
     };
@@ -68,11 +52,17 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
         sections: vec![
             Section {
                 heading: "Results".into(),
-                text: vec![if failed == 0 {
+                text: std::iter::once(if failed == 0 {
                     format!("All {} estimates are within tolerance.", est.checks.len())
                 } else {
                     format!("{failed} of {} estimates missed their tolerance.", est.checks.len())
-                }],
+                })
+                .chain(std::iter::once(CHECK_LEGEND.to_string()))
+                .chain(est.checks.iter().filter_map(|c| c.note.as_ref().map(|n| format!("{}: {n}", c.error))))
+                .chain(std::iter::once(
+                    "Methods and their sources: docs/methods.md; file formats: docs/formats.md (in the vmt repository).".into(),
+                ))
+                .collect(),
                 figures: Vec::new(),
                 tables: vec![table],
             },

@@ -5,7 +5,7 @@
 
 use crate::byo::{score_profiles, Estimator};
 use crate::error::VmtError;
-use crate::estimate::run_estimators;
+use crate::estimate::{run_estimators, Quantity};
 use crate::scenario::Scenario;
 use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set};
 use rayon::prelude::*;
@@ -53,20 +53,40 @@ pub struct TrialRow {
     pub trial: usize,
     pub estimate: String,
     pub difference: f64,
-    pub pass: bool,
+    /// Whether the difference met the tolerance; `None` where no tolerance was given (an external
+    /// estimator run without `--tolerance`).
+    pub pass: Option<bool>,
     /// Cramér–Rao bound of the difference, where one exists (NaN otherwise).
     pub bound: f64,
+    /// What the difference measures (its SI unit: m, rad or none); the `quantity` column of trials.csv.
+    pub quantity: Quantity,
+}
+
+/// The quantity of an error motion named as in a profile CSV (`pitch`, `y.straightness_z`): lengths for
+/// the translational ones, angles otherwise.
+pub fn motion_quantity(name: &str) -> Quantity {
+    match name.rsplit('.').next().and_then(|n| n.parse::<vmt_sim::effects::EffectName>().ok()) {
+        Some(e) if e.is_translational() => Quantity::Length,
+        Some(_) => Quantity::Angle,
+        None => Quantity::Ratio,
+    }
 }
 
 /// Runs trials `k` with k % shard.1 == shard.0 of every value. Each trial runs the scenario's estimators,
-/// or, with `estimator`, that estimator (e.g. a user's program) scored against the truth per error motion.
+/// or, with `estimator`, that estimator (e.g. a user's program) scored against the truth per error motion:
+/// the RMS of (estimate − truth) of each error motion passes when it is at most `tolerance` (SI: m or rad);
+/// without a tolerance the rows carry no pass/fail.
 pub fn run_study(
     sc: &Scenario,
     vary: &Vary,
     trials: usize,
     shard: (usize, usize),
     estimator: Option<&dyn Estimator>,
+    tolerance: Option<f64>,
 ) -> Result<Vec<TrialRow>, VmtError> {
+    if trials == 0 {
+        return Err(VmtError::Usage("--trials: expected at least 1 trial".into()));
+    }
     let truth_table = crate::simulate::truth_profiles(sc)?;
     let ph = physics(sc)?;
     if !ph.sensors.iter().any(|s| s.name == vary.sensor) {
@@ -107,8 +127,9 @@ pub fn run_study(
                         trial: k,
                         estimate: format!("{} RMS", r.effect),
                         difference: r.rms,
-                        pass: true,
+                        pass: tolerance.map(|t| r.rms <= t),
                         bound: f64::NAN,
+                        quantity: motion_quantity(&r.effect),
                     })
                     .collect());
             }
@@ -121,8 +142,9 @@ pub fn run_study(
                     trial: k,
                     estimate: c.error,
                     difference: c.difference,
-                    pass: c.pass,
+                    pass: Some(c.pass),
                     bound: c.bound.unwrap_or(f64::NAN),
+                    quantity: c.quantity,
                 })
                 .collect())
         })
@@ -134,16 +156,17 @@ pub fn run_study(
 pub fn rows_csv(rows: &[TrialRow]) -> String {
     let mut rows = rows.to_vec();
     rows.sort_by(|a, b| a.value.total_cmp(&b.value).then(a.trial.cmp(&b.trial)).then(a.estimate.cmp(&b.estimate)));
-    let mut s = String::from("value,trial,estimate,difference,pass,bound\n");
+    let mut s = String::from("value,trial,estimate,difference,pass,bound,quantity\n");
     for r in rows {
         s += &format!(
-            "{},{},\"{}\",{},{},{}\n",
+            "{},{},\"{}\",{},{},{},{}\n",
             r.value,
             r.trial,
             r.estimate.replace('"', "'"),
             r.difference,
-            r.pass,
-            r.bound
+            r.pass.map_or(String::new(), |p| p.to_string()),
+            r.bound,
+            quantity_id(r.quantity)
         );
     }
     s
@@ -167,8 +190,32 @@ pub fn read_rows(path: &Path) -> Result<Vec<TrialRow>, VmtError> {
             trial: num(1)? as usize,
             estimate: f(2).to_string(),
             difference: num(3)?,
-            pass: f(4) == "true",
+            pass: match f(4) {
+                "true" => Some(true),
+                "false" => Some(false),
+                "" => None,
+                other => {
+                    return Err(VmtError::bad(
+                        path,
+                        format!("line {}", i + 2),
+                        format!("pass: expected true, false or empty, got `{other}`"),
+                    ))
+                }
+            },
             bound: f(5).parse().unwrap_or(f64::NAN),
+            quantity: match f(6) {
+                "length" => Quantity::Length,
+                "angle" => Quantity::Angle,
+                // A file written before the column existed: unit unknown, shown bare.
+                "ratio" | "" => Quantity::Ratio,
+                other => {
+                    return Err(VmtError::bad(
+                        path,
+                        format!("line {}", i + 2),
+                        format!("quantity: expected length, angle or ratio, got `{other}`"),
+                    ))
+                }
+            },
         });
     }
     Ok(out)
@@ -181,10 +228,24 @@ pub struct SummaryRow {
     pub estimate: String,
     pub trials: usize,
     pub mean_abs: f64,
+    /// Root mean square of the difference over the trials, √(mean d²): the statistic a Cramér–Rao bound
+    /// (a bound on the expected squared error) is compared with.
+    pub rms: f64,
     pub p95_abs: f64,
-    pub pass_rate: f64,
+    /// Fraction of the trials that met the tolerance; `None` when the trials had no tolerance.
+    pub pass_rate: Option<f64>,
     /// Mean Cramér–Rao bound over the trials (NaN where none exists).
     pub bound: f64,
+    pub quantity: Quantity,
+}
+
+/// The `quantity` column of trials.csv and summary.csv.
+pub fn quantity_id(q: Quantity) -> &'static str {
+    match q {
+        Quantity::Length => "length",
+        Quantity::Angle => "angle",
+        Quantity::Ratio => "ratio",
+    }
 }
 
 pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
@@ -197,17 +258,23 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
                 rows.iter().filter(|r| r.value == v && r.estimate == e).map(|r| r.difference.abs()).collect();
             d.sort_by(f64::total_cmp);
             let n = d.len();
-            let passed = rows.iter().filter(|r| r.value == v && r.estimate == e && r.pass).count();
+            let judged: Vec<bool> =
+                rows.iter().filter(|r| r.value == v && r.estimate == e).filter_map(|r| r.pass).collect();
+            let pass_rate = (judged.len() == n).then(|| judged.iter().filter(|&&p| p).count() as f64 / n.max(1) as f64);
             let bounds: Vec<f64> = rows.iter().filter(|r| r.value == v && r.estimate == e).map(|r| r.bound).collect();
             let bound = bounds.iter().sum::<f64>() / bounds.len().max(1) as f64;
+            let quantity =
+                rows.iter().find(|r| r.value == v && r.estimate == e).map_or(Quantity::Ratio, |r| r.quantity);
             SummaryRow {
                 value: v,
                 estimate: e,
                 trials: n,
                 mean_abs: d.iter().sum::<f64>() / n.max(1) as f64,
+                rms: (d.iter().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt(),
                 p95_abs: d[((0.95 * n as f64).ceil() as usize).clamp(1, n) - 1],
-                pass_rate: passed as f64 / n.max(1) as f64,
+                pass_rate,
                 bound,
+                quantity,
             }
         })
         .collect()

@@ -17,6 +17,9 @@ use vmt::simulate::{physics, read_all, simulate_truth, to_measurement_set};
 use vmt_estimators::modelcheck::Verdict;
 use vmt_sim::effects::{Effect, EffectName, EffectParams};
 
+#[path = "common/realdata.rs"]
+mod realdata;
+
 /// After adding the hidden effect the residual must be at the noise level: normalised RMS ≤ 1.3.
 /// (1.0 is the noise floor, and with ~90 samples its scatter is about ±0.1; the simulator adds some
 /// nm of unmodelled servo settling to the 50 nm laser noise.)
@@ -270,13 +273,9 @@ fn interpolation_error_between_sparse_targets_is_not_searched() {
 /// the residual RMS must fall. A positioning profile (cubic) must also reduce it.
 #[test]
 fn real_iso230_2_data_the_loop_reduces_the_residual() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let shared = [root.join("../shared"), root.join("../../shared")].into_iter().find(|p| p.is_dir());
-    let Some(shared) = shared else {
-        eprintln!("realdata not found beside the repository: skipped");
+    let Some(dir) = realdata::realdata("ecmc_iso230_2", "real_iso230_2_data_the_loop_reduces_the_residual") else {
         return;
     };
-    let dir = shared.join("realdata/ecmc_iso230_2");
     // Minimum number of effects the loop adds. mcu1025 (raw normalised RMS 1.51): its only
     // significant candidate is a cyclic lead at 35.6 mm that, on its regular targets, fits exactly
     // as well at eight aliases from 2.2 to 7.9 mm (issue 11): `inseparable`, nothing to add; before
@@ -330,13 +329,11 @@ fn real_iso230_2_data_the_loop_reduces_the_residual() {
 /// 3.97 mm, ΔBIC −2050) and must say why such periods are not searched.
 #[test]
 fn real_b02_x_no_cyclic_lead_shorter_than_the_targets_resolve() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let shared = [root.join("../shared"), root.join("../../shared")].into_iter().find(|p| p.is_dir());
-    let Some(shared) = shared else {
-        eprintln!("realdata not found beside the repository: skipped");
+    let Some(dir) = realdata::realdata("ecmc_iso230_2", "real_b02_x_no_cyclic_lead_shorter_than_the_targets_resolve")
+    else {
         return;
     };
-    let path = shared.join("realdata/ecmc_iso230_2/ess_target_muts_logger/b02_x_target_x.md_ISO230.dat");
+    let path = dir.join("ess_target_muts_logger/b02_x_target_x.md_ISO230.dat");
     let text = std::fs::read_to_string(&path).unwrap();
     let dat = vmt_estimators::iso230_2::dat::parse_dat(&text).unwrap();
     let set = vmt::measurement::from_iso230_2_dat(&dat);

@@ -1,16 +1,10 @@
 //! `vmt compare` and `vmt diagnose` read an ISO 230-2 `.dat` file (the ecmc key=value format of
 //! ../shared/realdata/ecmc_iso230_2/) directly as `--data`, as they read a measurement set.
 
-use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn realdata(file: &str) -> Option<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    [root.join("../shared"), root.join("../../shared")]
-        .into_iter()
-        .find(|p| p.is_dir())
-        .map(|s| s.join("realdata/ecmc_iso230_2").join(file))
-}
+#[path = "common/realdata.rs"]
+mod realdata;
 
 fn vmt(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_vmt")).args(args).output().unwrap();
@@ -23,10 +17,11 @@ fn vmt(args: &[&str]) -> (i32, String, String) {
 
 #[test]
 fn compare_and_diagnose_take_an_iso230_2_dat_file_as_data() {
-    let Some(dat) = realdata("ess_target_muts_logger/b02_x_target_x.md_ISO230.dat") else {
-        eprintln!("realdata not found beside the repository: skipped");
+    let Some(dir) = realdata::realdata("ecmc_iso230_2", "compare_and_diagnose_take_an_iso230_2_dat_file_as_data")
+    else {
         return;
     };
+    let dat = dir.join("ess_target_muts_logger/b02_x_target_x.md_ISO230.dat");
     let tmp = tempfile::tempdir().unwrap();
     let empty = tmp.path().join("empty.toml");
     std::fs::write(&empty, "format = \"vmt-model/1\"\naxis = \"x\"\n").unwrap();

@@ -227,7 +227,7 @@ fn identify_then_score_recovers_the_six_error_motions_from_laser_lines() {
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let rows = rows.as_array().unwrap();
+    let rows = rows["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 6, "{rows:?}");
     for r in rows {
         // 20 nm laser noise, two runs per direction: issue 5's 0.1 µm (translations) and 0.5 µrad (angles)

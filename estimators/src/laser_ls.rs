@@ -1565,7 +1565,10 @@ pub fn seed001_formulas(
         check_positions(p)?;
     }
     if lines.len() < 9 {
-        return bad(format!("expected the 9 lines of seed 001, got {}", lines.len()));
+        return bad(format!(
+            "expected the 9 lines of the laser-Doppler 21-error layout (docs/methods.md), got {}",
+            lines.len()
+        ));
     }
     let moving = [0, 1, 2, 0, 1, 2, 0, 1, 2];
     for (l, v) in lines.iter().take(9).enumerate() {

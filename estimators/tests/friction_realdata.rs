@@ -11,27 +11,18 @@
 //!
 //! The CSV parsing lives here; the estimator only sees numbers.
 
-use std::path::PathBuf;
+use std::path::Path;
 use vmt_estimators::friction_id::{
     fit_stribeck, friction_from_motion, lugre_sigma0_from_presliding, stribeck_curve, FilterMode, FrictionIdError,
     StribeckCoefficients, StribeckFit, StribeckFitOptions, StribeckShape, SweepDirection,
 };
 
-/// `shared/` sits beside the worktree (`<manifest>/../../shared`) or beside the clone.
-fn data_dir() -> PathBuf {
-    let m = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    for cand in [m.join("../../shared"), m.join("../shared"), m.join("../../../shared")] {
-        let d = cand.join("realdata/friction_rack_pinion");
-        if d.is_dir() {
-            return d;
-        }
-    }
-    panic!("realdata/friction_rack_pinion not found beside {}", m.display());
-}
+#[path = "../../tests/common/realdata.rs"]
+mod realdata;
 
 /// Numeric rows of a CSV after `skip` header lines (the first line may carry a UTF-8 BOM).
-fn read_rows(name: &str, skip: usize) -> Vec<Vec<f64>> {
-    let path = data_dir().join(name);
+fn read_rows(dir: &Path, name: &str, skip: usize) -> Vec<Vec<f64>> {
+    let path = dir.join(name);
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     text.lines()
         .skip(skip)
@@ -66,10 +57,12 @@ struct Prepared {
     dt: f64,
 }
 
-/// Reads both files and puts force and velocity on the servo timebase (README processing).
-fn prepare() -> Prepared {
-    let ni = read_rows("a3NI.csv", 4);
-    let mr = read_rows("a3MR.csv", 5);
+/// Reads both files and puts force and velocity on the servo timebase (README processing); `None`
+/// (the test `test` is skipped, visibly) when the real data is absent.
+fn prepare(test: &str) -> Option<Prepared> {
+    let dir = realdata::realdata("friction_rack_pinion", test)?;
+    let ni = read_rows(&dir, "a3NI.csv", 4);
+    let mr = read_rows(&dir, "a3MR.csv", 5);
     assert!(ni.len() > 1000 && mr.len() == 1024, "{} NI rows, {} MR rows", ni.len(), mr.len());
     let v0: f64 = ni[..10].iter().map(|r| r[1]).sum::<f64>() / 10.0;
     let t_ni: Vec<f64> = ni.iter().map(|r| r[0] + 0.004).collect();
@@ -89,7 +82,7 @@ fn prepare() -> Prepared {
         }
     }
     let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
-    Prepared { t, v_raw, force_raw, dt }
+    Some(Prepared { t, v_raw, force_raw, dt })
 }
 
 /// The fit window of the README: acceleration phase (from the start up to the velocity peak),
@@ -119,7 +112,10 @@ mod friction_realdata {
 
     #[test]
     fn rack_pinion_author_processing_lands_within_15_percent_of_the_published_coefficients() {
-        let d = prepare();
+        let Some(d) = prepare("rack_pinion_author_processing_lands_within_15_percent_of_the_published_coefficients")
+        else {
+            return;
+        };
         println!("{} samples on the servo timebase, dt = {} s", d.t.len(), d.dt);
         let mf = friction_from_motion(&d.v_raw, &d.force_raw, 24.7, d.dt, Some(30.0), FilterMode::Causal).unwrap();
         let (v, f) = window(&mf.v, &mf.friction);
@@ -152,7 +148,7 @@ mod friction_realdata {
     fn rack_pinion_variants_are_reported() {
         // Not tolerance tests of the author's numbers: how the answer moves with choices the README
         // leaves open. Printed for the report; only sanity bounds are asserted.
-        let d = prepare();
+        let Some(d) = prepare("rack_pinion_variants_are_reported") else { return };
         for (label, mode) in [("causal", FilterMode::Causal), ("zero-phase", FilterMode::ZeroPhase)] {
             let mf = friction_from_motion(&d.v_raw, &d.force_raw, 24.7, d.dt, Some(30.0), mode).unwrap();
             let (v, f) = window(&mf.v, &mf.friction);
@@ -178,7 +174,7 @@ mod friction_realdata {
         // t ≈ 0.046 s) and the load-cell force does not rise before that (summary.png: force and
         // acceleration start together at ≈0.05 s), so the stick segment holds no pre-sliding ramp and
         // σ0 is not identifiable from these files. The estimator must say so.
-        let d = prepare();
+        let Some(d) = prepare("rack_pinion_lugre_sigma0_is_not_identifiable") else { return };
         let mut x = vec![0.0; d.v_raw.len()];
         for i in 1..x.len() {
             x[i] = x[i - 1] + 0.5 * (d.v_raw[i] + d.v_raw[i - 1]) * d.dt;

@@ -11,22 +11,16 @@ use std::path::{Path, PathBuf};
 use vmt_estimators::iso230_2::dat::{parse_dat, DatFile};
 use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
 
-fn realdata_dir() -> PathBuf {
-    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for rel in ["../../shared", "../shared", "../../../shared"] {
-        let p = manifest.join(rel).join("realdata/ecmc_iso230_2");
-        if p.is_dir() {
-            return p;
-        }
-    }
-    panic!(
-        "shared/realdata/ecmc_iso230_2 not found beside {} (tried ../../shared, ../shared, ../../../shared)",
-        manifest.display()
-    );
+#[path = "../../tests/common/realdata.rs"]
+mod realdata;
+
+/// `realdata/ecmc_iso230_2`, or `None` (the test is skipped, visibly) when the real data is absent.
+fn realdata_dir(test: &str) -> Option<PathBuf> {
+    realdata::realdata("ecmc_iso230_2", test)
 }
 
-fn load(rel: &str) -> (DatFile, AxisResult) {
-    let path = realdata_dir().join(rel);
+fn load(dir: &Path, rel: &str) -> (DatFile, AxisResult) {
+    let path = dir.join(rel);
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let dat = parse_dat(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let r =
@@ -35,10 +29,10 @@ fn load(rel: &str) -> (DatFile, AxisResult) {
 }
 
 /// Every `.dat` file in the three sub-folders.
-fn all_dat_files() -> Vec<String> {
+fn all_dat_files(root: &Path) -> Vec<String> {
     let mut out = Vec::new();
     for sub in ["ecmccomgui", "ess_target_muts_logger", "psi_ecmccfg"] {
-        let dir = realdata_dir().join(sub);
+        let dir = root.join(sub);
         for entry in std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
             let name = entry.unwrap().file_name().into_string().unwrap();
             if name.ends_with(".dat") {
@@ -204,12 +198,13 @@ const B02_X: Reported = Reported {
 
 #[test]
 fn literal_report_values_reproduce_for_three_files() {
+    let Some(dir) = realdata_dir("literal_report_values_reproduce_for_three_files") else { return };
     for (dat_file, rep) in [
         ("psi_ecmccfg/fat_sat_report.md_ISO230.dat", FAT_SAT),
         ("psi_ecmccfg/mcu1025_fat_sat_report.md_ISO230.dat", MCU1025),
         ("ess_target_muts_logger/b02_x_target_x.md_ISO230.dat", B02_X),
     ] {
-        let (dat, r) = load(dat_file);
+        let (dat, r) = load(&dir, dat_file);
         assert_reproduces(dat_file, &dat, &r, &rep);
     }
 }
@@ -220,7 +215,8 @@ fn literal_report_values_reproduce_for_three_files() {
 /// report's own R(i) column, yet the printed axis R is max(R_fwd, R_bwd) = 6.29e-5 mm.
 #[test]
 fn fat_sat_e_and_r_differ_from_the_report_as_the_readme_says() {
-    let (dat, r) = load("psi_ecmccfg/fat_sat_report.md_ISO230.dat");
+    let Some(dir) = realdata_dir("fat_sat_e_and_r_differ_from_the_report_as_the_readme_says") else { return };
+    let (dat, r) = load(&dir, "psi_ecmccfg/fat_sat_report.md_ISO230.dat");
     let tol = printed_tolerance_mm(&dat);
     assert!((r.e * 1e3 - 3.68e-5).abs() <= tol, "E = {} mm", r.e * 1e3);
     assert!((r.r * 1e3 - 6.882e-5).abs() <= tol, "R = {} mm", r.r * 1e3);
@@ -231,7 +227,7 @@ fn fat_sat_e_and_r_differ_from_the_report_as_the_readme_says() {
 /// (.dat, .md) pairs in the data folder. `testdata` holds the same numbers as `example_data` in
 /// another line order, and `tools_iso230-2_report.md` / `tools_report_forward_sequence.md` have no
 /// `.dat`, so they are not paired.
-fn report_pairs() -> Vec<(String, String)> {
+fn report_pairs(root: &Path) -> Vec<(String, String)> {
     let mut pairs = vec![
         (
             "ecmccomgui/tools_iso230-2_example_data_ISO230_2.dat".to_string(),
@@ -246,9 +242,9 @@ fn report_pairs() -> Vec<(String, String)> {
             "ess_target_muts_logger/b02_x_x_iso230_2_report.md".to_string(),
         ),
     ];
-    for f in all_dat_files() {
+    for f in all_dat_files(root) {
         if let Some(md) = f.strip_suffix("_ISO230.dat") {
-            if md.ends_with(".md") && realdata_dir().join(md).is_file() {
+            if md.ends_with(".md") && root.join(md).is_file() {
                 pairs.push((f.clone(), md.to_string()));
             }
         }
@@ -258,10 +254,11 @@ fn report_pairs() -> Vec<(String, String)> {
 
 #[test]
 fn every_dat_file_parses_and_satisfies_the_iso_invariants() {
-    let files = all_dat_files();
+    let Some(dir) = realdata_dir("every_dat_file_parses_and_satisfies_the_iso_invariants") else { return };
+    let files = all_dat_files(&dir);
     assert_eq!(files.len(), 12, "README lists 12 .dat files: {files:?}");
     for f in &files {
-        let (dat, r) = load(f);
+        let (dat, r) = load(&dir, f);
         assert!(dat.targets.len() >= 5 && dat.up[0].len() == 5, "{f}: 5 cycles, >= 5 positions");
         // Exact inequalities: each follows from max/min over a superset, so no tolerance is needed.
         assert!(r.e >= r.e_up.max(r.e_down), "{f}: E < max(E↑, E↓)");
@@ -277,8 +274,8 @@ fn every_dat_file_parses_and_satisfies_the_iso_invariants() {
         );
     }
     // The two ecmccomgui files hold the same numbers in a different order.
-    let (_, a) = load("ecmccomgui/tools_iso230-2_example_data_ISO230_2.dat");
-    let (_, b) = load("ecmccomgui/tools_iso230-2_testdata_ISO230_2.dat");
+    let (_, a) = load(&dir, "ecmccomgui/tools_iso230-2_example_data_ISO230_2.dat");
+    let (_, b) = load(&dir, "ecmccomgui/tools_iso230-2_testdata_ISO230_2.dat");
     assert_eq!(a, b);
 }
 
@@ -287,12 +284,13 @@ fn every_dat_file_parses_and_satisfies_the_iso_invariants() {
 /// max_i R_i exceeds it by more than the printed rounding.
 #[test]
 fn all_reports_right_values_reproduce_and_e_r_are_wrong_as_stated() {
-    let pairs = report_pairs();
+    let Some(dir) = realdata_dir("all_reports_right_values_reproduce_and_e_r_are_wrong_as_stated") else { return };
+    let pairs = report_pairs(&dir);
     assert_eq!(pairs.len(), 12, "{pairs:?}");
     let mut r_wrong = 0;
     for (dat_file, md_file) in &pairs {
-        let (dat, r) = load(dat_file);
-        let md = std::fs::read_to_string(realdata_dir().join(md_file)).unwrap();
+        let (dat, r) = load(&dir, dat_file);
+        let md = std::fs::read_to_string(dir.join(md_file)).unwrap();
         let rep = parse_report(&md);
         assert_reproduces(dat_file, &dat, &r, &rep);
         let tol = printed_tolerance_mm(&dat);

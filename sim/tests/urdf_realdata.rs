@@ -3,15 +3,14 @@
 
 use vmt_sim::urdf::parse_urdf;
 
+#[path = "../../tests/common/realdata.rs"]
+mod realdata;
+
 #[test]
 fn every_real_urdf_with_prismatic_joints_loads() {
-    // shared/ sits beside the checkout (CI: <clone>/../shared); in a git worktree one level further up.
-    let manifest = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let dir = ["../../shared", "../../../shared"]
-        .iter()
-        .map(|p| manifest.join(p).join("realdata/urdf_prismatic"))
-        .find(|p| p.exists())
-        .unwrap_or_else(|| manifest.join("../../shared/realdata/urdf_prismatic"));
+    let Some(dir) = realdata::realdata("urdf_prismatic", "every_real_urdf_with_prismatic_joints_loads") else {
+        return;
+    };
     let mut loaded = 0;
     for entry in std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
         let path = entry.unwrap().path();
