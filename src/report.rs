@@ -6,6 +6,10 @@ use crate::estimate::{Estimates, Quantity};
 use crate::measurement::MeasurementSet;
 use crate::scenario::Scenario;
 use std::path::Path;
+
+mod conditions;
+pub mod iso;
+pub use conditions::{command_line, conditions, conditions_for_data, report_date, version};
 use vmt_report::{render_html, write_atomic, Report, RowStatus, Section, Table};
 
 fn fmt(q: Quantity, v: f64) -> String {
@@ -62,10 +66,11 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
         highlight: Vec::new(),
     };
     let failed = est.checks.iter().filter(|c| !c.pass).count();
-    Report {
+    let mut report = Report {
         title: format!("vmt run: {}", sc.source.display()),
         subtitle: sc.description.clone(),
         sections: vec![
+            conditions(sc),
             Section {
                 heading: "Results".into(),
                 text: vec![if failed == 0 {
@@ -84,7 +89,7 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
             },
             Section {
                 heading: "Tables of the estimators".into(),
-                text: Vec::new(),
+                text: est.notes.clone(),
                 figures: Vec::new(),
                 tables: est.tables.clone(),
             },
@@ -95,14 +100,26 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
                 tables: vec![measured],
             },
         ],
-    }
+    };
+    // A scenario without estimator tables or notes (the crawl) has nothing for that section: no empty section.
+    report.sections.retain(|s| !(s.text.is_empty() && s.figures.is_empty() && s.tables.is_empty()));
+    report
 }
 
-/// Renders and writes the report atomically.
+/// Renders and writes the report atomically, with the same report as JSON beside it (`report.json`
+/// next to `report.html`: the [`Report`] data, for other programs and for the readability check).
 pub fn write_run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates, path: &Path) -> Result<(), VmtError> {
-    let html = render_html(&run_report(sc, set, est)).map_err(|e| VmtError::Internal(format!("report: {e}")))?;
+    write_report(&run_report(sc, set, est), path)
+}
+
+/// Renders `report` to `path` (HTML) and writes its data beside it (`path` with extension `json`).
+pub fn write_report(report: &Report, path: &Path) -> Result<(), VmtError> {
+    let html = render_html(report).map_err(|e| VmtError::Internal(format!("report: {e}")))?;
+    let json = serde_json::to_string_pretty(report).map_err(|e| VmtError::Internal(format!("report JSON: {e}")))?;
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| VmtError::io(dir, "creating the output directory", e))?;
     }
+    write_atomic(path.with_extension("json"), json)
+        .map_err(|e| VmtError::Internal(format!("writing {}: {e}", path.with_extension("json").display())))?;
     write_atomic(path, html).map_err(|e| VmtError::Internal(format!("writing {}: {e}", path.display())))
 }
