@@ -848,7 +848,7 @@ fn laser_lines_3d_checks(
             names.join(", ")
         ),
         x_label: "angle (1 = first listed)".into(),
-        x_unit: String::new(),
+        x_unit: vmt_report::DIMENSIONLESS.into(),
         y_label: "angle".into(),
         y_unit: "µrad".into(),
         series: vec![
@@ -1028,7 +1028,7 @@ fn model_check_loop(
             if added.is_empty() { "nothing".into() } else { added.join(", ") }
         ),
         x_label: "iteration".into(),
-        x_unit: String::new(),
+        x_unit: vmt_report::DIMENSIONLESS.into(),
         y_label: "normalised RMS".into(),
         y_unit: "1 = noise".into(),
         series: vec![Series {

@@ -16,7 +16,7 @@ fn fmt(q: Quantity, v: f64) -> String {
     match q {
         Quantity::Length => format!("{:.3} µm", v * 1e6),
         Quantity::Angle => format!("{:.3} µrad", v * 1e6),
-        Quantity::Ratio => format!("{v:.3}"),
+        Quantity::Ratio => format!("{v:.3} (dimensionless)"),
     }
 }
 
@@ -50,7 +50,7 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
     let figures = est.figures.clone();
     let measured = Table {
         caption: "Runs of the measurement set".into(),
-        header: ["run", "procedure", "rows", "columns"].map(String::from).to_vec(),
+        header: ["run", "procedure", "rows (count)", "columns"].map(String::from).to_vec(),
         rows: set
             .runs
             .iter()

@@ -290,7 +290,7 @@ pub fn conditions(sc: &Scenario) -> Section {
         row("scenario", sc.source.display().to_string()),
         row("description", if sc.description.is_empty() { "—".into() } else { sc.description.clone() }),
         row("machine", sc.machine_name.clone()),
-        row("seed", sc.seed.to_string()),
+        row("seed", format!("{} (random seed of the sensor noise and procedures)", sc.seed)),
     ])];
     let procedures = procedure_rows(sc);
     if !procedures.is_empty() {
