@@ -322,7 +322,7 @@ pub fn study(
     let cmd = estimator_cmd.map(|c| crate::byo::CommandEstimator { command: c.to_string() });
     let rows = run_study(&sc, &vary, trials, shard, cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator), tolerance)?;
     bar.finish_and_clear();
-    write_study(&rows, &format!("sensors.{}.{}", vary.sensor, vary.key), out)
+    write_study(&rows, &format!("sensors.{}.{}", vary.sensor, vary.key), out, Some(&sc))
 }
 
 /// `vmt study merge OUT SHARD_DIRS…`: joins the trials of shards and writes the same outputs as one run.
@@ -331,10 +331,10 @@ pub fn study_merge(out: &Path, shards: &[PathBuf]) -> Result<i32, VmtError> {
     for d in shards {
         rows.extend(crate::study::read_rows(&d.join("trials.csv"))?);
     }
-    write_study(&rows, "varied parameter", out)
+    write_study(&rows, "varied parameter", out, None)
 }
 
-fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path) -> Result<i32, VmtError> {
+fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path, sc: Option<&Scenario>) -> Result<i32, VmtError> {
     use crate::study::{rows_csv, summarize, summary_svg};
     let summary = summarize(rows);
     std::fs::create_dir_all(out).map_err(|e| VmtError::io(out, "creating the output directory", e))?;
@@ -356,6 +356,7 @@ fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path) -> Resu
     measurement::write_file_atomic(&out.join("trials.csv"), rows_csv(rows).as_bytes())?;
     measurement::write_file_atomic(&out.join("summary.csv"), s.as_bytes())?;
     measurement::write_file_atomic(&out.join("study.svg"), summary_svg(&summary, label)?.as_bytes())?;
+    crate::report::write_report(&crate::report::study_report(sc, &summary, label), &out.join("report.html"))?;
     let judged = summary.iter().all(|r| r.pass_rate.is_some());
     println!("value: {label} (SI); over the trials of each value: mean |d|, RMS of d and 95th percentile of |d|,");
     println!(

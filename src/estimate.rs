@@ -367,6 +367,9 @@ pub struct Estimates {
     /// Tables an estimator reports in full (e.g. the ISO 230-2 table).
     #[serde(skip)]
     pub tables: Vec<vmt_report::Table>,
+    /// Statements the report prints beside the tables (e.g. the ISO 230-2 uncertainty statement).
+    #[serde(skip)]
+    pub notes: Vec<String>,
 }
 
 impl Estimates {
@@ -388,52 +391,7 @@ impl Estimates {
     }
 }
 
-/// The standard's table of an ISO 230-2 evaluation: per target, then the axis values (µm).
-pub fn iso_table(caption: &str, r: &AxisResult) -> vmt_report::Table {
-    let um = |v: f64| format!("{:.3}", v * 1e6);
-    let mut rows: Vec<Vec<String>> = r
-        .targets
-        .iter()
-        .map(|t| {
-            vec![
-                format!("{:.3}", t.target * 1e3),
-                um(t.up.mean),
-                um(t.down.mean),
-                um(t.mean_bidirectional),
-                um(t.reversal),
-                um(t.up.repeatability),
-                um(t.down.repeatability),
-                um(t.repeatability),
-            ]
-        })
-        .collect();
-    rows.push(vec![
-        "axis".into(),
-        format!("E↑ {}", um(r.e_up)),
-        format!("E↓ {}", um(r.e_down)),
-        format!("E {} / M {}", um(r.e), um(r.m)),
-        format!("B {} / B̄ {}", um(r.b), um(r.b_mean)),
-        format!("R↑ {}", um(r.r_up)),
-        format!("R↓ {}", um(r.r_down)),
-        format!("R {}", um(r.r)),
-    ]);
-    rows.push(vec![
-        "accuracy".into(),
-        format!("A↑ {}", um(r.a_up)),
-        format!("A↓ {}", um(r.a_down)),
-        format!("A {}", um(r.a)),
-        String::new(),
-        String::new(),
-        String::new(),
-        String::new(),
-    ]);
-    vmt_report::Table {
-        caption: caption.to_string(),
-        header: ["target mm", "x̄↑", "x̄↓", "x̄", "B_i", "R↑_i", "R↓_i", "R_i"].map(String::from).to_vec(),
-        rows,
-        highlight: Vec::new(),
-    }
-}
+pub use crate::report::iso::iso_table;
 
 /// Deviations of one sensor column of a point table, split by direction: (targets, up[i][j], down[i][j]).
 pub fn point_table_deviations(run: &RunRecord, sensor: &str) -> Option<(Vec<f64>, Vec<Vec<f64>>, Vec<Vec<f64>>)> {
@@ -489,20 +447,12 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                         })
                         .collect();
                 let injected: Vec<f64> = truth.targets.iter().map(|t| t.mean_bidirectional).collect();
-                let mean_up: Vec<f64> = est.targets.iter().map(|t| t.up.mean).collect();
-                let mean_down: Vec<f64> = est.targets.iter().map(|t| t.down.mean).collect();
-                let fig = profile_figure(
-                    format!("ISO 230-2 positioning test, {sensor}: mean deviations per target"),
-                    Quantity::Length,
-                    &targets,
-                    &[
-                        ("injected δx", &injected, SeriesStyle::Line),
-                        ("measured x̄↑", &mean_up, SeriesStyle::Points),
-                        ("measured x̄↓", &mean_down, SeriesStyle::Points),
-                    ],
-                );
+                let fig = crate::report::iso::iso_figure(sensor, &targets, &up, &down, &est, Some(&injected));
                 out.push(checks, fig);
-                out.tables.push(iso_table(&format!("ISO 230-2:2014 evaluation of run {run}, {sensor} (µm)"), &est));
+                out.tables.push(iso_table(&format!("ISO 230-2:2014 evaluation of run {run}, {sensor}"), &est));
+                let travel = targets.last().copied().unwrap_or(0.0) - targets.first().copied().unwrap_or(0.0);
+                let env = spec.air_scale_error() + spec.material_scale_error();
+                out.notes.push(crate::report::iso::uncertainty_statement(sensor, spec.sigma, env, travel));
             }
             EstimatorSpec::LaserLines { run, sensors, tolerance_translation, tolerance_angle } => {
                 for (c, f) in
@@ -1121,7 +1071,7 @@ fn laser_lines_3d_checks(
             names.join(", ")
         ),
         x_label: "angle (1 = first listed)".into(),
-        x_unit: String::new(),
+        x_unit: vmt_report::DIMENSIONLESS.into(),
         y_label: "angle".into(),
         y_unit: "µrad".into(),
         series: vec![
@@ -1330,7 +1280,7 @@ fn model_check_loop(
             if added.is_empty() { "nothing".into() } else { added.join(", ") }
         ),
         x_label: "iteration".into(),
-        x_unit: String::new(),
+        x_unit: vmt_report::DIMENSIONLESS.into(),
         y_label: "normalised RMS".into(),
         y_unit: "1 = noise".into(),
         series: vec![Series {

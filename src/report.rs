@@ -6,6 +6,10 @@ use crate::estimate::{Estimates, CHECK_HEADER, CHECK_LEGEND};
 use crate::measurement::MeasurementSet;
 use crate::scenario::Scenario;
 use std::path::Path;
+
+mod conditions;
+pub mod iso;
+pub use conditions::{command_line, conditions, conditions_for_data, report_date, version};
 use vmt_report::{render_html, write_atomic, Report, RowStatus, Section, Table};
 
 /// Builds the report of a run: the table of checks (each row names its figure), then the figures.
@@ -30,7 +34,7 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
     let figures = est.figures.clone();
     let measured = Table {
         caption: "Runs of the measurement set".into(),
-        header: ["run", "procedure", "rows", "columns"].map(String::from).to_vec(),
+        header: ["run", "procedure", "rows (count)", "columns"].map(String::from).to_vec(),
         rows: set
             .runs
             .iter()
@@ -46,10 +50,11 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
         highlight: Vec::new(),
     };
     let failed = est.checks.iter().filter(|c| !c.pass).count();
-    Report {
+    let mut report = Report {
         title: format!("vmt run: {}", sc.source.display()),
         subtitle: sc.description.clone(),
         sections: vec![
+            conditions(sc),
             Section {
                 heading: "Results".into(),
                 text: std::iter::once(if failed == 0 {
@@ -74,7 +79,7 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
             },
             Section {
                 heading: "Tables of the estimators".into(),
-                text: Vec::new(),
+                text: est.notes.clone(),
                 figures: Vec::new(),
                 tables: est.tables.clone(),
             },
@@ -85,14 +90,107 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
                 tables: vec![measured],
             },
         ],
-    }
+    };
+    // A scenario without estimator tables or notes (the crawl) has nothing for that section: no empty section.
+    report.sections.retain(|s| !(s.text.is_empty() && s.figures.is_empty() && s.tables.is_empty()));
+    report
 }
 
-/// Renders and writes the report atomically.
+/// Renders and writes the report atomically, with the same report as JSON beside it (`report.json`
+/// next to `report.html`: the [`Report`] data, for other programs and for the readability check).
 pub fn write_run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates, path: &Path) -> Result<(), VmtError> {
-    let html = render_html(&run_report(sc, set, est)).map_err(|e| VmtError::Internal(format!("report: {e}")))?;
+    write_report(&run_report(sc, set, est), path)
+}
+
+/// Renders `report` to `path` (HTML) and writes its data beside it (`path` with extension `json`).
+pub fn write_report(report: &Report, path: &Path) -> Result<(), VmtError> {
+    let html = render_html(report).map_err(|e| VmtError::Internal(format!("report: {e}")))?;
+    let json = serde_json::to_string_pretty(report).map_err(|e| VmtError::Internal(format!("report JSON: {e}")))?;
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| VmtError::io(dir, "creating the output directory", e))?;
     }
+    write_atomic(path.with_extension("json"), json)
+        .map_err(|e| VmtError::Internal(format!("writing {}: {e}", path.with_extension("json").display())))?;
     write_atomic(path, html).map_err(|e| VmtError::Internal(format!("writing {}: {e}", path.display())))
+}
+
+/// The HTML report of a tolerance study (`vmt study`, `study merge`): the test conditions, one figure
+/// per estimate of the error against the varied value (mean and 95th percentile of |estimate − truth|
+/// over the trials, markers at the studied values, with the Cramér–Rao bound where one exists), and the
+/// summary table.
+pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow], label: &str) -> Report {
+    use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
+    let mut names: Vec<&str> = summary.iter().map(|s| s.estimate.as_str()).collect();
+    names.dedup();
+    let positive = summary.iter().all(|s| s.value > 0.0 && s.mean_abs > 0.0 && s.p95_abs > 0.0);
+    let figures: Vec<Figure> = names
+        .iter()
+        .map(|n| {
+            let pts: Vec<&crate::study::SummaryRow> = summary.iter().filter(|s| s.estimate == *n).collect();
+            let x: Vec<f64> = pts.iter().map(|s| s.value).collect();
+            let mut series = vec![
+                Series { label: "mean |error|".into(), x: x.clone(), y: pts.iter().map(|s| s.mean_abs * 1e6).collect(), style: SeriesStyle::LinePoints },
+                Series { label: "95th percentile |error|".into(), x: x.clone(), y: pts.iter().map(|s| s.p95_abs * 1e6).collect(), style: SeriesStyle::LinePoints },
+            ];
+            let bound: Vec<(f64, f64)> =
+                pts.iter().filter(|s| s.bound.is_finite() && s.bound > 0.0).map(|s| (s.value, s.bound * 1e6)).collect();
+            if !bound.is_empty() {
+                series.push(Series {
+                    label: "Cramér–Rao bound (RMS)".into(),
+                    x: bound.iter().map(|b| b.0).collect(),
+                    y: bound.iter().map(|b| b.1).collect(),
+                    style: SeriesStyle::Dashed,
+                });
+            }
+            Figure {
+                title: format!("{n}: error of the estimate against {label}, {} trials per value", pts.first().map_or(0, |p| p.trials)),
+                x_label: label.to_string(),
+                x_unit: "SI unit of the key".into(),
+                y_label: "|estimate − truth|".into(),
+                y_unit: "µm (µrad for angles)".into(),
+                series,
+                kind: FigureKind::Line,
+                log_x: positive,
+                log_y: positive,
+            }
+        })
+        .collect();
+    let table = Table {
+        caption: "Summary per studied value and estimate".into(),
+        header: ["value (SI)", "estimate", "trials (count)", "mean |error| / µm", "p95 |error| / µm", "pass rate / %", "Cramér–Rao bound / µm"]
+            .map(String::from)
+            .to_vec(),
+        rows: summary
+            .iter()
+            .map(|r| {
+                vec![
+                    format!("{:.3e}", r.value),
+                    r.estimate.clone(),
+                    r.trials.to_string(),
+                    format!("{:.4}", r.mean_abs * 1e6),
+                    format!("{:.4}", r.p95_abs * 1e6),
+                    format!("{:.0}", 100.0 * r.pass_rate),
+                    if r.bound.is_finite() { format!("{:.4}", r.bound * 1e6) } else { "—".into() },
+                ]
+            })
+            .collect(),
+        highlight: Vec::new(),
+    };
+    let head = match sc {
+        Some(sc) => conditions(sc),
+        None => conditions_for_data(vec![vec!["varied parameter".into(), label.to_string()]]),
+    };
+    Report {
+        title: format!("vmt study: {label}"),
+        subtitle: sc.map_or(String::new(), |s| s.description.clone()),
+        sections: vec![
+            head,
+            Section {
+                heading: "Error against the varied parameter".into(),
+                text: vec!["Each marker is one studied value; lengths in µm, angles in µrad (the trial rows carry SI values).".into()],
+                figures,
+                tables: vec![table],
+            },
+        ],
+    }
 }

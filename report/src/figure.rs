@@ -1,6 +1,6 @@
 //! One [`Figure`] → one SVG document, drawn with plotters' SVG backend.
 
-use crate::{Figure, FigureKind, ReportError, Series, SeriesStyle};
+use crate::{DIMENSIONLESS, Figure, FigureKind, ReportError, Series, SeriesStyle};
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
@@ -226,7 +226,9 @@ fn bars(prepared: &[Prepared<'_>], log_x: bool) -> Vec<Vec<Bar>> {
 }
 
 fn axis_title(label: &str, unit: &str) -> String {
-    if unit.trim().is_empty() {
+    if unit.trim() == DIMENSIONLESS {
+        format!("{label} (dimensionless)")
+    } else if unit.trim().is_empty() {
         label.to_string()
     } else {
         format!("{label} / {unit}")
@@ -326,11 +328,22 @@ impl Job<'_> {
             .map_err(|e| e.to_string())?;
 
         let mut labelled: bool = false;
+        // Palette index: one colour per main series; Faint/Band/ErrorBars series share the colour of the
+        // main series before them.
+        let mut main_index: usize = 0;
         for (i, p) in self.prepared.iter().enumerate() {
+            let colour_index: usize = match fig.kind {
+                FigureKind::Line if !p.series.style.is_main() => main_index.saturating_sub(1),
+                FigureKind::Line => {
+                    main_index += 1;
+                    main_index - 1
+                }
+                FigureKind::Scatter | FigureKind::Bar => i,
+            };
             if p.points.is_empty() {
                 continue;
             }
-            let colour: RGBColor = PALETTE[i % PALETTE.len()];
+            let colour: RGBColor = PALETTE[colour_index % PALETTE.len()];
             let label: &str = &p.series.label;
             let style: SeriesStyle = match fig.kind {
                 FigureKind::Line => p.series.style,
@@ -348,6 +361,18 @@ impl Job<'_> {
                 anno.legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 18, y + 6)], colour.filled()))
             } else {
                 match style {
+                    SeriesStyle::ErrorBars => {
+                        let pairs: Vec<(f64, f64, f64)> =
+                            p.points.chunks_exact(2).map(|w| (w[0].0, w[0].1, w[1].1)).collect();
+                        chart
+                            .draw_series(pairs.into_iter().map(|(x, y1, y2)| {
+                                ErrorBar::new_vertical(x, y1.min(y2), (y1 + y2) / 2.0, y1.max(y2), colour.stroke_width(1), 8)
+                            }))
+                            .map_err(|e| e.to_string())?
+                            .legend(move |(x, y)| {
+                                PathElement::new(vec![(x + 9, y - 6), (x + 9, y + 6)], colour.stroke_width(1))
+                            })
+                    }
                     SeriesStyle::Points => chart
                         .draw_series(points.map(|pt| Circle::new(pt, 3, colour.filled())))
                         .map_err(|e| e.to_string())?
@@ -360,6 +385,29 @@ impl Job<'_> {
                         .draw_series(LineSeries::new(points, colour.stroke_width(2)))
                         .map_err(|e| e.to_string())?
                         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 22, y)], colour.stroke_width(2))),
+                    SeriesStyle::LinePoints => {
+                        chart
+                            .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))
+                            .map_err(|e| e.to_string())?;
+                        chart
+                            .draw_series(points.map(|pt| Circle::new(pt, 4, colour.filled())))
+                            .map_err(|e| e.to_string())?
+                            .legend(move |(x, y)| {
+                                EmptyElement::at((x, y))
+                                    + PathElement::new(vec![(0, 0), (22, 0)], colour.stroke_width(2))
+                                    + Circle::new((11, 0), 4, colour.filled())
+                            })
+                    }
+                    SeriesStyle::Faint => chart
+                        .draw_series(LineSeries::new(points, colour.mix(0.45).stroke_width(1)))
+                        .map_err(|e| e.to_string())?
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 22, y)], colour.mix(0.45).stroke_width(1))),
+                    SeriesStyle::Band => chart
+                        .draw_series(DashedLineSeries::new(points, 5, 4, colour.stroke_width(1)))
+                        .map_err(|e| e.to_string())?
+                        .legend(move |(x, y)| {
+                            DashedPathElement::new(vec![(x, y), (x + 24, y)], 5, 4, colour.stroke_width(1))
+                        }),
                     SeriesStyle::Dashed => chart
                         .draw_series(DashedLineSeries::new(points, 8, 5, colour.stroke_width(2)))
                         .map_err(|e| e.to_string())?

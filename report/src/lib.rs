@@ -15,10 +15,16 @@
 mod figure;
 mod html;
 mod io;
+mod lint;
 
 pub use figure::{figure_svg, format_tick, PALETTE_HEX};
 pub use html::{escape_html, render_html};
 pub use io::write_atomic;
+pub use lint::lint;
+
+/// The unit of a dimensionless quantity (ratio, index) in [`Figure::x_unit`] / [`Figure::y_unit`]: ISO
+/// 80000-1 writes it as 1; the axis title then reads `quantity (dimensionless)`.
+pub const DIMENSIONLESS: &str = "1";
 
 use serde::{Deserialize, Serialize};
 
@@ -73,6 +79,29 @@ pub enum SeriesStyle {
     Points,
     /// Dashed line (8 px dashes, 5 px gaps): use it for a reference such as the injected truth.
     Dashed,
+    /// Solid line with a marker at every data point: use it where the points are the data (a study's
+    /// values, iterations) and the line only guides the eye.
+    LinePoints,
+    /// Thin (1 px), half-transparent line in the colour of the nearest preceding series that is not
+    /// `Faint`, `Band` or `ErrorBars`: the individual runs behind a mean.
+    Faint,
+    /// Thin dashed line in the colour of the nearest preceding main series: an envelope such as the
+    /// mean ± 2s of ISO 230-2.
+    Band,
+    /// Vertical error bars in the colour of the nearest preceding main series: each consecutive pair of
+    /// points (x, y₁), (x, y₂) is one bar from y₁ to y₂ with 8 px caps, e.g. value ± σ.
+    ErrorBars,
+}
+
+impl SeriesStyle {
+    /// True for styles drawn in their own palette colour; false for those that take the colour of the
+    /// preceding main series ([`SeriesStyle::Faint`], [`SeriesStyle::Band`], [`SeriesStyle::ErrorBars`]).
+    pub fn is_main(self) -> bool {
+        match self {
+            SeriesStyle::Line | SeriesStyle::Points | SeriesStyle::Dashed | SeriesStyle::LinePoints => true,
+            SeriesStyle::Faint | SeriesStyle::Band | SeriesStyle::ErrorBars => false,
+        }
+    }
 }
 
 /// One data series: matching x and y values with a legend label.
