@@ -514,7 +514,6 @@ fn hidden_effects_are_named_first_and_adding_them_reaches_the_noise() {
 /// significant claim. The cyclic_lead entry must name its aliases or say why it cannot be seen
 /// (FORMAT.md §4 `aliases`, `note`).
 #[test]
-#[ignore = "issue 11: enable when diagnose meets it"]
 fn unresolvable_cyclic_error_is_never_claimed_at_a_wrong_period() {
     let n = draws_for(50);
     let res = over_draws(&Family::UnresolvedCyclic, n, |_, dir| diagnose(dir, "start.toml"));
