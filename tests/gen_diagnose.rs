@@ -282,6 +282,8 @@ struct LoopOutcome {
     params: Vec<(String, f64)>,
     /// Effects added by following the advice that are not hidden.
     wrong_adds: Vec<String>,
+    /// The loop added exactly the hidden effects (the final model is complete).
+    completed: bool,
     /// Significant claims on the final model when the loop added exactly the hidden effects (the
     /// model is then complete: any claim is a false alarm).
     final_claims: Vec<String>,
@@ -375,7 +377,8 @@ fn follow_loop(d: &Draw, dir: &Path) -> Result<LoopOutcome, String> {
         }
     }
     // Every hidden effect added and nothing else: the model is now complete.
-    if out.wrong_adds.is_empty() && added == d.hidden.len() {
+    out.completed = out.wrong_adds.is_empty() && added == d.hidden.len();
+    if out.completed {
         out.final_claims = claims(&diagnose(dir, &model)?).iter().map(ToString::to_string).collect();
     }
     Ok(out)
@@ -407,6 +410,8 @@ fn hidden_families() -> Vec<Family> {
 fn hidden_effects_are_named_first_and_adding_them_reaches_the_noise() {
     let n = draws_for(30);
     let mut failures = Vec::new();
+    // Pooled over families: (draws whose loop made the model complete, those with a claim after).
+    let (mut completed, mut claimed_after) = (0usize, 0usize);
     eprintln!(
         "Columns, as draws out of the family's count: named first = first-ranked entry is hidden and \
          significant; NRMS≤1.3 = residual RMS / true σ after the adds; wrong adds = following the advice \
@@ -437,6 +442,8 @@ fn hidden_effects_are_named_first_and_adding_them_reaches_the_noise() {
                     nrms += usize::from(o.nrms_after <= NRMS_AFTER_ADD);
                     wrong += usize::from(!o.wrong_adds.is_empty());
                     new_claims += usize::from(!o.final_claims.is_empty());
+                    completed += usize::from(o.completed);
+                    claimed_after += usize::from(!o.final_claims.is_empty());
                     for (k, v) in &o.params {
                         params.entry(k.clone()).or_default().push(*v);
                     }
@@ -491,6 +498,12 @@ fn hidden_effects_are_named_first_and_adding_them_reaches_the_noise() {
                 failures.push(format!("{}: {k} within 10 % {}", fam.label(), rate(ok, v.len())));
             }
         }
+    }
+    // A model the loop made complete is a complete model: issue 11's ≤ 2 % false alarms, pooled
+    // over all families (per family, 30 draws cannot resolve 2 %).
+    eprintln!("complete after the loop, then a significant claim: {}", rate(claimed_after, completed));
+    if claimed_after as f64 > 0.02 * completed as f64 {
+        failures.push(format!("claims on models the loop made complete {}", rate(claimed_after, completed)));
     }
     assert!(failures.is_empty(), "issue 11 thresholds not met:\n{}", failures.join("\n"));
 }
