@@ -388,7 +388,7 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 for ((r, e), tol) in crawl.iter().zip(expected).zip(tolerance) {
                     let RunData::TimeSeries { t, .. } = &r.data else { return Err(bad("expected time series".into())) };
                     let x = r.data.column(sensor).ok_or_else(|| bad(format!("run `{}` has no `{sensor}`", r.name)))?;
-                    let dt = t[1] - t[0];
+                    let dt = crate::measurement::uniform_interval(t).map_err(|m| bad(format!("run `{}`: {m}", r.name)))?;
                     let res = vmt_estimators::ssi::stick_slip_index(x, dt, q).map_err(|e| bad(e.to_string()))?;
                     let feed = r.feed.unwrap_or(0.0) * 60_000.0;
                     let v: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]) / dt * 60_000.0).collect();
@@ -454,10 +454,11 @@ pub fn accel_runs(
             .find(|(n, _)| n == sensor)
             .ok_or_else(|| format!("run `{}` has no column `{sensor}`", r.name))?;
         let x = &columns.iter().find(|(n, _)| n == "x_cmd").ok_or_else(|| "no x_cmd column".to_string())?.1;
-        if t.len() < 2 || x.is_empty() {
-            return Err(format!("run `{}` has fewer than two samples", r.name));
+        if x.is_empty() {
+            return Err(format!("run `{}` has no samples", r.name));
         }
-        let (speed, rate, direction) = (r.feed.unwrap_or(0.0), 1.0 / (t[1] - t[0]), r.direction.unwrap_or(1));
+        let dt = crate::measurement::uniform_interval(t).map_err(|m| format!("run `{}`: {m}", r.name))?;
+        let (speed, rate, direction) = (r.feed.unwrap_or(0.0), 1.0 / dt, r.direction.unwrap_or(1));
         acc_runs.push(vmt_estimators::accel_straightness::AccelRun {
             speed,
             sample_rate: rate,

@@ -9,6 +9,7 @@ pub mod estimate;
 pub mod measurement;
 pub mod model;
 pub mod modelcheck;
+pub mod output;
 pub mod report;
 pub mod scenario;
 pub mod simulate;

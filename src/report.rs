@@ -5,8 +5,7 @@ use crate::error::VmtError;
 use crate::estimate::{Estimates, Quantity};
 use crate::measurement::MeasurementSet;
 use crate::scenario::Scenario;
-use std::path::Path;
-use vmt_report::{render_html, write_atomic, Report, RowStatus, Section, Table};
+use vmt_report::{render_html, Report, RowStatus, Section, Table};
 
 fn fmt(q: Quantity, v: f64) -> String {
     match q {
@@ -99,10 +98,8 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
 }
 
 /// Renders and writes the report atomically.
-pub fn write_run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates, path: &Path) -> Result<(), VmtError> {
-    let html = render_html(&run_report(sc, set, est)).map_err(|e| VmtError::Internal(format!("report: {e}")))?;
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| VmtError::io(dir, "creating the output directory", e))?;
-    }
-    write_atomic(path, html).map_err(|e| VmtError::Internal(format!("writing {}: {e}", path.display())))
+/// The HTML text of a run's report.
+pub fn run_report_html(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Result<String, VmtError> {
+    render_html(&run_report(sc, set, est)).map_err(|e| VmtError::Internal(format!("report: {e}")))
 }
+
