@@ -6,6 +6,7 @@ pub mod byo;
 pub mod cli;
 pub mod error;
 pub mod estimate;
+pub mod fuzz;
 pub mod measurement;
 pub mod model;
 pub mod modelcheck;
