@@ -84,6 +84,36 @@ pub enum EstimatorSpec {
     },
 }
 
+impl EstimatorSpec {
+    /// Checks the estimator's tolerances and thresholds: each finite and ≥ 0 (a negative or NaN
+    /// tolerance is bad input, not a missed estimate). Returns the key and message of the first problem.
+    pub fn check(&self) -> Result<(), (String, String)> {
+        let values: Vec<(&str, f64)> = match self {
+            EstimatorSpec::Iso230_2 { tolerance, .. }
+            | EstimatorSpec::ModelCheck { tolerance, .. }
+            | EstimatorSpec::AccelStraightness { tolerance, .. } => vec![("tolerance", *tolerance)],
+            EstimatorSpec::LaserLines { tolerance_translation, tolerance_angle, .. } => {
+                vec![("tolerance_translation", *tolerance_translation), ("tolerance_angle", *tolerance_angle)]
+            }
+            EstimatorSpec::Compensation { max_ratio, pearson, residual, .. } => {
+                vec![("max_ratio", *max_ratio), ("pearson", *pearson), ("residual", *residual)]
+            }
+            EstimatorSpec::Ssi { expected, tolerance, .. } => {
+                expected.iter().map(|v| ("expected", *v)).chain(tolerance.iter().map(|v| ("tolerance", *v))).collect()
+            }
+            EstimatorSpec::LaserLines3d { k_sigma, bias, bias_angle, .. } => {
+                let mut v = vec![("k_sigma", *k_sigma), ("bias", *bias)];
+                v.extend(bias_angle.map(|b| ("bias_angle", b)));
+                v
+            }
+        };
+        match values.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
+            Some((k, v)) => Err((k.to_string(), format!("expected a finite value ≥ 0, got {v}"))),
+            None => Ok(()),
+        }
+    }
+}
+
 fn default_k_sigma() -> f64 {
     4.0
 }

@@ -108,6 +108,9 @@ impl Scenario {
             _ => return Err(bad("truth", "expected a table (inline truth) or a file name".into())),
         };
         validate_sensors(&raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
+        for (i, e) in raw.estimators.iter().enumerate() {
+            e.check().map_err(|(k, m)| bad(&format!("estimators[{i}].{k}"), m))?;
+        }
         validate_procedures(&raw.procedures, &raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
         let chain = build_chain(&raw, &machine, &truth).map_err(|(p, m)| bad(&p, m))?;
         Ok(Scenario {
