@@ -141,14 +141,6 @@ fn each_hidden_effect_is_found_first_and_adding_it_reaches_the_noise_level() {
             wide,
             2,
         ),
-        (
-            EffectName::InterpolationError,
-            "[truth.effects.interpolation_error]\nperiod = 20e-6\namplitude = 0.5e-6\nphase = 1.0\n",
-            EffectName::ScaleError,
-            "[truth.effects.scale_error]\nvalue = 2e-6\n",
-            (41, 0.02, 0.98),
-            2,
-        ),
     ];
     let seeds: [u64; 5] = [1, 2, 3, 4, 5];
     for (hidden, htoml, base, btoml, (n, a, b), runs) in cases {
@@ -253,6 +245,26 @@ fn thermal_expansion_and_scale_error_at_one_time_are_inseparable() {
     }
 }
 
+/// Issue 11: a 20 µm interpolation error read at 41 targets ≈ 24 mm apart is not observable (its
+/// phase at each target depends on the target's position to far better than 20 µm, and the
+/// readings resolve no period shorter than ≈ 2 × the gap). Before issue 11 this case was expected
+/// to be found (by fitting the exact catalogue period to per-target scatter); now diagnose does
+/// not search it, lists it with a note saying why, and claims nothing periodic below the spacing.
+#[test]
+fn interpolation_error_between_sparse_targets_is_not_searched() {
+    let truth = "[truth.effects.scale_error]\nvalue = 2e-6\n[truth.effects.interpolation_error]\nperiod = 20e-6\namplitude = 0.5e-6\nphase = 1.0\n";
+    let sc = Scenario::parse(&scenario_text(truth, 41, 0.02, 0.98, 2), Path::new("hidden.toml"), None).unwrap();
+    let model = model_fitting(&[EffectName::ScaleError]);
+    let set = &sets(&sc, &[1])[0];
+    let d = diagnose(&model, set, Path::new("sim")).unwrap();
+    let e = d.ranking.iter().find(|r| r.effect == "interpolation_error").expect("listed");
+    assert_eq!(e.verdict, Verdict::Noise, "{e:?}");
+    assert!(e.note.as_deref().is_some_and(|n| n.contains("not searched")), "{e:?}");
+    for r in d.ranking.iter().filter(|r| r.verdict == Verdict::Significant) {
+        assert!(r.params.get("period").is_none_or(|p| *p > 20e-3), "{r:?}");
+    }
+}
+
 /// Real data: ISO 230-2 tests of ESS/PSI axes (ecmc `.dat` files, one reference sensor, no σ).
 /// The raw deviations (offset only) → diagnose → add the first significant effect → compare:
 /// the residual RMS must fall. A positioning profile (cubic) must also reduce it.
@@ -265,10 +277,14 @@ fn real_iso230_2_data_the_loop_reduces_the_residual() {
         return;
     };
     let dir = shared.join("realdata/ecmc_iso230_2");
-    for file in [
-        "ess_target_muts_logger/b02_x_target_x.md_ISO230.dat",
-        "ess_target_muts_logger/b02_y_report_target_y.md_ISO230.dat",
-        "psi_ecmccfg/mcu1025_fat_sat_report.md_ISO230.dat",
+    // Minimum number of effects the loop adds. mcu1025 (raw normalised RMS 1.51): its only
+    // significant candidate is a cyclic lead at 35.6 mm that, on its regular targets, fits exactly
+    // as well at eight aliases from 2.2 to 7.9 mm (issue 11): `inseparable`, nothing to add; before
+    // issue 11 the loop added that unidentified period.
+    for (file, min_added) in [
+        ("ess_target_muts_logger/b02_x_target_x.md_ISO230.dat", 1),
+        ("ess_target_muts_logger/b02_y_report_target_y.md_ISO230.dat", 1),
+        ("psi_ecmccfg/mcu1025_fat_sat_report.md_ISO230.dat", 0),
     ] {
         let path = dir.join(file);
         let text = std::fs::read_to_string(&path).unwrap();
@@ -298,10 +314,47 @@ fn real_iso230_2_data_the_loop_reduces_the_residual() {
             assert!(c.channels[0].rms < rms, "{file}: {steps:?}");
             rms = c.channels[0].rms;
         }
-        assert!(steps.len() >= 3, "{file}: the loop must add at least one effect: {steps:?}");
+        assert!(steps.len() >= 2 + min_added, "{file}: the loop must add at least {min_added} effects: {steps:?}");
+        if min_added == 0 {
+            assert!(steps.last().is_some_and(|s| s.contains("not identified")), "{file}: {steps:?}");
+        }
         eprintln!("{file}: {}", steps.join(" → "));
         assert!(c0.notes.iter().any(|n| n.contains("estimated")), "σ estimated and said so");
     }
+}
+
+/// Real data, issue 11: b02_x has 9 targets regularly 5 mm apart, so no period below 2 × 5 = 10 mm
+/// can be told from its aliases (1/p' = |1/p − k/5 mm| fit the targets equally well). With a fitted
+/// positioning profile and backlash (the model a user starts from), `diagnose` must claim no
+/// cyclic lead or interpolation error shorter than 10 mm (before the fix: a 23.7 µm cyclic lead at
+/// 3.97 mm, ΔBIC −2050) and must say why such periods are not searched.
+#[test]
+fn real_b02_x_no_cyclic_lead_shorter_than_the_targets_resolve() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let shared = [root.join("../shared"), root.join("../../shared")].into_iter().find(|p| p.is_dir());
+    let Some(shared) = shared else {
+        eprintln!("realdata not found beside the repository: skipped");
+        return;
+    };
+    let path = shared.join("realdata/ecmc_iso230_2/ess_target_muts_logger/b02_x_target_x.md_ISO230.dat");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let dat = vmt_estimators::iso230_2::dat::parse_dat(&text).unwrap();
+    let set = vmt::measurement::from_iso230_2_dat(&dat);
+    let model = model_fitting(&[EffectName::Positioning, EffectName::Backlash]);
+    let d = diagnose(&model, &set, &path).unwrap();
+    for r in &d.ranking {
+        let period = r.params.get("period").copied();
+        eprintln!("b02_x: {} {:?} ΔBIC {:.1} period {:?}", r.effect, r.verdict, r.delta_bic, period);
+        if let Some(p) = period {
+            assert!(p >= 10e-3, "{} at a {:.3} mm period, below 2 × the 5 mm target spacing", r.effect, p * 1e3);
+        }
+    }
+    assert!(
+        d.notes.iter().any(|n| n.contains("interpolation_error not searched"))
+            && d.notes.iter().any(|n| n.contains("cyclic_lead searched only at periods ≥ 10")),
+        "{:?}",
+        d.notes
+    );
 }
 
 fn vmt_bin() -> Command {

@@ -162,6 +162,12 @@ pub struct RankingEntry {
     pub params: BTreeMap<String, f64>,
     /// Effects this one is inseparable from.
     pub confused_with: Vec<String>,
+    /// Why the candidate was not tried or cannot be seen in this data (FORMAT.md §4 optional `note`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+    /// Other periods (m) that fit exactly as well on these sample positions (optional `aliases`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub aliases: Vec<f64>,
 }
 
 /// The full fit of one candidate (details behind a [`RankingEntry`]).
@@ -449,8 +455,10 @@ fn fit_prepared(
     })
 }
 
-/// Golden-section search for the maximum of `f` on [lo, hi]; returns (x, f(x)) of the best point.
-fn golden_max(f: &mut impl FnMut(f64) -> f64, lo: f64, hi: f64, iters: usize) -> (f64, f64) {
+/// Golden-section search for the maximum of `f` on [lo, hi] (Kiefer 1953; ratio (√5 − 1)/2, one
+/// new evaluation per iteration, at most `iters`); returns (x, f(x)) of the best point evaluated.
+/// The one line search of the model-check loop (`vmt::modelcheck` uses it on log scales).
+pub fn golden_max(f: &mut impl FnMut(f64) -> f64, lo: f64, hi: f64, iters: usize) -> (f64, f64) {
     let gr = (5f64.sqrt() - 1.0) / 2.0;
     let (mut a, mut b) = (lo, hi);
     let mut c = b - gr * (b - a);
@@ -604,6 +612,8 @@ fn rank_refs(
             verdict,
             params: f.params.clone(),
             confused_with,
+            note: None,
+            aliases: vec![],
         })
         .collect();
     Ok(Diagnosis { ranking, fits, stat_old: p.stat_old, n: p.n })
@@ -683,6 +693,8 @@ mod tests {
             verdict: Verdict::Significant,
             params: [("value".to_string(), 6.1e-6)].into_iter().collect(),
             confused_with: vec![],
+            note: None,
+            aliases: vec![],
         };
         let s = serde_json::to_string(&e).unwrap();
         assert_eq!(

@@ -23,7 +23,7 @@ pub mod spectrum;
 pub mod stats;
 
 pub use diagnose::{
-    fit_candidate, forward_select, rank_candidates, Candidate, CandidateFit, DiagnoseConfig, Diagnosis,
+    fit_candidate, forward_select, golden_max, rank_candidates, Candidate, CandidateFit, DiagnoseConfig, Diagnosis,
     ForwardSelection, HyperParameter, RankingEntry, ResidualInput, Verdict,
 };
 pub use lsq::{fit_signature, LinearFit};

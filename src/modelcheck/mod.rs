@@ -1,0 +1,277 @@
+//! The model-check loop (DESIGN.md §8): `vmt compare`, `vmt diagnose`, `vmt add`.
+//!
+//! Phase 1 predicts the deviation columns of positioning point tables (FORMAT.md §1: `target`,
+//! `run`, `direction`, optional `t`, then deviations actual − target) from a model (FORMAT.md §2).
+//! For a sensor with unit direction u and measuring point r (axis frame, m), at target x, approach
+//! direction d = ±1 and time t (run `start_time` + the table's `t`, s), the first-order model is
+//!
+//! ```text
+//! ŷ = o_ch + u·(E(x) + ε(x) × r)                           (error motions, ISO 230-1, axis frame)
+//!          + s_drive·[ −d·b/2 + A_l·sin(2πx/p_l + φ_l) ]        (backlash b, cyclic lead)
+//!          + s_chain·[ k·x + α·ΔT∞·x·(1 − e^{−t/τ}) + d∞·(1 − e^{−t/τ}) + A_i·sin(2πx/p_i + φ_i) ]
+//! ```
+//!
+//! with E = (EXX, EYX, EZX), ε = (EAX, EBX, ECX) and o_ch an offset per channel (run, sensor) for
+//! the zeroing of the instrument. Signs follow the simulator (`vmt_sim::axis_sim`): the table
+//! lands at command + EXX + e(x, t) (feedback-chain error e: scale error k, thermal, interpolation);
+//! in a semi-closed loop the screw's lead error adds to it and backlash makes the table lag the
+//! motor by b/2, so the ISO 230-2 reversal value is B = x̄↑ − x̄↓ = −b. For a laser
+//! s_drive = s_chain = u·axis; a linear scale (`encoder_linear`, reading x − EXX − e) sees only the
+//! drive terms (s_drive = 1, s_chain = 0, no error motions); a rotary encoder only its offset.
+//!
+//! Everything is linear in the unknowns except periods and time constants, which are searched on
+//! a grid and refined by golden-section search on the weighted residual sum of squares with the
+//! linear parameters eliminated (variable projection; Golub & Pereyra 1973). The statistics and
+//! the candidate ranking come from `vmt_estimators::modelcheck`.
+//!
+//! Phase 2 (friction): the `motor_force` column of a `friction_sweep` or `constant_velocity` time
+//! series, every sample at the run's steady velocity v = feed·direction, is predicted by
+//! F = o + Fc·sgn v + Fv·v + (Fs − Fc)·sgn v·exp(−(v/vs)²) (Coulomb, viscous, Stribeck with the
+//! catalogue's default shape δ = 2; the simulator's law, `vmt_sim::effects::EffectSet::friction`),
+//! with one force offset o per sensor; vs is searched like a period.
+//!
+//! Phase 3 (accelerometers): the readings of an `accelerometer` (body-frame sensitive direction u,
+//! measuring point r) in a `constant_velocity` run with a `feed` (time t, position from `x_cmd`,
+//! velocity v = feed·direction) are predicted by
+//!
+//! ```text
+//! a_i = o_ch + v²·u·[Ē''(x_{i−1}, x_i) + ε̄''(x_{i−1}, x_i) × r] + g·τ_s(x_i) + a_mode,i
+//! ```
+//!
+//! - o_ch: an offset per (run, sensor) (bias, gravity through the mounting tilt).
+//! - The guideway's own acceleration of the measuring point, d²/dt² u·(E + ε × r) at constant v:
+//!   the error motions' second derivatives averaged over the sample interval, Ē''(a, b) =
+//!   (E'(b) − E'(a))/(b − a) with x_{i−1} = x_i − v·Δt_i, because the simulator's reading is the
+//!   difference of the point velocities at successive samples over Δt (`vmt_sim::sensors`). The
+//!   sensitivities are a laser's (u_i for translations, (r × u)_i for angles) times v². Given error
+//!   motions use their profiles' slopes (Ē'' as `Profile::mean_second_derivative` computes it:
+//!   polynomials, harmonics and random profiles by their analytic slopes, a table by its
+//!   piecewise-constant slope, i.e. the slope jumps at its knots); fitted ones (c_k·x^k) give the columns v²·s·k·(x_i^{k−1} −
+//!   x_{i−1}^{k−1})/(x_i − x_{i−1}) ≈ v²·s·k(k−1)·x^{k−2}, with the same coefficients c_k as the
+//!   lasers' columns (one unknown per coefficient shared by lasers and accelerometers).
+//! - g·τ_s(x): gravity seen through the tilt of sensor s's sensitive axis (`gravity_tilt`; the
+//!   simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted
+//!   as a polynomial Σ c_k·x^k, k = 1..3, per sensor, shared by its runs). The error-motion columns
+//!   leave gravity out: a given roll or pitch does not predict its g·τ (add `gravity_tilt`).
+//! - a_mode: a `resonance`, a structural mode q̈ + 2ζω·q̇ + ω²·q = −u·a_ref(t) driven by the
+//!   acceleration of the axis reference point (the simulator's base excitation, `StructuralMode`),
+//!   read as φ·q̈ (φ the mode shape at the sensor). Where the model predicts that excitation on a
+//!   channel (given translation error motions: a_ref = v²·E''(x(t)), x between samples at v), the
+//!   mode is the forced response to it (integrated exactly with the input held at its mean over
+//!   0.1 ms steps) from rest at the sample before the first, with a gain φ per sensor, plus the free
+//!   vibration from the unknown state at that instant (two columns per channel); f (5–200 Hz, 1 Hz grid,
+//!   below 0.4× the slowest sampling rate) and ζ (0.5–10 %) are searched. Where it does not
+//!   (no given straightness: the excitation is an unknown random profile), the mode is a narrow-band
+//!   random process: sin/cos of 2πf·t with amplitude and phase free per segment of
+//!   [`RESONANCE_SEGMENT`] s of each channel; ζ is then not resolved (held at its start, 2 %).
+//!   Fitted error motions do not enter the excitation: a polynomial's acceleration varies far
+//!   slower than a mode, whose response to it is quasi-static (q ≈ −a/ω², q̈ ≈ 0).
+//!
+//! Not predicted in phase 3: the carriage's own dynamics on its bearing blocks (it follows the
+//! geometry only quasi-statically, with a relative error ≈ (f/f_b)² at frequency f below its
+//! bearing mode f_b: a normalised RMS far above 1 when the guideway's band reaches f_b, and when it
+//! comes within ≈ f_b/5 diagnose already reports these dynamics as a `resonance` near the band's
+//! top, see tests/model_check.rs `guideway_scenario`), the servo's ripple, the excitation by fitted error motions, gravity through given
+//! angles, and a guideway that the model does not give (its broadband acceleration stays in the
+//! residual, normalised by the manifest's σ or σ estimated from successive differences; a strong
+//! line of it can then win the resonance search).
+//!
+//! Phase 4 (encoder logs, [`encoder`]): in a time series with `x_cmd`, a linear scale and a motor
+//! encoder give the channels scale − motor (the transmission: lead error, cyclic lead, backlash as
+//! play, the scale's interpolation error, all at the scale's reading) and motor − command (the
+//! following error of a first-order loop, `servo_lag`); one encoder alone gives encoder − command.
+//!
+//! Not predicted: LuGre, squareness (needs two axes), servo lag on point tables (no effect on
+//! settled readings).
+//! They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
+//! degree `order` (default 3) without its constant term (the offsets carry it).
+
+use crate::error::{fmt_num, VmtError};
+use crate::measurement::{write_file_atomic, MeasurementSet, Procedure, RunData, SensorKind};
+use crate::model::{Model, ModelEffect};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::f64::consts::TAU as TWO_PI;
+use std::path::{Path, PathBuf};
+use vmt_estimators::modelcheck::{
+    autocorrelation, bin_by_edges, golden_max, bin_by_label, estimate_noise_sigma, fit_percent, fit_signature, frequency_grid,
+    ljung_box, ls_periodogram, rank_candidates, uniform_edges, Candidate, DiagnoseConfig, HyperParameter, RankingEntry,
+    Sigma, Verdict,
+};
+use vmt_sim::axis_sim::GRAVITY;
+use vmt_sim::effects::{Effect, EffectName, EffectParams};
+use vmt_sim::profile::{Profile, Term};
+
+/// Default polynomial degree of a fitted error motion (FORMAT.md §2 `order`).
+pub const DEFAULT_ORDER: u32 = 3;
+/// Starting α of a thermal expansion when the model gives none, 1/K (steel).
+const ALPHA_STEEL: f64 = 11.5e-6;
+
+
+mod add;
+mod channels;
+mod encoder;
+mod fit;
+mod report;
+mod signatures;
+mod text;
+
+pub use add::*;
+pub use channels::*;
+pub use encoder::*;
+pub(crate) use fit::*;
+pub use report::*;
+pub use signatures::*;
+pub use text::*;
+
+/// True for a positioning procedure (used by callers that build sets).
+pub fn is_positioning(p: Procedure) -> bool {
+    p == Procedure::Positioning
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An accelerometer channel of `m` samples at 100 Hz from t = 0, x = 0.1·t.
+    fn accel(run: &str, m: usize) -> Channel {
+        let t: Vec<f64> = (0..m).map(|i| i as f64 / 100.0).collect();
+        Channel {
+            run: run.into(),
+            sensor: "acc".into(),
+            kind: SensorKind::Accelerometer,
+            u: [0.0, 1.0, 0.0],
+            r: [0.0; 3],
+            x: t.iter().map(|t| 0.1 * t).collect(),
+            d: vec![1.0; m],
+            cycle: vec![1; m],
+            t: t.clone(),
+            v: vec![0.1; m],
+            y: vec![0.0; m],
+            sigma: Some(1e-3),
+            encoder: None,
+        }
+    }
+
+    /// 100 samples over 0.99 s → ⌈0.99/0.2⌉ = 5 segments; every sample falls in exactly one, and
+    /// each resonance column pair is non-zero only on its own segment.
+    #[test]
+    fn resonance_segments_cover_every_sample_once() {
+        let chans = vec![accel("a", 100), accel("b", 20)];
+        let st = Stack::new(&chans);
+        let segs = resonance_segments(&st);
+        // Run b: 20 samples over 0.19 s → 1 segment.
+        assert_eq!(segs.iter().filter(|s| s.0 == 0).count(), 5);
+        assert_eq!(segs.iter().filter(|s| s.0 == 1).count(), 1);
+        let sh = shape(&st, EffectName::Resonance, 1, DEFAULT_ORDER, false);
+        assert_eq!(sh.coefs.len(), 12);
+        let cols = columns(&st, EffectName::Resonance, &sh, &[45.0, 0.02]);
+        for k in 0..st.n {
+            // sin² + cos² = 1 on the one segment holding sample k, 0 elsewhere.
+            let s: f64 = cols.iter().map(|c| c[k] * c[k]).sum();
+            assert!((s - 1.0).abs() < 1e-12, "sample {k}: {s}");
+        }
+    }
+
+    /// A y accelerometer at 0.1 m/s sampled at 100 Hz over a straightness EYX = 3e-6·x² (1/m):
+    /// E'' = 6e-6 /m everywhere, so each reading is v²·E'' = 0.01·6e-6 = 6e-8 m/s², and a pitch
+    /// (r = 0: r × u = 0) gives nothing. A laser sees the profile itself.
+    #[test]
+    fn guideway_acceleration_of_a_parabola_is_v2_times_its_curvature() {
+        let c = accel("a", 10);
+        let p = Profile::poly(vec![0.0, 0.0, 3e-6]);
+        for i in 0..10 {
+            let a = c.motion_response(i, EffectName::StraightnessY, |x| p.value(x), |x| p.eval3(x)[1]);
+            assert!((a - 6e-8).abs() < 1e-20, "sample {i}: {a}");
+            assert_eq!(c.motion_response(i, EffectName::Pitch, |x| p.value(x), |x| p.eval3(x)[1]), 0.0);
+        }
+        let mut l = accel("l", 3);
+        l.kind = SensorKind::LaserStraightness;
+        assert_eq!(l.motion_response(2, EffectName::StraightnessY, |x| p.value(x), |x| p.eval3(x)[1]), p.value(0.002));
+    }
+
+    /// Fitted straightness c_k·x^k on an accelerometer (u = y, v = 0.1 m/s, Δt = 0.01 s, so
+    /// x_{i−1} = x_i − 1 mm): the c1 column is 0 (a slope has no acceleration), c2 is v²·2 = 0.02,
+    /// c3 is v²·3·(x_i² − x_{i−1}²)/(x_i − x_{i−1}) = 0.03·(x_i + x_{i−1}) m/s² per unit c_k.
+    #[test]
+    fn fitted_straightness_columns_on_an_accelerometer_are_mean_curvatures_times_v2() {
+        let chans = vec![accel("a", 10)];
+        let st = Stack::new(&chans);
+        let sh = shape(&st, EffectName::StraightnessY, 1, 3, false);
+        let cols = columns(&st, EffectName::StraightnessY, &sh, &[]);
+        for i in 0..10 {
+            let x = chans[0].x[i];
+            assert_eq!(cols[0][i], 0.0);
+            assert!((cols[1][i] - 0.02).abs() < 1e-14, "{}", cols[1][i]);
+            assert!((cols[2][i] - 0.03 * (2.0 * x - 0.001)).abs() < 1e-14, "{}", cols[2][i]);
+        }
+    }
+
+    /// Free vibration from (q, q̇) = (1, 0): q̇(t) = −(ω²/ω_d)·e^{−ζωt}·sin(ω_d·t), ω_d = ω·√(1 − ζ²);
+    /// the reading is (q̇_i − q̇_{i−1})/Δt from t_{−1} = −Δt (the sample times start at 0 and t_{−1}
+    /// is the integration's zero). Agreement to 1e-9 of ω² (the step map's RK4 error is ≈ 1e-14).
+    #[test]
+    fn free_mode_response_matches_the_damped_oscillator() {
+        let c = accel("a", 100);
+        let (f, z): (f64, f64) = (12.0, 0.05);
+        let w = TWO_PI * f;
+        let wd = w * (1.0 - z * z).sqrt();
+        let qd = |t: f64| -(w * w / wd) * (-z * w * t).exp() * (wd * t).sin();
+        let r = mode_response(&c, None, f, z, (1.0, 0.0));
+        for i in 0..100 {
+            let (t1, t0) = (c.t[i] + 0.01, c.t[i]);
+            let want = (qd(t1) - qd(t0)) / 0.01;
+            assert!((r[i] - want).abs() < 1e-9 * w * w, "sample {i}: {} {want}", r[i]);
+        }
+    }
+
+    /// Forced at resonance by a(τ) = A·sin(ωτ) with ζ = 0.2: after the transient (e^{−ζω·2 s} ≈
+    /// e^{−25}) q̈ = −A·cos(ωτ)/(2ζ) (|H| = 1/(2ζω²) at ω, q = A·cos(ωτ)/(2ζω²)), read as the mean
+    /// of q̈ over each 10 ms interval: the exact mean of that cosine, to 1e-5 of A/(2ζ) (the input
+    /// is held at its mean over 0.1 ms steps, which shrinks a sinusoid by ≈ (ωh)²/24 = 1.6e-6 at
+    /// 10 Hz).
+    #[test]
+    fn forced_mode_response_at_resonance_has_gain_one_over_two_zeta() {
+        let c = accel("a", 300);
+        let (f, z, amp): (f64, f64, f64) = (10.0, 0.2, 1.0);
+        let w = TWO_PI * f;
+        let (steps, input): (Vec<usize>, Vec<Vec<f64>>) = (0..300)
+            .map(|i| {
+                let m = mode_steps(0.01);
+                // τ counts from t_{−1} = −Δt: interval i (t_i − Δt → t_i) starts at τ = t_i.
+                let t0 = c.t[i];
+                // The mean of A·sin(ωτ) over each step.
+                let tk = |k: usize| t0 + 0.01 * k as f64 / m as f64;
+                let vals = (0..m)
+                    .map(|k| amp * ((w * tk(k)).cos() - (w * tk(k + 1)).cos()) / (w * (tk(k + 1) - tk(k))))
+                    .collect();
+                (m, vals)
+            })
+            .unzip();
+        let ex = Excitation { steps, input };
+        let r = mode_response(&c, Some(&ex), f, z, (0.0, 0.0));
+        for i in 200..300 {
+            // Interval i runs from τ = t_i to t_i + Δt (τ from t_{−1}); mean of −A·cos(ωτ)/(2ζ).
+            let (a, b) = (c.t[i], c.t[i] + 0.01);
+            let want = -amp / (2.0 * z) * ((w * b).sin() - (w * a).sin()) / (w * 0.01);
+            assert!((r[i] - want).abs() < 1e-5 * amp / (2.0 * z), "sample {i}: {} {want}", r[i]);
+        }
+    }
+
+    /// The gravity-tilt column of x^k on an accelerometer is g·x^k (g = 9.80665 m/s²), shared by the
+    /// sensor's runs; a laser channel gets 0.
+    #[test]
+    fn gravity_tilt_columns_are_g_times_powers_of_x() {
+        let mut laser = accel("c", 3);
+        laser.kind = SensorKind::LaserLinear;
+        laser.sensor = "laser".into();
+        let chans = vec![accel("a", 10), accel("b", 10), laser];
+        let st = Stack::new(&chans);
+        let sh = shape(&st, EffectName::GravityTilt, 1, 3, false);
+        assert_eq!(sh.coefs, vec!["acc_c1", "acc_c2", "acc_c3"]);
+        let cols = columns(&st, EffectName::GravityTilt, &sh, &[]);
+        // Sample 5 of run b: x = 0.1·0.05 = 0.005 m; c2 column = g·x².
+        assert!((cols[1][15] - GRAVITY * 0.005f64.powi(2)).abs() < 1e-15);
+        assert!(cols.iter().all(|c| c[20..].iter().all(|v| *v == 0.0)));
+    }
+}

@@ -1,0 +1,594 @@
+//! Reports: compare and diagnose.
+
+use super::*;
+
+// ------------------------------------------------------------------------------------------
+// Reports.
+
+/// One channel of `vmt compare` (FORMAT.md §4 `channels[]`, plus details).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ChannelReport {
+    /// Run name.
+    pub run: String,
+    /// SI unit of the channel's values (`m` for deviations, `N` for motor forces).
+    pub unit: String,
+    /// Sensor name.
+    pub sensor: String,
+    /// RMS of the residual, SI unit of the channel (m).
+    pub rms: f64,
+    /// RMS of residual/σ.
+    pub normalized_rms: f64,
+    /// NRMSE fit, % : 100·(1 − ‖y − ŷ‖/‖y − ȳ‖).
+    pub fit_percent: f64,
+    /// The σ used, m.
+    pub sigma: f64,
+    /// True when σ was estimated from the residual (the manifest gives none).
+    pub sigma_estimated: bool,
+    /// Fitted offset (instrument zero), m.
+    pub offset: f64,
+    /// Fraction of autocorrelation lags outside ±1.96/√n (white: about 5 %).
+    pub acf_fraction_outside: Option<f64>,
+    /// Ljung–Box p-value of the residual in acquisition order (small: not white).
+    pub ljung_box_p: Option<f64>,
+    /// Residual by approach direction: (direction, mean, rms).
+    pub by_direction: Vec<(i8, f64, f64)>,
+    /// Residual by run number (cycle): (cycle, mean, rms).
+    pub by_cycle: Vec<(u32, f64, f64)>,
+    /// Residual by position bin: (lower, upper, mean, rms), m.
+    pub by_position: Vec<(f64, f64, f64, f64)>,
+    /// Residual by time bin: (lower, upper, mean, rms), s.
+    pub by_time: Vec<(f64, f64, f64, f64)>,
+    /// Strongest spatial periods of the residual: (wavelength m, amplitude m), from a
+    /// least-squares periodogram over position.
+    pub spectrum_peaks: Vec<(f64, f64)>,
+}
+
+/// One iteration of the loop, as kept in `history.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HistoryEntry {
+    /// Model file.
+    pub model: String,
+    /// Data it was compared with.
+    pub data: String,
+    /// Effect added to reach it (empty for the starting model).
+    pub added: String,
+    /// Normalised RMS of the residual.
+    pub normalized_rms: f64,
+}
+
+/// `vmt compare` (FORMAT.md §4; extra keys allowed).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CompareReport {
+    /// Model file.
+    pub model: String,
+    /// Data directory.
+    pub data: String,
+    /// Per channel.
+    pub channels: Vec<ChannelReport>,
+    /// RMS of residual/σ over all samples of all channels.
+    pub normalized_rms: f64,
+    /// Fitted parameters by effect.
+    pub fitted: BTreeMap<String, BTreeMap<String, f64>>,
+    /// Number of samples.
+    pub n: usize,
+    /// Number of fitted parameters (offsets included).
+    pub n_params: usize,
+    /// What was skipped or estimated.
+    pub notes: Vec<String>,
+    /// Iterations so far (history.json beside the model), if any.
+    pub history: Vec<HistoryEntry>,
+}
+
+/// `vmt diagnose` (FORMAT.md §4).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiagnoseReport {
+    /// Normalised RMS of the model's residual.
+    pub normalized_rms: f64,
+    /// Candidates, best first.
+    pub ranking: Vec<RankingEntry>,
+    /// What to do next.
+    pub advice: String,
+    /// Notes (skipped channels, estimated σ).
+    pub notes: Vec<String>,
+}
+
+/// Everything a compare computes, for diagnose to build on.
+pub(crate) struct Fitted<'a> {
+    pub(crate) st: Stack<'a>,
+    pub(crate) fs: FitState,
+    pub(crate) sig: Vec<f64>,
+    pub(crate) est: Vec<bool>,
+    pub(crate) notes: Vec<String>,
+}
+
+pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> Result<Fitted<'a>, VmtError> {
+    let st = Stack::with_model(chans, model);
+    let bad = |m: String| VmtError::bad(data, "", m);
+    let mut notes = Vec::new();
+    // Every fitted effect must be seen by some channel; a periodic one whose periods these
+    // positions cannot resolve is held at zero with a note (its aliases would fit per-target misfit).
+    for me in model.effects.iter().filter(|m| m.fit && m.effect.axis == model.axis && predicts(m.effect.name)) {
+        let sh = shape(&st, me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER), lacks_coulomb(model));
+        let period = me.given.iter().any(|g| g == "period").then(|| me.effect.params.get("period")).flatten();
+        if !visible(&st, me.effect.name, &sh, period) && sh.hypers.first() == Some(&"period") && st.n > 0 {
+            notes.push(format!("{} (held at zero in this fit)", unresolved_period_note(&st, me.effect.name)));
+        } else if !visible(&st, me.effect.name, &sh, period) {
+            return Err(bad(format!(
+                "the model fits `{}` on axis {}, but no channel of the data sees it: {}",
+                me.effect.name,
+                me.effect.axis,
+                needs(me.effect.name)
+            )));
+        }
+    }
+    // Pass 1: weights from the known σ (1 where unknown); estimate the unknown σ from the residual.
+    let mut sig: Vec<f64> = chans.iter().map(|c| c.sigma.unwrap_or(f64::NAN)).collect();
+    let est: Vec<bool> = sig.iter().map(|s| s.is_nan()).collect();
+    for pass in 0..2 {
+        let per = st_sigma(&st, &sig);
+        let w: Vec<f64> = per.iter().map(|s| 1.0 / s).collect();
+        let sigma = Sigma::PerSample(per);
+        let fs = fit_model_on(&st, model, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
+        if pass == 0 && est.iter().any(|e| *e) {
+            let mut k0 = 0;
+            for (j, c) in chans.iter().enumerate() {
+                let r = &fs.residual[k0..k0 + c.y.len()];
+                k0 += c.y.len();
+                if est[j] {
+                    let (s, how) = match repeatability_sigma(c, r) {
+                        Some(s) => (s, "pooled spread of repeated readings at each target and direction"),
+                        None => (
+                            estimate_noise_sigma(r).map_err(|e| {
+                                bad(format!(
+                                    "sensor `{}` in run `{}` has no sigma in the manifest and its {} readings are \
+                                     too few to estimate it ({e}); give `sigma` for the sensor",
+                                    c.sensor,
+                                    c.run,
+                                    c.y.len()
+                                ))
+                            })?,
+                            "successive differences of the residual",
+                        ),
+                    };
+                    sig[j] = s;
+                    notes.push(format!(
+                        "sigma of `{}` in run `{}` estimated from the data ({how}): {} m",
+                        c.sensor,
+                        c.run,
+                        fmt_num(s)
+                    ));
+                }
+            }
+            continue;
+        }
+        return Ok(Fitted { st, fs, sig, est, notes });
+    }
+    Err(VmtError::Internal("fit loop ended".into()))
+}
+
+/// Minimum degrees of freedom of the repeatability estimate of σ (relative error ≈ 1/√(2·dof) ≤ 22 %).
+pub(crate) const MIN_REPEAT_DOF: usize = 10;
+
+/// σ of one reading from repeated approaches (ISO 230-2 repeatability): the residual grouped by
+/// (target, direction), σ̂² = Σ (r − r̄_group)² / (N − G); None with fewer than
+/// [`MIN_REPEAT_DOF`] degrees of freedom or a zero spread.
+pub(crate) fn repeatability_sigma(c: &Channel, r: &[f64]) -> Option<f64> {
+    let mut groups: BTreeMap<(u64, i8), Vec<f64>> = BTreeMap::new();
+    for i in 0..r.len() {
+        groups.entry((c.x[i].to_bits(), if c.d[i] > 0.0 { 1 } else { -1 })).or_default().push(r[i]);
+    }
+    let dof = r.len().checked_sub(groups.len())?;
+    if dof < MIN_REPEAT_DOF {
+        return None;
+    }
+    let ss: f64 = groups
+        .values()
+        .map(|g| {
+            let m = g.iter().sum::<f64>() / g.len() as f64;
+            g.iter().map(|v| (v - m).powi(2)).sum::<f64>()
+        })
+        .sum();
+    let s = (ss / dof as f64).sqrt();
+    (s > 0.0).then_some(s)
+}
+
+/// Per-sample σ from per-channel σ (NaN → 1: unweighted first pass).
+pub(crate) fn st_sigma(st: &Stack, sig: &[f64]) -> Vec<f64> {
+    let mut v = Vec::with_capacity(st.n);
+    for (c, s) in st.chans.iter().zip(sig) {
+        v.extend(std::iter::repeat(if s.is_finite() { *s } else { 1.0 }).take(c.y.len()));
+    }
+    v
+}
+
+/// True when some channel sees effect `name` (a non-zero column) at the hyper-parameter `fixed`, or
+/// at some value of its search grid.
+pub(crate) fn visible(st: &Stack, name: EffectName, sh: &Shape, fixed: Option<f64>) -> bool {
+    if name == EffectName::Resonance {
+        // Any excited channel or any narrow-band segment (sin/cos are never both zero).
+        return st.excitation.iter().any(|e| e.is_some()) || !resonance_segments(st).is_empty();
+    }
+    let grid: Vec<f64> = match (fixed, sh.hypers.first()) {
+        (Some(v), _) => vec![v],
+        (None, Some(h)) => hyper_grid(st, name, h).0,
+        (None, None) => vec![1.0],
+    };
+    grid.iter().any(|g| {
+        let h: Vec<f64> = sh.hypers.iter().map(|_| *g).collect();
+        columns(st, name, sh, &h).iter().any(|c| c.iter().any(|v| *v != 0.0))
+    })
+}
+
+/// What data shows an effect (for the "missing channel" message and the advice).
+pub(crate) fn needs(name: EffectName) -> &'static str {
+    match name {
+        EffectName::Positioning => "needs a laser_linear along the axis in a positioning run",
+        EffectName::StraightnessY | EffectName::StraightnessZ => {
+            "needs a laser_straightness across the axis in a positioning run, or an accelerometer across the axis \
+             in a constant-velocity run"
+        }
+        EffectName::Roll | EffectName::Pitch | EffectName::Yaw => {
+            "needs a laser whose measuring point is offset from the axis (an Abbe offset) across its direction"
+        }
+        EffectName::Backlash | EffectName::CyclicLead => {
+            "needs a laser_linear or a linear scale in a positioning run, or a linear scale and a motor encoder \
+             logged against x_cmd in a time series"
+        }
+        EffectName::ServoLag => "needs an encoder logged against the command (x_cmd) in a time series",
+        _ => "needs a laser_linear along the axis in a positioning run",
+    }
+}
+
+pub(crate) fn load_channels(model: &Model, set: &MeasurementSet, data: &Path) -> Result<(Vec<Channel>, Vec<String>), VmtError> {
+    let (chans, mut notes) = channels(set, model.axis);
+    if chans.is_empty() {
+        return Err(VmtError::bad(
+            data,
+            "runs",
+            format!(
+                "no channel the model can be compared with: expected a positioning point table of axis {} with a \
+                 laser or encoder deviation column, or a constant-velocity or friction-sweep time series with a \
+                 `feed` and a motor_force or accelerometer column",
+                model.axis
+            ),
+        ));
+    }
+    for me in model.effects.iter().filter(|m| !predicts(m.effect.name)) {
+        notes.push(format!("effect `{}` is not predicted (module doc): left out", me.effect.name));
+    }
+    Ok((chans, notes))
+}
+
+/// `vmt compare` on in-memory inputs: fits the model's free parameters to the point-table channels
+/// of `set` and reports residual statistics per channel and overall (module doc for the model;
+/// FORMAT.md §4 for the keys). `data` names the data in messages and the report.
+pub fn compare(model: &Model, set: &MeasurementSet, data: &Path) -> Result<CompareReport, VmtError> {
+    let (chans, mut notes) = load_channels(model, set, data)?;
+    let f = fit_all(model, &chans, data)?;
+    notes.extend(f.notes.iter().cloned());
+    let pred_total: Vec<f64> = f.st.y().iter().zip(&f.fs.residual).map(|(y, r)| y - r).collect();
+    let mut out = Vec::new();
+    let mut k0 = 0;
+    let mut sum_sq = 0.0;
+    for (j, c) in chans.iter().enumerate() {
+        let m = c.y.len();
+        let r = &f.fs.residual[k0..k0 + m];
+        let p = &pred_total[k0..k0 + m];
+        k0 += m;
+        let s = f.sig[j];
+        sum_sq += r.iter().map(|v| (v / s).powi(2)).sum::<f64>();
+        out.push(channel_report(c, r, p, s, f.est[j], f.fs.coefs[f.st.group[j]]));
+    }
+    let n = f.st.n;
+    Ok(CompareReport {
+        model: model.source.display().to_string(),
+        data: data.display().to_string(),
+        channels: out,
+        normalized_rms: (sum_sq / n as f64).sqrt(),
+        fitted: term_params(&f.fs, model),
+        n,
+        n_params: f.fs.cols.len(),
+        notes,
+        history: read_history(&history_path(&model.source)).unwrap_or_default(),
+    })
+}
+
+pub(crate) fn channel_report(c: &Channel, r: &[f64], p: &[f64], s: f64, est: bool, offset: f64) -> ChannelReport {
+    let m = r.len();
+    let rms = (r.iter().map(|v| v * v).sum::<f64>() / m as f64).sqrt();
+    let lag = (m / 4).clamp(1, 20);
+    let acf = autocorrelation(r, lag).ok().map(|a| a.fraction_outside);
+    let lb = ljung_box(r, lag, 0).ok().map(|l| l.p_value);
+    let labels: Vec<i8> = c.d.iter().map(|d| if *d > 0.0 { 1 } else { -1 }).collect();
+    let by_direction =
+        bin_by_label(r, &labels).map(|b| b.into_iter().map(|x| (x.key, x.mean, x.rms)).collect()).unwrap_or_default();
+    let by_cycle =
+        bin_by_label(r, &c.cycle).map(|b| b.into_iter().map(|x| (x.key, x.mean, x.rms)).collect()).unwrap_or_default();
+    let ranged = |keys: &[f64]| -> Vec<(f64, f64, f64, f64)> {
+        let lo = keys.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = keys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if hi <= lo {
+            return Vec::new();
+        }
+        let edges = match uniform_edges(lo, hi + 1e-12 * (hi - lo).abs().max(1.0), 5) {
+            Ok(e) => e,
+            Err(_) => return Vec::new(),
+        };
+        bin_by_edges(r, keys, &edges)
+            .map(|b| {
+                b.bins
+                    .into_iter()
+                    .filter_map(|x| Some((x.lower, x.upper, x.mean?, x.rms?)))
+                    .collect::<Vec<(f64, f64, f64, f64)>>()
+            })
+            .unwrap_or_default()
+    };
+    let spectrum_peaks = frequency_grid(&c.x, 5.0, None)
+        .ok()
+        .and_then(|g| ls_periodogram(&c.x, r, &Sigma::Unknown, &g).ok())
+        .map(|pg| {
+            let mut idx: Vec<usize> = (0..pg.frequency.len()).collect();
+            idx.sort_by(|a, b| pg.amplitude[*b].total_cmp(&pg.amplitude[*a]));
+            idx.into_iter().take(3).map(|i| (1.0 / pg.frequency[i], pg.amplitude[i])).collect()
+        })
+        .unwrap_or_default();
+    ChannelReport {
+        run: c.run.clone(),
+        unit: match c.kind {
+            SensorKind::MotorForce => "N".into(),
+            SensorKind::Accelerometer => "m/s²".into(),
+            _ => "m".into(),
+        },
+        sensor: c.sensor.clone(),
+        rms,
+        normalized_rms: rms / s,
+        fit_percent: fit_percent(&c.y, p).unwrap_or(f64::NAN),
+        sigma: s,
+        sigma_estimated: est,
+        offset,
+        acf_fraction_outside: acf,
+        ljung_box_p: lb,
+        by_direction,
+        by_cycle,
+        by_position: ranged(&c.x),
+        by_time: ranged(&c.t),
+        spectrum_peaks,
+    }
+}
+
+/// The candidates for effects the model lacks that phase 1 can express, each with its shape.
+pub(crate) fn candidate_names(model: &Model, st: &Stack) -> Vec<EffectName> {
+    EffectName::ALL
+        .iter()
+        .copied()
+        .filter(|n| predicts(*n) && model.get(*n, model.axis).is_none())
+        .filter(|n| visible(st, *n, &candidate_shape(st, *n, lacks_coulomb(model)), None))
+        .collect()
+}
+
+/// A candidate's shape: error motions as a cubic without constant term; the positioning candidate
+/// without its linear term as well (a linear positioning error is the scale error's signature).
+pub(crate) fn candidate_shape(st: &Stack, n: EffectName, with_fc: bool) -> Shape {
+    shape(st, n, if n == EffectName::Positioning { 2 } else { 1 }, DEFAULT_ORDER, with_fc)
+}
+
+/// True when the model has no `coulomb` effect on its axis (a Stribeck term then fits its own Fc).
+pub(crate) fn lacks_coulomb(model: &Model) -> bool {
+    model.get(EffectName::Coulomb, model.axis).is_none()
+}
+
+/// The model's Coulomb level: fitted (`fitted`) or known, 0 without one, N.
+pub(crate) fn coulomb_level(model: &Model, fitted: &BTreeMap<String, BTreeMap<String, f64>>) -> f64 {
+    fitted
+        .get("coulomb")
+        .and_then(|m| m.get("fc").copied())
+        .or_else(|| model.get(EffectName::Coulomb, model.axis).and_then(|m| m.effect.params.get("fc")))
+        .unwrap_or(0.0)
+}
+
+/// `vmt diagnose` on in-memory inputs: fits the model, then every catalogue effect the model lacks
+/// that these channels can show is fitted to the weighted residual together with the model's own
+/// linear columns, ranked by ΔBIC with verdicts (`vmt_estimators::modelcheck::rank_candidates`).
+pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<DiagnoseReport, VmtError> {
+    let (chans, mut notes) = load_channels(model, set, data)?;
+    let f = fit_all(model, &chans, data)?;
+    notes.extend(f.notes.iter().cloned());
+    let per = st_sigma(&f.st, &f.sig);
+    let nrms = (f.fs.residual.iter().zip(&per).map(|(r, s)| (r / s).powi(2)).sum::<f64>() / f.st.n as f64).sqrt();
+    let names = candidate_names(model, &f.st);
+    // Periodic candidates these positions cannot resolve: not searched, listed with a note.
+    let mut unresolved: Vec<EffectName> = Vec::new();
+    let mut restricted: Option<String> = None;
+    for n in [EffectName::CyclicLead, EffectName::InterpolationError] {
+        if !names.contains(&n) && model.get(n, model.axis).is_none() && !f.st.chans.is_empty() {
+            let sh = candidate_shape(&f.st, n, false);
+            // Not visible: no period of its range resolvable, or the waves vanish on these positions.
+            // A cyclic lead acts on the drive, an interpolation error on the feedback chain.
+            let sees = |c: &Channel| if n == EffectName::CyclicLead { c.s_drive() } else { c.s_chain() } != 0.0;
+            if sh.hypers.first() == Some(&"period") && f.st.chans.iter().any(sees) {
+                unresolved.push(n);
+            }
+        } else if names.contains(&n) && n == EffectName::CyclicLead {
+            if let Some(p) = shortest_resolvable_period(&f.st).filter(|p| *p > 2e-3) {
+                restricted = Some(format!(
+                    "cyclic_lead searched only at periods ≥ {} mm, the shortest these sample positions resolve \
+                     (twice the gap between neighbouring targets); a shorter lead needs targets every ≤ P/3 over a period",
+                    fmt_num(p * 1e3)
+                ));
+                notes.extend(restricted.clone());
+            }
+        }
+    }
+    let fc_ref = coulomb_level(model, &term_params(&f.fs, model));
+    let st = &f.st;
+    let cands: Vec<Candidate> = names
+        .iter()
+        .map(|&n| {
+            let sh = candidate_shape(st, n, lacks_coulomb(model));
+            let sh2 = sh.clone();
+            let coef: Vec<&str> = sh.coefs.iter().map(|s| s.as_str()).collect();
+            let mut c = Candidate::new(n.as_str(), &coef, move |h: &[f64]| {
+                let cols = columns(st, n, &sh2, h);
+                if cols.iter().all(|c| c.iter().all(|v| *v == 0.0)) {
+                    Err("the signature vanishes on these samples (an alias of a constant)".to_string())
+                } else {
+                    Ok(cols)
+                }
+            });
+            for hname in &sh.hypers {
+                let (grid, refine) = hyper_grid(st, n, hname);
+                c.hyper_parameters.push(HyperParameter { name: hname.to_string(), grid, refine });
+            }
+            let sh3 = sh.clone();
+            let mut start = EffectParams::default_for(n);
+            if n == EffectName::Stribeck {
+                start.set("fc", fc_ref);
+            }
+            c.with_describe(move |coefs: &[f64], h: &[f64]| describe(n, &sh3, coefs, h, &start))
+        })
+        .collect();
+    let mut ranking: Vec<RankingEntry> = Vec::new();
+    if !cands.is_empty() {
+        let sigma = Sigma::PerSample(per.clone());
+        let base: Vec<Vec<f64>> = f.fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
+        let input =
+            vmt_estimators::modelcheck::ResidualInput { residual: &f.fs.residual, sigma: &sigma, base_columns: &base };
+        match rank_candidates(&input, &cands, &DiagnoseConfig::default()) {
+            Ok(d) => ranking = d.ranking,
+            Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) => {
+                notes.push("the model explains the data exactly: nothing to diagnose".into())
+            }
+            Err(e) => return Err(VmtError::bad(data, "", format!("diagnose: {e}"))),
+        }
+    }
+    // A fitted period that other periods reproduce on these positions is not identified: the
+    // claim is `inseparable` from its aliases (the data cannot say which one), with the advice.
+    for r in ranking.iter_mut().filter(|r| r.verdict == Verdict::Significant) {
+        let Some(&p) = r.params.get("period") else { continue };
+        let Some(range) = r.effect.parse::<EffectName>().ok().and_then(period_range) else { continue };
+        let mut aliases = period_aliases(st, p, range);
+        aliases.truncate(8);
+        if aliases.is_empty() {
+            continue;
+        }
+        let list: Vec<String> = aliases.iter().map(|q| format!("{} mm", fmt_num(q * 1e3))).collect();
+        r.verdict = Verdict::Inseparable;
+        r.note = Some(format!(
+            "`{}` at a {} mm period fits these sample positions exactly as well as at {}: the period is not \
+             identified. Targets every ≤ P/3 over a period P, irregular spacing or a dense run would separate them",
+            r.effect,
+            fmt_num(p * 1e3),
+            list.join(", ")
+        ));
+        r.aliases = aliases;
+    }
+    // The cyclic-lead entry says which periods were not searched (and why), unless it has a note.
+    if let Some(r) = ranking.iter_mut().find(|r| r.effect == EffectName::CyclicLead.as_str() && r.note.is_none()) {
+        r.note = restricted;
+    }
+    for n in unresolved {
+        let note = unresolved_period_note(&f.st, n);
+        notes.push(note.clone());
+        ranking.push(RankingEntry {
+            effect: n.as_str().to_string(),
+            delta_bic: 0.0,
+            explained: 0.0,
+            verdict: Verdict::Noise,
+            params: BTreeMap::new(),
+            confused_with: vec![],
+            note: Some(note),
+            aliases: vec![],
+        });
+    }
+    let advice = advice(&ranking, nrms);
+    Ok(DiagnoseReport { normalized_rms: nrms, ranking, advice, notes })
+}
+
+/// Why a periodic effect is not searched on these positions, and what measurement would show it.
+pub(crate) fn unresolved_period_note(st: &Stack, name: EffectName) -> String {
+    let range = match name {
+        EffectName::CyclicLead => "2–60 mm (screw leads)",
+        _ => "2–200 µm (scale signal periods)",
+    };
+    let shortest = match shortest_resolvable_period(st) {
+        Some(p) => format!("the shortest period they resolve is {} mm", fmt_num(p * 1e3)),
+        None => "they resolve no period".to_string(),
+    };
+    format!(
+        "{name} not searched: its periods {range} are not resolvable on these sample positions ({shortest}; \
+         a shorter period is one of many aliases that fit the targets equally well). To see a period P, measure \
+         targets every ≤ P/3 over at least one period (a dense run) or at irregular spacing"
+    )
+}
+
+/// What measurement separates two effects that fit the same signature on these data.
+pub fn separating_measurement(a: &str, b: &str) -> String {
+    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
+    let angular = |e: &str| matches!(e, "roll" | "pitch" | "yaw");
+    let linear = |e: &str| matches!(e, "positioning" | "straightness_y" | "straightness_z" | "scale_error");
+    if pair("thermal_expansion", "scale_error") || pair("thermal_expansion", "positioning") {
+        "repeat the positioning test later, when the machine is warm (runs at different times): thermal expansion \
+         grows with time, a scale error does not"
+            .into()
+    } else if a == "thermal_drift" || b == "thermal_drift" {
+        "record the readings over a longer time, or repeat the test after a pause: a drift grows with time".into()
+    } else if (angular(a) && linear(b)) || (angular(b) && linear(a)) || (angular(a) && angular(b)) {
+        "measure with a second laser at another height or lateral offset (a different Abbe offset), or with an \
+         angular laser: an angular error motion scales with the offset, a translation does not"
+            .into()
+    } else if pair("cyclic_lead", "interpolation_error") {
+        "measure at target spacings finer than the screw lead and than the scale's signal period".into()
+    } else if a == "backlash" || b == "backlash" {
+        "approach every target from both directions (bidirectional ISO 230-2 cycle)".into()
+    } else {
+        "measure at more positions, at other times or with a sensor at another offset, so that the two \
+         signatures differ"
+            .into()
+    }
+}
+
+/// The advice text of a diagnosis.
+pub(crate) fn advice(ranking: &[RankingEntry], nrms: f64) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    let sig: Vec<&RankingEntry> = ranking.iter().filter(|r| r.verdict == Verdict::Significant).collect();
+    for r in &sig {
+        parts.push(format!(
+            "`{}` is significant (ΔBIC {:.1}, explains {:.0} % of the residual): add it with \
+             `vmt add --effect {} --from-diagnosis`.",
+            r.effect,
+            r.delta_bic,
+            100.0 * r.explained,
+            r.effect
+        ));
+    }
+    let mut seen: Vec<(String, String)> = Vec::new();
+    for r in ranking.iter().filter(|r| r.verdict == Verdict::Inseparable) {
+        for o in &r.confused_with {
+            let key = if r.effect < *o { (r.effect.clone(), o.clone()) } else { (o.clone(), r.effect.clone()) };
+            if seen.contains(&key) {
+                continue;
+            }
+            parts.push(format!(
+                "`{}` and `{}` explain the residual equally well on these data and cannot be told apart: {}.",
+                key.0,
+                key.1,
+                separating_measurement(&key.0, &key.1)
+            ));
+            seen.push(key);
+        }
+    }
+    for r in ranking.iter().filter(|r| r.verdict == Verdict::Inseparable && !r.aliases.is_empty()) {
+        parts.extend(r.note.clone());
+    }
+    if parts.is_empty() {
+        parts.push(format!("no missing effect is significant at this noise level (normalised RMS {nrms:.2})."));
+        if nrms > 1.5 {
+            parts.push(
+                "The residual is above the noise but no catalogue effect explains it: look at the residual by \
+                 position, direction and time in `vmt compare`, or fit an error motion with a richer basis."
+                    .into(),
+            );
+        }
+    }
+    parts.join(" ")
+}

@@ -1,0 +1,784 @@
+//! Signatures of the effects on the stacked samples.
+
+use super::*;
+
+// ------------------------------------------------------------------------------------------
+// Signatures of the effects on the stacked samples.
+
+// 1 − exp(−t/τ) for t > 0 (a step for τ = 0), 0 before t = 0: the simulator's thermal rise.
+use vmt_sim::effects::rise;
+
+/// The stacked samples of all channels, with per-sample sensitivities.
+pub(crate) struct Stack<'a> {
+    pub(crate) chans: &'a [Channel],
+    pub(crate) n: usize,
+    /// Offset group of each channel: one per (run, sensor) for deviations (the instrument is zeroed
+    /// per run), one per sensor for motor forces (a force bias, e.g. weight on an inclined axis,
+    /// does not change from run to run).
+    pub(crate) group: Vec<usize>,
+    pub(crate) n_groups: usize,
+    /// Per channel: the base excitation of a structural mode predicted by the model (accelerometer
+    /// channels only; None where the model predicts none), see [`Excitation`].
+    pub(crate) excitation: Vec<Option<Excitation>>,
+}
+
+/// Time step of the mode integration, s: at most this long (and at least 4 steps per sample
+/// interval). The input is held at its mean over each step, so that its impulse (the velocity it
+/// gives) is exact; the hold's error on a sinusoid of the guideway's band (≤ 100 Hz) is
+/// ≈ (ωh)²/24 ≈ 2·10⁻⁵ of it.
+pub(crate) const MODE_STEP: f64 = 1e-4;
+
+/// The base acceleration that drives a structural mode, as the model predicts it on one
+/// accelerometer channel: u·a_ref(τ) = v²·u·E''(x(τ)), the guideway acceleration of the axis
+/// reference point (r = 0: the angles do not move it) from the model's given error motions, with
+/// x(τ) = x_i + v·(τ − t_i) between samples. It is tabulated from t_{−1} = t_0 − Δt_0 (the sample
+/// before the first, whose velocity the first reading is differenced against): interval i
+/// (t_{i−1} → t_i) holds `steps[i]` steps of length Δt_i/steps[i] and the input's mean over each
+/// step, v²·u·Ē''(x_k, x_{k+1}) (`Profile::mean_second_derivative`: a table's slope jumps count).
+#[derive(Clone, Debug)]
+pub(crate) struct Excitation {
+    pub(crate) steps: Vec<usize>,
+    pub(crate) input: Vec<Vec<f64>>,
+}
+
+/// Sample interval before sample i of a channel, s (the first sample takes the second's).
+pub(crate) fn sample_interval(c: &Channel, i: usize) -> f64 {
+    match i {
+        0 if c.t.len() > 1 => c.t[1] - c.t[0],
+        0 => 0.0,
+        _ => c.t[i] - c.t[i - 1],
+    }
+}
+
+/// Number of mode-integration steps over a sample interval `dt` (s).
+pub(crate) fn mode_steps(dt: f64) -> usize {
+    ((dt / MODE_STEP).ceil() as usize).max(4)
+}
+
+impl Excitation {
+    /// The excitation of channel `c` by the given (not fitted) translation error motions of
+    /// `model` (EXX, EYX, EZX with their profiles); None for a non-accelerometer channel, a channel
+    /// without velocity or a non-increasing time, or when no given translation reaches u.
+    pub(crate) fn of(c: &Channel, model: &Model) -> Option<Excitation> {
+        if !c.is_accel() || c.t.len() < 2 {
+            return None;
+        }
+        let motions: Vec<(f64, &Profile)> = model
+            .effects
+            .iter()
+            .filter(|m| !m.fit && m.effect.axis == model.axis)
+            .filter_map(|m| match (&m.effect.params, m.effect.name) {
+                (EffectParams::ErrorMotion(p), n)
+                    if matches!(n, EffectName::Positioning | EffectName::StraightnessY | EffectName::StraightnessZ) =>
+                {
+                    let s = c.s_motion(n);
+                    (s != 0.0 && !p.is_zero()).then_some((s, p))
+                }
+                _ => None,
+            })
+            .collect();
+        if motions.is_empty() {
+            return None;
+        }
+        let mut steps = Vec::with_capacity(c.t.len());
+        let mut input = Vec::with_capacity(c.t.len());
+        for i in 0..c.t.len() {
+            let dt = sample_interval(c, i);
+            let v = c.v[i];
+            if !(dt > 0.0) || !dt.is_finite() || v == 0.0 {
+                return None;
+            }
+            let m = mode_steps(dt);
+            let x = |k: usize| c.x[i] - v * dt * (1.0 - k as f64 / m as f64);
+            let vals: Vec<f64> = (0..m)
+                .map(|k| v * v * motions.iter().map(|(s, p)| s * p.mean_second_derivative(x(k), x(k + 1))).sum::<f64>())
+                .collect();
+            steps.push(m);
+            input.push(vals);
+        }
+        Some(Excitation { steps, input })
+    }
+}
+
+/// The exact one-step map of the mode q̈ + 2ζω·q̇ + ω²·q = −a(τ) over a step h with a linear
+/// input from a₀ to a₁: (q, q̇)(h) = Φ·(q, q̇)(0) + g₀·a₀ + g₁·a₁. Φ, g₀ and g₁ are the responses to
+/// the unit states and to the inputs 1 − τ/h and τ/h, integrated by classical RK4 in 32 sub-steps
+/// (ωh/32 ≤ 0.004 at 200 Hz and h = 0.1 ms: error ≈ 10⁻¹⁴).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct StepMap {
+    pub(crate) h: f64,
+    pub(crate) phi: [[f64; 2]; 2],
+    pub(crate) g0: [f64; 2],
+    pub(crate) g1: [f64; 2],
+}
+
+impl StepMap {
+    pub(crate) fn new(f: f64, zeta: f64, h: f64) -> StepMap {
+        let w = TWO_PI * f;
+        let n = 32;
+        let hs = h / n as f64;
+        let run = |x0: [f64; 2], a: &dyn Fn(f64) -> f64| -> [f64; 2] {
+            let d = |tau: f64, x: [f64; 2]| [x[1], -a(tau) - 2.0 * zeta * w * x[1] - w * w * x[0]];
+            let mut x = x0;
+            for k in 0..n {
+                let tau = k as f64 * hs;
+                let k1 = d(tau, x);
+                let k2 = d(tau + 0.5 * hs, [x[0] + 0.5 * hs * k1[0], x[1] + 0.5 * hs * k1[1]]);
+                let k3 = d(tau + 0.5 * hs, [x[0] + 0.5 * hs * k2[0], x[1] + 0.5 * hs * k2[1]]);
+                let k4 = d(tau + hs, [x[0] + hs * k3[0], x[1] + hs * k3[1]]);
+                for j in 0..2 {
+                    x[j] += hs / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+                }
+            }
+            x
+        };
+        let c0 = run([1.0, 0.0], &|_| 0.0);
+        let c1 = run([0.0, 1.0], &|_| 0.0);
+        StepMap {
+            h,
+            phi: [[c0[0], c1[0]], [c0[1], c1[1]]],
+            g0: run([0.0, 0.0], &|tau| 1.0 - tau / h),
+            g1: run([0.0, 0.0], &|tau| tau / h),
+        }
+    }
+
+    pub(crate) fn step(&self, x: [f64; 2], a0: f64, a1: f64) -> [f64; 2] {
+        [
+            self.phi[0][0] * x[0] + self.phi[0][1] * x[1] + self.g0[0] * a0 + self.g1[0] * a1,
+            self.phi[1][0] * x[0] + self.phi[1][1] * x[1] + self.g0[1] * a0 + self.g1[1] * a1,
+        ]
+    }
+}
+
+/// Interval means of q̈ of a mode q̈ + 2ζω·q̇ + ω²·q = −a(τ) over each sample interval of channel
+/// `c`, (q̇_i − q̇_{i−1})/Δt_i (what the simulator's accelerometer reads of a point moving by q), from
+/// the state (q, q̇) = `start` at t_{−1}, with the input a from `ex` (None: free vibration) held at
+/// its mean over each step ([`StepMap`], [`MODE_STEP`]). ω = 2πf, f in Hz.
+pub(crate) fn mode_response(c: &Channel, ex: Option<&Excitation>, f: f64, zeta: f64, start: (f64, f64)) -> Vec<f64> {
+    let mut x = [start.0, start.1];
+    let mut map: Option<StepMap> = None;
+    let mut out = Vec::with_capacity(c.t.len());
+    for i in 0..c.t.len() {
+        let dt = sample_interval(c, i);
+        if !(dt > 0.0) {
+            out.push(0.0);
+            continue;
+        }
+        let m = ex.map_or(mode_steps(dt), |e| e.steps[i]);
+        let h = dt / m as f64;
+        // Sample intervals repeat: the map is rebuilt only when the step changes (≥ 1 ppb).
+        let mp = match map {
+            Some(mp) if (mp.h - h).abs() <= 1e-9 * h => mp,
+            _ => *map.insert(StepMap::new(f, zeta, h)),
+        };
+        let v0 = x[1];
+        for k in 0..m {
+            let a = ex.map_or(0.0, |e| e.input[i][k]);
+            x = mp.step(x, a, a);
+        }
+        out.push((x[1] - v0) / dt);
+    }
+    out
+}
+
+impl<'a> Stack<'a> {
+    /// The stack of `chans` with the structural-mode excitation the model `model` predicts.
+    pub(crate) fn with_model(chans: &'a [Channel], model: &Model) -> Stack<'a> {
+        let mut st = Stack::new(chans);
+        st.excitation = chans.iter().map(|c| Excitation::of(c, model)).collect();
+        st
+    }
+
+    pub(crate) fn new(chans: &'a [Channel]) -> Stack<'a> {
+        let mut keys: Vec<String> = Vec::new();
+        let mut group = Vec::with_capacity(chans.len());
+        for c in chans {
+            // Encoders are homed once: one offset per encoder channel over all runs (so the
+            // passes both ways show the backlash and the lead error is one shape).
+            let key = if c.kind == SensorKind::MotorForce {
+                format!("force/{}", c.sensor)
+            } else if c.encoder.is_some() {
+                format!("encoder/{}", c.sensor)
+            } else {
+                format!("{}/{}", c.run, c.sensor)
+            };
+            let g = keys.iter().position(|k| *k == key).unwrap_or_else(|| {
+                keys.push(key);
+                keys.len() - 1
+            });
+            group.push(g);
+        }
+        Stack {
+            chans,
+            n: chans.iter().map(|c| c.y.len()).sum(),
+            group,
+            n_groups: keys.len(),
+            excitation: vec![None; chans.len()],
+        }
+    }
+
+    /// One column: f(channel, sample index) over all samples.
+    pub(crate) fn col(&self, f: impl Fn(&Channel, usize) -> f64) -> Vec<f64> {
+        let mut v = Vec::with_capacity(self.n);
+        for c in self.chans {
+            for i in 0..c.y.len() {
+                v.push(f(c, i));
+            }
+        }
+        v
+    }
+
+    /// One column: f(channel, sample index, channel index) over all samples.
+    pub(crate) fn col_j(&self, f: impl Fn(&Channel, usize, usize) -> f64) -> Vec<f64> {
+        let mut v = Vec::with_capacity(self.n);
+        for (j, c) in self.chans.iter().enumerate() {
+            for i in 0..c.y.len() {
+                v.push(f(c, i, j));
+            }
+        }
+        v
+    }
+
+    pub(crate) fn y(&self) -> Vec<f64> {
+        self.col(|c, i| c.y[i])
+    }
+
+    /// Offset columns, one per offset group.
+    pub(crate) fn offsets(&self) -> Vec<Vec<f64>> {
+        (0..self.n_groups)
+            .map(|k| {
+                let mut v = Vec::with_capacity(self.n);
+                for (j, c) in self.chans.iter().enumerate() {
+                    v.extend(std::iter::repeat(if self.group[j] == k { 1.0 } else { 0.0 }).take(c.y.len()));
+                }
+                v
+            })
+            .collect()
+    }
+
+    pub(crate) fn t_span(&self) -> (f64, f64) {
+        let ts = self.col(|c, i| c.t[i]);
+        let lo = ts.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = ts.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (lo, hi)
+    }
+}
+
+/// How an effect's signature is parameterised: names of its linear coefficients and of its
+/// nonlinear hyper-parameters (periods, time constants).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Shape {
+    pub(crate) coefs: Vec<String>,
+    pub(crate) hypers: Vec<&'static str>,
+    /// Lowest power of a polynomial error motion (1 in a model; 2 for the positioning candidate,
+    /// whose linear term is the scale error's signature).
+    pub(crate) first_power: u32,
+    pub(crate) order: u32,
+    /// Stribeck only: also fit the Coulomb level (the model has no `coulomb` effect).
+    pub(crate) with_fc: bool,
+}
+
+/// True for the effects phase 1 can predict in a point table.
+pub fn predicts(name: EffectName) -> bool {
+    name.is_error_motion()
+        || matches!(
+            name,
+            EffectName::Backlash
+                | EffectName::CyclicLead
+                | EffectName::ScaleError
+                | EffectName::ThermalExpansion
+                | EffectName::ThermalDrift
+                | EffectName::InterpolationError
+                | EffectName::Coulomb
+                | EffectName::Viscous
+                | EffectName::Stribeck
+                | EffectName::Resonance
+                | EffectName::GravityTilt
+                | EffectName::ServoLag
+        )
+}
+
+/// Length of the segments over which a resonance's amplitude and phase are held, s. A base-excited
+/// mode driven by a random guideway profile is a narrow-band random process whose amplitude and
+/// phase wander over its correlation time 1/(ζ·2πf) (0.18 s at 45 Hz, ζ = 0.02): piecewise
+/// sin/cos with amplitudes per segment follow it.
+pub(crate) const RESONANCE_SEGMENT: f64 = 0.2;
+
+/// The resonance segments of the accelerometer channels without a predicted mode excitation
+/// (module doc): (channel index, segment number, start time, end time), s. A channel is cut into ⌈T/`RESONANCE_SEGMENT`⌉ equal segments of its time span
+/// (a segment needs ≥ 8 samples, else the channel is one segment).
+pub(crate) fn resonance_segments(st: &Stack) -> Vec<(usize, usize, f64, f64)> {
+    let mut out = Vec::new();
+    for (j, c) in st.chans.iter().enumerate() {
+        if !c.is_accel() || c.t.len() < 8 || st.excitation[j].is_some() {
+            continue;
+        }
+        let lo = c.t.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = c.t.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let span = hi - lo;
+        let mut m = ((span / RESONANCE_SEGMENT).ceil() as usize).max(1);
+        if c.t.len() / m < 8 {
+            m = (c.t.len() / 8).max(1);
+        }
+        for k in 0..m {
+            let a = lo + span * k as f64 / m as f64;
+            // The last segment's end lies just past the last sample (half-open intervals).
+            let b = if k + 1 == m { hi + 1.0 } else { lo + span * (k + 1) as f64 / m as f64 };
+            out.push((j, k, a, b));
+        }
+    }
+    out
+}
+
+/// Names of the accelerometer sensors among the channels, in order of appearance.
+pub(crate) fn accel_sensors(st: &Stack) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for c in st.chans.iter().filter(|c| c.is_accel()) {
+        if !out.contains(&c.sensor) {
+            out.push(c.sensor.clone());
+        }
+    }
+    out
+}
+
+/// Names of the accelerometer sensors with a predicted mode excitation on some channel, in order
+/// of appearance.
+pub(crate) fn excited_sensors(st: &Stack) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for (c, _) in st.chans.iter().zip(&st.excitation).filter(|(_, e)| e.is_some()) {
+        if !out.contains(&c.sensor) {
+            out.push(c.sensor.clone());
+        }
+    }
+    out
+}
+
+/// Sampling rate of the slowest accelerometer channel, Hz (median sample interval); None without one.
+pub(crate) fn accel_min_rate(st: &Stack) -> Option<f64> {
+    st.chans
+        .iter()
+        .filter(|c| c.is_accel() && c.t.len() > 2)
+        .map(|c| {
+            let mut dt: Vec<f64> = c.t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+            dt.sort_by(f64::total_cmp);
+            if dt.is_empty() {
+                0.0
+            } else {
+                1.0 / dt[dt.len() / 2]
+            }
+        })
+        .filter(|f| *f > 0.0)
+        .reduce(f64::min)
+}
+
+pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, with_fc: bool) -> Shape {
+    let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<String>>();
+    let (coefs, hypers): (Vec<String>, Vec<&'static str>) = match name {
+        n if n.is_error_motion() => ((first_power..=order).map(|k| format!("c{k}")).collect(), vec![]),
+        // On encoder time series the backlash is a play whose take-up at a reversal depends on it.
+        EffectName::Backlash if st.chans.iter().any(|c| c.encoder.is_some()) => (s(&["value"]), vec!["play"]),
+        EffectName::Backlash | EffectName::ScaleError => (s(&["value"]), vec![]),
+        EffectName::ServoLag => {
+            // The gain, and per following channel the decay of its unknown starting state.
+            let mut names = s(&["gain"]);
+            names.extend(following_channels(st).map(|j| format!("start_{j}")));
+            (names, vec!["kv"])
+        }
+        EffectName::CyclicLead | EffectName::InterpolationError => (s(&["a_sin", "a_cos"]), vec!["period"]),
+        EffectName::ThermalExpansion => (s(&["alpha_delta_t"]), vec!["tau"]),
+        EffectName::ThermalDrift => (s(&["value"]), vec!["tau"]),
+        EffectName::Coulomb => (s(&["fc"]), vec![]),
+        EffectName::Viscous => (s(&["fv"]), vec![]),
+        EffectName::Stribeck if with_fc => (s(&["fs_minus_fc", "fc"]), vec!["vs"]),
+        EffectName::Stribeck => (s(&["fs_minus_fc"]), vec!["vs"]),
+        EffectName::Resonance => {
+            let mut names: Vec<String> = excited_sensors(st).iter().map(|a| format!("gain_{a}")).collect();
+            for (j, _) in st.excitation.iter().enumerate().filter(|(_, e)| e.is_some()) {
+                names.push(format!("free_q_{j}"));
+                names.push(format!("free_v_{j}"));
+            }
+            names.extend(
+                resonance_segments(st).iter().flat_map(|(j, k, _, _)| [format!("sin_{j}_{k}"), format!("cos_{j}_{k}")]),
+            );
+            (names, vec!["frequency", "damping"])
+        }
+        EffectName::GravityTilt => {
+            (accel_sensors(st).iter().flat_map(|a| (1..=order).map(move |k| format!("{a}_c{k}"))).collect(), vec![])
+        }
+        _ => (vec![], vec![]),
+    };
+    Shape { coefs, hypers, first_power, order, with_fc }
+}
+
+/// Design columns of effect `name` at hyper-parameters `h` (in the order of [`shape`]).
+pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>> {
+    match name {
+        n if n.is_error_motion() => {
+            // c_k·x^k: the same coefficient for lasers (x^k) and accelerometers (slope k·x^(k−1)).
+            (sh.first_power..=sh.order)
+                .map(|k| {
+                    let kf = k as f64;
+                    st.col(|c, i| c.motion_response(i, n, |x| x.powi(k as i32), |x| kf * x.powi(k as i32 - 1)))
+                })
+                .collect()
+        }
+        EffectName::Backlash => {
+            // Encoder time series: the play p(t; b)/b (take-up b/|v| at a reversal); point tables: −d/2.
+            let b = h.first().copied().unwrap_or(0.0);
+            let mut col = Vec::with_capacity(st.n);
+            for c in st.chans {
+                match play_signature(c, b).filter(|_| b > 0.0) {
+                    Some(p) => col.extend(p),
+                    None => col.extend((0..c.y.len()).map(|i| -0.5 * c.d[i] * c.s_drive())),
+                }
+            }
+            vec![col]
+        }
+        EffectName::ServoLag => {
+            // Following error of a first-order loop, L_kv[input] − command, on following channels;
+            // the coefficient is 1 − the velocity feed-forward fraction.
+            let mut col = Vec::with_capacity(st.n);
+            for c in st.chans {
+                col.extend(following_error(c, h[0]));
+            }
+            // A log starts a finite time after the last change of speed: the loop's state then
+            // decays as e^{−kv·(t − t₀)} from an unknown start, one column per following channel.
+            let mut cols = vec![col];
+            for j in following_channels(st) {
+                let t0 = st.chans[j].t.first().copied().unwrap_or(0.0);
+                cols.push(st.col_j(|c, i, jj| if jj == j { (-h[0] * (c.t[i] - t0)).exp() } else { 0.0 }));
+            }
+            cols
+        }
+        EffectName::ScaleError => vec![st.col(|c, i| c.x[i] * c.s_chain())],
+        EffectName::CyclicLead | EffectName::InterpolationError => {
+            let p = h[0];
+            if !phases_spread(st, p) || !period_resolvable(st, p) {
+                return vec![vec![0.0; st.n], vec![0.0; st.n]];
+            }
+            let drive = name == EffectName::CyclicLead;
+            let s = move |c: &Channel| if drive { c.s_drive() } else { c.s_chain() };
+            vec![st.col(|c, i| s(c) * (TWO_PI * c.x[i] / p).sin()), st.col(|c, i| s(c) * (TWO_PI * c.x[i] / p).cos())]
+        }
+        EffectName::ThermalExpansion => vec![st.col(|c, i| c.s_chain() * c.x[i] * rise(c.t[i], h[0]))],
+        EffectName::ThermalDrift => vec![st.col(|c, i| c.s_chain() * rise(c.t[i], h[0]))],
+        EffectName::Coulomb => vec![st.col(|c, i| c.s_force() * c.v[i].signum())],
+        EffectName::Viscous => vec![st.col(|c, i| c.s_force() * c.v[i])],
+        EffectName::Stribeck => {
+            // F = Fc·sgn v + (Fs − Fc)·sgn v·exp(−|v/vs|^δ), δ = 2 (the catalogue's default shape).
+            let vs = h[0];
+            let mut cols = vec![st.col(|c, i| c.s_force() * c.v[i].signum() * (-(c.v[i] / vs).abs().powi(2)).exp())];
+            if sh.with_fc {
+                cols.push(st.col(|c, i| c.s_force() * c.v[i].signum()));
+            }
+            cols
+        }
+        EffectName::Resonance => {
+            let (f, zeta) = (h[0], h[1]);
+            let mut cols = Vec::new();
+            // Forced response to the predicted base acceleration, gain φ (the mode shape at the
+            // sensor) per sensor: φ·mean q̈ with q driven by −u·a_ref from rest at t_{−1}.
+            let responses: Vec<Option<Vec<f64>>> = st
+                .chans
+                .iter()
+                .zip(&st.excitation)
+                .map(|(c, e)| e.as_ref().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))))
+                .collect();
+            for a in excited_sensors(st) {
+                cols.push(st.col_j(|c, i, j| match &responses[j] {
+                    Some(r) if c.sensor == a => r[i],
+                    _ => 0.0,
+                }));
+            }
+            // Free vibration from the unknown state at t_{−1} (q₀ = 1/ω², q̇₀ = 1/ω: unit scale),
+            // per excited channel.
+            let w = TWO_PI * f;
+            for (j, c) in st.chans.iter().enumerate() {
+                if st.excitation[j].is_none() {
+                    continue;
+                }
+                for start in [(1.0 / (w * w), 0.0), (0.0, 1.0 / w)] {
+                    let r = mode_response(c, None, f, zeta, start);
+                    cols.push(st.col_j(|_, i, jj| if jj == j { r[i] } else { 0.0 }));
+                }
+            }
+            // Channels without a predicted excitation: narrow band at the temporal frequency f,
+            // sin/cos of 2πf·t per segment.
+            for (j, _, a, b) in resonance_segments(st) {
+                let inside = move |c: &Channel, i: usize, jj: usize| jj == j && c.t[i] >= a && c.t[i] < b;
+                cols.push(st.col_j(|c, i, jj| if inside(c, i, jj) { (TWO_PI * f * c.t[i]).sin() } else { 0.0 }));
+                cols.push(st.col_j(|c, i, jj| if inside(c, i, jj) { (TWO_PI * f * c.t[i]).cos() } else { 0.0 }));
+            }
+            cols
+        }
+        EffectName::GravityTilt => {
+            // g·tilt(x) of each accelerometer's sensitive axis, a polynomial in x shared by its runs.
+            let mut cols = Vec::new();
+            for a in accel_sensors(st) {
+                for k in 1..=sh.order {
+                    cols.push(st.col(|c, i| {
+                        if c.sensor == a && c.is_accel() {
+                            GRAVITY * c.x[i].powi(k as i32)
+                        } else {
+                            0.0
+                        }
+                    }));
+                }
+            }
+            cols
+        }
+        _ => vec![],
+    }
+}
+
+/// True when the phases 2πx/p of the distinct targets spread around the circle (mean resultant
+/// length R = |mean e^{iθ}| ≤ 0.5, and 0.1 ≤ mean sin²θ ≤ 0.9 so both quadratures vary), so that a sinusoid of period p is distinguishable from a
+/// constant on these targets; false at an alias (targets a whole number of periods apart).
+pub(crate) fn phases_spread(st: &Stack, p: f64) -> bool {
+    let mut xs: Vec<f64> = st.chans.iter().flat_map(|c| c.x.iter().copied()).collect();
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    if xs.len() < 3 || !(p > 0.0) {
+        return false;
+    }
+    let m = xs.len() as f64;
+    let (sc, cc) = xs.iter().fold((0.0, 0.0), |(a, b), x| (a + (TWO_PI * x / p).sin(), b + (TWO_PI * x / p).cos()));
+    // Both quadratures must vary: at p = 2 µm on targets rounded to 1 µm the sine vanishes.
+    let s2: f64 = xs.iter().map(|x| (TWO_PI * x / p).sin().powi(2)).sum::<f64>() / m;
+    (sc * sc + cc * cc).sqrt() / m <= 0.5 && (0.1..=0.9).contains(&s2)
+}
+
+/// The distinct sample positions of all channels, sorted (m).
+fn distinct_positions(st: &Stack) -> Vec<f64> {
+    let mut xs: Vec<f64> = st.chans.iter().flat_map(|c| c.x.iter().copied()).collect();
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    xs
+}
+
+/// True when the sample positions can resolve a wave of period `p` (m) rather than one of its
+/// aliases: somewhere the positions sample it at least twice per period (every gap between
+/// neighbouring distinct positions ≤ p/2, the Nyquist condition in position) over a stretch at
+/// least one period long. On a regular grid of spacing Δ this is p ≥ 2Δ (and p ≤ the travel):
+/// a shorter period is one of infinitely many aliases p' with 1/p' = |1/p − k/Δ| that fit the
+/// targets equally well; on an irregular layout without such a dense stretch the phase at each
+/// target is unrelated to its neighbours' and the search would fit per-target misfit.
+pub(crate) fn period_resolvable(st: &Stack, p: f64) -> bool {
+    resolvable_on(&distinct_positions(st), p)
+}
+
+fn resolvable_on(xs: &[f64], p: f64) -> bool {
+    if !(p > 0.0) || xs.len() < 3 {
+        return false;
+    }
+    let mut start = xs[0];
+    for w in xs.windows(2) {
+        if w[1] - w[0] > 0.5 * p {
+            start = w[1];
+        } else if w[1] - start >= p {
+            return true;
+        }
+    }
+    false
+}
+
+/// The periods q (m, within `range`, the candidate's catalogue range, differing from `p` by more than 10 %) whose sine and cosine
+/// on these sample positions reproduce those of period `p` (each with R² ≥ 0.99 by a 2-column
+/// least-squares fit), i.e. fit any data exactly as well. On positions that lie on a lattice of
+/// spacing Δ (the smallest gap) these are 1/q = |1/p − k/Δ|, k = ±1, ±2, … (spatial aliasing).
+pub(crate) fn period_aliases(st: &Stack, p: f64, range: (f64, f64)) -> Vec<f64> {
+    let xs = distinct_positions(st);
+    let delta = xs.windows(2).map(|w| w[1] - w[0]).filter(|g| *g > 0.0).fold(f64::INFINITY, f64::min);
+    if !(p > 0.0) || !delta.is_finite() || xs.len() < 3 {
+        return vec![];
+    }
+    let wave = |q: f64| -> [Vec<f64>; 2] {
+        [xs.iter().map(|x| (TWO_PI * x / q).sin()).collect(), xs.iter().map(|x| (TWO_PI * x / q).cos()).collect()]
+    };
+    let target = wave(p);
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let reproduces = |q: f64| {
+        let [u, v] = wave(q);
+        let (uu, uv, vv) = (dot(&u, &u), dot(&u, &v), dot(&v, &v));
+        let det = uu * vv - uv * uv;
+        det > 1e-9 * uu * vv
+            && target.iter().all(|a| {
+                let (au, av) = (dot(a, &u), dot(a, &v));
+                let (cu, cv) = ((vv * au - uv * av) / det, (uu * av - uv * au) / det);
+                let explained = cu * au + cv * av;
+                let aa = dot(a, a);
+                aa <= 0.0 || explained >= 0.99 * aa
+            })
+    };
+    let mut out: Vec<f64> = Vec::new();
+    for k in 1..=400 {
+        for f in [1.0 / p + k as f64 / delta, (1.0 / p - k as f64 / delta).abs()] {
+            let q = 1.0 / f;
+            if (range.0..=range.1).contains(&q) && (q / p - 1.0).abs() > 0.1 && !out.iter().any(|o| (o / q - 1.0).abs() < 1e-6) && reproduces(q) {
+                out.push(q);
+            }
+        }
+    }
+    out.sort_by(f64::total_cmp);
+    out
+}
+
+/// The shortest period (m) these positions resolve ([`period_resolvable`]), to name in a note and
+/// in the advice; None when no stretch holds three positions.
+pub(crate) fn shortest_resolvable_period(st: &Stack) -> Option<f64> {
+    let xs = distinct_positions(st);
+    // Resolvable periods from the rule: p ≥ 2·(largest gap in a stretch) and p ≤ its length; the
+    // smallest such p over all stretches is found by trying p = 2·gap for every gap (sorted).
+    let mut gaps: Vec<f64> = xs.windows(2).map(|w| w[1] - w[0]).filter(|g| *g > 0.0).collect();
+    gaps.sort_by(f64::total_cmp);
+    gaps.into_iter().map(|g| 2.0 * g).find(|p| resolvable_on(&xs, *p))
+}
+
+/// The prediction of a known (not fitted) effect at every sample.
+pub(crate) fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
+    match (&e.params, e.name) {
+        (EffectParams::ErrorMotion(prof), n) => {
+            st.col(|c, i| c.motion_response(i, n, |x| prof.value(x), |x| prof.eval3(x)[1]))
+        }
+        (EffectParams::Backlash(b), _) => {
+            let mut col = Vec::with_capacity(st.n);
+            for c in st.chans {
+                match play_signature(c, b.value).filter(|_| b.value > 0.0) {
+                    Some(p) => col.extend(p.iter().map(|p| p * b.value)),
+                    None => col.extend((0..c.y.len()).map(|i| -0.5 * c.d[i] * c.s_drive() * b.value)),
+                }
+            }
+            col
+        }
+        (EffectParams::ServoLag(s), _) => {
+            let mut col = Vec::with_capacity(st.n);
+            for c in st.chans {
+                col.extend(following_error(c, s.kv));
+            }
+            col
+        }
+        (EffectParams::ScaleError(s), _) => st.col(|c, i| c.s_chain() * s.value * c.x[i]),
+        (EffectParams::CyclicLead(l), _) => st.col(|c, i| c.s_drive() * l.value(c.x[i])),
+        (EffectParams::InterpolationError(ie), _) => st.col(|c, i| c.s_chain() * ie.value(c.x[i])),
+        (EffectParams::ThermalExpansion(th), _) => st.col(|c, i| c.s_chain() * th.value(c.x[i], c.t[i])),
+        (EffectParams::ThermalDrift(dr), _) => st.col(|c, i| c.s_chain() * dr.value_at(c.t[i])),
+        (EffectParams::Coulomb(f), _) => st.col(|c, i| c.s_force() * f.fc * c.v[i].signum()),
+        (EffectParams::Viscous(f), _) => st.col(|c, i| c.s_force() * f.fv * c.v[i]),
+        (EffectParams::Stribeck(f), _) => {
+            // The Coulomb part belongs to the `coulomb` effect unless `fc` is given here.
+            let fc = f.fc.unwrap_or(0.0);
+            st.col(|c, i| {
+                let v = c.v[i];
+                c.s_force()
+                    * v.signum()
+                    * (fc * (1.0 - (-(v / f.vs).abs().powf(f.shape)).exp())
+                        + f.fs * (-(v / f.vs).abs().powf(f.shape)).exp())
+            })
+        }
+        _ => vec![0.0; st.n],
+    }
+}
+
+/// Log-spaced grid of `n` values from `lo` to `hi`.
+pub(crate) fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    let (a, b) = (lo.ln(), hi.ln());
+    (0..n).map(|k| (a + (b - a) * k as f64 / (n - 1).max(1) as f64).exp()).collect()
+}
+
+/// Search grid of a hyper-parameter on these data: time constants from a quarter of the time span
+/// to ten times it (a faster process looks like a constant, which the offsets and the scale error
+/// already carry); screw leads 2–60 mm; encoder signal periods from the common scale gratings.
+pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>, bool) {
+    match (name, hyper) {
+        (_, "tau") => {
+            let (lo, hi) = st.t_span();
+            let span = (hi - lo).max(1.0);
+            (log_grid(span / 4.0, span * 10.0, 40), true)
+        }
+        // Screw leads 2–60 mm, only the periods these positions resolve (`period_resolvable`).
+        (EffectName::CyclicLead, _) => (resolvable_only(st, log_grid(2e-3, 60e-3, 120)), true),
+        // Position-loop gains of machine tools, 2–500 1/s.
+        (_, "kv") => (log_grid(2.0, 500.0, 41), true),
+        // Play of a ball-screw transmission, 0.1–100 µm.
+        (_, "play") => (log_grid(0.1e-6, 100e-6, 31), true),
+        // Stribeck velocities of machine-tool guideways: 10 µm/s to 100 mm/s.
+        (_, "vs") => (log_grid(1e-5, 0.1, 41), true),
+        // Structural modes of machine-tool columns and frames: 5–200 Hz, capped at 0.4× the slowest
+        // accelerometer rate (below Nyquist), in steps of 1 Hz (five points across the 1/0.2 s =
+        // 5 Hz resolution of a segment), refined by golden section.
+        (_, "frequency") => {
+            let hi = accel_min_rate(st).map_or(200.0, |f| (0.4 * f).min(200.0)).max(6.0);
+            let n = (hi - 5.0).floor() as usize + 1;
+            ((0..n).map(|k| 5.0 + k as f64).collect(), true)
+        }
+        // Damping ratios of machine-tool structural modes, 0.5–10 % (bolted and welded frames; a
+        // column's first bending mode is typically 2–5 %); only the forced response resolves it,
+        // so without a predicted excitation it is held at 2 % (not searched).
+        (_, "damping") => {
+            if st.excitation.iter().any(|e| e.is_some()) {
+                (log_grid(0.005, 0.1, 6), true)
+            } else {
+                (vec![0.02], false)
+            }
+        }
+        // Signal periods of common linear and rotary scales (Heidenhain, Renishaw): 2–200 µm.
+        _ => (resolvable_only(st, vec![2e-6, 4e-6, 8e-6, 10e-6, 20e-6, 40e-6, 100e-6, 200e-6]), false),
+    }
+}
+
+/// The catalogue range (m) of a periodic candidate's period: screw leads, scale signal periods.
+pub(crate) fn period_range(name: EffectName) -> Option<(f64, f64)> {
+    match name {
+        EffectName::CyclicLead => Some((2e-3, 60e-3)),
+        EffectName::InterpolationError => Some((2e-6, 200e-6)),
+        EffectName::Positioning
+        | EffectName::StraightnessY
+        | EffectName::StraightnessZ
+        | EffectName::Roll
+        | EffectName::Pitch
+        | EffectName::Yaw
+        | EffectName::Backlash
+        | EffectName::ScaleError
+        | EffectName::ThermalExpansion
+        | EffectName::ThermalDrift
+        | EffectName::Coulomb
+        | EffectName::Viscous
+        | EffectName::Stribeck
+        | EffectName::Resonance
+        | EffectName::GravityTilt
+        | EffectName::SquarenessXy
+        | EffectName::SquarenessXz
+        | EffectName::SquarenessYz
+        | EffectName::Lugre
+        | EffectName::ServoLag
+        | EffectName::AccelBiasDrift => None,
+    }
+}
+
+/// The periods of `grid` that the sample positions resolve (never search an alias).
+fn resolvable_only(st: &Stack, grid: Vec<f64>) -> Vec<f64> {
+    let xs = distinct_positions(st);
+    grid.into_iter().filter(|p| resolvable_on(&xs, *p)).collect()
+}
+
+#[cfg(test)]
+mod resolvability_tests {
+    use super::resolvable_on;
+
+    /// A regular 5 mm grid over 40 mm resolves periods from 2 × 5 = 10 mm to the 40 mm travel and
+    /// none below (every shorter period has an alias above 10 mm); an ISO-style irregular layout with
+    /// gaps of 40–60 mm resolves nothing in the cyclic-lead (≤ 60 mm) or interpolation ranges; a
+    /// dense run of 1 mm steps over 19 mm added to it resolves 2–19 mm.
+    #[test]
+    fn periods_resolvable_only_with_two_samples_per_period_over_a_period() {
+        let grid: Vec<f64> = (0..9).map(|k| k as f64 * 5e-3).collect();
+        assert!(!resolvable_on(&grid, 3.97e-3) && !resolvable_on(&grid, 9.9e-3));
+        assert!(resolvable_on(&grid, 10.1e-3) && resolvable_on(&grid, 40e-3) && !resolvable_on(&grid, 41e-3));
+        let iso = [0.0, 0.047, 0.101, 0.143, 0.2, 0.259, 0.3];
+        assert!(!resolvable_on(&iso, 60e-3) && !resolvable_on(&iso, 20e-6));
+        let mut dense: Vec<f64> = iso.to_vec();
+        dense.extend((1..20).map(|k| 0.101 + k as f64 * 1e-3));
+        dense.sort_by(f64::total_cmp);
+        assert!(resolvable_on(&dense, 2.1e-3) && resolvable_on(&dense, 19e-3) && !resolvable_on(&dense, 1.9e-3));
+    }
+}

@@ -1,0 +1,83 @@
+//! Human-readable output.
+
+use super::*;
+
+// ------------------------------------------------------------------------------------------
+// Human-readable output.
+
+/// The text report of a compare.
+pub fn compare_text(r: &CompareReport) -> String {
+    let mut s = format!("vmt compare: model {} against {}\n", r.model, r.data);
+    s += &format!(
+        "{:<12} {:<14} {:>12} {:>10} {:>8} {:>12} {:>8}\n",
+        "run", "sensor", "rms", "rms/σ", "fit %", "σ", "LB p"
+    );
+    for c in &r.channels {
+        // Deviations in µm, forces in N.
+        let (k, u) = match c.unit.as_str() {
+            "N" => (1.0, "N"),
+            "m/s²" => (1.0, "m/s²"),
+            _ => (1e6, "µm"),
+        };
+        s += &format!(
+            "{:<12} {:<14} {:>9.4} {u:<2} {:>10.2} {:>8.1} {:>9.4} {u:<2}{} {:>8}\n",
+            c.run,
+            c.sensor,
+            c.rms * k,
+            c.normalized_rms,
+            c.fit_percent,
+            c.sigma * k,
+            if c.sigma_estimated { "*" } else { " " },
+            c.ljung_box_p.map_or("-".to_string(), |p| format!("{p:.3}"))
+        );
+        let dir: Vec<String> = c.by_direction.iter().map(|(d, m, _)| format!("{d:+}: {:.3}", m * k)).collect();
+        s += &format!("    mean residual by direction ({u}): {}\n", dir.join(", "));
+        let pos: Vec<String> =
+            c.by_position.iter().map(|(a, b, m, _)| format!("{:.0}–{:.0} mm {:.3}", a * 1e3, b * 1e3, m * k)).collect();
+        s += &format!("    by position: {}\n", pos.join("; "));
+        if let Some((wl, a)) = c.spectrum_peaks.first() {
+            s += &format!("    strongest spatial period: {:.2} mm, amplitude {:.3} {u}\n", wl * 1e3, a * k);
+        }
+    }
+    s += &format!("normalised RMS (all samples): {:.3}   (1.0 = noise level; * σ estimated)\n", r.normalized_rms);
+    for (e, p) in &r.fitted {
+        let kv: Vec<String> = p.iter().map(|(k, v)| format!("{k} = {}", fmt_num(*v))).collect();
+        s += &format!("fitted {e}: {}\n", kv.join(", "));
+    }
+    for n in &r.notes {
+        s += &format!("note: {n}\n");
+    }
+    if !r.history.is_empty() {
+        s += "iterations (normalised RMS):\n";
+        let max = r.history.iter().map(|h| h.normalized_rms).fold(0.0, f64::max).max(1e-300);
+        for (i, h) in r.history.iter().enumerate() {
+            let bar = "#".repeat(((h.normalized_rms / max) * 40.0).round() as usize);
+            s += &format!("  {i:>2} {:>10.3} {bar} {} {}\n", h.normalized_rms, h.model, h.added);
+        }
+    }
+    s
+}
+
+/// The text report of a diagnosis.
+pub fn diagnose_text(r: &DiagnoseReport) -> String {
+    let mut s = format!("vmt diagnose: normalised RMS {:.3}\n", r.normalized_rms);
+    s += &format!("{:<22} {:>12} {:>10} {:<12} params\n", "effect", "ΔBIC", "explained", "verdict");
+    for e in &r.ranking {
+        let kv: Vec<String> = e.params.iter().map(|(k, v)| format!("{k}={}", fmt_num(*v))).collect();
+        let v = match e.verdict {
+            Verdict::Significant => "significant",
+            Verdict::Noise => "noise",
+            Verdict::Inseparable => "inseparable",
+        };
+        s += &format!("{:<22} {:>12.1} {:>10.3} {:<12} {}", e.effect, e.delta_bic, e.explained, v, kv.join(" "));
+        if !e.confused_with.is_empty() {
+            s += &format!("  (confused with {})", e.confused_with.join(", "));
+        }
+        s += "\n";
+    }
+    s += &format!("advice: {}\n", r.advice);
+    for n in &r.notes {
+        s += &format!("note: {n}\n");
+    }
+    s
+}

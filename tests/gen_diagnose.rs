@@ -1,0 +1,576 @@
+//! The model-check loop measured on an independent generator (issue 11): `tests/gen/mod.rs` writes
+//! laser point tables and friction sweeps from its own physics (not vmt's simulator, defaults or
+//! fitting basis); this harness runs the command line on them (`vmt diagnose --json`, `vmt add
+//! --from-diagnosis`, `vmt compare --json`, FORMAT.md §4) and states the results as rates over
+//! many draws.
+//!
+//! Draw counts: `VMT_GEN_DRAWS` (a number) replaces every family's default count (e.g.
+//! `VMT_GEN_DRAWS=20` for a quick look). The rate tests are `#[ignore]`d until `vmt diagnose` meets
+//! issue 11's thresholds; run them with
+//! `cargo test --release --test gen_diagnose -- --ignored --nocapture`.
+//!
+//! The normalised RMS the harness judges ("NRMS vs true σ") is the residual RMS over all channels
+//! (`channels[].rms`, weighted by each channel's reading count) divided by the generator's true σ,
+//! so it does not depend on how vmt treats a manifest σ that is understated or missing. vmt's own
+//! `normalized_rms` is printed beside it.
+
+mod gen;
+
+use gen::{draw, Draw, Effect, Family};
+use rayon::prelude::*;
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
+
+/// The issue's threshold on the normalised RMS after `add`: 1.3 (noise level plus room for the
+/// χ² scatter of a few hundred readings, ≈ ±0.1 at 2σ, and a fitted shape's small bias).
+const NRMS_AFTER_ADD: f64 = 1.3;
+/// Relative parameter error allowed after `add` (issue 11: backlash, τ, α·ΔT, period, vs within 10 %).
+const PARAM_REL: f64 = 0.10;
+
+fn draws_for(default: u64) -> u64 {
+    std::env::var("VMT_GEN_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
+/// Run the CLI; the JSON on success, or the stderr (and exit code) on failure.
+fn vmt(args: &[&str]) -> Result<Value, String> {
+    let out = Command::new(env!("CARGO_BIN_EXE_vmt")).args(args).output().map_err(|e| e.to_string())?;
+    if !out.status.success() {
+        return Err(format!("exit {:?}: {}", out.status.code(), String::from_utf8_lossy(&out.stderr).trim()));
+    }
+    if out.stdout.is_empty() {
+        return Ok(Value::Null);
+    }
+    serde_json::from_slice(&out.stdout).map_err(|e| format!("bad JSON ({e}): {}", String::from_utf8_lossy(&out.stdout)))
+}
+
+fn compare(dir: &Path, model: &str) -> Result<Value, String> {
+    let m = dir.join(model);
+    let d = dir.join("data");
+    vmt(&["compare", "--model", m.to_str().unwrap(), "--data", d.to_str().unwrap(), "--json"])
+}
+
+fn diagnose(dir: &Path, model: &str) -> Result<Value, String> {
+    let m = dir.join(model);
+    let d = dir.join("data");
+    vmt(&["diagnose", "--model", m.to_str().unwrap(), "--data", d.to_str().unwrap(), "--json"])
+}
+
+fn add(dir: &Path, model: &str, effect: &str, out: &str) -> Result<(), String> {
+    let m = dir.join(model);
+    let d = dir.join("data");
+    let o = dir.join(out);
+    let args = ["add", "--model", m.to_str().unwrap(), "--effect", effect, "--from-diagnosis"];
+    vmt(&[&args[..], &["--data", d.to_str().unwrap(), "-o", o.to_str().unwrap()]].concat()).map(|_| ())
+}
+
+/// Residual RMS over all channels of a compare JSON divided by the true σ (module doc).
+fn nrms_true(d: &Draw, c: &Value) -> f64 {
+    let (mut ss, mut n) = (0.0, 0usize);
+    for ch in c["channels"].as_array().into_iter().flatten() {
+        let key = (ch["run"].as_str().unwrap_or("").to_string(), ch["sensor"].as_str().unwrap_or("").to_string());
+        let count = d.channel_counts.iter().find(|(k, _)| *k == key).map_or(0, |c| c.1);
+        let rms = ch["rms"].as_f64().unwrap_or(f64::NAN);
+        ss += rms * rms * count as f64;
+        n += count;
+    }
+    (ss / n as f64).sqrt() / d.sigma_true
+}
+
+/// A significant ranking entry: (effect, period if any).
+#[derive(Clone, Debug)]
+struct Claim {
+    effect: String,
+    period: Option<f64>,
+}
+
+impl std::fmt::Display for Claim {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.period {
+            Some(p) => write!(f, "{}@{:.3}mm", self.effect, p * 1e3),
+            None => write!(f, "{}", self.effect),
+        }
+    }
+}
+
+fn claims(diag: &Value) -> Vec<Claim> {
+    diag["ranking"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|e| e["verdict"] == "significant")
+        .map(|e| Claim {
+            effect: e["effect"].as_str().unwrap_or("?").to_string(),
+            period: e["params"]["period"].as_f64(),
+        })
+        .collect()
+}
+
+/// Run `f` on draws 0..n of `family` in parallel (each in its own temporary directory); results
+/// in index order, so the output does not depend on the number of threads.
+fn over_draws<T: Send>(family: &Family, n: u64, f: impl Fn(&Draw, &Path) -> T + Sync) -> Vec<(Draw, T)> {
+    (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let d = draw(family, i);
+            let tmp = tempfile::tempdir().unwrap();
+            d.write(tmp.path()).unwrap();
+            let r = f(&d, tmp.path());
+            (d, r)
+        })
+        .collect()
+}
+
+fn rate(k: usize, n: usize) -> String {
+    format!("{k}/{n} ({:.1} %)", 100.0 * k as f64 / n.max(1) as f64)
+}
+
+// ------------------------------------------------------------------------------------------
+// The generator itself (not ignored).
+
+/// The generator's files parse, and its physics agrees with vmt's stated conventions: `vmt
+/// compare` with the truth model (every effect given with the generator's own parameters,
+/// profiles as tables at the targets; only the per-channel offsets are fitted) leaves a residual
+/// at the noise level. The residual sum of squares is σ²·χ²(N − k) for N readings and k offsets,
+/// so the residual RMS / σ has mean ≈ √((N − k)/N) and a standard deviation ≈ 1/√(2N); the
+/// assertion allows 5 of those (a 1-in-10⁶ event per draw) plus 0.5 % for the profiles' 1-nm
+/// rounding in the CSVs. A wrong sign (backlash, Abbe arm, thermal) or unit would leave the
+/// effect's full size in the residual (≥ 6σ signatures in hidden draws). Also: the same index
+/// gives the same files (determinism).
+#[test]
+fn generator_sanity_truth_model_leaves_noise() {
+    let mut families: Vec<(Family, u64)> = vec![(Family::CompletePointTable, 8), (Family::CompleteFriction, 3)];
+    for e in Effect::ALL {
+        families.push((Family::Hidden(vec![e]), 3));
+    }
+    families.push((Family::UnresolvedCyclic, 2));
+    let mut rows: Vec<String> = Vec::new();
+    // Pooled over all draws: Σ RSS/σ² against Σ (N − k), a χ² with Σ (N − k) degrees of freedom
+    // (mean 1 for the ratio, sd √(2/Σ(N − k)) ≈ 0.005 here): catches a small systematic misfit
+    // (e.g. a 2 % unit or sign slip in an effect) that single small draws cannot.
+    let (mut chi2, mut dof) = (0.0, 0.0);
+    for (fam, n) in &families {
+        for (d, r) in over_draws(fam, *n, |d, dir| compare(dir, "truth.toml").map(|c| nrms_true(d, &c))) {
+            let x = r.unwrap_or_else(|e| panic!("{}: vmt compare on the truth failed: {e}", d.describe()));
+            let n: usize = d.channel_counts.iter().map(|c| c.1).sum();
+            let k = d.channel_counts.len();
+            let expect = ((n - k) as f64 / n as f64).sqrt();
+            let tol = 5.0 / (2.0 * n as f64).sqrt() + 0.005;
+            chi2 += x * x * n as f64;
+            dof += (n - k) as f64;
+            rows.push(format!("{:<40} NRMS vs true σ {x:.3} (expected {expect:.3} ± {tol:.3})", d.describe()));
+            assert!(
+                (x - expect).abs() <= tol,
+                "{}: truth model residual / σ = {x:.4}, expected {expect:.4} ± {tol:.4}",
+                d.describe()
+            );
+        }
+    }
+    eprintln!("{}", rows.join("\n"));
+    let pooled = chi2 / dof;
+    let tol = 5.0 * (2.0 / dof).sqrt();
+    eprintln!("pooled RSS/σ² per degree of freedom: {pooled:.4} (expected 1 ± {tol:.4}, 5 sd)");
+    assert!((pooled - 1.0).abs() <= tol, "pooled χ²/dof {pooled:.4}");
+    // Determinism: a draw is a function of its index only.
+    for fam in [Family::CompletePointTable, Family::CompleteFriction, Family::Hidden(vec![Effect::ThermalDrift])] {
+        let (a, b) = (draw(&fam, 7), draw(&fam, 7));
+        assert_eq!(a.data_files, b.data_files);
+        assert_eq!(a.model_files, b.model_files);
+        assert_ne!(draw(&fam, 8).data_files, a.data_files);
+    }
+    // Unresolved cyclic draws: every target spacing exceeds the period (no layout can show it).
+    for i in 0..20 {
+        let d = draw(&Family::UnresolvedCyclic, i);
+        let p = d.truth.cyclic.unwrap().0;
+        assert!(d.min_spacing > p, "{}: period {p}", d.describe());
+    }
+}
+
+/// The catalogue's form of a friction law, `coulomb` (fc) + `stribeck` (fs, vs, shape, no fc) +
+/// `viscous`, all given, is the simulator's law F = Fc·sgn v + Fv·v + (Fs − Fc)·sgn v·e^{−|v/vs|^δ}
+/// (`vmt_sim::effects::EffectSet::friction`: stribeck.fc unset takes the coulomb level). `vmt
+/// compare` on it should leave the noise, as it does for the same law written with stribeck.fc
+/// (the sanity test above). On main it leaves ≈ Fc·(1 − e^{−|v/vs|^δ}) per sample: the given
+/// Stribeck term fills its fc from coulomb and the coulomb term is added again (Fc counted twice).
+#[test]
+#[ignore = "bug found by the generator: compare counts Fc twice for given coulomb + stribeck"]
+fn given_coulomb_and_stribeck_predict_the_simulators_law() {
+    for (d, r) in
+        over_draws(&Family::CompleteFriction, 3, |d, dir| compare(dir, "truth_split.toml").map(|c| nrms_true(d, &c)))
+    {
+        let x = r.unwrap();
+        let n: usize = d.channel_counts.iter().map(|c| c.1).sum();
+        // Same bound as the sanity test: 5 standard deviations of the residual RMS / σ.
+        let tol = 5.0 / (2.0 * n as f64).sqrt() + 0.005;
+        assert!((x - 1.0).abs() <= tol, "{}: residual / σ {x:.3} with coulomb + stribeck given", d.describe());
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Rates (issue 11's thresholds).
+
+/// Complete models (nothing hidden): the fraction of data sets where `diagnose` reports any
+/// `significant` candidate. Issue 11: at most 2 % over ≥ 200 draws (goal 1 %). Draws: 160 point
+/// tables + 40 friction sweeps by default.
+#[test]
+#[ignore = "issue 11: enable when diagnose meets it"]
+fn complete_models_have_at_most_2_percent_false_alarms() {
+    let n_table = draws_for(160);
+    let n_fric = draws_for(40);
+    let mut alarms = 0;
+    let mut errors = Vec::new();
+    let mut total = 0;
+    let mut by_effect: std::collections::BTreeMap<String, usize> = Default::default();
+    // (alarms, draws) by layout and by how the manifest states σ.
+    let mut by_kind: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
+    let mut lines = Vec::new();
+    for (fam, n) in [(Family::CompletePointTable, n_table), (Family::CompleteFriction, n_fric)] {
+        for (d, r) in over_draws(&fam, n, |_, dir| diagnose(dir, "complete.toml")) {
+            total += 1;
+            match r {
+                Err(e) => errors.push(format!("{}: {e}", d.describe())),
+                Ok(diag) => {
+                    let c = claims(&diag);
+                    let layout = d.layout.map_or("friction sweep".to_string(), |l| format!("layout {l:?}"));
+                    for k in [layout, format!("σ {:?}", d.sigma_stated)] {
+                        let e = by_kind.entry(k).or_default();
+                        e.0 += usize::from(!c.is_empty());
+                        e.1 += 1;
+                    }
+                    if !c.is_empty() {
+                        alarms += 1;
+                        for cl in &c {
+                            *by_effect.entry(cl.effect.clone()).or_default() += 1;
+                        }
+                        lines.push(format!(
+                            "  {}: {}",
+                            d.describe(),
+                            c.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    eprintln!("{}", lines.join("\n"));
+    eprintln!("false alarms (any `significant` claim): {} complete models", rate(alarms, total));
+    eprintln!("  claims by effect (significant entries): {by_effect:?}");
+    for (k, (a, n)) in &by_kind {
+        eprintln!("  false alarms, {k}: {}", rate(*a, *n));
+    }
+    eprintln!("  command failures: {}", rate(errors.len(), total));
+    for e in &errors {
+        eprintln!("  {e}");
+    }
+    assert!(errors.is_empty(), "diagnose failed on {} draws", errors.len());
+    // Issue 11: ≤ 2 % with any significant claim.
+    assert!(alarms as f64 <= 0.02 * total as f64, "false alarms {}", rate(alarms, total));
+}
+
+/// Outcome of the loop on one hidden-effect draw.
+#[derive(Debug, Default)]
+struct LoopOutcome {
+    /// The first-ranked entry is a hidden effect and `significant`.
+    named_first: bool,
+    /// What was ranked first (effect, verdict).
+    first: String,
+    /// NRMS vs true σ after adding what diagnose named (one add per hidden effect).
+    nrms_after: f64,
+    /// vmt's own normalized_rms after the adds.
+    vmt_nrms_after: f64,
+    /// Relative parameter errors after the adds (name, error).
+    params: Vec<(String, f64)>,
+    /// Effects added by following the advice that are not hidden.
+    wrong_adds: Vec<String>,
+    /// Significant claims on the final model when the loop added exactly the hidden effects (the
+    /// model is then complete: any claim is a false alarm).
+    final_claims: Vec<String>,
+}
+
+fn rel(a: f64, b: f64) -> f64 {
+    ((a - b) / b).abs()
+}
+
+/// Effects no data set of one axis can tell apart from hidden effect `e`, physically: a thermal
+/// expansion that settled before the test (τ short against the reading interval) is α·ΔT∞·x, a
+/// scale error. For these an `inseparable` verdict naming only them counts as naming `e`.
+fn physically_equivalent(e: Effect) -> &'static [&'static str] {
+    match e {
+        Effect::ScaleError => &["thermal_expansion"],
+        Effect::Backlash
+        | Effect::CyclicLead
+        | Effect::ThermalExpansion
+        | Effect::ThermalDrift
+        | Effect::Pitch
+        | Effect::Yaw
+        | Effect::Stribeck
+        | Effect::Viscous => &[],
+    }
+}
+
+/// The ranking entry names a hidden effect as `inseparable` only from its physical equivalents.
+fn equivalent_inseparable(d: &Draw, entry: &Value) -> bool {
+    let Some(h) = d.hidden.iter().find(|h| entry["effect"] == h.name()) else { return false };
+    let eq = physically_equivalent(*h);
+    entry["verdict"] == "inseparable"
+        && !eq.is_empty()
+        && entry["confused_with"].as_array().is_some_and(|c| c.iter().all(|n| eq.iter().any(|e| n == e)))
+}
+
+/// Follow the advice: diagnose, add the first-ranked significant effect, once per hidden effect;
+/// then compare and diagnose the final model.
+fn follow_loop(d: &Draw, dir: &Path) -> Result<LoopOutcome, String> {
+    let mut out = LoopOutcome::default();
+    let mut model = "start.toml".to_string();
+    let mut added = 0;
+    for step in 0..d.hidden.len() {
+        let diag = diagnose(dir, &model)?;
+        let top = &diag["ranking"][0];
+        let eff = top["effect"].as_str().unwrap_or("").to_string();
+        let sig = top["verdict"] == "significant" || equivalent_inseparable(d, top);
+        if step == 0 {
+            out.first = format!("{eff} ({})", top["verdict"].as_str().unwrap_or("?"));
+            out.named_first = sig && d.hidden.iter().any(|h| h.name() == eff);
+        }
+        if !sig {
+            break;
+        }
+        if !d.hidden.iter().any(|h| h.name() == eff) {
+            out.wrong_adds.push(eff.clone());
+        }
+        let next = format!("m{}.toml", step + 1);
+        add(dir, &model, &eff, &next)?;
+        added += 1;
+        model = next;
+    }
+    let c = compare(dir, &model)?;
+    out.nrms_after = nrms_true(d, &c);
+    out.vmt_nrms_after = c["normalized_rms"].as_f64().unwrap_or(f64::NAN);
+    let f = &c["fitted"];
+    let tr = &d.truth;
+    for h in &d.hidden {
+        let get = |e: &str, k: &str| f[e][k].as_f64();
+        let mut push = |name: &str, v: Option<f64>, truth: f64| {
+            out.params.push((name.to_string(), v.map_or(f64::INFINITY, |v| rel(v, truth))));
+        };
+        match h {
+            Effect::Backlash => push("backlash b", get("backlash", "value"), tr.backlash.unwrap()),
+            Effect::CyclicLead => push("cyclic period", get("cyclic_lead", "period"), tr.cyclic.unwrap().0),
+            Effect::ScaleError => push("scale k", get("scale_error", "value"), tr.scale.unwrap()),
+            Effect::ThermalExpansion => {
+                let (a, dt, tau) = tr.expansion.unwrap();
+                let prod =
+                    get("thermal_expansion", "alpha").zip(get("thermal_expansion", "delta_t")).map(|(a, t)| a * t);
+                push("expansion α·ΔT", prod, a * dt);
+                push("expansion τ", get("thermal_expansion", "tau"), tau);
+            }
+            Effect::ThermalDrift => {
+                let (v, tau) = tr.drift.unwrap();
+                push("drift d∞", get("thermal_drift", "value"), v);
+                push("drift τ", get("thermal_drift", "tau"), tau);
+            }
+            Effect::Pitch | Effect::Yaw => {}
+            Effect::Stribeck => push("stribeck vs", get("stribeck", "vs"), tr.friction.unwrap().vs),
+            Effect::Viscous => push("viscous fv", get("viscous", "fv"), tr.friction.unwrap().fv),
+        }
+    }
+    // Every hidden effect added and nothing else: the model is now complete.
+    if out.wrong_adds.is_empty() && added == d.hidden.len() {
+        out.final_claims = claims(&diagnose(dir, &model)?).iter().map(ToString::to_string).collect();
+    }
+    Ok(out)
+}
+
+/// The families of hidden-effect draws: each hideable effect alone, and two together.
+fn hidden_families() -> Vec<Family> {
+    let mut v: Vec<Family> = Effect::ALL.iter().map(|e| Family::Hidden(vec![*e])).collect();
+    for pair in [
+        [Effect::Backlash, Effect::ThermalDrift],
+        [Effect::CyclicLead, Effect::Backlash],
+        [Effect::ThermalExpansion, Effect::Backlash],
+        [Effect::Pitch, Effect::Backlash],
+    ] {
+        v.push(Family::Hidden(pair.to_vec()));
+    }
+    v
+}
+
+/// Hidden effects: per family, named first and significant, NRMS ≤ 1.3 after `add`, parameter
+/// errors ≤ 10 %. Issue 11: each rate ≥ 95 % over ≥ 30 draws (30 per family by default).
+/// "Named first": the first-ranked entry is a hidden effect with verdict `significant`, or
+/// `inseparable` from its physical equivalents only ([`physically_equivalent`]: a scale error from
+/// a settled thermal expansion). The loop then adds that entry (`vmt add --from-diagnosis`), once
+/// per hidden effect, following the first-ranked significant entry each time (a wrong add is
+/// counted). `VMT_GEN_FAMILY=LABEL[,LABEL]` restricts the run to some families.
+#[test]
+#[ignore = "issue 11: enable when diagnose meets it"]
+fn hidden_effects_are_named_first_and_adding_them_reaches_the_noise() {
+    let n = draws_for(30);
+    let mut failures = Vec::new();
+    eprintln!(
+        "Columns, as draws out of the family's count: named first = first-ranked entry is hidden and \
+         significant; NRMS≤1.3 = residual RMS / true σ after the adds; wrong adds = following the advice \
+         added an effect that was not hidden; new claims = the model the loop made complete gets a \
+         significant claim; parameter errors = draws within 10 % of the truth (median relative error; \
+         inf: the effect was never added)."
+    );
+    eprintln!(
+        "{:<38} {:>14} {:>14} {:>14} {:>12}  parameter errors ≤ 10 % (median rel. error)",
+        "family", "named first", "NRMS≤1.3", "wrong adds", "new claims"
+    );
+    let only: Option<Vec<String>> =
+        std::env::var("VMT_GEN_FAMILY").ok().map(|v| v.split(',').map(|s| s.trim().to_string()).collect());
+    for fam in hidden_families().into_iter().filter(|f| only.as_ref().is_none_or(|o| o.contains(&f.label()))) {
+        let res = over_draws(&fam, n, follow_loop);
+        let total = res.len();
+        let mut first = 0;
+        let mut nrms = 0;
+        let mut wrong = 0;
+        let mut new_claims = 0;
+        let mut params: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
+        let mut detail = Vec::new();
+        for (d, r) in &res {
+            match r {
+                Err(e) => detail.push(format!("  {}: command failed: {e}", d.describe())),
+                Ok(o) => {
+                    first += usize::from(o.named_first);
+                    nrms += usize::from(o.nrms_after <= NRMS_AFTER_ADD);
+                    wrong += usize::from(!o.wrong_adds.is_empty());
+                    new_claims += usize::from(!o.final_claims.is_empty());
+                    for (k, v) in &o.params {
+                        params.entry(k.clone()).or_default().push(*v);
+                    }
+                    if !o.named_first || o.nrms_after > NRMS_AFTER_ADD || o.params.iter().any(|p| p.1 > PARAM_REL) {
+                        detail.push(format!(
+                            "  {}: first {}, NRMS vs true σ {:.2} (vmt {:.2}), params {:?}, wrong adds {:?}, claims after {:?}",
+                            d.describe(),
+                            o.first,
+                            o.nrms_after,
+                            o.vmt_nrms_after,
+                            o.params.iter().map(|(k, v)| format!("{k} {:.1} %", v * 100.0)).collect::<Vec<_>>(),
+                            o.wrong_adds,
+                            o.final_claims
+                        ));
+                    }
+                }
+            }
+        }
+        let ptxt: Vec<String> = params
+            .iter()
+            .map(|(k, v)| {
+                let mut s = v.clone();
+                s.sort_by(f64::total_cmp);
+                let ok = v.iter().filter(|e| **e <= PARAM_REL).count();
+                format!("{k}: {} (median {:.1} %)", rate(ok, v.len()), 100.0 * s[s.len() / 2])
+            })
+            .collect();
+        eprintln!(
+            "{:<38} {:>14} {:>14} {:>14} {:>12}  {}",
+            fam.label(),
+            rate(first, total),
+            rate(nrms, total),
+            rate(wrong, total),
+            rate(new_claims, total),
+            ptxt.join("; ")
+        );
+        for l in &detail {
+            eprintln!("{l}");
+        }
+        // Issue 11: ≥ 95 % named first and significant; ≥ 95 % at NRMS ≤ 1.3 after add; parameter
+        // errors within 10 % (here: in ≥ 95 % of draws, the same rate as the other criteria).
+        let need = (0.95 * total as f64).ceil() as usize;
+        if first < need {
+            failures.push(format!("{}: named first {}", fam.label(), rate(first, total)));
+        }
+        if nrms < need {
+            failures.push(format!("{}: NRMS ≤ 1.3 after add {}", fam.label(), rate(nrms, total)));
+        }
+        for (k, v) in &params {
+            let ok = v.iter().filter(|e| **e <= PARAM_REL).count();
+            if ok < need {
+                failures.push(format!("{}: {k} within 10 % {}", fam.label(), rate(ok, v.len())));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "issue 11 thresholds not met:\n{}", failures.join("\n"));
+}
+
+/// A cyclic lead error on regular or sparse targets whose spacing exceeds its period (it cannot be
+/// resolved there): `diagnose` must never make a significant claim of a periodic effect at a wrong
+/// period (not within 10 % of the truth). Issue 11: 0 in ≥ 50 draws. Also counted: any
+/// significant claim. The cyclic_lead entry must name its aliases or say why it cannot be seen
+/// (FORMAT.md §4 `aliases`, `note`).
+#[test]
+fn unresolvable_cyclic_error_is_never_claimed_at_a_wrong_period() {
+    let n = draws_for(50);
+    let res = over_draws(&Family::UnresolvedCyclic, n, |_, dir| diagnose(dir, "start.toml"));
+    let (mut wrong, mut any, mut aliases, mut errors) = (0, 0, 0, 0);
+    let mut lines = Vec::new();
+    for (d, r) in &res {
+        let p = d.truth.cyclic.unwrap().0;
+        match r {
+            Err(e) => {
+                errors += 1;
+                lines.push(format!("  {}: {e}", d.describe()));
+            }
+            Ok(diag) => {
+                let c = claims(diag);
+                let bad: Vec<&Claim> = c.iter().filter(|cl| cl.period.is_some_and(|q| rel(q, p) > 0.1)).collect();
+                any += usize::from(!c.is_empty());
+                wrong += usize::from(!bad.is_empty());
+                // FORMAT.md §4: `aliases` (periods that fit equally well here) or `note` (why the
+                // candidate cannot be seen in this data) on the cyclic_lead entry.
+                let nonempty = |v: Option<&Value>| {
+                    v.is_some_and(|v| {
+                        v.as_array().is_some_and(|a| !a.is_empty()) || v.as_str().is_some_and(|s| !s.is_empty())
+                    })
+                };
+                let named =
+                    diag["ranking"].as_array().into_iter().flatten().any(|e| {
+                        e["effect"] == "cyclic_lead" && (nonempty(e.get("aliases")) || nonempty(e.get("note")))
+                    });
+                aliases += usize::from(named);
+                if !c.is_empty() {
+                    lines.push(format!(
+                        "  {} (true period {:.3} mm): {}",
+                        d.describe(),
+                        p * 1e3,
+                        c.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
+                    ));
+                }
+            }
+        }
+    }
+    let total = res.len();
+    eprintln!("{}", lines.join("\n"));
+    eprintln!("unresolvable cyclic lead: significant claim at a wrong period: {}", rate(wrong, total));
+    eprintln!("  any significant claim: {}", rate(any, total));
+    eprintln!("  cyclic_lead entry names its aliases or why it cannot be seen: {}", rate(aliases, total));
+    eprintln!("  command failures: {}", rate(errors, total));
+    assert_eq!(errors, 0);
+    // Issue 11: never a significant claim at a wrong period.
+    assert_eq!(wrong, 0, "wrong-period claims {}", rate(wrong, total));
+    // Issue 11: "the output names the aliases and the spacing that would resolve it" (every draw).
+    assert_eq!(aliases, total, "cyclic_lead entry with `aliases` or `note`: {}", rate(aliases, total));
+}
+
+/// Write one draw for inspection: `VMT_GEN_DUMP="LABEL INDEX DIR"` (LABEL as the tables print it,
+/// e.g. `complete_table`, `hidden_backlash`, `hidden_cyclic_lead+backlash`, `unresolved_cyclic`),
+/// then `cargo test --release --test gen_diagnose dump_draw -- --ignored`. Writes DIR/data/ and
+/// DIR/{truth,complete,start}.toml.
+#[test]
+#[ignore = "a tool: writes the draw named by VMT_GEN_DUMP"]
+fn dump_draw() {
+    let spec = std::env::var("VMT_GEN_DUMP").expect("set VMT_GEN_DUMP=\"LABEL INDEX DIR\"");
+    let parts: Vec<&str> = spec.split_whitespace().collect();
+    assert_eq!(parts.len(), 3, "VMT_GEN_DUMP: expected \"LABEL INDEX DIR\", got {spec:?}");
+    let mut all = vec![Family::CompletePointTable, Family::CompleteFriction, Family::UnresolvedCyclic];
+    all.extend(hidden_families());
+    let fam = all
+        .into_iter()
+        .find(|f| f.label() == parts[0])
+        .unwrap_or_else(|| panic!("VMT_GEN_DUMP: unknown family label {:?}", parts[0]));
+    let d = draw(&fam, parts[1].parse().expect("VMT_GEN_DUMP: INDEX must be a number"));
+    d.write(Path::new(parts[2])).unwrap();
+    eprintln!("{}\n{:#?}", d.describe(), d.truth);
+}
