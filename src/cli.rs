@@ -29,6 +29,9 @@ pub fn simulate_set(sc: &Scenario) -> Result<MeasurementSet, VmtError> {
 pub fn simulate(path: Option<&Path>, out: &Path, units: &str) -> Result<(), VmtError> {
     let units = parse_units(units)?;
     let sc = load_scenario(path)?;
+    if let Some(p) = path {
+        crate::output::refuse_input_overwrite(out, &[p])?;
+    }
     let set = simulate_set(&sc)?;
     measurement::write_with_extras(&set, out, units, &truth_extras(&sc)?)?;
     eprintln!("wrote {} runs to {}", set.runs.len(), out.display());
@@ -80,11 +83,22 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     let runs = read_all(&sc, &ph, &truths, sc.seed)?;
     let set = to_measurement_set(&sc, &runs)?;
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| default_out(&sc.source));
-    measurement::write_with_extras(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc)?)?;
+    if let Some(p) = path {
+        crate::output::refuse_input_overwrite(&out, &[p])?;
+    }
+    let files = measurement::set_files(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc)?)?;
     let est = run_estimators(&sc, &ph, &runs)?;
     let checks = &est.checks;
     let html = out.join("report.html");
-    crate::report::write_run_report(&sc, &set, &est, &html)?;
+    let (report, report_json) = crate::report::report_files(&crate::report::run_report(&sc, &set, &est))?;
+    // One transaction: the measurement set and the report swapped in together, after all the work.
+    crate::output::replace_dir(&out, |tmp| {
+        measurement::put_files(&tmp.join("data"), &files)?;
+        measurement::put_files(
+            tmp,
+            &[("report.html".into(), report.into_bytes()), ("report.json".into(), report_json.into_bytes())],
+        )
+    })?;
     let failed: Vec<&Check> = checks.iter().filter(|c| !c.pass).collect();
     bar.finish_and_clear();
     if json {
@@ -337,7 +351,6 @@ pub fn study_merge(out: &Path, shards: &[PathBuf]) -> Result<i32, VmtError> {
 fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path, sc: Option<&Scenario>) -> Result<i32, VmtError> {
     use crate::study::{rows_csv, summarize, summary_svg};
     let summary = summarize(rows);
-    std::fs::create_dir_all(out).map_err(|e| VmtError::io(out, "creating the output directory", e))?;
     let mut s = String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate,cramer_rao_bound,rms,quantity\n");
     for r in &summary {
         s += &format!(
@@ -353,10 +366,16 @@ fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path, sc: Opt
             crate::study::quantity_id(r.quantity)
         );
     }
-    measurement::write_file_atomic(&out.join("trials.csv"), rows_csv(rows).as_bytes())?;
-    measurement::write_file_atomic(&out.join("summary.csv"), s.as_bytes())?;
-    measurement::write_file_atomic(&out.join("study.svg"), summary_svg(&summary, label)?.as_bytes())?;
-    crate::report::write_report(&crate::report::study_report(sc, &summary, label), &out.join("report.html"))?;
+    let (html, json) = crate::report::report_files(&crate::report::study_report(sc, &summary, label))?;
+    let files = [
+        ("trials.csv".to_string(), rows_csv(rows).into_bytes()),
+        ("summary.csv".to_string(), s.into_bytes()),
+        ("study.svg".to_string(), summary_svg(&summary, label)?.into_bytes()),
+        ("report.html".to_string(), html.into_bytes()),
+        ("report.json".to_string(), json.into_bytes()),
+    ];
+    // One transaction: the study files and the report swapped in together.
+    crate::output::replace_dir(out, |tmp| measurement::put_files(tmp, &files))?;
     let judged = summary.iter().all(|r| r.pass_rate.is_some());
     println!("value: {label} (SI); over the trials of each value: mean |d|, RMS of d and 95th percentile of |d|,");
     println!(
@@ -417,7 +436,8 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
         if t.len() < 3 {
             continue;
         }
-        let res = stick_slip_index(x, t[1] - t[0], None)
+        let dt = measurement::uniform_interval(t).map_err(|m| VmtError::bad(path, format!("run {}", r.name), m))?;
+        let res = stick_slip_index(x, dt, None)
             .map_err(|e| VmtError::bad(path, format!("run {}", r.name), e.to_string()))?;
         results
             .push(serde_json::json!({"run": r.name, "sensor": s.name, "feed": r.feed, "ssi": res.ssi, "result": res}));
@@ -487,6 +507,9 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
     Ok(0)
 }
 
+/// Most points of an equidistant compensation table (size budget, DESIGN.md §2).
+pub const MAX_TABLE_NODES: usize = 100_000;
+
 /// `vmt compensate DATA -o TABLE.csv [--controller]`: seed 004's variable-step compensation table from the
 /// mean bidirectional deviations of a positioning run; `--equidistant N` for the controller-style table.
 pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Option<usize>) -> Result<i32, VmtError> {
@@ -494,6 +517,7 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
         equidistant_table, export_controller_table, variable_step_table, VariableStepParams,
     };
     use vmt_estimators::iso230_2::evaluate_bidirectional;
+    crate::output::refuse_input_overwrite(out, &[path])?;
     let set = measurement::read(path)?;
     let run = set
         .runs
@@ -531,6 +555,11 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
             s
         }
         Some(n) => {
+            if n > MAX_TABLE_NODES {
+                return Err(VmtError::Usage(format!(
+                    "--equidistant {n}: the limit is {MAX_TABLE_NODES} table points (controllers hold a few thousand)"
+                )));
+            }
             let table = equidistant_table(&t, &dev, n).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
             let ctl = export_controller_table(&table).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
             let mut s = format!(
@@ -626,12 +655,24 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
         }
         _ => None,
     };
+    let hpath = crate::modelcheck::history_path(out);
+    if data.is_some() && hpath.exists() && crate::modelcheck::read_history(&hpath).is_none() {
+        return Err(VmtError::bad(
+            &hpath,
+            "",
+            "expected a history.json written by vmt add (a JSON array of iterations); it is unreadable or corrupt, \
+             and vmt will not replace it: move it away or choose another --out directory",
+        ));
+    }
+    crate::output::refuse_input_overwrite(out, &[model])?;
+    if let Some(d) = data {
+        crate::output::refuse_input_overwrite(out, &[d])?;
+    }
     let mut m2 = crate::modelcheck::add_effect(&m, name, entry.as_ref()).map_err(|e| VmtError::bad(model, "", e))?;
     m2.source = out.to_path_buf();
     crate::model::write_model(&m2, out)?;
     eprintln!("wrote {} ({} added, fit = true)", out.display(), name);
     if let (Some(s), Some(d)) = (&set, data) {
-        let hpath = crate::modelcheck::history_path(out);
         let mut entries = Vec::new();
         if crate::modelcheck::read_history(&hpath).unwrap_or_default().is_empty() {
             let r0 = crate::modelcheck::compare(&m, s, d)?;
@@ -659,6 +700,9 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
 /// lines (linear and straightness lasers) of a point-table run, with standard errors (FORMAT.md §5 CSV).
 pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, units: &str, json: bool) -> Result<i32, VmtError> {
     let units = parse_units(units)?;
+    if let Some(o) = out {
+        crate::output::refuse_input_overwrite(o, &[path])?;
+    }
     let set = measurement::read(path)?;
     if run.is_none() {
         if let Some((n_lines, ci)) = crate::byo::identify_axes_set(&set).map_err(|m| VmtError::bad(path, "runs", m))? {

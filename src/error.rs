@@ -64,19 +64,32 @@ impl VmtError {
 
     /// An I/O error while doing `action` on `file`. A file that does not exist when reading is
     /// bad input (the user named it), not an I/O failure.
+    /// Likewise a directory where a file is expected, a file where a directory is expected, and a
+    /// file that is not UTF-8 text (UTF-16, binary).
     pub fn io(file: &Path, action: &str, source: std::io::Error) -> VmtError {
-        if source.kind() == std::io::ErrorKind::NotFound && action.starts_with("reading") {
-            return VmtError::bad(file, "", format!("no such file or directory ({action})"));
+        use std::io::ErrorKind;
+        if action.starts_with("reading") {
+            let what = match source.kind() {
+                ErrorKind::NotFound => Some("no such file or directory"),
+                ErrorKind::IsADirectory => Some("a directory where a file is expected"),
+                ErrorKind::NotADirectory => Some("a file where a directory is expected"),
+                ErrorKind::InvalidData => Some("not UTF-8 text (save it as UTF-8, e.g. not UTF-16)"),
+                _ => None,
+            };
+            if let Some(w) = what {
+                return VmtError::bad(file, "", format!("{w} ({action})"));
+            }
         }
         VmtError::Io { file: file.to_path_buf(), action: action.to_string(), source }
     }
 
-    /// Process exit code: 2 for bad input and bad usage (DESIGN.md §2), 1 for I/O failures,
-    /// 70 (EX_SOFTWARE) for internal errors.
+    /// Process exit code: 2 for bad input and bad usage (DESIGN.md §2), 3 for I/O failures of the
+    /// machine (disk full, permission denied; 1 is reserved for an estimate that missed its
+    /// tolerance), 70 (EX_SOFTWARE) for internal errors.
     pub fn exit_code(&self) -> i32 {
         match self {
             VmtError::BadInput { .. } | VmtError::Usage(_) => 2,
-            VmtError::Io { .. } => 1,
+            VmtError::Io { .. } => 3,
             VmtError::Internal(_) => 70,
         }
     }

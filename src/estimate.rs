@@ -84,6 +84,36 @@ pub enum EstimatorSpec {
     },
 }
 
+impl EstimatorSpec {
+    /// Checks the estimator's tolerances and thresholds: each finite and ≥ 0 (a negative or NaN
+    /// tolerance is bad input, not a missed estimate). Returns the key and message of the first problem.
+    pub fn check(&self) -> Result<(), (String, String)> {
+        let values: Vec<(&str, f64)> = match self {
+            EstimatorSpec::Iso230_2 { tolerance, .. }
+            | EstimatorSpec::ModelCheck { tolerance, .. }
+            | EstimatorSpec::AccelStraightness { tolerance, .. } => vec![("tolerance", *tolerance)],
+            EstimatorSpec::LaserLines { tolerance_translation, tolerance_angle, .. } => {
+                vec![("tolerance_translation", *tolerance_translation), ("tolerance_angle", *tolerance_angle)]
+            }
+            EstimatorSpec::Compensation { max_ratio, pearson, residual, .. } => {
+                vec![("max_ratio", *max_ratio), ("pearson", *pearson), ("residual", *residual)]
+            }
+            EstimatorSpec::Ssi { expected, tolerance, .. } => {
+                expected.iter().map(|v| ("expected", *v)).chain(tolerance.iter().map(|v| ("tolerance", *v))).collect()
+            }
+            EstimatorSpec::LaserLines3d { k_sigma, bias, bias_angle, .. } => {
+                let mut v = vec![("k_sigma", *k_sigma), ("bias", *bias)];
+                v.extend(bias_angle.map(|b| ("bias_angle", b)));
+                v
+            }
+        };
+        match values.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
+            Some((k, v)) => Err((k.to_string(), format!("expected a finite value ≥ 0, got {v}"))),
+            None => Ok(()),
+        }
+    }
+}
+
 fn default_k_sigma() -> f64 {
     4.0
 }
@@ -481,7 +511,7 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 for ((r, e), tol) in crawl.iter().zip(expected).zip(tolerance) {
                     let RunData::TimeSeries { t, .. } = &r.data else { return Err(bad("expected time series".into())) };
                     let x = r.data.column(sensor).ok_or_else(|| bad(format!("run `{}` has no `{sensor}`", r.name)))?;
-                    let dt = t[1] - t[0];
+                    let dt = crate::measurement::uniform_interval(t).map_err(|m| bad(format!("run `{}`: {m}", r.name)))?;
                     let res = vmt_estimators::ssi::stick_slip_index(x, dt, q).map_err(|e| bad(e.to_string()))?;
                     let feed = r.feed.unwrap_or(0.0) * 60_000.0;
                     let v: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]) / dt * 60_000.0).collect();
@@ -567,10 +597,11 @@ pub fn accel_runs(
             .find(|(n, _)| n == sensor)
             .ok_or_else(|| format!("run `{}` has no column `{sensor}`", r.name))?;
         let x = &columns.iter().find(|(n, _)| n == "x_cmd").ok_or_else(|| "no x_cmd column".to_string())?.1;
-        if t.len() < 2 || x.is_empty() {
-            return Err(format!("run `{}` has fewer than two samples", r.name));
+        if x.is_empty() {
+            return Err(format!("run `{}` has no samples", r.name));
         }
-        let (speed, rate, direction) = (r.feed.unwrap_or(0.0), 1.0 / (t[1] - t[0]), r.direction.unwrap_or(1));
+        let dt = crate::measurement::uniform_interval(t).map_err(|m| format!("run `{}`: {m}", r.name))?;
+        let (speed, rate, direction) = (r.feed.unwrap_or(0.0), 1.0 / dt, r.direction.unwrap_or(1));
         acc_runs.push(vmt_estimators::accel_straightness::AccelRun {
             speed,
             sample_rate: rate,

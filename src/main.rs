@@ -1,4 +1,5 @@
-//! The `vmt` command line. Exit codes: 0 success, 1 an estimate missed its tolerance, 2 bad input.
+//! The `vmt` command line. Exit codes: 0 success, 1 an estimate missed its tolerance, 2 bad input,
+//! 3 an I/O failure of the machine (disk full, permission denied), 70 a bug in vmt.
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -8,7 +9,10 @@ use std::process::ExitCode;
 #[command(
     name = "vmt",
     version,
-    about = "A virtual machine tool: simulate machine-tool linear axes, identify their errors, check models against measurements"
+    about = "A virtual machine tool: simulate machine-tool linear axes, identify their errors, check models against measurements",
+    after_help = "Exit codes: 0 success; 1 an estimate missed its tolerance; 2 bad input (a file, a key or an \
+                  option: the message names the file and the place); 3 an I/O failure of the machine (disk \
+                  full, permission denied); 70 a bug in vmt."
 )]
 struct Cli {
     #[command(subcommand)]

@@ -210,63 +210,6 @@ pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> Result<(), VmtError> {
     })
 }
 
-/// Creates or replaces the directory `dir` atomically: `fill` writes the contents into a
-/// temporary sibling directory, which is then renamed into place. An existing `dir` is replaced
-/// only if it is empty or holds the file `marker` (e.g. `manifest.toml`: a previous output of the
-/// same kind), so a mistyped output path never deletes unrelated data. Between the two renames of
-/// a replacement `dir` is briefly absent, never half-written.
-pub fn replace_dir_atomic(
-    dir: &Path,
-    marker: &str,
-    fill: impl FnOnce(&Path) -> Result<(), VmtError>,
-) -> Result<(), VmtError> {
-    let exists = match std::fs::symlink_metadata(dir) {
-        Ok(m) if m.is_dir() => true,
-        Ok(_) => return Err(VmtError::bad(dir, "", "expected an output directory, but a file of that name exists")),
-        Err(_) => false,
-    };
-    if exists {
-        let empty = std::fs::read_dir(dir).map_err(|e| VmtError::io(dir, "reading the directory", e))?.next().is_none();
-        if !empty && !dir.join(marker).is_file() {
-            return Err(VmtError::bad(
-                dir,
-                "",
-                format!(
-                    "refusing to replace this directory: it is not empty and holds no `{marker}`, \
-                     so it is not a previous vmt output; choose another output path"
-                ),
-            ));
-        }
-    }
-    let parent = parent_dir(dir);
-    std::fs::create_dir_all(&parent).map_err(|e| VmtError::io(&parent, "creating the directory", e))?;
-    let tmp = sibling(dir, "tmp");
-    std::fs::create_dir(&tmp).map_err(|e| VmtError::io(&tmp, "creating the directory", e))?;
-    if let Err(e) = fill(&tmp) {
-        let _ = std::fs::remove_dir_all(&tmp);
-        return Err(e);
-    }
-    if exists {
-        let old = sibling(dir, "old");
-        if let Err(e) = std::fs::rename(dir, &old) {
-            let _ = std::fs::remove_dir_all(&tmp);
-            return Err(VmtError::io(dir, "moving the old output aside", e));
-        }
-        if let Err(e) = std::fs::rename(&tmp, dir) {
-            let _ = std::fs::rename(&old, dir);
-            let _ = std::fs::remove_dir_all(&tmp);
-            return Err(VmtError::io(dir, "renaming into place", e));
-        }
-        let _ = std::fs::remove_dir_all(&old);
-    } else {
-        std::fs::rename(&tmp, dir).map_err(|e| {
-            let _ = std::fs::remove_dir_all(&tmp);
-            VmtError::io(dir, "renaming into place", e)
-        })?;
-    }
-    Ok(())
-}
-
 // ------------------------------------------------------------------------------------------
 // CSV reading.
 
@@ -280,6 +223,10 @@ struct CsvText {
 
 /// Reads a CSV file of FORMAT.md §1: `#` comment lines, one header line, then rows with as many
 /// cells as the header. Duplicate column names are rejected.
+/// Most columns a CSV may have (size budget, DESIGN.md §2): a run holds t or the point-table keys,
+/// the commands and one column per sensor.
+pub const MAX_COLUMNS: usize = 1_000;
+
 fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
     let bytes = std::fs::read(path).map_err(|e| VmtError::io(path, "reading", e))?;
     let mut rdr = csv::ReaderBuilder::new()
@@ -299,6 +246,13 @@ fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
         let line = rec.position().map_or(0, |p| p.line());
         match &header {
             None => {
+                if rec.len() > MAX_COLUMNS {
+                    return Err(VmtError::bad(
+                        path,
+                        format!("line {line} (header)"),
+                        format!("{} columns; the limit is {MAX_COLUMNS}", rec.len()),
+                    ));
+                }
                 let mut cols: Vec<(String, Option<String>)> = Vec::new();
                 for cell in rec.iter() {
                     let (name, unit) =
@@ -387,6 +341,60 @@ fn parse_number(cell: &str) -> Result<f64, String> {
         Ok(_) => Err(format!("expected a finite number, got `{cell}`")),
         Err(_) => Err(format!("expected a number, got `{cell}`")),
     }
+}
+
+/// Largest |position| a point table or a `.dat` target may hold, m: the sensors' mounting limit
+/// (a machine-tool axis is at most tens of metres long); beyond it a number is a unit or typing slip.
+pub const MAX_POSITION: f64 = 100.0;
+
+/// Checks the rows of a point table the same way for every reader (measurement set CSV, `.dat`,
+/// writers): every target finite and within ±[`MAX_POSITION`], and no (target, run, direction)
+/// repeated (a repeated row would be counted twice by every evaluation). Returns the 0-based row
+/// and the message of the first problem.
+pub fn check_point_rows(target: &[f64], run: &[u32], direction: &[i8]) -> Result<(), (usize, String)> {
+    if let Some(k) = target.iter().position(|x| !(x.is_finite() && x.abs() <= MAX_POSITION)) {
+        return Err((k, format!("expected a target position within ±{MAX_POSITION} m, got {} m", fmt_num(target[k]))));
+    }
+    let mut seen: std::collections::HashMap<(u64, u32, i8), usize> = std::collections::HashMap::new();
+    for (k, ((x, r), d)) in target.iter().zip(run).zip(direction).enumerate() {
+        // +0.0 and −0.0 are one position.
+        let key = ((x + 0.0).to_bits(), *r, *d);
+        if let Some(first) = seen.insert(key, k) {
+            return Err((
+                k,
+                format!(
+                    "repeats row {} (target {} m, run {r}, direction {d:+}): each (target, run, direction) must appear once",
+                    first + 1,
+                    fmt_num(*x)
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The sample interval of a uniformly sampled time column, s: Δt = (t_last − t_0)/(n − 1), checked
+/// against every step t_k+1 − t_k (relative deviation ≤ 1e-3: CSV rounding, not a missing sample).
+/// For estimators that take one rate (SSI, accelerometer straightness). Errors on fewer than two
+/// samples or a non-uniform step, naming the row.
+pub fn uniform_interval(t: &[f64]) -> Result<f64, String> {
+    let n = t.len();
+    if n < 2 {
+        return Err(format!("expected at least two samples of `t` to have a sample interval, got {n}"));
+    }
+    let dt = (t[n - 1] - t[0]) / (n - 1) as f64;
+    if !(dt > 0.0 && dt.is_finite()) {
+        return Err(format!("expected `t` increasing, got {} to {}", fmt_num(t[0]), fmt_num(t[n - 1])));
+    }
+    if let Some(k) = t.windows(2).position(|w| ((w[1] - w[0]) - dt).abs() > 1e-3 * dt) {
+        return Err(format!(
+            "expected uniformly sampled `t` (step {} s), got a step of {} s at row {}: this estimator needs a constant sample rate",
+            fmt_num(dt),
+            fmt_num(t[k + 1] - t[k]),
+            k + 2
+        ));
+    }
+    Ok(dt)
 }
 
 /// Checks that `t` increases strictly; the error names the line of the offending row.
@@ -495,6 +503,8 @@ fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
         Some(ti) => Some(csv.numbers(path, ti, Dimension::Time)?),
         None => None,
     };
+    check_point_rows(&target, &run, &direction)
+        .map_err(|(k, m)| VmtError::bad(path, format!("line {}, column target", csv.line(k)), m))?;
     Ok(RunData::PointTable { target, run, direction, t, columns })
 }
 
@@ -593,7 +603,20 @@ pub fn read_data(path: &Path) -> Result<MeasurementSet, VmtError> {
         let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the ISO 230-2 test", e))?;
         let dat =
             vmt_estimators::iso230_2::dat::parse_dat(&text).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
-        return Ok(from_iso230_2_dat(&dat));
+        let set = from_iso230_2_dat(&dat);
+        for (k, x) in dat.targets.iter().enumerate() {
+            if !(x.is_finite() && x.abs() <= MAX_POSITION) {
+                return Err(VmtError::bad(path, format!("target {}", k + 1), format!(
+                    "expected a target position within ±{MAX_POSITION} m, got {} m", fmt_num(*x)
+                )));
+            }
+            if let Some(j) = dat.targets[..k].iter().position(|y| y == x) {
+                return Err(VmtError::bad(path, format!("target {}", k + 1), format!(
+                    "the same position {} m as target {}: each target must be a distinct position", fmt_num(*x), j + 1
+                )));
+            }
+        }
+        return Ok(set);
     }
     read(path)
 }
@@ -861,6 +884,9 @@ pub fn validate(set: &MeasurementSet, file: &Path) -> Result<(), VmtError> {
                         format!("expected +1 or -1, got {}", direction[k]),
                     );
                 }
+                if let Err((k, m)) = check_point_rows(target, run, direction) {
+                    return bad(format!("column target, row {}", k + 1), m);
+                }
             }
         }
     }
@@ -1038,9 +1064,9 @@ pub fn write(set: &MeasurementSet, dir: &Path, units: UnitChoice) -> Result<(), 
 }
 
 /// Writes a measurement set into directory `dir`, plus `extras` (file name, bytes) such as
-/// `truth.toml` and `truth_profiles.csv` (FORMAT.md §5), all in one atomic step: everything is
-/// written into a temporary sibling directory which is then renamed into place, replacing a
-/// previous measurement set (a directory holding `manifest.toml`) or an empty directory.
+/// `truth.toml` and `truth_profiles.csv` (FORMAT.md §5), all in one output transaction
+/// ([`crate::output::replace_dir`]): written into a temporary sibling directory which is then swapped
+/// into place, replacing a previous vmt output or an empty directory.
 /// The set is validated first ([`validate`]): nothing is written that [`read`] would reject.
 pub fn write_with_extras(
     set: &MeasurementSet,
@@ -1048,6 +1074,18 @@ pub fn write_with_extras(
     units: UnitChoice,
     extras: &[(String, Vec<u8>)],
 ) -> Result<(), VmtError> {
+    let files = set_files(set, dir, units, extras)?;
+    crate::output::replace_dir(dir, |tmp| put_files(tmp, &files))
+}
+
+/// The files of a measurement set (relative name, bytes), the manifest last, plus `extras`; `dir`
+/// names the destination in messages. Validates the set first.
+pub fn set_files(
+    set: &MeasurementSet,
+    dir: &Path,
+    units: UnitChoice,
+    extras: &[(String, Vec<u8>)],
+) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
     let mpath = dir.join("manifest.toml");
     validate(set, &mpath)?;
     for (name, _) in extras {
@@ -1056,32 +1094,31 @@ pub fn write_with_extras(
         }
     }
     let manifest = manifest_text(set)?;
-    let runs: Vec<(String, String)> = set
+    let mut files: Vec<(String, Vec<u8>)> = set
         .runs
         .iter()
         .map(|r| {
             run_csv(set, r, units)
-                .map(|text| (r.file.clone(), text))
+                .map(|text| (r.file.clone(), text.into_bytes()))
                 .map_err(|m| VmtError::bad(&dir.join(&r.file), "", m))
         })
-        .collect::<Result<Vec<(String, String)>, VmtError>>()?;
-    replace_dir_atomic(dir, "manifest.toml", |tmp| {
-        let put = |name: &str, bytes: &[u8]| -> Result<(), VmtError> {
-            let p = tmp.join(name);
-            if let Some(parent) = p.parent() {
-                std::fs::create_dir_all(parent).map_err(|e| VmtError::io(parent, "creating the directory", e))?;
-            }
-            write_synced(&p, bytes)
-        };
-        for (file, text) in &runs {
-            put(file, text.as_bytes())?;
+        .collect::<Result<Vec<_>, VmtError>>()?;
+    files.extend(extras.iter().cloned());
+    // The manifest last: a set is complete when its manifest exists.
+    files.push(("manifest.toml".into(), manifest.into_bytes()));
+    Ok(files)
+}
+
+/// Writes files (relative name, bytes) into directory `dir`, creating subdirectories.
+pub fn put_files(dir: &Path, files: &[(String, Vec<u8>)]) -> Result<(), VmtError> {
+    for (name, bytes) in files {
+        let p = dir.join(name);
+        if let Some(parent) = p.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| VmtError::io(parent, "creating the directory", e))?;
         }
-        for (name, bytes) in extras {
-            put(name, bytes)?;
-        }
-        // The manifest last: a set is complete when its manifest exists.
-        put("manifest.toml", manifest.as_bytes())
-    })
+        write_synced(&p, bytes)?;
+    }
+    Ok(())
 }
 
 // ------------------------------------------------------------------------------------------

@@ -10,7 +10,7 @@ use std::path::Path;
 mod conditions;
 pub mod iso;
 pub use conditions::{command_line, conditions, conditions_for_data, report_date, version};
-use vmt_report::{render_html, write_atomic, Report, RowStatus, Section, Table};
+use vmt_report::{render_html, Report, RowStatus, Section, Table};
 
 /// Builds the report of a run: the table of checks (each row names its figure), then the figures.
 pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Report {
@@ -96,24 +96,13 @@ pub fn run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates) -> Repor
     report
 }
 
-/// Renders and writes the report atomically, with the same report as JSON beside it (`report.json`
-/// next to `report.html`: the [`Report`] data, for other programs and for the readability check).
-pub fn write_run_report(sc: &Scenario, set: &MeasurementSet, est: &Estimates, path: &Path) -> Result<(), VmtError> {
-    write_report(&run_report(sc, set, est), path)
-}
-
-/// Renders `report` to `path` (HTML) and writes its data beside it (`path` with extension `json`).
-pub fn write_report(report: &Report, path: &Path) -> Result<(), VmtError> {
+/// The report's HTML page and its data as JSON (`report.json` beside `report.html`: the [`Report`]
+/// data, for other programs and for the readability check), to be written in one output transaction.
+pub fn report_files(report: &Report) -> Result<(String, String), VmtError> {
     let html = render_html(report).map_err(|e| VmtError::Internal(format!("report: {e}")))?;
     let json = serde_json::to_string_pretty(report).map_err(|e| VmtError::Internal(format!("report JSON: {e}")))?;
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| VmtError::io(dir, "creating the output directory", e))?;
-    }
-    write_atomic(path.with_extension("json"), json)
-        .map_err(|e| VmtError::Internal(format!("writing {}: {e}", path.with_extension("json").display())))?;
-    write_atomic(path, html).map_err(|e| VmtError::Internal(format!("writing {}: {e}", path.display())))
+    Ok((html, json))
 }
-
 /// The HTML report of a tolerance study (`vmt study`, `study merge`): the test conditions, one figure
 /// per estimate of the error against the varied value (mean and 95th percentile of |estimate − truth|
 /// over the trials, markers at the studied values, with the Cramér–Rao bound where one exists), and the
@@ -169,7 +158,7 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
                     r.trials.to_string(),
                     format!("{:.4}", r.mean_abs * 1e6),
                     format!("{:.4}", r.p95_abs * 1e6),
-                    format!("{:.0}", 100.0 * r.pass_rate),
+                    r.pass_rate.map_or("—".into(), |p| format!("{:.0}", 100.0 * p)),
                     if r.bound.is_finite() { format!("{:.4}", r.bound * 1e6) } else { "—".into() },
                 ]
             })

@@ -10,10 +10,10 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use vmt_sim::chain::{ChainModel, ChainProcedureSpec};
 use vmt_sim::effects::EffectName;
-use vmt_sim::machine::{AxisConfig, AxisModel, Fidelity};
-use vmt_sim::procedures::ProcedureSpec;
+use vmt_sim::machine::{AxisConfig, AxisModel, Fidelity, MachineError};
+use vmt_sim::procedures::{ProcedureSpec, MAX_SAMPLES, MAX_STEPS};
 use vmt_sim::sensors::{SensorKind, SensorSpec};
-use vmt_sim::urdf::{parse_urdf, MachineStructure};
+use vmt_sim::urdf::{parse_urdf, MachineStructure, UrdfError};
 
 /// The scenario file as written (before the truth is parsed and the machine loaded).
 #[derive(Debug, Deserialize)]
@@ -102,13 +102,19 @@ impl Scenario {
             Some([first, ..]) => AxisConfig { joint: first.clone(), ..raw.axis.clone() },
             _ => raw.axis.clone(),
         };
-        let axis = AxisModel::build(&machine, &axis_cfg).map_err(|e| bad("axis", e.to_string()))?;
+        let axis = AxisModel::build(&machine, &axis_cfg).map_err(|e| match e {
+            MachineError::Key(_, k, m) => bad(&format!("axis.{k}"), m),
+            MachineError::NoJoint(..) | MachineError::Invalid(..) => bad("axis", e.to_string()),
+        })?;
         let truth = match &raw.truth {
             toml::Value::String(file) => model::read_model(&base_dir.join(file))?,
             toml::Value::Table(t) => model::parse_model(t, source, &base_dir, "truth")?,
             _ => return Err(bad("truth", "expected a table (inline truth) or a file name".into())),
         };
         validate_sensors(&raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
+        for (i, e) in raw.estimators.iter().enumerate() {
+            e.check().map_err(|(k, m)| bad(&format!("estimators[{i}].{k}"), m))?;
+        }
         validate_procedures(&raw.procedures, &raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
         let chain = build_chain(&raw, &machine, &truth).map_err(|(p, m)| bad(&p, m))?;
         Ok(Scenario {
@@ -226,7 +232,18 @@ pub fn load_machine(name: &str, base: Option<&Path>, source: &Path) -> Result<Ma
             (std::fs::read_to_string(&p).map_err(|e| VmtError::io(&p, "reading the URDF", e))?, p)
         }
     };
-    parse_urdf(&text).map_err(|e| VmtError::bad(&file, "robot", e.to_string()))
+    parse_urdf(&text).map_err(|e| {
+        // The line of the named link or joint, where the URDF error names one.
+        let named = match &e {
+            UrdfError::Link { link: n, .. } | UrdfError::Joint { joint: n, .. } => Some(n.as_str()),
+            UrdfError::Parse(_) | UrdfError::Structure(_) => None,
+        };
+        let place = named
+            .and_then(|n| text.find(&format!("name=\"{n}\"")))
+            .map(|pos| format!("line {}", crate::error::line_col(&text, pos).0))
+            .unwrap_or_else(|| "robot".into());
+        VmtError::bad(&file, place, e.to_string())
+    })
 }
 
 fn finite_nonneg(v: f64) -> bool {
@@ -302,10 +319,23 @@ fn validate_procedures(
 ) -> Result<(), (String, String)> {
     let (lo, hi) = axis.travel;
     let tol = 1e-9;
+    let (mut samples, mut steps) = (0.0, 0.0);
     for (i, p) in procs.iter().enumerate() {
         let at = |k: &str| format!("procedures[{i}] ({}).{k}", p.name());
         if !p.name().is_empty() && procs[..i].iter().any(|o| o.name() == p.name()) {
             return Err((at("name"), "procedure names must be unique".into()));
+        }
+        let (n, s) = p.budget(axis.dt).map_err(|(k, m)| (at(&k), m))?;
+        samples += n;
+        steps += s;
+        if samples > MAX_SAMPLES as f64 || steps > MAX_STEPS {
+            return Err((
+                at("name"),
+                format!(
+                    "the procedures up to this one record about {samples:.3e} samples over {steps:.3e} physics steps; \
+                     the limits for a scenario are {MAX_SAMPLES:e} samples and {MAX_STEPS:e} steps"
+                ),
+            ));
         }
         for s in p.sensors() {
             if !sensors.iter().any(|d| &d.name == s) {

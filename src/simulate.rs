@@ -227,12 +227,22 @@ pub fn truth_extras(sc: &Scenario) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
 /// The six injected error motions every millimetre over the travel (FORMAT.md §5 table); for a
 /// multi-axis scenario the six of every axis of the chain, prefixed by the axis (`y.pitch`), every
 /// millimetre from the lowest lower to the highest upper travel end of the axes.
+/// Most points of a truth profile (size budget, DESIGN.md §2): 1 mm steps up to a 10 m travel.
+pub const MAX_PROFILE_POINTS: usize = 10_001;
+
+/// Positions of a truth profile over [lo, hi] (m): every millimetre, but at most
+/// [`MAX_PROFILE_POINTS`] points evenly spread (a 1000 m URDF travel gets 10 cm steps, not 10⁶ points).
+fn profile_positions(lo: f64, hi: f64) -> Vec<f64> {
+    let n = ((hi - lo) / 1e-3).round().clamp(1.0, (MAX_PROFILE_POINTS - 1) as f64);
+    let n = if n.is_finite() { n as usize } else { 1 };
+    (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect()
+}
+
 pub fn truth_profiles(sc: &Scenario) -> Result<ProfileTable, VmtError> {
     if let Some(chain) = &sc.chain {
         let lo = chain.travels().iter().map(|t| t.0).fold(f64::INFINITY, f64::min);
         let hi = chain.travels().iter().map(|t| t.1).fold(f64::NEG_INFINITY, f64::max);
-        let n = ((hi - lo) / 1e-3).round().max(1.0) as usize;
-        let position: Vec<f64> = (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect();
+        let position = profile_positions(lo, hi);
         let mut columns = Vec::new();
         for a in &chain.axes {
             for (i, &effect) in EffectName::ERROR_MOTIONS.iter().enumerate() {
@@ -248,8 +258,7 @@ pub fn truth_profiles(sc: &Scenario) -> Result<ProfileTable, VmtError> {
     }
     let errors = error_motions(sc)?;
     let (lo, hi) = sc.axis.travel;
-    let n = ((hi - lo) / 1e-3).round().max(1.0) as usize;
-    let position: Vec<f64> = (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect();
+    let position = profile_positions(lo, hi);
     let columns = EffectName::ERROR_MOTIONS
         .iter()
         .enumerate()

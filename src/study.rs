@@ -72,6 +72,10 @@ pub fn motion_quantity(name: &str) -> Quantity {
     }
 }
 
+/// Most trials (values × trials) one study or shard computes (size budget, DESIGN.md §2): the job
+/// list is built before any work.
+pub const MAX_TRIALS: usize = 1_000_000;
+
 /// Runs trials `k` with k % shard.1 == shard.0 of every value. Each trial runs the scenario's estimators,
 /// or, with `estimator`, that estimator (e.g. a user's program) scored against the truth per error motion:
 /// the RMS of (estimate − truth) of each error motion passes when it is at most `tolerance` (SI: m or rad);
@@ -86,6 +90,13 @@ pub fn run_study(
 ) -> Result<Vec<TrialRow>, VmtError> {
     if trials == 0 {
         return Err(VmtError::Usage("--trials: expected at least 1 trial".into()));
+    }
+    let jobs_total = vary.values.len() as f64 * trials as f64 / shard.1 as f64;
+    if jobs_total > MAX_TRIALS as f64 {
+        return Err(VmtError::Usage(format!(
+            "{} values × {trials} trials = {jobs_total:e} trials in this shard; the limit is {MAX_TRIALS} (split with --shard i/n)",
+            vary.values.len()
+        )));
     }
     let truth_table = crate::simulate::truth_profiles(sc)?;
     let ph = physics(sc)?;
@@ -185,8 +196,16 @@ pub fn read_rows(path: &Path) -> Result<Vec<TrialRow>, VmtError> {
                 VmtError::bad(path, format!("line {}", i + 2), format!("expected a number, got `{}`", f(j)))
             })
         };
+        let value = num(0)?;
+        if !value.is_finite() {
+            return Err(VmtError::bad(
+                path,
+                format!("line {}, column value", i + 2),
+                format!("expected a finite varied value, got `{}`", f(0)),
+            ));
+        }
         out.push(TrialRow {
-            value: num(0)?,
+            value,
             trial: num(1)? as usize,
             estimate: f(2).to_string(),
             difference: num(3)?,
@@ -252,26 +271,27 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
     let mut keys: Vec<(f64, String)> = rows.iter().map(|r| (r.value, r.estimate.clone())).collect();
     keys.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     keys.dedup();
+    // One group per (value, estimate) key; `total_cmp` so that a NaN value (refused by the readers,
+    // but never a panic here) forms its own group rather than an empty one.
+    let same = |r: &TrialRow, v: f64, e: &str| r.value.total_cmp(&v).is_eq() && r.estimate == e;
     keys.into_iter()
         .map(|(v, e)| {
-            let mut d: Vec<f64> =
-                rows.iter().filter(|r| r.value == v && r.estimate == e).map(|r| r.difference.abs()).collect();
+            let mut d: Vec<f64> = rows.iter().filter(|r| same(r, v, &e)).map(|r| r.difference.abs()).collect();
             d.sort_by(f64::total_cmp);
             let n = d.len();
-            let judged: Vec<bool> =
-                rows.iter().filter(|r| r.value == v && r.estimate == e).filter_map(|r| r.pass).collect();
+            let judged: Vec<bool> = rows.iter().filter(|r| same(r, v, &e)).filter_map(|r| r.pass).collect();
             let pass_rate = (judged.len() == n).then(|| judged.iter().filter(|&&p| p).count() as f64 / n.max(1) as f64);
-            let bounds: Vec<f64> = rows.iter().filter(|r| r.value == v && r.estimate == e).map(|r| r.bound).collect();
+            let bounds: Vec<f64> = rows.iter().filter(|r| same(r, v, &e)).map(|r| r.bound).collect();
             let bound = bounds.iter().sum::<f64>() / bounds.len().max(1) as f64;
             let quantity =
-                rows.iter().find(|r| r.value == v && r.estimate == e).map_or(Quantity::Ratio, |r| r.quantity);
+                rows.iter().find(|r| same(r, v, &e)).map_or(Quantity::Ratio, |r| r.quantity);
             SummaryRow {
                 value: v,
                 estimate: e,
                 trials: n,
                 mean_abs: d.iter().sum::<f64>() / n.max(1) as f64,
                 rms: (d.iter().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt(),
-                p95_abs: d[((0.95 * n as f64).ceil() as usize).clamp(1, n) - 1],
+                p95_abs: d.get(((0.95 * n as f64).ceil() as usize).max(1) - 1).copied().unwrap_or(f64::NAN),
                 pass_rate,
                 bound,
                 quantity,
@@ -283,7 +303,10 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
 /// An SVG plot of mean and p95 |difference| against the varied value, one pair of series per estimate.
 pub fn summary_svg(summary: &[SummaryRow], x_label: &str) -> Result<String, VmtError> {
     use vmt_report::{figure_svg, Figure, FigureKind, Series, SeriesStyle};
+    // One pair of series per estimate: the summary is sorted by value first, so sort before dedup
+    // (else every estimate repeats once per value and the SVG grows with the square of the values).
     let mut names: Vec<&str> = summary.iter().map(|s| s.estimate.as_str()).collect();
+    names.sort_unstable();
     names.dedup();
     let mut series = Vec::new();
     for n in names {

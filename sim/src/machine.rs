@@ -79,6 +79,63 @@ pub enum Fidelity {
     Fast,
 }
 
+/// Smallest physics step accepted, s: below it a second of motion costs over 10⁷ steps (the size
+/// budget of one run, see `procedures::MAX_STEPS`).
+pub const MIN_DT: f64 = 1e-7;
+
+/// Largest ω·dt accepted for the explicitly integrated stiff modes (guideway bearings, ball screw).
+/// Semi-implicit Euler on x'' = −ω²x is stable for ω·dt < 2 undamped (less with the explicit damping
+/// force c = 2ζ√(km)); 1 keeps a factor 2 margin and a phase error of the mode below ~5 %.
+pub const MAX_OMEGA_DT: f64 = 1.0;
+
+/// The axis frame's y and z (the guideway's stiff directions, world frame `R_a·y`, `R_a·z` with R_a
+/// taking x onto the world-frame `axis`) expressed in the moving body's frame (rotation `home`).
+fn body_axis_directions(axis: DVec3, home: DQuat) -> (DVec3, DVec3) {
+    let r = DQuat::from_rotation_arc(DVec3::X, axis);
+    (home.inverse() * (r * DVec3::Y), home.inverse() * (r * DVec3::Z))
+}
+
+/// Angular frequency of the stiffest rigid-body mode of a body of mass `m` (kg), centre of mass `com`
+/// and inertia `inertia` (kg·m², about the centre of mass, body frame) on springs at `blocks` (body
+/// frame, m), each with stiffness k (N/m) along each direction d of `dirs`: ω_max = √λ_max(M⁻¹K),
+/// K = Σ k·J·Jᵀ with J = [d; (b − com) × d], M = diag(m, m, m, I). λ_max by power iteration on the
+/// 6×6 matrix M⁻¹K (its eigenvalues are those of the symmetric M^-½KM^-½, real and ≥ 0), rad/s.
+pub fn stiffest_mode(m: f64, com: DVec3, inertia: &rapier3d_f64::glamx::DMat3, blocks: &[DVec3], dirs: &[(DVec3, f64)]) -> f64 {
+    let mut k = [[0.0f64; 6]; 6];
+    for b in blocks {
+        for (d, kd) in dirs {
+            let r = (*b - com).cross(*d);
+            let j = [d.x, d.y, d.z, r.x, r.y, r.z];
+            for (a, row) in k.iter_mut().enumerate() {
+                for (c, v) in row.iter_mut().enumerate() {
+                    *v += kd * j[a] * j[c];
+                }
+            }
+        }
+    }
+    let inv_i = inertia.inverse();
+    let apply = |x: &[f64; 6]| -> [f64; 6] {
+        let mut kx = [0.0; 6];
+        for (a, row) in k.iter().enumerate() {
+            kx[a] = row.iter().zip(x).map(|(p, q)| p * q).sum();
+        }
+        let w = inv_i * DVec3::new(kx[3], kx[4], kx[5]);
+        [kx[0] / m, kx[1] / m, kx[2] / m, w.x, w.y, w.z]
+    };
+    let mut x = [1.0, 0.9, 0.8, 0.7, 0.6, 0.5];
+    let mut lambda = 0.0;
+    for _ in 0..500 {
+        let y = apply(&x);
+        let n = y.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !(n > 0.0 && n.is_finite()) {
+            return if n == 0.0 { 0.0 } else { f64::INFINITY };
+        }
+        lambda = n / x.iter().map(|v| v * v).sum::<f64>().sqrt();
+        x = y.map(|v| v / n);
+    }
+    lambda.sqrt()
+}
+
 /// Why an axis model could not be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum MachineError {
@@ -86,6 +143,9 @@ pub enum MachineError {
     NoJoint(String, String),
     #[error("axis `{0}`: {1}")]
     Invalid(String, String),
+    /// A key of the machine section out of range: (joint, key path within the section, message).
+    #[error("axis `{0}`: {1}: {2}")]
+    Key(String, String, String),
 }
 
 /// Immutable model of one axis. Frames: the axis frame has its origin at the axis reference point (the
@@ -189,9 +249,16 @@ impl AxisModel {
         if !(cfg.guideway.damping_ratio >= 0.0 && cfg.guideway.damping_ratio < 1.0) {
             return Err(bad(format!("guideway.damping_ratio must be in [0, 1), got {}", cfg.guideway.damping_ratio)));
         }
-        if !(cfg.dt > 0.0 && cfg.dt <= 1e-3) {
-            return Err(bad(format!("dt must be in (0, 1e-3] s, got {}", cfg.dt)));
+        let key = |(k, m): (String, String)| MachineError::Key(cfg.joint.clone(), k, m);
+        if !(cfg.dt >= MIN_DT && cfg.dt <= 1e-3) {
+            return Err(key(("dt".into(), format!("expected a physics step in [{MIN_DT:e}, 1e-3] s, got {}", cfg.dt))));
         }
+        for (k, v, unit) in [("max_feed", cfg.max_feed, "m/s"), ("max_accel", cfg.max_accel, "m/s²")] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(key((k.into(), format!("expected a finite value > 0 {unit}, got {v}"))));
+            }
+        }
+        cfg.servo.check(cfg.dt).map_err(key)?;
         let nut = match (cfg.nut_link.as_str(), body.link_frame("nut")) {
             ("", Some(f)) => f.translation,
             ("", None) => DVec3::ZERO,
@@ -215,6 +282,25 @@ impl AxisModel {
         let n = blocks.len() as f64;
         let damping = |k: f64| 2.0 * cfg.guideway.damping_ratio * (k * mass / n).sqrt();
         let servo_steps = ((1.0 / cfg.servo.rate) / cfg.dt).round().max(1.0) as usize;
+        cfg.servo.check_discrete(cfg.dt * servo_steps as f64).map_err(key)?;
+        let (y, z) = body_axis_directions(ax.axis, ax.origin.rotation);
+        let dirs = [(y, cfg.guideway.stiffness_y), (z, cfg.guideway.stiffness_z)];
+        let omega_guide = stiffest_mode(mass, body.mass.com, &body.mass.inertia, &blocks, &dirs);
+        let omega_drive = match &cfg.drive {
+            DriveConfig::BallScrew(b) => (b.stiffness * (1.0 / mass + 1.0 / b.rotor_mass())).sqrt(),
+            DriveConfig::LinearMotor => 0.0,
+        };
+        for (what, w) in [("guideway bearings", omega_guide), ("ball-screw axial stiffness", omega_drive)] {
+            if !(w * cfg.dt <= MAX_OMEGA_DT) {
+                return Err(key(("dt".into(), format!(
+                    "the explicit integration is unstable: the stiffest mode of the {what} has ω = {w:.4e} rad/s \
+                     (moving mass {mass} kg), ω·dt = {:.3} > {MAX_OMEGA_DT}; a stable step is dt ≤ {:.3e} s, \
+                     or raise the mass / lower the stiffness",
+                    w * cfg.dt,
+                    MAX_OMEGA_DT / w
+                ))));
+            }
+        }
         Ok(AxisModel {
             joint: cfg.joint.clone(),
             mass,

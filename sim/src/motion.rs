@@ -46,7 +46,7 @@ impl Segment {
                 let s = (x1 - x0).signum();
                 let (ta, vp) = ramp(d, feed, accel);
                 let total = self.duration();
-                let tau = (t - t0).clamp(0.0, total);
+                let tau = (t - t0).max(0.0).min(total); // no clamp: a NaN bound must not panic
                 if tau >= total {
                     return Command { pos: x1, vel: 0.0, acc: 0.0 };
                 }

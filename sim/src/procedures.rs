@@ -49,6 +49,22 @@ impl ProcedureKind {
     }
 }
 
+/// Size budget of a scenario (DESIGN.md §2): limits on what input can make vmt allocate or compute,
+/// checked before planning. Targets of one positioning or nine-line procedure.
+pub const MAX_TARGETS: usize = 10_000;
+/// Runs (bidirectional cycles) of one positioning procedure.
+pub const MAX_RUNS: usize = 1_000;
+/// Targets × runs of one positioning procedure (each visit is two motion segments).
+pub const MAX_VISITS: usize = 100_000;
+/// Speeds or feeds of one procedure.
+pub const MAX_SPEEDS: usize = 1_000;
+/// Recorded samples of one procedure (each sample holds the full rigid-body truth, ~200 bytes).
+pub const MAX_SAMPLES: usize = 20_000_000;
+/// Physics steps of one procedure (at ~2–5 µs a step: minutes to tens of minutes).
+pub const MAX_STEPS: f64 = 5e8;
+/// Longest dwell, settle, window or pause, s (about 11.6 days).
+pub const MAX_SECONDS: f64 = 1e6;
+
 // Defaults of the procedures' optional keys.
 defaults! {
     d_dwell: f64 = 1.0;
@@ -218,11 +234,18 @@ pub fn friction_sweep_speeds(
                     "friction sweep: expected 0 < v_min < v_max (finite, m/s), got v_min {v_min}, v_max {v_max}"
                 ));
             }
-            if per_decade == 0 {
-                return Err("friction sweep: per_decade must be at least 1".into());
+            if per_decade == 0 || per_decade > MAX_SPEEDS as u32 {
+                return Err(format!("friction sweep: per_decade must be in 1..={MAX_SPEEDS}, got {per_decade}"));
             }
             let n = per_decade as f64;
-            let k = (n * (v_max / v_min).log10()).round() as i32;
+            let k = (n * (v_max / v_min).log10()).round();
+            if k + 1.0 > MAX_SPEEDS as f64 {
+                return Err(format!(
+                    "friction sweep: {} speeds from v_min {v_min} to v_max {v_max} at {per_decade} per decade; the limit is {MAX_SPEEDS}",
+                    k + 1.0
+                ));
+            }
+            let k = k as i32;
             (0..=k).map(|i| v_min * 10f64.powf(i as f64 / n)).collect()
         }
     };
@@ -280,6 +303,111 @@ impl ProcedureSpec {
     /// Checks what the simulation of this procedure needs beyond the scenario's checks (FrictionSweep: its
     /// speeds, and a steady window at every speed within [start, end] at the axis's max_accel; every
     /// speed ≤ the axis's max_feed). Other procedures: Ok.
+    /// The size of the procedure before it is planned (DESIGN.md §2 size budget): every key that sets a
+    /// count or a duration checked finite and within its limit, every sampling rate ≤ 1/dt (one sample
+    /// per physics step at most), and the estimated number of recorded samples (Σ rate·window) and
+    /// physics steps (machine time / dt). Returns the key and message of the first problem, else
+    /// (samples, steps). `dt` is the physics step (s).
+    pub fn budget(&self, dt: f64) -> Result<(f64, f64), (String, String)> {
+        fn err<T>(k: &str, m: String) -> Result<T, (String, String)> {
+            Err((k.to_string(), m))
+        }
+        let time_key = |k: &str, v: f64, positive: bool| -> Result<(), (String, String)> {
+            if v.is_finite() && v <= MAX_SECONDS && (v > 0.0 || !positive && v >= 0.0) {
+                Ok(())
+            } else {
+                let sign = if positive { "> 0" } else { "≥ 0" };
+                err(k, format!("expected a time {sign} and ≤ {MAX_SECONDS:e} s, got {v}"))
+            }
+        };
+        let rate_key = |k: &str, r: f64| -> Result<(), (String, String)> {
+            if r.is_finite() && r > 0.0 && r * dt <= 1.0 + 1e-9 {
+                Ok(())
+            } else {
+                err(k, format!("expected a sampling rate > 0 and ≤ 1/dt = {} Hz (dt = {dt} s), got {r}", 1.0 / dt))
+            }
+        };
+        let count = |k: &str, n: f64, limit: usize| -> Result<(), (String, String)> {
+            if n.is_finite() && n <= limit as f64 {
+                Ok(())
+            } else {
+                err(k, format!("this makes {n} {k}; the limit is {limit}"))
+            }
+        };
+        let span = |start: f64, end: f64| (end - start).abs();
+        let (samples, time) = match self {
+            ProcedureSpec::ConstantVelocity { speeds, start, end, high_rate, settle, .. } => {
+                rate_key("high_rate", *high_rate)?;
+                time_key("settle", *settle, false)?;
+                count("speeds", speeds.len() as f64, MAX_SPEEDS)?;
+                let vmax = speeds.iter().cloned().fold(0.0, f64::max);
+                let per_pass = high_rate * span(*start, *end) / vmax;
+                let time: f64 = speeds.iter().map(|v| settle + 2.0 * span(*start, *end) / v).sum();
+                count("samples", per_pass * speeds.len() as f64, MAX_SAMPLES)?;
+                (per_pass * speeds.len() as f64, time)
+            }
+            ProcedureSpec::Positioning { targets, n_targets, start, end, runs, feed, dwell, average, rate, overrun, .. } => {
+                let n = targets.as_ref().map_or(*n_targets, Vec::len) as f64;
+                count("n_targets", n, MAX_TARGETS)?;
+                count("runs", *runs as f64, MAX_RUNS)?;
+                count("targets × runs", n * *runs as f64, MAX_VISITS)?;
+                time_key("dwell", *dwell, true)?;
+                time_key("average", *average, true)?;
+                rate_key("rate", *rate)?;
+                let visits = 2.0 * n * *runs as f64;
+                let travel = 2.0 * *runs as f64 * (span(*start, *end) + 2.0 * overrun.abs()) / feed;
+                (visits * (average * rate + 1.0), visits * dwell + travel)
+            }
+            ProcedureSpec::Crawl { feeds, start: _, duration, rate, settle, .. } => {
+                time_key("duration", *duration, true)?;
+                time_key("settle", *settle, false)?;
+                rate_key("rate", *rate)?;
+                count("feeds", feeds.len() as f64, MAX_SPEEDS)?;
+                let k = feeds.len() as f64;
+                (k * rate * duration, k * (settle + duration + 1.0))
+            }
+            ProcedureSpec::NineLine { start, end, step, feed, dwell, average, rate, overrun, .. } => {
+                let n = span(*start, *end) / step + 1.0;
+                if !(*step > 0.0) {
+                    return err("step", format!("expected a step > 0 m, got {step}"));
+                }
+                count("n_targets", n, MAX_TARGETS)?;
+                time_key("dwell", *dwell, true)?;
+                time_key("average", *average, true)?;
+                rate_key("rate", *rate)?;
+                let travel = 2.0 * (span(*start, *end) + 2.0 * overrun.abs()) / feed;
+                (2.0 * n * (average * rate + 1.0), 2.0 * n * dwell + travel)
+            }
+            ProcedureSpec::FrictionSweep { speeds, v_min, v_max, per_decade, settle, duration, rate, .. } => {
+                time_key("settle", *settle, false)?;
+                time_key("duration", *duration, true)?;
+                rate_key("rate", *rate)?;
+                if let Some(v) = speeds {
+                    count("speeds", v.len() as f64, MAX_SPEEDS)?;
+                }
+                let n = friction_sweep_speeds(speeds.as_deref(), *v_min, *v_max, *per_decade)
+                    .map_err(|m| ("speeds".to_string(), m))?
+                    .len() as f64;
+                (2.0 * n * rate * duration, 2.0 * n * (0.5 + settle + duration + 1.0))
+            }
+            ProcedureSpec::Pause { duration, .. } => {
+                time_key("duration", *duration, false)?;
+                (0.0, 0.0)
+            }
+        };
+        count("samples", samples, MAX_SAMPLES)?;
+        let steps = time / dt;
+        if !(steps <= MAX_STEPS) {
+            return err(
+                "dwell",
+                format!(
+                    "the procedure needs about {steps:.3e} physics steps ({time:.4e} s of machine time at dt = {dt} s); the limit is {MAX_STEPS:e}"
+                ),
+            );
+        }
+        Ok((samples, steps))
+    }
+
     pub fn check(&self, model: &AxisModel) -> Result<(), String> {
         if let ProcedureSpec::FrictionSweep {
             speeds,

@@ -41,6 +41,66 @@ impl Default for ServoConfig {
     }
 }
 
+impl ServoConfig {
+    /// Range checks of the servo keys for a physics step `dt` (s): kp, velocity_bandwidth,
+    /// force_limit and rate finite and > 0, integral_corner finite and ≥ 0, resolution in [0, 1 mm],
+    /// and rate ≤ 1/dt (the servo cannot update more often than the physics steps). Returns the
+    /// message naming the `servo.KEY` at fault.
+    pub fn check(&self, dt: f64) -> Result<(), (String, String)> {
+        for (k, v, unit) in [
+            ("kp", self.kp, "1/s"),
+            ("velocity_bandwidth", self.velocity_bandwidth, "Hz"),
+            ("force_limit", self.force_limit, "N"),
+            ("rate", self.rate, "Hz"),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err((format!("servo.{k}"), format!("expected a finite value > 0 {unit}, got {v}")));
+            }
+        }
+        if !(self.integral_corner.is_finite() && self.integral_corner >= 0.0) {
+            return Err(("servo.integral_corner".into(), format!("expected a finite value ≥ 0 Hz, got {}", self.integral_corner)));
+        }
+        if !(self.resolution.is_finite() && (0.0..=1e-3).contains(&self.resolution)) {
+            return Err(("servo.resolution".into(), format!("expected a feedback step in [0, 1e-3] m, got {}", self.resolution)));
+        }
+        if self.rate * dt > 1.0 + 1e-9 {
+            return Err((
+                "servo.rate".into(),
+                format!("{} Hz is faster than the physics step dt = {dt} s allows: expected rate ≤ 1/dt = {} Hz", self.rate, 1.0 / dt),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Discrete stability of the loops at the servo period `ts` (s). The velocity loop on a mass with
+    /// the velocity taken as a backward difference and the force held over the period is
+    /// v_{k+1} = v_k + K·(r − (v_k + v_{k−1})/2), K = 2π·f_v·ts: characteristic z² + (K/2 − 1)·z + K/2,
+    /// stable for 0 < K < 2 (Jury). The position and integral loops add lag, so each of K, kp·ts and
+    /// 2π·f_i·ts must stay ≤ 1 (a gain margin of 2 on the velocity loop). Returns the message naming
+    /// the key and the limit.
+    pub fn check_discrete(&self, ts: f64) -> Result<(), (String, String)> {
+        let tau = std::f64::consts::TAU;
+        for (k, g, scale) in [
+            ("velocity_bandwidth", self.velocity_bandwidth, tau * ts),
+            ("integral_corner", self.integral_corner, tau * ts),
+            ("kp", self.kp, ts),
+        ] {
+            if g * scale > 1.0 {
+                return Err((
+                    format!("servo.{k}"),
+                    format!(
+                        "{g} makes the discrete servo loop unstable at the servo period {ts:e} s (rate {} Hz): \
+                         expected {k} ≤ {} (gain·period ≤ 1), or a higher servo.rate",
+                        1.0 / ts,
+                        crate::effects::fmt_num(1.0 / scale)
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Mutable state of the servo loops.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ServoState {

@@ -138,6 +138,54 @@ impl MachineStructure {
     }
 }
 
+/// Deepest XML element nesting a URDF may have (a URDF is robot → link → visual → geometry → mesh:
+/// 5 levels); the XML deserialiser recurses per level, so a deeply nested file would overflow the stack.
+pub const MAX_XML_DEPTH: usize = 64;
+/// Most XML elements a URDF may have (size budget, DESIGN.md §2).
+pub const MAX_XML_ELEMENTS: usize = 200_000;
+
+/// Bounds the XML nesting depth and element count before deserialising: a scan of the tags
+/// (`<name` opens, `</` and `/>` close; comments, `<?…?>` and `<!…>` skipped). The error names the
+/// line where the limit is crossed.
+pub fn check_xml_size(text: &str) -> Result<(), UrdfError> {
+    let b = text.as_bytes();
+    let (mut depth, mut elements, mut i) = (0usize, 0usize, 0usize);
+    let line = |pos: usize| b[..pos].iter().filter(|&&c| c == b'\n').count() + 1;
+    while let Some(off) = b[i..].iter().position(|&c| c == b'<') {
+        let start = i + off;
+        let rest = &b[start..];
+        let close_of = |pat: &[u8]| rest.windows(pat.len()).position(|w| w == pat).map(|p| start + p + pat.len());
+        let end = if rest.starts_with(b"<!--") {
+            close_of(b"-->")
+        } else if rest.starts_with(b"<?") {
+            close_of(b"?>")
+        } else {
+            let e = close_of(b">");
+            if rest.starts_with(b"</") {
+                depth = depth.saturating_sub(1);
+            } else if !rest.starts_with(b"<!") {
+                let self_closing = e.is_some_and(|e| e >= 2 && b[e - 2] == b'/');
+                elements += 1;
+                if !self_closing {
+                    depth += 1;
+                }
+                if depth > MAX_XML_DEPTH || elements > MAX_XML_ELEMENTS {
+                    return Err(UrdfError::Parse(format!(
+                        "line {}: XML nested {depth} elements deep with {elements} elements so far; the limits are {MAX_XML_DEPTH} levels and {MAX_XML_ELEMENTS} elements",
+                        line(start)
+                    )));
+                }
+            }
+            e
+        };
+        match end {
+            Some(e) => i = e,
+            None => break,
+        }
+    }
+    Ok(())
+}
+
 fn finite3(v: [f64; 3]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
@@ -147,6 +195,7 @@ fn finite3(v: [f64; 3]) -> bool {
 /// Revolute, continuous and other joints are accepted but
 /// treated as fixed (vmt simulates linear axes); prismatic joints become axes.
 pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
+    check_xml_size(text)?;
     let robot = urdf_rs::read_from_string(text).map_err(|e| UrdfError::Parse(e.to_string()))?;
     let mut link_index: HashMap<&str, usize> = HashMap::new();
     for (i, l) in robot.links.iter().enumerate() {

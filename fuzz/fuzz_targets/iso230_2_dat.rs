@@ -1,0 +1,5 @@
+//! cargo-fuzz target: vmt::fuzz::iso230_2_dat never panics on any input (issue 14).
+#![no_main]
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    vmt::fuzz::iso230_2_dat(data);
+});
