@@ -12,5 +12,6 @@ pub mod modelcheck;
 pub mod report;
 pub mod scenario;
 pub mod simulate;
+pub mod straightness;
 pub mod study;
 pub mod units;
