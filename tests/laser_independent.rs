@@ -114,7 +114,13 @@ fn layout_stats(seed: u64) -> Option<(usize, f64, Vec<f64>, Vec<String>)> {
     let motions = random_motions(&mut rng, travel);
     let m = model(&l);
     let opts = IdOptions::default();
-    let truth = identify(&readings(&l, &motions, None), &m, &opts).ok()?;
+    let truth = match identify(&readings(&l, &motions, None), &m, &opts) {
+        Ok(t) => t,
+        Err(e) => {
+            println!("layout {seed}: {e}");
+            return None;
+        }
+    };
     let draws = 60;
     let mut z: Vec<Vec<f64>> = Vec::new();
     for k in 0..draws {
@@ -134,25 +140,34 @@ fn layout_stats(seed: u64) -> Option<(usize, f64, Vec<f64>, Vec<String>)> {
     }
     let n = z[0].len();
     if n == 0 {
-        return None;
+        // Every value confounded (a rank-deficient layout): the identifier must say what it cannot see.
+        println!("layout {seed}: {} lines, no observable value; not observable: {}", l.lines.len(), truth.unobservable.join("; "));
+        return Some((l.lines.len(), truth.rank as f64, Vec::new(), truth.unobservable));
     }
     // spread/σ per parameter: √(mean z²) over the draws (zero-mean: the model is exact)
     let per_param: Vec<f64> = (0..n).map(|j| (z.iter().map(|d| d[j] * d[j]).sum::<f64>() / draws as f64).sqrt()).collect();
     Some((l.lines.len(), truth.rank as f64, per_param, truth.unobservable))
 }
 
-/// Issue 17, must show: the reported σ against the spread over ≥ 50 draws within 20 %, on 24 random
-/// layouts × 60 noise draws. Per layout the pooled ratio spread/σ = √(mean over parameters and draws of
+/// Issue 17, must show: the reported σ against the spread over ≥ 50 draws within 20 %, on 30 random
+/// layouts × 60 noise draws (rank-deficient ones included: what they cannot see is named). Per layout the pooled ratio spread/σ = √(mean over parameters and draws of
 /// z²) has a sampling spread of about 1/√(2·60·n_eff) ≤ 9 %; 20 % is the issue's limit. Each parameter's
 /// own ratio (60 draws: ±9 % 1σ) is summarised (mean, 95th percentile) and must stay within 0.6–1.5
 /// (beyond 5σ of its sampling spread).
 #[test]
 fn laser_identification_sigma_matches_spread_on_random_layouts() {
     let t0 = std::time::Instant::now();
-    let stats: Vec<_> = (0..24u64).into_par_iter().filter_map(|s| layout_stats(100 + s)).collect();
-    assert!(stats.len() >= 20, "only {} of 24 layouts identified anything", stats.len());
+    let stats: Vec<_> = (0..30u64).into_par_iter().filter_map(|s| layout_stats(100 + s)).collect();
+    assert_eq!(stats.len(), 30, "every layout identifies (possibly nothing observable)");
+    let with_values = stats.iter().filter(|s| !s.2.is_empty()).count();
+    println!("{with_values} of 30 random layouts determine at least one value; the others name what they cannot see");
+    assert!(with_values >= 15, "only {with_values} of 30 layouts determine a value");
     let mut all = Vec::new();
     for (lines, rank, per, unobs) in &stats {
+        if per.is_empty() {
+            assert!(!unobs.is_empty(), "a layout with nothing observable names nothing unobservable");
+            continue;
+        }
         let pooled = (per.iter().map(|r| r * r).sum::<f64>() / per.len() as f64).sqrt();
         println!(
             "{lines} lines, rank {rank}: {} parameters, pooled spread/σ {pooled:.3}; not observable: {}",
@@ -166,8 +181,8 @@ fn laser_identification_sigma_matches_spread_on_random_layouts() {
     s.sort_by(f64::total_cmp);
     let mean = all.iter().sum::<f64>() / all.len() as f64;
     println!(
-        "{} layouts, {} parameters × 60 draws: spread/σ mean {mean:.3}, p5 {:.3}, p95 {:.3}, min {:.3}, max {:.3} ({:.1} s)",
-        stats.len(),
+        "{} layouts with values, {} parameters × 60 draws: spread/σ mean {mean:.3}, p5 {:.3}, p95 {:.3}, min {:.3}, max {:.3} ({:.1} s)",
+        with_values,
         all.len(),
         s[s.len() / 20],
         s[s.len() * 19 / 20],
