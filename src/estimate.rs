@@ -582,71 +582,6 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
     Ok(out)
 }
 
-/// The accelerometer runs `<procedure>_*` of `sensor` as the estimator takes them: speed and direction
-/// from the run, sample rate from the time column, start position from the `x_cmd` column.
-pub fn accel_runs(
-    runs: &[RunRecord],
-    procedure: &str,
-    sensor: &str,
-) -> Result<Vec<vmt_estimators::accel_straightness::AccelRun>, String> {
-    let mut acc_runs = Vec::new();
-    for r in runs.iter().filter(|r| r.name.starts_with(&format!("{procedure}_"))) {
-        let RunData::TimeSeries { t, columns } = &r.data else { continue };
-        let a = columns
-            .iter()
-            .find(|(n, _)| n == sensor)
-            .ok_or_else(|| format!("run `{}` has no column `{sensor}`", r.name))?;
-        let x = &columns.iter().find(|(n, _)| n == "x_cmd").ok_or_else(|| "no x_cmd column".to_string())?.1;
-        if x.is_empty() {
-            return Err(format!("run `{}` has no samples", r.name));
-        }
-        let dt = crate::measurement::uniform_interval(t).map_err(|m| format!("run `{}`: {m}", r.name))?;
-        let (speed, rate, direction) = (r.feed.unwrap_or(0.0), 1.0 / dt, r.direction.unwrap_or(1));
-        acc_runs.push(vmt_estimators::accel_straightness::AccelRun {
-            speed,
-            sample_rate: rate,
-            // A reading is the mean acceleration over the sample interval before its time stamp (the
-            // simulated accelerometer's averaging anti-alias filter, vmt_sim::sensors): it belongs to the
-            // interval's middle, half a sample (v/(2·fs) in position) behind the commanded position.
-            start_position: x[0] - f64::from(direction) * speed / (2.0 * rate),
-            direction: i32::from(direction),
-            acceleration: a.1.clone(),
-        });
-    }
-    if acc_runs.is_empty() {
-        return Err(format!("no constant-velocity runs named `{procedure}_*`"));
-    }
-    Ok(acc_runs)
-}
-
-/// The estimator settings `vmt run` uses for an accelerometer (issue 4): SNR-weighted fusion in the cosine
-/// basis (no wrap-around leakage on non-periodic profiles), the sensor's AC coupling undone (its resolved
-/// `highpass` corner: 0.2 Hz for the piezo preset), and the gravity tilt separated when the sensitive axis
-/// is horizontal and across the motion (|world z| < 0.5 and |along-motion| < 0.5: a Y sensor on an X axis
-/// reads g·EAX). `method` "spatial_continuity"/"seed000" selects the seed's pipeline instead.
-pub fn accel_config(
-    spec: &vmt_sim::sensors::SensorSpec,
-    axis: &vmt_sim::machine::AxisModel,
-    method: Option<&str>,
-) -> Result<vmt_estimators::accel_straightness::StraightnessConfig, String> {
-    use vmt_estimators::accel_straightness::{FusionMethod, SpectralBasis, StraightnessConfig};
-    let method = match method.unwrap_or("snr_weighted") {
-        "snr_weighted" => FusionMethod::SnrWeighted,
-        "spatial_continuity" | "seed000" => FusionMethod::SpatialContinuity,
-        other => return Err(format!("method: expected \"snr_weighted\" or \"spatial_continuity\", got \"{other}\"")),
-    };
-    let resolved = spec.resolved();
-    let w = axis.home.rotation * (axis.axis_rotation * spec.unit_direction());
-    let across_horizontal = w.z.abs() < 0.5 && w.dot(axis.axis).abs() < 0.5;
-    Ok(StraightnessConfig {
-        method,
-        basis: SpectralBasis::Cosine,
-        ac_coupling_hz: resolved.highpass,
-        separate_gravity_tilt: across_horizontal,
-        ..Default::default()
-    })
-}
-
 /// The accelerometer straightness check of one sensor (seed 000 / SNR-weighted fusion).
 #[allow(clippy::too_many_arguments)]
 fn accel_straightness_check(
@@ -659,14 +594,15 @@ fn accel_straightness_check(
     method: Option<&str>,
     tolerance: f64,
 ) -> Result<(Check, Figure, Vec<Figure>), VmtError> {
-    use vmt_estimators::accel_straightness::{
-        estimate_straightness, integrate_curvature_cosine, zero_phase_highpass, SpectralBasis,
-    };
+    use crate::straightness::{parse_method, sensor_straightness, PassSelection};
+    use vmt_estimators::accel_straightness::{integrate_curvature_cosine, zero_phase_highpass, SpectralBasis};
     let bad = |m: String| VmtError::bad(&sc.source, format!("estimators ({procedure}/{sensor})"), m);
-    let acc_runs = accel_runs(runs, procedure, sensor).map_err(bad)?;
     let spec = sc.sensors.iter().find(|s| s.name == sensor).ok_or_else(|| bad("sensor not declared".into()))?;
-    let cfg = accel_config(spec, &sc.axis, method).map_err(bad)?;
-    let est = estimate_straightness(&acc_runs, &cfg).map_err(|e| bad(e.to_string()))?;
+    // The same adapter as `vmt straightness` on the measurement set this recording is written as.
+    let set = crate::simulate::to_measurement_set(sc, runs)?;
+    let method = parse_method(method.unwrap_or("snr_weighted")).map_err(bad)?;
+    let result = sensor_straightness(&set, &sc.source, sensor, PassSelection::Procedure(procedure), method)?;
+    let (acc_runs, est) = (result.runs, result.estimate);
     let r = rapier3d_f64::glamx::DVec3::from_array(spec.axis_position(&sc.axis).map_err(bad)?);
     let u = spec.unit_direction();
     let n = est.positions.len();

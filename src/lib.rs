@@ -14,5 +14,6 @@ pub mod output;
 pub mod report;
 pub mod scenario;
 pub mod simulate;
+pub mod straightness;
 pub mod study;
 pub mod units;

@@ -85,6 +85,22 @@ enum Command {
         #[arg(short, long)]
         out: PathBuf,
     },
+    /// Straightness (and roll from a horizontal accelerometer) from the constant-velocity passes of a
+    /// measurement set: recoverable band, Cramér–Rao bounds, profile CSV with standard errors.
+    Straightness {
+        data: PathBuf,
+        /// Write the estimate as a FORMAT.md §5 profile CSV with `_sigma` columns.
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// `fusion` (SNR-weighted, DESIGN.md §7) or `seed` (seed 000, spatial-frequency continuity).
+        #[arg(long, default_value = "fusion")]
+        method: String,
+        /// Accelerometers to use (default: every accelerometer with a column in a constant_velocity run).
+        #[arg(long, num_args = 1..)]
+        sensor: Vec<String>,
+        #[arg(long)]
+        json: bool,
+    },
     /// Stick-slip (crawl) index of the time-series runs (encoder method, docs/methods.md).
     Ssi {
         /// Measurement set directory (docs/formats.md).
@@ -211,6 +227,9 @@ fn main() -> ExitCode {
                     None => Err(vmt::error::VmtError::Usage("study needs --vary sensors.NAME.KEY=V1,V2,…".into())),
                 }
             }
+        }
+        Command::Straightness { data, out, method, sensor, json } => {
+            vmt::straightness::command(&data, out.as_deref(), &method, &sensor, json)
         }
         Command::Ssi { data, sensor, json } => vmt::cli::ssi(&data, sensor.as_deref(), json),
         Command::Friction { data, sensor, json } => vmt::cli::friction(&data, sensor.as_deref(), json),

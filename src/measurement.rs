@@ -62,6 +62,14 @@ pub struct Sensor {
     /// (a linear scale: closed loop; the motor's rotary encoder: semi-closed loop).
     #[serde(default)]
     pub closes_loop: bool,
+    /// Accelerometers: one-sided white-noise density ρ (m/s²/√Hz), if known (> 0). Optional manifest key
+    /// `noise_density`; `vmt straightness` estimates it from the records when absent.
+    #[serde(default)]
+    pub noise_density: Option<f64>,
+    /// Accelerometers: first-order AC-coupling (high-pass) corner of the sensor (Hz, ≥ 0; 0 or absent =
+    /// DC coupled). Optional manifest key `highpass`.
+    #[serde(default)]
+    pub highpass: Option<f64>,
 }
 
 /// One run of a measurement set (a `[[runs]]` entry with its CSV data).
@@ -552,8 +560,10 @@ fn parse_sensor(r: &TomlReader<'_>) -> Result<Sensor, VmtError> {
     if closes_loop && !matches!(kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) {
         return Err(r.bad("closes_loop", format!("only an encoder closes the position loop, not a `{kind_s}` sensor")));
     }
+    let noise_density = r.opt_f64("noise_density", "a one-sided noise density in m/s²/√Hz")?;
+    let highpass = r.opt_f64("highpass", "an AC-coupling corner frequency in Hz")?;
     r.deny_unknown()?;
-    Ok(Sensor { name, kind, axis, position, direction, sigma, closes_loop })
+    Ok(Sensor { name, kind, axis, position, direction, sigma, closes_loop, noise_density, highpass })
 }
 
 /// A run's manifest entry before its data is read.
@@ -653,6 +663,8 @@ pub fn from_iso230_2_dat(dat: &vmt_estimators::iso230_2::dat::DatFile) -> Measur
             direction: [1.0, 0.0, 0.0],
             sigma: None,
             closes_loop: false,
+            noise_density: None,
+            highpass: None,
         }],
         runs: vec![Run {
             name: "iso".into(),
@@ -763,6 +775,22 @@ pub fn validate_manifest(set: &MeasurementSet, file: &Path) -> Result<(), VmtErr
                 return bad(
                     format!("sensors[{i}].sigma"),
                     format!("expected a 1-sigma noise in SI units of the channel ≥ 0, got {}", fmt_num(sg)),
+                );
+            }
+        }
+        if let Some(rho) = s.noise_density {
+            if !(rho.is_finite() && rho > 0.0) {
+                return bad(
+                    format!("sensors[{i}].noise_density"),
+                    format!("expected a one-sided noise density > 0 (m/s²/√Hz), got {}", fmt_num(rho)),
+                );
+            }
+        }
+        if let Some(hp) = s.highpass {
+            if !(hp.is_finite() && hp >= 0.0) {
+                return bad(
+                    format!("sensors[{i}].highpass"),
+                    format!("expected an AC-coupling corner ≥ 0 (Hz), got {}", fmt_num(hp)),
                 );
             }
         }
@@ -1037,6 +1065,12 @@ fn manifest_text(set: &MeasurementSet) -> Result<String, VmtError> {
         }
         if x.closes_loop {
             s.push_str("closes_loop = true\n");
+        }
+        if let Some(rho) = x.noise_density {
+            s.push_str(&format!("noise_density = {}\n", fmt_toml_f64(rho)));
+        }
+        if let Some(hp) = x.highpass {
+            s.push_str(&format!("highpass = {}\n", fmt_toml_f64(hp)));
         }
     }
     for r in &set.runs {

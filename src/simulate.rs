@@ -153,6 +153,12 @@ fn reading_sigma(s: &SensorSpec) -> Option<f64> {
     (s.noise_density == 0.0).then(|| (s.sigma * s.sigma + s.resolution * s.resolution / 12.0).sqrt())
 }
 
+/// An accelerometer's resolved spec (preset values filled in), for the manifest's `noise_density` (the
+/// white part, m/s²/√Hz) and `highpass` (AC-coupling corner, Hz); None for other sensors.
+fn accel_spec(s: &SensorSpec) -> Option<SensorSpec> {
+    (s.kind == SensorKind::Accelerometer).then(|| s.resolved())
+}
+
 /// The measurement set (FORMAT.md §1) of a recording.
 pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<MeasurementSet, VmtError> {
     let axis = axis_letter(&sc.axis.joint);
@@ -167,6 +173,8 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
             direction: s.unit_direction().to_array(),
             sigma: reading_sigma(s),
             closes_loop: false,
+            noise_density: accel_spec(s).map(|r| r.noise_density).filter(|&rho| rho > 0.0),
+            highpass: accel_spec(s).map(|r| r.highpass),
         });
     }
     if let Some(chain) = &sc.chain {
@@ -182,6 +190,8 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
                     direction: line.beam().to_array(),
                     sigma: (spec.sigma > 0.0).then_some(spec.sigma),
                     closes_loop: false,
+                    noise_density: None,
+                    highpass: None,
                 });
             }
         }

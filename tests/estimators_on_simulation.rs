@@ -130,9 +130,11 @@ fn default_cv(preset: vmt_sim::sensors::AccelPreset, seeds: &[Option<u64>]) -> V
         let mut out = Vec::new();
         for sensor in ["acc_y", "acc_z"] {
             let spec = sc.sensors.iter().find(|s| s.name == sensor).unwrap();
-            let cfg = vmt::estimate::accel_config(spec, &sc.axis, None).unwrap();
-            let acc = vmt::estimate::accel_runs(&runs, "cv", sensor).unwrap();
-            let est = estimate_straightness(&acc, &cfg).unwrap();
+            let set = vmt::simulate::to_measurement_set(&sc, &runs).unwrap();
+            let cv = vmt::straightness::PassSelection::Procedure("cv");
+            let est = vmt::straightness::sensor_straightness(&set, &sc.source, sensor, cv, FusionMethod::SnrWeighted)
+                .unwrap()
+                .estimate;
             let r = DVec3::from_array(spec.axis_position(&sc.axis).unwrap());
             let u = spec.unit_direction();
             let curv: Vec<f64> = est
@@ -172,7 +174,7 @@ fn default_cv(preset: vmt_sim::sensors::AccelPreset, seeds: &[Option<u64>]) -> V
 /// so at most 2 may exceed 3 (P(≥ 3) ≈ 0.6 %) and none may exceed 4.
 /// Measured: one draw above 3 (acc_y, 250 mm, cos, 3.12 at the scenario's seed; the 16 other seeds at
 /// most 2.16 there); RMS per component 0.64–1.37, means within ±0.8. Before the readings were placed at
-/// the middle of their averaging interval (half a sample behind x_cmd, `vmt::estimate::accel_runs`)
+/// the middle of their averaging interval (half a sample behind x_cmd, `vmt::straightness::accel_passes`)
 /// acc_y at 80 mm sat at −3.2 on average (a 0.19 mm shift at 0.45 m/s).
 #[test]
 fn default_scenario_accelerometer_harmonics_are_efficient_over_noise_seeds() {

@@ -1033,6 +1033,104 @@ impl StraightnessEstimate {
     }
 }
 
+/// Cramér–Rao bound of one in-band basis function of an estimate ([`StraightnessEstimate::in_band_bounds`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BinBound {
+    /// Basis index `k` (wavelength `λ_k = P/k`, `P` the basis period).
+    pub k: usize,
+    /// Wavelength `λ_k` (m).
+    pub wavelength: f64,
+    /// Straightness amplitude bound per quadrature (m), [`StraightnessEstimate::harmonic_std`]; `None`
+    /// outside the straightness band.
+    pub straightness: Option<f64>,
+    /// Tilt amplitude bound per quadrature (rad), [`StraightnessEstimate::tilt_std`]; `None` outside the
+    /// tilt band or when the tilt was not separated.
+    pub tilt: Option<f64>,
+}
+
+/// Cramér–Rao bounds of everything an estimate contains: per basis function in its bands, for the in-band
+/// RMS, and per position.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InBandBounds {
+    /// Basis period `P` (m): the travel `L` for the DFT, `2L` for the cosine basis.
+    pub period: f64,
+    /// Every basis function inside the straightness or the tilt band, longest wavelength first.
+    pub bins: Vec<BinBound>,
+    /// Bound on the RMS over the travel of the in-band straightness error (m): `√(Σ_k c·σ_k²)`, with
+    /// `c = 1` for a DFT bin (two quadratures, each of mean square `σ_k²/2`) and `c = ½` for a cosine
+    /// coefficient (one quadrature). The least-squares line removal takes out about one of the `K` bins'
+    /// worth of variance, neglected.
+    pub straightness_rms: f64,
+    /// The same for the tilt profile (rad), when separated.
+    pub tilt_rms: Option<f64>,
+    /// Standard deviation (m) of the straightness estimate at each grid position, `√(Σ_k σ_k²·φ_k(x)²)`
+    /// (cosine basis, `φ_k(x_j) = cos(πk(j + ½)/M)`; DFT: `sin² + cos² = 1`, so `√(Σ σ_k²)`).
+    pub straightness_std: Vec<f64>,
+    /// The same for the tilt (rad), when separated.
+    pub tilt_std: Option<Vec<f64>>,
+}
+
+impl StraightnessEstimate {
+    /// The Cramér–Rao bounds of the estimate's in-band content ([`InBandBounds`]): the basis functions
+    /// `λ_k = P/k` inside `[band.min_wavelength, band.max_wavelength]` carry straightness, those inside
+    /// `[tilt_min_wavelength, tilt_max_wavelength]` the tilt. For the seed method the straightness values
+    /// are [`StraightnessEstimate::harmonic_std`]'s guide (not a bound).
+    pub fn in_band_bounds(&self) -> Result<InBandBounds> {
+        let (period, per_bin) = match self.basis {
+            SpectralBasis::Periodic => (self.travel, 1.0),
+            SpectralBasis::Cosine => (2.0 * self.travel, 0.5),
+        };
+        let m = self.positions.len();
+        let in_band = |lam: f64, lo: f64, hi: f64| lam >= lo && lam <= hi;
+        let tilt_band = match (self.tilt_min_wavelength, self.tilt_max_wavelength) {
+            (Some(lo), Some(hi)) if self.gravity_tilt_separated => Some((lo, hi)),
+            _ => None,
+        };
+        let shortest = tilt_band.map_or(self.band.min_wavelength, |(lo, _)| lo.min(self.band.min_wavelength));
+        let mut bins = Vec::new();
+        let (mut var_s, mut var_t) = (0.0, 0.0);
+        let mut std_s = vec![0.0; m];
+        let mut std_t = vec![0.0; m];
+        let mut k = 1usize;
+        while k <= m && period / k as f64 >= shortest {
+            let lam = period / k as f64;
+            let s = if !self.band.empty && in_band(lam, self.band.min_wavelength, self.band.max_wavelength) {
+                Some(self.harmonic_std(lam)?)
+            } else {
+                None
+            };
+            let t = match tilt_band {
+                Some((lo, hi)) if in_band(lam, lo, hi) => self.tilt_std(lam)?,
+                _ => None,
+            };
+            if s.is_some() || t.is_some() {
+                let phi2 = |j: usize| match self.basis {
+                    SpectralBasis::Periodic => 1.0,
+                    SpectralBasis::Cosine => (PI * k as f64 * (j as f64 + 0.5) / m as f64).cos().powi(2),
+                };
+                for j in 0..m {
+                    let p = phi2(j);
+                    std_s[j] += s.map_or(0.0, |v| v * v * p);
+                    std_t[j] += t.map_or(0.0, |v| v * v * p);
+                }
+                var_s += s.map_or(0.0, |v| per_bin * v * v);
+                var_t += t.map_or(0.0, |v| per_bin * v * v);
+                bins.push(BinBound { k, wavelength: lam, straightness: s, tilt: t });
+            }
+            k += 1;
+        }
+        let sep = tilt_band.is_some();
+        Ok(InBandBounds {
+            period,
+            bins,
+            straightness_rms: var_s.sqrt(),
+            tilt_rms: sep.then(|| var_t.sqrt()),
+            straightness_std: std_s.iter().map(|v| v.sqrt()).collect(),
+            tilt_std: sep.then(|| std_t.iter().map(|v| v.sqrt()).collect()),
+        })
+    }
+}
+
 fn speed_order(speeds: &[f64]) -> Vec<usize> {
     let mut order: Vec<usize> = (0..speeds.len()).collect();
     order.sort_by(|&a, &b| speeds[b].total_cmp(&speeds[a]));
