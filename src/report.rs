@@ -5,7 +5,6 @@ use crate::error::VmtError;
 use crate::estimate::{Estimates, CHECK_HEADER, CHECK_LEGEND};
 use crate::measurement::MeasurementSet;
 use crate::scenario::Scenario;
-use std::path::Path;
 
 mod conditions;
 pub mod iso;

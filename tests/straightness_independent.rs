@@ -177,6 +177,7 @@ fn sensor(with_tilt: bool, rho: Option<f64>) -> Sensor {
         position: [0.0, 0.0, 0.0],
         direction: if with_tilt { [0.0, 1.0, 0.0] } else { [0.0, 0.0, 1.0] },
         sigma: None,
+        closes_loop: false,
         noise_density: rho,
         highpass: None,
     }
