@@ -58,6 +58,10 @@ pub struct Sensor {
     pub direction: [f64; 3],
     /// 1-sigma noise in SI units of the channel, if known (≥ 0; 0 = noise-free).
     pub sigma: Option<f64>,
+    /// Optional `closes_loop = true` (encoders only): this encoder is the position loop's feedback
+    /// (a linear scale: closed loop; the motor's rotary encoder: semi-closed loop).
+    #[serde(default)]
+    pub closes_loop: bool,
 }
 
 /// One run of a measurement set (a `[[runs]]` entry with its CSV data).
@@ -526,8 +530,12 @@ fn parse_sensor(r: &TomlReader<'_>) -> Result<Sensor, VmtError> {
     let position = vec3(r, "position", "a measuring point in metres")?.unwrap_or([0.0, 0.0, 0.0]);
     let direction = vec3(r, "direction", "a sensitive direction")?.unwrap_or_else(|| axis_unit(axis));
     let sigma = r.opt_f64("sigma", "a 1-sigma noise in SI units of the channel")?;
+    let closes_loop = r.opt_bool("closes_loop")?.unwrap_or(false);
+    if closes_loop && !matches!(kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) {
+        return Err(r.bad("closes_loop", format!("only an encoder closes the position loop, not a `{kind_s}` sensor")));
+    }
     r.deny_unknown()?;
-    Ok(Sensor { name, kind, axis, position, direction, sigma })
+    Ok(Sensor { name, kind, axis, position, direction, sigma, closes_loop })
 }
 
 /// A run's manifest entry before its data is read.
@@ -613,6 +621,7 @@ pub fn from_iso230_2_dat(dat: &vmt_estimators::iso230_2::dat::DatFile) -> Measur
             position: [0.0; 3],
             direction: [1.0, 0.0, 0.0],
             sigma: None,
+            closes_loop: false,
         }],
         runs: vec![Run {
             name: "iso".into(),
@@ -987,6 +996,9 @@ fn manifest_text(set: &MeasurementSet) -> Result<String, VmtError> {
         s.push_str(&format!("direction = {}\n", toml_f64_array(&x.direction)));
         if let Some(sg) = x.sigma {
             s.push_str(&format!("sigma = {}\n", fmt_toml_f64(sg)));
+        }
+        if x.closes_loop {
+            s.push_str("closes_loop = true\n");
         }
     }
     for r in &set.runs {

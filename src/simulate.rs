@@ -166,6 +166,7 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
             position: s.axis_position(&sc.axis).map_err(|m| VmtError::bad(&sc.source, "sensors", m))?,
             direction: s.unit_direction().to_array(),
             sigma: reading_sigma(s),
+            closes_loop: false,
         });
     }
     if let Some(chain) = &sc.chain {
@@ -180,6 +181,7 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
                     position: line.point,
                     direction: line.beam().to_array(),
                     sigma: (spec.sigma > 0.0).then_some(spec.sigma),
+                    closes_loop: false,
                 });
             }
         }

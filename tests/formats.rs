@@ -16,7 +16,7 @@ use vmt_sim::effects::{
 use vmt_sim::profile::{Harmonic, Profile, RandomProfile, Term};
 
 fn sensor(name: &str, kind: SensorKind, sigma: Option<f64>) -> Sensor {
-    Sensor { name: name.to_string(), kind, axis: 'x', position: [0.0, 0.25, 1.1], direction: [1.0, 0.0, 0.0], sigma }
+    Sensor { name: name.to_string(), kind, axis: 'x', position: [0.0, 0.25, 1.1], direction: [1.0, 0.0, 0.0], sigma, closes_loop: false }
 }
 
 /// Random f64 values spread over many magnitudes and signs (all bits of the mantissa used), plus

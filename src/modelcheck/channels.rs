@@ -32,12 +32,18 @@ pub struct Channel {
     pub y: Vec<f64>,
     /// 1σ noise from the manifest (None or 0 → estimated).
     pub sigma: Option<f64>,
+    /// Encoder time series only: the transmission or following-error channel it is
+    /// ([`encoder::EncoderRole`]); its `x` is then the measured position.
+    pub encoder: Option<EncoderRole>,
 }
 
 impl Channel {
     /// Sensitivity to the drive terms (backlash, cyclic lead): u·axis for a laser, 1 for a linear
     /// scale, 0 for a rotary encoder.
     pub(crate) fn s_drive(&self) -> f64 {
+        if let Some(role) = &self.encoder {
+            return role.s_transmission();
+        }
         match self.kind {
             SensorKind::EncoderLinear => 1.0,
             _ if self.is_laser() => self.u[0],
@@ -57,6 +63,9 @@ impl Channel {
     /// Sensitivity to the feedback-chain terms (scale error, thermal, interpolation): u·axis for a
     /// laser, 0 for encoders (they read the chain itself).
     pub(crate) fn s_chain(&self) -> f64 {
+        if let Some(role) = &self.encoder {
+            return role.s_transmission();
+        }
         if self.is_laser() {
             self.u[0]
         } else {
@@ -76,6 +85,10 @@ impl Channel {
     /// (u·(ε × r) = ε·(r × u)), for lasers (to the motion itself) and accelerometers (to its mean
     /// second derivative, see [`Channel::motion_response`]); 0 for encoders and motor forces.
     pub(crate) fn s_motion(&self, name: EffectName) -> f64 {
+        // An encoder time series sees the screw's lead error (EXX) in its transmission.
+        if let Some(role) = &self.encoder {
+            return if name == EffectName::Positioning { role.s_transmission() } else { 0.0 };
+        }
         if !self.is_laser() && !self.is_accel() {
             return 0.0;
         }
@@ -120,7 +133,7 @@ impl Channel {
         if s == 0.0 {
             return 0.0;
         }
-        if self.is_laser() {
+        if self.is_laser() || self.encoder.is_some() {
             return s * value(self.x[i]);
         }
         let dt = sample_interval(self, i);
@@ -191,6 +204,7 @@ pub fn channels(set: &MeasurementSet, axis: char) -> (Vec<Channel>, Vec<String>)
                 v: vec![0.0; target.len()],
                 y: values.clone(),
                 sigma: s.sigma.filter(|v| *v > 0.0),
+                encoder: None,
             });
         }
     }
@@ -209,11 +223,17 @@ pub(crate) fn time_series_channels(
     let RunData::TimeSeries { t, columns } = &run.data else { return };
     let steady = matches!(run.procedure, Procedure::FrictionSweep | Procedure::ConstantVelocity);
     let x: Vec<f64> = run.data.column("x_cmd").map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; t.len()]);
+    if run.data.column("x_cmd").is_some() {
+        out.extend(encoder_channels(set, run, &x, t, notes));
+    }
     for (name, values) in columns {
         if name == "x_cmd" {
             continue;
         }
         let Some(s) = set.sensor(name) else { continue };
+        if matches!(s.kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) && run.data.column("x_cmd").is_some() {
+            continue;
+        }
         match (s.kind, steady, run.feed) {
             (SensorKind::Accelerometer, _, Some(feed)) if run.procedure == Procedure::ConstantVelocity => {
                 out.push(steady_channel(
@@ -233,7 +253,7 @@ pub(crate) fn time_series_channels(
             }
             _ => notes.push(format!(
                 "run `{}` ({}), sensor `{name}` ({}): not predicted (time series: only the motor force of \
-                 constant-velocity and friction-sweep runs with a `feed`)",
+                 constant-velocity and friction-sweep runs with a `feed`, and encoders against `x_cmd`)",
                 run.name,
                 run.procedure.as_str(),
                 s.kind.as_str()
@@ -271,5 +291,6 @@ pub(crate) fn steady_channel(
         v: vec![feed * dir; t.len()],
         y: values.to_vec(),
         sigma: s.sigma.filter(|v| *v > 0.0),
+        encoder: None,
     }
 }

@@ -250,6 +250,11 @@ pub(crate) fn describe(name: EffectName, sh: &Shape, c: &[f64], h: &[f64], start
             }
             let _ = start;
         }
+        EffectName::ServoLag => {
+            // Position-loop gain kv, 1/s; gain = 1 − velocity feed-forward fraction.
+            m.insert("kv".into(), h[0]);
+            m.insert("gain".into(), c[0]);
+        }
         EffectName::GravityTilt => {
             // Tilt of each sensor's sensitive axis, rad: Σ_k c_k·x^k (x in m), by sensor.
             for (k, v) in sh.coefs.iter().zip(c) {

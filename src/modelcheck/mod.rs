@@ -76,7 +76,13 @@
 //! residual, normalised by the manifest's σ or σ estimated from successive differences; a strong
 //! line of it can then win the resonance search).
 //!
-//! Not predicted: LuGre, squareness (needs two axes), servo lag (no effect on settled readings).
+//! Phase 4 (encoder logs, [`encoder`]): in a time series with `x_cmd`, a linear scale and a motor
+//! encoder give the channels scale − motor (the transmission: lead error, cyclic lead, backlash as
+//! play, the scale's interpolation error, all at the scale's reading) and motor − command (the
+//! following error of a first-order loop, `servo_lag`); one encoder alone gives encoder − command.
+//!
+//! Not predicted: LuGre, squareness (needs two axes), servo lag on point tables (no effect on
+//! settled readings).
 //! They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
 //! degree `order` (default 3) without its constant term (the offsets carry it).
 
@@ -104,6 +110,7 @@ const ALPHA_STEEL: f64 = 11.5e-6;
 
 mod add;
 mod channels;
+mod encoder;
 mod fit;
 mod report;
 mod signatures;
@@ -111,6 +118,7 @@ mod text;
 
 pub use add::*;
 pub use channels::*;
+pub use encoder::*;
 pub(crate) use fit::*;
 pub use report::*;
 pub use signatures::*;
@@ -141,6 +149,7 @@ mod tests {
             v: vec![0.1; m],
             y: vec![0.0; m],
             sigma: Some(1e-3),
+            encoder: None,
         }
     }
 

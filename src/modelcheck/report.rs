@@ -230,7 +230,11 @@ pub(crate) fn needs(name: EffectName) -> &'static str {
         EffectName::Roll | EffectName::Pitch | EffectName::Yaw => {
             "needs a laser whose measuring point is offset from the axis (an Abbe offset) across its direction"
         }
-        EffectName::Backlash | EffectName::CyclicLead => "needs a laser_linear or a linear scale in a positioning run",
+        EffectName::Backlash | EffectName::CyclicLead => {
+            "needs a laser_linear or a linear scale in a positioning run, or a linear scale and a motor encoder \
+             logged against x_cmd in a time series"
+        }
+        EffectName::ServoLag => "needs an encoder logged against the command (x_cmd) in a time series",
         _ => "needs a laser_linear along the axis in a positioning run",
     }
 }

@@ -193,8 +193,12 @@ impl<'a> Stack<'a> {
         let mut keys: Vec<String> = Vec::new();
         let mut group = Vec::with_capacity(chans.len());
         for c in chans {
+            // Encoders are homed once: one offset per encoder channel over all runs (so the
+            // passes both ways show the backlash and the lead error is one shape).
             let key = if c.kind == SensorKind::MotorForce {
                 format!("force/{}", c.sensor)
+            } else if c.encoder.is_some() {
+                format!("encoder/{}", c.sensor)
             } else {
                 format!("{}/{}", c.run, c.sensor)
             };
@@ -290,6 +294,7 @@ pub fn predicts(name: EffectName) -> bool {
                 | EffectName::Stribeck
                 | EffectName::Resonance
                 | EffectName::GravityTilt
+                | EffectName::ServoLag
         )
 }
 
@@ -370,7 +375,15 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
     let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<String>>();
     let (coefs, hypers): (Vec<String>, Vec<&'static str>) = match name {
         n if n.is_error_motion() => ((first_power..=order).map(|k| format!("c{k}")).collect(), vec![]),
+        // On encoder time series the backlash is a play whose take-up at a reversal depends on it.
+        EffectName::Backlash if st.chans.iter().any(|c| c.encoder.is_some()) => (s(&["value"]), vec!["play"]),
         EffectName::Backlash | EffectName::ScaleError => (s(&["value"]), vec![]),
+        EffectName::ServoLag => {
+            // The gain, and per following channel the decay of its unknown starting state.
+            let mut names = s(&["gain"]);
+            names.extend(following_channels(st).map(|j| format!("start_{j}")));
+            (names, vec!["kv"])
+        }
         EffectName::CyclicLead | EffectName::InterpolationError => (s(&["a_sin", "a_cos"]), vec!["period"]),
         EffectName::ThermalExpansion => (s(&["alpha_delta_t"]), vec!["tau"]),
         EffectName::ThermalDrift => (s(&["value"]), vec!["tau"]),
@@ -409,7 +422,34 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
                 })
                 .collect()
         }
-        EffectName::Backlash => vec![st.col(|c, i| -0.5 * c.d[i] * c.s_drive())],
+        EffectName::Backlash => {
+            // Encoder time series: the play p(t; b)/b (take-up b/|v| at a reversal); point tables: −d/2.
+            let b = h.first().copied().unwrap_or(0.0);
+            let mut col = Vec::with_capacity(st.n);
+            for c in st.chans {
+                match play_signature(c, b).filter(|_| b > 0.0) {
+                    Some(p) => col.extend(p),
+                    None => col.extend((0..c.y.len()).map(|i| -0.5 * c.d[i] * c.s_drive())),
+                }
+            }
+            vec![col]
+        }
+        EffectName::ServoLag => {
+            // Following error of a first-order loop, L_kv[input] − command, on following channels;
+            // the coefficient is 1 − the velocity feed-forward fraction.
+            let mut col = Vec::with_capacity(st.n);
+            for c in st.chans {
+                col.extend(following_error(c, h[0]));
+            }
+            // A log starts a finite time after the last change of speed: the loop's state then
+            // decays as e^{−kv·(t − t₀)} from an unknown start, one column per following channel.
+            let mut cols = vec![col];
+            for j in following_channels(st) {
+                let t0 = st.chans[j].t.first().copied().unwrap_or(0.0);
+                cols.push(st.col_j(|c, i, jj| if jj == j { (-h[0] * (c.t[i] - t0)).exp() } else { 0.0 }));
+            }
+            cols
+        }
         EffectName::ScaleError => vec![st.col(|c, i| c.x[i] * c.s_chain())],
         EffectName::CyclicLead | EffectName::InterpolationError => {
             let p = h[0];
@@ -600,7 +640,23 @@ pub(crate) fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
         (EffectParams::ErrorMotion(prof), n) => {
             st.col(|c, i| c.motion_response(i, n, |x| prof.value(x), |x| prof.eval3(x)[1]))
         }
-        (EffectParams::Backlash(b), _) => st.col(|c, i| -0.5 * c.d[i] * c.s_drive() * b.value),
+        (EffectParams::Backlash(b), _) => {
+            let mut col = Vec::with_capacity(st.n);
+            for c in st.chans {
+                match play_signature(c, b.value).filter(|_| b.value > 0.0) {
+                    Some(p) => col.extend(p.iter().map(|p| p * b.value)),
+                    None => col.extend((0..c.y.len()).map(|i| -0.5 * c.d[i] * c.s_drive() * b.value)),
+                }
+            }
+            col
+        }
+        (EffectParams::ServoLag(s), _) => {
+            let mut col = Vec::with_capacity(st.n);
+            for c in st.chans {
+                col.extend(following_error(c, s.kv));
+            }
+            col
+        }
         (EffectParams::ScaleError(s), _) => st.col(|c, i| c.s_chain() * s.value * c.x[i]),
         (EffectParams::CyclicLead(l), _) => st.col(|c, i| c.s_drive() * l.value(c.x[i])),
         (EffectParams::InterpolationError(ie), _) => st.col(|c, i| c.s_chain() * ie.value(c.x[i])),
@@ -641,6 +697,10 @@ pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>
         }
         // Screw leads 2–60 mm, only the periods these positions resolve (`period_resolvable`).
         (EffectName::CyclicLead, _) => (resolvable_only(st, log_grid(2e-3, 60e-3, 120)), true),
+        // Position-loop gains of machine tools, 2–500 1/s.
+        (_, "kv") => (log_grid(2.0, 500.0, 41), true),
+        // Play of a ball-screw transmission, 0.1–100 µm.
+        (_, "play") => (log_grid(0.1e-6, 100e-6, 31), true),
         // Stribeck velocities of machine-tool guideways: 10 µm/s to 100 mm/s.
         (_, "vs") => (log_grid(1e-5, 0.1, 41), true),
         // Structural modes of machine-tool columns and frames: 5–200 Hz, capped at 0.4× the slowest

@@ -1,0 +1,278 @@
+//! Encoder logs as channels of the model-check loop (issue 19): the physics of a ball-screw axis
+//! seen by its linear scale and its motor's rotary encoder in a time series.
+//!
+//! A position loop with gain kv (1/s) drives the motor so that its feedback follows the command;
+//! the screw carries the table through its lead error and its play (backlash b); the scale reads
+//! the table with its interpolation error. With x_m the motor position (linear equivalent), x_t
+//! the table:
+//!
+//! ```text
+//! ẋ_m = ff·ẋ_cmd + kv·(x_cmd − feedback)                 (P position loop, feed-forward ff)
+//! scale − motor = E(x) + A_l·sin(2πx/p_l + φ_l) + play_b(t) + A_i·sin(2πx_s/p_i + φ_i)
+//! ```
+//!
+//! The difference scale − motor isolates the transmission (lead error E, cyclic lead, the play)
+//! and the scale's interpolation error at the scale's own reading x_s, whatever encoder closes the
+//! loop; the loop encoder against the command is the following error. In a semi-closed loop
+//! (feedback = motor) motor − command = (1 − ff)·(L_kv[x_cmd] − x_cmd) with L_kv the first-order
+//! lag ([`first_order_lag`]); in a closed loop (feedback = scale) the motor follows the command
+//! less the transmission, x_m = L_kv[x_cmd − (scale − motor)], which the same function computes
+//! from the measured transmission.
+
+use super::*;
+
+/// What an encoder channel of a time series holds (module doc).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub enum EncoderRole {
+    /// scale − motor, m: the transmission and the scale's interpolation error, evaluated at the
+    /// scale's reading (the channel's `x`); `drive` is the motor reading at each sample (m), which
+    /// moves the nut through the play.
+    Transmission { drive: Vec<f64> },
+    /// An encoder − command, m: the following error of the loop, x = L_kv[input] − command;
+    /// `input` (m) is the command, less the measured transmission when the scale closes the loop;
+    /// `s_transmission` is 1 when the channel also carries the transmission (a lone scale in a
+    /// semi-closed loop), else 0.
+    Following { input: Vec<f64>, command: Vec<f64>, s_transmission: f64 },
+}
+
+impl EncoderRole {
+    /// Sensitivity to the transmission terms (lead error, cyclic lead, backlash, interpolation).
+    pub(crate) fn s_transmission(&self) -> f64 {
+        match self {
+            EncoderRole::Transmission { .. } => 1.0,
+            EncoderRole::Following { s_transmission, .. } => *s_transmission,
+        }
+    }
+}
+
+/// The signature of a first-order following error on channel `c`: L_kv[input] − command at each
+/// sample (0 on channels that are not [`EncoderRole::Following`]).
+pub(crate) fn following_error(c: &Channel, kv: f64) -> Vec<f64> {
+    match &c.encoder {
+        Some(EncoderRole::Following { input, command, .. }) => {
+            let lag = first_order_lag(&c.t, input, kv);
+            lag.iter().zip(command).map(|(a, b)| a - b).collect()
+        }
+        Some(EncoderRole::Transmission { .. }) | None => vec![0.0; c.y.len()],
+    }
+}
+
+/// Indices of the following-error channels of a stack.
+pub(crate) fn following_channels<'a>(st: &'a Stack) -> impl Iterator<Item = usize> + 'a {
+    st.chans.iter().enumerate().filter(|(_, c)| matches!(c.encoder, Some(EncoderRole::Following { .. }))).map(|(j, _)| j)
+}
+
+/// The play signature of channel `c` for a backlash `b` (m), divided by b (so that its
+/// coefficient is the backlash): p/b ∈ [−½, ½] from [`play`] driven by the motor reading (or, on a
+/// lone encoder, by its own reading), times the channel's transmission sensitivity; None for a
+/// channel that is not an encoder time series.
+pub(crate) fn play_signature(c: &Channel, b: f64) -> Option<Vec<f64>> {
+    let role = c.encoder.as_ref()?;
+    let drive: &[f64] = match role {
+        EncoderRole::Transmission { drive } => drive,
+        EncoderRole::Following { .. } => &c.x,
+    };
+    let s = role.s_transmission();
+    Some(play(drive, b).iter().map(|p| s * p / b).collect())
+}
+
+/// The encoder channels of one time-series run (module doc): with a linear scale and a motor
+/// encoder, the transmission channel scale − motor and the following channel motor − command;
+/// with one encoder, that encoder − command. Which encoder closes the loop comes from the
+/// manifest's optional `closes_loop`, else from the data (the loop's encoder follows the command
+/// smoothly: the smaller mean square of the second differences of encoder − command), said in a
+/// note. Returns the channels; notes are appended to `notes`.
+pub(crate) fn encoder_channels(
+    set: &MeasurementSet,
+    run: &crate::measurement::Run,
+    x_cmd: &[f64],
+    t: &[f64],
+    notes: &mut Vec<String>,
+) -> Vec<Channel> {
+    let RunData::TimeSeries { columns, .. } = &run.data else { return Vec::new() };
+    let find = |kind: SensorKind| {
+        columns.iter().find_map(|(n, v)| set.sensor(n).filter(|s| s.kind == kind).map(|s| (s, v.as_slice())))
+    };
+    let scale = find(SensorKind::EncoderLinear);
+    let motor = find(SensorKind::EncoderRotary);
+    let t0 = run.start_time.unwrap_or(0.0);
+    let times: Vec<f64> = t.iter().map(|v| t0 + v).collect();
+    let vel: Vec<f64> = (0..x_cmd.len())
+        .map(|i| {
+            let (a, b) = if i == 0 { (0, 1.min(x_cmd.len() - 1)) } else { (i - 1, i) };
+            if t[b] > t[a] {
+                (x_cmd[b] - x_cmd[a]) / (t[b] - t[a])
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let d: Vec<f64> = vel.iter().map(|v| if *v < 0.0 { -1.0 } else { 1.0 }).collect();
+    let channel = |sensor: String, kind: SensorKind, x: Vec<f64>, y: Vec<f64>, sigma: Option<f64>, role| Channel {
+        run: run.name.clone(),
+        sensor,
+        kind,
+        u: [1.0, 0.0, 0.0],
+        r: [0.0; 3],
+        x,
+        d: d.clone(),
+        cycle: vec![1; t.len()],
+        t: times.clone(),
+        v: vel.clone(),
+        y,
+        sigma,
+        encoder: Some(role),
+    };
+    let minus = |a: &[f64], b: &[f64]| -> Vec<f64> { a.iter().zip(b).map(|(x, y)| x - y).collect() };
+    match (scale, motor) {
+        (Some((ss, sv)), Some((ms, mv))) => {
+            let closed = if ss.closes_loop || ms.closes_loop {
+                ss.closes_loop
+            } else {
+                let rough = |v: &[f64]| -> f64 {
+                    let e = minus(v, x_cmd);
+                    e.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).powi(2)).sum::<f64>() / e.len().max(1) as f64
+                };
+                let closed = rough(sv) < rough(mv);
+                notes.push(format!(
+                    "run `{}`: the manifest does not say which encoder closes the position loop (`closes_loop =                      true`); the data say `{}` (its reading follows the command more smoothly)",
+                    run.name,
+                    if closed { &ss.name } else { &ms.name }
+                ));
+                closed
+            };
+            let trans = minus(sv, mv);
+            let sig = match (ss.sigma.filter(|v| *v > 0.0), ms.sigma.filter(|v| *v > 0.0)) {
+                (Some(a), Some(b)) => Some(a.hypot(b)),
+                _ => None,
+            };
+            let input = if closed { minus(x_cmd, &trans) } else { x_cmd.to_vec() };
+            vec![
+                channel(
+                    format!("{}-{}", ss.name, ms.name),
+                    SensorKind::EncoderLinear,
+                    sv.to_vec(),
+                    trans,
+                    sig,
+                    EncoderRole::Transmission { drive: mv.to_vec() },
+                ),
+                channel(
+                    format!("{}-x_cmd", ms.name),
+                    SensorKind::EncoderRotary,
+                    mv.to_vec(),
+                    minus(mv, x_cmd),
+                    ms.sigma.filter(|v| *v > 0.0),
+                    EncoderRole::Following { input, command: x_cmd.to_vec(), s_transmission: 0.0 },
+                ),
+            ]
+        }
+        (Some((s, v)), None) | (None, Some((s, v))) => {
+            let s_tr = if s.kind == SensorKind::EncoderLinear && !s.closes_loop { 1.0 } else { 0.0 };
+            vec![channel(
+                format!("{}-x_cmd", s.name),
+                s.kind,
+                v.to_vec(),
+                minus(v, x_cmd),
+                s.sigma.filter(|v| *v > 0.0),
+                EncoderRole::Following { input: x_cmd.to_vec(), command: x_cmd.to_vec(), s_transmission: s_tr },
+            )]
+        }
+        (None, None) => Vec::new(),
+    }
+}
+
+/// The response x(t) of ẋ = kv·(u(t) − x) to an input `u` sampled at times `t` and linear between
+/// samples, from the settled state of the first interval (x₀ = u₀ − s₀/kv, s₀ the first slope: the
+/// lag of a cruise). Exact per interval of length h with slope s = (u₁ − u₀)/h:
+///
+/// ```text
+/// x(h) = u₁ − s/kv + (x₀ − u₀ + s/kv)·e^{−kv·h}
+/// ```
+///
+/// kv in 1/s, t in s; returns x at every sample (the same unit as u). Non-increasing times hold x.
+pub fn first_order_lag(t: &[f64], u: &[f64], kv: f64) -> Vec<f64> {
+    let n = t.len().min(u.len());
+    let mut out = Vec::with_capacity(n);
+    if n == 0 {
+        return out;
+    }
+    let s0 = if n > 1 && t[1] > t[0] { (u[1] - u[0]) / (t[1] - t[0]) } else { 0.0 };
+    let mut x = u[0] - s0 / kv;
+    out.push(x);
+    for i in 1..n {
+        let h = t[i] - t[i - 1];
+        if h > 0.0 {
+            let s = (u[i] - u[i - 1]) / h;
+            x = u[i] - s / kv + (x - u[i - 1] + s / kv) * (-kv * h).exp();
+        }
+        out.push(x);
+    }
+    out
+}
+
+/// The play of a transmission with backlash `b` (m) driven by `drive` (the motor position at
+/// each sample, m): the table stands while the nut crosses the clearance, then is pushed. Returns
+/// p = x_table − x_nut ∈ [−b/2, b/2] at each sample:
+///
+/// ```text
+/// p_k = clamp(p_{k−1} − (drive_k − drive_{k−1}), −b/2, b/2),  p₀ = −sgn(first motion)·b/2
+/// ```
+///
+/// (the table starts pushed from the side of the first motion). A step of ∓b/2 with the direction
+/// of motion is the limit b → 0 of the shape; at a reversal the take-up lasts b/|v|.
+pub fn play(drive: &[f64], b: f64) -> Vec<f64> {
+    let half = 0.5 * b.abs();
+    let first = drive.windows(2).map(|w| w[1] - w[0]).find(|d| *d != 0.0).unwrap_or(0.0);
+    let mut p = -first.signum() * half;
+    let mut out = Vec::with_capacity(drive.len());
+    for (k, &x) in drive.iter().enumerate() {
+        if k > 0 {
+            p = (p - (x - drive[k - 1])).clamp(-half, half);
+        }
+        out.push(p);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A ramp u = v·t is followed with the lag v/kv from the start (settled), and a step response
+    /// decays as e^{−kv·t} (hand-worked values).
+    #[test]
+    fn first_order_lag_ramp_and_step() {
+        let t: Vec<f64> = (0..200).map(|i| i as f64 * 1e-3).collect();
+        let u: Vec<f64> = t.iter().map(|t| 0.05 * t).collect();
+        let x = first_order_lag(&t, &u, 25.0);
+        for (xi, ui) in x.iter().zip(&u) {
+            assert!((ui - xi - 0.05 / 25.0).abs() < 1e-15);
+        }
+        // A unit rise over one interval h from rest, then held: x(t₂) = 1 − (1 − e^{−kv·h})/(kv·h)
+        // (the ramp's response), then x(t) = 1 + (x(t₂) − 1)·e^{−kv·(t − t₂)}.
+        let (kv, h) = (25.0, 1e-3);
+        let u2: Vec<f64> = (0..200).map(|i| if i < 2 { 0.0 } else { 1.0 }).collect();
+        let x2 = first_order_lag(&t, &u2, kv);
+        let at2 = 1.0 - (1.0 - (-kv * h).exp()) / (kv * h);
+        let k = 100;
+        let want = 1.0 + (at2 - 1.0) * (-kv * (t[k] - t[2])).exp();
+        assert!((x2[k] - want).abs() < 1e-12, "{} vs {want}", x2[k]);
+    }
+
+    /// The play: pushed at −b/2 going up, the table stands for b of motor travel after a reversal,
+    /// then is pushed at +b/2.
+    #[test]
+    fn play_takes_up_the_clearance_at_a_reversal() {
+        let b = 8e-6;
+        let mut drive: Vec<f64> = (0..100).map(|k| k as f64 * 1e-6).collect();
+        drive.extend((1..100).map(|k| 99e-6 - k as f64 * 1e-6));
+        let p = play(&drive, b);
+        assert!((p[50] + 4e-6).abs() < 1e-15);
+        // Reversal at k = 99: the table stands (table = nut + p constant) for 8 µm of motor travel.
+        for k in 100..=107 {
+            let table = drive[k] + p[k];
+            assert!((table - (drive[99] + p[99])).abs() < 1e-12, "k {k}");
+        }
+        assert!((p[150] - 4e-6).abs() < 1e-15);
+    }
+}

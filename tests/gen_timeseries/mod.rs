@@ -1,0 +1,745 @@
+//! Independent generators of time-series measurement sets for the model-check loop (issue 19).
+//!
+//! Written from the physics, not from vmt's simulator, defaults or bases: the files are written by
+//! hand in the FORMAT.md §1 contract (manifest + CSV) with a starting model in FORMAT.md §2, and the
+//! truth of each draw goes to `truth.json` beside them for the assertions.
+//!
+//! **Accelerometer passes** ([`accel_set`]): a carriage driven at constant speed v along x over a
+//! guideway whose straightness E_y(x), E_z(x) is a random smooth profile (a Gaussian process of
+//! squared-exponential covariance, drawn by random Fourier features, several correlation lengths
+//! 40–400 mm) plus short-wave rail waviness (λ 4–40 mm). An accelerometer with sensitive direction
+//! u reads the mean over its sample interval Δt of the proper acceleration of its mounting point
+//! (a boxcar anti-alias filter, as an integrating ADC):
+//!
+//! ```text
+//! a_i = [v_u(t_i) − v_u(t_{i−1})]/Δt + g·u_y·EAX(x_i) + (u·m)·[q̇(t_i) − q̇(t_{i−1})]/Δt + b_u + n_i
+//! v_u(t) = v·E_u'(x(t))                         (velocity of the point across the axis)
+//! q̈ + 2ζω q̇ + ω² q = −m·a_base(t)             (one structural mode, shape m in the y–z plane)
+//! ```
+//!
+//! with g·EAX the gravity seen through the roll (a y accelerometer tilted by EAX about x reads
+//! g·sin EAX), n white with one-sided density ρ (σ = ρ·√(f_s/2) after the boxcar), b a bias. The
+//! mode is integrated exactly (zero-order hold of a_base on 1/(40 f_s) steps, matrix exponential of
+//! the damped oscillator in closed form).
+//!
+//! **Encoder logs** ([`encoder_set`]): a ball-screw axis under a discrete P position loop at the
+//! servo rate (kv, optional velocity feed-forward), fed back from the motor's rotary encoder
+//! (semi-closed loop) or from the linear scale (closed loop). Per servo tick h:
+//!
+//! ```text
+//! ẋ_m = ff·ẋ_cmd + kv·(x_cmd − feedback)        (motor, linear equivalent θ·lead/2π)
+//! nut = x_m + P(x_m) + A_l·sin(2π x_m/p_l + φ_l)  (screw: smooth lead error + cyclic lead)
+//! table: stands while |nut − x_t| ≤ b/2, else is pushed (play: backlash b)
+//! scale = x_t + A_i·sin(2π x_t/p_i + φ_i) + noise  (interpolation error at the table's position)
+//! motor = x_m + noise
+//! ```
+//!
+//! Runs: constant-velocity passes both ways (cruise only, logged after the transient settled),
+//! crawls at 5–80 mm/min and a slow reversal (a `free` run), logged at a divisor of the servo rate.
+
+#![allow(dead_code)]
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Standard gravity, m/s² (as DESIGN.md §2).
+pub const G: f64 = 9.80665;
+
+/// A seeded source of the draws.
+pub struct Draw(ChaCha8Rng);
+
+impl Draw {
+    pub fn new(seed: u64) -> Draw {
+        Draw(ChaCha8Rng::seed_from_u64(seed))
+    }
+    pub fn uniform(&mut self, a: f64, b: f64) -> f64 {
+        a + (b - a) * self.0.gen::<f64>()
+    }
+    pub fn log_uniform(&mut self, a: f64, b: f64) -> f64 {
+        self.uniform(a.ln(), b.ln()).exp()
+    }
+    pub fn normal(&mut self) -> f64 {
+        self.0.sample(StandardNormal)
+    }
+    pub fn sign(&mut self) -> f64 {
+        if self.0.gen::<bool>() {
+            1.0
+        } else {
+            -1.0
+        }
+    }
+    pub fn chance(&mut self, p: f64) -> bool {
+        self.0.gen::<f64>() < p
+    }
+}
+
+/// A profile f(x) = Σ a_j·cos(k_j·x + φ_j), m (or rad), with analytic derivatives.
+#[derive(Clone, Debug, Default)]
+pub struct Waves {
+    pub k: Vec<f64>,
+    pub a: Vec<f64>,
+    pub phi: Vec<f64>,
+}
+
+impl Waves {
+    /// A Gaussian process of standard deviation `rms` and squared-exponential correlation length
+    /// `ell` (m) by `n` random Fourier features (Rahimi & Recht 2007): k ~ N(0, 1/ℓ²), φ uniform,
+    /// amplitude rms·√(2/n).
+    pub fn smooth(d: &mut Draw, rms: f64, ell: f64, n: usize) -> Waves {
+        let mut w = Waves::default();
+        for _ in 0..n {
+            w.k.push(d.normal() / ell);
+            w.a.push(rms * (2.0 / n as f64).sqrt());
+            w.phi.push(d.uniform(0.0, std::f64::consts::TAU));
+        }
+        w
+    }
+    /// Rail waviness: `n` sinusoids of wavelengths log-uniform in [lo, hi] m, total RMS `rms`.
+    pub fn waviness(d: &mut Draw, rms: f64, lo: f64, hi: f64, n: usize) -> Waves {
+        let mut w = Waves::default();
+        for _ in 0..n {
+            w.k.push(std::f64::consts::TAU / d.log_uniform(lo, hi));
+            w.a.push(rms * (2.0 / n as f64).sqrt() * d.uniform(0.5, 1.5));
+            w.phi.push(d.uniform(0.0, std::f64::consts::TAU));
+        }
+        w
+    }
+    pub fn plus(mut self, o: &Waves) -> Waves {
+        self.k.extend(&o.k);
+        self.a.extend(&o.a);
+        self.phi.extend(&o.phi);
+        self
+    }
+    pub fn value(&self, x: f64) -> f64 {
+        (0..self.k.len()).map(|j| self.a[j] * (self.k[j] * x + self.phi[j]).cos()).sum()
+    }
+    pub fn d1(&self, x: f64) -> f64 {
+        (0..self.k.len()).map(|j| -self.a[j] * self.k[j] * (self.k[j] * x + self.phi[j]).sin()).sum()
+    }
+    pub fn d2(&self, x: f64) -> f64 {
+        (0..self.k.len()).map(|j| -self.a[j] * self.k[j] * self.k[j] * (self.k[j] * x + self.phi[j]).cos()).sum()
+    }
+}
+
+/// One sensor line of a manifest.
+pub struct SensorSpec {
+    pub name: String,
+    pub kind: &'static str,
+    pub position: [f64; 3],
+    pub direction: [f64; 3],
+    pub sigma: f64,
+    /// Extra manifest lines (optional keys).
+    pub extra: String,
+}
+
+/// One run: manifest keys and columns (name with unit suffix, values).
+pub struct RunSpec {
+    pub name: String,
+    pub procedure: &'static str,
+    pub feed: Option<f64>,
+    pub direction: Option<i8>,
+    pub start_time: f64,
+    pub columns: Vec<(String, Vec<f64>)>,
+}
+
+/// Writes a FORMAT.md §1 measurement set (manifest.toml + one CSV per run) to `dir`.
+pub fn write_set(dir: &Path, description: &str, sensors: &[SensorSpec], runs: &[RunSpec]) {
+    std::fs::create_dir_all(dir).unwrap();
+    let mut m = String::new();
+    writeln!(m, "format = \"vmt-measurements/1\"\ndescription = \"{description}\"\n").unwrap();
+    for s in sensors {
+        writeln!(
+            m,
+            "[[sensors]]\nname = \"{}\"\nkind = \"{}\"\naxis = \"x\"\nposition = [{:?}, {:?}, {:?}]\n\
+             direction = [{:?}, {:?}, {:?}]\nsigma = {:e}\n{}",
+            s.name,
+            s.kind,
+            s.position[0],
+            s.position[1],
+            s.position[2],
+            s.direction[0],
+            s.direction[1],
+            s.direction[2],
+            s.sigma,
+            s.extra
+        )
+        .unwrap();
+    }
+    for r in runs {
+        write!(
+            m,
+            "[[runs]]\nname = \"{}\"\nfile = \"{}.csv\"\nprocedure = \"{}\"\naxis = \"x\"\nstart_time = {:?}\n",
+            r.name, r.name, r.procedure, r.start_time
+        )
+        .unwrap();
+        if let Some(f) = r.feed {
+            writeln!(m, "feed = {f:?}").unwrap();
+        }
+        if let Some(d) = r.direction {
+            writeln!(m, "direction = {d}").unwrap();
+        }
+        m.push('\n');
+        let mut csv = String::new();
+        let header: Vec<&str> = r.columns.iter().map(|c| c.0.as_str()).collect();
+        writeln!(csv, "{}", header.join(",")).unwrap();
+        let n = r.columns[0].1.len();
+        for i in 0..n {
+            let row: Vec<String> = r.columns.iter().map(|c| format!("{:?}", c.1[i])).collect();
+            writeln!(csv, "{}", row.join(",")).unwrap();
+        }
+        std::fs::write(dir.join(format!("{}.csv", r.name)), csv).unwrap();
+    }
+    std::fs::write(dir.join("manifest.toml"), m).unwrap();
+}
+
+/// Writes a FORMAT.md §2 starting model: `effects` as `[effects.NAME]` tables with `fit = true`.
+pub fn write_model(path: &Path, effects: &[&str]) {
+    let mut m = String::from("format = \"vmt-model/1\"\naxis = \"x\"\n");
+    for e in effects {
+        writeln!(m, "[effects.{e}]\nfit = true").unwrap();
+    }
+    std::fs::write(path, m).unwrap();
+}
+
+// ------------------------------------------------------------------------------------------
+// Accelerometer passes.
+
+/// What an accelerometer draw hides from its starting model (straightness_y + straightness_z).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AccelHidden {
+    None,
+    Resonance,
+    Roll,
+    ResonanceAndRoll,
+}
+
+/// The truth of an accelerometer draw.
+#[derive(Clone, Debug)]
+pub struct AccelTruth {
+    pub hidden: AccelHidden,
+    /// Mode frequency, Hz, and damping ratio (when present).
+    pub mode: Option<(f64, f64)>,
+    /// Roll profile EAX(x), rad (when present).
+    pub roll: Option<Waves>,
+    /// Noise density, m/s²/√Hz, and the per-sample σ of each pass, m/s².
+    pub density: f64,
+    pub sigmas: Vec<f64>,
+    /// Speeds, m/s, and sample rates, Hz, of the passes.
+    pub speeds: Vec<f64>,
+    pub rates: Vec<f64>,
+    /// Total number of samples (all passes, both channels).
+    pub samples: usize,
+    /// χ² of the hidden effects' contribution (Σ((h − mean h)/σ)² over all samples).
+    pub hidden_chi2: f64,
+}
+
+/// Exact one-step map of q̈ + 2ζω q̇ + ω² q = −a (a constant over the step h): state (q, q̇).
+struct Oscillator {
+    phi: [[f64; 2]; 2],
+    gam: [f64; 2],
+}
+
+impl Oscillator {
+    /// Underdamped closed form: q(t) = e^{−ζωt}(A cos ω_d t + B sin ω_d t) − a/ω².
+    fn new(f: f64, zeta: f64, h: f64) -> Oscillator {
+        let w = std::f64::consts::TAU * f;
+        let wd = w * (1.0 - zeta * zeta).sqrt();
+        let e = (-zeta * w * h).exp();
+        let (c, s) = ((wd * h).cos(), (wd * h).sin());
+        let zw = zeta * w;
+        // Homogeneous solution from (q0, v0).
+        let phi = [
+            [e * (c + zw / wd * s), e * s / wd],
+            [-e * w * w / wd * s, e * (c - zw / wd * s)],
+        ];
+        // Particular part for a unit constant input −1: q_p = −1/ω²; deviation decays homogeneously.
+        let qp = -1.0 / (w * w);
+        let gam = [qp - (phi[0][0] * qp), -(phi[1][0] * qp)];
+        Oscillator { phi, gam }
+    }
+    fn step(&self, x: [f64; 2], a: f64) -> [f64; 2] {
+        [
+            self.phi[0][0] * x[0] + self.phi[0][1] * x[1] + self.gam[0] * a,
+            self.phi[1][0] * x[0] + self.phi[1][1] * x[1] + self.gam[1] * a,
+        ]
+    }
+}
+
+/// One accelerometer draw, written to `dir` (manifest.toml, pass_k.csv, model.toml). Hidden effects
+/// are drawn large enough to be seen: the χ² of their contribution (mean removed per channel) is at
+/// least `min_chi2`, redrawn otherwise (an effect below the noise cannot be diagnosed by anyone).
+pub fn accel_set(dir: &Path, seed: u64, hidden: AccelHidden, min_chi2: f64) -> AccelTruth {
+    let mut attempt = 0u64;
+    loop {
+        let t = accel_try(dir, seed.wrapping_mul(1_000_003).wrapping_add(attempt), hidden);
+        if hidden == AccelHidden::None || t.hidden_chi2 >= min_chi2 || attempt > 200 {
+            return t;
+        }
+        attempt += 1;
+    }
+}
+
+fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden) -> AccelTruth {
+    let mut d = Draw::new(seed);
+    let travel = d.uniform(0.25, 0.6);
+    let x_lo = d.uniform(-0.1, 0.3);
+    // Straightness: two or three smooth components of different correlation lengths + waviness.
+    let mut straight = Vec::new();
+    for _ in 0..2 {
+        let mut w = Waves::default();
+        let ncomp = if d.chance(0.5) { 2 } else { 3 };
+        for _ in 0..ncomp {
+            let ell = d.log_uniform(0.04, 0.4);
+            let rms = d.log_uniform(0.3e-6, 4e-6) * (ell / 0.2).sqrt();
+            w = w.plus(&Waves::smooth(&mut d, rms, ell, 8));
+        }
+        let wav_rms = d.log_uniform(0.01e-6, 0.08e-6);
+        let wav = Waves::waviness(&mut d, wav_rms, 0.004, 0.04, 4);
+        straight.push(w.plus(&wav));
+    }
+    let roll = matches!(hidden, AccelHidden::Roll | AccelHidden::ResonanceAndRoll).then(|| {
+        let ell = d.log_uniform(0.15, 0.6);
+        let rms = d.log_uniform(2e-6, 20e-6);
+        Waves::smooth(&mut d, rms, ell, 8)
+    });
+    let mode = matches!(hidden, AccelHidden::Resonance | AccelHidden::ResonanceAndRoll)
+        .then(|| (d.uniform(20.0, 80.0), d.log_uniform(0.005, 0.05)));
+    let theta = d.uniform(0.0, std::f64::consts::TAU);
+    let m_shape = [0.0, theta.cos(), theta.sin()];
+    // Noise density from a seismic piezo part (0.1 µg/√Hz) to a MEMS part (25 µg/√Hz).
+    let density = d.log_uniform(0.1e-6, 25e-6) * G;
+    let v_max = d.uniform(0.25, 0.5);
+    let speeds = [v_max * d.uniform(0.3, 0.45), v_max * d.uniform(0.55, 0.75), v_max];
+    // One rate for the three passes (so one σ per sensor holds), 250–600 Hz: above 2× the highest
+    // mode frequency, few enough samples for the low pass.
+    let rate = d.uniform(250.0, 600.0);
+    let sigma = density * (rate / 2.0).sqrt();
+    let sensors: Vec<SensorSpec> = [("acc_y", [0.0, 1.0, 0.0]), ("acc_z", [0.0, 0.0, 1.0])]
+        .iter()
+        .map(|(n, u)| SensorSpec {
+            name: n.to_string(),
+            kind: "accelerometer",
+            position: [d.uniform(-0.1, 0.1), d.uniform(-0.1, 0.1), d.uniform(0.02, 0.1)],
+            direction: *u,
+            sigma: 0.0,
+            extra: String::new(),
+        })
+        .collect();
+    let bias: Vec<f64> = (0..2).map(|_| d.normal() * 0.02).collect();
+    let mut runs = Vec::new();
+    let mut sigmas = Vec::new();
+    let mut rates = Vec::new();
+    let mut samples = 0;
+    let mut chi2 = 0.0;
+    let mut t0 = 0.0;
+    for (k, &v) in speeds.iter().enumerate() {
+        let dt = 1.0 / rate;
+        let dirn = if d.chance(0.5) { 1.0 } else { -1.0 };
+        let n = (travel / v * rate).floor() as usize;
+        let x0 = if dirn > 0.0 { x_lo } else { x_lo + travel };
+        // Mode state integrated from well before the first sample (a settled cruise: the transient
+        // from the start of motion has decayed, 1 s lead-in).
+        let sub = 40usize;
+        let h = dt / sub as f64;
+        let osc = mode.map(|(f, z)| Oscillator::new(f, z, h));
+        let lead = (1.0 / dt).ceil() as usize;
+        let mut q = [0.0, 0.0];
+        let x_at = |tt: f64| x0 + dirn * v * tt;
+        let base = |x: f64| [0.0, v * v * straight[0].d2(x), v * v * straight[1].d2(x)];
+        let mut tcol = Vec::with_capacity(n);
+        let mut xcol = Vec::with_capacity(n);
+        let mut ay = Vec::with_capacity(n);
+        let mut az = Vec::with_capacity(n);
+        let mut hy = Vec::with_capacity(n);
+        let mut hz = Vec::with_capacity(n);
+        let mut qd_prev = 0.0;
+        for i in 0..(lead + n) as i64 {
+            let ti = (i - lead as i64) as f64 * dt;
+            // Integrate the mode over (t_{i−1}, t_i].
+            if let Some(o) = &osc {
+                for s in 0..sub {
+                    let tm = ti - dt + (s as f64 + 0.5) * h;
+                    let b = base(x_at(tm));
+                    let a = m_shape[1] * b[1] + m_shape[2] * b[2];
+                    q = o.step(q, a);
+                }
+            }
+            let qdd_mean = (q[1] - qd_prev) / dt;
+            qd_prev = q[1];
+            if i < lead as i64 {
+                continue;
+            }
+            let x = x_at(ti);
+            let xp = x_at(ti - dt);
+            tcol.push(t0 + ti);
+            xcol.push(x);
+            // Interval mean of the guideway acceleration: (v·E'(x_i) − v·E'(x_{i−1}))/Δt, signed
+            // by the direction of travel (d/dt E(x(t)) = ẋ·E'(x)).
+            let geo = |w: &Waves| dirn * v * (w.d1(x) - w.d1(xp)) / dt;
+            let gy = roll.as_ref().map_or(0.0, |r| G * r.value(x));
+            let my = m_shape[1] * qdd_mean;
+            let mz = m_shape[2] * qdd_mean;
+            hy.push(gy + my);
+            hz.push(mz);
+            ay.push(geo(&straight[0]) + gy + my + bias[0] + sigma * d.normal());
+            az.push(geo(&straight[1]) + mz + bias[1] + sigma * d.normal());
+        }
+        for hcol in [&hy, &hz] {
+            let mean = hcol.iter().sum::<f64>() / hcol.len() as f64;
+            chi2 += hcol.iter().map(|v| ((v - mean) / sigma).powi(2)).sum::<f64>();
+        }
+        samples += 2 * n;
+        let dur = n as f64 * dt;
+        runs.push(RunSpec {
+            name: format!("pass_{}", k + 1),
+            procedure: "constant_velocity",
+            feed: Some(v),
+            direction: Some(dirn as i8),
+            start_time: 0.0,
+            columns: vec![
+                ("t".into(), tcol.iter().map(|v| v - t0).collect()),
+                ("x_cmd[mm]".into(), xcol.iter().map(|v| v * 1e3).collect()),
+                ("acc_y".into(), ay),
+                ("acc_z".into(), az),
+            ],
+        });
+        runs.last_mut().unwrap().start_time = t0;
+        t0 += dur + 5.0;
+        sigmas.push(sigma);
+        rates.push(rate);
+    }
+    let sensors: Vec<SensorSpec> = sensors.into_iter().map(|s| SensorSpec { sigma, ..s }).collect();
+    let _ = std::fs::remove_dir_all(dir);
+    write_set(dir, "independent accelerometer passes (issue 19 generator)", &sensors, &runs);
+    write_model(&dir.join("model.toml"), &["straightness_y", "straightness_z"]);
+    AccelTruth {
+        hidden,
+        mode,
+        roll,
+        density,
+        sigmas,
+        speeds: speeds.to_vec(),
+        rates,
+        samples,
+        hidden_chi2: chi2,
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Encoder logs.
+
+/// What an encoder draw hides from its starting model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EncoderHidden {
+    /// The model holds everything present (positioning + servo_lag fitted).
+    None,
+    InterpolationError,
+    CyclicLead,
+    Backlash,
+    /// The model is `positioning` alone; the following error is missing.
+    ServoLag,
+    /// Cyclic lead and backlash together.
+    CyclicLeadAndBacklash,
+}
+
+/// Feedback of the position loop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Loop {
+    SemiClosed,
+    Closed,
+}
+
+/// The truth of an encoder draw.
+#[derive(Clone, Debug)]
+pub struct EncoderTruth {
+    pub hidden: EncoderHidden,
+    pub feedback: Loop,
+    pub kv: f64,
+    pub lead: f64,
+    /// Cyclic lead amplitude, m (0 when absent).
+    pub cyclic_amplitude: f64,
+    /// Interpolation period, m, and amplitude, m (0 when absent).
+    pub interp_period: f64,
+    pub interp_amplitude: f64,
+    pub backlash: f64,
+    pub sigma_scale: f64,
+    pub sigma_motor: f64,
+    pub samples: usize,
+}
+
+/// One encoder draw, written to `dir` (manifest.toml, runs, model.toml).
+pub fn encoder_set(dir: &Path, seed: u64, hidden: EncoderHidden) -> EncoderTruth {
+    let mut d = Draw::new(seed ^ 0x9e37_79b9_7f4a_7c15);
+    let feedback = if d.chance(0.5) { Loop::SemiClosed } else { Loop::Closed };
+    let kv = d.uniform(15.0, 60.0);
+    let lead = d.log_uniform(4e-3, 25e-3);
+    let travel = d.uniform(0.2, 0.6);
+    let x_lo = d.uniform(-0.05, 0.2);
+    let ell = d.log_uniform(0.08, 0.5);
+    let pos_rms = d.log_uniform(1e-6, 8e-6);
+    let pos_err = Waves::smooth(&mut d, pos_rms, ell, 10);
+    let slope = d.uniform(-20e-6, 20e-6);
+    let has_cyclic = matches!(hidden, EncoderHidden::CyclicLead | EncoderHidden::CyclicLeadAndBacklash);
+    let cyc_a = if has_cyclic { d.log_uniform(0.3e-6, 3e-6) } else { 0.0 };
+    let cyc_phi = d.uniform(0.0, std::f64::consts::TAU);
+    let has_interp = hidden == EncoderHidden::InterpolationError;
+    let ip = d.log_uniform(8e-6, 60e-6);
+    let ia = if has_interp { d.log_uniform(30e-9, 300e-9) } else { 0.0 };
+    let iphi = d.uniform(0.0, std::f64::consts::TAU);
+    let has_backlash = matches!(hidden, EncoderHidden::Backlash | EncoderHidden::CyclicLeadAndBacklash);
+    let b = if has_backlash { d.log_uniform(2e-6, 20e-6) } else { 0.0 };
+    let servo_rate: f64 = [1000.0, 2000.0, 4000.0][(d.uniform(0.0, 2.999)) as usize];
+    let h = 1.0 / servo_rate;
+    let sigma_scale = d.log_uniform(3e-9, 20e-9);
+    let sigma_motor = d.log_uniform(3e-9, 20e-9);
+    let lead_err = |xm: f64| pos_err.value(xm) + slope * xm + cyc_a * (std::f64::consts::TAU * xm / lead + cyc_phi).sin();
+    let interp = |xt: f64| ia * (std::f64::consts::TAU * xt / ip + iphi).sin();
+    // Command profiles: (time, position, velocity) per servo tick, with the logged window.
+    struct Plan {
+        name: String,
+        procedure: &'static str,
+        feed: Option<f64>,
+        direction: Option<i8>,
+        cmd: Vec<(f64, f64)>,
+        log_from: usize,
+        log_to: usize,
+        every: usize,
+    }
+    let mut plans: Vec<Plan> = Vec::new();
+    let v_pass = d.uniform(0.02, 0.12);
+    let acc = d.uniform(0.5, 2.0);
+    let log_rate: f64 = [250.0_f64, 500.0, 1000.0][(d.uniform(0.0, 2.999)) as usize].min(servo_rate);
+    let every = (servo_rate / log_rate).round() as usize;
+    // A trapezoidal move from a to b at speed v (acceleration acc), 0.3 s still before and after.
+    let trapezoid = |a: f64, b: f64, v: f64| -> (Vec<(f64, f64)>, usize, usize) {
+        let dist = (b - a).abs();
+        let s = (b - a).signum();
+        let ta = v / acc;
+        let tc = (dist - v * ta) / v;
+        let total = 0.3 + 2.0 * ta + tc + 0.3;
+        let n = (total / h).ceil() as usize;
+        let mut c = Vec::with_capacity(n);
+        for i in 0..n {
+            let t = i as f64 * h - 0.3;
+            let (p, vel) = if t < 0.0 {
+                (0.0, 0.0)
+            } else if t < ta {
+                (0.5 * acc * t * t, acc * t)
+            } else if t < ta + tc {
+                (0.5 * v * ta + v * (t - ta), v)
+            } else if t < 2.0 * ta + tc {
+                let u = 2.0 * ta + tc - t;
+                (dist - 0.5 * acc * u * u, acc * u)
+            } else {
+                (dist, 0.0)
+            };
+            c.push((a + s * p, s * vel));
+        }
+        // Cruise logged after five loop time constants of settling.
+        let from = ((0.3 + ta + 5.0 / kv) / h).ceil() as usize;
+        let to = ((0.3 + ta + tc) / h).floor() as usize;
+        (c, from, to.max(from + 1))
+    };
+    let pass_samples = d.uniform(1500.0, 3000.0);
+    let first_dir = d.sign();
+    for (k, dirn) in [first_dir, -first_dir].into_iter().enumerate() {
+        let (a, bb) = if dirn > 0.0 { (x_lo, x_lo + travel) } else { (x_lo + travel, x_lo) };
+        let (cmd, from, to) = trapezoid(a, bb, v_pass);
+        plans.push(Plan {
+            name: format!("pass_{}", k + 1),
+            procedure: "constant_velocity",
+            feed: Some(v_pass),
+            direction: Some(dirn as i8),
+            cmd,
+            log_from: from,
+            log_to: to,
+            // A controller trace of 1500–3000 samples per pass (a divisor of the servo rate).
+            every: ((to - from) as f64 / pass_samples).round().max(1.0) as usize,
+        });
+    }
+    // Crawls: 5–80 mm/min over 1–2 s, approached in the direction of travel.
+    for k in 0..2 {
+        let v = d.log_uniform(5.0, 80.0) / 60e3;
+        let dirn = d.sign();
+        let dur = d.uniform(1.0, 2.0);
+        let start = x_lo + d.uniform(0.2, 0.8) * travel;
+        let mut cmd = Vec::new();
+        let lead_in = 0.5 + 5.0 / kv;
+        let n = ((lead_in + dur) / h).ceil() as usize;
+        for i in 0..n {
+            let t = i as f64 * h;
+            cmd.push((start + dirn * v * t, dirn * v));
+        }
+        plans.push(Plan {
+            name: format!("crawl_{}", k + 1),
+            procedure: "crawl",
+            feed: Some(v),
+            direction: Some(dirn as i8),
+            cmd,
+            log_from: (lead_in / h).ceil() as usize,
+            log_to: n,
+            every,
+        });
+    }
+    // A slow reversal: x = c + D·sin(πt/T), D 0.5–3 mm, T 1–4 s, after a lead-in at its start speed.
+    {
+        let dd = d.uniform(0.5e-3, 3e-3);
+        let tt = d.uniform(1.0, 4.0);
+        let c0 = x_lo + 0.5 * travel;
+        let v0 = dd * std::f64::consts::PI / tt;
+        let lead_in = 0.5 + 5.0 / kv;
+        let n = ((lead_in + tt) / h).ceil() as usize;
+        let mut cmd = Vec::new();
+        for i in 0..n {
+            let t = i as f64 * h - lead_in;
+            if t < 0.0 {
+                cmd.push((c0 + v0 * t, v0));
+            } else {
+                let w = std::f64::consts::PI / tt;
+                cmd.push((c0 + dd * (w * t).sin(), dd * w * (w * t).cos()));
+            }
+        }
+        plans.push(Plan {
+            name: "reversal".into(),
+            procedure: "free",
+            feed: None,
+            direction: None,
+            log_from: (lead_in / h).ceil() as usize,
+            log_to: n,
+            cmd,
+            every,
+        });
+    }
+    // Simulate each plan from a settled state (motor at the command, the table pushed from the
+    // side of the first motion).
+    let mut runs = Vec::new();
+    let mut samples = 0;
+    let mut t0 = 0.0;
+    let loop_key = match feedback {
+        Loop::SemiClosed => "motor",
+        Loop::Closed => "scale",
+    };
+    for p in &plans {
+        let (x_start, v_start) = p.cmd[0];
+        let first_v = p.cmd.iter().map(|c| c.1).find(|v| *v != 0.0).unwrap_or(1.0);
+        let mut xm = x_start - v_start / kv;
+        let mut xt = xm + lead_err(xm) - first_v.signum() * b / 2.0;
+        let (mut tc, mut xc, mut sc, mut mc) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for (i, &(xcmd, vcmd)) in p.cmd.iter().enumerate() {
+            // Readings at the tick (before the loop's output acts over the next period).
+            let scale = xt + interp(xt);
+            if i >= p.log_from && i < p.log_to && (i - p.log_from) % p.every == 0 {
+                tc.push(i as f64 * h);
+                xc.push(xcmd);
+                sc.push(scale + sigma_scale * d.normal());
+                mc.push(xm + sigma_motor * d.normal());
+            }
+            let fb = match feedback {
+                Loop::SemiClosed => xm,
+                Loop::Closed => scale,
+            };
+            let vel = kv * (xcmd - fb);
+            // The motor moves at `vel` over the tick; the table follows the nut through the play.
+            let sub = 8;
+            for _ in 0..sub {
+                xm += vel * h / sub as f64;
+                let nut = xm + lead_err(xm);
+                if nut - xt > b / 2.0 {
+                    xt = nut - b / 2.0;
+                } else if nut - xt < -b / 2.0 {
+                    xt = nut + b / 2.0;
+                }
+            }
+            let _ = vcmd;
+        }
+        let t_first = tc[0];
+        samples += 2 * tc.len();
+        let dur = tc.last().unwrap() - t_first;
+        runs.push(RunSpec {
+            name: p.name.clone(),
+            procedure: p.procedure,
+            feed: p.feed,
+            direction: p.direction,
+            start_time: t0,
+            columns: vec![
+                ("t".into(), tc.iter().map(|t| t - t_first).collect()),
+                ("x_cmd[mm]".into(), xc.iter().map(|v| v * 1e3).collect()),
+                ("scale[um]".into(), sc.iter().map(|v| v * 1e6).collect()),
+                ("motor[um]".into(), mc.iter().map(|v| v * 1e6).collect()),
+            ],
+        });
+        t0 += dur + 2.0;
+    }
+    let sensors = vec![
+        SensorSpec {
+            name: "scale".into(),
+            kind: "encoder_linear",
+            position: [0.0; 3],
+            direction: [1.0, 0.0, 0.0],
+            sigma: sigma_scale,
+            extra: if loop_key == "scale" { "closes_loop = true\n".into() } else { String::new() },
+        },
+        SensorSpec {
+            name: "motor".into(),
+            kind: "encoder_rotary",
+            position: [0.0; 3],
+            direction: [1.0, 0.0, 0.0],
+            sigma: sigma_motor,
+            extra: if loop_key == "motor" { "closes_loop = true\n".into() } else { String::new() },
+        },
+    ];
+    let _ = std::fs::remove_dir_all(dir);
+    write_set(dir, "independent encoder logs of a ball-screw axis (issue 19 generator)", &sensors, &runs);
+    let model: &[&str] = match hidden {
+        EncoderHidden::ServoLag => &["positioning"],
+        _ => &["positioning", "servo_lag"],
+    };
+    write_model(&dir.join("model.toml"), model);
+    EncoderTruth {
+        hidden,
+        feedback,
+        kv,
+        lead,
+        cyclic_amplitude: cyc_a,
+        interp_period: ip,
+        interp_amplitude: ia,
+        backlash: b,
+        sigma_scale,
+        sigma_motor,
+        samples,
+    }
+}
+
+/// The closed-form step map of the generator's mode against a fine RK4 of the same oscillator
+/// under a constant input, over 0.5 s (relative error ≤ 1e-8: RK4 at h/1000 is ~1e-12 accurate).
+#[test]
+fn oscillator_step_map_matches_rk4() {
+    let (f, zeta, h) = (37.3, 0.021, 1.3e-4);
+    let o = Oscillator::new(f, zeta, h);
+    let w = std::f64::consts::TAU * f;
+    let a = 0.7;
+    let mut x = [1e-4, -2e-3];
+    let mut y = x;
+    let n = 1000;
+    let hs = h / n as f64;
+    for _ in 0..(0.5 / h) as usize {
+        x = o.step(x, a);
+        for _ in 0..n {
+            let dv = |s: [f64; 2]| [s[1], -a - 2.0 * zeta * w * s[1] - w * w * s[0]];
+            let k1 = dv(y);
+            let k2 = dv([y[0] + 0.5 * hs * k1[0], y[1] + 0.5 * hs * k1[1]]);
+            let k3 = dv([y[0] + 0.5 * hs * k2[0], y[1] + 0.5 * hs * k2[1]]);
+            let k4 = dv([y[0] + hs * k3[0], y[1] + hs * k3[1]]);
+            for j in 0..2 {
+                y[j] += hs / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+            }
+        }
+    }
+    for j in 0..2 {
+        let scale = if j == 0 { 1e-4 } else { 1e-4 * w };
+        assert!((x[j] - y[j]).abs() <= 1e-8 * scale, "component {j}: {} vs {}", x[j], y[j]);
+    }
+}

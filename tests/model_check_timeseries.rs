@@ -1,0 +1,293 @@
+//! The model-check loop on time series (issue 19), tested on data from independent generators
+//! (`tests/gen_timeseries`): accelerometer passes and encoder logs of a ball-screw axis, written in
+//! the FORMAT.md contract and run through the `vmt` binary (`diagnose --json`, `add`,
+//! `compare --json`) over many draws in parallel; results are rates over draws.
+
+mod gen_timeseries;
+
+use gen_timeseries::*;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn vmt(args: &[&str]) -> Result<serde_json::Value, String> {
+    let out = Command::new(env!("CARGO_BIN_EXE_vmt")).args(args).output().map_err(|e| e.to_string())?;
+    if !out.status.success() {
+        return Err(format!("exit {:?}: {}", out.status.code(), String::from_utf8_lossy(&out.stderr).trim()));
+    }
+    serde_json::from_slice(&out.stdout).map_err(|e| e.to_string())
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The outcome of one draw through the loop: diagnose the starting model, add the first candidate
+/// (when one is significant), compare again.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub nrms_before: f64,
+    /// First entry: (effect, verdict, params).
+    pub first: Option<(String, String, serde_json::Value)>,
+    pub any_significant: bool,
+    pub nrms_after: Option<f64>,
+    /// Fitted parameters of the added effect after `add` + `compare`.
+    pub fitted_after: Option<serde_json::Value>,
+    pub seconds: f64,
+    pub error: Option<String>,
+}
+
+/// Runs the loop on the set in `dir` (with `dir/model.toml`): diagnose; when `add` and the first
+/// candidate is significant, `vmt add --from-diagnosis` then compare.
+pub fn run_loop(dir: &Path, add: bool) -> Outcome {
+    let t0 = std::time::Instant::now();
+    let model = dir.join("model.toml");
+    let mut o = Outcome {
+        nrms_before: f64::NAN,
+        first: None,
+        any_significant: false,
+        nrms_after: None,
+        fitted_after: None,
+        seconds: 0.0,
+        error: None,
+    };
+    let diag_path = dir.join("diagnosis.json");
+    let d = match vmt(&["diagnose", "--model", s(&model), "--data", s(dir), "--json"]) {
+        Ok(d) => d,
+        Err(e) => {
+            o.error = Some(e);
+            o.seconds = t0.elapsed().as_secs_f64();
+            return o;
+        }
+    };
+    std::fs::write(&diag_path, d.to_string()).unwrap();
+    o.nrms_before = d["normalized_rms"].as_f64().unwrap_or(f64::NAN);
+    let ranking = d["ranking"].as_array().cloned().unwrap_or_default();
+    o.any_significant = ranking.iter().any(|r| r["verdict"] == "significant");
+    if let Some(r) = ranking.first() {
+        o.first = Some((
+            r["effect"].as_str().unwrap_or("").to_string(),
+            r["verdict"].as_str().unwrap_or("").to_string(),
+            r["params"].clone(),
+        ));
+    }
+    if add {
+        if let Some((eff, verdict, _)) = &o.first {
+            if verdict == "significant" {
+                let m2 = dir.join("model2.toml");
+                let added = Command::new(env!("CARGO_BIN_EXE_vmt"))
+                    .args(["add", "--model", s(&model), "--effect", eff, "--from-diagnosis", "--data", s(dir)])
+                    .args(["-o", s(&m2)])
+                    .output()
+                    .unwrap();
+                if added.status.success() {
+                    match vmt(&["compare", "--model", s(&m2), "--data", s(dir), "--json"]) {
+                        Ok(c) => {
+                            o.nrms_after = c["normalized_rms"].as_f64();
+                            o.fitted_after = Some(c["fitted"][eff.as_str()].clone());
+                        }
+                        Err(e) => o.error = Some(e),
+                    }
+                } else {
+                    o.error = Some(String::from_utf8_lossy(&added.stderr).to_string());
+                }
+            }
+        }
+    }
+    o.seconds = t0.elapsed().as_secs_f64();
+    o
+}
+
+fn workdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("vmt_ts_{tag}_{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Percentage helper.
+fn rate(k: usize, n: usize) -> f64 {
+    100.0 * k as f64 / n.max(1) as f64
+}
+
+// ------------------------------------------------------------------------------------------
+// The generators themselves (fast, always run).
+
+/// The encoder generator's physics, checked on its own files: in a semi-closed loop without
+/// feed-forward the motor lags the command by v/kv in a settled cruise (P loop: ẋ = kv·e), and the
+/// scale shows the same lag plus the screw's error (no play in a one-way cruise).
+#[test]
+fn encoder_generator_following_error_is_v_over_kv() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut checked = 0;
+    for seed in 0..8u64 {
+        let dir = tmp.path().join(format!("e{seed}"));
+        let t = encoder_set(&dir, seed, EncoderHidden::None);
+        let text = std::fs::read_to_string(dir.join("pass_1.csv")).unwrap();
+        let rows: Vec<Vec<f64>> =
+            text.lines().skip(1).map(|l| l.split(',').map(|c| c.parse().unwrap()).collect()).collect();
+        let man = std::fs::read_to_string(dir.join("manifest.toml")).unwrap();
+        let feed: f64 = man.lines().find(|l| l.starts_with("feed")).unwrap()[7..].trim().parse().unwrap();
+        // Motor − command, µm: mean over the cruise.
+        let lag: f64 = rows.iter().map(|r| r[3] - r[1] * 1e3).sum::<f64>() / rows.len() as f64;
+        let dirn = if rows.last().unwrap()[1] > rows[0][1] { 1.0 } else { -1.0 };
+        let expect = -dirn * feed / t.kv * 1e6;
+        if t.feedback == Loop::SemiClosed {
+            // 0.5 %: the discrete loop's lag differs from the continuous v/kv by kv·h/2 ≤ 3 %·… at
+            // 1 kHz and kv 60 (half a tick of velocity): v·h/2 against v/kv.
+            let tol = 0.5e-2 * expect.abs() + 0.5 * feed * 1e-3 * 1e6;
+            assert!((lag - expect).abs() <= tol, "seed {seed}: lag {lag:.3} µm, v/kv {expect:.3} µm");
+            checked += 1;
+        }
+    }
+    assert!(checked >= 2, "semi-closed draws checked: {checked}");
+}
+
+/// An accelerometer set of the generator is read by vmt (FORMAT.md §1) and its hidden effects are
+/// drawn visible (χ² of their contribution ≥ 200).
+#[test]
+fn accelerometer_generator_writes_a_readable_set() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("a");
+    let t = accel_set(&dir, 3, AccelHidden::ResonanceAndRoll, 200.0);
+    assert!(t.hidden_chi2 >= 200.0, "hidden effects visible: χ² {}", t.hidden_chi2);
+    // vmt reads the set (FORMAT.md §1): compare runs on it.
+    let c = vmt(&["compare", "--model", s(&dir.join("model.toml")), "--data", s(&dir), "--json"]);
+    assert!(c.is_ok(), "{c:?}");
+}
+
+// ------------------------------------------------------------------------------------------
+// Rates over draws (the issue's "must show"). Each prints its rates; run with
+// `cargo test --release --test model_check_timeseries -- --ignored --nocapture`.
+
+fn accel_rates(hidden: AccelHidden, draws: u64, add: bool) -> Vec<(AccelTruth, Outcome)> {
+    let root = workdir(&format!("acc{hidden:?}"));
+    (0..draws)
+        .into_par_iter()
+        .map(|seed| {
+            let dir = root.join(format!("d{seed}"));
+            let t = accel_set(&dir, 1000 + seed, hidden, 200.0);
+            let o = run_loop(&dir, add);
+            eprintln!(
+                "{hidden:?} draw {seed}: {} samples, ρ {:.2} µg/√Hz, mode {:?}; nrms {:.2} first {:?} after {:?} ({:.1} s) {}",
+                t.samples,
+                t.density / G * 1e6,
+                t.mode,
+                o.nrms_before,
+                o.first.as_ref().map(|f| (&f.0, &f.1)),
+                o.nrms_after,
+                o.seconds,
+                o.error.clone().unwrap_or_default()
+            );
+            (t, o)
+        })
+        .collect()
+}
+
+fn encoder_rates(hidden: EncoderHidden, draws: u64, add: bool) -> Vec<(EncoderTruth, Outcome)> {
+    let root = workdir(&format!("enc{hidden:?}"));
+    (0..draws)
+        .into_par_iter()
+        .map(|seed| {
+            let dir = root.join(format!("d{seed}"));
+            let t = encoder_set(&dir, 2000 + seed, hidden);
+            let o = run_loop(&dir, add);
+            eprintln!(
+                "{hidden:?} draw {seed}: {} samples, {:?}; nrms {:.2} first {:?} after {:?} ({:.1} s) {}",
+                t.samples,
+                t.feedback,
+                o.nrms_before,
+                o.first.as_ref().map(|f| (&f.0, &f.1)),
+                o.nrms_after,
+                o.seconds,
+                o.error.clone().unwrap_or_default()
+            );
+            (t, o)
+        })
+        .collect()
+}
+
+/// Complete accelerometer models: the share of draws with any `significant` claim (goal ≤ 2 %).
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn accel_complete_model_false_alarms() {
+    let n = std::env::var("VMT_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(100);
+    let r = accel_rates(AccelHidden::None, n, false);
+    let errors = r.iter().filter(|x| x.1.error.is_some()).count();
+    let fa = r.iter().filter(|x| x.1.any_significant).count();
+    eprintln!("accelerometer complete: {fa}/{n} with a significant claim ({:.1} %), {errors} errors", rate(fa, n as usize));
+    assert_eq!(errors, 0);
+    assert!(rate(fa, n as usize) <= 2.0);
+}
+
+fn hidden_accel(h: AccelHidden, expect: &str) {
+    let n = std::env::var("VMT_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(30);
+    let r = accel_rates(h, n, true);
+    let named = r.iter().filter(|x| x.1.first.as_ref().is_some_and(|f| f.0 == expect && f.1 == "significant")).count();
+    let low = r.iter().filter(|x| x.1.nrms_after.is_some_and(|v| v <= 1.3)).count();
+    eprintln!(
+        "accelerometer {h:?}: `{expect}` first & significant {named}/{n} ({:.0} %), nrms ≤ 1.3 after add {low}/{n}",
+        rate(named, n as usize)
+    );
+    assert!(rate(named, n as usize) >= 95.0 && rate(low, n as usize) >= 95.0);
+}
+
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn accel_hidden_resonance() {
+    hidden_accel(AccelHidden::Resonance, "resonance");
+}
+
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn accel_hidden_roll() {
+    hidden_accel(AccelHidden::Roll, "gravity_tilt");
+}
+
+/// Complete encoder models (positioning + servo_lag): share with any `significant` claim.
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn encoder_complete_model_false_alarms() {
+    let n = std::env::var("VMT_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(100);
+    let r = encoder_rates(EncoderHidden::None, n, false);
+    let errors = r.iter().filter(|x| x.1.error.is_some()).count();
+    let fa = r.iter().filter(|x| x.1.any_significant).count();
+    eprintln!("encoder complete: {fa}/{n} with a significant claim ({:.1} %), {errors} errors", rate(fa, n as usize));
+    assert_eq!(errors, 0);
+    assert!(rate(fa, n as usize) <= 2.0);
+}
+
+fn hidden_encoder(h: EncoderHidden, expect: &str) {
+    let n = std::env::var("VMT_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(30);
+    let r = encoder_rates(h, n, true);
+    let errors = r.iter().filter(|x| x.1.error.is_some()).count();
+    let named = r.iter().filter(|x| x.1.first.as_ref().is_some_and(|f| f.0 == expect && f.1 == "significant")).count();
+    let low = r.iter().filter(|x| x.1.nrms_after.is_some_and(|v| v <= 1.3)).count();
+    eprintln!(
+        "encoder {h:?}: `{expect}` first & significant {named}/{n}, nrms ≤ 1.3 after add {low}/{n}, {errors} errors"
+    );
+    assert!(rate(named, n as usize) >= 95.0 && rate(low, n as usize) >= 95.0);
+}
+
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn encoder_hidden_interpolation_error() {
+    hidden_encoder(EncoderHidden::InterpolationError, "interpolation_error");
+}
+
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn encoder_hidden_cyclic_lead() {
+    hidden_encoder(EncoderHidden::CyclicLead, "cyclic_lead");
+}
+
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn encoder_hidden_backlash() {
+    hidden_encoder(EncoderHidden::Backlash, "backlash");
+}
+
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn encoder_hidden_servo_lag() {
+    hidden_encoder(EncoderHidden::ServoLag, "servo_lag");
+}
