@@ -213,7 +213,7 @@ fn given_coulomb_and_stribeck_predict_the_simulators_law() {
 /// `significant` candidate. Issue 11: at most 2 % over ≥ 200 draws (goal 1 %). Draws: 160 point
 /// tables + 40 friction sweeps by default.
 #[test]
-#[ignore = "issue 11: enable when diagnose meets it"]
+#[ignore = "issue 11: 10/200 false alarms with Legendre+BIC shapes (was 29/200): 6 fit τ at the span/4 grid floor (item 4), 2 cyclic_lead on an understated σ (item 5)"]
 fn complete_models_have_at_most_2_percent_false_alarms() {
     let n_table = draws_for(160);
     let n_fric = draws_for(40);
@@ -406,7 +406,7 @@ fn hidden_families() -> Vec<Family> {
 /// per hidden effect, following the first-ranked significant entry each time (a wrong add is
 /// counted). `VMT_GEN_FAMILY=LABEL[,LABEL]` restricts the run to some families.
 #[test]
-#[ignore = "issue 11: enable when diagnose meets it"]
+#[ignore = "issue 11: point-table families ≥ 93 % named first and NRMS ≤ 1.3; τ accuracy and friction families below threshold"]
 fn hidden_effects_are_named_first_and_adding_them_reaches_the_noise() {
     let n = draws_for(30);
     let mut failures = Vec::new();

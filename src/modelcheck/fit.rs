@@ -24,6 +24,10 @@ pub(crate) struct FitState {
     pub(crate) coefs: Vec<f64>,
     pub(crate) residual: Vec<f64>,
     pub(crate) n_offsets: usize,
+    /// The data less the known (given) effects' predictions: what the linear columns fit.
+    pub(crate) target: Vec<f64>,
+    /// Per fitted error motion, how its shape was set.
+    pub(crate) shapes: Vec<ShapeChoice>,
 }
 
 pub(crate) fn design(st: &Stack, terms: &[FitTerm]) -> Vec<Vec<f64>> {
@@ -60,7 +64,92 @@ pub(crate) fn golden(a: f64, b: f64, iters: usize, f: &mut dyn FnMut(f64) -> f64
     golden_max(&mut |l: f64| -f(l.exp()), a.ln(), b.ln(), iters).0.exp()
 }
 
+/// How a fitted error motion's shape was set (FORMAT.md §4 `shapes`).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct ShapeChoice {
+    pub(crate) name: EffectName,
+    /// The order used (highest Legendre degree).
+    pub(crate) order: u32,
+    /// The order BIC prefers on these data (= `order` when BIC chose it).
+    pub(crate) best: u32,
+    /// The model gave `order`.
+    pub(crate) given: bool,
+    /// Highest order searched by BIC (what the data support, capped at [`MAX_ORDER`]); None when
+    /// the order was not searched (accelerometer data).
+    pub(crate) max: Option<u32>,
+}
+
+/// Highest Legendre order searched for a fitted error motion.
+pub(crate) const MAX_ORDER: u32 = 30;
+
+/// BIC of a weighted residual sum of squares `ss` over n samples with p linear parameters,
+/// σ unknown (Schwarz 1978): n·ln(ss/n) + p·ln n. Free of the stated σ's scale, so a σ stated
+/// too small or missing does not change the chosen order.
+pub(crate) fn bic_unknown_sigma(ss: f64, n: usize, p: usize) -> f64 {
+    let nf = n as f64;
+    nf * (ss.max(1e-300) / nf).ln() + p as f64 * nf.ln()
+}
+
+/// Fits the model (see [`fit_model_fixed`]); each fitted error motion whose model gives no `order`
+/// gets the Legendre order BIC (σ unknown, [`bic_unknown_sigma`]) prefers among 1..=max, where
+/// max = min([`MAX_ORDER`], m − 1) with m the distinct sample positions: the data cannot support
+/// more shape coefficients after the offsets. The orders are chosen with the hyper-parameters held
+/// at a first fit's values (coordinate-wise, one order at a time, two sweeps when several
+/// motions are fitted), then the model is refitted at the chosen orders with its searches. For a
+/// given `order` the preferred one is still computed (a shape too stiff for the data is a finding).
+/// Data with accelerometer channels keep the default order (their order choice is not implemented).
 pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) -> Result<FitState, String> {
+    let default = |me: &ModelEffect| me.order.unwrap_or(DEFAULT_ORDER);
+    let first = fit_model_fixed(st, model, sigma, w, &|_, me: &ModelEffect| default(me))?;
+    let m = distinct_positions(st).len() as u32;
+    let max = MAX_ORDER.min(m.saturating_sub(1)).max(1);
+    let motions: Vec<usize> = (0..first.terms.len()).filter(|&t| first.terms[t].name.is_error_motion()).collect();
+    if motions.is_empty() || st.chans.iter().any(|c| c.is_accel()) {
+        return Ok(first);
+    }
+    let n = st.n;
+    let mut terms = first.terms.clone();
+    let mut best: BTreeMap<usize, u32> = BTreeMap::new();
+    let sweeps = if motions.len() > 1 { 2 } else { 1 };
+    for _ in 0..sweeps {
+        for &ti in &motions {
+            let mut top = (f64::INFINITY, terms[ti].shape.order);
+            for k in 1..=max {
+                terms[ti].shape = shape(st, terms[ti].name, 1, k, false);
+                let cols = design(st, &terms);
+                let p = cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
+                if let Ok((_, r)) = solve(&first.target, &cols, sigma) {
+                    let b = bic_unknown_sigma(weighted_ss(&r, w), n, p);
+                    if b < top.0 {
+                        top = (b, k);
+                    }
+                }
+            }
+            best.insert(ti, top.1);
+            let me = &model.effects[terms[ti].index];
+            terms[ti].shape = shape(st, terms[ti].name, 1, me.order.unwrap_or(top.1), false);
+        }
+    }
+    let chosen: BTreeMap<usize, u32> = motions.iter().map(|&ti| (terms[ti].index, terms[ti].shape.order)).collect();
+    let mut fs = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| chosen.get(&index).copied().unwrap_or(default(me)))?;
+    for c in fs.shapes.iter_mut() {
+        if let Some((_, b)) = motions.iter().map(|&ti| (terms[ti].name, best[&ti])).find(|(nm, _)| *nm == c.name) {
+            c.best = b;
+            c.max = Some(max);
+        }
+    }
+    Ok(fs)
+}
+
+/// Fits the model with each fitted error motion's Legendre order from `order_of(effect index, effect)`:
+/// linear parameters by weighted least squares, hyper-parameters searched (module doc).
+pub(crate) fn fit_model_fixed(
+    st: &Stack,
+    model: &Model,
+    sigma: &Sigma,
+    w: &[f64],
+    order_of: &dyn Fn(usize, &ModelEffect) -> u32,
+) -> Result<FitState, String> {
     let mut known = vec![0.0; st.n];
     let mut terms: Vec<FitTerm> = Vec::new();
     for (index, me) in model.effects.iter().enumerate() {
@@ -80,7 +169,7 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
             }
             continue;
         }
-        let sh = shape(st, me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER), lacks_coulomb(model));
+        let sh = shape(st, me.effect.name, 1, order_of(index, me), lacks_coulomb(model));
         let mut hyper = Vec::new();
         let mut searched = Vec::new();
         for h in &sh.hypers {
@@ -166,7 +255,15 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
     }
     let cols = design(st, &terms);
     let (coefs, residual) = solve(&r0, &cols, sigma)?;
-    Ok(FitState { terms, cols, coefs, residual, n_offsets: st.n_groups })
+    let shapes = terms
+        .iter()
+        .filter(|t| t.name.is_error_motion())
+        .map(|t| {
+            let given = model.effects[t.index].order.is_some();
+            ShapeChoice { name: t.name, order: t.shape.order, best: t.shape.order, given, max: None }
+        })
+        .collect();
+    Ok(FitState { terms, cols, coefs, residual, n_offsets: st.n_groups, target: r0, shapes })
 }
 
 /// The fitted parameters of each term as effect parameters (FORMAT.md §2 keys).
@@ -196,8 +293,10 @@ pub(crate) fn describe(name: EffectName, sh: &Shape, c: &[f64], h: &[f64], start
     let mut m = BTreeMap::new();
     match name {
         n if n.is_error_motion() => {
-            for (k, v) in c.iter().enumerate() {
-                m.insert(format!("c{}", sh.first_power as usize + k), *v);
+            // The Legendre series as monomials c_j·x^j (FORMAT.md §2 keys); c0 is left out (the
+            // per-channel offsets carry the constant).
+            for (j, v) in legendre_to_monomials(sh.first_power, c, sh.range).into_iter().enumerate().skip(1) {
+                m.insert(format!("c{j}"), v);
             }
         }
         EffectName::CyclicLead | EffectName::InterpolationError => {

@@ -83,12 +83,18 @@
 //!
 //! Not predicted: LuGre, squareness (needs two axes), servo lag on point tables (no effect on
 //! settled readings).
-//! They are listed in the report's `notes`. Error motions fitted with any `basis` use a polynomial of
-//! degree `order` (default 3) without its constant term (the offsets carry it).
+//! They are listed in the report's `notes`. Error motions fitted with `basis = "poly"` (or none)
+//! are Legendre series Σ_{k=1..K} c_k·P_k(u), u = (2x − a − b)/(b − a) over the range [a, b] of
+//! the sample positions, without P_0 (the offsets carry it); K is the model's `order`, else the
+//! order BIC (σ unknown) prefers among 1..min(30, m − 1) for m distinct positions, re-chosen for
+//! every fit (compare, diagnose, after add); reported as `shapes` (FORMAT.md §4). The fitted
+//! parameters are written back as monomials c_j·x^j. `bspline`, `harmonics` and `table` are
+//! refused with an error (not implemented). On accelerometer data the order stays at `order`
+//! or the default 3.
 
 use crate::error::{fmt_num, VmtError};
 use crate::measurement::{write_file_atomic, MeasurementSet, Procedure, RunData, SensorKind};
-use crate::model::{Model, ModelEffect};
+use crate::model::{Basis, Model, ModelEffect};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::f64::consts::TAU as TWO_PI;
@@ -102,7 +108,8 @@ use vmt_sim::axis_sim::GRAVITY;
 use vmt_sim::effects::{Effect, EffectName, EffectParams};
 use vmt_sim::profile::{Profile, Term};
 
-/// Default polynomial degree of a fitted error motion (FORMAT.md §2 `order`).
+/// Legendre order of a fitted error motion when neither the model nor BIC sets it (accelerometer
+/// data; the diagnose candidates' error motions), FORMAT.md §2 `order`.
 pub const DEFAULT_ORDER: u32 = 3;
 /// Starting α of a thermal expansion when the model gives none, 1/K (steel).
 const ALPHA_STEEL: f64 = 11.5e-6;
@@ -190,20 +197,38 @@ mod tests {
         assert_eq!(l.motion_response(2, EffectName::StraightnessY, |x| p.value(x), |x| p.eval3(x)[1]), p.value(0.002));
     }
 
-    /// Fitted straightness c_k·x^k on an accelerometer (u = y, v = 0.1 m/s, Δt = 0.01 s, so
-    /// x_{i−1} = x_i − 1 mm): the c1 column is 0 (a slope has no acceleration), c2 is v²·2 = 0.02,
-    /// c3 is v²·3·(x_i² − x_{i−1}²)/(x_i − x_{i−1}) = 0.03·(x_i + x_{i−1}) m/s² per unit c_k.
+    /// Fitted straightness c_k·P_k(u) on an accelerometer (u = y, v = 0.1 m/s, Δt = 0.01 s, so
+    /// x_{i−1} = x_i − 1 mm; positions over [a, b], u = (2x − a − b)/(b − a)): the P_1 column is 0
+    /// (a slope has no acceleration), P_2 = (3u² − 1)/2 has the constant curvature 3·(2/(b − a))²,
+    /// so its column is v²·3·(2/(b − a))² m/s² per unit c_2.
     #[test]
     fn fitted_straightness_columns_on_an_accelerometer_are_mean_curvatures_times_v2() {
         let chans = vec![accel("a", 10)];
         let st = Stack::new(&chans);
         let sh = shape(&st, EffectName::StraightnessY, 1, 3, false);
         let cols = columns(&st, EffectName::StraightnessY, &sh, &[]);
+        let (a, b) = sh.range;
+        let want = 0.01 * 3.0 * (2.0 / (b - a)).powi(2);
         for i in 0..10 {
-            let x = chans[0].x[i];
-            assert_eq!(cols[0][i], 0.0);
-            assert!((cols[1][i] - 0.02).abs() < 1e-14, "{}", cols[1][i]);
-            assert!((cols[2][i] - 0.03 * (2.0 * x - 0.001)).abs() < 1e-14, "{}", cols[2][i]);
+            assert!(cols[0][i].abs() < 1e-9 * want, "{}", cols[0][i]);
+            assert!((cols[1][i] - want).abs() < 1e-9 * want, "{} vs {want}", cols[1][i]);
+        }
+    }
+
+    /// The Legendre series written as monomials reproduces it: Σ c_k·P_k(u(x)) = Σ m_j·x^j at
+    /// positions over a 0.2–0.9 m range (order 7, random-ish coefficients), to 1e-9 relative.
+    #[test]
+    fn legendre_series_as_monomials_matches_it() {
+        let c = [0.3, -1.2, 0.7, 0.05, -0.4, 0.9, 0.2];
+        let range = (0.2, 0.9);
+        let m = legendre_to_monomials(1, &c, range);
+        for i in 0..=20 {
+            let x = 0.2 + 0.7 * i as f64 / 20.0;
+            let u = (2.0 * x - 1.1) / 0.7;
+            let (p, _) = legendre(u, 7);
+            let want: f64 = c.iter().enumerate().map(|(k, ck)| ck * p[k + 1]).sum();
+            let got: f64 = m.iter().enumerate().map(|(j, mj)| mj * x.powi(j as i32)).sum();
+            assert!((got - want).abs() < 1e-9 * (1.0 + want.abs()), "x {x}: {got} vs {want}");
         }
     }
 

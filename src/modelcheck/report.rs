@@ -77,6 +77,41 @@ pub struct CompareReport {
     pub notes: Vec<String>,
     /// Iterations so far (history.json beside the model), if any.
     pub history: Vec<HistoryEntry>,
+    /// Per fitted error motion: basis, order and why (FORMAT.md §4 `shapes`, optional).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub shapes: BTreeMap<String, ShapeReport>,
+}
+
+/// How a fitted error motion's shape was set (FORMAT.md §4 `shapes`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ShapeReport {
+    /// The basis: `legendre` (Legendre polynomials of the position mapped onto [−1, 1] over the
+    /// range of the sample positions, no constant term).
+    pub basis: String,
+    /// Highest Legendre degree used.
+    pub order: u32,
+    /// Why this order: `BIC over 1..N`, `model` (the model's `order`) or `default`.
+    pub chosen_by: String,
+    /// The order BIC prefers on these data when the model gives one (optional).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bic_order: Option<u32>,
+}
+
+/// The `shapes` of a fit (see [`ShapeReport`]).
+pub(crate) fn shape_reports(fs: &FitState) -> BTreeMap<String, ShapeReport> {
+    fs.shapes
+        .iter()
+        .map(|c| {
+            let chosen_by = match (c.given, c.max) {
+                (true, _) => "model".to_string(),
+                (false, Some(m)) => format!("BIC over 1..{m}"),
+                (false, None) => "default (order choice on accelerometer data not implemented)".to_string(),
+            };
+            let bic_order = (c.given && c.max.is_some()).then_some(c.best);
+            let r = ShapeReport { basis: "legendre".into(), order: c.order, chosen_by, bic_order };
+            (c.name.as_str().to_string(), r)
+        })
+        .collect()
 }
 
 /// `vmt diagnose` (FORMAT.md §4).
@@ -90,6 +125,9 @@ pub struct DiagnoseReport {
     pub advice: String,
     /// Notes (skipped channels, estimated σ).
     pub notes: Vec<String>,
+    /// Per fitted error motion of the model: basis, order and why (FORMAT.md §4 `shapes`, optional).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub shapes: BTreeMap<String, ShapeReport>,
 }
 
 /// Everything a compare computes, for diagnose to build on.
@@ -108,6 +146,21 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
     // Every fitted effect must be seen by some channel; a periodic one whose periods these
     // positions cannot resolve is held at zero with a note (its aliases would fit per-target misfit).
     for me in model.effects.iter().filter(|m| m.fit && m.effect.axis == model.axis && predicts(m.effect.name)) {
+        // Fitted error motions use the Legendre basis (`poly`); the other bases are not implemented.
+        match me.basis {
+            None | Some(Basis::Poly) => {}
+            Some(b @ (Basis::Bspline | Basis::Harmonics | Basis::Table)) => {
+                return Err(VmtError::bad(
+                    &model.source,
+                    format!("effects.{}.basis", me.effect.name),
+                    format!(
+                        "basis `{}` is not implemented by compare/diagnose; use `poly` or leave `basis` out \
+                         (a Legendre series whose order BIC chooses unless `order` is given)",
+                        b.as_str()
+                    ),
+                ));
+            }
+        }
         let sh = shape(&st, me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER), lacks_coulomb(model));
         let period = me.given.iter().any(|g| g == "period").then(|| me.effect.params.get("period")).flatten();
         if !visible(&st, me.effect.name, &sh, period) && sh.hypers.first() == Some(&"period") && st.n > 0 {
@@ -290,6 +343,7 @@ pub fn compare(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Compa
         n_params: f.fs.cols.len(),
         notes,
         history: read_history(&history_path(&model.source)).unwrap_or_default(),
+        shapes: shape_reports(&f.fs),
     })
 }
 
@@ -500,8 +554,17 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             aliases: vec![],
         });
     }
-    let advice = advice(&ranking, nrms);
-    Ok(DiagnoseReport { normalized_rms: nrms, ranking, advice, notes })
+    let shapes = shape_reports(&f.fs);
+    // A given order stiffer than the data show is itself a finding, named before any candidate.
+    let stiff: Vec<String> = shapes
+        .iter()
+        .filter_map(|(n, s)| s.bic_order.filter(|b| *b > s.order).map(|b| format!("{n} needs more flexibility: order {} → {b} (BIC)", s.order)))
+        .collect();
+    let mut advice = advice(&ranking, nrms);
+    if !stiff.is_empty() {
+        advice = format!("{}; raise `order` (or remove it to let BIC choose) before adding effects. {advice}", stiff.join("; "));
+    }
+    Ok(DiagnoseReport { normalized_rms: nrms, ranking, advice, notes, shapes })
 }
 
 /// Why a periodic effect is not searched on these positions, and what measurement would show it.

@@ -270,10 +270,12 @@ impl<'a> Stack<'a> {
 pub(crate) struct Shape {
     pub(crate) coefs: Vec<String>,
     pub(crate) hypers: Vec<&'static str>,
-    /// Lowest power of a polynomial error motion (1 in a model; 2 for the positioning candidate,
-    /// whose linear term is the scale error's signature).
+    /// Lowest degree of an error motion's Legendre series (1 in a model; 2 for the positioning
+    /// candidate, whose linear term is the scale error's signature).
     pub(crate) first_power: u32,
     pub(crate) order: u32,
+    /// Error motions: the position range [a, b] (m) mapped onto u ∈ [−1, 1] by the Legendre basis.
+    pub(crate) range: (f64, f64),
     /// Stribeck only: also fit the Coulomb level (the model has no `coulomb` effect).
     pub(crate) with_fc: bool,
 }
@@ -407,18 +409,96 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
         }
         _ => (vec![], vec![]),
     };
-    Shape { coefs, hypers, first_power, order, with_fc }
+    let range = match distinct_positions(st) {
+        xs if xs.len() >= 2 => (xs[0], xs[xs.len() - 1]),
+        xs => xs.first().map_or((0.0, 1.0), |x| (x - 0.5, x + 0.5)),
+    };
+    Shape { coefs, hypers, first_power, order, with_fc, range }
+}
+
+/// Legendre polynomials P_0..P_n at u and their derivatives dP_k/du, by Bonnet's recurrence
+/// (k+1)·P_{k+1} = (2k+1)·u·P_k − k·P_{k−1} and P'_{k+1} = P'_{k−1} + (2k+1)·P_k
+/// (Abramowitz & Stegun 22.7.10, 22.8.5). Orthogonal on [−1, 1], |P_k| ≤ 1 there: a fitted
+/// error motion's columns stay well conditioned at high order, unlike monomials.
+pub(crate) fn legendre(u: f64, n: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut p = vec![0.0; n + 1];
+    let mut d = vec![0.0; n + 1];
+    p[0] = 1.0;
+    if n >= 1 {
+        p[1] = u;
+        d[1] = 1.0;
+    }
+    for k in 1..n {
+        let kf = k as f64;
+        p[k + 1] = ((2.0 * kf + 1.0) * u * p[k] - kf * p[k - 1]) / (kf + 1.0);
+        d[k + 1] = d[k - 1] + (2.0 * kf + 1.0) * p[k];
+    }
+    (p, d)
+}
+
+/// A fitted error motion's profile at x (m): Σ_k c_k·P_k(u), u = (2x − a − b)/(b − a), k from
+/// `first_power` to `order`; with `slope`, its derivative d/dx = Σ_k c_k·P'_k(u)·2/(b − a).
+pub(crate) fn legendre_term(sh: &Shape, k: u32, x: f64, slope: bool) -> f64 {
+    let (a, b) = sh.range;
+    let u = (2.0 * x - a - b) / (b - a);
+    let (p, d) = legendre(u, k as usize);
+    if slope {
+        d[k as usize] * 2.0 / (b - a)
+    } else {
+        p[k as usize]
+    }
+}
+
+/// Monomial coefficients m_j (x in m, j = 0..=n) of Σ_k c_k·P_k(u(x)), k = first..first + c.len() − 1,
+/// u = α·x + β with α = 2/(b − a), β = −(a + b)/(b − a): the Legendre series of a fitted error
+/// motion written as FORMAT.md §2 `c_j` (for reading; the fit itself stays in the Legendre basis).
+pub(crate) fn legendre_to_monomials(first: u32, c: &[f64], range: (f64, f64)) -> Vec<f64> {
+    let n = first as usize + c.len();
+    // Coefficients of P_k in powers of u, by the same recurrence.
+    let mut pu: Vec<Vec<f64>> = vec![vec![1.0]];
+    if n > 1 {
+        pu.push(vec![0.0, 1.0]);
+    }
+    for k in 1..n.saturating_sub(1) {
+        let kf = k as f64;
+        let mut next = vec![0.0; k + 2];
+        for (j, v) in pu[k].iter().enumerate() {
+            next[j + 1] += (2.0 * kf + 1.0) * v / (kf + 1.0);
+        }
+        for (j, v) in pu[k - 1].iter().enumerate() {
+            next[j] -= kf * v / (kf + 1.0);
+        }
+        pu.push(next);
+    }
+    let (a, b) = range;
+    let (al, be) = (2.0 / (b - a), -(a + b) / (b - a));
+    // Powers of u in x: (αx + β)^j by the binomial theorem.
+    let mut out = vec![0.0; n];
+    for (i, ck) in c.iter().enumerate() {
+        let k = first as usize + i;
+        for (j, pj) in pu[k].iter().enumerate() {
+            let mut binom = 1.0;
+            for q in 0..=j {
+                // C(j, q)·α^q·β^(j−q)
+                out[q] += ck * pj * binom * al.powi(q as i32) * be.powi((j - q) as i32);
+                binom = binom * (j - q) as f64 / (q + 1) as f64;
+            }
+        }
+    }
+    out
 }
 
 /// Design columns of effect `name` at hyper-parameters `h` (in the order of [`shape`]).
 pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>> {
     match name {
         n if n.is_error_motion() => {
-            // c_k·x^k: the same coefficient for lasers (x^k) and accelerometers (slope k·x^(k−1)).
+            // c_k·P_k(u(x)): the same coefficient for lasers (P_k) and accelerometers (its slope
+            // P'_k·2/(b − a), differenced over the sample interval).
             (sh.first_power..=sh.order)
                 .map(|k| {
-                    let kf = k as f64;
-                    st.col(|c, i| c.motion_response(i, n, |x| x.powi(k as i32), |x| kf * x.powi(k as i32 - 1)))
+                    st.col(|c, i| {
+                        c.motion_response(i, n, |x| legendre_term(sh, k, x, false), |x| legendre_term(sh, k, x, true))
+                    })
                 })
                 .collect()
         }
@@ -549,7 +629,7 @@ pub(crate) fn phases_spread(st: &Stack, p: f64) -> bool {
 }
 
 /// The distinct sample positions of all channels, sorted (m).
-fn distinct_positions(st: &Stack) -> Vec<f64> {
+pub(crate) fn distinct_positions(st: &Stack) -> Vec<f64> {
     let mut xs: Vec<f64> = st.chans.iter().flat_map(|c| c.x.iter().copied()).collect();
     xs.sort_by(f64::total_cmp);
     xs.dedup();

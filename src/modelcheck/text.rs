@@ -44,6 +44,7 @@ pub fn compare_text(r: &CompareReport) -> String {
         let kv: Vec<String> = p.iter().map(|(k, v)| format!("{k} = {}", fmt_num(*v))).collect();
         s += &format!("fitted {e}: {}\n", kv.join(", "));
     }
+    s += &shapes_text(&r.shapes);
     for n in &r.notes {
         s += &format!("note: {n}\n");
     }
@@ -75,9 +76,25 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
         }
         s += "\n";
     }
+    s += &shapes_text(&r.shapes);
     s += &format!("advice: {}\n", r.advice);
     for n in &r.notes {
         s += &format!("note: {n}\n");
+    }
+    s
+}
+
+/// One line per fitted error motion: its basis, order and why, e.g. "positioning: Legendre order 11
+/// chosen by BIC over 1..20 (model gave none)".
+fn shapes_text(shapes: &BTreeMap<String, ShapeReport>) -> String {
+    let mut s = String::new();
+    for (n, sh) in shapes {
+        let why = match (sh.chosen_by.as_str(), sh.bic_order) {
+            ("model", Some(b)) => format!("given by the model (BIC would choose {b})"),
+            ("model", None) => "given by the model".to_string(),
+            (how, _) => format!("chosen by {how} (model gave none)"),
+        };
+        s += &format!("{n}: Legendre order {} {why}\n", sh.order);
     }
     s
 }
