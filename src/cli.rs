@@ -602,7 +602,7 @@ fn print_result<T: serde::Serialize>(
 
 /// Prints `v` (which must serialize to a JSON object) as one JSON object whose first key is
 /// `"format": format` (`vmt-NAME/VERSION`, docs/formats.md), the rest in `v`'s own key order.
-fn print_json<T: serde::Serialize>(format: &str, v: &T) -> Result<(), VmtError> {
+pub(crate) fn print_json<T: serde::Serialize>(format: &str, v: &T) -> Result<(), VmtError> {
     let internal = |m: String| VmtError::Internal(format!("{format} JSON: {m}"));
     let text = serde_json::to_string_pretty(v).map_err(|e| internal(e.to_string()))?;
     let body = text.strip_prefix('{').ok_or_else(|| internal("the output is not a JSON object".into()))?;

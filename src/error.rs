@@ -350,7 +350,7 @@ mod tests {
         assert_eq!(e.to_string(), "scenario.toml: effects.backlash.value: expected a length in metres ≥ 0, got -4e-6");
         assert_eq!(e.exit_code(), 2);
         let io = VmtError::io(Path::new("x"), "writing", std::io::Error::from(std::io::ErrorKind::PermissionDenied));
-        assert_eq!(io.exit_code(), 1);
+        assert_eq!(io.exit_code(), 3, "I/O failures of the machine exit 3 (issue 14)");
         let nf =
             VmtError::io(Path::new("x.toml"), "reading the model", std::io::Error::from(std::io::ErrorKind::NotFound));
         assert_eq!(nf.exit_code(), 2);

@@ -355,7 +355,7 @@ pub fn display(q: Quantity, v: f64) -> String {
     match q {
         Quantity::Length => format!("{:.3} µm", v * 1e6),
         Quantity::Angle => format!("{:.3} µrad", v * 1e6),
-        Quantity::Ratio => format!("{v:.3}"),
+        Quantity::Ratio => format!("{v:.3} (dimensionless)"),
     }
 }
 

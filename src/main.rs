@@ -88,6 +88,7 @@ enum Command {
     /// Straightness (and roll from a horizontal accelerometer) from the constant-velocity passes of a
     /// measurement set: recoverable band, Cramér–Rao bounds, profile CSV with standard errors.
     Straightness {
+        /// The measurement set directory (manifest.toml + CSV runs with accelerometer columns).
         data: PathBuf,
         /// Write the estimate as a FORMAT.md §5 profile CSV with `_sigma` columns.
         #[arg(short, long)]
@@ -98,6 +99,7 @@ enum Command {
         /// Accelerometers to use (default: every accelerometer with a column in a constant_velocity run).
         #[arg(long, num_args = 1..)]
         sensor: Vec<String>,
+        /// Print the result as one JSON object (format `vmt-straightness/1`) instead of the text table.
         #[arg(long)]
         json: bool,
     },

@@ -957,6 +957,15 @@ enum Col<'a> {
     Int(Vec<String>),
 }
 
+/// The number with the fewest significant digits (1 to 17) whose conversion `back` to SI gives exactly
+/// `si`; `x` itself (the full shortest round-trip representation) when none shorter does.
+fn shortest_round_trip(x: f64, back: impl Fn(f64) -> f64, si: f64) -> f64 {
+    (1..=17usize)
+        .filter_map(|p| format!("{:.*e}", p - 1, x).parse::<f64>().ok())
+        .find(|&r| back(r) == si)
+        .unwrap_or(x)
+}
+
 fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, String> {
     let mut out = String::with_capacity(16 * (n + 1) * header.len().max(1));
     out.push_str(&header.join(","));
@@ -980,9 +989,10 @@ fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, Str
                         ));
                     }
                     // A value converted out of SI (m → mm) carries the conversion's rounding noise
-                    // (0.33595 m → 335.95000000000005 mm): written to 12 significant digits, far
-                    // below any instrument's resolution. SI values are written exactly.
-                    out.push_str(&fmt_f64(if u.is_si() { x } else { round_significant(x, 12) }));
+                    // (0.33595 m → 335.95000000000005 mm): written with the fewest significant digits
+                    // that read back (through the same unit) to the very same SI value, so the file
+                    // shows 335.95 and the round trip stays exact. SI values are written exactly.
+                    out.push_str(&fmt_f64(if u.is_si() { x } else { shortest_round_trip(x, |r| u.to_si(r), v[i]) }));
                 }
                 Col::Int(v) => out.push_str(&v[i]),
             }

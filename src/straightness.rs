@@ -377,12 +377,11 @@ pub fn command(path: &Path, out: Option<&Path>, method: &str, sensors: &[String]
     };
     if json {
         let v = serde_json::json!({
-            "format": "vmt-straightness/1",
             "data": path,
             "method": method,
             "sensors": results,
         });
-        println!("{}", serde_json::to_string_pretty(&v).map_err(|e| VmtError::Internal(e.to_string()))?);
+        crate::cli::print_json("vmt-straightness/1", &v)?;
     } else {
         print_text(path, &results);
     }

@@ -83,6 +83,9 @@ fn every_json_output_is_an_object_whose_first_key_is_a_versioned_format() {
     let truth = data.join("truth_profiles.csv");
     let est = t.join("estimate.csv");
     ok(vmt().args(["identify", d, "-o"]).arg(&est).output().unwrap(), "identify -o");
+    let passes = t.join("passes");
+    let accel = root().join("scenarios/study_accel.toml");
+    ok(vmt().arg("simulate").arg(&accel).arg("-o").arg(&passes).output().unwrap(), "simulate study_accel");
     let run_out = t.join("run");
     let small = root().join("tests/data/small.toml");
     let cases: Vec<(&str, Vec<String>, &str)> = vec![
@@ -96,6 +99,7 @@ fn every_json_output_is_an_object_whose_first_key_is_a_versioned_format() {
         ("identify", vec!["identify".into(), d.into()], "vmt-identify/1"),
         ("iso230-2", vec!["iso230-2".into(), d.into()], "vmt-iso230-2/1"),
         ("ssi", vec!["ssi".into(), d.into()], "vmt-ssi/1"),
+        ("straightness", vec!["straightness".into(), passes.display().to_string()], "vmt-straightness/1"),
         ("friction", vec!["friction".into(), friction.display().to_string()], "vmt-friction/1"),
         (
             "score",

@@ -172,7 +172,7 @@ fn metrology_units_are_written_in_headers_and_read_back_to_within_two_ulp() {
     }
     measurement::write(&set, &dir, UnitChoice::Metrology).unwrap();
     let head = std::fs::read_to_string(dir.join("cv_fast.csv")).unwrap();
-    assert_eq!(head.lines().next().unwrap(), "t,x_cmd[mm],laser_p1[um],acc_y");
+    assert_eq!(head.lines().next().unwrap(), "t[s],x_cmd[mm],laser_p1[um],acc_y[m/s^2]");
     let back = measurement::read(&dir).unwrap();
     let mut worst = 0.0f64;
     for (a, b) in back.runs.iter().zip(&set.runs) {
