@@ -96,15 +96,18 @@ fn check_replaceable(dest: &Path) -> Result<bool, VmtError> {
 }
 
 /// Removes the leftovers `NAME.vmt-partial-*` of interrupted commands writing to `dest` (only
-/// directories holding vmt's own markers).
+/// directories holding vmt's own markers, or empty ones).
 fn clean_leftovers(dest: &Path) {
     let parent = parent_dir(dest);
     let prefix = format!("{}{PARTIAL_TAG}", file_name(dest));
     let Ok(entries) = std::fs::read_dir(&parent) else { return };
     for e in entries.flatten() {
         let p = e.path();
+        // Ours: named by vmt and holding one of its markers, or empty (a run killed between creating
+        // the directory and writing its marker; removing an empty directory deletes nothing).
+        let empty = std::fs::read_dir(&p).is_ok_and(|mut d| d.next().is_none());
         let ours = e.file_name().to_string_lossy().starts_with(&prefix)
-            && (p.join(PARTIAL_MARKER).is_file() || p.join(OUTPUT_MARKER).is_file());
+            && (empty || p.join(PARTIAL_MARKER).is_file() || p.join(OUTPUT_MARKER).is_file());
         if ours {
             let _ = std::fs::remove_dir_all(&p);
         }
@@ -154,11 +157,13 @@ pub fn replace_dir(dest: &Path, fill: impl FnOnce(&Path) -> Result<(), VmtError>
     let result = (|| {
         std::fs::write(tmp.join(PARTIAL_MARKER), b"").map_err(|e| VmtError::io(&tmp, "writing", e))?;
         fill(&tmp)?;
-        std::fs::remove_file(tmp.join(PARTIAL_MARKER)).map_err(|e| VmtError::io(&tmp, "writing", e))?;
-        let mut list = list_files(&tmp)?.join("\n");
+        // The output marker is written before the partial marker goes, so a kill at any instant
+        // leaves a directory that holds one of vmt's markers (or, right after `create_dir`, nothing).
+        let mut list = list_files(&tmp)?.into_iter().filter(|f| f != PARTIAL_MARKER).collect::<Vec<_>>().join("\n");
         list.push('\n');
         let marker = tmp.join(OUTPUT_MARKER);
         std::fs::write(&marker, list).map_err(|e| VmtError::io(&marker, "writing", e))?;
+        std::fs::remove_file(tmp.join(PARTIAL_MARKER)).map_err(|e| VmtError::io(&tmp, "writing", e))?;
         sync_dir(&tmp);
         if exists {
             let swapped = exchange(&tmp, dest).map_err(|e| VmtError::io(dest, "swapping the new output in", e))?;
