@@ -109,9 +109,25 @@ fn clean_leftovers(dest: &Path) {
         let ours = e.file_name().to_string_lossy().starts_with(&prefix)
             && (empty || p.join(PARTIAL_MARKER).is_file() || p.join(OUTPUT_MARKER).is_file());
         if ours {
-            let _ = std::fs::remove_dir_all(&p);
+            remove_marked_dir(&p);
         }
     }
+}
+
+/// Removes a directory of vmt's (a leftover or a replaced output) with its markers last, so that a
+/// kill during the removal leaves a directory the next run still recognises as its own.
+fn remove_marked_dir(p: &Path) {
+    if let Ok(entries) = std::fs::read_dir(p) {
+        for e in entries.flatten() {
+            let name = e.file_name();
+            if name == PARTIAL_MARKER || name == OUTPUT_MARKER {
+                continue;
+            }
+            let q = e.path();
+            let _ = if q.is_dir() { std::fs::remove_dir_all(&q) } else { std::fs::remove_file(&q) };
+        }
+    }
+    let _ = std::fs::remove_dir_all(p);
 }
 
 /// Atomically exchanges two directories (Linux `renameat2(RENAME_EXCHANGE)`); false where the
@@ -151,7 +167,7 @@ pub fn replace_dir(dest: &Path, fill: impl FnOnce(&Path) -> Result<(), VmtError>
     clean_leftovers(dest);
     let tmp = parent.join(format!("{}{PARTIAL_TAG}{}", file_name(dest), std::process::id()));
     if tmp.exists() {
-        let _ = std::fs::remove_dir_all(&tmp);
+        remove_marked_dir(&tmp);
     }
     std::fs::create_dir(&tmp).map_err(|e| VmtError::io(&tmp, "creating the directory", e))?;
     let result = (|| {
@@ -174,18 +190,18 @@ pub fn replace_dir(dest: &Path, fill: impl FnOnce(&Path) -> Result<(), VmtError>
                     let _ = std::fs::rename(&old, dest);
                     return Err(VmtError::io(dest, "renaming into place", e));
                 }
-                let _ = std::fs::remove_dir_all(&old);
+                remove_marked_dir(&old);
                 return Ok(());
             }
             // `tmp` now holds the old output.
-            let _ = std::fs::remove_dir_all(&tmp);
+            remove_marked_dir(&tmp);
             Ok(())
         } else {
             std::fs::rename(&tmp, dest).map_err(|e| VmtError::io(dest, "renaming into place", e))
         }
     })();
     if result.is_err() {
-        let _ = std::fs::remove_dir_all(&tmp);
+        remove_marked_dir(&tmp);
     }
     sync_dir(&parent);
     result
