@@ -272,7 +272,9 @@ const ARRAY_COUNT: [&str; 2] = ["SLURM_ARRAY_TASK_COUNT", "LSB_JOBINDEX_END"];
 /// size). `env` reads an environment variable. Returns (i, n) with 0 ≤ i < n.
 pub fn parse_shard(s: &str, env: &dyn Fn(&str) -> Option<String>) -> Result<(usize, usize), VmtError> {
     let usage = |m: String| VmtError::Usage(format!("--shard {s}: {m}"));
-    let num = |v: &str, what: &str| v.trim().parse::<usize>().map_err(|_| usage(format!("{what} must be a whole number, got `{v}`")));
+    let num = |v: &str, what: &str| {
+        v.trim().parse::<usize>().map_err(|_| usage(format!("{what} must be a whole number, got `{v}`")))
+    };
     let (i, n) = s.split_once('/').map_or((s, None), |(i, n)| (i, Some(n)));
     let (i, n) = if i == "auto" {
         let (var, first, min_var) = *ARRAY_INDEX.iter().find(|e| env(e.0).is_some()).ok_or_else(|| {
@@ -286,7 +288,8 @@ pub fn parse_shard(s: &str, env: &dyn Fn(&str) -> Option<String>) -> Result<(usi
             None => first,
         };
         let raw = num(&env(var).unwrap_or_default(), var)?;
-        let i = raw.checked_sub(first).ok_or_else(|| usage(format!("{var} = {raw} is below the first index {first}")))?;
+        let i =
+            raw.checked_sub(first).ok_or_else(|| usage(format!("{var} = {raw} is below the first index {first}")))?;
         let n = match n {
             Some(n) => num(n, "n")?,
             None => {
@@ -348,7 +351,12 @@ pub fn study_merge(out: &Path, shards: &[PathBuf]) -> Result<i32, VmtError> {
     write_study(&rows, "varied parameter", out, None)
 }
 
-fn write_study(rows: &[crate::study::TrialRow], label: &str, out: &Path, sc: Option<&Scenario>) -> Result<i32, VmtError> {
+fn write_study(
+    rows: &[crate::study::TrialRow],
+    label: &str,
+    out: &Path,
+    sc: Option<&Scenario>,
+) -> Result<i32, VmtError> {
     use crate::study::{rows_csv, summarize, summary_svg};
     let summary = summarize(rows);
     let mut s = String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate,cramer_rao_bound,rms,quantity\n");
@@ -437,8 +445,8 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
             continue;
         }
         let dt = measurement::uniform_interval(t).map_err(|m| VmtError::bad(path, format!("run {}", r.name), m))?;
-        let res = stick_slip_index(x, dt, None)
-            .map_err(|e| VmtError::bad(path, format!("run {}", r.name), e.to_string()))?;
+        let res =
+            stick_slip_index(x, dt, None).map_err(|e| VmtError::bad(path, format!("run {}", r.name), e.to_string()))?;
         results
             .push(serde_json::json!({"run": r.name, "sensor": s.name, "feed": r.feed, "ssi": res.ssi, "result": res}));
     }
@@ -854,7 +862,11 @@ mod shard_tests {
             ("auto", &[][..], "no job-array index"),
             ("auto", &[("PBS_ARRAYID", "1")][..], "use --shard auto/N"),
             ("auto/2", &[("HQ_TASK_ID", "2")][..], "0 ≤ i < n"),
-            ("auto", &[("SLURM_ARRAY_TASK_ID", "x"), ("SLURM_ARRAY_TASK_COUNT", "2")][..], "SLURM_ARRAY_TASK_ID must be"),
+            (
+                "auto",
+                &[("SLURM_ARRAY_TASK_ID", "x"), ("SLURM_ARRAY_TASK_COUNT", "2")][..],
+                "SLURM_ARRAY_TASK_ID must be",
+            ),
             ("1", &[][..], "expected i/n"),
         ] {
             let e = parse_shard(s, &env(vars)).unwrap_err().to_string();

@@ -511,7 +511,8 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 for ((r, e), tol) in crawl.iter().zip(expected).zip(tolerance) {
                     let RunData::TimeSeries { t, .. } = &r.data else { return Err(bad("expected time series".into())) };
                     let x = r.data.column(sensor).ok_or_else(|| bad(format!("run `{}` has no `{sensor}`", r.name)))?;
-                    let dt = crate::measurement::uniform_interval(t).map_err(|m| bad(format!("run `{}`: {m}", r.name)))?;
+                    let dt =
+                        crate::measurement::uniform_interval(t).map_err(|m| bad(format!("run `{}`: {m}", r.name)))?;
                     let res = vmt_estimators::ssi::stick_slip_index(x, dt, q).map_err(|e| bad(e.to_string()))?;
                     let feed = r.feed.unwrap_or(0.0) * 60_000.0;
                     let v: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]) / dt * 60_000.0).collect();

@@ -616,14 +616,22 @@ pub fn read_data(path: &Path) -> Result<MeasurementSet, VmtError> {
         let set = from_iso230_2_dat(&dat);
         for (k, x) in dat.targets.iter().enumerate() {
             if !(x.is_finite() && x.abs() <= MAX_POSITION) {
-                return Err(VmtError::bad(path, format!("target {}", k + 1), format!(
-                    "expected a target position within ±{MAX_POSITION} m, got {} m", fmt_num(*x)
-                )));
+                return Err(VmtError::bad(
+                    path,
+                    format!("target {}", k + 1),
+                    format!("expected a target position within ±{MAX_POSITION} m, got {} m", fmt_num(*x)),
+                ));
             }
             if let Some(j) = dat.targets[..k].iter().position(|y| y == x) {
-                return Err(VmtError::bad(path, format!("target {}", k + 1), format!(
-                    "the same position {} m as target {}: each target must be a distinct position", fmt_num(*x), j + 1
-                )));
+                return Err(VmtError::bad(
+                    path,
+                    format!("target {}", k + 1),
+                    format!(
+                        "the same position {} m as target {}: each target must be a distinct position",
+                        fmt_num(*x),
+                        j + 1
+                    ),
+                ));
             }
         }
         return Ok(set);
@@ -960,10 +968,7 @@ enum Col<'a> {
 /// The number with the fewest significant digits (1 to 17) whose conversion `back` to SI gives exactly
 /// `si`; `x` itself (the full shortest round-trip representation) when none shorter does.
 fn shortest_round_trip(x: f64, back: impl Fn(f64) -> f64, si: f64) -> f64 {
-    (1..=17usize)
-        .filter_map(|p| format!("{:.*e}", p - 1, x).parse::<f64>().ok())
-        .find(|&r| back(r) == si)
-        .unwrap_or(x)
+    (1..=17usize).filter_map(|p| format!("{:.*e}", p - 1, x).parse::<f64>().ok()).find(|&r| back(r) == si).unwrap_or(x)
 }
 
 fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, String> {

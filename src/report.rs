@@ -117,8 +117,18 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
             let pts: Vec<&crate::study::SummaryRow> = summary.iter().filter(|s| s.estimate == *n).collect();
             let x: Vec<f64> = pts.iter().map(|s| s.value).collect();
             let mut series = vec![
-                Series { label: "mean |error|".into(), x: x.clone(), y: pts.iter().map(|s| s.mean_abs * 1e6).collect(), style: SeriesStyle::LinePoints },
-                Series { label: "95th percentile |error|".into(), x: x.clone(), y: pts.iter().map(|s| s.p95_abs * 1e6).collect(), style: SeriesStyle::LinePoints },
+                Series {
+                    label: "mean |error|".into(),
+                    x: x.clone(),
+                    y: pts.iter().map(|s| s.mean_abs * 1e6).collect(),
+                    style: SeriesStyle::LinePoints,
+                },
+                Series {
+                    label: "95th percentile |error|".into(),
+                    x: x.clone(),
+                    y: pts.iter().map(|s| s.p95_abs * 1e6).collect(),
+                    style: SeriesStyle::LinePoints,
+                },
             ];
             let bound: Vec<(f64, f64)> =
                 pts.iter().filter(|s| s.bound.is_finite() && s.bound > 0.0).map(|s| (s.value, s.bound * 1e6)).collect();
@@ -131,7 +141,10 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
                 });
             }
             Figure {
-                title: format!("{n}: error of the estimate against {label}, {} trials per value", pts.first().map_or(0, |p| p.trials)),
+                title: format!(
+                    "{n}: error of the estimate against {label}, {} trials per value",
+                    pts.first().map_or(0, |p| p.trials)
+                ),
                 x_label: label.to_string(),
                 x_unit: "SI unit of the key".into(),
                 y_label: "|estimate − truth|".into(),
@@ -145,9 +158,17 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
         .collect();
     let table = Table {
         caption: "Summary per studied value and estimate".into(),
-        header: ["value (SI)", "estimate", "trials (count)", "mean |error| / µm", "p95 |error| / µm", "pass rate / %", "Cramér–Rao bound / µm"]
-            .map(String::from)
-            .to_vec(),
+        header: [
+            "value (SI)",
+            "estimate",
+            "trials (count)",
+            "mean |error| / µm",
+            "p95 |error| / µm",
+            "pass rate / %",
+            "Cramér–Rao bound / µm",
+        ]
+        .map(String::from)
+        .to_vec(),
         rows: summary
             .iter()
             .map(|r| {
@@ -175,7 +196,10 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
             head,
             Section {
                 heading: "Error against the varied parameter".into(),
-                text: vec!["Each marker is one studied value; lengths in µm, angles in µrad (the trial rows carry SI values).".into()],
+                text: vec![
+                    "Each marker is one studied value; lengths in µm, angles in µrad (the trial rows carry SI values)."
+                        .into(),
+                ],
                 figures,
                 tables: vec![table],
             },

@@ -353,7 +353,10 @@ pub fn command(path: &Path, out: Option<&Path>, method: &str, sensors: &[String]
             .iter()
             .filter(|s| {
                 s.kind == SensorKind::Accelerometer
-                    && set.runs.iter().any(|r| r.procedure == Procedure::ConstantVelocity && r.data.column(&s.name).is_some())
+                    && set
+                        .runs
+                        .iter()
+                        .any(|r| r.procedure == Procedure::ConstantVelocity && r.data.column(&s.name).is_some())
             })
             .map(|s| s.name.clone())
             .collect()

@@ -283,8 +283,7 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
             let pass_rate = (judged.len() == n).then(|| judged.iter().filter(|&&p| p).count() as f64 / n.max(1) as f64);
             let bounds: Vec<f64> = rows.iter().filter(|r| same(r, v, &e)).map(|r| r.bound).collect();
             let bound = bounds.iter().sum::<f64>() / bounds.len().max(1) as f64;
-            let quantity =
-                rows.iter().find(|r| same(r, v, &e)).map_or(Quantity::Ratio, |r| r.quantity);
+            let quantity = rows.iter().find(|r| same(r, v, &e)).map_or(Quantity::Ratio, |r| r.quantity);
             SummaryRow {
                 value: v,
                 estimate: e,

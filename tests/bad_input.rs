@@ -146,7 +146,11 @@ fn scenario_cases() -> Vec<Case> {
             vec![("procedures[1].targets", None), ("procedures[1].n_targets", Some(int(1_000_000_000)))],
             "procedures[1]",
         ),
-        ("n_targets = 1", vec![("procedures[1].targets", None), ("procedures[1].n_targets", Some(int(1)))], "procedures[1]"),
+        (
+            "n_targets = 1",
+            vec![("procedures[1].targets", None), ("procedures[1].n_targets", Some(int(1)))],
+            "procedures[1]",
+        ),
         ("targets repeated", vec![("procedures[1].targets", Some(arr(&[0.5, 0.5])))], "procedures[1]"),
         ("target 1e20", vec![("procedures[1].targets", Some(arr(&[0.1, 1e20])))], "procedures[1]"),
         ("target nan", vec![("procedures[1].targets", Some(arr(&[f64::NAN, 0.2])))], "procedures[1]"),
@@ -191,7 +195,10 @@ fn scenario_cases() -> Vec<Case> {
     }
     cases.push(Case {
         label: "friction_sweep.per_decade = 4e9".into(),
-        files: vec![("s.toml".into(), with_procedure("friction_sweep", "per_decade", toml::Value::Integer(4_000_000_000)))],
+        files: vec![(
+            "s.toml".into(),
+            with_procedure("friction_sweep", "per_decade", toml::Value::Integer(4_000_000_000)),
+        )],
         args: args(&["simulate", "{dir}/s.toml", "-o", "{dir}/out"]),
         blamed: "s.toml".into(),
         place: "procedures[2]".into(),
@@ -206,7 +213,16 @@ fn scenario_cases() -> Vec<Case> {
         c.args = args(&["run", "{dir}/s.toml", "-o", "{dir}/out"]);
         cases.push(c);
         let mut c = scenario_case(&format!("study {label}"), &[(key, Some(num(v)))], place);
-        c.args = args(&["study", "{dir}/s.toml", "--vary", "sensors.laser_x3.sigma=1e-8", "--trials", "2", "-o", "{dir}/out"]);
+        c.args = args(&[
+            "study",
+            "{dir}/s.toml",
+            "--vary",
+            "sensors.laser_x3.sigma=1e-8",
+            "--trials",
+            "2",
+            "-o",
+            "{dir}/out",
+        ]);
         cases.push(c);
     }
     cases
@@ -302,16 +318,40 @@ fn set_cases() -> Vec<Case> {
     let utf16: Vec<u8> = "format = \"vmt-measurements/1\"\n".encode_utf16().flat_map(|u| u.to_le_bytes()).collect();
     let mut f = set_files(&table(&good_rows()));
     f[0].1 = [vec![0xFF, 0xFE], utf16].concat();
-    cases.push(Case { label: "UTF-16 manifest".into(), files: f, args: args(&["iso230-2", "{dir}/set"]), blamed: "manifest.toml".into(), place: "UTF-8".into() });
+    cases.push(Case {
+        label: "UTF-16 manifest".into(),
+        files: f,
+        args: args(&["iso230-2", "{dir}/set"]),
+        blamed: "manifest.toml".into(),
+        place: "UTF-8".into(),
+    });
     let mut f = set_files(&table(&good_rows()));
     f[1].1 = b"target,run,direction,laser\n0,1,1,\xff\xfe\n".to_vec();
-    cases.push(Case { label: "non-UTF-8 CSV".into(), files: f, args: args(&["iso230-2", "{dir}/set"]), blamed: "iso.csv".into(), place: "line 2".into() });
+    cases.push(Case {
+        label: "non-UTF-8 CSV".into(),
+        files: f,
+        args: args(&["iso230-2", "{dir}/set"]),
+        blamed: "iso.csv".into(),
+        place: "line 2".into(),
+    });
     let mut f = set_files(&table(&good_rows()));
     f[1] = ("set/iso.csv/".into(), Vec::new());
-    cases.push(Case { label: "CSV is a directory".into(), files: f, args: args(&["iso230-2", "{dir}/set"]), blamed: "iso.csv".into(), place: "directory".into() });
+    cases.push(Case {
+        label: "CSV is a directory".into(),
+        files: f,
+        args: args(&["iso230-2", "{dir}/set"]),
+        blamed: "iso.csv".into(),
+        place: "directory".into(),
+    });
     let mut f = set_files(&table(&good_rows()));
     f[0] = ("set/manifest.toml/".into(), Vec::new());
-    cases.push(Case { label: "manifest is a directory".into(), files: f, args: args(&["iso230-2", "{dir}/set"]), blamed: "manifest.toml".into(), place: "directory".into() });
+    cases.push(Case {
+        label: "manifest is a directory".into(),
+        files: f,
+        args: args(&["iso230-2", "{dir}/set"]),
+        blamed: "manifest.toml".into(),
+        place: "directory".into(),
+    });
     cases.push(Case {
         label: "scenario is a directory".into(),
         files: vec![("s.toml/".into(), Vec::new())],
@@ -321,7 +361,10 @@ fn set_cases() -> Vec<Case> {
     });
     cases.push(Case {
         label: "UTF-16 scenario".into(),
-        files: vec![("s.toml".into(), [vec![0xFF, 0xFE], "format = 1".encode_utf16().flat_map(|u| u.to_le_bytes()).collect()].concat())],
+        files: vec![(
+            "s.toml".into(),
+            [vec![0xFF, 0xFE], "format = 1".encode_utf16().flat_map(|u| u.to_le_bytes()).collect()].concat(),
+        )],
         args: args(&["simulate", "{dir}/s.toml", "-o", "{dir}/out"]),
         blamed: "s.toml".into(),
         place: "UTF-8".into(),
@@ -389,13 +432,62 @@ fn cli_cases() -> Vec<Case> {
     let s = scenario_text(&[]);
     let mut cases = Vec::new();
     for (label, a, place) in [
-        ("--trials 1e12", args(&["study", "{dir}/s.toml", "--vary", "sensors.laser_x3.sigma=1e-8,2e-8", "--trials", "1000000000000", "-o", "{dir}/out"]), "limit"),
-        ("--vary unknown sensor", args(&["study", "{dir}/s.toml", "--vary", "sensors.nope.sigma=1e-8", "--trials", "2", "-o", "{dir}/out"]), "nope"),
-        ("--vary nan", args(&["study", "{dir}/s.toml", "--vary", "sensors.laser_x3.sigma=nan", "--trials", "2", "-o", "{dir}/out"]), "--vary"),
-        ("--shard 3/2", args(&["study", "{dir}/s.toml", "--vary", "sensors.laser_x3.sigma=1e-8", "--shard", "3/2", "-o", "{dir}/out"]), "--shard"),
+        (
+            "--trials 1e12",
+            args(&[
+                "study",
+                "{dir}/s.toml",
+                "--vary",
+                "sensors.laser_x3.sigma=1e-8,2e-8",
+                "--trials",
+                "1000000000000",
+                "-o",
+                "{dir}/out",
+            ]),
+            "limit",
+        ),
+        (
+            "--vary unknown sensor",
+            args(&["study", "{dir}/s.toml", "--vary", "sensors.nope.sigma=1e-8", "--trials", "2", "-o", "{dir}/out"]),
+            "nope",
+        ),
+        (
+            "--vary nan",
+            args(&[
+                "study",
+                "{dir}/s.toml",
+                "--vary",
+                "sensors.laser_x3.sigma=nan",
+                "--trials",
+                "2",
+                "-o",
+                "{dir}/out",
+            ]),
+            "--vary",
+        ),
+        (
+            "--shard 3/2",
+            args(&[
+                "study",
+                "{dir}/s.toml",
+                "--vary",
+                "sensors.laser_x3.sigma=1e-8",
+                "--shard",
+                "3/2",
+                "-o",
+                "{dir}/out",
+            ]),
+            "--shard",
+        ),
         ("--units furlongs", args(&["simulate", "{dir}/s.toml", "--units", "furlongs", "-o", "{dir}/out"]), "units"),
     ] {
-        cases.push(Case { label: label.into(), files: vec![("s.toml".into(), s.clone())], args: a, blamed: String::new(), place: place.into() });
+        cases.push(Case {
+            label: label.into(),
+            files: vec![("s.toml".into(), s.clone())],
+            args: a,
+            blamed: String::new(),
+            place: place.into(),
+        });
     }
     let mut f = set_files(&table(&good_rows()));
     f.push(("s.toml".into(), s.clone()));
@@ -408,7 +500,10 @@ fn cli_cases() -> Vec<Case> {
     });
     cases.push(Case {
         label: "study merge of a NaN value".into(),
-        files: vec![("a/trials.csv".into(), b"value,trial,estimate,difference,pass,bound\nNaN,0,x,1e-6,true,NaN\n".to_vec())],
+        files: vec![(
+            "a/trials.csv".into(),
+            b"value,trial,estimate,difference,pass,bound\nNaN,0,x,1e-6,true,NaN\n".to_vec(),
+        )],
         args: args(&["study", "merge", "{dir}/a", "-o", "{dir}/out"]),
         blamed: "trials.csv".into(),
         place: "line 2".into(),
@@ -480,5 +575,11 @@ fn every_bad_input_exits_2_names_file_and_place_and_writes_nothing() {
     // Issue 14 asks for at least 150 inputs.
     assert!(cases.len() >= 150, "only {} cases", cases.len());
     let failures: Vec<String> = cases.par_iter().filter_map(check).collect();
-    assert!(failures.is_empty(), "{} of {} bad inputs mishandled:\n{}", failures.len(), cases.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} of {} bad inputs mishandled:\n{}",
+        failures.len(),
+        cases.len(),
+        failures.join("\n")
+    );
 }

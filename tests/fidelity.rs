@@ -94,7 +94,9 @@ fn fast_integrator_follows_rapier_on_every_bundled_scenario() {
                 drot = drot.max((s.rot - r.rot).abs().max_element());
             }
         }
-        report.push(format!("{name}: trajectory max |Δx| {dx:.2e} m, max |Δy|,|Δz| {dyz:.2e} m, max |Δrot| {drot:.2e} rad"));
+        report.push(format!(
+            "{name}: trajectory max |Δx| {dx:.2e} m, max |Δy|,|Δz| {dyz:.2e} m, max |Δrot| {drot:.2e} rad"
+        ));
         check(dx <= X_BOUND, format!("{name}: x differs by {dx:e} m (bound {X_BOUND:e} m)"));
         check(dyz <= YZ_BOUND, format!("{name}: y/z differ by {dyz:e} m (bound {YZ_BOUND:e} m)"));
         check(drot <= ROT_BOUND, format!("{name}: rotation differs by {drot:e} rad (bound {ROT_BOUND:e} rad)"));

@@ -11,8 +11,32 @@ use std::path::Path;
 const MUTATIONS: usize = 400;
 
 const TOKENS: &[&str] = &[
-    "nan", "inf", "-inf", "-1", "0", "1e300", "1e-300", "4294967295", "18446744073709551616", "\"", "[", "]",
-    "{", "}", ",", "\n", "=", "<", ">", "/>", "</", "<link name=\"a\">", "[[runs]]", "[[sensors]]", "\u{feff}", "\u{ff}",
+    "nan",
+    "inf",
+    "-inf",
+    "-1",
+    "0",
+    "1e300",
+    "1e-300",
+    "4294967295",
+    "18446744073709551616",
+    "\"",
+    "[",
+    "]",
+    "{",
+    "}",
+    ",",
+    "\n",
+    "=",
+    "<",
+    ">",
+    "/>",
+    "</",
+    "<link name=\"a\">",
+    "[[runs]]",
+    "[[sensors]]",
+    "\u{feff}",
+    "\u{ff}",
 ];
 
 fn mutate(seed: &[u8], rng: &mut rand_chacha::ChaCha8Rng) -> Vec<u8> {
@@ -66,7 +90,13 @@ fn replay(name: &str, target: fn(&[u8]), seeds: &[Vec<u8>]) {
         .map(|d| String::from_utf8_lossy(&d[..d.len().min(400)]).into_owned())
         .collect();
     std::panic::set_hook(prev);
-    assert!(failures.is_empty(), "{name}: {} of {} inputs panicked, e.g.:\n{}", failures.len(), inputs.len(), failures[0]);
+    assert!(
+        failures.is_empty(),
+        "{name}: {} of {} inputs panicked, e.g.:\n{}",
+        failures.len(),
+        inputs.len(),
+        failures[0]
+    );
 }
 
 fn root() -> &'static Path {

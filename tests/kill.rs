@@ -62,7 +62,10 @@ fn command(kind: &str, scenario: &Path, out: &Path) -> Command {
     };
     // The report header carries the date of the run; a fixed SOURCE_DATE_EPOCH makes two runs of one
     // scenario byte-identical, so a snapshot is either the old or the new output.
-    c.env("RAYON_NUM_THREADS", "1").env("SOURCE_DATE_EPOCH", "1700000000").stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null());
+    c.env("RAYON_NUM_THREADS", "1")
+        .env("SOURCE_DATE_EPOCH", "1700000000")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null());
     c
 }
 
@@ -88,8 +91,7 @@ fn kill_trials(kind: &str, seed: u64) -> (usize, usize) {
     let mut current_is_a = true;
     let (mut old, mut new) = (0, 0);
     for k in 0..KILLS {
-        let (next, next_snap, cur_snap) =
-            if current_is_a { (&b, &snap_b, &snap_a) } else { (&a, &snap_a, &snap_b) };
+        let (next, next_snap, cur_snap) = if current_is_a { (&b, &snap_b, &snap_a) } else { (&a, &snap_a, &snap_b) };
         let wait = t.mul_f64(rng.gen_range(0.0..1.2));
         let mut child = command(kind, next, &out).spawn().unwrap();
         std::thread::sleep(wait);
@@ -102,10 +104,7 @@ fn kill_trials(kind: &str, seed: u64) -> (usize, usize) {
                 new += 1;
                 current_is_a = !current_is_a;
             }
-            Some(s) => panic!(
-                "{kind}: kill {k} after {wait:?} left a mix: files {:?}",
-                s.keys().collect::<Vec<_>>()
-            ),
+            Some(s) => panic!("{kind}: kill {k} after {wait:?} left a mix: files {:?}", s.keys().collect::<Vec<_>>()),
             None => panic!("{kind}: kill {k} after {wait:?} left no output"),
         }
     }

@@ -141,11 +141,16 @@ fn layout_stats(seed: u64) -> Option<(usize, f64, Vec<f64>, Vec<String>)> {
     let n = z[0].len();
     if n == 0 {
         // Every value confounded (a rank-deficient layout): the identifier must say what it cannot see.
-        println!("layout {seed}: {} lines, no observable value; not observable: {}", l.lines.len(), truth.unobservable.join("; "));
+        println!(
+            "layout {seed}: {} lines, no observable value; not observable: {}",
+            l.lines.len(),
+            truth.unobservable.join("; ")
+        );
         return Some((l.lines.len(), truth.rank as f64, Vec::new(), truth.unobservable));
     }
     // spread/σ per parameter: √(mean z²) over the draws (zero-mean: the model is exact)
-    let per_param: Vec<f64> = (0..n).map(|j| (z.iter().map(|d| d[j] * d[j]).sum::<f64>() / draws as f64).sqrt()).collect();
+    let per_param: Vec<f64> =
+        (0..n).map(|j| (z.iter().map(|d| d[j] * d[j]).sum::<f64>() / draws as f64).sqrt()).collect();
     Some((l.lines.len(), truth.rank as f64, per_param, truth.unobservable))
 }
 
@@ -203,11 +208,7 @@ fn rank_deficient_layouts_name_the_unobservable_errors() {
     // Only X beams, at three points: positioning, pitch and yaw are seen; EYX, EZX and EAX are not.
     let x_only = Layout {
         targets: targets.clone(),
-        lines: vec![
-            ([0.0, 0.0, 0.2], BEAMS[0]),
-            ([0.2, 0.25, 0.8], BEAMS[0]),
-            ([0.0, -0.25, 1.1], BEAMS[0]),
-        ],
+        lines: vec![([0.0, 0.0, 0.2], BEAMS[0]), ([0.2, 0.25, 0.8], BEAMS[0]), ([0.0, -0.25, 1.1], BEAMS[0])],
         sigma: 1e-7,
     };
     let id = identify(&readings(&x_only, &motions, None), &model(&x_only), &IdOptions::default()).unwrap();

@@ -214,7 +214,10 @@ fn accel_complete_model_false_alarms() {
     let r = accel_rates(AccelHidden::None, n, false);
     let errors = r.iter().filter(|x| x.1.error.is_some()).count();
     let fa = r.iter().filter(|x| x.1.any_significant).count();
-    eprintln!("accelerometer complete: {fa}/{n} with a significant claim ({:.1} %), {errors} errors", rate(fa, n as usize));
+    eprintln!(
+        "accelerometer complete: {fa}/{n} with a significant claim ({:.1} %), {errors} errors",
+        rate(fa, n as usize)
+    );
     assert_eq!(errors, 0);
     assert!(rate(fa, n as usize) <= 2.0);
 }

@@ -67,7 +67,11 @@ fn render(browser: &Path, page: &Path, png: &Path) -> Result<(), String> {
     let profile = tempfile::tempdir().unwrap();
     let dom = chromium_cmd(browser, profile.path()).arg("--dump-dom").arg(&url).output().map_err(|e| e.to_string())?;
     if !dom.status.success() {
-        return Err(format!("chromium --dump-dom exited {:?}: {}", dom.status.code(), String::from_utf8_lossy(&dom.stderr)));
+        return Err(format!(
+            "chromium --dump-dom exited {:?}: {}",
+            dom.status.code(),
+            String::from_utf8_lossy(&dom.stderr)
+        ));
     }
     let dom = String::from_utf8_lossy(&dom.stdout).to_string();
     for tag in ["svg", "figure", "table", "section", "h2"] {
@@ -87,7 +91,11 @@ fn render(browser: &Path, page: &Path, png: &Path) -> Result<(), String> {
         .output()
         .map_err(|e| e.to_string())?;
     if !shot.status.success() {
-        return Err(format!("chromium --screenshot exited {:?}: {}", shot.status.code(), String::from_utf8_lossy(&shot.stderr)));
+        return Err(format!(
+            "chromium --screenshot exited {:?}: {}",
+            shot.status.code(),
+            String::from_utf8_lossy(&shot.stderr)
+        ));
     }
     let bytes = std::fs::read(png).map_err(|e| format!("no screenshot {}: {e}", png.display()))?;
     if bytes.len() < 24 || &bytes[..8] != b"\x89PNG\r\n\x1a\n" {
@@ -114,9 +122,20 @@ fn every_kind_of_report_renders_in_chromium_and_is_readable() {
     let sc = |rel: &str| root.join("scenarios").join(rel).display().to_string();
     let jobs: Vec<(&str, Vec<String>)> = vec![
         ("default", vec!["run".into(), sc("default.toml"), "--out".into(), out("default").display().to_string()]),
-        ("lesson_backlash", vec!["run".into(), sc("lessons/backlash/scenario.toml"), "--out".into(), out("lesson").display().to_string()]),
+        (
+            "lesson_backlash",
+            vec![
+                "run".into(),
+                sc("lessons/backlash/scenario.toml"),
+                "--out".into(),
+                out("lesson").display().to_string(),
+            ],
+        ),
         ("crawl", vec!["run".into(), sc("crawl_seed002.toml"), "--out".into(), out("crawl").display().to_string()]),
-        ("squareness_3axis", vec!["run".into(), sc("squareness_3axis.toml"), "--out".into(), out("3axis").display().to_string()]),
+        (
+            "squareness_3axis",
+            vec!["run".into(), sc("squareness_3axis.toml"), "--out".into(), out("3axis").display().to_string()],
+        ),
         (
             "study",
             vec![

@@ -130,8 +130,9 @@ fn generate(seed: u64, with_tilt: bool) -> Draw {
             let x1 = x_first + f64::from(dir) * v * dt * (j as f64 + 1.0);
             let x0 = x1 - f64::from(dir) * v * dt;
             let lateral = f64::from(dir) * v * (profile.slope(x1) - profile.slope(x0)) / dt;
-            let g_tilt =
-                tilt.as_ref().map_or(0.0, |t| STANDARD_GRAVITY * (t.antiderivative(x1) - t.antiderivative(x0)) / (x1 - x0));
+            let g_tilt = tilt
+                .as_ref()
+                .map_or(0.0, |t| STANDARD_GRAVITY * (t.antiderivative(x1) - t.antiderivative(x0)) / (x1 - x0));
             let noise: f64 = StandardNormal.sample(&mut rng);
             x_cmd.push(x1);
             acc.push(lateral + g_tilt + bias + sigma * noise);
@@ -300,7 +301,12 @@ fn fusion_attains_cramer_rao_on_independently_generated_passes() {
         assert!(m >= 1.0 - 3.0 * se, "{label}: mean ratio {m:.3} below the bound by more than 3 SE ({se:.3})");
         for o in &fusion {
             let floor = 1.0 - 4.0 * (2.0 / o.dof).sqrt();
-            assert!(o.ratio * o.ratio >= floor, "{label}: ratio {:.3} below the bound beyond scatter (dof {:.1})", o.ratio, o.dof);
+            assert!(
+                o.ratio * o.ratio >= floor,
+                "{label}: ratio {:.3} below the bound beyond scatter (dof {:.1})",
+                o.ratio,
+                o.dof
+            );
         }
         assert!(harm_rms <= 1.5, "{label}: per-coefficient error/CR RMS {harm_rms:.3} > 1.5");
         if with_tilt {
@@ -438,8 +444,8 @@ fn vmt_straightness_on_a_generated_set_matches_the_library() {
         let dir2 = tmp.path().join(format!("unstated{seed}"));
         write_set(&d, &dir2, false);
         let set = measurement::read(&dir2).unwrap();
-        let via =
-            sensor_straightness(&set, &dir2, &s.name, PassSelection::ConstantVelocity, FusionMethod::SnrWeighted).unwrap();
+        let via = sensor_straightness(&set, &dir2, &s.name, PassSelection::ConstantVelocity, FusionMethod::SnrWeighted)
+            .unwrap();
         for p in &via.passes {
             assert_eq!(p.noise_density_source, "estimated from the record");
             // Estimated from the upper half of ~1000+ periodogram bins: within 15 % of the true density.

@@ -1,6 +1,6 @@
 //! One [`Figure`] → one SVG document, drawn with plotters' SVG backend.
 
-use crate::{DIMENSIONLESS, Figure, FigureKind, ReportError, Series, SeriesStyle};
+use crate::{Figure, FigureKind, ReportError, Series, SeriesStyle, DIMENSIONLESS};
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
@@ -366,7 +366,14 @@ impl Job<'_> {
                             p.points.chunks_exact(2).map(|w| (w[0].0, w[0].1, w[1].1)).collect();
                         chart
                             .draw_series(pairs.into_iter().map(|(x, y1, y2)| {
-                                ErrorBar::new_vertical(x, y1.min(y2), (y1 + y2) / 2.0, y1.max(y2), colour.stroke_width(1), 8)
+                                ErrorBar::new_vertical(
+                                    x,
+                                    y1.min(y2),
+                                    (y1 + y2) / 2.0,
+                                    y1.max(y2),
+                                    colour.stroke_width(1),
+                                    8,
+                                )
                             }))
                             .map_err(|e| e.to_string())?
                             .legend(move |(x, y)| {
@@ -401,7 +408,9 @@ impl Job<'_> {
                     SeriesStyle::Faint => chart
                         .draw_series(LineSeries::new(points, colour.mix(0.45).stroke_width(1)))
                         .map_err(|e| e.to_string())?
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 22, y)], colour.mix(0.45).stroke_width(1))),
+                        .legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 22, y)], colour.mix(0.45).stroke_width(1))
+                        }),
                     SeriesStyle::Band => chart
                         .draw_series(DashedLineSeries::new(points, 5, 4, colour.stroke_width(1)))
                         .map_err(|e| e.to_string())?

@@ -35,7 +35,9 @@ fn lint_figure(place: &str, figure: &Figure, problems: &mut Vec<String>) {
             problems.push(format!("{name}: the {axis} axis has no label"));
         }
         if unit.trim().is_empty() {
-            problems.push(format!("{name}: the {axis} axis \"{label}\" names no unit (use \"{DIMENSIONLESS}\" for a ratio)"));
+            problems.push(format!(
+                "{name}: the {axis} axis \"{label}\" names no unit (use \"{DIMENSIONLESS}\" for a ratio)"
+            ));
         }
     }
     if figure.series.iter().all(|s| s.x.is_empty()) {
@@ -60,7 +62,9 @@ fn lint_table(place: &str, table: &Table, problems: &mut Vec<String>) {
 
 /// True when a column header names a unit: `quantity / unit`, `quantity (unit)` or `quantity [unit]`.
 fn names_unit(heading: &str) -> bool {
-    heading.contains(" / ") || (heading.contains('(') && heading.ends_with(')')) || (heading.contains('[') && heading.ends_with(']'))
+    heading.contains(" / ")
+        || (heading.contains('(') && heading.ends_with(')'))
+        || (heading.contains('[') && heading.ends_with(']'))
 }
 
 #[cfg(test)]

@@ -224,12 +224,7 @@ impl FastBody {
 
     fn state(&self) -> BodyState {
         let origin = self.com - self.rot * self.mprops.local_com;
-        BodyState {
-            pose: Pose::from_parts(origin, self.rot),
-            com: self.com,
-            linvel: self.linvel,
-            angvel: self.angvel,
-        }
+        BodyState { pose: Pose::from_parts(origin, self.rot), com: self.com, linvel: self.linvel, angvel: self.angvel }
     }
 }
 
@@ -247,7 +242,8 @@ impl Body {
                 world.gravity = DVec3::new(0.0, 0.0, -GRAVITY);
                 world.integration_parameters.dt = dt;
                 world.integration_parameters.num_solver_iterations = 1;
-                let rb = RigidBodyBuilder::dynamic().pose(start).additional_mass_properties(mprops).can_sleep(false).build();
+                let rb =
+                    RigidBodyBuilder::dynamic().pose(start).additional_mass_properties(mprops).can_sleep(false).build();
                 let handle = world.bodies.insert(rb);
                 Body::Reference(Box::new(RapierBody { world, handle }))
             }

@@ -100,7 +100,13 @@ fn body_axis_directions(axis: DVec3, home: DQuat) -> (DVec3, DVec3) {
 /// frame, m), each with stiffness k (N/m) along each direction d of `dirs`: ω_max = √λ_max(M⁻¹K),
 /// K = Σ k·J·Jᵀ with J = [d; (b − com) × d], M = diag(m, m, m, I). λ_max by power iteration on the
 /// 6×6 matrix M⁻¹K (its eigenvalues are those of the symmetric M^-½KM^-½, real and ≥ 0), rad/s.
-pub fn stiffest_mode(m: f64, com: DVec3, inertia: &rapier3d_f64::glamx::DMat3, blocks: &[DVec3], dirs: &[(DVec3, f64)]) -> f64 {
+pub fn stiffest_mode(
+    m: f64,
+    com: DVec3,
+    inertia: &rapier3d_f64::glamx::DMat3,
+    blocks: &[DVec3],
+    dirs: &[(DVec3, f64)],
+) -> f64 {
     let mut k = [[0.0f64; 6]; 6];
     for b in blocks {
         for (d, kd) in dirs {
@@ -292,13 +298,16 @@ impl AxisModel {
         };
         for (what, w) in [("guideway bearings", omega_guide), ("ball-screw axial stiffness", omega_drive)] {
             if !(w * cfg.dt <= MAX_OMEGA_DT) {
-                return Err(key(("dt".into(), format!(
-                    "the explicit integration is unstable: the stiffest mode of the {what} has ω = {w:.4e} rad/s \
+                return Err(key((
+                    "dt".into(),
+                    format!(
+                        "the explicit integration is unstable: the stiffest mode of the {what} has ω = {w:.4e} rad/s \
                      (moving mass {mass} kg), ω·dt = {:.3} > {MAX_OMEGA_DT}; a stable step is dt ≤ {:.3e} s, \
                      or raise the mass / lower the stiffness",
-                    w * cfg.dt,
-                    MAX_OMEGA_DT / w
-                ))));
+                        w * cfg.dt,
+                        MAX_OMEGA_DT / w
+                    ),
+                )));
             }
         }
         Ok(AxisModel {

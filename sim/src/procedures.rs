@@ -346,7 +346,19 @@ impl ProcedureSpec {
                 count("samples", per_pass * speeds.len() as f64, MAX_SAMPLES)?;
                 (per_pass * speeds.len() as f64, time)
             }
-            ProcedureSpec::Positioning { targets, n_targets, start, end, runs, feed, dwell, average, rate, overrun, .. } => {
+            ProcedureSpec::Positioning {
+                targets,
+                n_targets,
+                start,
+                end,
+                runs,
+                feed,
+                dwell,
+                average,
+                rate,
+                overrun,
+                ..
+            } => {
                 let n = targets.as_ref().map_or(*n_targets, Vec::len) as f64;
                 count("n_targets", n, MAX_TARGETS)?;
                 count("runs", *runs as f64, MAX_RUNS)?;

@@ -58,15 +58,25 @@ impl ServoConfig {
             }
         }
         if !(self.integral_corner.is_finite() && self.integral_corner >= 0.0) {
-            return Err(("servo.integral_corner".into(), format!("expected a finite value ≥ 0 Hz, got {}", self.integral_corner)));
+            return Err((
+                "servo.integral_corner".into(),
+                format!("expected a finite value ≥ 0 Hz, got {}", self.integral_corner),
+            ));
         }
         if !(self.resolution.is_finite() && (0.0..=1e-3).contains(&self.resolution)) {
-            return Err(("servo.resolution".into(), format!("expected a feedback step in [0, 1e-3] m, got {}", self.resolution)));
+            return Err((
+                "servo.resolution".into(),
+                format!("expected a feedback step in [0, 1e-3] m, got {}", self.resolution),
+            ));
         }
         if self.rate * dt > 1.0 + 1e-9 {
             return Err((
                 "servo.rate".into(),
-                format!("{} Hz is faster than the physics step dt = {dt} s allows: expected rate ≤ 1/dt = {} Hz", self.rate, 1.0 / dt),
+                format!(
+                    "{} Hz is faster than the physics step dt = {dt} s allows: expected rate ≤ 1/dt = {} Hz",
+                    self.rate,
+                    1.0 / dt
+                ),
             ));
         }
         Ok(())

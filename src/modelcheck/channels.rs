@@ -231,7 +231,8 @@ pub(crate) fn time_series_channels(
             continue;
         }
         let Some(s) = set.sensor(name) else { continue };
-        if matches!(s.kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) && run.data.column("x_cmd").is_some() {
+        if matches!(s.kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) && run.data.column("x_cmd").is_some()
+        {
             continue;
         }
         match (s.kind, steady, run.feed) {

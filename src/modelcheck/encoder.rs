@@ -59,7 +59,11 @@ pub(crate) fn following_error(c: &Channel, kv: f64) -> Vec<f64> {
 
 /// Indices of the following-error channels of a stack.
 pub(crate) fn following_channels<'a>(st: &'a Stack) -> impl Iterator<Item = usize> + 'a {
-    st.chans.iter().enumerate().filter(|(_, c)| matches!(c.encoder, Some(EncoderRole::Following { .. }))).map(|(j, _)| j)
+    st.chans
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| matches!(c.encoder, Some(EncoderRole::Following { .. })))
+        .map(|(j, _)| j)
 }
 
 /// The play signature of channel `c` for a backlash `b` (m), divided by b (so that its

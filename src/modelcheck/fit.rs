@@ -131,7 +131,9 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
         }
     }
     let chosen: BTreeMap<usize, u32> = motions.iter().map(|&ti| (terms[ti].index, terms[ti].shape.order)).collect();
-    let mut fs = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| chosen.get(&index).copied().unwrap_or(default(me)))?;
+    let mut fs = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| {
+        chosen.get(&index).copied().unwrap_or(default(me))
+    })?;
     for c in fs.shapes.iter_mut() {
         if let Some((_, b)) = motions.iter().map(|&ti| (terms[ti].name, best[&ti])).find(|(nm, _)| *nm == c.name) {
             c.best = b;
@@ -289,7 +291,13 @@ pub(crate) fn term_params(fs: &FitState, model: &Model) -> BTreeMap<String, BTre
 }
 
 /// Linear coefficients + hyper-parameters → the effect's parameters by FORMAT.md §2 key.
-pub(crate) fn describe(name: EffectName, sh: &Shape, c: &[f64], h: &[f64], start: &EffectParams) -> BTreeMap<String, f64> {
+pub(crate) fn describe(
+    name: EffectName,
+    sh: &Shape,
+    c: &[f64],
+    h: &[f64],
+    start: &EffectParams,
+) -> BTreeMap<String, f64> {
     let mut m = BTreeMap::new();
     match name {
         n if n.is_error_motion() => {

@@ -100,9 +100,9 @@ use std::collections::BTreeMap;
 use std::f64::consts::TAU as TWO_PI;
 use std::path::{Path, PathBuf};
 use vmt_estimators::modelcheck::{
-    autocorrelation, bin_by_edges, golden_max, bin_by_label, estimate_noise_sigma, fit_percent, fit_signature, frequency_grid,
-    ljung_box, ls_periodogram, rank_candidates, uniform_edges, Candidate, DiagnoseConfig, HyperParameter, RankingEntry,
-    Sigma, Verdict,
+    autocorrelation, bin_by_edges, bin_by_label, estimate_noise_sigma, fit_percent, fit_signature, frequency_grid,
+    golden_max, ljung_box, ls_periodogram, rank_candidates, uniform_edges, Candidate, DiagnoseConfig, HyperParameter,
+    RankingEntry, Sigma, Verdict,
 };
 use vmt_sim::axis_sim::GRAVITY;
 use vmt_sim::effects::{Effect, EffectName, EffectParams};
@@ -113,7 +113,6 @@ use vmt_sim::profile::{Profile, Term};
 pub const DEFAULT_ORDER: u32 = 3;
 /// Starting α of a thermal expansion when the model gives none, 1/K (steel).
 const ALPHA_STEEL: f64 = 11.5e-6;
-
 
 mod add;
 mod channels;

@@ -292,7 +292,11 @@ pub(crate) fn needs(name: EffectName) -> &'static str {
     }
 }
 
-pub(crate) fn load_channels(model: &Model, set: &MeasurementSet, data: &Path) -> Result<(Vec<Channel>, Vec<String>), VmtError> {
+pub(crate) fn load_channels(
+    model: &Model,
+    set: &MeasurementSet,
+    data: &Path,
+) -> Result<(Vec<Channel>, Vec<String>), VmtError> {
     let (chans, mut notes) = channels(set, model.axis);
     if chans.is_empty() {
         return Err(VmtError::bad(
@@ -558,11 +562,18 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     // A given order stiffer than the data show is itself a finding, named before any candidate.
     let stiff: Vec<String> = shapes
         .iter()
-        .filter_map(|(n, s)| s.bic_order.filter(|b| *b > s.order).map(|b| format!("{n} needs more flexibility: order {} → {b} (BIC)", s.order)))
+        .filter_map(|(n, s)| {
+            s.bic_order
+                .filter(|b| *b > s.order)
+                .map(|b| format!("{n} needs more flexibility: order {} → {b} (BIC)", s.order))
+        })
         .collect();
     let mut advice = advice(&ranking, nrms);
     if !stiff.is_empty() {
-        advice = format!("{}; raise `order` (or remove it to let BIC choose) before adding effects. {advice}", stiff.join("; "));
+        advice = format!(
+            "{}; raise `order` (or remove it to let BIC choose) before adding effects. {advice}",
+            stiff.join("; ")
+        );
     }
     Ok(DiagnoseReport { normalized_rms: nrms, ranking, advice, notes, shapes })
 }

@@ -694,7 +694,11 @@ pub(crate) fn period_aliases(st: &Stack, p: f64, range: (f64, f64)) -> Vec<f64> 
     for k in 1..=400 {
         for f in [1.0 / p + k as f64 / delta, (1.0 / p - k as f64 / delta).abs()] {
             let q = 1.0 / f;
-            if (range.0..=range.1).contains(&q) && (q / p - 1.0).abs() > 0.1 && !out.iter().any(|o| (o / q - 1.0).abs() < 1e-6) && reproduces(q) {
+            if (range.0..=range.1).contains(&q)
+                && (q / p - 1.0).abs() > 0.1
+                && !out.iter().any(|o| (o / q - 1.0).abs() < 1e-6)
+                && reproduces(q)
+            {
                 out.push(q);
             }
         }

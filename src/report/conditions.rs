@@ -23,10 +23,8 @@ pub fn version() -> String {
 /// 1970, the reproducible-builds convention) replaces the clock, so that a report can be made
 /// bit-identical for the same input.
 pub fn report_date() -> String {
-    let secs: i64 = std::env::var("SOURCE_DATE_EPOCH")
-        .ok()
-        .and_then(|s| s.trim().parse::<i64>().ok())
-        .unwrap_or_else(|| {
+    let secs: i64 =
+        std::env::var("SOURCE_DATE_EPOCH").ok().and_then(|s| s.trim().parse::<i64>().ok()).unwrap_or_else(|| {
             std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs() as i64)
         });
     let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
@@ -61,7 +59,8 @@ fn row(item: &str, value: String) -> Vec<String> {
 
 /// The run table: program, date, command, and what was given to it.
 fn run_table(rows: Vec<Vec<String>>) -> Table {
-    let mut all = vec![row("program", version()), row("date (UTC)", report_date()), row("command line", command_line())];
+    let mut all =
+        vec![row("program", version()), row("date (UTC)", report_date()), row("command line", command_line())];
     all.extend(rows);
     Table { caption: "Run".into(), header: vec!["item".into(), "value".into()], rows: all, highlight: Vec::new() }
 }
@@ -102,14 +101,32 @@ fn procedure_rows(sc: &Scenario) -> Vec<Vec<String>> {
                 dash(),
                 sensors.join(", "),
             ],
-            ProcedureSpec::Positioning { name, targets, n_targets, start, end, runs, feed, dwell, average, overrun, sensors, .. } => vec![
+            ProcedureSpec::Positioning {
+                name,
+                targets,
+                n_targets,
+                start,
+                end,
+                runs,
+                feed,
+                dwell,
+                average,
+                overrun,
+                sensors,
+                ..
+            } => vec![
                 name.clone(),
                 "ISO 230-2 positioning".into(),
                 format!("{:.0} mm/s", feed * 1e3),
                 format!("{dwell} s (mean of last {average} s)"),
                 format!("{runs} ↑ + {runs} ↓"),
                 match targets {
-                    Some(t) => format!("{} given, {}–{}", t.len(), mm(t.iter().copied().fold(f64::INFINITY, f64::min)), mm(t.iter().copied().fold(f64::NEG_INFINITY, f64::max))),
+                    Some(t) => format!(
+                        "{} given, {}–{}",
+                        t.len(),
+                        mm(t.iter().copied().fold(f64::INFINITY, f64::min)),
+                        mm(t.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+                    ),
                     None => format!("{n_targets} irregular, {}–{}", mm(*start), mm(*end)),
                 },
                 mm(*overrun),
@@ -262,7 +279,10 @@ fn environment_rows(sc: &Scenario) -> Vec<Vec<String>> {
         .filter(|s| {
             matches!(
                 s.kind,
-                SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserAngular | SensorKind::LaserVector
+                SensorKind::LaserLinear
+                    | SensorKind::LaserStraightness
+                    | SensorKind::LaserAngular
+                    | SensorKind::LaserVector
             )
         })
         .map(|s| {
@@ -296,7 +316,9 @@ pub fn conditions(sc: &Scenario) -> Section {
     if !procedures.is_empty() {
         tables.push(Table {
             caption: "Procedures, in the order they ran on the session clock".into(),
-            header: ["procedure", "kind", "feed", "dwell", "runs", "targets", "overrun", "sensors"].map(String::from).to_vec(),
+            header: ["procedure", "kind", "feed", "dwell", "runs", "targets", "overrun", "sensors"]
+                .map(String::from)
+                .to_vec(),
             rows: procedures,
             highlight: Vec::new(),
         });
@@ -304,8 +326,12 @@ pub fn conditions(sc: &Scenario) -> Section {
     let sensors = sensor_rows(sc);
     if !sensors.is_empty() {
         tables.push(Table {
-            caption: "Sensors: noise of one reading, mounting point and Abbe offset (axis frame at the reference point)".into(),
-            header: ["sensor", "kind", "noise", "mounting point", "direction (unit vector)", "Abbe offset"].map(String::from).to_vec(),
+            caption:
+                "Sensors: noise of one reading, mounting point and Abbe offset (axis frame at the reference point)"
+                    .into(),
+            header: ["sensor", "kind", "noise", "mounting point", "direction (unit vector)", "Abbe offset"]
+                .map(String::from)
+                .to_vec(),
             rows: sensors,
             highlight: Vec::new(),
         });
@@ -313,7 +339,8 @@ pub fn conditions(sc: &Scenario) -> Section {
     let env = environment_rows(sc);
     if !env.is_empty() {
         tables.push(Table {
-            caption: "Lasers: air (Edlén, Birch & Downs 1994) and material temperature (normalised to 20 °C, ISO 1)".into(),
+            caption: "Lasers: air (Edlén, Birch & Downs 1994) and material temperature (normalised to 20 °C, ISO 1)"
+                .into(),
             header: [
                 "laser",
                 "air at the beam",

@@ -251,10 +251,7 @@ impl Oscillator {
         let (c, s) = ((wd * h).cos(), (wd * h).sin());
         let zw = zeta * w;
         // Homogeneous solution from (q0, v0).
-        let phi = [
-            [e * (c + zw / wd * s), e * s / wd],
-            [-e * w * w / wd * s, e * (c - zw / wd * s)],
-        ];
+        let phi = [[e * (c + zw / wd * s), e * s / wd], [-e * w * w / wd * s, e * (c - zw / wd * s)]];
         // Particular part for a unit constant input −1: q_p = −1/ω²; deviation decays homogeneously.
         let qp = -1.0 / (w * w);
         let gam = [qp - (phi[0][0] * qp), -(phi[1][0] * qp)];
@@ -415,17 +412,7 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden) -> AccelTruth {
     let _ = std::fs::remove_dir_all(dir);
     write_set(dir, "independent accelerometer passes (issue 19 generator)", &sensors, &runs);
     write_model(&dir.join("model.toml"), &["straightness_y", "straightness_z"]);
-    AccelTruth {
-        hidden,
-        mode,
-        roll,
-        density,
-        sigmas,
-        speeds: speeds.to_vec(),
-        rates,
-        samples,
-        hidden_chi2: chi2,
-    }
+    AccelTruth { hidden, mode, roll, density, sigmas, speeds: speeds.to_vec(), rates, samples, hidden_chi2: chi2 }
 }
 
 // ------------------------------------------------------------------------------------------
@@ -495,7 +482,8 @@ pub fn encoder_set(dir: &Path, seed: u64, hidden: EncoderHidden) -> EncoderTruth
     let h = 1.0 / servo_rate;
     let sigma_scale = d.log_uniform(3e-9, 20e-9);
     let sigma_motor = d.log_uniform(3e-9, 20e-9);
-    let lead_err = |xm: f64| pos_err.value(xm) + slope * xm + cyc_a * (std::f64::consts::TAU * xm / lead + cyc_phi).sin();
+    let lead_err =
+        |xm: f64| pos_err.value(xm) + slope * xm + cyc_a * (std::f64::consts::TAU * xm / lead + cyc_phi).sin();
     let interp = |xt: f64| ia * (std::f64::consts::TAU * xt / ip + iphi).sin();
     // Command profiles: (time, position, velocity) per servo tick, with the logged window.
     struct Plan {
