@@ -210,7 +210,7 @@ fn encoder_rates(hidden: EncoderHidden, draws: u64, add: bool) -> Vec<(EncoderTr
 #[test]
 #[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
 fn accel_complete_model_false_alarms() {
-    let n = std::env::var("VMT_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(100);
+    let n = draws(100);
     let r = accel_rates(AccelHidden::None, n, false);
     let errors = r.iter().filter(|x| x.1.error.is_some()).count();
     let fa = r.iter().filter(|x| x.1.any_significant).count();
@@ -222,8 +222,13 @@ fn accel_complete_model_false_alarms() {
     assert!(rate(fa, n as usize) <= 2.0);
 }
 
+/// The number of draws of a rate study: `VMT_DRAWS`, else `default`.
+fn draws(default: u64) -> u64 {
+    std::env::var("VMT_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
 fn hidden_accel(h: AccelHidden, expect: &str) {
-    let n = std::env::var("VMT_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(30);
+    let n = draws(30);
     let r = accel_rates(h, n, true);
     let named = r.iter().filter(|x| x.1.first.as_ref().is_some_and(|f| f.0 == expect && f.1 == "significant")).count();
     let low = r.iter().filter(|x| x.1.nrms_after.is_some_and(|v| v <= 1.3)).count();
@@ -250,7 +255,7 @@ fn accel_hidden_roll() {
 #[test]
 #[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
 fn encoder_complete_model_false_alarms() {
-    let n = std::env::var("VMT_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(100);
+    let n = draws(100);
     let r = encoder_rates(EncoderHidden::None, n, false);
     let errors = r.iter().filter(|x| x.1.error.is_some()).count();
     let fa = r.iter().filter(|x| x.1.any_significant).count();
@@ -260,7 +265,7 @@ fn encoder_complete_model_false_alarms() {
 }
 
 fn hidden_encoder(h: EncoderHidden, expect: &str) {
-    let n = std::env::var("VMT_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(30);
+    let n = draws(30);
     let r = encoder_rates(h, n, true);
     let errors = r.iter().filter(|x| x.1.error.is_some()).count();
     let named = r.iter().filter(|x| x.1.first.as_ref().is_some_and(|f| f.0 == expect && f.1 == "significant")).count();
