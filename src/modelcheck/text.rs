@@ -45,6 +45,7 @@ pub fn compare_text(r: &CompareReport) -> String {
         s += &format!("fitted {e}: {}\n", kv.join(", "));
     }
     s += &shapes_text(&r.shapes);
+    s += &sigma_text(r.sigma.as_ref());
     for n in &r.notes {
         s += &format!("note: {n}\n");
     }
@@ -77,6 +78,7 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
         s += "\n";
     }
     s += &shapes_text(&r.shapes);
+    s += &sigma_text(r.sigma.as_ref());
     s += &format!("advice: {}\n", r.advice);
     for n in &r.notes {
         s += &format!("note: {n}\n");
@@ -97,4 +99,22 @@ fn shapes_text(shapes: &BTreeMap<String, ShapeReport>) -> String {
         s += &format!("{n}: Legendre order {} {why}\n", sh.order);
     }
     s
+}
+
+/// One line on the noise σ checked against the repeats, e.g. "σ: stated 0.100 µm, from repeats
+/// 0.310 µm (1σ of one reading, 80 degrees of freedom), χ² test p = 1.2e-30: ...".
+fn sigma_text(sc: Option<&SigmaCheck>) -> String {
+    let Some(sc) = sc else { return String::new() };
+    let stated = sc.stated.map_or("none".to_string(), |v| format!("{:.4} µm", v * 1e6));
+    let p = sc.p_value.map_or(String::new(), |p| format!(", χ² test p = {p:.2e}"));
+    let used = match sc.used {
+        SigmaUse::Stated => "significance uses the stated σ",
+        SigmaUse::Estimated => "significance uses σ estimated from the data",
+        SigmaUse::Residual => "stated σ inconsistent with the repeats: significance uses the residual's own scale",
+    };
+    format!(
+        "σ (1σ of one reading): stated {stated}, from repeats {:.4} µm ({} degrees of freedom){p}; {used}\n",
+        sc.from_repeats * 1e6,
+        sc.dof
+    )
 }

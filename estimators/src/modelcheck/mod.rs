@@ -79,12 +79,19 @@ pub enum Sigma {
     Constant(f64),
     /// One σ per sample.
     PerSample(Vec<f64>),
+    /// One σ per sample known only up to a common unknown factor s (σ_i·s): fits are weighted by
+    /// 1/σ_i, the scale comes from the residual, and ΔBIC uses n·ln(χ²_w,new/χ²_w,old) — the
+    /// profile likelihood over s. Used when a stated σ is inconsistent with the data's repeats.
+    Relative(Vec<f64>),
 }
 
 impl Sigma {
     /// Whether a noise level is known (χ² statistics are available).
     pub fn is_known(&self) -> bool {
-        !matches!(self, Sigma::Unknown)
+        match self {
+            Sigma::Unknown | Sigma::Relative(_) => false,
+            Sigma::Constant(_) | Sigma::PerSample(_) => true,
+        }
     }
 
     /// Weights w_i = 1/σ_i for n samples (all 1 when σ is unknown), validated.
@@ -95,7 +102,7 @@ impl Sigma {
                 check_sigma_value(0, *s)?;
                 Ok(vec![1.0 / s; n])
             }
-            Sigma::PerSample(v) => {
+            Sigma::PerSample(v) | Sigma::Relative(v) => {
                 check_len("sigma", n, v.len())?;
                 v.iter().enumerate().map(|(i, s)| check_sigma_value(i, *s).map(|_| 1.0 / s)).collect()
             }
