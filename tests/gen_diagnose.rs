@@ -208,7 +208,7 @@ fn given_coulomb_and_stribeck_predict_the_simulators_law() {
 /// The manifest's σ is checked against the repeated readings (issue 11 item 5): `diagnose` reports
 /// `sigma` = {stated, from_repeats, dof, p_value, used} on every point table with repeats.
 /// - σ stated 3× too small: the repeats' scatter is 9× the stated variance, T/dof ≈ 9 at ≥ 10
-///   degrees of freedom, so p < 10⁻⁶ in every draw: `used` = `residual` in all of them.
+///   degrees of freedom, so p < 10⁻⁶ in every draw: `used` = `from_repeats` in all of them.
 /// - σ stated correctly: the test rejects at its 1 % level (p < 0.01) by chance only; over the
 ///   ~15 such draws of 24, two or more rejections have probability ≈ 1 %, so at most one is allowed.
 /// - σ missing: `used` = `estimated`, `stated` absent.
@@ -252,13 +252,24 @@ fn stated_sigma_is_checked_against_the_repeats() {
 // Rates (issue 11's thresholds).
 
 /// Complete models (nothing hidden): the fraction of data sets where `diagnose` reports any
-/// `significant` candidate. Issue 11: at most 2 % over ≥ 200 draws (goal 1 %). Draws: 160 point
-/// tables + 40 friction sweeps by default.
+/// `significant` candidate. Issue 11: at most 2 % over ≥ 200 draws (goal 1 %). The default suite
+/// runs the first 24 point tables + 6 friction sweeps (the draws are fixed by their index, so this
+/// is a fixed set of 30 data sets, about 30 s): 2 % of 30 allows no alarm. Measured over 160 + 40
+/// draws (the ignored tool below): 0/200.
 #[test]
-#[ignore = "issue 11: 10/200 false alarms with Legendre+BIC shapes (was 29/200): 6 fit τ at the span/4 grid floor (item 4), 2 cyclic_lead on an understated σ (item 5)"]
 fn complete_models_have_at_most_2_percent_false_alarms() {
-    let n_table = draws_for(160);
-    let n_fric = draws_for(40);
+    false_alarm_study(24, 6);
+}
+
+/// The full study of [`complete_models_have_at_most_2_percent_false_alarms`]: 160 point tables +
+/// 40 friction sweeps (`VMT_GEN_DRAWS` replaces both counts).
+#[test]
+#[ignore = "a tool: the 200-draw false-alarm study (0/200 at this commit)"]
+fn complete_models_false_alarm_study() {
+    false_alarm_study(draws_for(160), draws_for(40));
+}
+
+fn false_alarm_study(n_table: u64, n_fric: u64) {
     let mut alarms = 0;
     let mut errors = Vec::new();
     let mut total = 0;

@@ -223,10 +223,11 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
             continue;
         }
         let sigma = sigma_check(chans, &fs.residual, &est);
-        if let Some(sc) = sigma.as_ref().filter(|sc| sc.used == SigmaUse::Residual) {
+        if let Some((sc, k)) = sigma.as_ref().and_then(|sc| Some((sc, sc.scale?))) {
             notes.push(format!(
                 "the manifest's sigma ({} m) is inconsistent with the repeated readings ({} m from {} degrees of \
-                 freedom, χ² test p = {:.2e}): the significance uses the residual's own scale",
+                 freedom, χ² test p = {:.2e}): the significance uses the stated sigma × {k:.3} (the repeats' \
+                 upper 95 % bound)",
                 fmt_num(sc.stated.unwrap_or(f64::NAN)),
                 fmt_num(sc.from_repeats),
                 sc.dof,
@@ -279,9 +280,9 @@ pub enum SigmaUse {
     Stated,
     /// The manifest gives no σ: estimated from the repeats (or the residual) and used as known.
     Estimated,
-    /// The manifest's σ is inconsistent with the repeats: σ's scale is left free and ΔBIC is
-    /// n·ln(χ²_new/χ²_old) + k·ln n, the profile likelihood (the stated σ only weights the channels).
-    Residual,
+    /// The manifest's σ is inconsistent with the repeats: the stated σ of every checked channel is
+    /// scaled by [`SigmaCheck::scale`], to the upper 95 % confidence bound of the repeats' scatter.
+    FromRepeats,
 }
 
 /// The noise σ of the point-table channels checked against their repeated readings (FORMAT.md §4
@@ -301,6 +302,11 @@ pub struct SigmaCheck {
     pub p_value: Option<f64>,
     /// What σ the significance uses.
     pub used: SigmaUse,
+    /// With `used` = `from_repeats`: the factor applied to the stated σ, √(T / χ²_{dof, 0.95}) (T
+    /// of `p_value`, χ²_{dof, 0.95} its lower 5 % point): the upper 95 % confidence bound of σ from
+    /// the repeats over the stated σ, so that a σ estimated from few repeats is not understated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
 }
 
 /// Checks the stated σ of the point-table (length) channels against their repeated readings in
@@ -334,16 +340,37 @@ pub(crate) fn sigma_check(chans: &[Channel], r: &[f64], est: &[bool]) -> Option<
         .map(|upper: f64| (2.0 * upper.min(1.0 - upper)).min(1.0));
     let used = match p_value {
         None if dof_s == 0 && est.iter().any(|e| *e) => SigmaUse::Estimated,
-        Some(p) if p < SIGMA_TEST_LEVEL => SigmaUse::Residual,
+        Some(p) if p < SIGMA_TEST_LEVEL => SigmaUse::FromRepeats,
         None | Some(_) => SigmaUse::Stated,
     };
+    let scale = (used == SigmaUse::FromRepeats)
+        .then(|| vmt_estimators::modelcheck::chi_square_isf(0.95, dof_s as f64).ok())
+        .flatten()
+        .map(|q| (t / q).sqrt());
     Some(SigmaCheck {
         stated: (dof_s > 0).then(|| (var_s / dof_s as f64).sqrt()),
         from_repeats: (ss_all / dof_all as f64).sqrt(),
         dof: dof_all,
         p_value,
         used,
+        scale,
     })
+}
+
+/// The per-sample σ the significance of `diagnose` uses: `per` (the fit's σ), with the stated σ of
+/// the checked (point-table laser) channels scaled by [`SigmaCheck::scale`] when the repeats
+/// reject it.
+pub(crate) fn significance_sigma(f: &Fitted, per: &[f64]) -> Vec<f64> {
+    let Some(k) = f.sigma.as_ref().and_then(|sc| sc.scale) else { return per.to_vec() };
+    let mut out = Vec::with_capacity(per.len());
+    let mut k0 = 0;
+    for (j, c) in f.st.chans.iter().enumerate() {
+        let m = c.y.len();
+        let checked = c.is_laser() && c.encoder.is_none() && !f.est[j];
+        out.extend(per[k0..k0 + m].iter().map(|s| if checked { s * k } else { *s }));
+        k0 += m;
+    }
+    out
 }
 
 /// Per-sample σ from per-channel σ (NaN → 1: unweighted first pass).
@@ -609,10 +636,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         .collect();
     let mut ranking: Vec<RankingEntry> = Vec::new();
     if !cands.is_empty() {
-        let sigma = match f.sigma.as_ref().map(|sc| sc.used) {
-            Some(SigmaUse::Residual) => Sigma::Relative(per.clone()),
-            Some(SigmaUse::Stated | SigmaUse::Estimated) | None => Sigma::PerSample(per.clone()),
-        };
+        let sigma = Sigma::PerSample(significance_sigma(&f, &per));
         let base: Vec<Vec<f64>> = f.fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
         let input =
             vmt_estimators::modelcheck::ResidualInput { residual: &f.fs.residual, sigma: &sigma, base_columns: &base };
@@ -661,6 +685,8 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             confused_with: vec![],
             note: Some(note),
             aliases: vec![],
+            p_value: None,
+            searched: None,
         });
     }
     let shapes = shape_reports(&f.fs);

@@ -63,7 +63,8 @@ pub fn compare_text(r: &CompareReport) -> String {
 /// The text report of a diagnosis.
 pub fn diagnose_text(r: &DiagnoseReport) -> String {
     let mut s = format!("vmt diagnose: normalised RMS {:.3}\n", r.normalized_rms);
-    s += &format!("{:<22} {:>12} {:>10} {:<12} params\n", "effect", "ΔBIC", "explained", "verdict");
+    // p: upper bound of the probability that noise alone gives any candidate a reduction this large.
+    s += &format!("{:<22} {:>12} {:>9} {:>10} {:<12} params\n", "effect", "ΔBIC", "p", "explained", "verdict");
     for e in &r.ranking {
         let kv: Vec<String> = e.params.iter().map(|(k, v)| format!("{k}={}", fmt_num(*v))).collect();
         let v = match e.verdict {
@@ -71,7 +72,16 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
             Verdict::Noise => "noise",
             Verdict::Inseparable => "inseparable",
         };
-        s += &format!("{:<22} {:>12.1} {:>10.3} {:<12} {}", e.effect, e.delta_bic, e.explained, v, kv.join(" "));
+        let p = e.p_value.map_or("-".to_string(), |p| format!("{p:.1e}"));
+        s += &format!(
+            "{:<22} {:>12.1} {:>9} {:>10.3} {:<12} {}",
+            e.effect,
+            e.delta_bic,
+            p,
+            e.explained,
+            v,
+            kv.join(" ")
+        );
         if !e.confused_with.is_empty() {
             s += &format!("  (confused with {})", e.confused_with.join(", "));
         }
@@ -110,7 +120,7 @@ fn sigma_text(sc: Option<&SigmaCheck>) -> String {
     let used = match sc.used {
         SigmaUse::Stated => "significance uses the stated σ",
         SigmaUse::Estimated => "significance uses σ estimated from the data",
-        SigmaUse::Residual => "stated σ inconsistent with the repeats: significance uses the residual's own scale",
+        SigmaUse::FromRepeats => "stated σ inconsistent with the repeats: significance uses their upper 95 % bound",
     };
     format!(
         "σ (1σ of one reading): stated {stated}, from repeats {:.4} µm ({} degrees of freedom){p}; {used}\n",

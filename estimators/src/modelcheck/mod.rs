@@ -29,8 +29,8 @@ pub use diagnose::{
 pub use lsq::{fit_signature, LinearFit};
 pub use spectrum::{amplitude_spectrum, frequency_grid, ls_periodogram, AmplitudeSpectrum, Periodogram};
 pub use stats::{
-    autocorrelation, bin_by_edges, bin_by_label, chi_square_sf, estimate_noise_sigma, fit_percent, ljung_box,
-    normalized_rms, rms, uniform_edges, Autocorrelation, BinnedResidual, LabelBin, LjungBox, RangeBin,
+    autocorrelation, bin_by_edges, bin_by_label, chi_square_isf, chi_square_sf, estimate_noise_sigma, fit_percent,
+    ljung_box, normalized_rms, rms, uniform_edges, Autocorrelation, BinnedResidual, LabelBin, LjungBox, RangeBin,
     MIN_SAMPLES_NOISE_SIGMA,
 };
 
@@ -79,17 +79,13 @@ pub enum Sigma {
     Constant(f64),
     /// One σ per sample.
     PerSample(Vec<f64>),
-    /// One σ per sample known only up to a common unknown factor s (σ_i·s): fits are weighted by
-    /// 1/σ_i, the scale comes from the residual, and ΔBIC uses n·ln(χ²_w,new/χ²_w,old) — the
-    /// profile likelihood over s. Used when a stated σ is inconsistent with the data's repeats.
-    Relative(Vec<f64>),
 }
 
 impl Sigma {
     /// Whether a noise level is known (χ² statistics are available).
     pub fn is_known(&self) -> bool {
         match self {
-            Sigma::Unknown | Sigma::Relative(_) => false,
+            Sigma::Unknown => false,
             Sigma::Constant(_) | Sigma::PerSample(_) => true,
         }
     }
@@ -102,7 +98,7 @@ impl Sigma {
                 check_sigma_value(0, *s)?;
                 Ok(vec![1.0 / s; n])
             }
-            Sigma::PerSample(v) | Sigma::Relative(v) => {
+            Sigma::PerSample(v) => {
                 check_len("sigma", n, v.len())?;
                 v.iter().enumerate().map(|(i, s)| check_sigma_value(i, *s).map(|_| 1.0 / s)).collect()
             }
