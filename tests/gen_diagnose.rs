@@ -229,9 +229,12 @@ fn stated_sigma_is_checked_against_the_repeats() {
         match d.sigma_stated {
             gen::SigmaStated::Understated => {
                 let p = sc["p_value"].as_f64().unwrap();
+                // The significance then uses the stated σ × scale, the repeats' upper 95 % bound: at
+                // least σ̂/σ_stated ≥ 3·(1 − 0.35).
+                let k = sc["scale"].as_f64().unwrap_or(0.0);
                 assert!(
-                    p < 1e-6 && used == "residual",
-                    "{}: understated σ not caught (p {p:e}, used {used})",
+                    p < 1e-6 && used == "from_repeats" && k >= 1.95,
+                    "{}: understated σ not caught (p {p:e}, used {used}, scale {k})",
                     d.describe()
                 );
             }
@@ -459,7 +462,7 @@ fn hidden_families() -> Vec<Family> {
 /// per hidden effect, following the first-ranked significant entry each time (a wrong add is
 /// counted). `VMT_GEN_FAMILY=LABEL[,LABEL]` restricts the run to some families.
 #[test]
-#[ignore = "issue 11: point-table families ≥ 93 % named first and NRMS ≤ 1.3; τ accuracy and friction families below threshold"]
+#[ignore = "issue 11 (18 min): named first 30/30 in all 15 families, NRMS ≤ 1.3 ≥ 28/30 (cyclic_lead 29, cyclic_lead+backlash 28), 0/390 new claims; below 95 %: drift τ 24/30, d∞ 26/30, expansion τ 27/30 within 10 %"]
 fn hidden_effects_are_named_first_and_adding_them_reaches_the_noise() {
     let n = draws_for(30);
     let mut failures = Vec::new();
