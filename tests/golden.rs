@@ -3,9 +3,11 @@
 //! files as when the goldens were captured (before the redesign moved any code). The goldens are
 //! tests/golden/run/NAME.txt (stdout, the output directory replaced by `<out>`) and NAME.files (one line per
 //! written file: path, length in bytes, FNV-1a 64-bit hash of the bytes with the output directory replaced
-//! by `<out>`). `SOURCE_DATE_EPOCH=0` fixes the report date.
+//! by `<out>`, the program path by `<vmt>` and the build's `(git COMMIT)` by `(git <commit>)`).
+//! `SOURCE_DATE_EPOCH=0` fixes the report date.
 //!
-//! Re-capture after a deliberate change of behaviour: `VMT_BLESS=1 cargo test --release --test golden`.
+//! Re-capture after a deliberate change of behaviour: `VMT_BLESS=1 cargo test --release --test golden`;
+//! `VMT_BIN=PATH` runs another build of vmt (how the goldens were captured from the build of 04efba4).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -38,6 +40,27 @@ fn fnv1a(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3))
 }
 
+/// The program under test: `VMT_BIN`, else the vmt this test was built with.
+fn vmt_bin() -> PathBuf {
+    std::env::var_os("VMT_BIN").map(PathBuf::from).unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_vmt")))
+}
+
+/// Text with what legitimately differs between builds and runs replaced: the output directory, the
+/// program path (the report records the command line) and the commit in `(git COMMIT)`.
+fn normalise(text: &str, out: &str) -> String {
+    let text = text.replace(out, "<out>").replace(&*vmt_bin().to_string_lossy(), "<vmt>");
+    let mut s = String::new();
+    let mut rest = text.as_str();
+    while let Some(i) = rest.find("(git ") {
+        s.push_str(&rest[..i]);
+        s.push_str("(git <commit>)");
+        rest = &rest[i..];
+        rest = rest.find(')').map_or("", |j| &rest[j + 1..]);
+    }
+    s.push_str(rest);
+    s
+}
+
 /// Every file below `dir` (paths relative to `dir`, sorted), as `path length hash` lines.
 fn listing(dir: &Path, out: &str) -> String {
     fn walk(d: &Path, acc: &mut Vec<PathBuf>) {
@@ -60,7 +83,7 @@ fn listing(dir: &Path, out: &str) -> String {
             continue; // the output marker names the process and the directory
         }
         let bytes = std::fs::read(&f).unwrap();
-        let text = String::from_utf8(bytes.clone()).map(|t| t.replace(out, "<out>").into_bytes());
+        let text = String::from_utf8(bytes.clone()).map(|t| normalise(&t, out).into_bytes());
         let bytes = text.unwrap_or(bytes);
         s.push_str(&format!("{rel} {} {:016x}\n", bytes.len(), fnv1a(&bytes)));
     }
@@ -87,7 +110,7 @@ fn vmt_run_on_every_bundled_scenario_and_lesson_matches_its_golden_output() {
                 let out = tmp.path().join(golden_name(sc));
                 let golden_dir = &golden_dir;
                 s.spawn(move || {
-                    let o = Command::new(env!("CARGO_BIN_EXE_vmt"))
+                    let o = Command::new(vmt_bin())
                         .current_dir(root())
                         .args(["run", sc, "-o"])
                         .arg(&out)
@@ -96,7 +119,7 @@ fn vmt_run_on_every_bundled_scenario_and_lesson_matches_its_golden_output() {
                         .output()
                         .unwrap();
                     let outs = out.to_string_lossy().into_owned();
-                    let stdout = String::from_utf8(o.stdout).unwrap().replace(&outs, "<out>");
+                    let stdout = normalise(&String::from_utf8(o.stdout).unwrap(), &outs);
                     let text = format!("exit code {:?}\n{stdout}", o.status.code());
                     let files = listing(&out, &outs);
                     let name = golden_name(sc);
