@@ -5,9 +5,9 @@
 
 use crate::byo::{score_profiles, Estimator};
 use crate::error::VmtError;
-use crate::estimate::{run_estimators, Quantity};
+use crate::estimate::{estimate_recording, Quantity};
 use crate::scenario::Scenario;
-use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set};
+use crate::simulate::{physics, read_all, remeasure, simulate_truth, to_measurement_set};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
@@ -98,8 +98,8 @@ pub fn run_study(
             vary.values.len()
         )));
     }
-    let truth_table = crate::simulate::truth_profiles(sc)?;
     let ph = physics(sc)?;
+    let truth_table = crate::simulate::truth_profiles(sc, &ph)?;
     if !ph.sensors.iter().any(|s| s.name == vary.sensor) {
         return Err(VmtError::Usage(format!("--vary: no sensor `{}` in the scenario", vary.sensor)));
     }
@@ -126,9 +126,9 @@ pub fn run_study(
             }
             let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/{i}/{k}"));
             let runs = read_all(sc, &p, &truths, seed)?;
+            let set = to_measurement_set(sc, &runs)?;
             if let Some(e) = estimator {
                 let work = std::env::temp_dir().join(format!("vmt-study-{}-{i}-{k}", std::process::id()));
-                let set = to_measurement_set(sc, &runs)?;
                 let table = e.estimate(&set, &work);
                 let _ = std::fs::remove_dir_all(&work);
                 return Ok(score_profiles(&truth_table, &table?)
@@ -144,7 +144,9 @@ pub fn run_study(
                     })
                     .collect());
             }
-            let est = run_estimators(sc, &p, &runs)?;
+            // The compensation check re-measures on this trial's sensors, after the session simulated once.
+            let again = |q: &_, x: &[f64], y: &[f64]| remeasure(&p, sc.seed, truths.end, q, x, y);
+            let est = estimate_recording(sc, p.view(), &runs, &set, &again)?;
             Ok(est
                 .checks
                 .into_iter()
