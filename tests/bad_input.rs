@@ -203,6 +203,17 @@ fn scenario_cases() -> Vec<Case> {
         blamed: "s.toml".into(),
         place: "procedures[2]".into(),
     });
+    // Static friction below the Coulomb level (a Stribeck curve rising with speed) is refused, not
+    // raised to Fc (issue 12): fs from `stribeck`, fc from `coulomb`.
+    cases.push(scenario_case(
+        "stribeck fs < coulomb fc",
+        &[
+            ("truth.effects.coulomb.fc", Some(num(100.0))),
+            ("truth.effects.stribeck.fs", Some(num(50.0))),
+            ("truth.effects.stribeck.vs", Some(num(1e-3))),
+        ],
+        "static friction fs = 50 N is below the Coulomb level fc = 100 N",
+    ));
     // The same scenario through `run` (which also writes a report) and `study`.
     for (label, key, v, place) in [
         ("run: max_accel = 0", "axis.max_accel", 0.0, "axis.max_accel"),
