@@ -271,9 +271,6 @@ pub fn truth_extras(sc: &Scenario, ph: &Physics) -> Result<Vec<(String, Vec<u8>)
     Ok(out)
 }
 
-/// The six injected error motions every millimetre over the travel (FORMAT.md §5 table); for a
-/// multi-axis scenario the six of every axis of the chain, prefixed by the axis (`y.pitch`), every
-/// millimetre from the lowest lower to the highest upper travel end of the axes.
 /// Most points of a truth profile (size budget, DESIGN.md §2): 1 mm steps up to a 10 m travel.
 pub const MAX_PROFILE_POINTS: usize = 10_001;
 
@@ -285,6 +282,10 @@ fn profile_positions(lo: f64, hi: f64) -> Vec<f64> {
     (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect()
 }
 
+/// The six injected error motions every millimetre over the travel (FORMAT.md §5 table), from the
+/// physics `ph` built once by the caller; for a multi-axis scenario the six of every axis of the chain,
+/// prefixed by the axis (`y.pitch`), every millimetre from the lowest lower to the highest upper travel
+/// end of the axes.
 pub fn truth_profiles(sc: &Scenario, ph: &Physics) -> Result<ProfileTable, VmtError> {
     if let Some(chain) = &sc.chain {
         let lo = chain.travels().iter().map(|t| t.0).fold(f64::INFINITY, f64::min);
