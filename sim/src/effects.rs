@@ -830,34 +830,33 @@ impl Effect {
                 }
             }
         }
-        match &self.params {
-            EffectParams::ErrorMotion(p) => {
-                let q = if self.name.is_translational() { LENGTH } else { ANGLE };
-                validate_profile(p, q, &mut bad);
-            }
-            EffectParams::CyclicLead(c) => {
-                for (i, h) in c.harmonics.iter().enumerate() {
-                    if h.order < 2 {
-                        bad(
-                            format!("harmonics[{i}].order"),
-                            format!("expected a harmonic number ≥ 2, got {}", h.order),
-                        );
-                    }
-                    if !Range::NonNegative.contains(h.amplitude) {
-                        bad(
-                            format!("harmonics[{i}].amplitude"),
-                            format!("expected {LENGTH} ≥ 0, got {}", fmt_num(h.amplitude)),
-                        );
-                    }
-                    if !h.phase.is_finite() {
-                        bad(
-                            format!("harmonics[{i}].phase"),
-                            format!("expected a phase in radians, got {}", fmt_num(h.phase)),
-                        );
-                    }
+        // Beyond the scalars checked above from `param_specs` (every effect's, generically), three
+        // effects carry structure of their own: a profile, cyclic-lead harmonics, the cascade gains.
+        if let EffectParams::ErrorMotion(p) = &self.params {
+            let q = if self.name.is_translational() { LENGTH } else { ANGLE };
+            validate_profile(p, q, &mut bad);
+        }
+        if let EffectParams::CyclicLead(c) = &self.params {
+            for (i, h) in c.harmonics.iter().enumerate() {
+                if h.order < 2 {
+                    bad(format!("harmonics[{i}].order"), format!("expected a harmonic number ≥ 2, got {}", h.order));
+                }
+                if !Range::NonNegative.contains(h.amplitude) {
+                    bad(
+                        format!("harmonics[{i}].amplitude"),
+                        format!("expected {LENGTH} ≥ 0, got {}", fmt_num(h.amplitude)),
+                    );
+                }
+                if !h.phase.is_finite() {
+                    bad(
+                        format!("harmonics[{i}].phase"),
+                        format!("expected a phase in radians, got {}", fmt_num(h.phase)),
+                    );
                 }
             }
-            EffectParams::ServoLag(s) if s.ki.is_some() && s.kp.is_none() => {
+        }
+        if let EffectParams::ServoLag(s) = &self.params {
+            if s.ki.is_some() && s.kp.is_none() {
                 bad(
                     "ki".into(),
                     "the cascade gains go together: `ki` needs `kp` (and `kv` is then the \
@@ -865,21 +864,6 @@ impl Effect {
                         .into(),
                 );
             }
-            // Scalars only: their ranges are checked above from `param_specs`.
-            EffectParams::ServoLag(_)
-            | EffectParams::Squareness(_)
-            | EffectParams::Backlash(_)
-            | EffectParams::ScaleError(_)
-            | EffectParams::ThermalExpansion(_)
-            | EffectParams::ThermalDrift(_)
-            | EffectParams::InterpolationError(_)
-            | EffectParams::Coulomb(_)
-            | EffectParams::Viscous(_)
-            | EffectParams::Stribeck(_)
-            | EffectParams::Lugre(_)
-            | EffectParams::Resonance(_)
-            | EffectParams::GravityTilt
-            | EffectParams::AccelBiasDrift(_) => {}
         }
         out
     }
