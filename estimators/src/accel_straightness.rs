@@ -460,6 +460,22 @@ fn band_from_limits(
 // FFT helpers and band limiting
 // ---------------------------------------------------------------------------------------------------
 
+/// `S_j = Σ_k w_k·cos²(πk(j + ½)/M)` for `j = 0..M`: the squared cosine-basis functions at the grid
+/// points weighted by `w_k` (here the bins' variances), in O(M log M) instead of O(M·K) cosines.
+/// cos²θ = ½(1 + cos 2θ), and `Σ_k w_k·cos(2πk(j + ½)/M) = Re Σ_q a_q·e^{2πiqj/M}` with
+/// `a_q = Σ_{k ≡ q (mod M)} w_k·e^{iπk/M}`: one inverse DFT of the Hermitian part
+/// `b_q = (a_q + conj a_{M−q})/2`. Values below 0 from rounding are clamped to 0.
+fn weighted_cosine_squares(bins: &[(usize, f64)], m: usize) -> Vec<f64> {
+    let mut a = vec![Complex::new(0.0, 0.0); m];
+    for &(k, w) in bins {
+        a[k % m] += Complex::from_polar(w, PI * k as f64 / m as f64);
+    }
+    let mut spec: Vec<Complex<f64>> = (0..=m / 2).map(|q| (a[q] + a[(m - q) % m].conj()) * 0.5).collect();
+    let half_total = 0.5 * bins.iter().map(|&(_, w)| w).sum::<f64>();
+    // irfft divides by M; the sum wanted is the unnormalised one.
+    irfft(&mut spec, m).iter().map(|c| (half_total + 0.5 * c * m as f64).max(0.0)).collect()
+}
+
 fn check_uniform(positions: &[f64]) -> Result<f64> {
     min_len("positions", positions, 4)?;
     finite_slice("positions", positions)?;
@@ -476,6 +492,16 @@ fn check_uniform(positions: &[f64]) -> Result<f64> {
         }
     }
     Ok(dx)
+}
+
+/// Whether a basis function of wavelength `λ` (m) lies in the band `[min_wavelength, max_wavelength]` (m),
+/// with a relative tolerance of 1e-9 at both ends. Every caller decides band membership here: λ and the band
+/// edges come from the same travel by different roundings (λ = 2L/k, 2π/(k·π/L), P/k), and the default
+/// maximum, L/2, is itself the wavelength of the k = 4 cosine mode. Without one rule the estimator dropped
+/// that mode while the bounds and the band filter kept it (an in-band error as large as the signal).
+pub fn in_band(wavelength: f64, min_wavelength: f64, max_wavelength: f64) -> bool {
+    const REL: f64 = 1e-9;
+    wavelength >= min_wavelength * (1.0 - REL) && wavelength <= max_wavelength * (1.0 + REL)
 }
 
 /// Band-limits a profile on a uniform grid to the wavelengths `[min_wavelength, max_wavelength]` (m):
@@ -499,7 +525,7 @@ pub fn band_limit_profile(
     for (k, c) in spec.iter_mut().enumerate() {
         let keep = k > 0 && {
             let wl = period / k as f64;
-            wl >= min_wavelength && wl <= max_wavelength
+            in_band(wl, min_wavelength, max_wavelength)
         };
         if !keep {
             *c = Complex::new(0.0, 0.0);
@@ -776,11 +802,7 @@ impl StraightnessEstimate {
         let kappa = 2.0 * PI / positive("wavelength (m)", wavelength)?;
         match self.method {
             FusionMethod::SnrWeighted => {
-                Ok(if wavelength >= self.band.min_wavelength && wavelength <= self.band.max_wavelength {
-                    1.0
-                } else {
-                    0.0
-                })
+                Ok(if in_band(wavelength, self.band.min_wavelength, self.band.max_wavelength) { 1.0 } else { 0.0 })
             }
             FusionMethod::SpatialContinuity => {
                 let speeds: Vec<f64> = self.runs.iter().map(|r| r.speed).collect();
@@ -849,7 +871,6 @@ impl StraightnessEstimate {
             SpectralBasis::Cosine => (2.0 * self.travel, 0.5),
         };
         let m = self.positions.len();
-        let in_band = |lam: f64, lo: f64, hi: f64| lam >= lo && lam <= hi;
         let tilt_band = match (self.tilt_min_wavelength, self.tilt_max_wavelength) {
             (Some(lo), Some(hi)) if self.gravity_tilt_separated => Some((lo, hi)),
             _ => None,
@@ -857,8 +878,9 @@ impl StraightnessEstimate {
         let shortest = tilt_band.map_or(self.band.min_wavelength, |(lo, _)| lo.min(self.band.min_wavelength));
         let mut bins = Vec::new();
         let (mut var_s, mut var_t) = (0.0, 0.0);
-        let mut std_s = vec![0.0; m];
-        let mut std_t = vec![0.0; m];
+        // (k, σ_k²) of the straightness and tilt bins, for the position-wise standard deviations.
+        let mut w_s: Vec<(usize, f64)> = Vec::new();
+        let mut w_t: Vec<(usize, f64)> = Vec::new();
         let mut k = 1usize;
         while k <= m && period / k as f64 >= shortest {
             let lam = period / k as f64;
@@ -872,15 +894,8 @@ impl StraightnessEstimate {
                 _ => None,
             };
             if s.is_some() || t.is_some() {
-                let phi2 = |j: usize| match self.basis {
-                    SpectralBasis::Periodic => 1.0,
-                    SpectralBasis::Cosine => (PI * k as f64 * (j as f64 + 0.5) / m as f64).cos().powi(2),
-                };
-                for j in 0..m {
-                    let p = phi2(j);
-                    std_s[j] += s.map_or(0.0, |v| v * v * p);
-                    std_t[j] += t.map_or(0.0, |v| v * v * p);
-                }
+                w_s.extend(s.map(|v| (k, v * v)));
+                w_t.extend(t.map(|v| (k, v * v)));
                 var_s += s.map_or(0.0, |v| per_bin * v * v);
                 var_t += t.map_or(0.0, |v| per_bin * v * v);
                 bins.push(BinBound { k, wavelength: lam, straightness: s, tilt: t });
@@ -888,6 +903,12 @@ impl StraightnessEstimate {
             k += 1;
         }
         let sep = tilt_band.is_some();
+        // Σ_k σ_k²·φ_k(x_j)²: φ_k² = 1 for a DFT bin (sin² + cos²), cos²(πk(j + ½)/M) for a cosine one.
+        let position_variance = |w: &[(usize, f64)]| match self.basis {
+            SpectralBasis::Periodic => vec![w.iter().map(|&(_, v)| v).sum::<f64>(); m],
+            SpectralBasis::Cosine => weighted_cosine_squares(w, m),
+        };
+        let (std_s, std_t) = (position_variance(&w_s), position_variance(&w_t));
         Ok(InBandBounds {
             period,
             bins,
@@ -1029,7 +1050,7 @@ pub fn fuse_snr_weighted(
     let mut fused = vec![Complex::new(0.0, 0.0); spectra[0].len()];
     for (k, c) in fused.iter_mut().enumerate().skip(1) {
         let wl = period / k as f64;
-        if wl < min_wavelength || wl > max_wavelength {
+        if !in_band(wl, min_wavelength, max_wavelength) {
             continue;
         }
         let kappa = 2.0 * PI / wl;
@@ -1474,9 +1495,9 @@ pub fn fuse_multi_speed(
     for k in 1..nb {
         let kappa = kappa_step * k as f64;
         let wl = 2.0 * PI / kappa;
-        let in_e = wl >= settings.min_wavelength && wl <= settings.max_wavelength;
+        let in_e = in_band(wl, settings.min_wavelength, settings.max_wavelength);
         let in_t =
-            settings.separate_gravity_tilt && wl >= settings.tilt_min_wavelength && wl <= settings.tilt_max_wavelength;
+            settings.separate_gravity_tilt && in_band(wl, settings.tilt_min_wavelength, settings.tilt_max_wavelength);
         if !in_e && !in_t {
             continue;
         }
@@ -1557,7 +1578,7 @@ fn cosine_band_filter(
     for (k, v) in c.iter_mut().enumerate() {
         let keep = k > 0 && {
             let wl = 2.0 * l / k as f64;
-            wl >= min_wavelength && wl <= max_wavelength
+            in_band(wl, min_wavelength, max_wavelength)
         };
         *v = if keep { *v * gain(PI * k as f64 / l) } else { 0.0 };
     }
@@ -1597,6 +1618,21 @@ pub fn integrate_curvature_cosine(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn weighted_cosine_squares_equals_the_direct_sum() {
+        // Odd and even M, bins up to k = M (the largest the bounds use), weights over six decades.
+        for m in [4usize, 7, 64, 101] {
+            let bins: Vec<(usize, f64)> =
+                (1..=m).filter(|k| k % 3 != 1).map(|k| (k, 10f64.powi((k % 7) as i32 - 3))).collect();
+            let fast = weighted_cosine_squares(&bins, m);
+            for (j, f) in fast.iter().enumerate() {
+                let direct: f64 =
+                    bins.iter().map(|&(k, w)| w * (PI * k as f64 * (j as f64 + 0.5) / m as f64).cos().powi(2)).sum();
+                assert!((f - direct).abs() <= 1e-12 * direct.max(1.0), "M={m} j={j}: {f} vs {direct}");
+            }
+        }
+    }
 
     #[test]
     fn trapezoid_integrates_a_ramp_exactly() {
