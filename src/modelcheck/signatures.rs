@@ -95,11 +95,22 @@ impl Excitation {
         if !c.is_accel() || c.t.len() < 2 || coef.iter().all(|v| *v == 0.0) {
             return None;
         }
+        // E'(x); the step boundaries come in order (x_k, x_{k+1}), (x_{k+1}, x_{k+2}), …: the last
+        // boundary's slope is kept.
+        let last = std::cell::Cell::new((f64::NAN, 0.0));
         let slope = |x: f64| -> f64 {
+            if last.get().0 == x {
+                return last.get().1;
+            }
             let (_, d) = sh.basis_at(x);
-            coef.iter().enumerate().map(|(i, ck)| ck * d[sh.first_power as usize + i]).sum()
+            let v = coef.iter().enumerate().map(|(i, ck)| ck * d[sh.first_power as usize + i]).sum();
+            last.set((x, v));
+            v
         };
-        Excitation::tabulate(c, |xa, xb| (slope(xb) - slope(xa)) / (xb - xa))
+        Excitation::tabulate(c, |xa, xb| {
+            let sa = slope(xa);
+            (slope(xb) - sa) / (xb - xa)
+        })
     }
 
     /// The input table of channel `c` for a profile's mean second derivative `mean_e2(x_a, x_b)`
@@ -341,16 +352,25 @@ impl Shape {
                 let th = std::f64::consts::PI * (x - a) / (b - a);
                 let kx = std::f64::consts::PI / (b - a);
                 let (p, d) = legendre((2.0 * x - a - b) / (b - a), 4);
-                (0..=top)
-                    .map(|k| match k {
-                        1 | 2 => (p[k + 2], d[k + 2] * 2.0 / (b - a)),
+                let (mut vals, mut slopes) = (Vec::with_capacity(top + 1), Vec::with_capacity(top + 1));
+                // cos(mθ), sin(mθ) by the angle-addition recurrence (rounding grows ≈ m·ε).
+                let (s1, c1) = th.sin_cos();
+                let (mut sm, mut cm) = (0.0, 1.0);
+                for k in 0..=top {
+                    match k {
+                        1 | 2 => {
+                            vals.push(p[k + 2]);
+                            slopes.push(d[k + 2] * 2.0 / (b - a));
+                        }
                         _ => {
                             let m = k.saturating_sub(2) as f64;
-                            let (sn, cs) = (m * th).sin_cos();
-                            (cs, -m * kx * sn)
+                            vals.push(cm);
+                            slopes.push(-m * kx * sm);
+                            (sm, cm) = (sm * c1 + cm * s1, cm * c1 - sm * s1);
                         }
-                    })
-                    .unzip()
+                    }
+                }
+                (vals, slopes)
             }
         }
     }
