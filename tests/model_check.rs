@@ -354,6 +354,70 @@ fn real_b02_x_no_cyclic_lead_shorter_than_the_targets_resolve() {
     );
 }
 
+/// A tool (issue 11's real-data table): the loop on every ISO 230-2 `.dat` file of
+/// `realdata/ecmc_iso230_2`, from an empty model (offsets only): diagnose, add the first-ranked
+/// `significant` effect from the diagnosis, up to 5 times. Prints per file the normalised RMS before
+/// and after (against σ from the repeats: the files state none), the σ check, what was added and
+/// every other claim (inseparable entries with their aliases). Run with
+/// `cargo test --release --test model_check -- --ignored --nocapture real_data_loop_table`.
+#[test]
+#[ignore = "a tool: prints the real-data loop table of issue 11"]
+fn real_data_loop_table() {
+    let Some(root) = realdata::realdata("ecmc_iso230_2", "real_data_loop_table") else { return };
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&root)
+        .unwrap()
+        .flat_map(|d| std::fs::read_dir(d.unwrap().path()).into_iter().flatten())
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "dat"))
+        .collect();
+    files.sort();
+    println!("| file | NRMS start | NRMS end | σ from repeats (µm, dof) | added | other claims |");
+    println!("|---|---|---|---|---|---|");
+    for path in files {
+        let text = std::fs::read_to_string(&path).unwrap();
+        let dat = vmt_estimators::iso230_2::dat::parse_dat(&text).unwrap();
+        let set = vmt::measurement::from_iso230_2_dat(&dat);
+        let mut model = model_fitting(&[]);
+        let mut added = Vec::new();
+        let mut start = f64::NAN;
+        let mut others = Vec::new();
+        for _ in 0..5 {
+            let d = diagnose(&model, &set, &path).unwrap();
+            if start.is_nan() {
+                start = d.normalized_rms;
+            }
+            others = d
+                .ranking
+                .iter()
+                .filter(|r| r.verdict != Verdict::Noise)
+                .map(|r| {
+                    let p = r.params.get("period").map_or(String::new(), |p| format!(" at {:.2} mm", p * 1e3));
+                    let al =
+                        if r.aliases.is_empty() { String::new() } else { format!(", {} aliases", r.aliases.len()) };
+                    format!("{}{p} {:?}{al}", r.effect, r.verdict)
+                })
+                .collect();
+            let Some(top) = d.ranking.iter().find(|r| r.verdict == Verdict::Significant) else { break };
+            let name: EffectName = top.effect.parse().unwrap();
+            added.push(format!(
+                "{}{}",
+                top.effect,
+                top.params.get("period").map_or(String::new(), |p| format!(" {:.2} mm", p * 1e3))
+            ));
+            model = add_effect(&model, name, Some(top)).unwrap();
+        }
+        let c = compare(&model, &set, &path).unwrap();
+        let sc = c.sigma.as_ref().map_or("-".to_string(), |s| format!("{:.3} ({})", s.from_repeats * 1e6, s.dof));
+        println!(
+            "| {} | {start:.2} | {:.2} | {sc} | {} | {} |",
+            path.file_name().unwrap().to_string_lossy(),
+            c.normalized_rms,
+            added.join(", "),
+            others.join("; ")
+        );
+    }
+}
+
 fn vmt_bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_vmt"))
 }

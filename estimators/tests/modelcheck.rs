@@ -295,11 +295,14 @@ mod modelcheck {
         let json = serde_json::to_value(&d.ranking).unwrap();
         let first = json[0].as_object().unwrap();
         let keys: Vec<&str> = first.keys().map(|k| k.as_str()).collect();
-        let mut want = vec!["effect", "delta_bic", "explained", "verdict", "params", "confused_with"];
+        // FORMAT.md §4's keys, plus the optional `p_value` and `searched` (docs/formats.md).
+        let mut want =
+            vec!["effect", "delta_bic", "explained", "verdict", "params", "confused_with", "p_value", "searched"];
         want.sort();
         let mut got = keys.clone();
         got.sort();
         assert_eq!(got, want);
+        assert!(first["p_value"].as_f64().is_some_and(|p| (0.0..=0.01).contains(&p)), "{:?}", first["p_value"]);
         assert_eq!(first["verdict"], "significant");
         assert_eq!(first["effect"], "backlash");
     }

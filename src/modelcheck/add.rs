@@ -43,6 +43,16 @@ pub fn add_effect(model: &Model, name: EffectName, from: Option<&RankingEntry>) 
             }
         }
     }
+    // A diagnosis value outside the catalogue's range (e.g. a negative viscous coefficient fitted
+    // while another term's hyper-parameters were held) is only a starting value: the model gets
+    // the catalogue's default there and `compare` fits it afresh (not `given`).
+    let default = EffectParams::default_for(name);
+    for p in effect.validate() {
+        if let Some(v) = default.get(&p.key) {
+            effect.params.set(&p.key, v);
+            given.retain(|g| *g != p.key);
+        }
+    }
     if let Some(p) = effect.validate().into_iter().next() {
         return Err(format!("{}: {}", p.key, p.message));
     }

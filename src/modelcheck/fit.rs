@@ -349,6 +349,13 @@ pub(crate) fn fit_model_fixed(
             continue;
         }
         if !me.fit {
+            // The simulator's friction law (`vmt_sim::effects::Model::friction`): a given Stribeck
+            // law carries the Coulomb level (its `fc`, unset: the coulomb effect's), so a given
+            // coulomb beside a given stribeck adds nothing of its own (it would count Fc twice).
+            let stribeck_known = model.get(EffectName::Stribeck, model.axis).is_some_and(|s| !s.fit);
+            if me.effect.name == EffectName::Coulomb && stribeck_known {
+                continue;
+            }
             let mut e = me.effect.clone();
             if let EffectParams::Stribeck(sp) = &mut e.params {
                 // The simulator's law: stribeck.fc unset takes the coulomb level.
@@ -371,8 +378,8 @@ pub(crate) fn fit_model_fixed(
             // A damping that these data cannot resolve (no predicted excitation) is held.
             let resolvable = *h != "damping" || hyper_grid(st, me.effect.name, h).1;
             hyper.push(if given || !resolvable { start } else { f64::NAN });
-            searched.push(!(given && *h == "period") && resolvable);
-            let _ = st;
+            // A given period or Stribeck shape exponent is held (the diagnosis searched it).
+            searched.push(!(given && matches!(*h, "period" | "shape")) && resolvable);
         }
         terms.push(FitTerm { index, name: me.effect.name, shape: sh, hyper, searched });
     }
@@ -612,7 +619,7 @@ pub(crate) fn describe(
             }
             m.insert("fs".into(), fc + c[0]);
             m.insert("vs".into(), h[0]);
-            m.insert("shape".into(), 2.0);
+            m.insert("shape".into(), h[1]);
         }
         EffectName::Resonance => {
             // Frequency and damping; the forced response's gain per sensor (the mode shape φ at

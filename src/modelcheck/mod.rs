@@ -26,7 +26,7 @@
 //!
 //! Phase 2 (friction): the `motor_force` column of a `friction_sweep` or `constant_velocity` time
 //! series, every sample at the run's steady velocity v = feed·direction, is predicted by
-//! F = o + Fc·sgn v + Fv·v + (Fs − Fc)·sgn v·exp(−(v/vs)²) (Coulomb, viscous, Stribeck with the
+//! F = o + Fc·sgn v + Fv·v + (Fs − Fc)·sgn v·exp(−|v/vs|^δ) (Coulomb, viscous, Stribeck with the
 //! catalogue's default shape δ = 2; the simulator's law, `vmt_sim::effects::EffectSet::friction`),
 //! with one force offset o per sensor; vs is searched like a period.
 //!

@@ -80,6 +80,9 @@ pub struct CompareReport {
     /// Per fitted error motion: basis, order and why (FORMAT.md §4 `shapes`, optional).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub shapes: BTreeMap<String, ShapeReport>,
+    /// The stated σ checked against the repeated readings (FORMAT.md §4 `sigma`, optional).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<SigmaCheck>,
 }
 
 /// How a fitted error motion's shape was set (FORMAT.md §4 `shapes`).
@@ -136,6 +139,9 @@ pub struct DiagnoseReport {
     /// Per fitted error motion of the model: basis, order and why (FORMAT.md §4 `shapes`, optional).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub shapes: BTreeMap<String, ShapeReport>,
+    /// The stated σ checked against the repeated readings (FORMAT.md §4 `sigma`, optional).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<SigmaCheck>,
 }
 
 /// Everything a compare computes, for diagnose to build on.
@@ -145,6 +151,8 @@ pub(crate) struct Fitted<'a> {
     pub(crate) sig: Vec<f64>,
     pub(crate) est: Vec<bool>,
     pub(crate) notes: Vec<String>,
+    /// The stated σ checked against the repeats (None without repeats).
+    pub(crate) sigma: Option<SigmaCheck>,
 }
 
 pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> Result<Fitted<'a>, VmtError> {
@@ -231,15 +239,29 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
             }
             continue;
         }
-        if mode_over_shapes {
+        let (st, fs) = if mode_over_shapes {
             let st2 = match fitted_excitation(&st, &fs) {
                 Some(ex) => st.with_excitation(ex),
                 None => st.with_excitation(st.excitation.clone()),
             };
             let fs = fit_model_on(&st2, model, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
-            return Ok(Fitted { st: st2, fs, sig, est, notes });
+            (st2, fs)
+        } else {
+            (st, fs)
+        };
+        let sigma = sigma_check(chans, &fs.residual, &est);
+        if let Some((sc, k)) = sigma.as_ref().and_then(|sc| Some((sc, sc.scale?))) {
+            notes.push(format!(
+                "the manifest's sigma ({} m) is inconsistent with the repeated readings ({} m from {} degrees of \
+                 freedom, χ² test p = {:.2e}): the significance uses the stated sigma × {k:.3} (the repeats' \
+                 upper 95 % bound)",
+                fmt_num(sc.stated.unwrap_or(f64::NAN)),
+                fmt_num(sc.from_repeats),
+                sc.dof,
+                sc.p_value.unwrap_or(f64::NAN)
+            ));
         }
-        return Ok(Fitted { st, fs, sig, est, notes });
+        return Ok(Fitted { st, fs, sig, est, notes, sigma });
     }
     Err(VmtError::Internal("fit loop ended".into()))
 }
@@ -247,18 +269,15 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
 /// Minimum degrees of freedom of the repeatability estimate of σ (relative error ≈ 1/√(2·dof) ≤ 22 %).
 pub(crate) const MIN_REPEAT_DOF: usize = 10;
 
-/// σ of one reading from repeated approaches (ISO 230-2 repeatability): the residual grouped by
-/// (target, direction), σ̂² = Σ (r − r̄_group)² / (N − G); None with fewer than
-/// [`MIN_REPEAT_DOF`] degrees of freedom or a zero spread.
-pub(crate) fn repeatability_sigma(c: &Channel, r: &[f64]) -> Option<f64> {
+/// Within-group scatter of repeated readings (ISO 230-2 repeatability): the residual grouped by
+/// (target, direction), returns (SS = Σ (r − r̄_group)², dof = N − G); None when no reading is
+/// repeated.
+pub(crate) fn repeat_scatter(c: &Channel, r: &[f64]) -> Option<(f64, usize)> {
     let mut groups: BTreeMap<(u64, i8), Vec<f64>> = BTreeMap::new();
     for i in 0..r.len() {
         groups.entry((c.x[i].to_bits(), if c.d[i] > 0.0 { 1 } else { -1 })).or_default().push(r[i]);
     }
-    let dof = r.len().checked_sub(groups.len())?;
-    if dof < MIN_REPEAT_DOF {
-        return None;
-    }
+    let dof = r.len().checked_sub(groups.len()).filter(|d| *d > 0)?;
     let ss: f64 = groups
         .values()
         .map(|g| {
@@ -266,8 +285,119 @@ pub(crate) fn repeatability_sigma(c: &Channel, r: &[f64]) -> Option<f64> {
             g.iter().map(|v| (v - m).powi(2)).sum::<f64>()
         })
         .sum();
+    Some((ss, dof))
+}
+
+/// σ of one reading from repeated approaches: σ̂² = SS/(N − G) ([`repeat_scatter`]); None with
+/// fewer than [`MIN_REPEAT_DOF`] degrees of freedom or a zero spread.
+pub(crate) fn repeatability_sigma(c: &Channel, r: &[f64]) -> Option<f64> {
+    let (ss, dof) = repeat_scatter(c, r).filter(|(_, d)| *d >= MIN_REPEAT_DOF)?;
     let s = (ss / dof as f64).sqrt();
     (s > 0.0).then_some(s)
+}
+
+/// Two-sided p-value below which a stated σ is inconsistent with the repeats ([`sigma_check`]).
+pub(crate) const SIGMA_TEST_LEVEL: f64 = 0.01;
+
+/// What σ the significance (ΔBIC) of `diagnose` uses (FORMAT.md §4 optional `sigma.used`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SigmaUse {
+    /// The manifest's σ, consistent with the repeats (or no repeats to check it): χ² form of ΔBIC.
+    Stated,
+    /// The manifest gives no σ: estimated from the repeats (or the residual) and used as known.
+    Estimated,
+    /// The manifest's σ is inconsistent with the repeats: the stated σ of every checked channel is
+    /// scaled by [`SigmaCheck::scale`], to the upper 95 % confidence bound of the repeats' scatter.
+    FromRepeats,
+}
+
+/// The noise σ of the point-table channels checked against their repeated readings (FORMAT.md §4
+/// optional `sigma`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SigmaCheck {
+    /// The manifest's σ of the checked channels, m: √(Σ dof_j·σ_j² / Σ dof_j); None when no checked
+    /// channel states one.
+    pub stated: Option<f64>,
+    /// Pooled within-group standard deviation of the residual over repeated readings (same target,
+    /// same direction, several runs), m: √(Σ SS_j / Σ dof_j).
+    pub from_repeats: f64,
+    /// Its degrees of freedom: readings − (target, direction) groups, summed over the channels.
+    pub dof: usize,
+    /// Two-sided p-value of T = Σ SS_j/σ_j² against χ²(dof) (the stated σ is right when T is a
+    /// χ²(dof) draw): 2·min(P(χ² ≥ T), P(χ² ≤ T)); None without a stated σ.
+    pub p_value: Option<f64>,
+    /// What σ the significance uses.
+    pub used: SigmaUse,
+    /// With `used` = `from_repeats`: the factor applied to the stated σ, √(T / χ²_{dof, 0.95}) (T
+    /// of `p_value`, χ²_{dof, 0.95} its lower 5 % point): the upper 95 % confidence bound of σ from
+    /// the repeats over the stated σ, so that a σ estimated from few repeats is not understated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
+}
+
+/// Checks the stated σ of the point-table (length) channels against their repeated readings in
+/// the residual `r` (all samples, stack order): the χ² test of [`SigmaCheck::p_value`]. Channels
+/// without a stated σ count in `from_repeats` but not in the test. None when no channel has
+/// repeats ([`MIN_REPEAT_DOF`] degrees of freedom in all).
+pub(crate) fn sigma_check(chans: &[Channel], r: &[f64], est: &[bool]) -> Option<SigmaCheck> {
+    let (mut ss_all, mut dof_all) = (0.0, 0usize);
+    let (mut t, mut dof_s, mut var_s) = (0.0, 0usize, 0.0);
+    let mut k0 = 0;
+    for (j, c) in chans.iter().enumerate() {
+        let rc = &r[k0..k0 + c.y.len()];
+        k0 += c.y.len();
+        // Laser readings of a point table (an encoder time series has no repeated targets).
+        let point_table = c.is_laser() && c.encoder.is_none();
+        let Some((ss, dof)) = repeat_scatter(c, rc).filter(|_| point_table) else { continue };
+        ss_all += ss;
+        dof_all += dof;
+        if let Some(s) = c.sigma.filter(|_| !est[j]) {
+            t += ss / (s * s);
+            dof_s += dof;
+            var_s += dof as f64 * s * s;
+        }
+    }
+    if dof_all < MIN_REPEAT_DOF || ss_all <= 0.0 {
+        return None;
+    }
+    let p_value = (dof_s >= MIN_REPEAT_DOF)
+        .then(|| vmt_estimators::modelcheck::chi_square_sf(t, dof_s as f64).ok())
+        .flatten()
+        .map(|upper: f64| (2.0 * upper.min(1.0 - upper)).min(1.0));
+    let used = match p_value {
+        None if dof_s == 0 && est.iter().any(|e| *e) => SigmaUse::Estimated,
+        Some(p) if p < SIGMA_TEST_LEVEL => SigmaUse::FromRepeats,
+        None | Some(_) => SigmaUse::Stated,
+    };
+    let scale = (used == SigmaUse::FromRepeats)
+        .then(|| vmt_estimators::modelcheck::chi_square_isf(0.95, dof_s as f64).ok())
+        .flatten()
+        .map(|q| (t / q).sqrt());
+    Some(SigmaCheck {
+        stated: (dof_s > 0).then(|| (var_s / dof_s as f64).sqrt()),
+        from_repeats: (ss_all / dof_all as f64).sqrt(),
+        dof: dof_all,
+        p_value,
+        used,
+        scale,
+    })
+}
+
+/// The per-sample σ the significance of `diagnose` uses: `per` (the fit's σ), with the stated σ of
+/// the checked (point-table laser) channels scaled by [`SigmaCheck::scale`] when the repeats
+/// reject it.
+pub(crate) fn significance_sigma(f: &Fitted, per: &[f64]) -> Vec<f64> {
+    let Some(k) = f.sigma.as_ref().and_then(|sc| sc.scale) else { return per.to_vec() };
+    let mut out = Vec::with_capacity(per.len());
+    let mut k0 = 0;
+    for (j, c) in f.st.chans.iter().enumerate() {
+        let m = c.y.len();
+        let checked = c.is_laser() && c.encoder.is_none() && !f.est[j];
+        out.extend(per[k0..k0 + m].iter().map(|s| if checked { s * k } else { *s }));
+        k0 += m;
+    }
+    out
 }
 
 /// Per-sample σ from per-channel σ (NaN → 1: unweighted first pass).
@@ -373,6 +503,7 @@ pub fn compare(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Compa
         notes,
         history: read_history(&history_path(&model.source)).unwrap_or_default(),
         shapes: shape_reports(&f.fs),
+        sigma: f.sigma,
     })
 }
 
@@ -548,7 +679,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         .collect();
     let mut ranking: Vec<RankingEntry> = Vec::new();
     if !cands.is_empty() {
-        let sigma = Sigma::PerSample(per.clone());
+        let sigma = Sigma::PerSample(significance_sigma(&f, &per));
         let base: Vec<Vec<f64>> = f.fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
         let input =
             vmt_estimators::modelcheck::ResidualInput { residual: &f.fs.residual, sigma: &sigma, base_columns: &base };
@@ -597,6 +728,8 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             confused_with: vec![],
             note: Some(note),
             aliases: vec![],
+            p_value: None,
+            searched: None,
         });
     }
     let shapes = shape_reports(&f.fs);
@@ -616,7 +749,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             stiff.join("; ")
         );
     }
-    Ok(DiagnoseReport { normalized_rms: nrms, ranking, advice, notes, shapes })
+    Ok(DiagnoseReport { normalized_rms: nrms, ranking, advice, notes, shapes, sigma: f.sigma })
 }
 
 /// Why a periodic effect is not searched on these positions, and what measurement would show it.

@@ -501,8 +501,8 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
         EffectName::ThermalDrift => (s(&["value"]), vec!["tau"]),
         EffectName::Coulomb => (s(&["fc"]), vec![]),
         EffectName::Viscous => (s(&["fv"]), vec![]),
-        EffectName::Stribeck if with_fc => (s(&["fs_minus_fc", "fc"]), vec!["vs"]),
-        EffectName::Stribeck => (s(&["fs_minus_fc"]), vec!["vs"]),
+        EffectName::Stribeck if with_fc => (s(&["fs_minus_fc", "fc"]), vec!["vs", "shape"]),
+        EffectName::Stribeck => (s(&["fs_minus_fc"]), vec!["vs", "shape"]),
         EffectName::Resonance => {
             let mut names: Vec<String> = resonance_gains(st).into_iter().map(|g| g.2).collect();
             for (j, _) in st.excitation.iter().enumerate().filter(|(_, e)| !e.is_empty()) {
@@ -662,9 +662,11 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
         EffectName::Coulomb => vec![st.col(|c, i| c.s_force() * c.v[i].signum())],
         EffectName::Viscous => vec![st.col(|c, i| c.s_force() * c.v[i])],
         EffectName::Stribeck => {
-            // F = Fc·sgn v + (Fs − Fc)·sgn v·exp(−|v/vs|^δ), δ = 2 (the catalogue's default shape).
-            let vs = h[0];
-            let mut cols = vec![st.col(|c, i| c.s_force() * c.v[i].signum() * (-(c.v[i] / vs).abs().powi(2)).exp())];
+            // F = Fc·sgn v + (Fs − Fc)·sgn v·exp(−|v/vs|^δ): vs = h[0] (m/s), δ = h[1] (the shape
+            // exponent, 2 when absent).
+            let (vs, delta) = (h[0], h.get(1).copied().unwrap_or(2.0));
+            let mut cols =
+                vec![st.col(|c, i| c.s_force() * c.v[i].signum() * (-(c.v[i] / vs).abs().powf(delta)).exp())];
             if sh.with_fc {
                 cols.push(st.col(|c, i| c.s_force() * c.v[i].signum()));
             }
@@ -887,16 +889,42 @@ pub(crate) fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
     (0..n).map(|k| (a + (b - a) * k as f64 / (n - 1).max(1) as f64).exp()).collect()
 }
 
-/// Search grid of a hyper-parameter on these data: time constants from a quarter of the time span
-/// to ten times it (a faster process looks like a constant, which the offsets and the scale error
-/// already carry); screw leads 2–60 mm; encoder signal periods from the common scale gratings.
+/// Time constants searched per decade ([`tau_range`]).
+pub(crate) const TAU_PER_DECADE: f64 = 10.0;
+
+/// The range (s) of a searched time constant: from [`TAU_MIN_INTERVALS`] median sample intervals
+/// (a faster process has settled after a few readings: it is a constant, which the offsets and
+/// the scale error carry) to [`TAU_MAX_RECORDS`] times the record (a slower one is a straight
+/// line in time over the record).
+pub(crate) fn tau_range(st: &Stack) -> (f64, f64) {
+    let (lo, hi) = st.t_span();
+    let span = (hi - lo).max(1.0);
+    let mut ts: Vec<f64> = st.chans.iter().flat_map(|c| c.t.iter().copied()).collect();
+    ts.sort_by(f64::total_cmp);
+    let mut dt: Vec<f64> = ts.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+    dt.sort_by(f64::total_cmp);
+    let interval = dt.get(dt.len() / 2).copied().unwrap_or(span / 4.0);
+    ((TAU_MIN_INTERVALS * interval).min(span / 4.0), TAU_MAX_RECORDS * span)
+}
+
+/// Shortest searched time constant, in median sample intervals ([`tau_range`]).
+pub(crate) const TAU_MIN_INTERVALS: f64 = 3.0;
+/// Longest searched time constant, in records ([`tau_range`]).
+pub(crate) const TAU_MAX_RECORDS: f64 = 30.0;
+
+/// Search grid of a hyper-parameter on these data: time constants over [`tau_range`] on a log
+/// grid of [`TAU_PER_DECADE`] per decade; screw leads 2–60 mm; Stribeck velocities and shape
+/// exponents; encoder signal periods from the common scale gratings.
 pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>, bool) {
     match (name, hyper) {
         (_, "tau") => {
-            let (lo, hi) = st.t_span();
-            let span = (hi - lo).max(1.0);
-            (log_grid(span / 4.0, span * 10.0, 40), true)
+            let (lo, hi) = tau_range(st);
+            let n = ((hi / lo).log10() * TAU_PER_DECADE).ceil().max(2.0) as usize + 1;
+            (log_grid(lo, hi, n), true)
         }
+        // Stribeck shape exponents δ of lubricated guideways, 0.5–3 (Armstrong-Hélouvry 1994:
+        // 0.5–2; δ = 2 the Gaussian law).
+        (EffectName::Stribeck, "shape") => (log_grid(0.5, 3.0, 9), true),
         // Screw leads 2–60 mm, only the periods these positions resolve (`period_resolvable`).
         (EffectName::CyclicLead, _) => (resolvable_only(st, log_grid(2e-3, 60e-3, 120)), true),
         // Position-loop gains of machine tools, 2–500 1/s.

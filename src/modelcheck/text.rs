@@ -45,6 +45,7 @@ pub fn compare_text(r: &CompareReport) -> String {
         s += &format!("fitted {e}: {}\n", kv.join(", "));
     }
     s += &shapes_text(&r.shapes);
+    s += &sigma_text(r.sigma.as_ref());
     for n in &r.notes {
         s += &format!("note: {n}\n");
     }
@@ -62,7 +63,8 @@ pub fn compare_text(r: &CompareReport) -> String {
 /// The text report of a diagnosis.
 pub fn diagnose_text(r: &DiagnoseReport) -> String {
     let mut s = format!("vmt diagnose: normalised RMS {:.3}\n", r.normalized_rms);
-    s += &format!("{:<22} {:>12} {:>10} {:<12} params\n", "effect", "ΔBIC", "explained", "verdict");
+    // p: upper bound of the probability that noise alone gives any candidate a reduction this large.
+    s += &format!("{:<22} {:>12} {:>9} {:>10} {:<12} params\n", "effect", "ΔBIC", "p", "explained", "verdict");
     for e in &r.ranking {
         let kv: Vec<String> = e.params.iter().map(|(k, v)| format!("{k}={}", fmt_num(*v))).collect();
         let v = match e.verdict {
@@ -70,13 +72,23 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
             Verdict::Noise => "noise",
             Verdict::Inseparable => "inseparable",
         };
-        s += &format!("{:<22} {:>12.1} {:>10.3} {:<12} {}", e.effect, e.delta_bic, e.explained, v, kv.join(" "));
+        let p = e.p_value.map_or("-".to_string(), |p| format!("{p:.1e}"));
+        s += &format!(
+            "{:<22} {:>12.1} {:>9} {:>10.3} {:<12} {}",
+            e.effect,
+            e.delta_bic,
+            p,
+            e.explained,
+            v,
+            kv.join(" ")
+        );
         if !e.confused_with.is_empty() {
             s += &format!("  (confused with {})", e.confused_with.join(", "));
         }
         s += "\n";
     }
     s += &shapes_text(&r.shapes);
+    s += &sigma_text(r.sigma.as_ref());
     s += &format!("advice: {}\n", r.advice);
     for n in &r.notes {
         s += &format!("note: {n}\n");
@@ -97,4 +109,22 @@ fn shapes_text(shapes: &BTreeMap<String, ShapeReport>) -> String {
         s += &format!("{n}: Legendre order {} {why}\n", sh.order);
     }
     s
+}
+
+/// One line on the noise σ checked against the repeats, e.g. "σ: stated 0.100 µm, from repeats
+/// 0.310 µm (1σ of one reading, 80 degrees of freedom), χ² test p = 1.2e-30: ...".
+fn sigma_text(sc: Option<&SigmaCheck>) -> String {
+    let Some(sc) = sc else { return String::new() };
+    let stated = sc.stated.map_or("none".to_string(), |v| format!("{:.4} µm", v * 1e6));
+    let p = sc.p_value.map_or(String::new(), |p| format!(", χ² test p = {p:.2e}"));
+    let used = match sc.used {
+        SigmaUse::Stated => "significance uses the stated σ",
+        SigmaUse::Estimated => "significance uses σ estimated from the data",
+        SigmaUse::FromRepeats => "stated σ inconsistent with the repeats: significance uses their upper 95 % bound",
+    };
+    format!(
+        "σ (1σ of one reading): stated {stated}, from repeats {:.4} µm ({} degrees of freedom){p}; {used}\n",
+        sc.from_repeats * 1e6,
+        sc.dof
+    )
 }

@@ -19,8 +19,18 @@
 //! false-alarm probability of one searched sinusoid near M·e^{−(3 ln n + 10)/2} (≈ 10⁻⁵ for
 //! n = 400, M = 400); see the false-alarm test in `tests/modelcheck.rs` for the measured rate.
 //!
+//! Beside ΔBIC each candidate gets a false-alarm probability for the whole diagnosis
+//! ([`CandidateFit::p_value`]): with q independent new columns, the reduction Δχ² of pure noise at
+//! one hyper-parameter value is χ²(q) (σ known; with σ's scale free, Δχ²·(n − p)/χ²_new, the
+//! large-n form of the F test); a search over M grid values and a ranking of C candidates raise the
+//! chance that some value of some candidate reaches it, bounded by Bonferroni:
+//! p = min(1, C·M·P(χ²_q > Δχ²)). A candidate is significant only when p ≤ `family_alpha` (1 %):
+//! the false-alarm probability of one whole `diagnose` on a complete model is then ≤ 1 % by this
+//! bound (M counts the searched grid values; the golden-section refinement between two of them is
+//! not counted, which the measured rates in `tests/gen_diagnose.rs` check).
+//!
 //! Verdicts (see [`rank_candidates`]): `significant` when ΔBIC < −10 ("very strong" evidence in
-//! Kass & Raftery's scale), the candidate explains at least a small fraction of the residual,
+//! Kass & Raftery's scale) and p ≤ `family_alpha`, the candidate explains at least a small fraction of the residual,
 //! and it is not explained away by better-ranked significant candidates; `inseparable` when two
 //! significant candidates fit nearly the same vector on THIS data (cosine > 0.98) with ΔBIC
 //! closer than 10; `noise` otherwise.
@@ -134,6 +144,9 @@ pub struct DiagnoseConfig {
     pub max_grid_points: usize,
     /// Maximum number of effects [`forward_select`] adds (default 5).
     pub max_steps: usize,
+    /// Largest false-alarm probability of the whole diagnosis ([`CandidateFit::p_value`]) for a
+    /// significant verdict (default 0.01).
+    pub family_alpha: f64,
 }
 
 impl Default for DiagnoseConfig {
@@ -146,6 +159,7 @@ impl Default for DiagnoseConfig {
             refine_iterations: 40,
             max_grid_points: 200_000,
             max_steps: 5,
+            family_alpha: 0.01,
         }
     }
 }
@@ -183,6 +197,13 @@ pub struct RankingEntry {
     /// Other periods (m) that fit exactly as well on these sample positions (optional `aliases`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub aliases: Vec<f64>,
+    /// Upper bound of the probability that noise alone gives some candidate of this diagnosis a
+    /// reduction this large, searches counted ([`CandidateFit::p_value`]; optional `p_value`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub p_value: Option<f64>,
+    /// Number of hyper-parameter values searched for this candidate (optional `searched`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub searched: Option<usize>,
 }
 
 /// The full fit of one candidate (details behind a [`RankingEntry`]).
@@ -219,6 +240,12 @@ pub struct CandidateFit {
     pub conditional_delta_bic: Option<f64>,
     /// Number of signature evaluations of the search.
     pub evaluations: usize,
+    /// Number M of hyper-parameter grid values searched (the product of the searched grids' sizes; 1
+    /// without a search).
+    pub searched: usize,
+    /// P(χ²_q > Δχ²)·M for this candidate alone (module doc); [`rank_candidates`] multiplies it by
+    /// the number of candidates C and caps it at 1.
+    pub p_value: f64,
     /// The candidate's columns at the fitted hyper-parameters.
     #[serde(skip)]
     pub columns: Vec<Vec<f64>>,
@@ -302,6 +329,17 @@ fn delta_bic(p: &Prepared, stat_new: f64, k: usize) -> f64 {
     }
 }
 
+/// Orthonormal basis of the candidate's weighted columns with the base projected out; a column
+/// whose remaining norm is below 1e-9 of its own (dependent on the base or the others) is dropped,
+/// so its size is the number q of new independent columns.
+fn candidate_basis(p: &Prepared, cols: &[Vec<f64>]) -> Basis {
+    let mut b = Basis::default();
+    for v in p.base.project_columns(cols, &p.w).into_iter().filter(|v| v.iter().any(|x| *x != 0.0)) {
+        b.push(v);
+    }
+    b
+}
+
 /// Evaluates a candidate's signature at `h` and returns (χ² or RSS reduction, columns).
 fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<f64>>), String> {
     let cols = (cand.signature)(h)?;
@@ -338,10 +376,11 @@ fn screen_score(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<f64, String
     Ok(b.q.iter().map(|q| q.iter().zip(&p.r_t).map(|(a, b)| a * b).sum::<f64>().powi(2)).sum())
 }
 
-/// The χ² (or RSS) reduction of adding `cols` to the prepared base ([`OrthoBase::explained`]:
-/// variable projection, the base is factored once in [`prepare`]).
+/// The χ² (or RSS) reduction of adding `cols` to the prepared base (variable projection: the base
+/// is factored once in [`prepare`]).
 fn reduction_of(p: &Prepared, cols: &[Vec<f64>]) -> f64 {
-    p.base.explained(&p.r_t, cols, &p.w)
+    let b = candidate_basis(p, cols);
+    b.q.iter().map(|q| q.iter().zip(&p.r_t).map(|(a, b)| a * b).sum::<f64>().powi(2)).sum()
 }
 
 /// Fits one candidate: grid search of its hyper-parameters, golden-section refinement, weighted
@@ -462,6 +501,8 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
     let stat_new: f64 = fit.residual.iter().map(|r| r * r).sum();
     let fitted_change: Vec<f64> = p.r_t.iter().zip(&fit.residual).map(|(rt, r)| rt - r).collect();
     let k = cand.coefficient_names.len() + cand.searched();
+    let searched: usize = cand.hyper_parameters.iter().filter(|h| h.grid.len() > 1).map(|h| h.grid.len()).product();
+    let p_value = search_p_value(p, stat_new, candidate_basis(p, &cols).q.len(), p.base.rank(), searched);
     let coefs = &fit.coefficients[..];
     let coefficients: BTreeMap<String, f64> =
         cand.coefficient_names.iter().cloned().zip(coefs.iter().copied()).collect();
@@ -496,10 +537,29 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
         explained: (1.0 - stat_new / p.stat_old).clamp(0.0, 1.0),
         conditional_delta_bic: None,
         evaluations,
+        searched,
+        p_value,
         columns: cols,
         new_residual,
         fitted_change,
     })
+}
+
+/// P(χ²_q > Δχ²)·M (module doc): Δχ² = stat_old − stat_new with σ known; with σ's scale free,
+/// Δχ²·(n − nb − q)/stat_new (the F statistic times q, χ²_q for large n). 1 when q = 0.
+fn search_p_value(p: &Prepared, stat_new: f64, q: usize, nb: usize, searched: usize) -> f64 {
+    if q == 0 {
+        return 1.0;
+    }
+    let drop = (p.stat_old - stat_new).max(0.0);
+    let x = if p.known {
+        drop
+    } else {
+        let dof = p.n.saturating_sub(nb + q).max(1) as f64;
+        drop * dof / stat_new.max(1e-300)
+    };
+    let tail = super::stats::chi_square_sf(x, q as f64).unwrap_or(1.0);
+    (tail * searched.max(1) as f64).min(1.0)
 }
 
 /// Golden-section search for the maximum of `f` on [lo, hi] (Kiefer 1953; ratio (√5 − 1)/2, one
@@ -588,9 +648,17 @@ fn rank_refs(
         candidates.par_iter().map(|c| fit_prepared(&p, c, config)).collect::<Result<_, _>>()?;
     fits.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic).then_with(|| a.effect.cmp(&b.effect)));
     let m = fits.len();
+    // Bonferroni over the C candidates ranked: the whole diagnosis's false-alarm bound.
+    for f in fits.iter_mut() {
+        f.p_value = (f.p_value * m as f64).min(1.0);
+    }
     let marginal: Vec<bool> = fits
         .iter()
-        .map(|f| f.delta_bic < config.significance_threshold && f.explained >= config.explained_floor)
+        .map(|f| {
+            f.delta_bic < config.significance_threshold
+                && f.explained >= config.explained_floor
+                && f.p_value <= config.family_alpha
+        })
         .collect();
     let mut confused: Vec<Vec<String>> = vec![Vec::new(); m];
     for a in 0..m {
@@ -658,6 +726,8 @@ fn rank_refs(
             confused_with,
             note: None,
             aliases: vec![],
+            p_value: Some(f.p_value),
+            searched: Some(f.searched),
         })
         .collect();
     Ok(Diagnosis { ranking, fits, stat_old: p.stat_old, n: p.n })
@@ -739,6 +809,8 @@ mod tests {
             confused_with: vec![],
             note: None,
             aliases: vec![],
+            p_value: None,
+            searched: None,
         };
         let s = serde_json::to_string(&e).unwrap();
         assert_eq!(

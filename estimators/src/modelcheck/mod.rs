@@ -33,8 +33,8 @@ pub use lsq::{fit_signature, LinearFit};
 pub use ortho::{lstsq_qr, nested_rss, NestedRss, OrthoBase};
 pub use spectrum::{amplitude_spectrum, frequency_grid, ls_periodogram, AmplitudeSpectrum, Periodogram};
 pub use stats::{
-    autocorrelation, bin_by_edges, bin_by_label, chi_square_sf, estimate_noise_sigma, fit_percent, ljung_box,
-    normalized_rms, rms, uniform_edges, Autocorrelation, BinnedResidual, LabelBin, LjungBox, RangeBin,
+    autocorrelation, bin_by_edges, bin_by_label, chi_square_isf, chi_square_sf, estimate_noise_sigma, fit_percent,
+    ljung_box, normalized_rms, rms, uniform_edges, Autocorrelation, BinnedResidual, LabelBin, LjungBox, RangeBin,
     MIN_SAMPLES_NOISE_SIGMA,
 };
 
@@ -88,7 +88,10 @@ pub enum Sigma {
 impl Sigma {
     /// Whether a noise level is known (χ² statistics are available).
     pub fn is_known(&self) -> bool {
-        !matches!(self, Sigma::Unknown)
+        match self {
+            Sigma::Unknown => false,
+            Sigma::Constant(_) | Sigma::PerSample(_) => true,
+        }
     }
 
     /// Weights w_i = 1/σ_i for n samples (all 1 when σ is unknown), validated.

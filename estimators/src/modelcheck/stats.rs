@@ -152,6 +152,25 @@ pub fn chi_square_sf(x: f64, dof: f64) -> Result<f64, ModelCheckError> {
     Ok(gamma_q(0.5 * dof, 0.5 * x))
 }
 
+/// The x with P(χ²_ν > x) = p ([`chi_square_sf`] inverted by bisection on [0, ν + 40·√(2ν) + 100],
+/// 200 halvings: exact to rounding). Needs 0 < p < 1 and ν > 0.
+pub fn chi_square_isf(p: f64, dof: f64) -> Result<f64, ModelCheckError> {
+    if !(p > 0.0 && p < 1.0) {
+        return Err(ModelCheckError::Invalid(format!("chi_square_isf: p must be in (0, 1), got {p}")));
+    }
+    let (mut lo, mut hi) = (0.0, dof + 40.0 * (2.0 * dof).sqrt() + 100.0);
+    chi_square_sf(hi, dof)?;
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if chi_square_sf(mid, dof)? > p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Ok(0.5 * (lo + hi))
+}
+
 /// ln Γ(z) for z > 0 (Lanczos, g = 7, n = 9; relative error ~1e-15).
 fn ln_gamma(z: f64) -> f64 {
     const G: f64 = 7.0;
@@ -395,6 +414,14 @@ fn median(xs: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn chi_square_isf_inverts_the_survival_function() {
+        // Tables (Abramowitz & Stegun 26.8): χ²_{10} upper 5 % point 18.307, lower 5 % point 3.940.
+        assert!((chi_square_isf(0.05, 10.0).unwrap() - 18.307).abs() < 1e-3);
+        assert!((chi_square_isf(0.95, 10.0).unwrap() - 3.940).abs() < 1e-3);
+        assert!(chi_square_isf(0.0, 10.0).is_err() && chi_square_isf(0.5, 0.0).is_err());
+    }
 
     #[test]
     fn nrmse_fit_hand_worked() {
