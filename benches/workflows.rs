@@ -25,8 +25,12 @@ fn workflows(c: &mut Criterion) {
     g.bench_function("one accelerometer study trial (noise draw + estimate)", |b| {
         b.iter(|| {
             seed += 1;
+            // As `vmt::study::run_study` does per trial: noise redrawn, the set written once, the estimators
+            // run on it with the compensation check re-measuring after the session simulated once.
             let runs = vmt::simulate::read_all(&study, &ph, &truths, seed).unwrap();
-            vmt::estimate::run_estimators(&study, &ph, &runs).unwrap()
+            let set = vmt::simulate::to_measurement_set(&study, &runs).unwrap();
+            let again = |p: &_, x: &[f64], y: &[f64]| vmt::simulate::remeasure(&ph, study.seed, truths.end, p, x, y);
+            vmt::estimate::estimate_recording(&study, ph.view(), &runs, &set, &again).unwrap()
         })
     });
     g.finish();

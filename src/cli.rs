@@ -3,10 +3,10 @@
 //! bad input).
 
 use crate::error::VmtError;
-use crate::estimate::{display, run_estimators, Check, Quantity, CHECK_HEADER, CHECK_LEGEND};
+use crate::estimate::{display, estimate_recording, Check, Quantity, CHECK_HEADER, CHECK_LEGEND};
 use crate::measurement::{self, MeasurementSet, SensorKind, UnitChoice};
 use crate::scenario::Scenario;
-use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set, truth_extras};
+use crate::simulate::{physics, read_all, remeasure, simulate_truth, to_measurement_set, truth_extras};
 use std::path::{Path, PathBuf};
 
 /// Loads the scenario at `path`, or the bundled default.
@@ -19,9 +19,13 @@ pub fn load_scenario(path: Option<&Path>) -> Result<Scenario, VmtError> {
 
 /// Simulates a scenario and returns its measurement set.
 pub fn simulate_set(sc: &Scenario) -> Result<MeasurementSet, VmtError> {
-    let ph = physics(sc)?;
-    let truths = simulate_truth(sc, &ph);
-    let runs = read_all(sc, &ph, &truths, sc.seed)?;
+    simulate_set_on(sc, &physics(sc)?)
+}
+
+/// Simulates a scenario on its physics `ph` (built once by the caller) and returns its measurement set.
+fn simulate_set_on(sc: &Scenario, ph: &crate::simulate::Physics) -> Result<MeasurementSet, VmtError> {
+    let truths = simulate_truth(sc, ph);
+    let runs = read_all(sc, ph, &truths, sc.seed)?;
     to_measurement_set(sc, &runs)
 }
 
@@ -32,8 +36,9 @@ pub fn simulate(path: Option<&Path>, out: &Path, units: &str) -> Result<(), VmtE
     if let Some(p) = path {
         crate::output::refuse_input_overwrite(out, &[p])?;
     }
-    let set = simulate_set(&sc)?;
-    measurement::write_with_extras(&set, out, units, &truth_extras(&sc)?)?;
+    let ph = physics(&sc)?;
+    let set = simulate_set_on(&sc, &ph)?;
+    measurement::write_with_extras(&set, out, units, &truth_extras(&sc, &ph)?)?;
     eprintln!("wrote {} runs to {}", set.runs.len(), out.display());
     Ok(())
 }
@@ -86,8 +91,9 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     if let Some(p) = path {
         crate::output::refuse_input_overwrite(&out, &[p])?;
     }
-    let files = measurement::set_files(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc)?)?;
-    let est = run_estimators(&sc, &ph, &runs)?;
+    let files = measurement::set_files(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc, &ph)?)?;
+    let again = |p: &_, x: &[f64], y: &[f64]| remeasure(&ph, sc.seed, truths.end, p, x, y);
+    let est = estimate_recording(&sc, ph.view(), &runs, &set, &again)?;
     let checks = &est.checks;
     let html = out.join("report.html");
     let (report, report_json) = crate::report::report_files(&crate::report::run_report(&sc, &set, &est))?;
@@ -153,6 +159,25 @@ fn spinner(message: &str) -> indicatif::ProgressBar {
         bar.enable_steady_tick(std::time::Duration::from_millis(200));
     } else {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    bar
+}
+
+/// A spinner on stderr that appears only when the work lasts more than a second and stderr is a
+/// terminal (the model-check commands: most runs answer at once); `finish_and_clear` removes it.
+fn slow_spinner(message: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::with_draw_target(None, indicatif::ProgressDrawTarget::hidden());
+    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        let (b, message) = (bar.clone(), message.to_string());
+        std::thread::spawn(move || {
+            std::thread::sleep(std::time::Duration::from_secs(1));
+            if !b.is_finished() {
+                b.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+                b.set_style(indicatif::ProgressStyle::default_spinner());
+                b.set_message(message);
+                b.enable_steady_tick(std::time::Duration::from_millis(200));
+            }
+        });
     }
     bar
 }
@@ -339,7 +364,7 @@ pub fn study(
     let cmd = estimator_cmd.map(|c| crate::byo::CommandEstimator { command: c.to_string() });
     let rows = run_study(&sc, &vary, trials, shard, cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator), tolerance)?;
     bar.finish_and_clear();
-    write_study(&rows, &format!("sensors.{}.{}", vary.sensor, vary.key), out, Some(&sc))
+    write_study(&rows, &format!("sensors.{}.{}", vary.sensor, vary.key.key()), out, Some(&sc))
 }
 
 /// `vmt study merge OUT SHARD_DIRS…`: joins the trials of shards and writes the same outputs as one run.
@@ -627,14 +652,20 @@ pub(crate) fn print_json<T: serde::Serialize>(format: &str, v: &T) -> Result<(),
 /// residual (FORMAT.md §4).
 pub fn compare(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
     let (m, set) = model_and_data(model, data)?;
-    let r = crate::modelcheck::compare(&m, &set, data)?;
+    let bar = slow_spinner("compare: fitting the model");
+    let r = crate::modelcheck::compare(&m, &set, data);
+    bar.finish_and_clear();
+    let r = r?;
     print_result("vmt-compare/1", &r, json, crate::modelcheck::compare_text)
 }
 
 /// `vmt diagnose --model M --data D [--json]`: rank the effects the model lacks (FORMAT.md §4).
 pub fn diagnose(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
     let (m, set) = model_and_data(model, data)?;
-    let r = crate::modelcheck::diagnose(&m, &set, data)?;
+    let bar = slow_spinner("diagnose: fitting the model and every candidate it lacks");
+    let r = crate::modelcheck::diagnose(&m, &set, data);
+    bar.finish_and_clear();
+    let r = r?;
     print_result("vmt-diagnose/1", &r, json, crate::modelcheck::diagnose_text)
 }
 

@@ -1,19 +1,23 @@
-//! vmt: a virtual machine tool. File formats (FORMAT.md), scenarios, workflows (simulate, estimate),
-//! reports and the CLI.
+//! vmt: a virtual machine tool. The root crate in layers, data flowing forward:
+//!
+//! ```text
+//! format/    FORMAT readers and writers (error, units, measurement, model)       plain data
+//! scenario/  Scenario, load, chain building; spec.rs: EstimatorSpec             uses format
+//! modelcheck/ compare / diagnose / add                                           uses format
+//! workflow/  simulate → estimate (straightness, byo) → report; study            uses scenario, modelcheck, format
+//! cli, main  the commands                                                        uses all
+//! ```
+//!
+//! The old flat paths (`vmt::measurement`, `vmt::simulate`, …) stay available as re-exports.
 
 pub mod bundled;
-pub mod byo;
 pub mod cli;
-pub mod error;
-pub mod estimate;
+pub mod format;
 pub mod fuzz;
-pub mod measurement;
-pub mod model;
 pub mod modelcheck;
 pub mod output;
-pub mod report;
 pub mod scenario;
-pub mod simulate;
-pub mod straightness;
-pub mod study;
-pub mod units;
+pub mod workflow;
+
+pub use format::{error, measurement, model, units};
+pub use workflow::{byo, estimate, report, simulate, straightness, study};

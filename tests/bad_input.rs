@@ -203,6 +203,17 @@ fn scenario_cases() -> Vec<Case> {
         blamed: "s.toml".into(),
         place: "procedures[2]".into(),
     });
+    // Static friction below the Coulomb level (a Stribeck curve rising with speed) is refused, not
+    // raised to Fc (issue 12): fs from `stribeck`, fc from `coulomb`.
+    cases.push(scenario_case(
+        "stribeck fs < coulomb fc",
+        &[
+            ("truth.effects.coulomb.fc", Some(num(100.0))),
+            ("truth.effects.stribeck.fs", Some(num(50.0))),
+            ("truth.effects.stribeck.vs", Some(num(1e-3))),
+        ],
+        "static friction fs = 50 N is below the Coulomb level fc = 100 N",
+    ));
     // The same scenario through `run` (which also writes a report) and `study`.
     for (label, key, v, place) in [
         ("run: max_accel = 0", "axis.max_accel", 0.0, "axis.max_accel"),
@@ -582,4 +593,32 @@ fn every_bad_input_exits_2_names_file_and_place_and_writes_nothing() {
         cases.len(),
         failures.join("\n")
     );
+}
+
+/// A crawl too short for one sample interval (duration × rate < 1.5 samples per feed) is refused by the
+/// SSI check of `vmt run` naming the scenario, the estimator and the run (issue 12: the scenario SSI
+/// path once indexed `t[1] − t[0]` unguarded). The physics runs here (the check needs the recording),
+/// but 0.5–1.4 samples of it take milliseconds.
+#[test]
+fn a_crawl_shorter_than_two_samples_exits_2_naming_the_ssi_check() {
+    let seed002 = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/crawl_seed002.toml");
+    let text = std::fs::read_to_string(&seed002).unwrap();
+    let failures: Vec<String> = [0.5, 1.0, 1.4]
+        .into_iter()
+        .filter_map(|samples| {
+            let mut t: toml::Table = toml::from_str(&text).unwrap();
+            let crawl = t["procedures"].as_array_mut().unwrap()[0].as_table_mut().unwrap();
+            assert_eq!(crawl["kind"].as_str(), Some("crawl"), "test setup: procedures[0] of seed 002 is its crawl");
+            let rate = crawl["rate"].as_float().unwrap();
+            crawl.insert("duration".into(), num(samples / rate));
+            check(&Case {
+                label: format!("crawl of {samples} × the sample interval"),
+                files: vec![("s.toml".into(), toml::to_string(&t).unwrap().into_bytes())],
+                args: args(&["run", "{dir}/s.toml", "-o", "{dir}/out"]),
+                blamed: "s.toml".into(),
+                place: "estimators (ssi crawl)".into(),
+            })
+        })
+        .collect();
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

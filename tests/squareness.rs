@@ -18,7 +18,13 @@ fn written_set_reads_back(sc: &Scenario, truths: &[(usize, LineTruth)]) {
     let set = to_measurement_set(sc, &runs).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("set");
-    measurement::write_with_extras(&set, &out, UnitChoice::Si, &truth_extras(sc).unwrap()).unwrap();
+    measurement::write_with_extras(
+        &set,
+        &out,
+        UnitChoice::Si,
+        &truth_extras(sc, &vmt::simulate::physics(sc).unwrap()).unwrap(),
+    )
+    .unwrap();
     let back = measurement::read(&out).unwrap();
     assert_eq!(back.runs.len(), 16);
     let fxy = back.runs.iter().find(|r| r.name == "lines_fxy").unwrap();

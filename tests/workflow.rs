@@ -261,7 +261,10 @@ fn a_study_can_run_a_users_estimator_command_and_the_in_process_trait_agrees() {
     let set = vmt::cli::simulate_set(&sc).unwrap();
     use vmt::byo::Estimator;
     let table = vmt::byo::LaserLines.estimate(&set, tmp.path()).unwrap();
-    let rows = vmt::byo::score_profiles(&vmt::simulate::truth_profiles(&sc).unwrap(), &table);
+    let rows = vmt::byo::score_profiles(
+        &vmt::simulate::truth_profiles(&sc, &vmt::simulate::physics(&sc).unwrap()).unwrap(),
+        &table,
+    );
     assert_eq!(rows.len(), 6);
     // 20 nm noise: within issue 5's 0.1 µm / 0.5 µrad (both < 1e-7 in SI).
     assert!(rows.iter().all(|r| r.rms < 1e-7), "{rows:?}");

@@ -5,7 +5,9 @@
 
 pub mod accel_straightness;
 pub mod compensation;
+pub mod dsp;
 pub mod friction_id;
+pub mod input;
 pub mod iso230_2;
 pub mod laser_ls;
 pub mod line;

@@ -11,6 +11,7 @@
 //! display unit (e.g. converts metres to micrometres) and names it in [`Figure::x_unit`] /
 //! [`Figure::y_unit`]; axis titles are printed as `quantity / unit` (ISO 80000-1 §7.1, value of a
 //! quantity = number × unit).
+#![deny(missing_docs)]
 
 mod figure;
 mod html;

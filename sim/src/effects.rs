@@ -11,56 +11,78 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
-/// The name of a physical effect, as written in `[effects.NAME]` (FORMAT.md §2).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum EffectName {
+/// Defines [`EffectName`] from the catalogue's rows (`Variant = "file_name"`, with its doc comment),
+/// and from the same rows [`EffectName::ALL`] (its length counted, not written) and
+/// [`EffectName::as_str`]: a new effect is one row here.
+macro_rules! catalogue {
+    ($($(#[$doc:meta])* $variant:ident = $name:literal,)*) => {
+        /// The name of a physical effect, as written in `[effects.NAME]` (FORMAT.md §2).
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+        pub enum EffectName {
+            $($(#[$doc])* #[serde(rename = $name)] $variant,)*
+        }
+
+        impl EffectName {
+            /// Every effect, in catalogue order (the order of FORMAT.md §2's table).
+            pub const ALL: [EffectName; [$($name),*].len()] = [$(EffectName::$variant),*];
+
+            /// The name as written in files (snake_case), e.g. `cyclic_lead`.
+            pub fn as_str(self) -> &'static str {
+                match self {
+                    $(EffectName::$variant => $name,)*
+                }
+            }
+        }
+    };
+}
+
+catalogue! {
     /// Positioning error motion of the axis, ISO 230-1 EXX (m).
-    Positioning,
+    Positioning = "positioning",
     /// Straightness error motion in the first transverse direction, EYX for the X axis (m).
-    StraightnessY,
+    StraightnessY = "straightness_y",
     /// Straightness error motion in the second transverse direction, EZX for the X axis (m).
-    StraightnessZ,
+    StraightnessZ = "straightness_z",
     /// Roll: angular error motion about the axis itself, EAX for the X axis (rad).
-    Roll,
+    Roll = "roll",
     /// Pitch: angular error motion about the first transverse direction, EBX for X (rad).
-    Pitch,
+    Pitch = "pitch",
     /// Yaw: angular error motion about the second transverse direction, ECX for X (rad).
-    Yaw,
+    Yaw = "yaw",
     /// Squareness between the X and Y axes (rad).
-    SquarenessXy,
+    SquarenessXy = "squareness_xy",
     /// Squareness between the X and Z axes (rad).
-    SquarenessXz,
+    SquarenessXz = "squareness_xz",
     /// Squareness between the Y and Z axes (rad).
-    SquarenessYz,
+    SquarenessYz = "squareness_yz",
     /// Lost motion on reversal of the feed drive (m).
-    Backlash,
+    Backlash = "backlash",
     /// Periodic lead error of the ball screw (m).
-    CyclicLead,
+    CyclicLead = "cyclic_lead",
     /// Linear error of the feedback scale (m/m).
-    ScaleError,
+    ScaleError = "scale_error",
     /// Thermal expansion of the screw or scale, proportional to position and temperature rise.
-    ThermalExpansion,
+    ThermalExpansion = "thermal_expansion",
     /// Thermal drift: a position-independent offset growing with time.
-    ThermalDrift,
+    ThermalDrift = "thermal_drift",
     /// Encoder interpolation error, periodic in the signal period.
-    InterpolationError,
+    InterpolationError = "interpolation_error",
     /// Coulomb friction (N).
-    Coulomb,
+    Coulomb = "coulomb",
     /// Viscous friction (N·s/m).
-    Viscous,
+    Viscous = "viscous",
     /// Stribeck friction curve.
-    Stribeck,
+    Stribeck = "stribeck",
     /// LuGre dynamic friction (Canudas de Wit et al. 1995).
-    Lugre,
+    Lugre = "lugre",
     /// Following error from the servo loops.
-    ServoLag,
+    ServoLag = "servo_lag",
     /// A structural mode seen by accelerometers.
-    Resonance,
+    Resonance = "resonance",
     /// Gravity seen by an accelerometer through the link's tilt (no parameters).
-    GravityTilt,
+    GravityTilt = "gravity_tilt",
     /// Accelerometer bias random walk.
-    AccelBiasDrift,
+    AccelBiasDrift = "accel_bias_drift",
 }
 
 /// Returned by `EffectName::from_str` for a name that is not in the catalogue.
@@ -72,33 +94,6 @@ pub struct UnknownEffect {
 }
 
 impl EffectName {
-    /// Every effect, in catalogue order (the order of FORMAT.md §2's table).
-    pub const ALL: [EffectName; 23] = [
-        EffectName::Positioning,
-        EffectName::StraightnessY,
-        EffectName::StraightnessZ,
-        EffectName::Roll,
-        EffectName::Pitch,
-        EffectName::Yaw,
-        EffectName::SquarenessXy,
-        EffectName::SquarenessXz,
-        EffectName::SquarenessYz,
-        EffectName::Backlash,
-        EffectName::CyclicLead,
-        EffectName::ScaleError,
-        EffectName::ThermalExpansion,
-        EffectName::ThermalDrift,
-        EffectName::InterpolationError,
-        EffectName::Coulomb,
-        EffectName::Viscous,
-        EffectName::Stribeck,
-        EffectName::Lugre,
-        EffectName::ServoLag,
-        EffectName::Resonance,
-        EffectName::GravityTilt,
-        EffectName::AccelBiasDrift,
-    ];
-
     /// The six error motions of an axis (ISO 230-1), in the order EXX, EYX, EZX, EAX, EBX, ECX.
     pub const ERROR_MOTIONS: [EffectName; 6] = [
         EffectName::Positioning,
@@ -108,35 +103,6 @@ impl EffectName {
         EffectName::Pitch,
         EffectName::Yaw,
     ];
-
-    /// The name as written in files (snake_case), e.g. `cyclic_lead`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            EffectName::Positioning => "positioning",
-            EffectName::StraightnessY => "straightness_y",
-            EffectName::StraightnessZ => "straightness_z",
-            EffectName::Roll => "roll",
-            EffectName::Pitch => "pitch",
-            EffectName::Yaw => "yaw",
-            EffectName::SquarenessXy => "squareness_xy",
-            EffectName::SquarenessXz => "squareness_xz",
-            EffectName::SquarenessYz => "squareness_yz",
-            EffectName::Backlash => "backlash",
-            EffectName::CyclicLead => "cyclic_lead",
-            EffectName::ScaleError => "scale_error",
-            EffectName::ThermalExpansion => "thermal_expansion",
-            EffectName::ThermalDrift => "thermal_drift",
-            EffectName::InterpolationError => "interpolation_error",
-            EffectName::Coulomb => "coulomb",
-            EffectName::Viscous => "viscous",
-            EffectName::Stribeck => "stribeck",
-            EffectName::Lugre => "lugre",
-            EffectName::ServoLag => "servo_lag",
-            EffectName::Resonance => "resonance",
-            EffectName::GravityTilt => "gravity_tilt",
-            EffectName::AccelBiasDrift => "accel_bias_drift",
-        }
-    }
 
     /// All names joined by ", ", for error messages.
     pub fn known_list() -> String {
@@ -181,7 +147,23 @@ impl EffectName {
             EffectName::Roll => rot(a),
             EffectName::Pitch => rot(t1),
             EffectName::Yaw => rot(t2),
-            _ => return None,
+            EffectName::SquarenessXy
+            | EffectName::SquarenessXz
+            | EffectName::SquarenessYz
+            | EffectName::Backlash
+            | EffectName::CyclicLead
+            | EffectName::ScaleError
+            | EffectName::ThermalExpansion
+            | EffectName::ThermalDrift
+            | EffectName::InterpolationError
+            | EffectName::Coulomb
+            | EffectName::Viscous
+            | EffectName::Stribeck
+            | EffectName::Lugre
+            | EffectName::ServoLag
+            | EffectName::Resonance
+            | EffectName::GravityTilt
+            | EffectName::AccelBiasDrift => return None,
         };
         Some(format!("E{component}{a}"))
     }
@@ -633,7 +615,12 @@ impl EffectParams {
     pub fn default_for(name: EffectName) -> EffectParams {
         let d = |key: &str| param_specs(name).iter().find(|s| s.key == key).map(|s| s.default).unwrap_or(0.0);
         match name {
-            n if n.is_error_motion() => EffectParams::ErrorMotion(Profile::zero()),
+            EffectName::Positioning
+            | EffectName::StraightnessY
+            | EffectName::StraightnessZ
+            | EffectName::Roll
+            | EffectName::Pitch
+            | EffectName::Yaw => EffectParams::ErrorMotion(Profile::zero()),
             EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz => {
                 EffectParams::Squareness(Squareness { value: d("value") })
             }
@@ -675,7 +662,7 @@ impl EffectParams {
                 EffectParams::Resonance(Resonance { frequency: d("frequency"), damping: d("damping") })
             }
             EffectName::GravityTilt => EffectParams::GravityTilt,
-            _ => EffectParams::AccelBiasDrift(AccelBiasDrift { rate: d("rate") }),
+            EffectName::AccelBiasDrift => EffectParams::AccelBiasDrift(AccelBiasDrift { rate: d("rate") }),
         }
     }
 
@@ -759,7 +746,21 @@ impl EffectParams {
     pub fn profile(&self) -> Option<&Profile> {
         match self {
             EffectParams::ErrorMotion(p) => Some(p),
-            _ => None,
+            EffectParams::Squareness(_)
+            | EffectParams::Backlash(_)
+            | EffectParams::CyclicLead(_)
+            | EffectParams::ScaleError(_)
+            | EffectParams::ThermalExpansion(_)
+            | EffectParams::ThermalDrift(_)
+            | EffectParams::InterpolationError(_)
+            | EffectParams::Coulomb(_)
+            | EffectParams::Viscous(_)
+            | EffectParams::Stribeck(_)
+            | EffectParams::Lugre(_)
+            | EffectParams::ServoLag(_)
+            | EffectParams::Resonance(_)
+            | EffectParams::GravityTilt
+            | EffectParams::AccelBiasDrift(_) => None,
         }
     }
 }
@@ -829,34 +830,33 @@ impl Effect {
                 }
             }
         }
-        match &self.params {
-            EffectParams::ErrorMotion(p) => {
-                let q = if self.name.is_translational() { LENGTH } else { ANGLE };
-                validate_profile(p, q, &mut bad);
-            }
-            EffectParams::CyclicLead(c) => {
-                for (i, h) in c.harmonics.iter().enumerate() {
-                    if h.order < 2 {
-                        bad(
-                            format!("harmonics[{i}].order"),
-                            format!("expected a harmonic number ≥ 2, got {}", h.order),
-                        );
-                    }
-                    if !Range::NonNegative.contains(h.amplitude) {
-                        bad(
-                            format!("harmonics[{i}].amplitude"),
-                            format!("expected {LENGTH} ≥ 0, got {}", fmt_num(h.amplitude)),
-                        );
-                    }
-                    if !h.phase.is_finite() {
-                        bad(
-                            format!("harmonics[{i}].phase"),
-                            format!("expected a phase in radians, got {}", fmt_num(h.phase)),
-                        );
-                    }
+        // Beyond the scalars checked above from `param_specs` (every effect's, generically), three
+        // effects carry structure of their own: a profile, cyclic-lead harmonics, the cascade gains.
+        if let EffectParams::ErrorMotion(p) = &self.params {
+            let q = if self.name.is_translational() { LENGTH } else { ANGLE };
+            validate_profile(p, q, &mut bad);
+        }
+        if let EffectParams::CyclicLead(c) = &self.params {
+            for (i, h) in c.harmonics.iter().enumerate() {
+                if h.order < 2 {
+                    bad(format!("harmonics[{i}].order"), format!("expected a harmonic number ≥ 2, got {}", h.order));
+                }
+                if !Range::NonNegative.contains(h.amplitude) {
+                    bad(
+                        format!("harmonics[{i}].amplitude"),
+                        format!("expected {LENGTH} ≥ 0, got {}", fmt_num(h.amplitude)),
+                    );
+                }
+                if !h.phase.is_finite() {
+                    bad(
+                        format!("harmonics[{i}].phase"),
+                        format!("expected a phase in radians, got {}", fmt_num(h.phase)),
+                    );
                 }
             }
-            EffectParams::ServoLag(s) if s.ki.is_some() && s.kp.is_none() => {
+        }
+        if let EffectParams::ServoLag(s) = &self.params {
+            if s.ki.is_some() && s.kp.is_none() {
                 bad(
                     "ki".into(),
                     "the cascade gains go together: `ki` needs `kp` (and `kv` is then the \
@@ -864,7 +864,6 @@ impl Effect {
                         .into(),
                 );
             }
-            _ => {}
         }
         out
     }
@@ -965,7 +964,7 @@ impl FrictionLaw {
         if v == 0.0 {
             return 0.0;
         }
-        let g = self.fc + (self.fs - self.fc) * (-(v / self.vs).abs().powf(self.shape)).exp();
+        let g = crate::friction::stribeck_level(self.fc, self.fs, self.vs, self.shape, v);
         v.signum() * g + self.fv * v
     }
 }
@@ -1096,7 +1095,7 @@ mod tests {
         let mut names: Vec<&str> = EffectName::ALL.iter().map(|n| n.as_str()).collect();
         names.sort();
         names.dedup();
-        assert_eq!(names.len(), 23);
+        assert_eq!(names.len(), EffectName::ALL.len());
     }
 
     #[test]

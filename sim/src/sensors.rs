@@ -78,6 +78,32 @@ impl SensorKind {
         }
     }
 
+    /// The laser interferometer kinds (linear, straightness, angular, vector): one predicate for every
+    /// "is a laser" question (air and material scale errors, gains, laser-line identification).
+    pub fn is_laser(self) -> bool {
+        match self {
+            SensorKind::LaserLinear
+            | SensorKind::LaserStraightness
+            | SensorKind::LaserAngular
+            | SensorKind::LaserVector => true,
+            SensorKind::Command
+            | SensorKind::EncoderRotary
+            | SensorKind::EncoderLinear
+            | SensorKind::Accelerometer
+            | SensorKind::MotorForce
+            | SensorKind::Velocity
+            | SensorKind::Temperature
+            | SensorKind::Pressure
+            | SensorKind::Humidity => false,
+        }
+    }
+
+    /// A laser that reads the displacement of a point along its beam, m (linear, straightness, vector;
+    /// not the angular laser): the readings the laser-line identifiers use.
+    pub fn is_laser_line(self) -> bool {
+        self.is_laser() && self != SensorKind::LaserAngular
+    }
+
     /// In a positioning point table the sensor holds a deviation (actual − target) rather than a reading.
     pub fn reads_deviation(&self) -> bool {
         matches!(
@@ -280,13 +306,7 @@ impl SensorSpec {
     }
 
     fn is_laser(&self) -> bool {
-        matches!(
-            self.kind,
-            SensorKind::LaserLinear
-                | SensorKind::LaserStraightness
-                | SensorKind::LaserVector
-                | SensorKind::LaserAngular
-        )
+        self.kind.is_laser()
     }
 }
 

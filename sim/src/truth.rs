@@ -79,7 +79,16 @@ pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(A
             }
             EffectParams::ServoLag(s) => adj.servo_kv = Some(s.kv),
             EffectParams::AccelBiasDrift(d) => adj.accel_bias_drift = Some(d.rate),
-            _ => {}
+            // Acting elsewhere: the error motions shape the guideway (above), squareness joins the axes
+            // of a chain (`crate::chain`), the friction effects combine into one law (below) and
+            // gravity through tilt follows from the angles.
+            EffectParams::ErrorMotion(_)
+            | EffectParams::Squareness(_)
+            | EffectParams::Coulomb(_)
+            | EffectParams::Viscous(_)
+            | EffectParams::Stribeck(_)
+            | EffectParams::Lugre(_)
+            | EffectParams::GravityTilt => {}
         }
     }
     if !along.is_empty() {
@@ -87,19 +96,30 @@ pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(A
     }
     truth.friction = match set.friction(axis) {
         None => GuideFriction::None,
+        // The Stribeck curve falls from Fs at rest to Fc in sliding: Fs < Fc is no friction law (refused,
+        // not raised to Fc behind the user's back).
+        Some(law) if law.fs < law.fc => {
+            let from = if law.lugre.is_some() { "lugre" } else { "stribeck (fc from coulomb unless given)" };
+            return Err(format!(
+                "friction on axis {axis} ({from}): static friction fs = {} N is below the Coulomb level fc = {} N; \
+                 expected fs ≥ fc",
+                crate::effects::fmt_num(law.fs),
+                crate::effects::fmt_num(law.fc)
+            ));
+        }
         Some(law) => match law.lugre {
             Some([sigma0, sigma1]) => GuideFriction::LuGre(LugreParams {
                 sigma0,
                 sigma1,
                 sigma2: law.fv,
                 fc: law.fc,
-                fs: law.fs.max(law.fc),
+                fs: law.fs,
                 vs: law.vs,
                 delta: law.shape,
             }),
             None => GuideFriction::Stribeck(StribeckParams {
                 fc: law.fc,
-                fs: law.fs.max(law.fc),
+                fs: law.fs,
                 vs: law.vs,
                 delta: law.shape,
                 fv: law.fv,

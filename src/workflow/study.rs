@@ -5,19 +5,75 @@
 
 use crate::byo::{score_profiles, Estimator};
 use crate::error::VmtError;
-use crate::estimate::{run_estimators, Quantity};
+use crate::estimate::{estimate_recording, Quantity};
 use crate::scenario::Scenario;
-use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set};
+use crate::simulate::{physics, read_all, remeasure, simulate_truth, to_measurement_set};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
 
-/// The varied parameter: `sensors.NAME.KEY` with KEY one of sigma, noise_density, bias, resolution,
-/// scale_factor, bias_drift.
+/// A sensor parameter a study can vary without new physics (`--vary sensors.NAME.KEY=…`), each in
+/// the unit of its [`SensorSpec`](vmt_sim::sensors::SensorSpec) field.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SensorParam {
+    /// `sigma`: white noise of one reading, 1σ (unit of the sensor's reading).
+    Sigma,
+    /// `noise_density`: white noise density (reading unit per √Hz).
+    NoiseDensity,
+    /// `bias`: constant offset (reading unit).
+    Bias,
+    /// `resolution`: quantisation step (reading unit).
+    Resolution,
+    /// `scale_factor`: gain of the reading (dimensionless, 1 = exact).
+    ScaleFactor,
+    /// `bias_drift`: bias random-walk rate (reading unit per √s).
+    BiasDrift,
+}
+
+impl SensorParam {
+    /// Every parameter, in the order `--vary`'s message lists them.
+    pub const ALL: [SensorParam; 6] = [
+        SensorParam::Sigma,
+        SensorParam::NoiseDensity,
+        SensorParam::Bias,
+        SensorParam::Resolution,
+        SensorParam::ScaleFactor,
+        SensorParam::BiasDrift,
+    ];
+
+    /// The key as written after `sensors.NAME.`.
+    pub fn key(self) -> &'static str {
+        match self {
+            SensorParam::Sigma => "sigma",
+            SensorParam::NoiseDensity => "noise_density",
+            SensorParam::Bias => "bias",
+            SensorParam::Resolution => "resolution",
+            SensorParam::ScaleFactor => "scale_factor",
+            SensorParam::BiasDrift => "bias_drift",
+        }
+    }
+
+    /// Sets this parameter of a sensor to `v`.
+    pub fn set(self, s: &mut vmt_sim::sensors::SensorSpec, v: f64) {
+        match self {
+            SensorParam::Sigma => s.sigma = v,
+            SensorParam::NoiseDensity => s.noise_density = v,
+            SensorParam::Bias => s.bias = v,
+            SensorParam::Resolution => s.resolution = v,
+            SensorParam::ScaleFactor => s.scale_factor = v,
+            SensorParam::BiasDrift => s.bias_drift = v,
+        }
+    }
+}
+
+/// The varied parameter: `sensors.NAME.KEY` with KEY one of [`SensorParam`]'s keys, and its values.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Vary {
+    /// The sensor's name.
     pub sensor: String,
-    pub key: String,
+    /// Which of its parameters.
+    pub key: SensorParam,
+    /// The values, in the parameter's unit.
     pub values: Vec<f64>,
 }
 
@@ -31,9 +87,10 @@ impl Vary {
         if *root != "sensors" {
             return Err(usage("only sensor parameters can be varied without new physics"));
         }
-        if !["sigma", "noise_density", "bias", "resolution", "scale_factor", "bias_drift"].contains(key) {
-            return Err(usage(&format!("unknown sensor key `{key}`")));
-        }
+        let key = SensorParam::ALL
+            .into_iter()
+            .find(|p| p.key() == *key)
+            .ok_or_else(|| usage(&format!("unknown sensor key `{key}`")))?;
         let values = vals
             .split(',')
             .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0))
@@ -42,7 +99,7 @@ impl Vary {
         if values.is_empty() {
             return Err(usage("no values"));
         }
-        Ok(Vary { sensor: sensor.to_string(), key: key.to_string(), values })
+        Ok(Vary { sensor: sensor.to_string(), key, values })
     }
 }
 
@@ -98,8 +155,8 @@ pub fn run_study(
             vary.values.len()
         )));
     }
-    let truth_table = crate::simulate::truth_profiles(sc)?;
     let ph = physics(sc)?;
+    let truth_table = crate::simulate::truth_profiles(sc, &ph)?;
     if !ph.sensors.iter().any(|s| s.name == vary.sensor) {
         return Err(VmtError::Usage(format!("--vary: no sensor `{}` in the scenario", vary.sensor)));
     }
@@ -114,21 +171,14 @@ pub fn run_study(
             let v = vary.values[i];
             for s in p.sensors.iter_mut().filter(|s| s.name == vary.sensor) {
                 *s = s.resolved();
-                match vary.key.as_str() {
-                    "sigma" => s.sigma = v,
-                    "noise_density" => s.noise_density = v,
-                    "bias" => s.bias = v,
-                    "resolution" => s.resolution = v,
-                    "scale_factor" => s.scale_factor = v,
-                    _ => s.bias_drift = v,
-                }
+                vary.key.set(s, v);
                 s.preset = None;
             }
             let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/{i}/{k}"));
             let runs = read_all(sc, &p, &truths, seed)?;
+            let set = to_measurement_set(sc, &runs)?;
             if let Some(e) = estimator {
                 let work = std::env::temp_dir().join(format!("vmt-study-{}-{i}-{k}", std::process::id()));
-                let set = to_measurement_set(sc, &runs)?;
                 let table = e.estimate(&set, &work);
                 let _ = std::fs::remove_dir_all(&work);
                 return Ok(score_profiles(&truth_table, &table?)
@@ -144,7 +194,9 @@ pub fn run_study(
                     })
                     .collect());
             }
-            let est = run_estimators(sc, &p, &runs)?;
+            // The compensation check re-measures on this trial's sensors, after the session simulated once.
+            let again = |q: &_, x: &[f64], y: &[f64]| remeasure(&p, sc.seed, truths.end, q, x, y);
+            let est = estimate_recording(sc, p.view(), &runs, &set, &again)?;
             Ok(est
                 .checks
                 .into_iter()

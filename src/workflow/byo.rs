@@ -139,7 +139,7 @@ pub fn identify_set(
 pub fn identify_axes_set(
     set: &MeasurementSet,
 ) -> Result<Option<(usize, crate::estimate::ChainIdentification)>, String> {
-    use crate::measurement::{RunData, SensorKind};
+    use crate::measurement::RunData;
     use vmt_estimators::laser_ls::Reading;
     let has = |r: &crate::measurement::Run, l: char| r.data.column(&format!("{l}_cmd")).is_some();
     let letters: Vec<char> = ['x', 'y', 'z'].into_iter().filter(|&l| set.runs.iter().any(|r| has(r, l))).collect();
@@ -155,9 +155,7 @@ pub fn identify_axes_set(
         let RunData::PointTable { columns, .. } = &r.data else { continue };
         let qs = crate::estimate::axis_commands(&r.name, columns, &letters)?;
         for (name, values) in columns {
-            let Some(s) = set.sensor(name).filter(|s| {
-                matches!(s.kind, SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector)
-            }) else {
+            let Some(s) = set.sensor(name).filter(|s| s.kind.is_laser_line()) else {
                 continue;
             };
             let sigma = s.sigma.filter(|v| *v > 0.0).ok_or_else(|| {

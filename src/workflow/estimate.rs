@@ -3,134 +3,17 @@
 //! injected value, the recovered one, their difference, the tolerance (with its reason) and pass/fail.
 
 use crate::error::VmtError;
+use crate::measurement::MeasurementSet;
+pub use crate::scenario::spec::EstimatorSpec;
 use crate::scenario::Scenario;
-use crate::simulate::Physics;
+use crate::simulate::{Physics, TruthView};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
 use vmt_sim::effects::EffectName;
 use vmt_sim::geometry::ErrorMotions;
-use vmt_sim::procedures::{RunData, RunRecord};
-
-/// Estimators a scenario can ask for (`[[estimators]]`), each with the tolerance its estimate must meet.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum EstimatorSpec {
-    /// ISO 230-2 evaluation of a positioning run read by a linear laser: E, M and B̄ compared with the
-    /// values of the injected deviations at the laser's measuring point.
-    Iso230_2 { run: String, sensor: String, tolerance: f64 },
-    /// Laser line-set identification (seeds 001, 003) of the six error motions from a point-table run
-    /// read by several lasers (the 9-line / three-point design): general least squares with one zero
-    /// offset per laser line. Translations are compared with `tolerance_translation` (m RMS), angles
-    /// with `tolerance_angle` (rad RMS), in the identifier's conventions (EXX and angles relative to the
-    /// first target, straightness about its least-squares line).
-    LaserLines { run: String, sensors: Vec<String>, tolerance_translation: f64, tolerance_angle: f64 },
-    /// Compensation table (seed 004): a variable-step table from the mean bidirectional deviations of a
-    /// positioning run, applied in the simulated CNC; the test is repeated at other irregular targets and
-    /// E and A must fall to at most `max_ratio` of their values before compensation.
-    Compensation {
-        run: String,
-        sensor: String,
-        #[serde(default = "default_max_ratio")]
-        max_ratio: f64,
-        #[serde(default = "default_pearson")]
-        pearson: f64,
-        #[serde(default = "default_residual")]
-        residual: f64,
-    },
-    /// Stick-slip index (seed 002) of each crawl run of a procedure, compared with expected values.
-    Ssi { procedure: String, sensor: String, expected: Vec<f64>, tolerance: Vec<f64> },
-    /// The model-check loop (DESIGN.md §8) run automatically: compare the starting model (`model`, a
-    /// vmt-model/1 file relative to the scenario) with the recording, diagnose, add the best significant
-    /// effect, repeat (at most `max_steps`). Checks that the `expected` effects are found and that the final
-    /// normalised RMS is at most `tolerance`.
-    ModelCheck {
-        model: String,
-        expected: Vec<String>,
-        #[serde(default = "default_steps")]
-        max_steps: usize,
-        tolerance: f64,
-    },
-    /// Straightness from an accelerometer's constant-velocity runs (seed 000, and the SNR-weighted
-    /// fusion), compared with the lateral motion of its mount point band-limited to the recoverable
-    /// wavelengths; `tolerance` bounds the RMS difference.
-    AccelStraightness {
-        procedure: String,
-        sensor: String,
-        #[serde(default)]
-        method: Option<String>,
-        tolerance: f64,
-    },
-    /// Laser line-set identification of a multi-axis chain (seed 001; issue 3): every line of the chain
-    /// procedure `procedure` (`[[chain_procedures]]`, kind `laser_lines`) fed to
-    /// `vmt_estimators::laser_ls::identify` with the chain's axes (six error motions each, as values at
-    /// the joint positions the lines stop at) and `squareness: true`. One check per squareness angle of
-    /// the chain: injected as laser lines see it (`ChainModel::effective_squareness`, the angles between
-    /// the least-squares lines of the tool point's paths) against recovered, with the tolerance
-    /// `k_sigma`·σ + `bias` (σ the identifier's standard error, rad; `bias` the quasi-static bound of the
-    /// simulated composition, rad). Also one check per angular error motion the lines determine: RMS of
-    /// (identified − injected, relative to the reference position) within `k_sigma`·RMS(σ) +
-    /// `bias_angle` (rad, default `bias`).
-    #[serde(rename = "laser_lines_3d")]
-    LaserLines3d {
-        procedure: String,
-        #[serde(default = "default_k_sigma")]
-        k_sigma: f64,
-        #[serde(default)]
-        bias: f64,
-        #[serde(default)]
-        bias_angle: Option<f64>,
-    },
-}
-
-impl EstimatorSpec {
-    /// Checks the estimator's tolerances and thresholds: each finite and ≥ 0 (a negative or NaN
-    /// tolerance is bad input, not a missed estimate). Returns the key and message of the first problem.
-    pub fn check(&self) -> Result<(), (String, String)> {
-        let values: Vec<(&str, f64)> = match self {
-            EstimatorSpec::Iso230_2 { tolerance, .. }
-            | EstimatorSpec::ModelCheck { tolerance, .. }
-            | EstimatorSpec::AccelStraightness { tolerance, .. } => vec![("tolerance", *tolerance)],
-            EstimatorSpec::LaserLines { tolerance_translation, tolerance_angle, .. } => {
-                vec![("tolerance_translation", *tolerance_translation), ("tolerance_angle", *tolerance_angle)]
-            }
-            EstimatorSpec::Compensation { max_ratio, pearson, residual, .. } => {
-                vec![("max_ratio", *max_ratio), ("pearson", *pearson), ("residual", *residual)]
-            }
-            EstimatorSpec::Ssi { expected, tolerance, .. } => {
-                expected.iter().map(|v| ("expected", *v)).chain(tolerance.iter().map(|v| ("tolerance", *v))).collect()
-            }
-            EstimatorSpec::LaserLines3d { k_sigma, bias, bias_angle, .. } => {
-                let mut v = vec![("k_sigma", *k_sigma), ("bias", *bias)];
-                v.extend(bias_angle.map(|b| ("bias_angle", b)));
-                v
-            }
-        };
-        match values.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
-            Some((k, v)) => Err((k.to_string(), format!("expected a finite value ≥ 0, got {v}"))),
-            None => Ok(()),
-        }
-    }
-}
-
-fn default_k_sigma() -> f64 {
-    4.0
-}
-
-fn default_steps() -> usize {
-    3
-}
-
-fn default_max_ratio() -> f64 {
-    0.3
-}
-fn default_pearson() -> f64 {
-    0.98
-}
-fn default_residual() -> f64 {
-    0.5e-6
-}
+use vmt_sim::procedures::{ProcedureSpec, RunData, RunRecord};
 
 /// What a check compares (for units in the table).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -448,9 +331,33 @@ pub fn iso_truth(errors: &ErrorMotions, r: [f64; 3], targets: &[f64]) -> Result<
     evaluate_bidirectional(targets, &dev, &dev).map_err(|e| VmtError::Internal(e.to_string()))
 }
 
-/// Runs every estimator of a scenario on its recording and returns the checks with their figures.
+/// The compensation check's re-measurement: runs `procedure` (a positioning procedure) on the machine
+/// with the compensation table (positions, corrections; m) in its CNC and returns the run as its sensors
+/// read it. The estimate workflow owns no machine: the caller passes one
+/// ([`crate::simulate::remeasure`] on the scenario's physics for `vmt run` and a study).
+pub type Remeasure<'a> = dyn Fn(&ProcedureSpec, &[f64], &[f64]) -> Result<RunRecord, String> + Sync + 'a;
+
+/// Runs every estimator of a scenario on its simulated recording and returns the checks with their
+/// figures: [`estimate_recording`] with the measurement set written from `runs` and the compensation
+/// check re-measuring on `ph` after the session.
 pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result<Estimates, VmtError> {
-    let errors = &ph.truth.motions;
+    let set = crate::simulate::to_measurement_set(sc, runs)?;
+    let end = crate::simulate::session_end(&crate::simulate::session_plan(sc, ph));
+    let remeasure = |p: &ProcedureSpec, x: &[f64], y: &[f64]| crate::simulate::remeasure(ph, sc.seed, end, p, x, y);
+    estimate_recording(sc, ph.view(), runs, &set, &remeasure)
+}
+
+/// Runs every estimator of a scenario on its recording (`runs`, and `set`, the measurement set they are
+/// written as) and returns the checks with their figures; `truth` is what the estimates are compared
+/// with, `remeasure` the machine the compensation check re-measures on.
+pub fn estimate_recording(
+    sc: &Scenario,
+    truth: TruthView<'_>,
+    runs: &[RunRecord],
+    set: &MeasurementSet,
+    remeasure: &Remeasure<'_>,
+) -> Result<Estimates, VmtError> {
+    let errors = truth.motions;
     let mut out = Estimates::default();
     for spec in &sc.estimators {
         match spec {
@@ -492,7 +399,8 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 }
             }
             EstimatorSpec::Compensation { run, sensor, max_ratio, pearson, residual } => {
-                let (checks, fig) = compensation_checks(sc, ph, runs, run, sensor, *max_ratio, *pearson, *residual)?;
+                let (checks, fig) =
+                    compensation_checks(sc, remeasure, runs, run, sensor, *max_ratio, *pearson, *residual)?;
                 out.push(checks, fig);
             }
             EstimatorSpec::Ssi { procedure, sensor, expected, tolerance } => {
@@ -553,7 +461,7 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 }
             }
             EstimatorSpec::ModelCheck { model, expected, max_steps, tolerance } => {
-                let (checks, fig, residuals) = model_check_loop(sc, runs, model, expected, *max_steps, *tolerance)?;
+                let (checks, fig, residuals) = model_check_loop(sc, set, model, expected, *max_steps, *tolerance)?;
                 out.push(checks, fig);
                 out.push_figure(residuals);
             }
@@ -564,10 +472,10 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
                 }
             }
             EstimatorSpec::AccelStraightness { procedure, sensor, method, tolerance } => {
-                let simulated = ph.sensors.iter().find(|s| &s.name == sensor).map(|s| s.resolved());
+                let simulated = truth.sensors.iter().find(|s| &s.name == sensor).map(|s| s.resolved());
                 let (c, f, stages) = accel_straightness_check(
                     sc,
-                    runs,
+                    set,
                     errors,
                     simulated.as_ref(),
                     procedure,
@@ -587,7 +495,7 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
 #[allow(clippy::too_many_arguments)]
 fn accel_straightness_check(
     sc: &Scenario,
-    runs: &[RunRecord],
+    set: &MeasurementSet,
     errors: &ErrorMotions,
     simulated: Option<&vmt_sim::sensors::SensorSpec>,
     procedure: &str,
@@ -600,9 +508,8 @@ fn accel_straightness_check(
     let bad = |m: String| VmtError::bad(&sc.source, format!("estimators ({procedure}/{sensor})"), m);
     let spec = sc.sensors.iter().find(|s| s.name == sensor).ok_or_else(|| bad("sensor not declared".into()))?;
     // The same adapter as `vmt straightness` on the measurement set this recording is written as.
-    let set = crate::simulate::to_measurement_set(sc, runs)?;
     let method = parse_method(method.unwrap_or("snr_weighted")).map_err(bad)?;
-    let result = sensor_straightness(&set, &sc.source, sensor, PassSelection::Procedure(procedure), method)?;
+    let result = sensor_straightness(set, &sc.source, sensor, PassSelection::Procedure(procedure), method)?;
     let (acc_runs, est) = (result.runs, result.estimate);
     let r = rapier3d_f64::glamx::DVec3::from_array(spec.axis_position(&sc.axis).map_err(bad)?);
     let u = spec.unit_direction();
@@ -1101,7 +1008,7 @@ fn laser_lines_3d_checks(
 #[allow(clippy::too_many_arguments)]
 fn compensation_checks(
     sc: &Scenario,
-    ph: &Physics,
+    remeasure: &Remeasure<'_>,
     runs: &[RunRecord],
     run: &str,
     sensor: &str,
@@ -1110,7 +1017,6 @@ fn compensation_checks(
     residual: f64,
 ) -> Result<(Vec<Check>, Figure), VmtError> {
     use vmt_estimators::compensation::{variable_step_table, VariableStepParams};
-    use vmt_sim::procedures::{plan_procedure, read_run, simulate_run, ProcedureSpec};
     let bad = |m: String| VmtError::bad(&sc.source, format!("estimators (compensation {run})"), m);
     let iso = |rec: &RunRecord| -> Result<AxisResult, VmtError> {
         let (t, u, d) = point_table_deviations(rec, sensor)
@@ -1123,10 +1029,6 @@ fn compensation_checks(
     let deviations: Vec<f64> = before.targets.iter().map(|t| t.mean_bidirectional).collect();
     let params = VariableStepParams { min_abs_pearson: pearson, max_abs_residual: residual, ..Default::default() };
     let table = variable_step_table(&positions, &deviations, &params).map_err(|e| bad(e.to_string()))?.table;
-    let mut model = ph.model.clone();
-    model.compensation = vmt_sim::profile::Profile {
-        terms: vec![vmt_sim::profile::Term::Table { x: table.positions.clone(), y: table.corrections.clone() }],
-    };
     let spec = sc.procedures.iter().find(|p| p.name() == run).ok_or_else(|| bad(format!("no procedure `{run}`")))?;
     let ProcedureSpec::Positioning { .. } = spec else { return Err(bad("expected a positioning procedure".into())) };
     let mut verify = spec.clone();
@@ -1137,10 +1039,7 @@ fn compensation_checks(
         *name = format!("{run}_after_compensation");
     }
     // The re-test follows the scenario's session (time-dependent effects have moved on meanwhile).
-    let session_end = crate::simulate::session_end(&crate::simulate::session_plan(sc, ph));
-    let plan = plan_procedure(&model, &verify, sc.seed);
-    let truth = simulate_run(&model, &ph.truth, &plan[0], session_end);
-    let after_rec = read_run(&model, &ph.truth, &truth, &ph.sensors, sc.seed).map_err(bad)?;
+    let after_rec = remeasure(&verify, &table.positions, &table.corrections).map_err(bad)?;
     let after = iso(&after_rec)?;
     let label = format!("{} nodes", table.positions.len());
     let after_t: Vec<f64> = after.targets.iter().map(|t| t.target).collect();
@@ -1195,7 +1094,7 @@ fn compensation_checks(
 /// The model-check loop run to its end on a recording: normalised RMS per iteration and the effects added.
 fn model_check_loop(
     sc: &Scenario,
-    runs: &[RunRecord],
+    set: &MeasurementSet,
     model: &str,
     expected: &[String],
     max_steps: usize,
@@ -1205,19 +1104,18 @@ fn model_check_loop(
     use vmt_estimators::modelcheck::Verdict;
     let base = sc.source.parent().unwrap_or(Path::new("."));
     let mut m = crate::model::read_model(&base.join(model))?;
-    let set = crate::simulate::to_measurement_set(sc, runs)?;
-    let first = compare(&m, &set, &sc.source)?;
+    let first = compare(&m, set, &sc.source)?;
     let mut history = vec![first.normalized_rms];
     let mut last_report = first.clone();
     let mut added: Vec<String> = Vec::new();
     for _ in 0..max_steps {
-        let d = diagnose(&m, &set, &sc.source)?;
+        let d = diagnose(&m, set, &sc.source)?;
         let Some(top) = d.ranking.iter().find(|r| r.verdict == Verdict::Significant) else { break };
         let name: vmt_sim::effects::EffectName =
             top.effect.parse().map_err(|e: vmt_sim::effects::UnknownEffect| VmtError::Internal(e.to_string()))?;
         m = add_effect(&m, name, Some(top)).map_err(|e| VmtError::bad(&sc.source, "estimators (model_check)", e))?;
         added.push(top.effect.clone());
-        last_report = compare(&m, &set, &sc.source)?;
+        last_report = compare(&m, set, &sc.source)?;
         history.push(last_report.normalized_rms);
     }
     let mut checks: Vec<Check> = expected

@@ -18,7 +18,10 @@ use vmt_sim::chain::{
 use vmt_sim::effects::EffectName;
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::machine::AxisModel;
-use vmt_sim::procedures::{plan_session, read_run, simulate_run, RunPlan, RunRecord, RunTruth};
+use vmt_sim::procedures::{
+    plan_procedure, plan_session, read_run, simulate_run, ProcedureSpec, RunPlan, RunRecord, RunTruth,
+};
+use vmt_sim::profile::{Profile, Term};
 use vmt_sim::sensors::SensorSpec;
 use vmt_sim::truth::axis_physics;
 
@@ -54,9 +57,41 @@ pub fn physics(sc: &Scenario) -> Result<Physics, VmtError> {
     Ok(Physics { model, truth, sensors })
 }
 
-/// The six error motions of the scenario's axis.
-pub fn error_motions(sc: &Scenario) -> Result<ErrorMotions, VmtError> {
-    Ok(physics(sc)?.truth.motions)
+impl Physics {
+    /// What the estimate workflow may know of this truth (to compare its estimates with).
+    pub fn view(&self) -> TruthView<'_> {
+        TruthView { motions: &self.truth.motions, sensors: &self.sensors }
+    }
+}
+
+/// The truth as the estimate workflow sees it, without the machine: the injected error motions of the
+/// axis and the sensors as simulated (their noise model, for the Cramér–Rao bounds).
+#[derive(Clone, Copy, Debug)]
+pub struct TruthView<'a> {
+    /// The six injected error motions of the scenario's axis.
+    pub motions: &'a ErrorMotions,
+    /// The sensors as the physics reads them (the truth's sensor effects applied).
+    pub sensors: &'a [SensorSpec],
+}
+
+/// The compensation check's re-measurement (seed 004): `procedure` (a positioning procedure) run on the
+/// machine of `ph` with the compensation table (`positions`, `corrections`, m) in its CNC, starting at
+/// session time `session_end` (s; time-dependent effects have moved on during the session), read by
+/// the sensors with noise seed `seed`. The one place the estimate workflow's
+/// [`crate::estimate::Remeasure`] callback reaches the physics.
+pub fn remeasure(
+    ph: &Physics,
+    seed: u64,
+    session_end: f64,
+    procedure: &ProcedureSpec,
+    positions: &[f64],
+    corrections: &[f64],
+) -> Result<RunRecord, String> {
+    let mut model = ph.model.clone();
+    model.compensation = Profile { terms: vec![Term::Table { x: positions.to_vec(), y: corrections.to_vec() }] };
+    let plan = plan_procedure(&model, procedure, seed);
+    let truth = simulate_run(&model, &ph.truth, &plan[0], session_end);
+    read_run(&model, &ph.truth, &truth, &ph.sensors, seed)
 }
 
 /// The runs of every procedure of a scenario, in scenario order, with their session start times: the
@@ -77,6 +112,8 @@ pub fn session_end(plan: &[(RunPlan, f64)]) -> f64 {
 #[derive(Clone, Debug)]
 pub struct SessionTruth {
     pub runs: Vec<RunTruth>,
+    /// Session time at which the last single-axis run ends, s ([`session_end`] of the plan).
+    pub end: f64,
     /// (index of the chain procedure, line truth).
     pub lines: Vec<(usize, LineTruth)>,
 }
@@ -88,7 +125,7 @@ pub fn simulate_truth(sc: &Scenario, ph: &Physics) -> SessionTruth {
     let plan = session_plan(sc, ph);
     let end = session_end(&plan);
     let runs = plan.par_iter().map(|(r, t0)| simulate_run(&ph.model, &ph.truth, r, *t0)).collect();
-    SessionTruth { runs, lines: chain_truths(sc, end) }
+    SessionTruth { runs, end, lines: chain_truths(sc, end) }
 }
 
 /// Sensor readings of every run, noise seeded by `seed`: the single-axis runs, then the chain lines.
@@ -224,19 +261,16 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
 /// The truth written beside a measurement set (FORMAT.md §5): `truth.toml` (the truth in the model
 /// format, with any table sidecars) and `truth_profiles.csv` (the six error motions every millimetre
 /// over the travel).
-pub fn truth_extras(sc: &Scenario) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
+pub fn truth_extras(sc: &Scenario, ph: &Physics) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
     let (toml_text, sidecars) = model_to_toml(&sc.truth, "truth")?;
     let mut out = vec![("truth.toml".to_string(), toml_text.into_bytes())];
     out.extend(sidecars.into_iter().map(|(n, t)| (n, t.into_bytes())));
-    let table = truth_profiles(sc)?;
+    let table = truth_profiles(sc, ph)?;
     let csv = measurement::profiles_csv(&table, Path::new("truth_profiles.csv"), UnitChoice::Si)?;
     out.push(("truth_profiles.csv".to_string(), csv.into_bytes()));
     Ok(out)
 }
 
-/// The six injected error motions every millimetre over the travel (FORMAT.md §5 table); for a
-/// multi-axis scenario the six of every axis of the chain, prefixed by the axis (`y.pitch`), every
-/// millimetre from the lowest lower to the highest upper travel end of the axes.
 /// Most points of a truth profile (size budget, DESIGN.md §2): 1 mm steps up to a 10 m travel.
 pub const MAX_PROFILE_POINTS: usize = 10_001;
 
@@ -248,7 +282,11 @@ fn profile_positions(lo: f64, hi: f64) -> Vec<f64> {
     (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect()
 }
 
-pub fn truth_profiles(sc: &Scenario) -> Result<ProfileTable, VmtError> {
+/// The six injected error motions every millimetre over the travel (FORMAT.md §5 table), from the
+/// physics `ph` built once by the caller; for a multi-axis scenario the six of every axis of the chain,
+/// prefixed by the axis (`y.pitch`), every millimetre from the lowest lower to the highest upper travel
+/// end of the axes.
+pub fn truth_profiles(sc: &Scenario, ph: &Physics) -> Result<ProfileTable, VmtError> {
     if let Some(chain) = &sc.chain {
         let lo = chain.travels().iter().map(|t| t.0).fold(f64::INFINITY, f64::min);
         let hi = chain.travels().iter().map(|t| t.1).fold(f64::NEG_INFINITY, f64::max);
@@ -266,7 +304,7 @@ pub fn truth_profiles(sc: &Scenario) -> Result<ProfileTable, VmtError> {
         }
         return Ok(ProfileTable { position, columns });
     }
-    let errors = error_motions(sc)?;
+    let errors = &ph.truth.motions;
     let (lo, hi) = sc.axis.travel;
     let position = profile_positions(lo, hi);
     let columns = EffectName::ERROR_MOTIONS

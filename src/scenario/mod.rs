@@ -2,11 +2,13 @@
 //! format), the sensors and their noise, the procedures to run, and the estimators with the tolerance
 //! each estimate must meet. Every bundled scenario documents its keys in comments.
 
+pub mod spec;
+
 use crate::bundled;
 use crate::error::VmtError;
-use crate::estimate::EstimatorSpec;
 use crate::model::{self, Model};
 use serde::Deserialize;
+pub use spec::EstimatorSpec;
 use std::path::{Path, PathBuf};
 use vmt_sim::chain::{ChainModel, ChainProcedureSpec};
 use vmt_sim::effects::EffectName;
