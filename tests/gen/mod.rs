@@ -265,6 +265,21 @@ pub struct Draw {
     pub data_files: Vec<(String, String)>,
     /// Files of the models: truth.toml, complete.toml, start.toml and their tables.
     pub model_files: Vec<(String, String)>,
+    /// Where and when each laser reading of a point table was taken (empty for friction sweeps):
+    /// the design a Cramér–Rao bound needs.
+    pub design: Vec<Sample>,
+}
+
+/// One laser reading's design: channel (block × laser, in `channel_counts` order), target x (m),
+/// approach direction d = ±1, session time t (s), the laser's measuring point (y, z) (m).
+#[derive(Clone, Copy, Debug)]
+pub struct Sample {
+    pub channel: usize,
+    pub x: f64,
+    pub d: f64,
+    pub t: f64,
+    pub y: f64,
+    pub z: f64,
 }
 
 fn log_uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
@@ -511,7 +526,8 @@ fn table_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64) -> Draw {
     let mut data_files = Vec::new();
     let mut counts = Vec::new();
     let mut runs_toml = String::new();
-    for b in &blocks {
+    let mut design = Vec::new();
+    for (bi, b) in blocks.iter().enumerate() {
         let mut csv = String::from("target[mm],run,direction");
         if has_t {
             csv.push_str(",t[s]");
@@ -534,7 +550,9 @@ fn table_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64) -> Draw {
                     if has_t {
                         write!(csv, ",{t:.3}").unwrap();
                     }
-                    for (l, o) in lasers.iter().zip(&offsets) {
+                    for (li, (l, o)) in lasers.iter().zip(&offsets).enumerate() {
+                        let channel = bi * lasers.len() + li;
+                        design.push(Sample { channel, x, d, t: ts, y: l.y, z: l.z });
                         let y = o + reading(&truth, l, x, d, ts) + noise.sample(rng);
                         write!(csv, ",{:.6}", y * 1e6).unwrap();
                     }
@@ -591,6 +609,7 @@ fn table_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64) -> Draw {
         channel_counts: counts,
         data_files,
         model_files,
+        design,
     }
 }
 
@@ -833,6 +852,7 @@ fn friction_draw(rng: &mut ChaCha8Rng, family: &Family, index: u64, hidden: &[Ef
         channel_counts: counts,
         data_files,
         model_files,
+        design: Vec::new(),
     }
 }
 
