@@ -163,6 +163,25 @@ fn spinner(message: &str) -> indicatif::ProgressBar {
     bar
 }
 
+/// A spinner on stderr that appears only when the work lasts more than a second and stderr is a
+/// terminal (the model-check commands: most runs answer at once); `finish_and_clear` removes it.
+fn slow_spinner(message: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::with_draw_target(None, indicatif::ProgressDrawTarget::hidden());
+    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        let (b, message) = (bar.clone(), message.to_string());
+        std::thread::spawn(move || {
+            std::thread::sleep(std::time::Duration::from_secs(1));
+            if !b.is_finished() {
+                b.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+                b.set_style(indicatif::ProgressStyle::default_spinner());
+                b.set_message(message);
+                b.enable_steady_tick(std::time::Duration::from_millis(200));
+            }
+        });
+    }
+    bar
+}
+
 /// The table of checks ([`Check::cells`] under [`CHECK_HEADER`]), its legend and each row's note.
 pub fn check_table(checks: &[Check]) -> String {
     let line = |c: &[String]| {
@@ -636,14 +655,20 @@ pub(crate) fn print_json<T: serde::Serialize>(format: &str, v: &T) -> Result<(),
 /// residual (FORMAT.md §4).
 pub fn compare(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
     let (m, set) = model_and_data(model, data)?;
-    let r = crate::modelcheck::compare(&m, &set, data)?;
+    let bar = slow_spinner("compare: fitting the model");
+    let r = crate::modelcheck::compare(&m, &set, data);
+    bar.finish_and_clear();
+    let r = r?;
     print_result("vmt-compare/1", &r, json, crate::modelcheck::compare_text)
 }
 
 /// `vmt diagnose --model M --data D [--json]`: rank the effects the model lacks (FORMAT.md §4).
 pub fn diagnose(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
     let (m, set) = model_and_data(model, data)?;
-    let r = crate::modelcheck::diagnose(&m, &set, data)?;
+    let bar = slow_spinner("diagnose: fitting the model and every candidate it lacks");
+    let r = crate::modelcheck::diagnose(&m, &set, data);
+    bar.finish_and_clear();
+    let r = r?;
     print_result("vmt-diagnose/1", &r, json, crate::modelcheck::diagnose_text)
 }
 

@@ -74,7 +74,9 @@ pub fn run_loop(dir: &Path, add: bool) -> Outcome {
     if add {
         if let Some((eff, verdict, _)) = &o.first {
             if verdict == "significant" {
-                let m2 = dir.join("model2.toml");
+                // Outside the data directory: vmt refuses to write into its input.
+                let m2 = dir.with_extension("models").join("model2.toml");
+                std::fs::create_dir_all(m2.parent().unwrap()).unwrap();
                 let added = Command::new(env!("CARGO_BIN_EXE_vmt"))
                     .args(["add", "--model", s(&model), "--effect", eff, "--from-diagnosis", "--data", s(dir)])
                     .args(["-o", s(&m2)])
@@ -206,6 +208,30 @@ fn encoder_rates(hidden: EncoderHidden, draws: u64, add: bool) -> Vec<(EncoderTr
         .collect()
 }
 
+/// The complete accelerometer model (straightness y and z fitted, nothing else present) on 3
+/// fixed draws of the generator (3 passes, 5 000–9 000 samples, waviness of 4–40 mm that only a
+/// flexible shape fits): normalised RMS ≤ 1.1 × the ideal, which is ≤ 1 here (the manifest states
+/// the generator's true σ, and a right model leaves √(1 − p/n) of it), so ≤ 1.1 on every draw.
+/// Before the flexible shapes (a cubic) the first draw gave 14.7. The rate over 20 draws is in the
+/// report of issue 19 (`accel_complete_model_false_alarms`, ignored).
+#[test]
+fn accel_complete_model_fits_to_the_noise() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out: Vec<(u64, Result<f64, String>)> = (0..3u64)
+        .into_par_iter()
+        .map(|k| {
+            let dir = tmp.path().join(format!("a{k}"));
+            accel_set(&dir, 1000 + k, AccelHidden::None, 0.0);
+            let c = vmt(&["compare", "--model", s(&dir.join("model.toml")), "--data", s(&dir), "--json"]);
+            (k, c.map(|c| c["normalized_rms"].as_f64().unwrap_or(f64::NAN)))
+        })
+        .collect();
+    for (k, r) in out {
+        let nrms = r.unwrap_or_else(|e| panic!("draw {k}: {e}"));
+        assert!(nrms <= 1.1, "draw {k}: normalised RMS {nrms:.3} of the complete model (≤ 1.1 × ideal ≤ 1)");
+    }
+}
+
 /// Complete accelerometer models: the share of draws with any `significant` claim (goal ≤ 2 %).
 #[test]
 #[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
@@ -298,4 +324,25 @@ fn encoder_hidden_backlash() {
 #[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
 fn encoder_hidden_servo_lag() {
     hidden_encoder(EncoderHidden::ServoLag, "servo_lag");
+}
+
+/// Wall time of one `vmt diagnose` on accelerometer sets of `VMT_SAMPLES` samples (default 15 000;
+/// the generator's rate set for the size, `accel_set_sized`), printed; the criterion benchmark
+/// `benches/modelcheck.rs` runs the same on 15 000 and 100 000 samples.
+#[test]
+#[ignore = "timing tool; prints the wall time (see the report of issue 19)"]
+fn accel_diagnose_wall_time() {
+    let n: usize = std::env::var("VMT_SAMPLES").ok().and_then(|v| v.parse().ok()).unwrap_or(15_000);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("sized");
+    let t = accel_set_sized(&dir, 11, AccelHidden::None, 0.0, Some(n));
+    let t0 = std::time::Instant::now();
+    let d = vmt(&["diagnose", "--model", s(&dir.join("model.toml")), "--data", s(&dir), "--json"]).unwrap();
+    eprintln!(
+        "diagnose of {} samples: {:.1} s wall, normalised RMS {:.3}, first {}",
+        t.samples,
+        t0.elapsed().as_secs_f64(),
+        d["normalized_rms"].as_f64().unwrap_or(f64::NAN),
+        d["ranking"][0]
+    );
 }

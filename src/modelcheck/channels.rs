@@ -107,9 +107,19 @@ impl Channel {
     }
 }
 
+/// How sample i of a channel reads an error motion's profile P ([`Channel::motion_read`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum MotionRead {
+    /// Not at all (sensitivity 0, no interval, or no velocity).
+    Blind,
+    /// s·P(x): a laser or an encoder.
+    Value { s: f64, x: f64 },
+    /// s·v·(P'(xb) − P'(xa))/dt: an accelerometer's interval mean of v²·P'' (xa = xb − v·dt).
+    SlopeDifference { s: f64, v: f64, dt: f64, xa: f64, xb: f64 },
+}
+
 impl Channel {
-    /// Response of sample `i` to an error motion `name` whose profile has value `value(x)` and slope
-    /// `slope(x)` (first derivative in position):
+    /// How sample `i` reads an error motion `name`:
     ///
     /// ```text
     /// laser:          s·P(x_i)
@@ -122,6 +132,25 @@ impl Channel {
     /// second's) as the simulator's reading is (difference of point velocities at successive
     /// samples, `vmt_sim::sensors::true_readings`). Gravity through the angles (g·tilt) is not in
     /// it: that is the `gravity_tilt` effect.
+    pub(crate) fn motion_read(&self, i: usize, name: EffectName) -> MotionRead {
+        let s = self.s_motion(name);
+        if s == 0.0 {
+            return MotionRead::Blind;
+        }
+        if self.is_laser() || self.encoder.is_some() {
+            return MotionRead::Value { s, x: self.x[i] };
+        }
+        let dt = sample_interval(self, i);
+        let v = self.v[i];
+        if !(dt > 0.0) || v == 0.0 {
+            return MotionRead::Blind;
+        }
+        let xb = self.x[i];
+        MotionRead::SlopeDifference { s, v, dt, xa: xb - v * dt, xb }
+    }
+
+    /// Response of sample `i` to an error motion `name` whose profile has value `value(x)` and slope
+    /// `slope(x)` (first derivative in position), as [`Channel::motion_read`] says.
     pub(crate) fn motion_response(
         &self,
         i: usize,
@@ -129,21 +158,11 @@ impl Channel {
         value: impl Fn(f64) -> f64,
         slope: impl Fn(f64) -> f64,
     ) -> f64 {
-        let s = self.s_motion(name);
-        if s == 0.0 {
-            return 0.0;
+        match self.motion_read(i, name) {
+            MotionRead::Blind => 0.0,
+            MotionRead::Value { s, x } => s * value(x),
+            MotionRead::SlopeDifference { s, v, dt, xa, xb } => s * v * (slope(xb) - slope(xa)) / dt,
         }
-        if self.is_laser() || self.encoder.is_some() {
-            return s * value(self.x[i]);
-        }
-        let dt = sample_interval(self, i);
-        let v = self.v[i];
-        if !(dt > 0.0) || v == 0.0 {
-            return 0.0;
-        }
-        let xb = self.x[i];
-        let xa = xb - v * dt;
-        s * v * (slope(xb) - slope(xa)) / dt
     }
 }
 

@@ -1,6 +1,7 @@
 //! Fitting a model: linear parameters by weighted least squares, hyper-parameters searched.
 
 use super::*;
+use rayon::prelude::*;
 
 // ------------------------------------------------------------------------------------------
 // Fitting a model.
@@ -39,20 +40,89 @@ pub(crate) fn design(st: &Stack, terms: &[FitTerm]) -> Vec<Vec<f64>> {
 }
 
 /// Drops columns that are all zero (an effect no channel sees) so the solver sees a clean design;
-/// returns the kept indices.
+/// returns the kept indices. A design of more than [`LARGE_DESIGN`] columns (flexible shapes on
+/// time series) is solved by pivoted QR (`lstsq_qr`, ≈ 2np² flops) instead of the SVD.
 pub(crate) fn solve(r: &[f64], cols: &[Vec<f64>], sigma: &Sigma) -> Result<(Vec<f64>, Vec<f64>), String> {
     let keep: Vec<usize> = (0..cols.len()).filter(|&j| cols[j].iter().any(|v| *v != 0.0)).collect();
     let sub: Vec<Vec<f64>> = keep.iter().map(|&j| cols[j].clone()).collect();
     if sub.is_empty() {
         return Ok((vec![0.0; cols.len()], r.to_vec()));
     }
-    let fit = fit_signature(r, &sub, sigma).map_err(|e| e.to_string())?;
+    let (coefficients, residual) = if sub.len() > LARGE_DESIGN {
+        let w = sigma.weights(r.len()).map_err(|e| e.to_string())?;
+        lstsq_qr(r, &sub, &w).map_err(|e| e.to_string())?
+    } else {
+        let fit = fit_signature(r, &sub, sigma).map_err(|e| e.to_string())?;
+        (fit.coefficients, fit.residual)
+    };
     let mut beta = vec![0.0; cols.len()];
     for (k, &j) in keep.iter().enumerate() {
-        beta[j] = if fit.coefficients[k].is_finite() { fit.coefficients[k] } else { 0.0 };
+        beta[j] = if coefficients[k].is_finite() { coefficients[k] } else { 0.0 };
     }
-    Ok((beta, fit.residual))
+    Ok((beta, residual))
 }
+
+/// [`solve`] block by block: channels are linked when some column is non-zero on both, and each
+/// group of linked channels (its samples and the columns non-zero there) is an independent least
+/// squares problem (e.g. a y and a z accelerometer with their own offsets and shapes), solved
+/// alone. The same solution as one solve of the whole design, at a fraction of the cost of a
+/// large one.
+pub(crate) fn solve_blocks(
+    st: &Stack,
+    r: &[f64],
+    cols: &[Vec<f64>],
+    sigma: &Sigma,
+) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let starts: Vec<usize> = st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect();
+    let m = st.chans.len();
+    let seen = |col: &[f64], j: usize| col[starts[j]..starts[j] + st.chans[j].y.len()].iter().any(|v| *v != 0.0);
+    // Union-find over channels.
+    let mut parent: Vec<usize> = (0..m).collect();
+    fn root(p: &mut [usize], mut i: usize) -> usize {
+        while p[i] != i {
+            p[i] = p[p[i]];
+            i = p[i];
+        }
+        i
+    }
+    for col in cols {
+        let on: Vec<usize> = (0..m).filter(|&j| seen(col, j)).collect();
+        for w in on.windows(2) {
+            let (a, b) = (root(&mut parent, w[0]), root(&mut parent, w[1]));
+            parent[a.max(b)] = a.min(b);
+        }
+    }
+    let roots: Vec<usize> = (0..m).map(|j| root(&mut parent, j)).collect();
+    let mut blocks: Vec<usize> = roots.clone();
+    blocks.sort_unstable();
+    blocks.dedup();
+    if blocks.len() <= 1 || cols.len() <= LARGE_DESIGN {
+        return solve(r, cols, sigma);
+    }
+    let per = sigma.weights(r.len()).map_err(|e| e.to_string())?;
+    let mut beta = vec![0.0; cols.len()];
+    let mut residual = vec![0.0; r.len()];
+    for b in blocks {
+        let rows: Vec<usize> =
+            (0..m).filter(|&j| roots[j] == b).flat_map(|j| starts[j]..starts[j] + st.chans[j].y.len()).collect();
+        let pick = |v: &[f64]| rows.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+        let which: Vec<usize> = (0..cols.len()).filter(|&k| rows.iter().any(|&i| cols[k][i] != 0.0)).collect();
+        let sub: Vec<Vec<f64>> = which.iter().map(|&k| pick(&cols[k])).collect();
+        let sig_b = Sigma::PerSample(pick(&per).iter().map(|w| 1.0 / w).collect());
+        let (bb, rb) = solve(&pick(r), &sub, &sig_b)?;
+        for (k, v) in which.iter().zip(bb) {
+            beta[*k] = v;
+        }
+        for (i, v) in rows.iter().zip(rb) {
+            residual[*i] = v;
+        }
+    }
+    Ok((beta, residual))
+}
+
+/// Number of design columns above which fits use QR and the hyper-parameter searches factor the
+/// columns that do not change once (variable projection); the point tables stay below it.
+pub(crate) const LARGE_DESIGN: usize = 100;
 
 pub(crate) fn weighted_ss(r: &[f64], w: &[f64]) -> f64 {
     r.iter().zip(w).map(|(a, b)| (a * b).powi(2)).sum()
@@ -74,9 +144,14 @@ pub(crate) struct ShapeChoice {
     pub(crate) best: u32,
     /// The model gave `order`.
     pub(crate) given: bool,
-    /// Highest order searched by BIC (what the data support, capped at [`MAX_ORDER`]); None when
-    /// the order was not searched (accelerometer data).
+    /// Highest order searched by BIC (what the data support, capped at [`MAX_ORDER`] or
+    /// [`MAX_ACCEL_ORDER`]); None when the order was not searched.
     pub(crate) max: Option<u32>,
+    /// Seen only through accelerometers: its constant and slope have no acceleration and are
+    /// pinned at 0 (not fitted).
+    pub(crate) pinned: bool,
+    /// The series' basis.
+    pub(crate) basis: ShapeBasis,
 }
 
 /// Highest Legendre order searched for a fitted error motion.
@@ -104,8 +179,11 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
     let m = distinct_positions(st).len() as u32;
     let max = MAX_ORDER.min(m.saturating_sub(1)).max(1);
     let motions: Vec<usize> = (0..first.terms.len()).filter(|&t| first.terms[t].name.is_error_motion()).collect();
-    if motions.is_empty() || st.chans.iter().any(|c| c.is_accel()) {
+    if motions.is_empty() {
         return Ok(first);
+    }
+    if st.chans.iter().any(|c| c.is_accel()) {
+        return fit_orders_nested(st, model, sigma, w, first, &motions);
     }
     let n = st.n;
     let mut terms = first.terms.clone();
@@ -138,6 +216,118 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
         if let Some((_, b)) = motions.iter().map(|&ti| (terms[ti].name, best[&ti])).find(|(nm, _)| *nm == c.name) {
             c.best = b;
             c.max = Some(max);
+        }
+    }
+    Ok(fs)
+}
+
+/// Highest order searched for an error motion seen only by accelerometers (cost cap: one QR of
+/// the motion's rows × this many columns; wavelengths down to 2L/600, 2 mm on a 0.6 m travel).
+pub(crate) const MAX_ACCEL_ORDER: u32 = 600;
+
+/// The highest order of the cosine series ([`ShapeBasis::Cosine`]) of error motion `name` that the
+/// accelerometer channels seeing it resolve: the shortest wavelength 2L/N (L the range) must span
+/// at least two sample spacings |v|·Δt of the pass that samples the position most finely (the
+/// Nyquist condition in position), and N < the distinct positions seen; capped at
+/// [`MAX_ACCEL_ORDER`] and at a quarter of the samples that see the motion.
+pub(crate) fn resolvable_order(st: &Stack, name: EffectName, range: (f64, f64)) -> u32 {
+    let seeing: Vec<&Channel> = st.chans.iter().filter(|c| c.s_motion(name) != 0.0).collect();
+    let rows: usize = seeing.iter().map(|c| c.y.len()).sum();
+    let mut xs: Vec<f64> = seeing.iter().flat_map(|c| c.x.iter().copied()).collect();
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    let dx = seeing
+        .iter()
+        .filter_map(|c| {
+            let mut d: Vec<f64> = (1..c.t.len()).map(|i| (c.v[i] * (c.t[i] - c.t[i - 1])).abs()).collect();
+            d.retain(|v| *v > 0.0);
+            d.sort_by(f64::total_cmp);
+            d.get(d.len() / 2).copied()
+        })
+        .fold(f64::INFINITY, f64::min);
+    // Cosines: cos(kπ(x − a)/L) has the wavelength 2L/k ≥ 2·dx for k ≤ L/dx.
+    let by_spacing = if dx.is_finite() { ((range.1 - range.0) / dx).floor() } else { f64::INFINITY };
+    let cap = (MAX_ACCEL_ORDER as f64).min(by_spacing).min(xs.len().saturating_sub(1) as f64).min((rows / 4) as f64);
+    (cap.max(1.0)) as u32
+}
+
+/// The order choice of [`fit_model_on`] on data with accelerometer channels: for each fitted
+/// error motion, BIC with σ unknown, n_m·ln(RSS_k/n_m) + (rank + k)·ln n_m, over the orders 1..N
+/// ([`resolvable_order`]) from the nested residual sums of squares of one QR (`nested_rss`),
+/// on the n_m samples of the channels that see the motion, with the offsets and every other term
+/// held at their columns (a column shared with other channels is refitted on these samples
+/// alone). The constant and slope of a motion seen only by accelerometers have no acceleration:
+/// their columns are zero there and they are not fitted (pinned at 0, said in the report).
+/// Coordinate-wise over the motions, two sweeps when several share a channel; then the model is
+/// refitted at the chosen orders with its searches.
+fn fit_orders_nested(
+    st: &Stack,
+    model: &Model,
+    sigma: &Sigma,
+    w: &[f64],
+    first: FitState,
+    motions: &[usize],
+) -> Result<FitState, String> {
+    let mut terms = first.terms.clone();
+    let mut best: BTreeMap<usize, (u32, u32)> = BTreeMap::new();
+    // A second sweep only when two motions share a channel (else each choice is independent).
+    let shared =
+        st.chans.iter().any(|c| motions.iter().filter(|&&ti| c.s_motion(first.terms[ti].name) != 0.0).count() > 1);
+    let sweeps = if motions.len() > 1 && shared { 2 } else { 1 };
+    let rows_of = |name: EffectName| -> Vec<usize> {
+        let mut out = Vec::new();
+        let mut k = 0;
+        for c in st.chans {
+            if c.s_motion(name) != 0.0 {
+                out.extend(k..k + c.y.len());
+            }
+            k += c.y.len();
+        }
+        out
+    };
+    for _ in 0..sweeps {
+        for &ti in motions {
+            let name = terms[ti].name;
+            let rows = rows_of(name);
+            let range = shape(st, name, 1, 1, false).range;
+            let top = resolvable_order(st, name, range);
+            let series = columns(st, name, &shape(st, name, 1, top, false), &[]);
+            let others: Vec<FitTerm> =
+                terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
+            let pick = |v: &[f64]| rows.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+            let fixed: Vec<Vec<f64>> =
+                design(st, &others).iter().map(|c| pick(c)).filter(|c| c.iter().any(|v| *v != 0.0)).collect();
+            let (orders, nested): (Vec<u32>, Vec<Vec<f64>>) = series
+                .iter()
+                .enumerate()
+                .map(|(k, c)| (k as u32 + 1, pick(c)))
+                .filter(|(_, c)| c.iter().any(|v| *v != 0.0))
+                .unzip();
+            let wr = pick(w);
+            let base = OrthoBase::new(&fixed, &wr).map_err(|e| e.to_string())?;
+            let nr = nested_rss(&pick(&first.target), &wr, &base, &nested).map_err(|e| e.to_string())?;
+            let nm = rows.len() as f64;
+            let bic = |k: usize| nm * (nr.rss[k].max(1e-300) / nm).ln() + (base.rank() + k) as f64 * nm.ln();
+            let k = (0..nr.rss.len()).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0);
+            // k series columns taken: the order of the k-th (1 when none is needed); the columns
+            // the offsets span (P_2 per pass on accelerometers) are skipped but kept in the series.
+            let chosen = if k == 0 { 1 } else { orders[nr.used[k - 1]] };
+            let searched = nr.used.last().map_or(1, |&j| orders[j]);
+            best.insert(ti, (chosen, searched));
+            let me = &model.effects[terms[ti].index];
+            terms[ti].shape = shape(st, name, 1, me.order.unwrap_or(chosen), false);
+        }
+    }
+    let chosen: BTreeMap<usize, u32> = motions.iter().map(|&ti| (terms[ti].index, terms[ti].shape.order)).collect();
+    let default = |me: &ModelEffect| me.order.unwrap_or(DEFAULT_ORDER);
+    let mut fs = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| {
+        chosen.get(&index).copied().unwrap_or(default(me))
+    })?;
+    for c in fs.shapes.iter_mut() {
+        if let Some(&(b, m)) = motions.iter().find(|&&ti| terms[ti].name == c.name).map(|ti| &best[ti]) {
+            c.best = b;
+            c.max = Some(m);
+            c.pinned = st.chans.iter().filter(|ch| ch.s_motion(c.name) != 0.0).all(|ch| ch.is_accel());
         }
     }
     Ok(fs)
@@ -226,6 +416,18 @@ pub(crate) fn fit_model_fixed(
     }
     let n_searched: usize = terms.iter().map(|t| t.searched.iter().filter(|s| **s).count()).sum();
     let sweeps = if n_searched > 1 { 2 } else { 1 };
+    // A large design (flexible shapes on time series): the columns that no search changes (offsets,
+    // shapes, terms without a searched hyper-parameter) are factored once, and each evaluation
+    // projects only the searched terms' columns (variable projection, `OrthoBase`).
+    let moving = |t: &FitTerm| t.searched.iter().any(|s| *s);
+    let fixed_base = if n_searched > 0 && design(st, &terms).len() > LARGE_DESIGN {
+        let fixed: Vec<FitTerm> = terms.iter().filter(|t| !moving(t)).cloned().collect();
+        let base = OrthoBase::new(&design(st, &fixed), w).map_err(|e| e.to_string())?;
+        let target = base.project_vector(&r0, w);
+        Some((base, target))
+    } else {
+        None
+    };
     for _ in 0..sweeps {
         for ti in 0..terms.len() {
             for hi in 0..terms[ti].hyper.len() {
@@ -235,14 +437,31 @@ pub(crate) fn fit_model_fixed(
                 let (grid, refine) = &grids[ti][hi];
                 let eval = |v: f64, terms: &mut Vec<FitTerm>| -> f64 {
                     terms[ti].hyper[hi] = v;
+                    if let Some((base, target)) = &fixed_base {
+                        let cols: Vec<Vec<f64>> = terms
+                            .iter()
+                            .filter(|t| moving(t))
+                            .flat_map(|t| columns(st, t.name, &t.shape, &t.hyper))
+                            .collect();
+                        let ss: f64 = target.iter().map(|v| v * v).sum();
+                        return ss - base.explained(target, &cols, w);
+                    }
                     match solve(&r0, &design(st, terms), sigma) {
                         Ok((_, r)) => weighted_ss(&r, w),
                         Err(_) => f64::INFINITY,
                     }
                 };
+                // The grid in parallel (rayon), the best taken in grid order: the same on any
+                // number of threads.
+                let values: Vec<f64> = grid
+                    .par_iter()
+                    .map(|&g| {
+                        let mut tt = terms.clone();
+                        eval(g, &mut tt)
+                    })
+                    .collect();
                 let mut best = (f64::INFINITY, grid[0]);
-                for &g in grid {
-                    let s = eval(g, &mut terms);
+                for (&g, &s) in grid.iter().zip(&values) {
                     if s < best.0 {
                         best = (s, g);
                     }
@@ -263,16 +482,56 @@ pub(crate) fn fit_model_fixed(
         }
     }
     let cols = design(st, &terms);
-    let (coefs, residual) = solve(&r0, &cols, sigma)?;
+    let (coefs, residual) = solve_blocks(st, &r0, &cols, sigma)?;
     let shapes = terms
         .iter()
         .filter(|t| t.name.is_error_motion())
         .map(|t| {
             let given = model.effects[t.index].order.is_some();
-            ShapeChoice { name: t.name, order: t.shape.order, best: t.shape.order, given, max: None }
+            ShapeChoice {
+                name: t.name,
+                order: t.shape.order,
+                best: t.shape.order,
+                given,
+                max: None,
+                pinned: false,
+                basis: t.shape.basis,
+            }
         })
         .collect();
     Ok(FitState { terms, cols, coefs, residual, n_offsets: st.n_groups, target: r0, shapes })
+}
+
+/// The linear coefficients of term `ti` of a fit (they follow the offsets, term by term).
+pub(crate) fn term_coefs(fs: &FitState, ti: usize) -> &[f64] {
+    let start = fs.n_offsets + fs.terms[..ti].iter().map(|t| t.shape.coefs.len()).sum::<usize>();
+    &fs.coefs[start..start + fs.terms[ti].shape.coefs.len()]
+}
+
+/// The mode excitations of `st` plus, on every accelerometer channel, one input per fitted
+/// translation error motion (EXX, EYX, EZX) of the fit `fs` (`Excitation::of_fitted`): a
+/// structural mode is driven by the guideway the data show. None when no fitted translation
+/// gives an input.
+pub(crate) fn fitted_excitation(st: &Stack, fs: &FitState) -> Option<Vec<Vec<Excitation>>> {
+    let translation =
+        |n: EffectName| matches!(n, EffectName::Positioning | EffectName::StraightnessY | EffectName::StraightnessZ);
+    let mut added = false;
+    let ex = st
+        .chans
+        .iter()
+        .zip(&st.excitation)
+        .map(|(c, given)| {
+            let mut list = given.clone();
+            for (ti, t) in fs.terms.iter().enumerate().filter(|(_, t)| translation(t.name)) {
+                if let Some(e) = Excitation::of_fitted(c, &t.shape, term_coefs(fs, ti)) {
+                    list.push(e);
+                    added = true;
+                }
+            }
+            list
+        })
+        .collect();
+    added.then_some(ex)
 }
 
 /// The fitted parameters of each term as effect parameters (FORMAT.md §2 keys).
@@ -310,8 +569,25 @@ pub(crate) fn describe(
         n if n.is_error_motion() => {
             // The Legendre series as monomials c_j·x^j (FORMAT.md §2 keys); c0 is left out (the
             // per-channel offsets carry the constant).
-            for (j, v) in legendre_to_monomials(sh.first_power, c, sh.range).into_iter().enumerate().skip(1) {
-                m.insert(format!("c{j}"), v);
+            match sh.basis {
+                ShapeBasis::Legendre => {
+                    for (j, v) in legendre_to_monomials(sh.first_power, c, sh.range).into_iter().enumerate().skip(1) {
+                        m.insert(format!("c{j}"), v);
+                    }
+                }
+                // Σ cos_k·cos(kπ(x − x_lo)/(x_hi − x_lo)), m (no monomials: hundreds of terms).
+                ShapeBasis::Cosine => {
+                    // φ_1 = P_3, φ_2 = P_4 of u = (2x − x_lo − x_hi)/(x_hi − x_lo), then cosines.
+                    for (i, v) in c.iter().enumerate() {
+                        let key = match sh.first_power as usize + i {
+                            k @ (1 | 2) => format!("p{}", k + 2),
+                            k => format!("cos{}", k - 2),
+                        };
+                        m.insert(key, *v);
+                    }
+                    m.insert("x_lo".into(), sh.range.0);
+                    m.insert("x_hi".into(), sh.range.1);
+                }
             }
         }
         EffectName::CyclicLead | EffectName::InterpolationError => {

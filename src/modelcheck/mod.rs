@@ -46,9 +46,14 @@
 //!   sensitivities are a laser's (u_i for translations, (r × u)_i for angles) times v². Given error
 //!   motions use their profiles' slopes (Ē'' as `Profile::mean_second_derivative` computes it:
 //!   polynomials, harmonics and random profiles by their analytic slopes, a table by its
-//!   piecewise-constant slope, i.e. the slope jumps at its knots); fitted ones (c_k·x^k) give the columns v²·s·k·(x_i^{k−1} −
-//!   x_{i−1}^{k−1})/(x_i − x_{i−1}) ≈ v²·s·k(k−1)·x^{k−2}, with the same coefficients c_k as the
-//!   lasers' columns (one unknown per coefficient shared by lasers and accelerometers).
+//!   piecewise-constant slope, i.e. the slope jumps at its knots); fitted ones (a series Σ c_k·φ_k,
+//!   below) give the columns v²·s·(φ'_k(x_i) − φ'_k(x_{i−1}))/(x_i − x_{i−1}), with the same
+//!   coefficients c_k as the lasers' columns (one unknown per coefficient shared by lasers and
+//!   accelerometers). A motion seen only by accelerometers is a cosine series φ_k =
+//!   cos(kπ(x − a)/(b − a)) (`ShapeBasis::Cosine`: E'' is then a cosine series, which converges on
+//!   any smooth profile, and its columns stay independent to hundreds of terms, as the rail
+//!   waviness needs; Legendre columns of the accelerations become dependent near order 270 on 3 500
+//!   samples); its constant and slope have no acceleration and are pinned at 0 (said in `shapes`).
 //! - g·τ_s(x): gravity seen through the tilt of sensor s's sensitive axis (`gravity_tilt`; the
 //!   simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted
 //!   as a polynomial Σ c_k·x^k, k = 1..3, per sensor, shared by its runs). The error-motion columns
@@ -64,8 +69,12 @@
 //!   (no given straightness: the excitation is an unknown random profile), the mode is a narrow-band
 //!   random process: sin/cos of 2πf·t with amplitude and phase free per segment of
 //!   [`RESONANCE_SEGMENT`] s of each channel; ζ is then not resolved (held at its start, 2 %).
-//!   Fitted error motions do not enter the excitation: a polynomial's acceleration varies far
-//!   slower than a mode, whose response to it is quasi-static (q ≈ −a/ω², q̈ ≈ 0).
+//!   Fitted translations (flexible shapes) do enter the excitation: a first fit without the mode
+//!   gives Ê(x), and each fitted translation's v²·Ê''(x(τ)) is an input of its own, with a gain
+//!   per (sensor, input) (the mode is driven by every component of the reference point's
+//!   acceleration, read along each sensor's direction), plus the free vibration per channel
+//!   (`fitted_excitation`; in diagnose for the candidate, in compare and after add for a fitted
+//!   `resonance`). The diagnose search over (f, ζ) is then screened (`Candidate::with_screen`).
 //!
 //! Not predicted in phase 3: the carriage's own dynamics on its bearing blocks (it follows the
 //! geometry only quasi-statically, with a relative error ≈ (f/f_b)² at frequency f below its
@@ -89,8 +98,13 @@
 //! order BIC (σ unknown) prefers among 1..min(30, m − 1) for m distinct positions, re-chosen for
 //! every fit (compare, diagnose, after add); reported as `shapes` (FORMAT.md §4). The fitted
 //! parameters are written back as monomials c_j·x^j. `bspline`, `harmonics` and `table` are
-//! refused with an error (not implemented). On accelerometer data the order stays at `order`
-//! or the default 3.
+//! refused with an error (not implemented). On data with accelerometer channels the order is
+//! chosen per motion by BIC (σ unknown) on the samples of the channels that see it, over 1..N
+//! with N what the passes resolve (P_N's shortest wavelength ≈ π(b − a)/N spans two sample
+//! spacings |v|·Δt of the finest pass; at most [`MAX_ACCEL_ORDER`]), from the nested residual
+//! sums of squares of one QR (`vmt_estimators::modelcheck::nested_rss`); large designs are solved
+//! by QR block by block and the hyper-parameter searches factor the unchanging columns once
+//! (variable projection, `OrthoBase`).
 
 use crate::error::{fmt_num, VmtError};
 use crate::measurement::{write_file_atomic, MeasurementSet, Procedure, RunData, SensorKind};
@@ -101,8 +115,8 @@ use std::f64::consts::TAU as TWO_PI;
 use std::path::{Path, PathBuf};
 use vmt_estimators::modelcheck::{
     autocorrelation, bin_by_edges, bin_by_label, estimate_noise_sigma, fit_percent, fit_signature, frequency_grid,
-    golden_max, ljung_box, ls_periodogram, rank_candidates, uniform_edges, Candidate, DiagnoseConfig, HyperParameter,
-    RankingEntry, Sigma, Verdict,
+    golden_max, ljung_box, ls_periodogram, lstsq_qr, nested_rss, rank_candidates, uniform_edges, Candidate,
+    DiagnoseConfig, HyperParameter, OrthoBase, RankingEntry, Sigma, Verdict,
 };
 use vmt_sim::axis_sim::GRAVITY;
 use vmt_sim::effects::{Effect, EffectName, EffectParams};
@@ -204,7 +218,10 @@ mod tests {
     fn fitted_straightness_columns_on_an_accelerometer_are_mean_curvatures_times_v2() {
         let chans = vec![accel("a", 10)];
         let st = Stack::new(&chans);
-        let sh = shape(&st, EffectName::StraightnessY, 1, 3, false);
+        let mut sh = shape(&st, EffectName::StraightnessY, 1, 3, false);
+        // Only accelerometers see it: a cosine series; the Legendre columns checked first.
+        assert_eq!(sh.basis, ShapeBasis::Cosine);
+        sh.basis = ShapeBasis::Legendre;
         let cols = columns(&st, EffectName::StraightnessY, &sh, &[]);
         let (a, b) = sh.range;
         let want = 0.01 * 3.0 * (2.0 / (b - a)).powi(2);
@@ -212,6 +229,28 @@ mod tests {
             assert!(cols[0][i].abs() < 1e-9 * want, "{}", cols[0][i]);
             assert!((cols[1][i] - want).abs() < 1e-9 * want, "{} vs {want}", cols[1][i]);
         }
+        // Cosines cos(kπ(x − a)/L) after P_3, P_4: the column is v² times the interval mean of
+        // E'' = −(kπ/L)²·cos(kπ(x − a)/L), which is E'' at the interval's middle to (kπh/L)²/24
+        // (h = 1 mm, L = 9 mm: 0.5 % at k = 1, 1.9 % at k = 2, 4.3 % at k = 3); checked to 1.2× that.
+        sh.basis = ShapeBasis::Cosine;
+        let l = b - a;
+        // cols[0], cols[1] are P_3, P_4 (as above); cols[2] is cos(1·…).
+        sh.order = 5;
+        let cols = columns(&st, EffectName::StraightnessY, &sh, &[]);
+        for (j, col) in cols.iter().enumerate().skip(2) {
+            let k = (j - 1) as f64;
+            let kx = std::f64::consts::PI * k / l;
+            let tol = 1.2 * (kx * 1e-3).powi(2) / 24.0 * kx * kx * 0.01;
+            for (i, v) in col.iter().enumerate().skip(1) {
+                let mid = chans[0].x[i] - 0.5e-3;
+                let want = -0.01 * kx * kx * (kx * (mid - a)).cos();
+                assert!((v - want).abs() <= tol, "k {k}, sample {i}: {v} vs {want}");
+            }
+        }
+        let mut laser = accel("l", 3);
+        laser.kind = SensorKind::LaserStraightness;
+        let both = [accel("a", 10), laser];
+        assert_eq!(shape(&Stack::new(&both), EffectName::StraightnessY, 1, 3, false).basis, ShapeBasis::Legendre);
     }
 
     /// The Legendre series written as monomials reproduces it: Σ c_k·P_k(u(x)) = Σ m_j·x^j at

@@ -89,7 +89,8 @@ pub struct CompareReport {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ShapeReport {
     /// The basis: `legendre` (Legendre polynomials of the position mapped onto [−1, 1] over the
-    /// range of the sample positions, no constant term).
+    /// range of the sample positions, no constant term) or `cosine` (cos(kπ(x − a)/(b − a)),
+    /// k ≥ 1, for a motion seen only by accelerometers).
     pub basis: String,
     /// Highest Legendre degree used.
     pub order: u32,
@@ -105,13 +106,20 @@ pub(crate) fn shape_reports(fs: &FitState) -> BTreeMap<String, ShapeReport> {
     fs.shapes
         .iter()
         .map(|c| {
-            let chosen_by = match (c.given, c.max) {
+            let mut chosen_by = match (c.given, c.max) {
                 (true, _) => "model".to_string(),
                 (false, Some(m)) => format!("BIC over 1..{m}"),
-                (false, None) => "default (order choice on accelerometer data not implemented)".to_string(),
+                (false, None) => "default".to_string(),
             };
+            if c.pinned {
+                chosen_by += "; constant and slope pinned at 0 (accelerometers do not see them)";
+            }
             let bic_order = (c.given && c.max.is_some()).then_some(c.best);
-            let r = ShapeReport { basis: "legendre".into(), order: c.order, chosen_by, bic_order };
+            let basis = match c.basis {
+                ShapeBasis::Legendre => "legendre",
+                ShapeBasis::Cosine => "cosine",
+            };
+            let r = ShapeReport { basis: basis.into(), order: c.order, chosen_by, bic_order };
             (c.name.as_str().to_string(), r)
         })
         .collect()
@@ -185,11 +193,20 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
     // Pass 1: weights from the known σ (1 where unknown); estimate the unknown σ from the residual.
     let mut sig: Vec<f64> = chans.iter().map(|c| c.sigma.unwrap_or(f64::NAN)).collect();
     let est: Vec<bool> = sig.iter().map(|s| s.is_nan()).collect();
+    // A fitted resonance over fitted translations (accelerometers) is driven by the guideway a
+    // first fit without it shows (`fitted_excitation`); the model is then refitted with those inputs.
+    let mode_over_shapes = chans.iter().any(|c| c.is_accel())
+        && model.effects.iter().any(|m| m.fit && m.effect.name == EffectName::Resonance)
+        && model.effects.iter().any(|m| m.fit && m.effect.name.is_error_motion());
+    let mut bare = model.clone();
+    if mode_over_shapes {
+        bare.effects.retain(|m| m.effect.name != EffectName::Resonance);
+    }
     for pass in 0..2 {
         let per = st_sigma(&st, &sig);
         let w: Vec<f64> = per.iter().map(|s| 1.0 / s).collect();
         let sigma = Sigma::PerSample(per);
-        let fs = fit_model_on(&st, model, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
+        let fs = fit_model_on(&st, &bare, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
         if pass == 0 && est.iter().any(|e| *e) {
             let mut k0 = 0;
             for (j, c) in chans.iter().enumerate() {
@@ -222,6 +239,16 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
             }
             continue;
         }
+        let (st, fs) = if mode_over_shapes {
+            let st2 = match fitted_excitation(&st, &fs) {
+                Some(ex) => st.with_excitation(ex),
+                None => st.with_excitation(st.excitation.clone()),
+            };
+            let fs = fit_model_on(&st2, model, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
+            (st2, fs)
+        } else {
+            (st, fs)
+        };
         let sigma = sigma_check(chans, &fs.residual, &est);
         if let Some((sc, k)) = sigma.as_ref().and_then(|sc| Some((sc, sc.scale?))) {
             notes.push(format!(
@@ -387,7 +414,7 @@ pub(crate) fn st_sigma(st: &Stack, sig: &[f64]) -> Vec<f64> {
 pub(crate) fn visible(st: &Stack, name: EffectName, sh: &Shape, fixed: Option<f64>) -> bool {
     if name == EffectName::Resonance {
         // Any excited channel or any narrow-band segment (sin/cos are never both zero).
-        return st.excitation.iter().any(|e| e.is_some()) || !resonance_segments(st).is_empty();
+        return st.excitation.iter().any(|e| !e.is_empty()) || !resonance_segments(st).is_empty();
     }
     let grid: Vec<f64> = match (fixed, sh.hypers.first()) {
         (Some(v), _) => vec![v],
@@ -573,6 +600,9 @@ pub(crate) fn coulomb_level(model: &Model, fitted: &BTreeMap<String, BTreeMap<St
         .unwrap_or(0.0)
 }
 
+/// Grid points of a screened resonance search evaluated exactly (of ≈ 200 frequencies × 6 dampings).
+pub(crate) const RESONANCE_SCREEN: usize = 12;
+
 /// `vmt diagnose` on in-memory inputs: fits the model, then every catalogue effect the model lacks
 /// that these channels can show is fitted to the weighted residual together with the model's own
 /// linear columns, ranked by ΔBIC with verdicts (`vmt_estimators::modelcheck::rank_candidates`).
@@ -608,9 +638,15 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     }
     let fc_ref = coulomb_level(model, &term_params(&f.fs, model));
     let st = &f.st;
+    // A resonance over fitted translations is driven by the guideway the base fit shows.
+    let st_mode = fitted_excitation(st, &f.fs).map(|ex| st.with_excitation(ex));
     let cands: Vec<Candidate> = names
         .iter()
         .map(|&n| {
+            let st = match (&st_mode, n == EffectName::Resonance) {
+                (Some(sm), true) => sm,
+                _ => st,
+            };
             let sh = candidate_shape(st, n, lacks_coulomb(model));
             let sh2 = sh.clone();
             let coef: Vec<&str> = sh.coefs.iter().map(|s| s.as_str()).collect();
@@ -631,7 +667,14 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             if n == EffectName::Stribeck {
                 start.set("fc", fc_ref);
             }
-            c.with_describe(move |coefs: &[f64], h: &[f64]| describe(n, &sh3, coefs, h, &start))
+            let c = c.with_describe(move |coefs: &[f64], h: &[f64]| describe(n, &sh3, coefs, h, &start));
+            // A mode over a large base (flexible shapes): the (f, ζ) grid is screened
+            // (`Candidate::with_screen`), the best RESONANCE_SCREEN points evaluated exactly.
+            if n == EffectName::Resonance && f.fs.cols.len() > LARGE_DESIGN {
+                c.with_screen(RESONANCE_SCREEN)
+            } else {
+                c
+            }
         })
         .collect();
     let mut ranking: Vec<RankingEntry> = Vec::new();

@@ -17,9 +17,11 @@ pub(crate) struct Stack<'a> {
     /// does not change from run to run).
     pub(crate) group: Vec<usize>,
     pub(crate) n_groups: usize,
-    /// Per channel: the base excitation of a structural mode predicted by the model (accelerometer
-    /// channels only; None where the model predicts none), see [`Excitation`].
-    pub(crate) excitation: Vec<Option<Excitation>>,
+    /// Per channel: the base excitations of a structural mode predicted by the model, one per
+    /// input (accelerometer channels only; empty where the model predicts none), see
+    /// [`Excitation`]: the given translations' projection on the sensor (one input), or each
+    /// fitted translation after a first fit ([`Stack::with_excitation`]).
+    pub(crate) excitation: Vec<Vec<Excitation>>,
 }
 
 /// Time step of the mode integration, s: at most this long (and at least 4 steps per sample
@@ -80,6 +82,40 @@ impl Excitation {
         if motions.is_empty() {
             return None;
         }
+        Excitation::tabulate(c, |a, b| motions.iter().map(|(s, p)| s * p.mean_second_derivative(a, b)).sum::<f64>())
+    }
+
+    /// The excitation of accelerometer channel `c` by one fitted translation error motion E (its
+    /// Legendre shape `sh` and coefficients `coef`, [`columns`]): the reference point's
+    /// acceleration v²·Ē''(x_k, x_{k+1}) in that direction, Ē'' = (E'(x_{k+1}) − E'(x_k))/(x_{k+1} −
+    /// x_k), E'(x) = Σ c_k·P'_k(u)·2/(b − a). Not projected on the sensor's direction: the mode is
+    /// driven by every component of the reference point's acceleration, and its gains per sensor
+    /// and component are fitted. None as for [`Excitation::of`] or for a shape without coefficients.
+    pub(crate) fn of_fitted(c: &Channel, sh: &Shape, coef: &[f64]) -> Option<Excitation> {
+        if !c.is_accel() || c.t.len() < 2 || coef.iter().all(|v| *v == 0.0) {
+            return None;
+        }
+        // E'(x); the step boundaries come in order (x_k, x_{k+1}), (x_{k+1}, x_{k+2}), …: the last
+        // boundary's slope is kept.
+        let last = std::cell::Cell::new((f64::NAN, 0.0));
+        let slope = |x: f64| -> f64 {
+            if last.get().0 == x {
+                return last.get().1;
+            }
+            let (_, d) = sh.basis_at(x);
+            let v = coef.iter().enumerate().map(|(i, ck)| ck * d[sh.first_power as usize + i]).sum();
+            last.set((x, v));
+            v
+        };
+        Excitation::tabulate(c, |xa, xb| {
+            let sa = slope(xa);
+            (slope(xb) - sa) / (xb - xa)
+        })
+    }
+
+    /// The input table of channel `c` for a profile's mean second derivative `mean_e2(x_a, x_b)`
+    /// (1/m) over each integration step: v²·Ē'' at x(τ) = x_i + v·(τ − t_i) (see [`Excitation`]).
+    fn tabulate(c: &Channel, mean_e2: impl Fn(f64, f64) -> f64) -> Option<Excitation> {
         let mut steps = Vec::with_capacity(c.t.len());
         let mut input = Vec::with_capacity(c.t.len());
         for i in 0..c.t.len() {
@@ -90,9 +126,7 @@ impl Excitation {
             }
             let m = mode_steps(dt);
             let x = |k: usize| c.x[i] - v * dt * (1.0 - k as f64 / m as f64);
-            let vals: Vec<f64> = (0..m)
-                .map(|k| v * v * motions.iter().map(|(s, p)| s * p.mean_second_derivative(x(k), x(k + 1))).sum::<f64>())
-                .collect();
+            let vals: Vec<f64> = (0..m).map(|k| v * v * mean_e2(x(k), x(k + 1))).collect();
             steps.push(m);
             input.push(vals);
         }
@@ -185,8 +219,13 @@ impl<'a> Stack<'a> {
     /// The stack of `chans` with the structural-mode excitation the model `model` predicts.
     pub(crate) fn with_model(chans: &'a [Channel], model: &Model) -> Stack<'a> {
         let mut st = Stack::new(chans);
-        st.excitation = chans.iter().map(|c| Excitation::of(c, model)).collect();
+        st.excitation = chans.iter().map(|c| Excitation::of(c, model).into_iter().collect()).collect();
         st
+    }
+
+    /// The same stack with these mode excitations (one list per channel).
+    pub(crate) fn with_excitation(&self, excitation: Vec<Vec<Excitation>>) -> Stack<'a> {
+        Stack { chans: self.chans, n: self.n, group: self.group.clone(), n_groups: self.n_groups, excitation }
     }
 
     pub(crate) fn new(chans: &'a [Channel]) -> Stack<'a> {
@@ -213,7 +252,7 @@ impl<'a> Stack<'a> {
             n: chans.iter().map(|c| c.y.len()).sum(),
             group,
             n_groups: keys.len(),
-            excitation: vec![None; chans.len()],
+            excitation: vec![Vec::new(); chans.len()],
         }
     }
 
@@ -278,6 +317,63 @@ pub(crate) struct Shape {
     pub(crate) range: (f64, f64),
     /// Stribeck only: also fit the Coulomb level (the model has no `coulomb` effect).
     pub(crate) with_fc: bool,
+    /// Error motions: the series' basis.
+    pub(crate) basis: ShapeBasis,
+}
+
+/// The basis of a fitted error motion's series (over the range [a, b] of the sample positions).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum ShapeBasis {
+    /// Legendre polynomials P_k(u), u = (2x − a − b)/(b − a): lasers and encoders (point tables).
+    Legendre,
+    /// P_3, P_4, then cosines cos(kπ(x − a)/(b − a)): a motion seen only by accelerometers. They see E'' alone,
+    /// and the cosine series of E'' converges on any smooth profile (its even extension is
+    /// continuous) with columns that stay independent to hundreds of terms (wavelengths 2(b − a)/k
+    /// down to the rail waviness), where Legendre columns of the sampled accelerations become
+    /// dependent (to 1e-9) near order 270 on 3 500 samples while the waviness needs more.
+    Cosine,
+}
+
+impl Shape {
+    /// Values and slopes (d/dx, 1/m) of the basis functions of orders 0..=`order` at x (m).
+    pub(crate) fn basis_at(&self, x: f64) -> (Vec<f64>, Vec<f64>) {
+        let (a, b) = self.range;
+        let top = self.order as usize;
+        match self.basis {
+            ShapeBasis::Legendre => {
+                let (p, d) = legendre((2.0 * x - a - b) / (b - a), top);
+                let slope = d.iter().map(|dk| dk * 2.0 / (b - a)).collect();
+                (p, slope)
+            }
+            ShapeBasis::Cosine => {
+                // φ_1 = P_3, φ_2 = P_4 (their E'' = P_3'', P_4'' carry the profile's third
+                // derivative at the ends, where the cosine series of E'' converges slowly), then
+                // φ_k = cos((k − 2)π(x − a)/(b − a)).
+                let th = std::f64::consts::PI * (x - a) / (b - a);
+                let kx = std::f64::consts::PI / (b - a);
+                let (p, d) = legendre((2.0 * x - a - b) / (b - a), 4);
+                let (mut vals, mut slopes) = (Vec::with_capacity(top + 1), Vec::with_capacity(top + 1));
+                // cos(mθ), sin(mθ) by the angle-addition recurrence (rounding grows ≈ m·ε).
+                let (s1, c1) = th.sin_cos();
+                let (mut sm, mut cm) = (0.0, 1.0);
+                for k in 0..=top {
+                    match k {
+                        1 | 2 => {
+                            vals.push(p[k + 2]);
+                            slopes.push(d[k + 2] * 2.0 / (b - a));
+                        }
+                        _ => {
+                            let m = k.saturating_sub(2) as f64;
+                            vals.push(cm);
+                            slopes.push(-m * kx * sm);
+                            (sm, cm) = (sm * c1 + cm * s1, cm * c1 - sm * s1);
+                        }
+                    }
+                }
+                (vals, slopes)
+            }
+        }
+    }
 }
 
 /// True for the effects phase 1 can predict in a point table.
@@ -312,7 +408,7 @@ pub(crate) const RESONANCE_SEGMENT: f64 = 0.2;
 pub(crate) fn resonance_segments(st: &Stack) -> Vec<(usize, usize, f64, f64)> {
     let mut out = Vec::new();
     for (j, c) in st.chans.iter().enumerate() {
-        if !c.is_accel() || c.t.len() < 8 || st.excitation[j].is_some() {
+        if !c.is_accel() || c.t.len() < 8 || !st.excitation[j].is_empty() {
             continue;
         }
         let lo = c.t.iter().copied().fold(f64::INFINITY, f64::min);
@@ -347,9 +443,23 @@ pub(crate) fn accel_sensors(st: &Stack) -> Vec<String> {
 /// of appearance.
 pub(crate) fn excited_sensors(st: &Stack) -> Vec<String> {
     let mut out: Vec<String> = Vec::new();
-    for (c, _) in st.chans.iter().zip(&st.excitation).filter(|(_, e)| e.is_some()) {
+    for (c, _) in st.chans.iter().zip(&st.excitation).filter(|(_, e)| !e.is_empty()) {
         if !out.contains(&c.sensor) {
             out.push(c.sensor.clone());
+        }
+    }
+    out
+}
+
+/// The forced-response gains of a resonance: (sensor, input index) for every input of every excited
+/// sensor, named `gain_SENSOR` for the first input and `gain_SENSOR_K` for input K ≥ 1.
+pub(crate) fn resonance_gains(st: &Stack) -> Vec<(String, usize, String)> {
+    let mut out = Vec::new();
+    for a in excited_sensors(st) {
+        let k_max = st.chans.iter().zip(&st.excitation).filter(|(c, _)| c.sensor == a).map(|(_, e)| e.len()).max();
+        for k in 0..k_max.unwrap_or(0) {
+            let name = if k == 0 { format!("gain_{a}") } else { format!("gain_{a}_{k}") };
+            out.push((a.clone(), k, name));
         }
     }
     out
@@ -394,8 +504,8 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
         EffectName::Stribeck if with_fc => (s(&["fs_minus_fc", "fc"]), vec!["vs", "shape"]),
         EffectName::Stribeck => (s(&["fs_minus_fc"]), vec!["vs", "shape"]),
         EffectName::Resonance => {
-            let mut names: Vec<String> = excited_sensors(st).iter().map(|a| format!("gain_{a}")).collect();
-            for (j, _) in st.excitation.iter().enumerate().filter(|(_, e)| e.is_some()) {
+            let mut names: Vec<String> = resonance_gains(st).into_iter().map(|g| g.2).collect();
+            for (j, _) in st.excitation.iter().enumerate().filter(|(_, e)| !e.is_empty()) {
                 names.push(format!("free_q_{j}"));
                 names.push(format!("free_v_{j}"));
             }
@@ -413,7 +523,14 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
         xs if xs.len() >= 2 => (xs[0], xs[xs.len() - 1]),
         xs => xs.first().map_or((0.0, 1.0), |x| (x - 0.5, x + 0.5)),
     };
-    Shape { coefs, hypers, first_power, order, with_fc, range }
+    // A motion seen only through accelerometers: a cosine series ([`ShapeBasis::Cosine`]).
+    let seeing: Vec<&Channel> = st.chans.iter().filter(|c| c.s_motion(name) != 0.0).collect();
+    let basis = if name.is_error_motion() && !seeing.is_empty() && seeing.iter().all(|c| c.is_accel()) {
+        ShapeBasis::Cosine
+    } else {
+        ShapeBasis::Legendre
+    };
+    Shape { coefs, hypers, first_power, order, with_fc, range, basis }
 }
 
 /// Legendre polynomials P_0..P_n at u and their derivatives dP_k/du, by Bonnet's recurrence
@@ -434,19 +551,6 @@ pub(crate) fn legendre(u: f64, n: usize) -> (Vec<f64>, Vec<f64>) {
         d[k + 1] = d[k - 1] + (2.0 * kf + 1.0) * p[k];
     }
     (p, d)
-}
-
-/// A fitted error motion's profile at x (m): Σ_k c_k·P_k(u), u = (2x − a − b)/(b − a), k from
-/// `first_power` to `order`; with `slope`, its derivative d/dx = Σ_k c_k·P'_k(u)·2/(b − a).
-pub(crate) fn legendre_term(sh: &Shape, k: u32, x: f64, slope: bool) -> f64 {
-    let (a, b) = sh.range;
-    let u = (2.0 * x - a - b) / (b - a);
-    let (p, d) = legendre(u, k as usize);
-    if slope {
-        d[k as usize] * 2.0 / (b - a)
-    } else {
-        p[k as usize]
-    }
 }
 
 /// Monomial coefficients m_j (x in m, j = 0..=n) of Σ_k c_k·P_k(u(x)), k = first..first + c.len() − 1,
@@ -493,14 +597,27 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
     match name {
         n if n.is_error_motion() => {
             // c_k·P_k(u(x)): the same coefficient for lasers (P_k) and accelerometers (its slope
-            // P'_k·2/(b − a), differenced over the sample interval).
-            (sh.first_power..=sh.order)
-                .map(|k| {
-                    st.col(|c, i| {
-                        c.motion_response(i, n, |x| legendre_term(sh, k, x, false), |x| legendre_term(sh, k, x, true))
-                    })
-                })
-                .collect()
+            // P'_k·2/(b − a), differenced over the sample interval); every order at once per
+            // position ([`Shape::basis_at`]; cosines for a motion only accelerometers see).
+            let ks: Vec<usize> = (sh.first_power as usize..=sh.order as usize).collect();
+            let mut cols: Vec<Vec<f64>> = ks.iter().map(|_| Vec::with_capacity(st.n)).collect();
+            let at = |x: f64| sh.basis_at(x);
+            for c in st.chans {
+                for i in 0..c.y.len() {
+                    match c.motion_read(i, n) {
+                        MotionRead::Blind => cols.iter_mut().for_each(|col| col.push(0.0)),
+                        MotionRead::Value { s, x } => {
+                            let (p, _) = at(x);
+                            cols.iter_mut().zip(&ks).for_each(|(col, &k)| col.push(s * p[k]));
+                        }
+                        MotionRead::SlopeDifference { s, v, dt, xa, xb } => {
+                            let ((_, d1), (_, d0)) = (at(xb), at(xa));
+                            cols.iter_mut().zip(&ks).for_each(|(col, &k)| col.push(s * v * (d1[k] - d0[k]) / dt));
+                        }
+                    }
+                }
+            }
+            cols
         }
         EffectName::Backlash => {
             // Encoder time series: the play p(t; b)/b (take-up b/|v| at a reversal); point tables: −d/2.
@@ -558,16 +675,17 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
         EffectName::Resonance => {
             let (f, zeta) = (h[0], h[1]);
             let mut cols = Vec::new();
-            // Forced response to the predicted base acceleration, gain φ (the mode shape at the
-            // sensor) per sensor: φ·mean q̈ with q driven by −u·a_ref from rest at t_{−1}.
-            let responses: Vec<Option<Vec<f64>>> = st
+            // Forced response to each predicted base acceleration, gain φ (the mode shape at the
+            // sensor, times the input's share of the drive) per sensor and input: φ·mean q̈ with q
+            // driven by −a_ref from rest at t_{−1}.
+            let responses: Vec<Vec<Vec<f64>>> = st
                 .chans
                 .iter()
                 .zip(&st.excitation)
-                .map(|(c, e)| e.as_ref().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))))
+                .map(|(c, es)| es.iter().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))).collect())
                 .collect();
-            for a in excited_sensors(st) {
-                cols.push(st.col_j(|c, i, j| match &responses[j] {
+            for (a, k, _) in resonance_gains(st) {
+                cols.push(st.col_j(|c, i, j| match responses[j].get(k) {
                     Some(r) if c.sensor == a => r[i],
                     _ => 0.0,
                 }));
@@ -576,7 +694,7 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
             // per excited channel.
             let w = TWO_PI * f;
             for (j, c) in st.chans.iter().enumerate() {
-                if st.excitation[j].is_none() {
+                if st.excitation[j].is_empty() {
                     continue;
                 }
                 for start in [(1.0 / (w * w), 0.0), (0.0, 1.0 / w)] {
@@ -827,7 +945,7 @@ pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>
         // column's first bending mode is typically 2–5 %); only the forced response resolves it,
         // so without a predicted excitation it is held at 2 % (not searched).
         (_, "damping") => {
-            if st.excitation.iter().any(|e| e.is_some()) {
+            if st.excitation.iter().any(|e| !e.is_empty()) {
                 (log_grid(0.005, 0.1, 6), true)
             } else {
                 (vec![0.02], false)

@@ -269,9 +269,21 @@ impl Oscillator {
 /// are drawn large enough to be seen: the χ² of their contribution (mean removed per channel) is at
 /// least `min_chi2`, redrawn otherwise (an effect below the noise cannot be diagnosed by anyone).
 pub fn accel_set(dir: &Path, seed: u64, hidden: AccelHidden, min_chi2: f64) -> AccelTruth {
+    accel_set_sized(dir, seed, hidden, min_chi2, None)
+}
+
+/// [`accel_set`] with about `samples` samples in all (both channels, three passes) when given: the
+/// sample rate is set to give that count instead of its draw of 250–600 Hz (the benchmark's sizes).
+pub fn accel_set_sized(
+    dir: &Path,
+    seed: u64,
+    hidden: AccelHidden,
+    min_chi2: f64,
+    samples: Option<usize>,
+) -> AccelTruth {
     let mut attempt = 0u64;
     loop {
-        let t = accel_try(dir, seed.wrapping_mul(1_000_003).wrapping_add(attempt), hidden);
+        let t = accel_try(dir, seed.wrapping_mul(1_000_003).wrapping_add(attempt), hidden, samples);
         if hidden == AccelHidden::None || t.hidden_chi2 >= min_chi2 || attempt > 200 {
             return t;
         }
@@ -279,7 +291,7 @@ pub fn accel_set(dir: &Path, seed: u64, hidden: AccelHidden, min_chi2: f64) -> A
     }
 }
 
-fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden) -> AccelTruth {
+fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>) -> AccelTruth {
     let mut d = Draw::new(seed);
     let travel = d.uniform(0.25, 0.6);
     let x_lo = d.uniform(-0.1, 0.3);
@@ -313,6 +325,9 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden) -> AccelTruth {
     // One rate for the three passes (so one σ per sensor holds), 250–600 Hz: above 2× the highest
     // mode frequency, few enough samples for the low pass.
     let rate = d.uniform(250.0, 600.0);
+    // Σ 2·travel/v seconds of samples over the passes (two channels each).
+    let seconds: f64 = speeds.iter().map(|v| 2.0 * travel / v).sum();
+    let rate = samples.map_or(rate, |n| n as f64 / seconds);
     let sigma = density * (rate / 2.0).sqrt();
     let sensors: Vec<SensorSpec> = [("acc_y", [0.0, 1.0, 0.0]), ("acc_z", [0.0, 0.0, 1.0])]
         .iter()

@@ -36,18 +36,20 @@
 //! closer than 10; `noise` otherwise.
 
 use super::lsq::{fit_signature, Basis};
+use super::ortho::OrthoBase;
 use super::{check_finite, check_len, ModelCheckError, Sigma};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 /// The signature of a candidate: hyper-parameter values (in the order of
 /// [`Candidate::hyper_parameters`]) → design columns, one `Vec` of n values per linear
 /// coefficient. An `Err` marks a hyper-parameter value as invalid (it is skipped in the search).
-pub type SignatureFn<'a> = dyn Fn(&[f64]) -> Result<Vec<Vec<f64>>, String> + 'a;
+pub type SignatureFn<'a> = dyn Fn(&[f64]) -> Result<Vec<Vec<f64>>, String> + Send + Sync + 'a;
 
 /// Optional conversion of (coefficients, hyper-parameters) into the reported `params` (e.g. a
 /// sine and cosine coefficient into amplitude and phase).
-pub type DescribeFn<'a> = dyn Fn(&[f64], &[f64]) -> BTreeMap<String, f64> + 'a;
+pub type DescribeFn<'a> = dyn Fn(&[f64], &[f64]) -> BTreeMap<String, f64> + Send + Sync + 'a;
 
 /// A hyper-parameter searched on a grid (then refined between the neighbours of the best grid
 /// value by golden-section search when `refine` is set), in its own unit (s, m, m/s...).
@@ -73,6 +75,8 @@ pub struct Candidate<'a> {
     pub signature: Box<SignatureFn<'a>>,
     /// Optional conversion of the fitted numbers into `params`.
     pub describe: Option<Box<DescribeFn<'a>>>,
+    /// Screened search ([`Candidate::with_screen`]): the number of grid points evaluated exactly.
+    pub screen: Option<usize>,
 }
 
 impl<'a> Candidate<'a> {
@@ -80,7 +84,7 @@ impl<'a> Candidate<'a> {
     pub fn new(
         effect: &str,
         coefficient_names: &[&str],
-        signature: impl Fn(&[f64]) -> Result<Vec<Vec<f64>>, String> + 'a,
+        signature: impl Fn(&[f64]) -> Result<Vec<Vec<f64>>, String> + Send + Sync + 'a,
     ) -> Self {
         Candidate {
             effect: effect.to_string(),
@@ -88,6 +92,7 @@ impl<'a> Candidate<'a> {
             hyper_parameters: Vec::new(),
             signature: Box::new(signature),
             describe: None,
+            screen: None,
         }
     }
 
@@ -98,8 +103,18 @@ impl<'a> Candidate<'a> {
     }
 
     /// Sets the conversion of (coefficients, hyper-parameters) into the reported `params`.
-    pub fn with_describe(mut self, f: impl Fn(&[f64], &[f64]) -> BTreeMap<String, f64> + 'a) -> Self {
+    pub fn with_describe(mut self, f: impl Fn(&[f64], &[f64]) -> BTreeMap<String, f64> + Send + Sync + 'a) -> Self {
         self.describe = Some(Box::new(f));
+        self
+    }
+
+    /// Screens the grid: every grid point is scored by the reduction of the base-projected
+    /// residual on the candidate's weighted columns *without* their projection on the base (an
+    /// upper bound of the exact reduction, cheap when the base is large), and only the `top` best
+    /// of those are evaluated exactly; the refinement and the reported fit are exact. For
+    /// candidates with many columns over a large base (a structural mode over flexible shapes).
+    pub fn with_screen(mut self, top: usize) -> Self {
+        self.screen = Some(top.max(1));
         self
     }
 
@@ -267,11 +282,12 @@ pub struct Diagnosis {
     pub n: usize,
 }
 
-/// Prepared residual: weights, orthonormal weighted base, weighted residual with base removed.
+/// Prepared residual: weights, orthonormal weighted base (one QR, reused for every candidate and
+/// hyper-parameter value: variable projection), weighted residual with base removed.
 struct Prepared {
     n: usize,
     w: Vec<f64>,
-    base: Basis,
+    base: OrthoBase,
     r_t: Vec<f64>,
     stat_old: f64,
     rss_old: f64,
@@ -285,25 +301,20 @@ fn prepare(input: &ResidualInput) -> Result<Prepared, ModelCheckError> {
     }
     check_finite("residual", input.residual)?;
     let w = input.sigma.weights(n)?;
-    let mut base = Basis::default();
     for (j, c) in input.base_columns.iter().enumerate() {
         check_len(&format!("base column {j}"), n, c.len())?;
         check_finite(&format!("base column {j}"), c)?;
-        base.push(c.iter().zip(&w).map(|(x, w)| x * w).collect());
     }
-    let mut r_t: Vec<f64> = input.residual.iter().zip(&w).map(|(r, w)| r * w).collect();
-    let total: f64 = r_t.iter().map(|x| x * x).sum();
-    base.project_out(&mut r_t);
+    let base = OrthoBase::new(input.base_columns, &w)?;
+    let total: f64 = input.residual.iter().zip(&w).map(|(r, w)| (r * w).powi(2)).sum();
+    let r_t = base.project_vector(input.residual, &w);
     let stat_old: f64 = r_t.iter().map(|x| x * x).sum();
     // Rounding level: the base leaves less than 1e-12 of the residual's norm.
     if stat_old <= 1e-24 * total || stat_old == 0.0 {
         return Err(ModelCheckError::NothingToExplain);
     }
-    let rss_old = if input.base_columns.is_empty() {
-        input.residual.iter().map(|r| r * r).sum()
-    } else {
-        fit_signature(input.residual, input.base_columns, input.sigma)?.rss
-    };
+    // The unweighted residual of the weighted fit is W⁻¹·(what the projection leaves of W·r).
+    let rss_old = r_t.iter().zip(&w).map(|(r, w)| (r / w).powi(2)).sum();
     Ok(Prepared { n, w, base, r_t, stat_old, rss_old, known: input.sigma.is_known() })
 }
 
@@ -323,14 +334,8 @@ fn delta_bic(p: &Prepared, stat_new: f64, k: usize) -> f64 {
 /// so its size is the number q of new independent columns.
 fn candidate_basis(p: &Prepared, cols: &[Vec<f64>]) -> Basis {
     let mut b = Basis::default();
-    for c in cols {
-        let mut v: Vec<f64> = c.iter().zip(&p.w).map(|(x, w)| x * w).collect();
-        let n0 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        p.base.project_out(&mut v);
-        let n1 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if n0 > 0.0 && n1 > 1e-9 * n0 {
-            b.push(v);
-        }
+    for v in p.base.project_columns(cols, &p.w).into_iter().filter(|v| v.iter().any(|x| *x != 0.0)) {
+        b.push(v);
     }
     b
 }
@@ -353,9 +358,29 @@ fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<
             return Err(format!("signature column {j} is not finite at sample {i}: {}", c[i]));
         }
     }
-    let b = candidate_basis(p, &cols);
-    let red: f64 = b.q.iter().map(|q| q.iter().zip(&p.r_t).map(|(a, b)| a * b).sum::<f64>().powi(2)).sum();
-    Ok((red, cols))
+    Ok((reduction_of(p, &cols), cols))
+}
+
+/// The screening score of a candidate at `h` ([`Candidate::with_screen`]): ‖projection of the
+/// base-projected weighted residual on the candidate's weighted columns‖², the columns not
+/// projected on the base.
+fn screen_score(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<f64, String> {
+    let cols = (cand.signature)(h)?;
+    let mut b = Basis::default();
+    for c in &cols {
+        if c.len() != p.n || c.iter().any(|x| !x.is_finite()) {
+            return Err("signature column of the wrong length or not finite".into());
+        }
+        b.push(c.iter().zip(&p.w).map(|(x, w)| x * w).collect());
+    }
+    Ok(b.q.iter().map(|q| q.iter().zip(&p.r_t).map(|(a, b)| a * b).sum::<f64>().powi(2)).sum())
+}
+
+/// The χ² (or RSS) reduction of adding `cols` to the prepared base (variable projection: the base
+/// is factored once in [`prepare`]).
+fn reduction_of(p: &Prepared, cols: &[Vec<f64>]) -> f64 {
+    let b = candidate_basis(p, cols);
+    b.q.iter().map(|q| q.iter().zip(&p.r_t).map(|(a, b)| a * b).sum::<f64>().powi(2)).sum()
 }
 
 /// Fits one candidate: grid search of its hyper-parameters, golden-section refinement, weighted
@@ -367,15 +392,10 @@ pub fn fit_candidate(
     config: &DiagnoseConfig,
 ) -> Result<CandidateFit, ModelCheckError> {
     let p = prepare(input)?;
-    fit_prepared(&p, input, candidate, config)
+    fit_prepared(&p, candidate, config)
 }
 
-fn fit_prepared(
-    p: &Prepared,
-    input: &ResidualInput,
-    cand: &Candidate,
-    config: &DiagnoseConfig,
-) -> Result<CandidateFit, ModelCheckError> {
+fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Result<CandidateFit, ModelCheckError> {
     let err = |message: String| ModelCheckError::Candidate { effect: cand.effect.clone(), message };
     if cand.coefficient_names.is_empty() {
         return Err(err("needs at least one coefficient name".into()));
@@ -394,30 +414,50 @@ fn fit_prepared(
         Some(t) if t <= config.max_grid_points => t,
         _ => return Err(err(format!("hyper-parameter grid has more than {} points", config.max_grid_points))),
     };
-    // Grid search over the Cartesian product.
+    // Grid search over the Cartesian product, in parallel over grid points (rayon); the best is
+    // then taken in grid order, so the result does not depend on the number of threads.
+    let point = |g: usize| -> Vec<f64> {
+        let mut rest = g;
+        cand.hyper_parameters
+            .iter()
+            .zip(&dims)
+            .map(|(hp, d)| {
+                let i = rest % d;
+                rest /= d;
+                hp.grid[i]
+            })
+            .collect()
+    };
+    // The grid points evaluated exactly: all of them, or the best `top` by the screening score.
+    let exact_points: Vec<usize> = match cand.screen {
+        None => (0..total).collect(),
+        Some(top) => {
+            let scores: Vec<f64> = (0..total)
+                .into_par_iter()
+                .map(|g| screen_score(p, cand, &point(g)).unwrap_or(f64::NEG_INFINITY))
+                .collect();
+            let mut order: Vec<usize> = (0..total).collect();
+            order.sort_by(|a, b| scores[*b].total_cmp(&scores[*a]).then(a.cmp(b)));
+            order.truncate(top);
+            order.sort_unstable();
+            order
+        }
+    };
+    let reds: Vec<(usize, Result<f64, String>)> =
+        exact_points.into_par_iter().map(|g| (g, reduction(p, cand, &point(g)).map(|r| r.0))).collect();
     let mut best: Option<(f64, Vec<f64>)> = None;
     let mut first_error: Option<String> = None;
-    let mut evaluations = 0usize;
-    let mut idx = vec![0usize; dims.len()];
-    for _ in 0..total {
-        let h: Vec<f64> = idx.iter().zip(&cand.hyper_parameters).map(|(i, hp)| hp.grid[*i]).collect();
-        evaluations += 1;
-        match reduction(p, cand, &h) {
-            Ok((red, _)) => {
+    let mut evaluations = reds.len();
+    for (g, r) in reds.into_iter() {
+        match r {
+            Ok(red) => {
                 if best.as_ref().is_none_or(|(b, _)| red > *b) {
-                    best = Some((red, h));
+                    best = Some((red, point(g)));
                 }
             }
             Err(e) => {
                 first_error.get_or_insert(e);
             }
-        }
-        for d in 0..dims.len() {
-            idx[d] += 1;
-            if idx[d] < dims[d] {
-                break;
-            }
-            idx[d] = 0;
         }
     }
     let (mut best_red, mut best_h) = match best {
@@ -451,21 +491,30 @@ fn fit_prepared(
         }
     }
     let (_, cols) = reduction(p, cand, &best_h).map_err(err)?;
-    let mut all: Vec<Vec<f64>> = input.base_columns.to_vec();
-    all.extend(cols.iter().cloned());
-    let fit = fit_signature(input.residual, &all, input.sigma)?;
-    let nb = input.base_columns.len();
-    let stat_new: f64 = fit.residual.iter().zip(&p.w).map(|(r, w)| (r * w).powi(2)).sum();
-    let fitted_change: Vec<f64> =
-        p.r_t.iter().zip(fit.residual.iter().zip(&p.w)).map(|(rt, (r, w))| rt - r * w).collect();
+    // Variable projection: the candidate's coefficients of the joint weighted fit (base +
+    // candidate) are those of the base-projected residual on the base-projected columns, with the
+    // same covariance block; the weighted new residual is what that fit leaves.
+    // (A column dependent on the base is zero: coefficient 0, infinite standard error.)
+    let pc = p.base.project_columns(&cols, &p.w);
+    let fit = fit_signature(&p.r_t, &pc, &Sigma::Constant(1.0))?;
+    let new_residual: Vec<f64> = fit.residual.iter().zip(&p.w).map(|(r, w)| r / w).collect();
+    let stat_new: f64 = fit.residual.iter().map(|r| r * r).sum();
+    let fitted_change: Vec<f64> = p.r_t.iter().zip(&fit.residual).map(|(rt, r)| rt - r).collect();
     let k = cand.coefficient_names.len() + cand.searched();
     let searched: usize = cand.hyper_parameters.iter().filter(|h| h.grid.len() > 1).map(|h| h.grid.len()).product();
-    let p_value = search_p_value(p, stat_new, candidate_basis(p, &cols).q.len(), nb, searched);
-    let coefs = &fit.coefficients[nb..];
+    let p_value = search_p_value(p, stat_new, candidate_basis(p, &cols).q.len(), p.base.rank(), searched);
+    let coefs = &fit.coefficients[..];
     let coefficients: BTreeMap<String, f64> =
         cand.coefficient_names.iter().cloned().zip(coefs.iter().copied()).collect();
+    // σ unknown: the scale √(χ²/(n − rank)) counts the base's rank too.
+    let se_scale = if p.known {
+        1.0
+    } else {
+        let dof = p.n.saturating_sub(p.base.rank() + fit.rank).max(1) as f64;
+        (stat_new / dof).sqrt()
+    };
     let std_errors: BTreeMap<String, f64> =
-        cand.coefficient_names.iter().cloned().zip(fit.std_errors[nb..].iter().copied()).collect();
+        cand.coefficient_names.iter().cloned().zip(fit.std_errors.iter().map(|s| s * se_scale)).collect();
     let hyper_parameters: BTreeMap<String, f64> =
         cand.hyper_parameters.iter().map(|h| h.name.clone()).zip(best_h.iter().copied()).collect();
     let params = match &cand.describe {
@@ -483,7 +532,7 @@ fn fit_prepared(
         chi2_old: p.known.then_some(p.stat_old),
         chi2_new: p.known.then_some(stat_new),
         rss_old: p.rss_old,
-        rss_new: fit.rss,
+        rss_new: new_residual.iter().map(|r| r * r).sum(),
         delta_bic: delta_bic(p, stat_new, k),
         explained: (1.0 - stat_new / p.stat_old).clamp(0.0, 1.0),
         conditional_delta_bic: None,
@@ -491,7 +540,7 @@ fn fit_prepared(
         searched,
         p_value,
         columns: cols,
-        new_residual: fit.residual,
+        new_residual,
         fitted_change,
     })
 }
@@ -596,7 +645,7 @@ fn rank_refs(
     }
     let p = prepare(input)?;
     let mut fits: Vec<CandidateFit> =
-        candidates.iter().map(|c| fit_prepared(&p, input, c, config)).collect::<Result<_, _>>()?;
+        candidates.par_iter().map(|c| fit_prepared(&p, c, config)).collect::<Result<_, _>>()?;
     fits.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic).then_with(|| a.effect.cmp(&b.effect)));
     let m = fits.len();
     // Bonferroni over the C candidates ranked: the whole diagnosis's false-alarm bound.
@@ -652,10 +701,7 @@ fn rank_refs(
                 Err(ModelCheckError::NothingToExplain) => fits[a].k as f64 * (p.n as f64).ln(),
                 Err(e) => return Err(e),
                 Ok(cp) => {
-                    let mut all = accepted.clone();
-                    all.extend(fits[a].columns.iter().cloned());
-                    let fit = fit_signature(input.residual, &all, input.sigma)?;
-                    let stat_new: f64 = fit.residual.iter().zip(&cp.w).map(|(r, w)| (r * w).powi(2)).sum();
+                    let stat_new = (cp.stat_old - reduction_of(&cp, &fits[a].columns)).max(0.0);
                     delta_bic(&cp, stat_new, fits[a].k)
                 }
             }

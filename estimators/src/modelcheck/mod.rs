@@ -11,6 +11,8 @@
 //! - [`spectrum`]: the one-sided amplitude spectrum of a uniformly sampled residual and a
 //!   least-squares (generalised Lomb–Scargle) periodogram for irregular sampling;
 //! - [`lsq`]: weighted linear least squares of a residual on signature columns (faer SVD);
+//! - [`ortho`]: orthonormal bases of fixed columns reused across a search (variable projection)
+//!   and the residual sums of squares of nested series (order choice) from one QR;
 //! - [`diagnose`]: ranking of candidate effects by ΔBIC with the verdicts `significant`, `noise`,
 //!   `inseparable` (FORMAT.md §4 `ranking`), and greedy forward selection.
 //!
@@ -19,6 +21,7 @@
 
 pub mod diagnose;
 pub mod lsq;
+pub mod ortho;
 pub mod spectrum;
 pub mod stats;
 
@@ -27,6 +30,7 @@ pub use diagnose::{
     ForwardSelection, HyperParameter, RankingEntry, ResidualInput, Verdict,
 };
 pub use lsq::{fit_signature, LinearFit};
+pub use ortho::{lstsq_qr, nested_rss, NestedRss, OrthoBase};
 pub use spectrum::{amplitude_spectrum, frequency_grid, ls_periodogram, AmplitudeSpectrum, Periodogram};
 pub use stats::{
     autocorrelation, bin_by_edges, bin_by_label, chi_square_isf, chi_square_sf, estimate_noise_sigma, fit_percent,
