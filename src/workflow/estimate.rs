@@ -623,9 +623,9 @@ fn accel_straightness_check(
         ..Check::profile(name, Quantity::Length, &truth, &estimate, tolerance)
             .with_id(format!("accel_straightness.{sensor}"))
             .with_note(format!(
-                "both profiles band-limited to the recoverable wavelengths {:.0}–{:.0} mm; Cramér–Rao bound of the RMS difference {}",
-                est.band.min_wavelength * 1e3,
-                est.band.max_wavelength * 1e3,
+                "both profiles band-limited to the recoverable wavelengths {}–{} mm; Cramér–Rao bound of the RMS difference {}",
+                four_significant(est.band.min_wavelength * 1e3),
+                four_significant(est.band.max_wavelength * 1e3),
                 display(Quantity::Length, bound)
             ))
     };
@@ -1181,4 +1181,19 @@ fn model_check_loop(
         log_y: false,
     };
     Ok((checks, fig, residuals))
+}
+
+/// `x` with four significant digits and no trailing zeros (1.5, 399.9, 0.04): a band edge read literally
+/// (whole millimetres showed 1.5 mm as "2").
+fn four_significant(x: f64) -> String {
+    if !(x.is_finite() && x != 0.0) {
+        return format!("{x}");
+    }
+    let decimals = (3 - x.abs().log10().floor() as i32).max(0) as usize;
+    let s = format!("{x:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
 }
