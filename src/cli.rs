@@ -384,6 +384,8 @@ fn write_study(
 ) -> Result<i32, VmtError> {
     use crate::study::{rows_csv, summarize, summary_svg};
     let summary = summarize(rows);
+    // An undefined statistic (no tolerance; no difference) is an empty cell, as docs/formats.md §6 says.
+    let opt = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
     let mut s = String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate,cramer_rao_bound,rms,quantity\n");
     for r in &summary {
         s += &format!(
@@ -391,11 +393,11 @@ fn write_study(
             r.value,
             r.estimate,
             r.trials,
-            r.mean_abs,
-            r.p95_abs,
-            r.pass_rate.map_or(String::new(), |p| p.to_string()),
+            opt(r.mean_abs),
+            opt(r.p95_abs),
+            opt(r.pass_rate),
             r.bound,
-            r.rms,
+            opt(r.rms),
             crate::study::quantity_id(r.quantity)
         );
     }
@@ -426,15 +428,16 @@ fn write_study(
         if judged { "  pass (d ≤ tolerance)" } else { "" }
     );
     for r in &summary {
+        let shown = |x: Option<f64>| x.map_or("-".to_string(), |x| display(r.quantity, x));
         let bound = if r.bound.is_finite() { display(r.quantity, r.bound) } else { "-".to_string() };
         println!(
             "{:>10.3e}  {:<40} {:>6} {:>14} {:>14} {:>14} {:>14}{}",
             r.value,
             r.estimate,
             r.trials,
-            display(r.quantity, r.mean_abs),
-            display(r.quantity, r.rms),
-            display(r.quantity, r.p95_abs),
+            shown(r.mean_abs),
+            shown(r.rms),
+            shown(r.p95_abs),
             bound,
             r.pass_rate.map_or(String::new(), |p| format!("  {:>5.1} %", 100.0 * p))
         );

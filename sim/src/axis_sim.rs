@@ -61,6 +61,7 @@ impl StructuralMode {
 /// Friction of a guideway (DESIGN.md §4): Coulomb and viscous are Stribeck special cases.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub enum GuideFriction {
+    /// No friction force on the guideway.
     #[default]
     None,
     /// Static friction curve with true sticking.
@@ -85,6 +86,7 @@ impl AxisTruth {
 pub struct Sample {
     /// Time, s.
     pub t: f64,
+    /// The interpolator's command at `t`: position, m; velocity, m/s; acceleration, m/s².
     pub cmd: Command,
     /// Position feedback as the controller sees it (quantised), m.
     pub feedback: f64,
@@ -106,6 +108,7 @@ pub struct Sample {
     pub angvel: DVec3,
     /// Modal displacement and velocity of the structural mode (zero without one), world frame.
     pub mode: DVec3,
+    /// Modal velocity of the structural mode (time derivative of `mode`), world frame, m/s.
     pub mode_vel: DVec3,
 }
 
@@ -147,6 +150,7 @@ impl Sample {
 /// Samples of a run at the requested record times.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Trace {
+    /// One sample per record time, in time order.
     pub samples: Vec<Sample>,
 }
 
@@ -446,7 +450,7 @@ impl<'a> AxisSim<'a> {
         let x_act = self.axis_coordinate(&pose);
         let q_dot = m.axis.dot(st.velocity_at_point(pose.translation));
         let q = self.nominal(x_act);
-        if self.steps % m.servo_steps as u64 == 0 {
+        if self.steps.is_multiple_of(m.servo_steps as u64) {
             let fb = quantise(self.raw_feedback(q), m.servo.resolution);
             // Velocity loop on the motor encoder for a ball screw, on the scale for a linear motor.
             let (vel_fb, mass) = match &m.drive {

@@ -75,8 +75,10 @@ pub const SYNTHETIC_BLOCK_HALF_SPAN: f64 = 0.2;
 /// Why a chain could not be built or a chain procedure is invalid. Messages say what was expected.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum ChainError {
+    /// A chain or chain procedure that breaks a rule; the message names the key and what was expected.
     #[error("{0}")]
     Invalid(String),
+    /// A machine error of one of the chain's axes.
     #[error(transparent)]
     Machine(#[from] MachineError),
 }
@@ -99,8 +101,11 @@ pub fn letter_unit(letter: char) -> Option<DVec3> {
 /// `xy` = EC0Y (Y about Z), `xz` = EB0Z (Z about Y), `yz` = EA0Z (Z about X).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct SquarenessAngles {
+    /// EC0Y, squareness of Y to X (rotation of the Y axis about Z), rad.
     pub xy: f64,
+    /// EB0Z, squareness of Z to X (rotation of the Z axis about Y), rad.
     pub xz: f64,
+    /// EA0Z, squareness of Z to Y (rotation of the Z axis about X), rad.
     pub yz: f64,
 }
 
@@ -515,7 +520,7 @@ impl ChainPlan {
     pub fn move_to(&mut self, q1: &[f64], feed: f64, accel: f64) -> (f64, f64) {
         let q0 = self.end_positions();
         let len = q0.iter().zip(q1).map(|(a, b)| (b - a) * (b - a)).sum::<f64>().sqrt();
-        if !(len > 0.0) {
+        if len.is_nan() || len <= 0.0 {
             return (self.end, self.end);
         }
         let t0 = self.end;
@@ -571,12 +576,18 @@ defaults! {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LaserLineSpec {
+    /// Line name; the run is named `{procedure}_{name}` and the laser column after it.
     pub name: String,
+    /// Start of the line, joint positions in chain order, m.
     pub from: Vec<f64>,
+    /// End of the line, joint positions in chain order, m.
     pub to: Vec<f64>,
+    /// Number of equally spaced targets, both ends included.
     pub n: usize,
+    /// Reflector position in the tool frame, from the tool reference point, m (default: the reference point).
     #[serde(default)]
     pub point: [f64; 3],
+    /// Beam direction in the machine frame (normalised on use); `None`: along the line.
     #[serde(default)]
     pub direction: Option<[f64; 3]>,
 }
@@ -620,17 +631,25 @@ impl LaserLineSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LaserLinesSpec {
+    /// Procedure name, the prefix of its runs.
     pub name: String,
+    /// The laser lines, one run each, measured in this order.
     pub lines: Vec<LaserLineSpec>,
+    /// Path feed between targets, m/s.
     pub feed: f64,
+    /// Path acceleration, m/s²; `None`: the smallest `max_accel` of the chain's axes.
     #[serde(default)]
     pub accel: Option<f64>,
+    /// Stop at each target, s.
     #[serde(default = "d_dwell")]
     pub dwell: f64,
+    /// Averaging window at the end of each stop, s (≤ `dwell`).
     #[serde(default = "d_average")]
     pub average: f64,
+    /// Laser sample rate during the averaging window, Hz.
     #[serde(default = "d_rate")]
     pub rate: f64,
+    /// Rest at `from` before the first move, s (the servo integrators take up a vertical axis's weight).
     #[serde(default = "d_settle")]
     pub settle: f64,
     /// 1σ noise of one laser reading, m.
@@ -642,6 +661,7 @@ pub struct LaserLinesSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum ChainProcedureSpec {
+    /// A laser line set ([`LaserLinesSpec`], seed 001).
     LaserLines(LaserLinesSpec),
 }
 
@@ -727,7 +747,7 @@ impl LaserLinesSpec {
                 return Err((at("n"), format!("expected at least 2 targets, got {}", l.n)));
             }
             let len = l.length();
-            if !(len > 0.0) {
+            if len.is_nan() || len <= 0.0 {
                 return Err((at("to"), "expected `to` different from `from`".into()));
             }
             if !l.point.iter().all(|v| v.is_finite() && v.abs() < 10.0) {
@@ -759,8 +779,11 @@ impl LaserLinesSpec {
 /// (same times).
 #[derive(Clone, Debug)]
 pub struct LineTruth {
+    /// The line's plan: command, record times and visits.
     pub plan: LinePlan,
+    /// Start of the line in the session's time, s.
     pub start_time: f64,
+    /// One noise-free trace per chain axis, sampled at `plan.record_times`.
     pub traces: Vec<Trace>,
 }
 
@@ -770,9 +793,13 @@ pub struct LineTruth {
 pub struct LinePlan {
     /// Run name `{procedure}_{line}`.
     pub name: String,
+    /// The line as the procedure declares it.
     pub line: LaserLineSpec,
+    /// The stops at the targets, with their averaging windows.
     pub visits: Vec<Visit>,
+    /// The chain's commanded joint motion along the line.
     pub plan: ChainPlan,
+    /// Times at which the physics is recorded, s (the visits' sample windows).
     pub record_times: Vec<f64>,
 }
 

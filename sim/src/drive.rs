@@ -28,6 +28,7 @@ pub struct BallScrewConfig {
     pub stiffness: f64,
     /// Damping ratio of the axial mode (c = 2ζ·√(k·m_body)).
     pub damping_ratio: f64,
+    /// Where the position loop takes its feedback (motor encoder or linear scale).
     pub feedback: FeedbackKind,
 }
 
@@ -51,18 +52,14 @@ impl BallScrewConfig {
 }
 
 /// Drive of an axis.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum DriveConfig {
     /// Direct drive: the servo force acts on the body at the drive point; feedback from a linear scale.
+    #[default]
     LinearMotor,
+    /// Ball-screw drive: motor, screw and nut with axial stiffness ([`BallScrewConfig`]).
     BallScrew(BallScrewConfig),
-}
-
-impl Default for DriveConfig {
-    fn default() -> Self {
-        DriveConfig::LinearMotor
-    }
 }
 
 /// Force of a contact with clearance (backlash b, m) and stiffness k: the dead zone

@@ -12,7 +12,9 @@ pub struct FeedbackErrors {
     /// Position-dependent part (scale error as a slope, interpolation error and, in a semi-closed loop,
     /// cyclic lead error as harmonics), m.
     pub along: Profile,
+    /// Thermal expansion of the scale or screw, δ = α·x·ΔT(t), m; `None`: none.
     pub thermal_expansion: Option<ThermalExpansion>,
+    /// Thermal drift of the feedback zero, δ(t) = d∞·(1 − exp(−t/τ)), m; `None`: none.
     pub thermal_drift: Option<ThermalDrift>,
 }
 

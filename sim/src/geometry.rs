@@ -26,12 +26,12 @@ pub struct ErrorMotions {
 }
 
 impl ErrorMotions {
-    /// Translation error [EXX, EYX, EZX](x), m, axis frame.
+    /// Translation error (EXX, EYX, EZX)(x), m, axis frame.
     pub fn translation(&self, x: f64) -> DVec3 {
         DVec3::new(self.positioning.value(x), self.straightness_y.value(x), self.straightness_z.value(x))
     }
 
-    /// Angular error [EAX, EBX, ECX](x), rad, axis frame.
+    /// Angular error (EAX, EBX, ECX)(x), rad, axis frame.
     pub fn rotation(&self, x: f64) -> DVec3 {
         DVec3::new(self.roll.value(x), self.pitch.value(x), self.yaw.value(x))
     }

@@ -2,6 +2,7 @@
 //! rest pose follows injected error motions, a servo-driven feed axis, sensors with seeded noise, and
 //! the measurement procedures a metrologist runs. Plain data flows forward: scenario → machine →
 //! recording. No file I/O: URDF text is passed in.
+#![deny(missing_docs)]
 
 /// Default-value functions for serde's `default = "..."` (it needs a function per value):
 /// `defaults! { d_rate: f64 = 500.0; }` defines `fn d_rate() -> f64 { 500.0 }`.

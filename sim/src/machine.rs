@@ -37,11 +37,15 @@ pub struct AxisConfig {
     pub joint: String,
     /// Link where the drive (ball-screw nut) acts; empty: the link named "nut", else the body frame origin.
     pub nut_link: String,
+    /// Guideway bearings: stiffness, damping, error motions, friction.
     pub guideway: GuidewayConfig,
+    /// Position and velocity loop of the axis.
     pub servo: ServoConfig,
+    /// Drive: linear motor or ball screw.
     pub drive: DriveConfig,
     /// Maximum feed (m/s) and acceleration (m/s²) of the axis.
     pub max_feed: f64,
+    /// Maximum acceleration of the axis, m/s².
     pub max_accel: f64,
     /// Physics time step, s.
     pub dt: f64,
@@ -145,8 +149,10 @@ pub fn stiffest_mode(
 /// Why an axis model could not be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum MachineError {
+    /// No prismatic joint of this name: (joint asked for, the machine's prismatic joints).
     #[error("machine has no prismatic joint `{0}` (prismatic joints: {1})")]
     NoJoint(String, String),
+    /// An axis that cannot be modelled: (joint, what is wrong).
     #[error("axis `{0}`: {1}")]
     Invalid(String, String),
     /// A key of the machine section out of range: (joint, key path within the section, message).
@@ -158,31 +164,45 @@ pub enum MachineError {
 /// moving body's frame origin at axis position 0), x along the motion; error motions are expressed in it.
 #[derive(Clone, Debug)]
 pub struct AxisModel {
+    /// Prismatic joint name in the URDF.
     pub joint: String,
     /// Moving body: mass (kg), centre of mass and inertia in the body frame.
     pub mass: f64,
+    /// Centre of mass in the body frame, m.
     pub com: DVec3,
+    /// Inertia tensor about the centre of mass in the body frame, kg·m².
     pub inertia: rapier3d_f64::glamx::DMat3,
     /// Body frame at axis position 0 in the machine (world) frame.
     pub home: Frame,
     /// Unit vector of motion in the world frame; the axis frame's rotation takes x onto it.
     pub axis: DVec3,
+    /// Rotation of the axis frame in the world frame: takes x onto `axis`.
     pub axis_rotation: DQuat,
     /// Bearing blocks, body frame, m.
     pub blocks: Vec<DVec3>,
+    /// Lateral (y, axis frame) stiffness of each bearing block, N/m.
     pub k_y: f64,
+    /// Vertical (z, axis frame) stiffness of each bearing block, N/m.
     pub k_z: f64,
+    /// Lateral damping of each bearing block, N·s/m (from the guideway's damping ratio).
     pub c_y: f64,
+    /// Vertical damping of each bearing block, N·s/m (from the guideway's damping ratio).
     pub c_z: f64,
     /// Drive point, body frame, m.
     pub nut: DVec3,
+    /// Position and velocity loop of the axis.
     pub servo: ServoConfig,
+    /// Drive: linear motor or ball screw.
     pub drive: DriveConfig,
     /// Viscous damping along the axis from URDF `<dynamics damping>`, N·s/m.
     pub axis_damping: f64,
+    /// Travel (lower, upper) from the URDF joint limits, m.
     pub travel: (f64, f64),
+    /// Maximum feed, m/s.
     pub max_feed: f64,
+    /// Maximum acceleration, m/s².
     pub max_accel: f64,
+    /// Physics time step, s.
     pub dt: f64,
     /// Integrator of the moving body.
     pub fidelity: Fidelity,
@@ -223,7 +243,7 @@ impl AxisModel {
         }
         let body = &m.bodies[ax.child];
         let mp = &body.mass;
-        if !(mp.mass > 0.0) || !crate::urdf::positive_definite(&mp.inertia) {
+        if mp.mass.is_nan() || mp.mass <= 0.0 || !crate::urdf::positive_definite(&mp.inertia) {
             return Err(bad(format!(
                 "moving body `{}` has mass {} kg and a non-positive-definite inertia: a simulated moving body needs positive mass and inertia (add <inertial> to its links)",
                 body.name, mp.mass
@@ -297,7 +317,7 @@ impl AxisModel {
             DriveConfig::LinearMotor => 0.0,
         };
         for (what, w) in [("guideway bearings", omega_guide), ("ball-screw axial stiffness", omega_drive)] {
-            if !(w * cfg.dt <= MAX_OMEGA_DT) {
+            if (w * cfg.dt).is_nan() || w * cfg.dt > MAX_OMEGA_DT {
                 return Err(key((
                     "dt".into(),
                     format!(

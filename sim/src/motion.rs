@@ -4,21 +4,43 @@
 #[derive(Clone, Debug, PartialEq)]
 pub enum Segment {
     /// Hold position `x` (m) for `duration` (s).
-    Dwell { t0: f64, x: f64, duration: f64 },
+    Dwell {
+        /// Start time, s.
+        t0: f64,
+        /// Held position, m.
+        x: f64,
+        /// Length of the hold, s.
+        duration: f64,
+    },
     /// Move from `x0` to `x1` (m) with peak feed `feed` (m/s) and acceleration `accel` (m/s²):
     /// trapezoidal velocity profile (triangular if the move is too short to reach the feed).
-    Move { t0: f64, x0: f64, x1: f64, feed: f64, accel: f64 },
+    Move {
+        /// Start time, s.
+        t0: f64,
+        /// Start position, m.
+        x0: f64,
+        /// End position, m.
+        x1: f64,
+        /// Peak feed (speed), m/s.
+        feed: f64,
+        /// Acceleration and deceleration, m/s².
+        accel: f64,
+    },
 }
 
 /// Commanded position, velocity and acceleration at one instant.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Command {
+    /// Position, m.
     pub pos: f64,
+    /// Velocity, m/s.
     pub vel: f64,
+    /// Acceleration, m/s².
     pub acc: f64,
 }
 
 impl Segment {
+    /// Start time, s.
     pub fn t0(&self) -> f64 {
         match *self {
             Segment::Dwell { t0, .. } | Segment::Move { t0, .. } => t0,
@@ -73,6 +95,7 @@ fn ramp(d: f64, feed: f64, accel: f64) -> (f64, f64) {
 /// A sequence of segments, back to back in time.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct MotionPlan {
+    /// The segments in time order; each starts where the previous one ends.
     pub segments: Vec<Segment>,
 }
 
@@ -82,10 +105,12 @@ impl MotionPlan {
         MotionPlan { segments: vec![Segment::Dwell { t0: 0.0, x, duration: 0.0 }] }
     }
 
+    /// End of the last segment, s.
     pub fn end_time(&self) -> f64 {
         self.segments.last().map_or(0.0, |s| s.t0() + s.duration())
     }
 
+    /// Commanded position at the end of the plan, m (0 for an empty plan).
     pub fn end_pos(&self) -> f64 {
         self.segments.last().map_or(0.0, |s| s.at(f64::INFINITY).pos)
     }

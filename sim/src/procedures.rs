@@ -17,14 +17,20 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ProcedureKind {
+    /// ISO 230-2 positioning: stops at targets, readings averaged at each stop (a point table).
     Positioning,
+    /// Constant-velocity passes at one or more speeds (time series).
     ConstantVelocity,
+    /// Low-speed crawl for stick-slip (time series).
     Crawl,
+    /// Passes over decades of speed in both directions for the friction curve F(v) (time series).
     FrictionSweep,
+    /// Any other run: motion and recording as the user gives them (time series).
     Free,
 }
 
 impl ProcedureKind {
+    /// Every kind, in FORMAT.md §1's order.
     pub const ALL: [ProcedureKind; 5] = [
         ProcedureKind::Positioning,
         ProcedureKind::ConstantVelocity,
@@ -38,6 +44,7 @@ impl ProcedureKind {
         ProcedureKind::ALL.iter().copied().find(|p| p.as_str() == s)
     }
 
+    /// The manifest `procedure` string (FORMAT.md §1), e.g. `constant_velocity`.
     pub fn as_str(&self) -> &'static str {
         match self {
             ProcedureKind::Positioning => "positioning",
@@ -95,78 +102,116 @@ pub enum ProcedureSpec {
     /// sampled at `high_rate` (default 1200 Hz), each other speed v at high_rate·v/v_max, over the range
     /// [start, end] (m) reached at full speed after `settle` seconds.
     ConstantVelocity {
+        /// Procedure name; its runs are named `{name}_low`/`_mid`/`_high` for three speeds, else
+        /// `{name}_{i}`, i = 1.. in increasing speed.
         name: String,
+        /// Feeds of the passes, m/s, one run each.
         speeds: Vec<f64>,
+        /// Start of the measured range, m (axis position).
         start: f64,
+        /// End of the measured range, m (axis position).
         end: f64,
+        /// Sample rate of the fastest pass, Hz; slower passes are sampled proportionally slower.
         #[serde(default = "d_high_rate")]
         high_rate: f64,
+        /// Direction of the passes: +1 from `start` to `end`, −1 back.
         #[serde(default = "d_one")]
         direction: i8,
+        /// Cruise time before the measured range, s (the axis reaches steady state at full speed).
         #[serde(default = "d_settle")]
         settle: f64,
+        /// Names of the scenario's sensors that record the runs.
         sensors: Vec<String>,
     },
     /// ISO 230-2 bidirectional positioning cycle: `targets` (or `n_targets` irregularly spaced between
     /// start and end), `runs` linear cycles up and down with an `overrun` before each reversal, dwell
     /// `dwell` s at each target, readings averaged over the last `average` s sampled at `rate` Hz.
     Positioning {
+        /// Procedure name; its one run (a point table, `run` column 1..=runs) is named after it.
         name: String,
+        /// Target positions, m; `None`: `n_targets` irregularly spaced between `start` and `end`.
         #[serde(default)]
         targets: Option<Vec<f64>>,
+        /// Number of targets when `targets` is not given.
         #[serde(default = "d_targets")]
         n_targets: usize,
+        /// First target (when `targets` is not given), m.
         start: f64,
+        /// Last target (when `targets` is not given), m.
         end: f64,
+        /// Bidirectional cycles (ISO 230-2: at least 5).
         #[serde(default = "d_runs")]
         runs: u32,
+        /// Feed between targets, m/s.
         feed: f64,
+        /// Stop at each target, s.
         #[serde(default = "d_dwell")]
         dwell: f64,
+        /// Averaging window at the end of each stop, s (≤ `dwell`).
         #[serde(default = "d_average")]
         average: f64,
+        /// Sample rate during the averaging window, Hz.
         #[serde(default = "d_rate")]
         rate: f64,
+        /// Overrun beyond the end targets before each reversal, m (ISO 230-2's approach from one side).
         #[serde(default = "d_overrun")]
         overrun: f64,
         /// Acceleration of the moves, m/s² (default: the axis's max_accel).
         #[serde(default)]
         accel: Option<f64>,
+        /// Names of the scenario's sensors read at each stop.
         sensors: Vec<String>,
     },
     /// Low-speed crawl (seed 002): constant feeds from `start`, the sensors sampled at `rate` Hz
     /// (default 2 kHz) for `duration` s (default 1 s) once `settle` s (default 2 s) have passed.
     Crawl {
+        /// Procedure name; its runs are named `{name}_{i}`, one per feed.
         name: String,
         /// Feeds, m/s (5 mm/min = 8.33e-5 m/s).
         feeds: Vec<f64>,
+        /// Start position of every crawl, m.
         start: f64,
+        /// Recorded window after `settle`, s.
         #[serde(default = "d_duration")]
         duration: f64,
+        /// Sample rate, Hz.
         #[serde(default = "d_crawl_rate")]
         rate: f64,
+        /// Time at the feed before recording starts, s.
         #[serde(default = "d_crawl_settle")]
         settle: f64,
+        /// Direction of the crawl: +1 up, −1 down.
         #[serde(default = "d_one")]
         direction: i8,
+        /// Names of the scenario's sensors that record the runs.
         sensors: Vec<String>,
     },
     /// Seed 003's laser 9-line / three-point measurement of one axis: targets every `step` m from start to
     /// end, one bidirectional run, every laser line read at every target.
     NineLine {
+        /// Procedure name; its run is named after it.
         name: String,
+        /// First target, m.
         start: f64,
+        /// Last target, m.
         end: f64,
+        /// Spacing of the targets, m (> 0).
         step: f64,
+        /// Feed between targets, m/s.
         feed: f64,
+        /// Stop at each target, s.
         #[serde(default = "d_dwell")]
         dwell: f64,
+        /// Averaging window at the end of each stop, s (≤ `dwell`).
         #[serde(default = "d_average")]
         average: f64,
+        /// Sample rate during the averaging window, Hz.
         #[serde(default = "d_rate")]
         rate: f64,
+        /// Overrun beyond the end targets before the reversal, m.
         #[serde(default = "d_overrun")]
         overrun: f64,
+        /// Names of the laser sensors read at each target (the 9 lines).
         sensors: Vec<String>,
     },
     /// Friction sweep (DESIGN.md §6, issue 3): constant-velocity passes over decades of speed, each speed in
@@ -186,23 +231,34 @@ pub enum ProcedureSpec {
     /// Speeds: `speeds` (m/s) if given, else `per_decade` log-spaced speeds per decade from `v_min` to
     /// `v_max` inclusive (defaults 2 per decade, 1e-5 to 0.1 m/s: four decades).
     FrictionSweep {
+        /// Procedure name; its runs are named `{name}_{i}_pos` / `{name}_{i}_neg`.
         name: String,
+        /// Speeds, m/s; `None`: log-spaced from `v_min` to `v_max`.
         #[serde(default)]
         speeds: Option<Vec<f64>>,
+        /// Lowest speed of the log-spaced sweep, m/s.
         #[serde(default = "d_sweep_vmin")]
         v_min: f64,
+        /// Highest speed of the log-spaced sweep, m/s.
         #[serde(default = "d_sweep_vmax")]
         v_max: f64,
+        /// Speeds per decade of the log-spaced sweep.
         #[serde(default = "d_per_decade")]
         per_decade: u32,
+        /// Lower end of the travel used by the passes, m.
         start: f64,
+        /// Upper end of the travel used by the passes, m.
         end: f64,
+        /// Cruise time before the sample window, s.
         #[serde(default = "d_sweep_settle")]
         settle: f64,
+        /// Longest sample window, s.
         #[serde(default = "d_sweep_duration")]
         duration: f64,
+        /// Sample rate, Hz.
         #[serde(default = "d_sweep_rate")]
         rate: f64,
+        /// Names of the scenario's sensors that record the runs (at least the motor force).
         sensors: Vec<String>,
     },
     /// A break in the session: the machine stands still for `duration` s (warm-up, a night) before the
@@ -210,8 +266,10 @@ pub enum ProcedureSpec {
     /// drift) go on evolving on the session clock — repeating a test after a pause is what separates
     /// a thermal expansion from a scale error.
     Pause {
+        /// Optional name of the pause (not a run).
         #[serde(default)]
         name: String,
+        /// Length of the pause, s.
         duration: f64,
     },
 }
@@ -380,7 +438,7 @@ impl ProcedureSpec {
             }
             ProcedureSpec::NineLine { start, end, step, feed, dwell, average, rate, overrun, .. } => {
                 let n = span(*start, *end) / step + 1.0;
-                if !(*step > 0.0) {
+                if step.is_nan() || *step <= 0.0 {
                     return err("step", format!("expected a step > 0 m, got {step}"));
                 }
                 count("n_targets", n, MAX_TARGETS)?;
@@ -409,7 +467,7 @@ impl ProcedureSpec {
         };
         count("samples", samples, MAX_SAMPLES)?;
         let steps = time / dt;
-        if !(steps <= MAX_STEPS) {
+        if steps.is_nan() || steps > MAX_STEPS {
             return err(
                 "dwell",
                 format!(
@@ -420,6 +478,8 @@ impl ProcedureSpec {
         Ok((samples, steps))
     }
 
+    /// Checks what can only be checked against the axis (a friction sweep's speeds within the axis's
+    /// max feed, and a sample window the travel allows at each speed); the message says what failed.
     pub fn check(&self, model: &AxisModel) -> Result<(), String> {
         if let ProcedureSpec::FrictionSweep {
             speeds,
@@ -447,6 +507,7 @@ impl ProcedureSpec {
         Ok(())
     }
 
+    /// The procedure's name (the prefix of its run names).
     pub fn name(&self) -> &str {
         match self {
             ProcedureSpec::ConstantVelocity { name, .. }
@@ -458,6 +519,7 @@ impl ProcedureSpec {
         }
     }
 
+    /// Names of the sensors the procedure reads (none for a pause).
     pub fn sensors(&self) -> &[String] {
         match self {
             ProcedureSpec::ConstantVelocity { sensors, .. }
@@ -473,11 +535,15 @@ impl ProcedureSpec {
 /// One reading of a point table: an approach to a target.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Visit {
+    /// Target position, m.
     pub target: f64,
+    /// Run (cycle) number, 1..=runs.
     pub run: u32,
+    /// Approach direction: +1 from below, −1 from above.
     pub direction: i8,
-    /// Indices into the trace: the averaging window.
+    /// Index into the trace of the averaging window's first sample.
     pub first: usize,
+    /// Index into the trace of the averaging window's last sample (inclusive).
     pub last: usize,
 }
 
@@ -487,9 +553,12 @@ pub enum Layout {
     /// Uniform samples at `rate` Hz; the trace holds one extra leading sample (accelerometers average
     /// over the interval before each output sample).
     TimeSeries {
+        /// Sample rate, Hz.
         rate: f64,
     },
+    /// One row per visit (approach to a target), averaged over the visit's window.
     PointTable {
+        /// The visits in time order.
         visits: Vec<Visit>,
     },
 }
@@ -497,13 +566,21 @@ pub enum Layout {
 /// The noise-free truth of one run.
 #[derive(Clone, Debug)]
 pub struct RunTruth {
+    /// Run name (unique in the measurement set).
     pub name: String,
+    /// The procedure kind, the manifest's `procedure`.
     pub procedure: ProcedureKind,
+    /// Feed of a constant-velocity, crawl or sweep run, m/s; `None` for a positioning run.
     pub feed: Option<f64>,
+    /// Direction of a one-way run (+1 up, −1 down); `None` for a bidirectional run.
     pub direction: Option<i8>,
+    /// Start of the run on the session clock, s (time-dependent effects run on it).
     pub start_time: f64,
+    /// Names of the sensors that record the run.
     pub sensors: Vec<String>,
+    /// Time series or point table, with the sample windows.
     pub layout: Layout,
+    /// Noise-free samples at the plan's record times.
     pub samples: Vec<Sample>,
 }
 
@@ -512,15 +589,24 @@ pub struct RunTruth {
 /// (+1/−1), optional `t`, then the sensors' deviations or readings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum RunData {
+    /// Samples at increasing times.
     TimeSeries {
+        /// Time of each sample, s, increasing.
         t: Vec<f64>,
+        /// (name, values) per column: `x_cmd` (m) and the sensors, SI units, one value per sample.
         columns: Vec<(String, Vec<f64>)>,
     },
+    /// One row per approach to a target (positioning).
     PointTable {
+        /// Target position of each row, m.
         target: Vec<f64>,
+        /// Run (cycle) number of each row, 1..=n.
         run: Vec<u32>,
+        /// Approach direction of each row, +1 / −1.
         direction: Vec<i8>,
+        /// Time of each reading, s, where recorded (for drift).
         t: Option<Vec<f64>>,
+        /// (name, values) per sensor: deviations (actual − target) or readings, SI units, one per row.
         columns: Vec<(String, Vec<f64>)>,
     },
 }
@@ -534,6 +620,7 @@ impl RunData {
         }
     }
 
+    /// Whether the run has no rows.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -562,11 +649,17 @@ impl RunData {
 /// A run as measured: metadata and data.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunRecord {
+    /// Run name (unique in the measurement set).
     pub name: String,
+    /// The procedure kind, the manifest's `procedure`.
     pub procedure: ProcedureKind,
+    /// Feed of a constant-velocity, crawl or sweep run, m/s; `None` for a positioning run.
     pub feed: Option<f64>,
+    /// Direction of a one-way run (+1 up, −1 down); `None` for a bidirectional run.
     pub direction: Option<i8>,
+    /// Start of the run on the session clock, s (time-dependent effects run on it).
     pub start_time: f64,
+    /// The recorded columns.
     pub data: RunData,
 }
 
@@ -592,13 +685,21 @@ pub fn irregular_targets(start: f64, end: f64, n: usize, seed: u64, name: &str) 
 /// any physics: what a procedure asks of the machine.
 #[derive(Clone, Debug)]
 pub struct RunPlan {
+    /// Run name (unique in the measurement set).
     pub name: String,
+    /// The procedure kind, the manifest's `procedure`.
     pub procedure: ProcedureKind,
+    /// Feed of a constant-velocity, crawl or sweep run, m/s; `None` for a positioning run.
     pub feed: Option<f64>,
+    /// Direction of a one-way run (+1 up, −1 down); `None` for a bidirectional run.
     pub direction: Option<i8>,
+    /// Names of the sensors that record the run.
     pub sensors: Vec<String>,
+    /// Time series or point table, with the sample windows.
     pub layout: Layout,
+    /// Commanded motion, run time from 0.
     pub plan: MotionPlan,
+    /// Times at which the truth is recorded, run time, s, increasing.
     pub record_times: Vec<f64>,
 }
 

@@ -28,9 +28,11 @@ pub struct Harmonic {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RandomProfile {
+    /// Root mean square of the profile over realisations, in the unit of the error motion (m or rad).
     pub rms: f64,
     /// Correlation length ℓ, m (> 0).
     pub correlation_length: f64,
+    /// Seed of the draw: the same seed gives the same profile.
     pub seed: u64,
 }
 
@@ -42,16 +44,21 @@ const RANDOM_TERMS: usize = 64;
 pub enum Term {
     /// Σ c_i·x^i, x in m.
     Poly(Vec<f64>),
+    /// Σ amplitude·sin(2π·x/wavelength + phase) over the harmonics.
     Harmonics(Vec<Harmonic>),
     /// Expanded random profile: (amplitude, wavenumber rad/m, phase) per cosine.
     Random {
+        /// The profile as declared (RMS, correlation length, seed).
         spec: RandomProfile,
+        /// The drawn cosines: value = Σ a·cos(k·x + φ).
         cosines: Vec<(f64, f64, f64)>,
     },
     /// Linear interpolation in a table of (position, value), positions strictly increasing;
     /// constant beyond the ends.
     Table {
+        /// Positions, m, strictly increasing.
         x: Vec<f64>,
+        /// Values at `x`, in the unit of the error motion (m or rad).
         y: Vec<f64>,
     },
 }
@@ -59,6 +66,7 @@ pub enum Term {
 /// An error motion as a function of axis position: the sum of its terms (zero if none).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Profile {
+    /// The terms, summed.
     pub terms: Vec<Term>,
 }
 
@@ -124,18 +132,22 @@ impl Term {
 }
 
 impl Profile {
+    /// The zero profile (no terms).
     pub fn zero() -> Profile {
         Profile::default()
     }
 
+    /// The polynomial Σ c_i·x^i (x in m) with `coeffs` = [c_0, c_1, …].
     pub fn poly(coeffs: Vec<f64>) -> Profile {
         Profile { terms: vec![Term::Poly(coeffs)] }
     }
 
+    /// The sum of harmonics Σ a·sin(2π·x/λ + φ).
     pub fn harmonics(h: Vec<Harmonic>) -> Profile {
         Profile { terms: vec![Term::Harmonics(h)] }
     }
 
+    /// Whether the profile has no terms (identically zero).
     pub fn is_zero(&self) -> bool {
         self.terms.is_empty()
     }

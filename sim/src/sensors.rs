@@ -19,16 +19,27 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SensorKind {
+    /// Commanded position of the axis, m (the interpolator's output, no noise).
     Command,
+    /// Motor encoder: position the servo sees through screw and motor in a semi-closed loop, m.
     EncoderRotary,
+    /// Linear scale on the axis: position read by the scale with its own errors, m.
     EncoderLinear,
+    /// Laser interferometer, linear: displacement of the mount point along `direction` from its home position, m.
     LaserLinear,
+    /// Laser straightness optics: displacement of the mount point across the motion (along `direction`), m.
     LaserStraightness,
+    /// Laser angular optics: rotation of the body about `direction` (pitch, yaw or roll), rad.
     LaserAngular,
+    /// Laser vector (diagonal) measurement: displacement of the mount point along a slanted `direction`, m.
     LaserVector,
+    /// Accelerometer on the body: specific force along `direction` (includes gravity when tilted), m/s².
     Accelerometer,
+    /// Drive force commanded by the servo, N.
     MotorForce,
+    /// Velocity of the body along the axis, m/s.
     Velocity,
+    /// Air or machine temperature, K.
     Temperature,
     /// Air pressure, Pa (vmt addition, for the laser's Edlén correction).
     Pressure,
@@ -127,7 +138,9 @@ pub enum AccelPreset {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SensorSpec {
+    /// Sensor name, the column name in the measurement set.
     pub name: String,
+    /// What the sensor measures (FORMAT.md §1).
     pub kind: SensorKind,
     /// Mount point on the moving body, axis frame, m. Alternatively `link`.
     #[serde(default)]
@@ -156,6 +169,8 @@ pub struct SensorSpec {
     /// First-order high-pass corner, Hz (piezo accelerometers have no DC response); 0 = DC coupled.
     #[serde(default)]
     pub highpass: f64,
+    /// Accelerometer preset (DESIGN.md §5): fills the noise density, bias, scale-factor, resolution and
+    /// high-pass terms the spec leaves zero ([`SensorSpec::resolved`]).
     #[serde(default)]
     pub preset: Option<AccelPreset>,
     /// Accelerometer bias random walk, m/s² per √s (bias drift).
@@ -268,6 +283,7 @@ impl SensorSpec {
         Ok(model.body_to_axis(self.mount(model)?).to_array())
     }
 
+    /// Unit vector of the sensitive direction (`direction` normalised; zero for a zero vector).
     pub fn unit_direction(&self) -> DVec3 {
         DVec3::from_array(self.direction).normalize_or_zero()
     }
@@ -387,8 +403,8 @@ pub fn apply_errors(spec: &SensorSpec, truth: &[f64], fs: f64, rng: &mut ChaCha8
     out
 }
 
-/// First-order RC high-pass, discrete: y[n] = α·(y[n−1] + x[n] − x[n−1]), α = RC/(RC + T), RC = 1/(2π·fc),
-/// started at steady state (y[0] = 0).
+/// First-order RC high-pass, discrete: `y[n] = α·(y[n−1] + x[n] − x[n−1])`, α = RC/(RC + T), RC = 1/(2π·fc),
+/// started at steady state (`y[0] = 0`).
 pub fn highpass_first_order(x: &[f64], fc: f64, fs: f64) -> Vec<f64> {
     let rc = 1.0 / (std::f64::consts::TAU * fc);
     let alpha = rc / (rc + 1.0 / fs);

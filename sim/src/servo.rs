@@ -114,7 +114,9 @@ impl ServoConfig {
 /// Mutable state of the servo loops.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ServoState {
+    /// Integral of the velocity error ∫e_v dt, m (the velocity loop's I term).
     pub integral: f64,
+    /// Velocity feedback of the last servo update, m (`None` before the first; differenced for velocity).
     pub last_feedback: Option<f64>,
     /// Force being applied (held between servo updates), N.
     pub force: f64,

@@ -8,12 +8,26 @@ use std::collections::{BTreeMap, HashMap};
 /// Why a URDF could not be turned into a machine.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum UrdfError {
+    /// The text is not well-formed URDF XML (the parser's message).
     #[error("not a readable URDF: {0}")]
     Parse(String),
+    /// A joint that breaks a rule.
     #[error("joint `{joint}`: {what}")]
-    Joint { joint: String, what: String },
+    Joint {
+        /// Joint name.
+        joint: String,
+        /// What is wrong and what was expected.
+        what: String,
+    },
+    /// A link that breaks a rule.
     #[error("link `{link}`: {what}")]
-    Link { link: String, what: String },
+    Link {
+        /// Link name.
+        link: String,
+        /// What is wrong and what was expected.
+        what: String,
+    },
+    /// The tree as a whole is unusable (no root, a cycle, a link with two parents, …).
     #[error("structure: {0}")]
     Structure(String),
 }
@@ -21,11 +35,14 @@ pub enum UrdfError {
 /// A rigid placement: x_parent = rotation·x_child + translation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame {
+    /// Origin of the child frame in the parent frame, m.
     pub translation: DVec3,
+    /// Rotation of the child frame's axes into the parent's.
     pub rotation: DQuat,
 }
 
 impl Frame {
+    /// The identity placement (child frame = parent frame).
     pub const IDENTITY: Frame = Frame { translation: DVec3::ZERO, rotation: DQuat::IDENTITY };
 
     /// URDF origin: translation xyz (m) and fixed-axis roll, pitch, yaw (rad): R = Rz(y)·Ry(p)·Rx(r).
@@ -42,6 +59,7 @@ impl Frame {
         }
     }
 
+    /// A point given in child coordinates, in parent coordinates: rotation·p + translation (m).
     pub fn transform_point(&self, p: DVec3) -> DVec3 {
         self.translation + self.rotation * p
     }
@@ -59,6 +77,7 @@ pub struct MassProps {
 }
 
 impl MassProps {
+    /// No mass (the neutral element of [`MassProps::combine`]).
     pub const ZERO: MassProps = MassProps { mass: 0.0, com: DVec3::ZERO, inertia: DMat3::ZERO };
 
     /// Combines two sets of mass properties expressed in the same frame (parallel-axis theorem:
@@ -87,13 +106,16 @@ impl MassProps {
 /// A rigid body: links welded by fixed joints. Its frame is the frame of its first (root) link.
 #[derive(Clone, Debug)]
 pub struct Body {
+    /// Name of the body's root link.
     pub name: String,
     /// Each link of the body with its placement in the body frame.
     pub links: Vec<(String, Frame)>,
+    /// Mass properties of all its links combined, body frame.
     pub mass: MassProps,
 }
 
 impl Body {
+    /// Placement of `link` in the body frame; `None` if the link is not part of this body.
     pub fn link_frame(&self, link: &str) -> Option<Frame> {
         self.links.iter().find(|(n, _)| n == link).map(|(_, f)| *f)
     }
@@ -102,37 +124,48 @@ impl Body {
 /// A prismatic joint: the child body slides along `axis` relative to the parent body.
 #[derive(Clone, Debug)]
 pub struct PrismaticAxis {
+    /// Joint name in the URDF.
     pub joint: String,
+    /// Index of the parent (fixed-side) body in [`MachineStructure::bodies`].
     pub parent: usize,
+    /// Index of the child (moving) body in [`MachineStructure::bodies`].
     pub child: usize,
     /// Placement of the child body frame in the parent body frame at joint position 0.
     pub origin: Frame,
     /// Unit direction of motion, in the parent body frame.
     pub axis: DVec3,
-    /// Travel limits, m.
+    /// Lower travel limit, m.
     pub lower: f64,
+    /// Upper travel limit, m.
     pub upper: f64,
-    /// URDF `<dynamics damping friction>` (N·s/m, N), zero where absent.
+    /// URDF `<dynamics damping>`: viscous damping along the axis, N·s/m, zero where absent.
     pub damping: f64,
+    /// URDF `<dynamics friction>`: Coulomb friction along the axis, N, zero where absent.
     pub friction: f64,
-    /// URDF `<limit effort velocity>` (N, m/s).
+    /// URDF `<limit effort>`: largest drive force, N.
     pub effort: f64,
+    /// URDF `<limit velocity>`: largest speed, m/s.
     pub velocity: f64,
 }
 
 /// The structure of a machine: bodies and the prismatic axes joining them. Body 0 is the base.
 #[derive(Clone, Debug)]
 pub struct MachineStructure {
+    /// The URDF `<robot name>`.
     pub name: String,
+    /// Rigid bodies (links welded by fixed joints); body 0 is the base.
     pub bodies: Vec<Body>,
+    /// The prismatic joints between bodies, in URDF order.
     pub axes: Vec<PrismaticAxis>,
 }
 
 impl MachineStructure {
+    /// The prismatic axis of the joint named `joint`, if any.
     pub fn axis_by_joint(&self, joint: &str) -> Option<&PrismaticAxis> {
         self.axes.iter().find(|a| a.joint == joint)
     }
 
+    /// Index of the body that contains `link`, if any.
     pub fn body_of_link(&self, link: &str) -> Option<usize> {
         self.bodies.iter().position(|b| b.links.iter().any(|(n, _)| n == link))
     }

@@ -110,26 +110,21 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
     use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
     let mut names: Vec<&str> = summary.iter().map(|s| s.estimate.as_str()).collect();
     names.dedup();
-    let positive = summary.iter().all(|s| s.value > 0.0 && s.mean_abs > 0.0 && s.p95_abs > 0.0);
+    let positive = crate::study::all_positive(summary);
+    // An estimate without a difference (a one-sided limit or a found/not-found check) has only a pass
+    // rate, which the table shows: no figure for it.
+    let undefined: Vec<&str> =
+        names.iter().copied().filter(|n| summary.iter().all(|s| s.estimate != *n || s.mean_abs.is_none())).collect();
     let figures: Vec<Figure> = names
         .iter()
+        .filter(|n| !undefined.contains(n))
         .map(|n| {
             let pts: Vec<&crate::study::SummaryRow> = summary.iter().filter(|s| s.estimate == *n).collect();
-            let x: Vec<f64> = pts.iter().map(|s| s.value).collect();
-            let mut series = vec![
-                Series {
-                    label: "mean |error|".into(),
-                    x: x.clone(),
-                    y: pts.iter().map(|s| s.mean_abs * 1e6).collect(),
-                    style: SeriesStyle::LinePoints,
-                },
-                Series {
-                    label: "95th percentile |error|".into(),
-                    x: x.clone(),
-                    y: pts.iter().map(|s| s.p95_abs * 1e6).collect(),
-                    style: SeriesStyle::LinePoints,
-                },
-            ];
+            let line = |label: &str, stat: fn(&crate::study::SummaryRow) -> Option<f64>| {
+                let (x, y) = crate::study::defined_points(&pts, stat, 1e6);
+                Series { label: label.into(), x, y, style: SeriesStyle::LinePoints }
+            };
+            let mut series = vec![line("mean |error|", |s| s.mean_abs), line("95th percentile |error|", |s| s.p95_abs)];
             let bound: Vec<(f64, f64)> =
                 pts.iter().filter(|s| s.bound.is_finite() && s.bound > 0.0).map(|s| (s.value, s.bound * 1e6)).collect();
             if !bound.is_empty() {
@@ -176,8 +171,8 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
                     format!("{:.3e}", r.value),
                     r.estimate.clone(),
                     r.trials.to_string(),
-                    format!("{:.4}", r.mean_abs * 1e6),
-                    format!("{:.4}", r.p95_abs * 1e6),
+                    r.mean_abs.map_or("—".into(), |m| format!("{:.4}", m * 1e6)),
+                    r.p95_abs.map_or("—".into(), |p| format!("{:.4}", p * 1e6)),
                     r.pass_rate.map_or("—".into(), |p| format!("{:.0}", 100.0 * p)),
                     if r.bound.is_finite() { format!("{:.4}", r.bound * 1e6) } else { "—".into() },
                 ]
@@ -196,10 +191,17 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
             head,
             Section {
                 heading: "Error against the varied parameter".into(),
-                text: vec![
+                text: std::iter::once(
                     "Each marker is one studied value; lengths in µm, angles in µrad (the trial rows carry SI values)."
-                        .into(),
-                ],
+                        .to_string(),
+                )
+                .chain(undefined.iter().map(|n| {
+                    format!(
+                        "{n}: a limit or found/not-found check forms no difference from the truth, so its \
+                         |error| is undefined (—) and it has no figure; its pass rate is in the table."
+                    )
+                }))
+                .collect(),
                 figures,
                 tables: vec![table],
             },

@@ -293,16 +293,25 @@ pub fn read_rows(path: &Path) -> Result<Vec<TrialRow>, VmtError> {
 }
 
 /// Summary per (value, estimate): trials, mean |difference|, 95th percentile of |difference|, pass rate.
+///
+/// The difference statistics are `None` (undefined, written empty and shown as "—") for an estimate whose
+/// trials form no difference: a one-sided limit ([`crate::estimate::Rule::AtMost`], e.g. the compensation
+/// check's "E after compensation ≤ 30 % of E before") or a found/not-found check has only a pass rate.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct SummaryRow {
+    /// The varied parameter's value (SI unit of the `--vary` key).
     pub value: f64,
+    /// The estimate's name (the run-table row).
     pub estimate: String,
+    /// Number of trials of this value and estimate.
     pub trials: usize,
-    pub mean_abs: f64,
+    /// Mean |d| over the trials (SI: m, rad or ratio as `quantity`); `None` if any trial's d is undefined.
+    pub mean_abs: Option<f64>,
     /// Root mean square of the difference over the trials, √(mean d²): the statistic a Cramér–Rao bound
-    /// (a bound on the expected squared error) is compared with.
-    pub rms: f64,
-    pub p95_abs: f64,
+    /// (a bound on the expected squared error) is compared with; `None` as `mean_abs`.
+    pub rms: Option<f64>,
+    /// 95th percentile of |d| over the trials (the ⌈0.95 n⌉-th smallest); `None` as `mean_abs`.
+    pub p95_abs: Option<f64>,
     /// Fraction of the trials that met the tolerance; `None` when the trials had no tolerance.
     pub pass_rate: Option<f64>,
     /// Mean Cramér–Rao bound over the trials (NaN where none exists).
@@ -331,6 +340,9 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
             let mut d: Vec<f64> = rows.iter().filter(|r| same(r, v, &e)).map(|r| r.difference.abs()).collect();
             d.sort_by(f64::total_cmp);
             let n = d.len();
+            // A statistic of d exists only where every trial formed a difference (NaN: the check has none).
+            let defined = n > 0 && d.iter().all(|x| x.is_finite());
+            let stat = |f: &dyn Fn(&[f64]) -> f64| defined.then(|| f(&d));
             let judged: Vec<bool> = rows.iter().filter(|r| same(r, v, &e)).filter_map(|r| r.pass).collect();
             let pass_rate = (judged.len() == n).then(|| judged.iter().filter(|&&p| p).count() as f64 / n.max(1) as f64);
             let bounds: Vec<f64> = rows.iter().filter(|r| same(r, v, &e)).map(|r| r.bound).collect();
@@ -340,9 +352,9 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
                 value: v,
                 estimate: e,
                 trials: n,
-                mean_abs: d.iter().sum::<f64>() / n.max(1) as f64,
-                rms: (d.iter().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt(),
-                p95_abs: d.get(((0.95 * n as f64).ceil() as usize).max(1) - 1).copied().unwrap_or(f64::NAN),
+                mean_abs: stat(&|d| d.iter().sum::<f64>() / n as f64),
+                rms: stat(&|d| (d.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt()),
+                p95_abs: stat(&|d| d[((0.95 * n as f64).ceil() as usize).clamp(1, n) - 1]),
                 pass_rate,
                 bound,
                 quantity,
@@ -351,7 +363,19 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
         .collect()
 }
 
-/// An SVG plot of mean and p95 |difference| against the varied value, one pair of series per estimate.
+/// The (value, statistic × `scale`) points of `rows` where the statistic `stat` is defined, for a plot
+/// (an estimate without a difference, e.g. the compensation check's one-sided limit, has none).
+pub fn defined_points(rows: &[&SummaryRow], stat: fn(&SummaryRow) -> Option<f64>, scale: f64) -> (Vec<f64>, Vec<f64>) {
+    rows.iter().filter_map(|s| stat(s).map(|y| (s.value, y * scale))).filter(|(_, y)| y.is_finite()).unzip()
+}
+
+/// Whether every defined statistic of `summary` and every varied value is > 0 (a log-log plot is possible).
+pub fn all_positive(summary: &[SummaryRow]) -> bool {
+    summary.iter().all(|s| s.value > 0.0 && [s.mean_abs, s.p95_abs].iter().flatten().all(|&y| y > 0.0))
+}
+
+/// An SVG plot of mean and p95 |difference| against the varied value, one pair of series per estimate
+/// (none for an estimate whose difference is undefined).
 pub fn summary_svg(summary: &[SummaryRow], x_label: &str) -> Result<String, VmtError> {
     use vmt_report::{figure_svg, Figure, FigureKind, Series, SeriesStyle};
     // One pair of series per estimate: the summary is sorted by value first, so sort before dedup
@@ -362,21 +386,17 @@ pub fn summary_svg(summary: &[SummaryRow], x_label: &str) -> Result<String, VmtE
     let mut series = Vec::new();
     for n in names {
         let pts: Vec<&SummaryRow> = summary.iter().filter(|s| s.estimate == n).collect();
-        let x: Vec<f64> = pts.iter().map(|s| s.value).collect();
-        series.push(Series {
-            label: format!("{n}: mean"),
-            x: x.clone(),
-            y: pts.iter().map(|s| s.mean_abs * 1e6).collect(),
-            style: SeriesStyle::Line,
-        });
-        series.push(Series {
-            label: format!("{n}: p95"),
-            x,
-            y: pts.iter().map(|s| s.p95_abs * 1e6).collect(),
-            style: SeriesStyle::Dashed,
-        });
+        for (label, stat, style) in [
+            ("mean", (|s: &SummaryRow| s.mean_abs) as fn(&SummaryRow) -> Option<f64>, SeriesStyle::Line),
+            ("p95", |s: &SummaryRow| s.p95_abs, SeriesStyle::Dashed),
+        ] {
+            let (x, y) = defined_points(&pts, stat, 1e6);
+            if !x.is_empty() {
+                series.push(Series { label: format!("{n}: {label}"), x, y, style });
+            }
+        }
     }
-    let positive = summary.iter().all(|s| s.value > 0.0 && s.mean_abs > 0.0);
+    let positive = all_positive(summary);
     let fig = Figure {
         title: "tolerance study: estimate error against the varied parameter".into(),
         x_label: x_label.into(),
