@@ -33,46 +33,11 @@ impl OrthoBase {
     /// scaled to unit norm, Householder QR with column pivoting, the pivots above
     /// [`RANK_TOLERANCE`] × the largest kept (all-zero columns are skipped).
     pub fn new(cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
-        let n = w.len();
         check_finite("weights", w)?;
-        let mut keep: Vec<(usize, f64)> = Vec::new();
-        for (j, c) in cols.iter().enumerate() {
-            check_len(&format!("column {j}"), n, c.len())?;
-            check_finite(&format!("column {j}"), c)?;
-            let norm = c.iter().zip(w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt();
-            if norm > 0.0 {
-                keep.push((j, norm));
-            }
-        }
-        let p = keep.len();
-        if p == 0 || n == 0 {
-            return Ok(OrthoBase { q: Mat::zeros(n, 0) });
-        }
-        let mut a = Mat::<f64>::from_fn(n, p, |i, k| cols[keep[k].0][i] * w[i] / keep[k].1);
-        let size = n.min(p);
-        let bs = qr::no_pivoting::factor::recommended_block_size::<f64>(n, p);
-        let mut coeff = Mat::<f64>::zeros(bs, size);
-        let mut perm = vec![0usize; p];
-        let mut perm_inv = vec![0usize; p];
-        let mut mem = MemBuffer::new(qr::col_pivoting::factor::qr_in_place_scratch::<usize, f64>(
-            n,
-            p,
-            bs,
-            Par::Seq,
-            Default::default(),
-        ));
-        qr::col_pivoting::factor::qr_in_place(
-            a.as_mut(),
-            coeff.as_mut(),
-            &mut perm,
-            &mut perm_inv,
-            Par::Seq,
-            MemStack::new(&mut mem),
-            Default::default(),
-        );
-        let d0 = a[(0, 0)].abs();
-        let rank = (0..size).take_while(|&j| a[(j, j)].abs() > RANK_TOLERANCE * d0).count();
-        Ok(OrthoBase { q: thin_q(a, &coeff, rank) })
+        Ok(match PivotedQr::of(cols, w)? {
+            Some(f) => OrthoBase { q: thin_q(f.a, &f.coeff, f.rank) },
+            None => OrthoBase { q: Mat::zeros(w.len(), 0) },
+        })
     }
 
     /// Number of samples n.
@@ -154,18 +119,64 @@ pub fn lstsq_qr(y: &[f64], cols: &[Vec<f64>], w: &[f64]) -> Result<(Vec<f64>, Ve
     let n = w.len();
     check_len("y", n, y.len())?;
     check_finite("y", y)?;
-    let mut keep: Vec<(usize, f64)> = Vec::new();
-    for (j, c) in cols.iter().enumerate() {
-        check_len(&format!("column {j}"), n, c.len())?;
-        check_finite(&format!("column {j}"), c)?;
-        let norm = c.iter().zip(w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt();
-        if norm > 0.0 {
-            keep.push((j, norm));
+    let mut beta = vec![0.0; cols.len()];
+    if let Some(PivotedQr { a, coeff, perm, keep, rank }) = PivotedQr::of(cols, w)? {
+        let r = Mat::<f64>::from_fn(rank, rank, |i, j| if i <= j { a[(i, j)] } else { 0.0 });
+        let q = thin_q(a, &coeff, rank);
+        let mut qty = vec![0.0; rank];
+        for (k, v) in qty.iter_mut().enumerate() {
+            *v = (0..n).map(|i| q[(i, k)] * y[i] * w[i]).sum();
+        }
+        // Back substitution R z = Qᵀ(Wy); z_k belongs to the pivoted column perm[k].
+        let mut z = vec![0.0; rank];
+        for i in (0..rank).rev() {
+            let s: f64 = qty[i] - (i + 1..rank).map(|j| r[(i, j)] * z[j]).sum::<f64>();
+            z[i] = s / r[(i, i)];
+        }
+        for (k, zk) in z.iter().enumerate() {
+            let (j, norm) = keep[perm[k]];
+            beta[j] = zk / norm;
         }
     }
-    let mut beta = vec![0.0; cols.len()];
-    let p = keep.len();
-    if p > 0 && n > 0 {
+    let residual: Vec<f64> = (0..n)
+        .map(|i| y[i] - cols.iter().zip(&beta).filter(|(_, b)| **b != 0.0).map(|(c, b)| c[i] * b).sum::<f64>())
+        .collect();
+    Ok((beta, residual))
+}
+
+/// A Householder QR with column pivoting of the unit-norm weighted columns W·c_j/‖W·c_j‖ (all-zero
+/// columns left out), in place as faer stores it, with the numerical rank: the pivots above
+/// [`RANK_TOLERANCE`] × the largest.
+struct PivotedQr {
+    /// R on and above the diagonal, the Householder essentials below it.
+    a: Mat<f64>,
+    /// Block Householder coefficients.
+    coeff: Mat<f64>,
+    /// Column k of the factorisation is kept column `perm[k]`.
+    perm: Vec<usize>,
+    /// Kept columns: (index into the input columns, weighted norm).
+    keep: Vec<(usize, f64)>,
+    /// Numerical rank.
+    rank: usize,
+}
+
+impl PivotedQr {
+    /// The factorisation of `cols` weighted by `w`, or `None` when no column is nonzero (or n = 0).
+    fn of(cols: &[Vec<f64>], w: &[f64]) -> Result<Option<PivotedQr>, ModelCheckError> {
+        let n = w.len();
+        let mut keep: Vec<(usize, f64)> = Vec::new();
+        for (j, c) in cols.iter().enumerate() {
+            check_len(&format!("column {j}"), n, c.len())?;
+            check_finite(&format!("column {j}"), c)?;
+            let norm = c.iter().zip(w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt();
+            if norm > 0.0 {
+                keep.push((j, norm));
+            }
+        }
+        let p = keep.len();
+        if p == 0 || n == 0 {
+            return Ok(None);
+        }
         let mut a = Mat::<f64>::from_fn(n, p, |i, k| cols[keep[k].0][i] * w[i] / keep[k].1);
         let size = n.min(p);
         let bs = qr::no_pivoting::factor::recommended_block_size::<f64>(n, p);
@@ -190,27 +201,8 @@ pub fn lstsq_qr(y: &[f64], cols: &[Vec<f64>], w: &[f64]) -> Result<(Vec<f64>, Ve
         );
         let d0 = a[(0, 0)].abs();
         let rank = (0..size).take_while(|&j| a[(j, j)].abs() > RANK_TOLERANCE * d0).count();
-        let r = Mat::<f64>::from_fn(rank, rank, |i, j| if i <= j { a[(i, j)] } else { 0.0 });
-        let q = thin_q(a, &coeff, rank);
-        let mut qty = vec![0.0; rank];
-        for (k, v) in qty.iter_mut().enumerate() {
-            *v = (0..n).map(|i| q[(i, k)] * y[i] * w[i]).sum();
-        }
-        // Back substitution R z = Qᵀ(Wy); z_k belongs to the pivoted column perm[k].
-        let mut z = vec![0.0; rank];
-        for i in (0..rank).rev() {
-            let s: f64 = qty[i] - (i + 1..rank).map(|j| r[(i, j)] * z[j]).sum::<f64>();
-            z[i] = s / r[(i, i)];
-        }
-        for (k, zk) in z.iter().enumerate() {
-            let (j, norm) = keep[perm[k]];
-            beta[j] = zk / norm;
-        }
+        Ok(Some(PivotedQr { a, coeff, perm, keep, rank }))
     }
-    let residual: Vec<f64> = (0..n)
-        .map(|i| y[i] - cols.iter().zip(&beta).filter(|(_, b)| **b != 0.0).map(|(c, b)| c[i] * b).sum::<f64>())
-        .collect();
-    Ok((beta, residual))
 }
 
 /// The first `rank` columns of Q of a Householder QR stored in place in `a` (essentials below the
