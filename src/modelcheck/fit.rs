@@ -152,6 +152,8 @@ pub(crate) struct ShapeChoice {
     pub(crate) pinned: bool,
     /// The series' basis.
     pub(crate) basis: ShapeBasis,
+    /// A sparse series: the number of terms selected of 1..=order (None: all of them).
+    pub(crate) terms: Option<usize>,
 }
 
 /// Highest Legendre order searched for a fitted error motion.
@@ -175,7 +177,7 @@ pub(crate) fn bic_unknown_sigma(ss: f64, n: usize, p: usize) -> f64 {
 /// Data with accelerometer channels keep the default order (their order choice is not implemented).
 pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) -> Result<FitState, String> {
     let default = |me: &ModelEffect| me.order.unwrap_or(DEFAULT_ORDER);
-    let first = fit_model_fixed(st, model, sigma, w, &|_, me: &ModelEffect| default(me))?;
+    let first = fit_model_fixed(st, model, sigma, w, &|_, me: &ModelEffect| (default(me), None))?;
     let m = distinct_positions(st).len() as u32;
     let max = MAX_ORDER.min(m.saturating_sub(1)).max(1);
     let motions: Vec<usize> = (0..first.terms.len()).filter(|&t| first.terms[t].name.is_error_motion()).collect();
@@ -210,7 +212,7 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
     }
     let chosen: BTreeMap<usize, u32> = motions.iter().map(|&ti| (terms[ti].index, terms[ti].shape.order)).collect();
     let mut fs = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| {
-        chosen.get(&index).copied().unwrap_or(default(me))
+        (chosen.get(&index).copied().unwrap_or(default(me)), None)
     })?;
     for c in fs.shapes.iter_mut() {
         if let Some((_, b)) = motions.iter().map(|&ti| (terms[ti].name, best[&ti])).find(|(nm, _)| *nm == c.name) {
@@ -220,6 +222,10 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
     }
     Ok(fs)
 }
+
+/// The greedy selection of a cosine series ([`greedy_rss`]) stops after 20 terms in a row that
+/// each explain less than this many times the residual mean square (BIC charges ln n ≥ 5 each).
+pub(crate) const GREEDY_STOP: f64 = 1.0;
 
 /// Highest order searched for an error motion seen only by accelerometers (cost cap: one QR of
 /// the motion's rows × this many columns; wavelengths down to 2L/600, 2 mm on a 0.6 m travel).
@@ -304,24 +310,47 @@ fn fit_orders_nested(
                 .filter(|(_, c)| c.iter().any(|v| *v != 0.0))
                 .unzip();
             let wr = pick(w);
+            let y = pick(&first.target);
             let base = OrthoBase::new(&fixed, &wr).map_err(|e| e.to_string())?;
-            let nr = nested_rss(&pick(&first.target), &wr, &base, &nested).map_err(|e| e.to_string())?;
+            let me = &model.effects[terms[ti].index];
+            let sparse = shape(st, name, 1, top, false).basis == ShapeBasis::Cosine && me.order.is_none();
+            // The order in which the series enters: by degree (nested orders), or for a cosine series
+            // greedily, each step the term that explains most of what is left (rail waviness puts the
+            // signal at a few high orders, where nesting by degree would charge every order below
+            // it; at the fast pass the short waves alias, so the terms are not orthogonal there).
+            let nr = if sparse {
+                greedy_rss(&y, &wr, &base, &nested, GREEDY_STOP).map_err(|e| e.to_string())?
+            } else {
+                nested_rss(&y, &wr, &base, &nested).map_err(|e| e.to_string())?
+            };
             let nm = rows.len() as f64;
             let bic = |k: usize| nm * (nr.rss[k].max(1e-300) / nm).ln() + (base.rank() + k) as f64 * nm.ln();
             let k = (0..nr.rss.len()).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0);
-            // k series columns taken: the order of the k-th (1 when none is needed); the columns
-            // the offsets span (P_2 per pass on accelerometers) are skipped but kept in the series.
-            let chosen = if k == 0 { 1 } else { orders[nr.used[k - 1]] };
-            let searched = nr.used.last().map_or(1, |&j| orders[j]);
-            best.insert(ti, (chosen, searched));
-            let me = &model.effects[terms[ti].index];
-            terms[ti].shape = shape(st, name, 1, me.order.unwrap_or(chosen), false);
+            let searched = orders.iter().copied().max().unwrap_or(1);
+            if sparse {
+                // The terms taken (at least the best one), in ascending order.
+                let mut sel: Vec<u32> = nr.used[..k.max(1).min(nr.used.len())].iter().map(|&j| orders[j]).collect();
+                sel.sort_unstable();
+                if sel.is_empty() {
+                    sel.push(1);
+                }
+                let chosen = *sel.last().unwrap_or(&1);
+                best.insert(ti, (chosen, searched));
+                terms[ti].shape = shape(st, name, 1, chosen, false).selected(sel);
+            } else {
+                // k series columns taken: the order of the k-th (1 when none is needed); the columns
+                // the offsets span (P_2 per pass on accelerometers) are skipped but kept in the series.
+                let chosen = if k == 0 { 1 } else { orders[nr.used[k - 1]] };
+                best.insert(ti, (chosen, searched));
+                terms[ti].shape = shape(st, name, 1, me.order.unwrap_or(chosen), false);
+            }
         }
     }
-    let chosen: BTreeMap<usize, u32> = motions.iter().map(|&ti| (terms[ti].index, terms[ti].shape.order)).collect();
+    let chosen: BTreeMap<usize, (u32, Option<Vec<u32>>)> =
+        motions.iter().map(|&ti| (terms[ti].index, (terms[ti].shape.order, terms[ti].shape.select.clone()))).collect();
     let default = |me: &ModelEffect| me.order.unwrap_or(DEFAULT_ORDER);
     let mut fs = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| {
-        chosen.get(&index).copied().unwrap_or(default(me))
+        chosen.get(&index).cloned().unwrap_or((default(me), None))
     })?;
     for c in fs.shapes.iter_mut() {
         if let Some(&(b, m)) = motions.iter().find(|&&ti| terms[ti].name == c.name).map(|ti| &best[ti]) {
@@ -340,7 +369,7 @@ pub(crate) fn fit_model_fixed(
     model: &Model,
     sigma: &Sigma,
     w: &[f64],
-    order_of: &dyn Fn(usize, &ModelEffect) -> u32,
+    order_of: &dyn Fn(usize, &ModelEffect) -> (u32, Option<Vec<u32>>),
 ) -> Result<FitState, String> {
     let mut known = vec![0.0; st.n];
     let mut terms: Vec<FitTerm> = Vec::new();
@@ -368,7 +397,11 @@ pub(crate) fn fit_model_fixed(
             }
             continue;
         }
-        let sh = shape(st, me.effect.name, 1, order_of(index, me), lacks_coulomb(model));
+        let (order, select) = order_of(index, me);
+        let mut sh = shape(st, me.effect.name, 1, order, lacks_coulomb(model));
+        if let Some(sel) = select {
+            sh = sh.selected(sel);
+        }
         let mut hyper = Vec::new();
         let mut searched = Vec::new();
         for h in &sh.hypers {
@@ -496,6 +529,7 @@ pub(crate) fn fit_model_fixed(
                 max: None,
                 pinned: false,
                 basis: t.shape.basis,
+                terms: t.shape.select.as_ref().map(Vec::len),
             }
         })
         .collect();
@@ -578,8 +612,8 @@ pub(crate) fn describe(
                 // Σ cos_k·cos(kπ(x − x_lo)/(x_hi − x_lo)), m (no monomials: hundreds of terms).
                 ShapeBasis::Cosine => {
                     // φ_1 = P_3, φ_2 = P_4 of u = (2x − x_lo − x_hi)/(x_hi − x_lo), then cosines.
-                    for (i, v) in c.iter().enumerate() {
-                        let key = match sh.first_power as usize + i {
+                    for (v, k) in c.iter().zip(sh.ks()) {
+                        let key = match k {
                             k @ (1 | 2) => format!("p{}", k + 2),
                             k => format!("cos{}", k - 2),
                         };

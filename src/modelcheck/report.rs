@@ -99,6 +99,11 @@ pub struct ShapeReport {
     /// The order BIC prefers on these data when the model gives one (optional).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bic_order: Option<u32>,
+    /// A sparse cosine series: the number of its terms of 1..=`order` fitted, chosen by BIC after
+    /// ranking the terms by their own explained χ² (optional; absent when every order up to
+    /// `order` is fitted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub terms: Option<usize>,
 }
 
 /// The `shapes` of a fit (see [`ShapeReport`]).
@@ -108,6 +113,9 @@ pub(crate) fn shape_reports(fs: &FitState) -> BTreeMap<String, ShapeReport> {
         .map(|c| {
             let mut chosen_by = match (c.given, c.max) {
                 (true, _) => "model".to_string(),
+                (false, Some(m)) if c.terms.is_some() => {
+                    format!("BIC over the terms of 1..{m} ranked by their explained chi-square")
+                }
                 (false, Some(m)) => format!("BIC over 1..{m}"),
                 (false, None) => "default".to_string(),
             };
@@ -119,7 +127,7 @@ pub(crate) fn shape_reports(fs: &FitState) -> BTreeMap<String, ShapeReport> {
                 ShapeBasis::Legendre => "legendre",
                 ShapeBasis::Cosine => "cosine",
             };
-            let r = ShapeReport { basis: basis.into(), order: c.order, chosen_by, bic_order };
+            let r = ShapeReport { basis: basis.into(), order: c.order, chosen_by, bic_order, terms: c.terms };
             (c.name.as_str().to_string(), r)
         })
         .collect()

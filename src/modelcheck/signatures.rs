@@ -98,12 +98,13 @@ impl Excitation {
         // E'(x); the step boundaries come in order (x_k, x_{k+1}), (x_{k+1}, x_{k+2}), …: the last
         // boundary's slope is kept.
         let last = std::cell::Cell::new((f64::NAN, 0.0));
+        let ks = sh.ks();
         let slope = |x: f64| -> f64 {
             if last.get().0 == x {
                 return last.get().1;
             }
             let (_, d) = sh.basis_at(x);
-            let v = coef.iter().enumerate().map(|(i, ck)| ck * d[sh.first_power as usize + i]).sum();
+            let v = coef.iter().zip(&ks).map(|(ck, k)| ck * d[*k]).sum();
             last.set((x, v));
             v
         };
@@ -319,6 +320,9 @@ pub(crate) struct Shape {
     pub(crate) with_fc: bool,
     /// Error motions: the series' basis.
     pub(crate) basis: ShapeBasis,
+    /// Error motions: the basis orders used, when a sparse selection of first_power..=order
+    /// (`fit_orders_nested` on a cosine series: the terms chosen by their explained χ²); None: all.
+    pub(crate) select: Option<Vec<u32>>,
 }
 
 /// The basis of a fitted error motion's series (over the range [a, b] of the sample positions).
@@ -335,6 +339,22 @@ pub(crate) enum ShapeBasis {
 }
 
 impl Shape {
+    /// The basis orders of an error motion's series, one per coefficient: `select`, else
+    /// first_power..=order.
+    pub(crate) fn ks(&self) -> Vec<usize> {
+        match &self.select {
+            Some(sel) => sel.iter().map(|k| *k as usize).collect(),
+            None => (self.first_power as usize..=self.order as usize).collect(),
+        }
+    }
+
+    /// The same series restricted to the basis orders `sel` (ascending, within first_power..=order).
+    pub(crate) fn selected(mut self, sel: Vec<u32>) -> Shape {
+        self.coefs = sel.iter().map(|k| format!("c{k}")).collect();
+        self.select = Some(sel);
+        self
+    }
+
     /// Values and slopes (d/dx, 1/m) of the basis functions of orders 0..=`order` at x (m).
     pub(crate) fn basis_at(&self, x: f64) -> (Vec<f64>, Vec<f64>) {
         let (a, b) = self.range;
@@ -530,7 +550,7 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
     } else {
         ShapeBasis::Legendre
     };
-    Shape { coefs, hypers, first_power, order, with_fc, range, basis }
+    Shape { coefs, hypers, first_power, order, with_fc, range, basis, select: None }
 }
 
 /// Legendre polynomials P_0..P_n at u and their derivatives dP_k/du, by Bonnet's recurrence
@@ -599,7 +619,7 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
             // c_k·P_k(u(x)): the same coefficient for lasers (P_k) and accelerometers (its slope
             // P'_k·2/(b − a), differenced over the sample interval); every order at once per
             // position ([`Shape::basis_at`]; cosines for a motion only accelerometers see).
-            let ks: Vec<usize> = (sh.first_power as usize..=sh.order as usize).collect();
+            let ks = sh.ks();
             let mut cols: Vec<Vec<f64>> = ks.iter().map(|_| Vec::with_capacity(st.n)).collect();
             let at = |x: f64| sh.basis_at(x);
             for c in st.chans {

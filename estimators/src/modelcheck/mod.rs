@@ -30,7 +30,7 @@ pub use diagnose::{
     ForwardSelection, HyperParameter, RankingEntry, ResidualInput, Verdict,
 };
 pub use lsq::{fit_signature, LinearFit};
-pub use ortho::{lstsq_qr, nested_rss, NestedRss, OrthoBase};
+pub use ortho::{greedy_rss, lstsq_qr, nested_rss, NestedRss, OrthoBase};
 pub use spectrum::{amplitude_spectrum, frequency_grid, ls_periodogram, AmplitudeSpectrum, Periodogram};
 pub use stats::{
     autocorrelation, bin_by_edges, bin_by_label, chi_square_isf, chi_square_sf, estimate_noise_sigma, fit_percent,
