@@ -227,15 +227,20 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
 /// each explain less than this many times the residual mean square (BIC charges ln n ≥ 5 each).
 pub(crate) const GREEDY_STOP: f64 = 1.0;
 
-/// Highest order searched for an error motion seen only by accelerometers (cost cap: one QR of
-/// the motion's rows × this many columns; wavelengths down to 2L/600, 2 mm on a 0.6 m travel).
+/// Largest number of values (columns × samples) of the series searched for one error motion
+/// (memory: 8 bytes each, held about three times during the search).
+pub(crate) const MAX_SERIES_VALUES: usize = 20_000_000;
+
+/// Highest number of frequencies searched for an error motion seen only by accelerometers (cost
+/// cap; wavelengths down to 2L/600, 2 mm on a 0.6 m travel).
 pub(crate) const MAX_ACCEL_ORDER: u32 = 600;
 
-/// The highest order of the cosine series ([`ShapeBasis::Cosine`]) of error motion `name` that the
-/// accelerometer channels seeing it resolve: the shortest wavelength 2L/N (L the range) must span
-/// at least two sample spacings |v|·Δt of the pass that samples the position most finely (the
-/// Nyquist condition in position), and N < the distinct positions seen; capped at
-/// [`MAX_ACCEL_ORDER`] and at a quarter of the samples that see the motion.
+/// The highest index 2 + 2N of the series ([`ShapeBasis::Cosine`]: P_3, P_4, then a cosine and a
+/// sine per frequency) of error motion `name` that the accelerometer channels seeing it resolve:
+/// the shortest wavelength 2L/N (L the range) must span at least two sample spacings |v|·Δt of
+/// the pass that samples the position most finely (the Nyquist condition in position), and N <
+/// the distinct positions seen; N capped at [`MAX_ACCEL_ORDER`], at a quarter of the samples that
+/// see the motion and by [`MAX_SERIES_VALUES`].
 pub(crate) fn resolvable_order(st: &Stack, name: EffectName, range: (f64, f64)) -> u32 {
     let seeing: Vec<&Channel> = st.chans.iter().filter(|c| c.s_motion(name) != 0.0).collect();
     let rows: usize = seeing.iter().map(|c| c.y.len()).sum();
@@ -254,7 +259,10 @@ pub(crate) fn resolvable_order(st: &Stack, name: EffectName, range: (f64, f64)) 
     // Cosines: cos(kπ(x − a)/L) has the wavelength 2L/k ≥ 2·dx for k ≤ L/dx.
     let by_spacing = if dx.is_finite() { ((range.1 - range.0) / dx).floor() } else { f64::INFINITY };
     let cap = (MAX_ACCEL_ORDER as f64).min(by_spacing).min(xs.len().saturating_sub(1) as f64).min((rows / 4) as f64);
-    (cap.max(1.0)) as u32
+    // Indices: P_3, P_4, then a cosine and a sine per frequency; the dictionary's values (columns
+    // × samples) held to [`MAX_SERIES_VALUES`].
+    let by_memory = ((MAX_SERIES_VALUES / st.n.max(1)) as f64 / 2.0 - 1.0).floor();
+    (2.0 + 2.0 * cap.min(by_memory).max(1.0)) as u32
 }
 
 /// The order choice of [`fit_model_on`] on data with accelerometer channels: for each fitted
@@ -615,7 +623,8 @@ pub(crate) fn describe(
                     for (v, k) in c.iter().zip(sh.ks()) {
                         let key = match k {
                             k @ (1 | 2) => format!("p{}", k + 2),
-                            k => format!("cos{}", k - 2),
+                            k if (k - 3) % 2 == 0 => format!("cos{}", (k - 3) / 2 + 1),
+                            k => format!("sin{}", (k - 3) / 2 + 1),
                         };
                         m.insert(key, *v);
                     }

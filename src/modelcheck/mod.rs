@@ -229,21 +229,23 @@ mod tests {
             assert!(cols[0][i].abs() < 1e-9 * want, "{}", cols[0][i]);
             assert!((cols[1][i] - want).abs() < 1e-9 * want, "{} vs {want}", cols[1][i]);
         }
-        // Cosines cos(kπ(x − a)/L) after P_3, P_4: the column is v² times the interval mean of
-        // E'' = −(kπ/L)²·cos(kπ(x − a)/L), which is E'' at the interval's middle to (kπh/L)²/24
-        // (h = 1 mm, L = 9 mm: 0.5 % at k = 1, 1.9 % at k = 2, 4.3 % at k = 3); checked to 1.2× that.
+        // Pairs cos(kπ(x − a)/L), sin(kπ(x − a)/L) after P_3, P_4: the column is v² times the
+        // interval mean of E'' = −(kπ/L)²·cos(kπ(x − a)/L) (or ·sin), which is E'' at the interval's
+        // middle to (kπh/L)²/24 (h = 1 mm, L = 9 mm: 0.5 % at k = 1, 1.9 % at k = 2, 4.3 % at k = 3);
+        // checked to 1.2× that.
         sh.basis = ShapeBasis::Cosine;
         let l = b - a;
-        // cols[0], cols[1] are P_3, P_4 (as above); cols[2] is cos(1·…).
-        sh.order = 5;
+        // cols[0], cols[1] are P_3, P_4 (as above); then cos 1, sin 1, cos 2, sin 2, cos 3.
+        sh.order = 7;
         let cols = columns(&st, EffectName::StraightnessY, &sh, &[]);
         for (j, col) in cols.iter().enumerate().skip(2) {
-            let k = (j - 1) as f64;
+            let k = ((j - 2) / 2 + 1) as f64;
+            let wave = |t: f64| if (j - 2) % 2 == 0 { t.cos() } else { t.sin() };
             let kx = std::f64::consts::PI * k / l;
             let tol = 1.2 * (kx * 1e-3).powi(2) / 24.0 * kx * kx * 0.01;
             for (i, v) in col.iter().enumerate().skip(1) {
                 let mid = chans[0].x[i] - 0.5e-3;
-                let want = -0.01 * kx * kx * (kx * (mid - a)).cos();
+                let want = -0.01 * kx * kx * wave(kx * (mid - a));
                 assert!((v - want).abs() <= tol, "k {k}, sample {i}: {v} vs {want}");
             }
         }

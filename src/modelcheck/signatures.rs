@@ -185,32 +185,82 @@ impl StepMap {
     }
 }
 
+/// The 2 × 2 product a·b.
+fn mat2(a: [[f64; 2]; 2], b: [[f64; 2]; 2]) -> [[f64; 2]; 2] {
+    [
+        [a[0][0] * b[0][0] + a[0][1] * b[1][0], a[0][0] * b[0][1] + a[0][1] * b[1][1]],
+        [a[1][0] * b[0][0] + a[1][1] * b[1][0], a[1][0] * b[0][1] + a[1][1] * b[1][1]],
+    ]
+}
+
+/// The exact state map of the free, underdamped mode q̈ + 2ζω·q̇ + ω²·q = 0 (ζ < 1, ω = 2πf) over
+/// a time h: (q, q̇)(h) = Φ·(q, q̇)(0), with ω_d = ω·√(1 − ζ²) and
+/// Φ = e^{−ζωh}·[[c + (ζω/ω_d)·s, s/ω_d], [−(ω²/ω_d)·s, c − (ζω/ω_d)·s]], c = cos ω_d h, s = sin ω_d h.
+pub(crate) fn free_map(f: f64, zeta: f64, h: f64) -> [[f64; 2]; 2] {
+    let w = TWO_PI * f;
+    let wd = w * (1.0 - zeta * zeta).sqrt();
+    let e = (-zeta * w * h).exp();
+    let (s, c) = (wd * h).sin_cos();
+    let zw = zeta * w;
+    [[e * (c + zw / wd * s), e * s / wd], [-e * w * w / wd * s, e * (c - zw / wd * s)]]
+}
+
 /// Interval means of q̈ of a mode q̈ + 2ζω·q̇ + ω²·q = −a(τ) over each sample interval of channel
 /// `c`, (q̇_i − q̇_{i−1})/Δt_i (what the simulator's accelerometer reads of a point moving by q), from
 /// the state (q, q̇) = `start` at t_{−1}, with the input a from `ex` (None: free vibration) held at
 /// its mean over each step ([`StepMap`], [`MODE_STEP`]). ω = 2πf, f in Hz.
 pub(crate) fn mode_response(c: &Channel, ex: Option<&Excitation>, f: f64, zeta: f64, start: (f64, f64)) -> Vec<f64> {
     let mut x = [start.0, start.1];
-    let mut map: Option<StepMap> = None;
+    let mut map: Option<(StepMap, [[f64; 2]; 2], Vec<[f64; 2]>)> = None;
     let mut out = Vec::with_capacity(c.t.len());
+    // Free vibration of an underdamped mode: one exact step per sample interval.
+    let mut free: Option<(f64, [[f64; 2]; 2])> = None;
     for i in 0..c.t.len() {
         let dt = sample_interval(c, i);
         if !(dt > 0.0) {
             out.push(0.0);
             continue;
         }
+        if ex.is_none() && zeta < 1.0 {
+            let phi = match free {
+                Some((h, phi)) if (h - dt).abs() <= 1e-9 * dt => phi,
+                _ => free.insert((dt, free_map(f, zeta, dt))).1,
+            };
+            let v0 = x[1];
+            x = [phi[0][0] * x[0] + phi[0][1] * x[1], phi[1][0] * x[0] + phi[1][1] * x[1]];
+            out.push((x[1] - v0) / dt);
+            continue;
+        }
         let m = ex.map_or(mode_steps(dt), |e| e.steps[i]);
         let h = dt / m as f64;
-        // Sample intervals repeat: the map is rebuilt only when the step changes (≥ 1 ppb).
-        let mp = match map {
-            Some(mp) if (mp.h - h).abs() <= 1e-9 * h => mp,
-            _ => *map.insert(StepMap::new(f, zeta, h)),
+        // Sample intervals repeat: the map is rebuilt only when the step changes (≥ 1 ppb). The m
+        // steps of an interval compose to x ← Φᵐ·x + Σ_k Φ^{m−1−k}·(g₀ + g₁)·a_k.
+        let (mp, phi_m, gk) = match &map {
+            Some((mp, phi_m, gk)) if (mp.h - h).abs() <= 1e-9 * h && gk.len() == m => (*mp, *phi_m, gk),
+            _ => {
+                let mp = StepMap::new(f, zeta, h);
+                let mut gk = vec![[0.0; 2]; m];
+                let mut g = [mp.g0[0] + mp.g1[0], mp.g0[1] + mp.g1[1]];
+                let mut phi_m = [[1.0, 0.0], [0.0, 1.0]];
+                for k in (0..m).rev() {
+                    gk[k] = g;
+                    g = mp.step(g, 0.0, 0.0);
+                    phi_m = mat2(mp.phi, phi_m);
+                }
+                let (_, _, gk) = map.insert((mp, phi_m, gk));
+                (mp, phi_m, &*gk)
+            }
         };
+        let _ = mp;
         let v0 = x[1];
-        for k in 0..m {
-            let a = ex.map_or(0.0, |e| e.input[i][k]);
-            x = mp.step(x, a, a);
+        let mut nx = [phi_m[0][0] * x[0] + phi_m[0][1] * x[1], phi_m[1][0] * x[0] + phi_m[1][1] * x[1]];
+        if let Some(e) = ex {
+            for (a, g) in e.input[i].iter().zip(gk) {
+                nx[0] += g[0] * a;
+                nx[1] += g[1] * a;
+            }
         }
+        x = nx;
         out.push((x[1] - v0) / dt);
     }
     out
@@ -330,7 +380,8 @@ pub(crate) struct Shape {
 pub(crate) enum ShapeBasis {
     /// Legendre polynomials P_k(u), u = (2x − a − b)/(b − a): lasers and encoders (point tables).
     Legendre,
-    /// P_3, P_4, then cosines cos(kπ(x − a)/(b − a)): a motion seen only by accelerometers. They see E'' alone,
+    /// P_3, P_4, then pairs cos(jπ(x − a)/(b − a)), sin(jπ(x − a)/(b − a)) ([`Shape::basis_at`]): a
+    /// motion seen only by accelerometers. They see E'' alone,
     /// and the cosine series of E'' converges on any smooth profile (its even extension is
     /// continuous) with columns that stay independent to hundreds of terms (wavelengths 2(b − a)/k
     /// down to the rail waviness), where Legendre columns of the sampled accelerations become
@@ -367,26 +418,38 @@ impl Shape {
             }
             ShapeBasis::Cosine => {
                 // φ_1 = P_3, φ_2 = P_4 (their E'' = P_3'', P_4'' carry the profile's third
-                // derivative at the ends, where the cosine series of E'' converges slowly), then
-                // φ_k = cos((k − 2)π(x − a)/(b − a)).
+                // derivative at the ends, where a cosine series of E'' converges slowly), then
+                // the pairs φ_{2j+1} = cos(jπ(x − a)/(b − a)), φ_{2j+2} = sin(jπ(x − a)/(b − a)),
+                // j ≥ 1: sine and cosine of period 2(b − a)/j, so that a wave of any wavelength and
+                // phase (rail waviness between two of these frequencies) is a few neighbouring pairs
+                // (the family is overcomplete on [a, b]: a smooth periodic extension exists).
                 let th = std::f64::consts::PI * (x - a) / (b - a);
                 let kx = std::f64::consts::PI / (b - a);
                 let (p, d) = legendre((2.0 * x - a - b) / (b - a), 4);
                 let (mut vals, mut slopes) = (Vec::with_capacity(top + 1), Vec::with_capacity(top + 1));
-                // cos(mθ), sin(mθ) by the angle-addition recurrence (rounding grows ≈ m·ε).
+                // cos(jθ), sin(jθ) by the angle-addition recurrence (rounding grows ≈ j·ε).
                 let (s1, c1) = th.sin_cos();
-                let (mut sm, mut cm) = (0.0, 1.0);
+                let (mut sm, mut cm) = (s1, c1);
                 for k in 0..=top {
                     match k {
+                        0 => {
+                            vals.push(1.0);
+                            slopes.push(0.0);
+                        }
                         1 | 2 => {
                             vals.push(p[k + 2]);
                             slopes.push(d[k + 2] * 2.0 / (b - a));
                         }
                         _ => {
-                            let m = k.saturating_sub(2) as f64;
-                            vals.push(cm);
-                            slopes.push(-m * kx * sm);
-                            (sm, cm) = (sm * c1 + cm * s1, cm * c1 - sm * s1);
+                            let j = ((k - 3) / 2 + 1) as f64;
+                            if (k - 3) % 2 == 0 {
+                                vals.push(cm);
+                                slopes.push(-j * kx * sm);
+                            } else {
+                                vals.push(sm);
+                                slopes.push(j * kx * cm);
+                                (sm, cm) = (sm * c1 + cm * s1, cm * c1 - sm * s1);
+                            }
                         }
                     }
                 }
