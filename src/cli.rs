@@ -226,7 +226,7 @@ pub fn summary_table(set: &MeasurementSet) -> String {
 /// `vmt iso230-2 PATH`: ISO 230-2 evaluation of a positioning test, from a measurement set directory
 /// (a point-table run and one of its deviation columns) or from an ecmc `.dat` file (key=value format).
 pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool) -> Result<i32, VmtError> {
-    use vmt_estimators::iso230_2::{dat::parse_dat, evaluate_bidirectional};
+    use vmt_estimators::iso230_2::evaluate_bidirectional;
     let (label, targets, up, down) = if path.is_dir() {
         let set = measurement::read(path)?;
         let r = match run {
@@ -260,8 +260,7 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
         })?;
         (format!("{} / {} / {}", path.display(), r.name, col), t, u, d)
     } else {
-        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading", e))?;
-        let dat = parse_dat(&text).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+        let dat = measurement::read_dat(path)?;
         (path.display().to_string(), dat.targets, dat.up, dat.down)
     };
     let res = evaluate_bidirectional(&targets, &up, &down).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
