@@ -226,7 +226,7 @@ pub fn summary_table(set: &MeasurementSet) -> String {
 /// `vmt iso230-2 PATH`: ISO 230-2 evaluation of a positioning test, from a measurement set directory
 /// (a point-table run and one of its deviation columns) or from an ecmc `.dat` file (key=value format).
 pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool) -> Result<i32, VmtError> {
-    use vmt_estimators::iso230_2::{dat::parse_dat, evaluate_bidirectional};
+    use vmt_estimators::iso230_2::evaluate_bidirectional;
     let (label, targets, up, down) = if path.is_dir() {
         let set = measurement::read(path)?;
         let r = match run {
@@ -260,8 +260,7 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
         })?;
         (format!("{} / {} / {}", path.display(), r.name, col), t, u, d)
     } else {
-        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading", e))?;
-        let dat = parse_dat(&text).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+        let dat = measurement::read_dat(path)?;
         (path.display().to_string(), dat.targets, dat.up, dat.down)
     };
     let res = evaluate_bidirectional(&targets, &up, &down).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
@@ -855,19 +854,28 @@ fn print_profiles(profiles: &[vmt_estimators::laser_ls::ProfileEstimate]) {
 /// `vmt score --truth T --estimate E`: compares two FORMAT.md §5 profile CSVs (crate::byo::score_profiles):
 /// RMS and max difference per error motion.
 pub fn score(truth: &Path, estimate: &Path, json: bool) -> Result<i32, VmtError> {
-    let rows = crate::byo::score_profiles(&measurement::read_profiles(truth)?, &measurement::read_profiles(estimate)?);
+    let rows = crate::byo::score_profiles(&measurement::read_profiles(truth)?, &measurement::read_profiles(estimate)?)
+        .map_err(|e| VmtError::bad(estimate, "positions", &e))?;
     if rows.is_empty() {
         return Err(VmtError::bad(estimate, "line 1 (header)", "no error-motion column in common with the truth"));
     }
     if json {
         print_json("vmt-score/1", &serde_json::json!({ "rows": rows }))?;
     } else {
-        println!("difference d = estimate − truth on the estimate's positions (straightness about its least-squares");
-        println!("line, the other motions relative to their first position)");
-        println!("{:<20} {:>14} {:>14} {:>8}", "error motion", "RMS of d", "max |d|", "points");
+        println!("difference d = estimate − truth on the estimate's positions inside the truth's range (straightness");
+        println!("about its least-squares line, the other motions relative to their first position); positions");
+        println!("outside the truth's range are not scored (the truth is not extrapolated)");
+        println!("{:<20} {:>14} {:>14} {:>8} {:>8}", "error motion", "RMS of d", "max |d|", "points", "outside");
         for r in &rows {
             let q = crate::study::motion_quantity(&r.effect);
-            println!("{:<20} {:>14} {:>14} {:>8}", r.effect, display(q, r.rms), display(q, r.max), r.points);
+            println!(
+                "{:<20} {:>14} {:>14} {:>8} {:>8}",
+                r.effect,
+                display(q, r.rms),
+                display(q, r.max),
+                r.points,
+                r.outside
+            );
         }
     }
     Ok(0)

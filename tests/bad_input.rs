@@ -388,6 +388,7 @@ fn set_cases() -> Vec<Case> {
         blamed: "iso.csv".into(),
         place: "input".into(),
     });
+    cases.extend(dat_cases());
     cases.push(Case {
         label: ".dat not UTF-8".into(),
         files: vec![("t.dat".into(), b"UNIT=mm\nTGT_DATA=[0,\xff]\n".to_vec())],
@@ -395,6 +396,56 @@ fn set_cases() -> Vec<Case> {
         blamed: "t.dat".into(),
         place: "UTF-8".into(),
     });
+    cases
+}
+
+/// An ISO 230-2 `.dat` (ecmc key=value format) with `targets` in mm, 2 cycles, every reading
+/// `dev` mm from its target, a target's text replaced by `mistyped` when given.
+fn dat_text(targets: &[f64], dev: f64, mistyped: Option<(usize, &str)>) -> Vec<u8> {
+    let mut t = format!("UNIT=mm\nCYCLES=2\nPOSITIONS={}\n", targets.len());
+    for (i, x) in targets.iter().enumerate() {
+        let text = match mistyped {
+            Some((k, v)) if k == i => v.to_string(),
+            _ => x.to_string(),
+        };
+        t += &format!("TGT_DATA[{}]={text}\n", i + 1);
+        for j in 1..=2 {
+            t += &format!("REF_DATA_FWD[{},{j}]={}\nREF_DATA_BWD[{},{j}]={}\n", i + 1, x + dev, i + 1, x - dev);
+        }
+    }
+    t.into_bytes()
+}
+
+/// `.dat` files every reader must refuse the same way (`iso230-2`, and `compare`/`diagnose` through
+/// `--data`): a repeated target, a target that is not finite or absurdly far, a reading that cannot
+/// belong to its target. Issue 14: compare/diagnose accepted a repeated target and a target at
+/// 1e20 mm was evaluated (and diagnosed as an 18.9 mm cyclic lead).
+fn dat_cases() -> Vec<Case> {
+    let model = b"format = \"vmt-model/1\"\n[effects.positioning]\nfit = true\n".to_vec();
+    let targets = [-20.0, -10.0, 0.0, 10.0, 20.0];
+    let bad: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("repeated target", dat_text(&targets, 0.004, Some((1, "-20"))), "target 2"),
+        ("target 1e20 mm", dat_text(&targets, 0.004, Some((4, "1e20"))), "target 5"),
+        ("target nan", dat_text(&targets, 0.004, Some((2, "nan"))), "line"),
+        ("target inf", dat_text(&targets, 0.004, Some((2, "inf"))), "line"),
+        ("readings in µm, targets in mm", dat_text(&targets, 6.0, None), "REF_DATA_FWD[1,1]"),
+    ];
+    let mut cases = Vec::new();
+    for (what, text, place) in bad {
+        for cmd in ["iso230-2", "compare", "diagnose"] {
+            let a = match cmd {
+                "iso230-2" => args(&["iso230-2", "{dir}/t.dat"]),
+                _ => args(&[cmd, "--model", "{dir}/m.toml", "--data", "{dir}/t.dat"]),
+            };
+            cases.push(Case {
+                label: format!("{cmd}: .dat {what}"),
+                files: vec![("t.dat".into(), text.clone()), ("m.toml".into(), model.clone())],
+                args: a,
+                blamed: "t.dat".into(),
+                place: place.into(),
+            });
+        }
+    }
     cases
 }
 

@@ -317,7 +317,8 @@ fn a_study_can_run_a_users_estimator_command_and_the_in_process_trait_agrees() {
     let rows = vmt::byo::score_profiles(
         &vmt::simulate::truth_profiles(&sc, &vmt::simulate::physics(&sc).unwrap()).unwrap(),
         &table,
-    );
+    )
+    .unwrap();
     assert_eq!(rows.len(), 6);
     // 20 nm noise: within issue 5's 0.1 µm / 0.5 µrad (both < 1e-7 in SI).
     assert!(rows.iter().all(|r| r.rms < 1e-7), "{rows:?}");
@@ -332,4 +333,46 @@ fn run_exits_1_and_names_the_estimates_that_missed_their_tolerance() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert_eq!(out.status.code(), Some(1), "{text}");
     assert!(text.contains("missed their tolerance") && text.contains("ISO 230-2 E (laser_x3)"), "{text}");
+}
+
+/// `vmt score` compares only where the truth is defined (issue 14): estimate positions past the
+/// truth's end are counted as `outside`, never scored against an extrapolated truth, and an estimate
+/// with too few positions inside the truth's range (one point would score as perfect) is bad input.
+#[test]
+fn score_never_extrapolates_the_truth_and_refuses_a_comparison_that_cannot_fail() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = |name: &str, text: &str| {
+        let p = tmp.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let truth = w("truth.csv", "position,straightness_y,pitch\n0,0,0\n0.5,1e-6,2e-6\n1,0,0\n");
+    // Inside the range the estimate equals the truth; two points lie far beyond it (at 1.5 m and 20 m
+    // an extrapolated truth would differ by metres).
+    let long = w(
+        "long.csv",
+        "position,straightness_y,pitch\n0,0,0\n0.25,0.5e-6,1e-6\n0.5,1e-6,2e-6\n1,0,0\n1.5,3e-6,1\n20,1,5\n",
+    );
+    let out = vmt().args(["score", "--json", "--truth"]).arg(&truth).arg("--estimate").arg(&long).output().unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for row in v["rows"].as_array().unwrap() {
+        assert_eq!(row["points"], 4, "{row}");
+        assert_eq!(row["outside_truth"], 2, "{row}");
+        assert!(row["rms"].as_f64().unwrap() < 1e-15, "{row}");
+    }
+    for (name, text, column) in [
+        ("one.csv", "position,pitch\n20,5e-6\n", "pitch"),
+        ("two.csv", "position,straightness_y\n0.2,0\n0.7,1e-6\n", "straightness_y"),
+        ("past.csv", "position,pitch\n0.9,0\n1.5,1\n3,2\n", "pitch"),
+    ] {
+        let est = w(name, text);
+        let out = vmt().args(["score", "--truth"]).arg(&truth).arg("--estimate").arg(&est).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{name}: {err}");
+        assert!(
+            err.contains(name) && err.contains(column) && err.contains("inside the truth's range"),
+            "{name}: {err}"
+        );
+    }
 }

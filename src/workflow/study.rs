@@ -181,7 +181,10 @@ pub fn run_study(
                 let work = std::env::temp_dir().join(format!("vmt-study-{}-{i}-{k}", std::process::id()));
                 let table = e.estimate(&set, &work);
                 let _ = std::fs::remove_dir_all(&work);
-                return Ok(score_profiles(&truth_table, &table?)
+                let rows = score_profiles(&truth_table, &table?).map_err(|e| {
+                    VmtError::Usage(format!("--estimator-cmd: its profile CSV cannot be scored against the truth: {e}"))
+                })?;
+                return Ok(rows
                     .into_iter()
                     .map(|r| TrialRow {
                         value: v,
