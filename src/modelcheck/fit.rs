@@ -522,6 +522,9 @@ pub(crate) fn fit_model_fixed(
             }
         }
     }
+    if st.chans.iter().any(|c| c.is_accel()) {
+        refine_jointly(st, &mut terms, &grids, &r0, sigma, w, fixed_base.as_ref());
+    }
     let cols = design(st, &terms);
     let (coefs, residual) = solve_blocks(st, &r0, &cols, sigma)?;
     let shapes = terms
@@ -542,6 +545,74 @@ pub(crate) fn fit_model_fixed(
         })
         .collect();
     Ok(FitState { terms, cols, coefs, residual, n_offsets: st.n_groups, target: r0, shapes })
+}
+
+/// Joint refinement of the searched, refinable hyper-parameters of a fit on accelerometer data (a
+/// fitted resonance's frequency and damping) after the coordinate-wise grid and golden-section
+/// sweeps: Levenberg–Marquardt over variable projection (`refine_projected`, the solver `diagnose`
+/// refines its candidates with), inside the box between the grid neighbours of each current value,
+/// so that `compare` (and `compare` after `add`) reports the same kind of optimum as `diagnose`.
+/// The projected residual is P⊥(θ)·W·r0: with `fixed` (the factored unchanging columns and the
+/// projected target) only the moving terms' columns are projected, else the whole design is solved.
+/// Kept only when it lowers the weighted RSS.
+fn refine_jointly(
+    st: &Stack,
+    terms: &mut [FitTerm],
+    grids: &[Vec<(Vec<f64>, bool)>],
+    r0: &[f64],
+    sigma: &Sigma,
+    w: &[f64],
+    fixed: Option<&(OrthoBase, Vec<f64>)>,
+) {
+    let free: Vec<(usize, usize)> = terms
+        .iter()
+        .enumerate()
+        .flat_map(|(ti, t)| {
+            (0..t.hyper.len())
+                .filter(move |&hi| t.searched[hi] && grids[ti][hi].1 && grids[ti][hi].0.len() > 1)
+                .map(move |hi| (ti, hi))
+        })
+        .collect();
+    if free.is_empty() {
+        return;
+    }
+    let bracket = |ti: usize, hi: usize, x: f64| -> (f64, f64) {
+        let mut g = grids[ti][hi].0.clone();
+        g.sort_by(f64::total_cmp);
+        let i = g.partition_point(|v| *v < x).min(g.len() - 1);
+        (g[i.saturating_sub(1)].min(x), g[(i + 1).min(g.len() - 1)].max(x))
+    };
+    let start: Vec<f64> = free.iter().map(|&(ti, hi)| terms[ti].hyper[hi]).collect();
+    let (lo, hi): (Vec<f64>, Vec<f64>) = free.iter().zip(&start).map(|(&(ti, h), &x)| bracket(ti, h, x)).unzip();
+    let base_terms: Vec<FitTerm> = terms.to_vec();
+    let ones = vec![1.0; w.len()];
+    let resid = |x: &[f64]| -> Result<Vec<f64>, String> {
+        let mut tt = base_terms.clone();
+        for (&(ti, hi), v) in free.iter().zip(x) {
+            tt[ti].hyper[hi] = *v;
+        }
+        match fixed {
+            Some((base, target)) => {
+                let moving: Vec<Vec<f64>> = tt
+                    .iter()
+                    .filter(|t| t.searched.iter().any(|s| *s))
+                    .flat_map(|t| columns(st, t.name, &t.shape, &t.hyper))
+                    .collect();
+                let pc = base.project_columns(&moving, w);
+                let ob = OrthoBase::new(&pc, &ones).map_err(|e| e.to_string())?;
+                Ok(ob.project_vector(target, &ones))
+            }
+            None => {
+                let (_, r) = solve(r0, &design(st, &tt), sigma)?;
+                Ok(r.iter().zip(w).map(|(r, w)| r * w).collect())
+            }
+        }
+    };
+    if let Some(r) = refine_projected(&resid, &start, &lo, &hi, 40) {
+        for (&(ti, hi), v) in free.iter().zip(&r.theta) {
+            terms[ti].hyper[hi] = *v;
+        }
+    }
 }
 
 /// The linear coefficients of term `ti` of a fit (they follow the offsets, term by term).
