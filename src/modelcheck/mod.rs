@@ -49,11 +49,12 @@
 //!   piecewise-constant slope, i.e. the slope jumps at its knots); fitted ones (a series Σ c_k·φ_k,
 //!   below) give the columns v²·s·(φ'_k(x_i) − φ'_k(x_{i−1}))/(x_i − x_{i−1}), with the same
 //!   coefficients c_k as the lasers' columns (one unknown per coefficient shared by lasers and
-//!   accelerometers). A motion seen only by accelerometers is a cosine series φ_k =
-//!   cos(kπ(x − a)/(b − a)) (`ShapeBasis::Cosine`: E'' is then a cosine series, which converges on
-//!   any smooth profile, and its columns stay independent to hundreds of terms, as the rail
-//!   waviness needs; Legendre columns of the accelerations become dependent near order 270 on 3 500
-//!   samples); its constant and slope have no acceleration and are pinned at 0 (said in `shapes`).
+//!   accelerometers). A motion seen only by accelerometers is P_3, P_4 and pairs cos, sin of
+//!   jπ(x − a)/(b − a) (`ShapeBasis::Cosine`: an overcomplete family in which a wave of any
+//!   wavelength and phase, as rail waviness is, takes a few neighbouring pairs; Legendre columns of
+//!   the accelerations become dependent near order 270 on 3 500 samples), its terms chosen by a
+//!   greedy forward selection (`greedy_rss`) and BIC; its constant and slope have no acceleration
+//!   and are pinned at 0 (said in `shapes`).
 //! - g·τ_s(x): gravity seen through the tilt of sensor s's sensitive axis (`gravity_tilt`; the
 //!   simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted
 //!   as a polynomial Σ c_k·x^k, k = 1..3, per sensor, shared by its runs). The error-motion columns
@@ -104,7 +105,11 @@
 //! spacings |v|·Δt of the finest pass; at most [`MAX_ACCEL_ORDER`]), from the nested residual
 //! sums of squares of one QR (`vmt_estimators::modelcheck::nested_rss`); large designs are solved
 //! by QR block by block and the hyper-parameter searches factor the unchanging columns once
-//! (variable projection, `OrthoBase`).
+//! (variable projection, `OrthoBase`). A motion seen only by accelerometers is not nested by
+//! degree: its terms enter greedily, each step the one that explains most of what is left
+//! (orthogonal matching pursuit, `greedy_rss`), and BIC says how many (`shapes.terms`): rail
+//! waviness puts the signal at a few short wavelengths, where nesting by degree charged every
+//! term below it and left the whole motion unfitted (a misfit the mode search then claimed).
 
 use crate::error::{fmt_num, VmtError};
 use crate::measurement::{write_file_atomic, MeasurementSet, Procedure, RunData, SensorKind};
