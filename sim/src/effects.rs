@@ -258,6 +258,33 @@ pub enum ParamUnit {
 }
 
 impl ParamUnit {
+    /// The physical bounds of a value in this unit (SI): (smallest magnitude of a strictly positive
+    /// parameter, largest magnitude of any). A value outside them is a typo or a unit mistake, not a
+    /// machine: a length or period of 1 nm to 100 m (an axis travel is at most [`MAX_LENGTH`]), an
+    /// angular error up to 0.1 rad, a strain up to 1 % (10 000 µm/m), an expansion coefficient up to
+    /// 1000 µm/(m·K) (metals 1–25, plastics up to ~200), time constants 1 ns to 1e9 s (30 years),
+    /// velocities up to 100 m/s, frequencies 1 µHz to 1 MHz, forces up to 10 MN.
+    pub fn limits(self) -> (f64, f64) {
+        match self {
+            ParamUnit::Length => (1e-9, MAX_LENGTH),
+            ParamUnit::Angle => (1e-12, 0.1),
+            ParamUnit::Phase => (0.0, 1e3),
+            ParamUnit::Force => (1e-9, 1e7),
+            ParamUnit::Time => (1e-9, 1e9),
+            ParamUnit::Velocity => (1e-9, 100.0),
+            ParamUnit::Frequency => (1e-6, 1e6),
+            ParamUnit::Strain => (1e-12, 1e-2),
+            ParamUnit::ExpansionCoefficient => (1e-12, 1e-3),
+            ParamUnit::Temperature => (1e-6, 1e3),
+            ParamUnit::Stiffness => (1e-9, 1e15),
+            ParamUnit::Damping => (1e-9, 1e12),
+            ParamUnit::Rate => (1e-9, 1e9),
+            ParamUnit::Dimensionless => (1e-6, 1e3),
+            ParamUnit::AccelRandomWalk => (0.0, 1e3),
+            ParamUnit::Gain => (1e-9, 1e12),
+        }
+    }
+
     /// `v` (SI) in display units with four significant digits, e.g. `25.37 µm`, `10.49 mm`,
     /// `3.1 µrad`, `300.1 s`, `2.5 mm/s`.
     pub fn display(self, v: f64) -> String {
@@ -295,6 +322,10 @@ impl ParamUnit {
         }
     }
 }
+
+/// The largest length an effect parameter may have, m: an axis travel (vmt's readers bound
+/// positions by the same 100 m).
+pub const MAX_LENGTH: f64 = 100.0;
 
 /// Description of one scalar parameter of an effect: its TOML key, what it is in SI units, its
 /// admissible range, the starting value used when a model leaves it out under `fit = true`, and
@@ -911,10 +942,23 @@ impl Effect {
         }
         for s in param_specs(self.name) {
             if let Some(v) = self.params.get(s.key) {
+                let (min_positive, max) = s.unit.limits();
                 if !s.range.contains(v) {
                     bad(
                         s.key.to_string(),
                         format!("expected {}{}, got {}", s.quantity, s.range.describe(), fmt_num(v)),
+                    );
+                } else if v.abs() > max || (s.range == Range::Positive && v < min_positive) {
+                    bad(
+                        s.key.to_string(),
+                        format!(
+                            "expected {}{} between {} and {} (physical bounds), got {} (a unit mistake?)",
+                            s.quantity,
+                            s.range.describe(),
+                            s.unit.display(if s.range == Range::Positive { min_positive } else { -max }),
+                            s.unit.display(max),
+                            fmt_num(v)
+                        ),
                     );
                 }
             }
