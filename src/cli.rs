@@ -363,7 +363,7 @@ pub fn study(
     let cmd = estimator_cmd.map(|c| crate::byo::CommandEstimator { command: c.to_string() });
     let rows = run_study(&sc, &vary, trials, shard, cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator), tolerance)?;
     bar.finish_and_clear();
-    write_study(&rows, &format!("sensors.{}.{}", vary.sensor, vary.key.key()), out, Some(&sc))
+    write_study(&rows, &vary.label(), out, Some(&sc))
 }
 
 /// `vmt study merge OUT SHARD_DIRS…`: joins the trials of shards and writes the same outputs as one run.

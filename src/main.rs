@@ -57,13 +57,16 @@ enum Command {
         #[arg(long, default_value = "si")]
         units: String,
     },
-    /// Monte Carlo tolerance study over a sensor parameter (physics simulated once), or `study merge`.
+    /// Monte Carlo tolerance study over a sensor or scenario parameter, or `study merge`.
     Study {
         /// Scenario file, or `merge` to join shard outputs.
         scenario: PathBuf,
         /// With `merge`: the shard output directories.
         shards: Vec<PathBuf>,
-        /// The varied parameter, e.g. sensors.acc_z.noise_density=1e-7,3e-7,1e-6
+        /// The varied parameter and its values (SI): a sensor parameter, e.g.
+        /// sensors.acc_z.noise_density=1e-7,3e-7,1e-6 (physics simulated once), or any number the scenario
+        /// file gives, by its key path, e.g. truth.effects.backlash.value=2e-6,4e-6 or axis.servo.kp=30,50
+        /// (each value a new scenario, validated as the file would be, simulated once)
         #[arg(long)]
         vary: Option<String>,
         /// Monte Carlo trials per value (each redraws the sensor noise; at least 1).
@@ -226,7 +229,9 @@ fn main() -> ExitCode {
                         tolerance,
                         &out,
                     ),
-                    None => Err(vmt::error::VmtError::Usage("study needs --vary sensors.NAME.KEY=V1,V2,…".into())),
+                    None => Err(vmt::error::VmtError::Usage(
+                        "study needs --vary sensors.NAME.KEY=V1,V2,… or --vary SCENARIO.KEY.PATH=V1,V2,…".into(),
+                    )),
                 }
             }
         }

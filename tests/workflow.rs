@@ -376,3 +376,56 @@ fn score_never_extrapolates_the_truth_and_refuses_a_comparison_that_cannot_fail(
         );
     }
 }
+
+/// `vmt study --vary` over a number of the scenario file (issue 15: physical tolerance studies):
+/// each value is a new scenario with its own physics. Held to two references built independently:
+/// at the file's own value the rows equal a sensor study's (physics shared, same seeds), and at a new
+/// value they equal a sensor study of the scenario edited by hand — so the physics really was
+/// re-simulated with the value, and nothing else changed. Invalid values are refused by the
+/// scenario's own range checks.
+#[test]
+fn a_study_over_a_scenario_number_resimulates_the_physics_per_value() {
+    use vmt::scenario::Scenario;
+    use vmt::study::{run_study, set_scenario_number, Vary, VaryKey};
+    let tmp = tempfile::tempdir().unwrap();
+    let small = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
+    let text = std::fs::read_to_string(&small).unwrap();
+    let path = tmp.path().join("s.toml");
+    std::fs::write(&path, &text).unwrap();
+    let sc = Scenario::load(&path).unwrap();
+    // The positioning slope: 28 µm/m in the file, 112 µm/m as the new value.
+    let vary = Vary::parse("truth.effects.positioning.poly[1]=2.8e-5,1.12e-4").unwrap();
+    let rows = run_study(&sc, &vary, 2, (0, 1), None, None).unwrap();
+    let key =
+        |r: &vmt::study::TrialRow| (r.trial, r.estimate.clone(), r.difference.to_bits(), r.pass, r.bound.to_bits());
+    let pick = |rows: &[vmt::study::TrialRow], v: f64| {
+        let mut k: Vec<_> = rows.iter().filter(|r| r.value == v).map(key).collect();
+        k.sort();
+        k
+    };
+    // Reference 1: the file's value, physics shared (value index 0 in both studies).
+    let base = run_study(&sc, &Vary::parse("sensors.laser_x3.sigma=2e-8").unwrap(), 2, (0, 1), None, None).unwrap();
+    assert!(!pick(&rows, 2.8e-5).is_empty());
+    assert_eq!(pick(&rows, 2.8e-5), pick(&base, 2e-8));
+    // Reference 2: the file edited to the new value, physics shared (value index 1 in both).
+    let VaryKey::Scenario { parts, .. } = &vary.key else { panic!("a scenario key") };
+    let edited = tmp.path().join("edited.toml");
+    std::fs::write(&edited, set_scenario_number(&text, parts, 1.12e-4).unwrap()).unwrap();
+    let sc2 = Scenario::load(&edited).unwrap();
+    let base2 =
+        run_study(&sc2, &Vary::parse("sensors.laser_x3.sigma=1e-9,2e-8").unwrap(), 2, (0, 1), None, None).unwrap();
+    assert_eq!(pick(&rows, 1.12e-4), pick(&base2, 2e-8));
+    // …and not what the file's physics gives with the same seeds (value index 1): the physics changed.
+    let same_seeds =
+        run_study(&sc, &Vary::parse("sensors.laser_x3.sigma=1e-9,2e-8").unwrap(), 2, (0, 1), None, None).unwrap();
+    assert_ne!(pick(&rows, 1.12e-4), pick(&same_seeds, 2e-8));
+    // The scenario's own checks apply to a varied value; a key the file lacks is refused.
+    for (bad, why) in [
+        ("axis.servo.kp=50,-1", "axis.servo.kp"),
+        ("truth.effects.backlash.value=1e-6", "no key `truth.effects.backlash`"),
+        ("seed=1.5", "is an integer"),
+    ] {
+        let err = run_study(&sc, &Vary::parse(bad).unwrap(), 1, (0, 1), None, None).unwrap_err().to_string();
+        assert!(err.contains(why), "{bad}: {err}");
+    }
+}

@@ -1,13 +1,15 @@
-//! Workflow `study`: a Monte Carlo tolerance study over one sensor parameter (DESIGN.md §6, §9). The
-//! physics is simulated once; every trial redraws the sensor noise with its own seed (derived from the
-//! scenario seed, the value index and the trial number), so the results are the same on any number of
-//! threads and shards can be computed on different machines and merged.
+//! Workflow `study`: a Monte Carlo tolerance study over one parameter (DESIGN.md §6, §9): a sensor
+//! parameter (the physics is simulated once and shared) or any number of the scenario file (a truth
+//! effect's parameter, a servo gain, a feed: the physics is simulated once per value). Every trial
+//! redraws the sensor noise with its own seed (derived from the scenario seed, the value index and the
+//! trial number), so the results are the same on any number of threads and shards can be computed on
+//! different machines and merged.
 
 use crate::byo::{score_profiles, Estimator};
 use crate::error::VmtError;
 use crate::estimate::{estimate_recording, Quantity};
 use crate::scenario::Scenario;
-use crate::simulate::{physics, read_all, remeasure, simulate_truth, to_measurement_set};
+use crate::simulate::{physics, read_all, remeasure, simulate_truth, to_measurement_set, Physics};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
@@ -66,41 +68,135 @@ impl SensorParam {
     }
 }
 
-/// The varied parameter: `sensors.NAME.KEY` with KEY one of [`SensorParam`]'s keys, and its values.
+/// What a study varies.
+#[derive(Clone, Debug, PartialEq)]
+pub enum VaryKey {
+    /// `sensors.NAME.KEY` with KEY one of [`SensorParam`]'s keys: the physics is simulated once and
+    /// shared by every value; each trial redraws the sensor noise.
+    Sensor {
+        /// The sensor's name.
+        sensor: String,
+        /// Which of its parameters.
+        key: SensorParam,
+    },
+    /// Any number the scenario file gives, by its TOML key path (`truth.effects.backlash.value`,
+    /// `axis.servo.kp`, `truth.effects.pitch.poly[1]`, `procedures[1].feed`): each value is a new
+    /// scenario, parsed and validated as the file would be (its range checks included), with its own
+    /// physics; the trials of a value share it and redraw the sensor noise.
+    Scenario {
+        /// The path, as written.
+        path: String,
+        /// Its parts: a key and an optional array index each.
+        parts: Vec<(String, Option<usize>)>,
+    },
+}
+
+/// The varied parameter and its values.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Vary {
-    /// The sensor's name.
-    pub sensor: String,
-    /// Which of its parameters.
-    pub key: SensorParam,
-    /// The values, in the parameter's unit.
+    /// What is varied.
+    pub key: VaryKey,
+    /// The values, in the parameter's SI unit.
     pub values: Vec<f64>,
 }
 
+/// Most values of a parameter that changes the physics (each is simulated and held in memory).
+pub const MAX_PHYSICS_VALUES: usize = 256;
+
 impl Vary {
-    /// Parses `sensors.acc_z.noise_density=1e-7,2e-7`.
+    /// Parses `sensors.acc_z.noise_density=1e-7,2e-7` or `truth.effects.backlash.value=2e-6,4e-6`.
     pub fn parse(s: &str) -> Result<Vary, VmtError> {
-        let usage = |m: &str| VmtError::Usage(format!("--vary {s}: {m} (expected sensors.NAME.KEY=V1,V2,…)"));
+        let usage = |m: &str| {
+            VmtError::Usage(format!(
+                "--vary {s}: {m} (expected sensors.NAME.KEY=V1,V2,… or a scenario key path such as \
+                 truth.effects.backlash.value=V1,V2,…)"
+            ))
+        };
         let (path, vals) = s.split_once('=').ok_or_else(|| usage("no `=`"))?;
         let parts: Vec<&str> = path.split('.').collect();
-        let [root, sensor, key] = parts.as_slice() else { return Err(usage("expected three dot-separated parts")) };
-        if *root != "sensors" {
-            return Err(usage("only sensor parameters can be varied without new physics"));
-        }
-        let key = SensorParam::ALL
-            .into_iter()
-            .find(|p| p.key() == *key)
-            .ok_or_else(|| usage(&format!("unknown sensor key `{key}`")))?;
         let values = vals
             .split(',')
-            .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0))
+            .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
             .collect::<Option<Vec<f64>>>()
-            .ok_or_else(|| usage("values must be finite numbers ≥ 0"))?;
+            .ok_or_else(|| usage("values must be finite numbers"))?;
         if values.is_empty() {
             return Err(usage("no values"));
         }
-        Ok(Vary { sensor: sensor.to_string(), key, values })
+        let key = if parts.first() == Some(&"sensors") {
+            let [_, sensor, key] = parts.as_slice() else { return Err(usage("expected sensors.NAME.KEY")) };
+            let key = SensorParam::ALL
+                .into_iter()
+                .find(|p| p.key() == *key)
+                .ok_or_else(|| usage(&format!("unknown sensor key `{key}`")))?;
+            if values.iter().any(|v| *v < 0.0) {
+                return Err(usage("sensor parameter values must be ≥ 0"));
+            }
+            VaryKey::Sensor { sensor: sensor.to_string(), key }
+        } else {
+            if values.len() > MAX_PHYSICS_VALUES {
+                return Err(usage(&format!(
+                    "{} values of a parameter that changes the physics; the limit is {MAX_PHYSICS_VALUES}",
+                    values.len()
+                )));
+            }
+            let parts = parts
+                .iter()
+                .map(|p| match p.split_once('[') {
+                    None if !p.is_empty() => Ok((p.to_string(), None)),
+                    Some((k, i)) if !k.is_empty() => i
+                        .strip_suffix(']')
+                        .and_then(|i| i.parse::<usize>().ok())
+                        .map(|i| (k.to_string(), Some(i)))
+                        .ok_or_else(|| usage(&format!("`{p}`: expected KEY or KEY[INDEX]"))),
+                    _ => Err(usage(&format!("`{p}`: expected KEY or KEY[INDEX]"))),
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            VaryKey::Scenario { path: path.to_string(), parts }
+        };
+        Ok(Vary { key, values })
     }
+
+    /// The varied parameter as written (`sensors.acc_z.noise_density`, `axis.servo.kp`).
+    pub fn label(&self) -> String {
+        match &self.key {
+            VaryKey::Sensor { sensor, key } => format!("sensors.{sensor}.{}", key.key()),
+            VaryKey::Scenario { path, .. } => path.clone(),
+        }
+    }
+}
+
+/// The scenario text with the number at `parts` replaced by `v`. The key must be in the file (a new
+/// key would be ignored where the format accepts unknown keys, so a typo would pass silently); an
+/// integer key takes only integral values.
+pub fn set_scenario_number(text: &str, parts: &[(String, Option<usize>)], v: f64) -> Result<String, String> {
+    let mut root: toml::Table = toml::from_str(text).map_err(|e| e.message().to_string())?;
+    let mut node: &mut toml::Value =
+        root.get_mut(&parts[0].0).ok_or_else(|| format!("no key `{}` in the scenario", parts[0].0))?;
+    let mut walked = parts[0].0.clone();
+    for (i, (key, index)) in parts.iter().enumerate() {
+        if i > 0 {
+            walked += &format!(".{key}");
+            node = node.as_table_mut().and_then(|t| t.get_mut(key)).ok_or_else(|| {
+                format!(
+                    "no key `{walked}` in the scenario (--vary changes a number the file gives; add it there first)"
+                )
+            })?;
+        }
+        if let Some(j) = index {
+            walked += &format!("[{j}]");
+            node = node
+                .as_array_mut()
+                .and_then(|a| a.get_mut(*j))
+                .ok_or_else(|| format!("no item `{walked}` in the scenario"))?;
+        }
+    }
+    *node = match node {
+        toml::Value::Float(_) => toml::Value::Float(v),
+        toml::Value::Integer(_) if v.fract() == 0.0 && v.abs() < 9.0e15 => toml::Value::Integer(v as i64),
+        toml::Value::Integer(_) => return Err(format!("`{walked}` is an integer; got {v}")),
+        other => return Err(format!("`{walked}` is {}, not a number", crate::error::describe_value(other))),
+    };
+    toml::to_string(&root).map_err(|e| e.to_string())
 }
 
 /// One trial's result for one estimate.
@@ -155,33 +251,72 @@ pub fn run_study(
             vary.values.len()
         )));
     }
-    let ph = physics(sc)?;
-    let truth_table = crate::simulate::truth_profiles(sc, &ph)?;
-    if !ph.sensors.iter().any(|s| s.name == vary.sensor) {
-        return Err(VmtError::Usage(format!("--vary: no sensor `{}` in the scenario", vary.sensor)));
-    }
-    let truths = simulate_truth(sc, &ph);
+    // The scenario and physics of each value: one shared for a sensor parameter, one per value for
+    // a scenario key (simulated in parallel; each value's trials then share it).
+    let scenarios: Vec<Scenario> = match &vary.key {
+        VaryKey::Sensor { sensor, .. } => {
+            if !sc.sensors.iter().any(|s| &s.name == sensor) {
+                return Err(VmtError::Usage(format!("--vary: no sensor `{sensor}` in the scenario")));
+            }
+            vec![sc.clone()]
+        }
+        VaryKey::Scenario { path, parts } => {
+            let text = std::fs::read_to_string(&sc.source)
+                .map_err(|e| VmtError::io(&sc.source, "reading the scenario to vary it", e))?;
+            vary.values
+                .iter()
+                .map(|&v| {
+                    let at = |m: String| VmtError::Usage(format!("--vary {path}={v}: {m}"));
+                    let t = set_scenario_number(&text, parts, v).map_err(at)?;
+                    Scenario::parse(&t, &sc.source, sc.source.parent()).map_err(|e| at(e.to_string()))
+                })
+                .collect::<Result<_, _>>()?
+        }
+    };
+    let sessions: Vec<(Physics, crate::simulate::SessionTruth, crate::measurement::ProfileTable)> = scenarios
+        .par_iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let session = || -> Result<_, VmtError> {
+                let ph = physics(s)?;
+                let table = crate::simulate::truth_profiles(s, &ph)?;
+                let truths = simulate_truth(s, &ph);
+                Ok((ph, truths, table))
+            };
+            session().map_err(|e| match &vary.key {
+                VaryKey::Sensor { .. } => e,
+                VaryKey::Scenario { path, .. } => VmtError::Usage(format!(
+                    "--vary {path}={}: the scenario with this value cannot be simulated: {e}",
+                    vary.values[i]
+                )),
+            })
+        })
+        .collect::<Result<_, VmtError>>()?;
+    let of_value = |i: usize| i.min(scenarios.len() - 1);
     let jobs: Vec<(usize, usize)> = (0..vary.values.len())
         .flat_map(|i| (0..trials).filter(|k| k % shard.1 == shard.0).map(move |k| (i, k)))
         .collect();
     let rows: Result<Vec<Vec<TrialRow>>, VmtError> = jobs
         .par_iter()
         .map(|&(i, k)| {
+            let (sc, (ph, truths, truth_table)) = (&scenarios[of_value(i)], &sessions[of_value(i)]);
             let mut p = ph.clone();
             let v = vary.values[i];
-            for s in p.sensors.iter_mut().filter(|s| s.name == vary.sensor) {
-                *s = s.resolved();
-                vary.key.set(s, v);
-                s.preset = None;
+            if let VaryKey::Sensor { sensor, key } = &vary.key {
+                for s in p.sensors.iter_mut().filter(|s| &s.name == sensor) {
+                    *s = s.resolved();
+                    key.set(s, v);
+                    s.preset = None;
+                }
             }
             let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/{i}/{k}"));
-            let runs = read_all(sc, &p, &truths, seed)?;
+            let runs = read_all(sc, &p, truths, seed)?;
             let set = to_measurement_set(sc, &runs)?;
             if let Some(e) = estimator {
                 let work = std::env::temp_dir().join(format!("vmt-study-{}-{i}-{k}", std::process::id()));
                 let table = e.estimate(&set, &work);
                 let _ = std::fs::remove_dir_all(&work);
-                let rows = score_profiles(&truth_table, &table?).map_err(|e| {
+                let rows = score_profiles(truth_table, &table?).map_err(|e| {
                     VmtError::Usage(format!("--estimator-cmd: its profile CSV cannot be scored against the truth: {e}"))
                 })?;
                 return Ok(rows
