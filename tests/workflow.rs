@@ -429,3 +429,90 @@ fn a_study_over_a_scenario_number_resimulates_the_physics_per_value() {
         assert!(err.contains(why), "{bad}: {err}");
     }
 }
+
+/// The first-order Sobol index of sampled studies (`vmt::study::first_order_index`, given-data
+/// estimator) on an independent model with a known answer: y = x₁ + c·x₂ + ε, x₁, x₂ ~ U(0, 1),
+/// ε ~ N(0, s²), so S1(x₁) = (1/12) / ((1 + c²)/12 + s²) and S1(x₂) = (c²/12) / (same). Over 200
+/// draws of 400 trials with random c ∈ [0, 2] and s ∈ [0, 0.5], the mean error of each index is
+/// below 0.02 (the estimator's bias at M = 20 bins is O(1/M²) ≈ 0.003 after its noise correction)
+/// and the RMS error below 0.06 (the sampling scatter of a variance ratio from 400 points).
+#[test]
+fn first_order_sobol_indices_match_an_analytic_model() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(77);
+    let (mut bias, mut sq) = ([0.0f64; 2], [0.0f64; 2]);
+    let draws = 200;
+    for _ in 0..draws {
+        let c: f64 = rng.gen_range(0.0..2.0);
+        let s: f64 = rng.gen_range(0.0..0.5);
+        let n = 400;
+        let x1: Vec<f64> = (0..n).map(|_| rng.gen::<f64>()).collect();
+        let x2: Vec<f64> = (0..n).map(|_| rng.gen::<f64>()).collect();
+        let y: Vec<f64> = (0..n)
+            .map(|i| {
+                x1[i] + c * x2[i] + s * rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, &mut rng)
+            })
+            .collect();
+        let total = (1.0 + c * c) / 12.0 + s * s;
+        for (j, (x, truth)) in [(&x1, 1.0 / 12.0 / total), (&x2, c * c / 12.0 / total)].into_iter().enumerate() {
+            let e = vmt::study::first_order_index(x, &y) - truth;
+            bias[j] += e / draws as f64;
+            sq[j] += e * e / draws as f64;
+        }
+    }
+    for j in 0..2 {
+        println!("S1(x{}): mean error {:+.4}, RMS error {:.4} over {draws} draws", j + 1, bias[j], sq[j].sqrt());
+        assert!(bias[j].abs() < 0.02 && sq[j].sqrt() < 0.06, "x{}: bias {} rms {}", j + 1, bias[j], sq[j].sqrt());
+    }
+}
+
+/// A sampled study (`--sample`, issue 15) gives the same trials.csv whether run whole or as two shards
+/// merged (per-trial counter-based draws), writes the drawn values per trial within their distribution,
+/// and a sensitivity.csv with one S1 per estimate and parameter.
+#[test]
+fn a_sampled_study_is_the_same_in_shards_and_draws_within_its_distribution() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sc = tmp.path().join("s.toml");
+    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml"), &sc).unwrap();
+    let study = |extra: &[&str], out: &str| {
+        let o = vmt()
+            .arg("study")
+            .arg(&sc)
+            .args(["--sample", "truth.effects.positioning.poly[1]=uniform(1e-5,5e-5)", "--sample"])
+            .arg("truth.effects.pitch.poly[1]=loguniform(1e-6,1e-4)")
+            .args(["--trials", "6"])
+            .args(extra)
+            .arg("-o")
+            .arg(tmp.path().join(out))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    study(&[], "whole");
+    study(&["--shard", "0/2"], "a");
+    study(&["--shard", "1/2"], "b");
+    let m = vmt()
+        .args(["study", "merge"])
+        .arg(tmp.path().join("a"))
+        .arg(tmp.path().join("b"))
+        .arg("-o")
+        .arg(tmp.path().join("merged"))
+        .output()
+        .unwrap();
+    assert_eq!(m.status.code(), Some(0), "{}", String::from_utf8_lossy(&m.stderr));
+    let read = |d: &str, f: &str| std::fs::read_to_string(tmp.path().join(d).join(f)).unwrap();
+    assert_eq!(read("whole", "trials.csv"), read("merged", "trials.csv"));
+    assert_eq!(read("whole", "sensitivity.csv"), read("merged", "sensitivity.csv"));
+    let trials = read("whole", "trials.csv");
+    let mut rdr = csv::Reader::from_reader(trials.as_bytes());
+    let mut seen = std::collections::BTreeSet::new();
+    for rec in rdr.records() {
+        let rec = rec.unwrap();
+        let (a, b): (f64, f64) = (rec[7].parse().unwrap(), rec[8].parse().unwrap());
+        assert!((1e-5..5e-5).contains(&a) && (1e-6..1e-4).contains(&b), "{rec:?}");
+        seen.insert(rec[1].to_string());
+    }
+    assert_eq!(seen.len(), 6, "every trial present");
+    let sens = read("whole", "sensitivity.csv");
+    assert!(sens.starts_with("estimate,parameter,S1,S1_conf,trials\n") && sens.lines().count() > 2, "{sens}");
+}

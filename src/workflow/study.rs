@@ -139,19 +139,7 @@ impl Vary {
                     values.len()
                 )));
             }
-            let parts = parts
-                .iter()
-                .map(|p| match p.split_once('[') {
-                    None if !p.is_empty() => Ok((p.to_string(), None)),
-                    Some((k, i)) if !k.is_empty() => i
-                        .strip_suffix(']')
-                        .and_then(|i| i.parse::<usize>().ok())
-                        .map(|i| (k.to_string(), Some(i)))
-                        .ok_or_else(|| usage(&format!("`{p}`: expected KEY or KEY[INDEX]"))),
-                    _ => Err(usage(&format!("`{p}`: expected KEY or KEY[INDEX]"))),
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            VaryKey::Scenario { path: path.to_string(), parts }
+            VaryKey::Scenario { path: path.to_string(), parts: parse_key_path(path).map_err(|m| usage(&m))? }
         };
         Ok(Vary { key, values })
     }
@@ -163,6 +151,244 @@ impl Vary {
             VaryKey::Scenario { path, .. } => path.clone(),
         }
     }
+}
+
+/// A scenario key path `a.b[2].c` as (key, optional array index) parts.
+fn parse_key_path(path: &str) -> Result<Vec<(String, Option<usize>)>, String> {
+    path.split('.')
+        .map(|p| match p.split_once('[') {
+            None if !p.is_empty() => Ok((p.to_string(), None)),
+            Some((k, i)) if !k.is_empty() => i
+                .strip_suffix(']')
+                .and_then(|i| i.parse::<usize>().ok())
+                .map(|i| (k.to_string(), Some(i)))
+                .ok_or_else(|| format!("`{p}`: expected KEY or KEY[INDEX]")),
+            _ => Err(format!("`{p}`: expected KEY or KEY[INDEX]")),
+        })
+        .collect()
+}
+
+/// A distribution a physical parameter is drawn from once per trial (`--sample KEY=DIST`), SI.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Distribution {
+    /// `uniform(lo,hi)`: every value in [lo, hi) equally likely.
+    Uniform {
+        /// Lower end.
+        lo: f64,
+        /// Upper end.
+        hi: f64,
+    },
+    /// `normal(mean,sd)`: Gaussian.
+    Normal {
+        /// Mean.
+        mean: f64,
+        /// Standard deviation.
+        sd: f64,
+    },
+    /// `loguniform(lo,hi)`: ln x uniform on [ln lo, ln hi) (0 < lo < hi), for a parameter known
+    /// to an order of magnitude.
+    LogUniform {
+        /// Lower end (> 0).
+        lo: f64,
+        /// Upper end.
+        hi: f64,
+    },
+}
+
+impl Distribution {
+    /// Parses `uniform(2e-6,8e-6)`, `normal(5e-6,1e-6)` or `loguniform(1e-7,1e-5)`.
+    pub fn parse(s: &str) -> Result<Distribution, String> {
+        let expected = "expected uniform(LO,HI), normal(MEAN,SD) or loguniform(LO,HI) with finite numbers";
+        let (name, rest) = s.split_once('(').ok_or(expected)?;
+        let args: Vec<f64> = rest
+            .strip_suffix(')')
+            .ok_or(expected)?
+            .split(',')
+            .map(|a| a.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
+            .collect::<Option<_>>()
+            .ok_or(expected)?;
+        let [a, b] = args[..] else { return Err(expected.into()) };
+        match name.trim() {
+            "uniform" if a < b => Ok(Distribution::Uniform { lo: a, hi: b }),
+            "normal" if b > 0.0 => Ok(Distribution::Normal { mean: a, sd: b }),
+            "loguniform" if 0.0 < a && a < b => Ok(Distribution::LogUniform { lo: a, hi: b }),
+            "uniform" => Err(format!("uniform({a},{b}): expected LO < HI")),
+            "normal" => Err(format!("normal({a},{b}): expected SD > 0")),
+            "loguniform" => Err(format!("loguniform({a},{b}): expected 0 < LO < HI")),
+            _ => Err(expected.into()),
+        }
+    }
+
+    /// One draw.
+    pub fn draw(self, rng: &mut impl rand::Rng) -> f64 {
+        match self {
+            Distribution::Uniform { lo, hi } => rng.gen_range(lo..hi),
+            Distribution::Normal { mean, sd } => {
+                mean + sd * rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
+            }
+            Distribution::LogUniform { lo, hi } => rng.gen_range(lo.ln()..hi.ln()).exp(),
+        }
+    }
+}
+
+/// A parameter of the scenario file drawn per trial: `--sample KEY.PATH=DIST`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sample {
+    /// The key path, as written.
+    pub path: String,
+    /// Its parts ([`set_scenario_number`]).
+    pub parts: Vec<(String, Option<usize>)>,
+    /// Its distribution.
+    pub dist: Distribution,
+}
+
+impl Sample {
+    /// Parses `truth.effects.backlash.value=uniform(2e-6,8e-6)`.
+    pub fn parse(s: &str) -> Result<Sample, VmtError> {
+        let usage = |m: &str| {
+            VmtError::Usage(format!(
+                "--sample {s}: {m} (expected KEY.PATH=uniform(LO,HI), normal(MEAN,SD) or loguniform(LO,HI))"
+            ))
+        };
+        let (path, dist) = s.split_once('=').ok_or_else(|| usage("no `=`"))?;
+        if path.starts_with("sensors.") {
+            return Err(usage("sensor parameters are studied with --vary (their physics is shared)"));
+        }
+        Ok(Sample {
+            path: path.to_string(),
+            parts: parse_key_path(path).map_err(|m| usage(&m))?,
+            dist: Distribution::parse(dist).map_err(|m| usage(&m))?,
+        })
+    }
+}
+
+/// Runs a sampled study: trials `k` with k % shard.1 == shard.0; each trial draws every sampled
+/// parameter (its own counter-based random stream `sample/k` from the scenario seed, so a trial's
+/// values do not depend on the shard count or threads), simulates that scenario's physics and runs
+/// the estimators as [`run_study`] does. Rows carry `value` 0 (one group: all trials) and the drawn
+/// values in `sampled`.
+pub fn run_sampled_study(
+    sc: &Scenario,
+    samples: &[Sample],
+    trials: usize,
+    shard: (usize, usize),
+    estimator: Option<&dyn Estimator>,
+    tolerance: Option<f64>,
+) -> Result<Vec<TrialRow>, VmtError> {
+    if trials == 0 || samples.is_empty() {
+        return Err(VmtError::Usage("--sample: expected at least one parameter and 1 trial".into()));
+    }
+    if trials / shard.1 > MAX_TRIALS {
+        return Err(VmtError::Usage(format!(
+            "{trials} trials in this shard; the limit is {MAX_TRIALS} (split with --shard i/n)"
+        )));
+    }
+    let text = std::fs::read_to_string(&sc.source)
+        .map_err(|e| VmtError::io(&sc.source, "reading the scenario to sample it", e))?;
+    let jobs: Vec<usize> = (0..trials).filter(|k| k % shard.1 == shard.0).collect();
+    let rows: Result<Vec<Vec<TrialRow>>, VmtError> = jobs
+        .par_iter()
+        .map(|&k| {
+            let mut rng = vmt_sim::rng::source_rng(sc.seed, &format!("sample/{k}"));
+            let values: Vec<f64> = samples.iter().map(|s| s.dist.draw(&mut rng)).collect();
+            let drawn = || {
+                samples.iter().zip(&values).map(|(s, v)| format!("{} = {v}", s.path)).collect::<Vec<_>>().join(", ")
+            };
+            let at = |m: String| {
+                VmtError::Usage(format!(
+                    "--sample: trial {k} drew {}, which the scenario refuses: {m} (narrow the distribution to values the parameter can take)",
+                    drawn()
+                ))
+            };
+            let mut t = text.clone();
+            for (s, v) in samples.iter().zip(&values) {
+                t = set_scenario_number(&t, &s.parts, *v).map_err(at)?;
+            }
+            let scenario = Scenario::parse(&t, &sc.source, sc.source.parent()).map_err(|e| at(e.to_string()))?;
+            let ph = physics(&scenario).map_err(|e| at(e.to_string()))?;
+            let truth_table = crate::simulate::truth_profiles(&scenario, &ph).map_err(|e| at(e.to_string()))?;
+            let truths = simulate_truth(&scenario, &ph);
+            let session = Session { sc: &scenario, ph: &ph, truths: &truths, truth_table: &truth_table };
+            let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/0/{k}"));
+            let mut rows = trial_rows(&session, seed, (0.0, k), estimator, tolerance)?;
+            rows.iter_mut().for_each(|r| r.sampled = values.clone());
+            Ok(rows)
+        })
+        .collect();
+    Ok(rows?.into_iter().flatten().collect())
+}
+
+/// First-order sensitivity of one estimate to one sampled parameter.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SensitivityRow {
+    /// The estimate (run-table row).
+    pub estimate: String,
+    /// The sampled parameter's key path.
+    pub parameter: String,
+    /// First-order Sobol index S1 = Var(E[d | x]) / Var(d) of the estimate's difference d.
+    pub s1: f64,
+    /// Half-width of its 95 % bootstrap interval (SALib's `S1_conf`).
+    pub s1_conf: f64,
+    /// Trials it is computed from.
+    pub trials: usize,
+}
+
+/// First-order Sobol index from given data (no extra model runs): the trials sorted by x and cut
+/// into M = ⌊√n⌋ bins of equal count, S1 = (Var_b(ȳ_b) − mean_b(s_b²/n_b)) / Var(y), the variance of
+/// the bin means corrected for the scatter each mean carries (Plischke, Borgonovo & Smith 2013, Eur.
+/// J. Oper. Res. 226:536, the "given data" estimator). 0 when y does not vary.
+pub fn first_order_index(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len().min(y.len());
+    let mut idx: Vec<usize> = (0..n).collect();
+    idx.sort_by(|a, b| x[*a].total_cmp(&x[*b]).then(a.cmp(b)));
+    let mean = y[..n].iter().sum::<f64>() / n as f64;
+    let var = y[..n].iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
+    let m = ((n as f64).sqrt().floor() as usize).max(1);
+    if n < 4 || var <= 0.0 {
+        return 0.0;
+    }
+    let (mut between, mut noise) = (0.0, 0.0);
+    for b in 0..m {
+        let bin: Vec<f64> = idx[b * n / m..(b + 1) * n / m].iter().map(|&i| y[i]).collect();
+        let nb = bin.len() as f64;
+        let mb = bin.iter().sum::<f64>() / nb;
+        let sb = if nb > 1.0 { bin.iter().map(|v| (v - mb).powi(2)).sum::<f64>() / (nb - 1.0) } else { 0.0 };
+        between += nb / n as f64 * (mb - mean).powi(2);
+        noise += nb / n as f64 * sb / nb;
+    }
+    ((between - noise) / var).clamp(0.0, 1.0)
+}
+
+/// First-order indices of every estimate's difference to every sampled parameter, with 95 %
+/// bootstrap half-widths (200 resamples of the trials, a fixed stream: deterministic).
+pub fn sensitivity(rows: &[TrialRow], names: &[String]) -> Vec<SensitivityRow> {
+    use rand::Rng;
+    let mut estimates: Vec<&str> = rows.iter().map(|r| r.estimate.as_str()).collect();
+    estimates.sort_unstable();
+    estimates.dedup();
+    let mut out = Vec::new();
+    for e in estimates {
+        let mut of: Vec<&TrialRow> = rows.iter().filter(|r| r.estimate == e && r.difference.is_finite()).collect();
+        of.sort_by_key(|r| r.trial);
+        let y: Vec<f64> = of.iter().map(|r| r.difference).collect();
+        for (j, name) in names.iter().enumerate() {
+            let x: Vec<f64> = of.iter().map(|r| r.sampled.get(j).copied().unwrap_or(f64::NAN)).collect();
+            let s1 = first_order_index(&x, &y);
+            let mut rng = vmt_sim::rng::source_rng(0, &format!("sensitivity/{e}/{name}"));
+            let mut boot: Vec<f64> = (0..200)
+                .map(|_| {
+                    let pick: Vec<usize> = (0..y.len()).map(|_| rng.gen_range(0..y.len().max(1))).collect();
+                    let xb: Vec<f64> = pick.iter().map(|&i| x[i]).collect();
+                    let yb: Vec<f64> = pick.iter().map(|&i| y[i]).collect();
+                    first_order_index(&xb, &yb)
+                })
+                .collect();
+            boot.sort_by(f64::total_cmp);
+            let s1_conf = if y.len() >= 4 { 0.5 * (boot[194] - boot[4]) } else { f64::NAN };
+            out.push(SensitivityRow { estimate: e.to_string(), parameter: name.clone(), s1, s1_conf, trials: y.len() });
+        }
+    }
+    out
 }
 
 /// The scenario text with the number at `parts` replaced by `v`. The key must be in the file (a new
@@ -213,6 +439,9 @@ pub struct TrialRow {
     pub bound: f64,
     /// What the difference measures (its SI unit: m, rad or none); the `quantity` column of trials.csv.
     pub quantity: Quantity,
+    /// A sampled study's parameter values of this trial, in the order of its `--sample` keys (SI);
+    /// empty otherwise. The trailing columns of trials.csv, named by their key paths.
+    pub sampled: Vec<f64>,
 }
 
 /// The quantity of an error motion named as in a profile CSV (`pitch`, `y.straightness_z`): lengths for
@@ -310,57 +539,87 @@ pub fn run_study(
                 }
             }
             let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/{i}/{k}"));
-            let runs = read_all(sc, &p, truths, seed)?;
-            let set = to_measurement_set(sc, &runs)?;
-            if let Some(e) = estimator {
-                let work = std::env::temp_dir().join(format!("vmt-study-{}-{i}-{k}", std::process::id()));
-                let table = e.estimate(&set, &work);
-                let _ = std::fs::remove_dir_all(&work);
-                let rows = score_profiles(truth_table, &table?).map_err(|e| {
-                    VmtError::Usage(format!("--estimator-cmd: its profile CSV cannot be scored against the truth: {e}"))
-                })?;
-                return Ok(rows
-                    .into_iter()
-                    .map(|r| TrialRow {
-                        value: v,
-                        trial: k,
-                        estimate: format!("{} RMS", r.effect),
-                        difference: r.rms,
-                        pass: tolerance.map(|t| r.rms <= t),
-                        bound: f64::NAN,
-                        quantity: motion_quantity(&r.effect),
-                    })
-                    .collect());
-            }
-            // The compensation check re-measures on this trial's sensors, after the session simulated once.
-            let again = |q: &_, x: &[f64], y: &[f64]| remeasure(&p, sc.seed, truths.end, q, x, y);
-            let est = estimate_recording(sc, p.view(), &runs, &set, &again)?;
-            Ok(est
-                .checks
-                .into_iter()
-                .map(|c| TrialRow {
-                    value: v,
-                    trial: k,
-                    estimate: c.error,
-                    difference: c.difference,
-                    pass: Some(c.pass),
-                    bound: c.bound.unwrap_or(f64::NAN),
-                    quantity: c.quantity,
-                })
-                .collect())
+            trial_rows(&Session { sc, ph: &p, truths, truth_table }, seed, (v, k), estimator, tolerance)
         })
         .collect();
     Ok(rows?.into_iter().flatten().collect())
 }
 
-/// CSV of trial rows (value, trial, estimate, difference, pass), sorted so shards merge to the same file.
-pub fn rows_csv(rows: &[TrialRow]) -> String {
+/// One value's session: the scenario, its physics with the trial's sensors, the simulated truth of
+/// every run and the truth profiles.
+struct Session<'a> {
+    sc: &'a Scenario,
+    ph: &'a Physics,
+    truths: &'a crate::simulate::SessionTruth,
+    truth_table: &'a crate::measurement::ProfileTable,
+}
+
+/// The rows of one trial: the session read by its sensors with the trial's `seed`, then the
+/// scenario's estimators (or `estimator`, scored against the truth). `(v, k)`: the row's value and
+/// trial number.
+fn trial_rows(
+    session: &Session,
+    seed: u64,
+    (v, k): (f64, usize),
+    estimator: Option<&dyn Estimator>,
+    tolerance: Option<f64>,
+) -> Result<Vec<TrialRow>, VmtError> {
+    let Session { sc, ph: p, truths, truth_table } = *session;
+    let runs = read_all(sc, p, truths, seed)?;
+    let set = to_measurement_set(sc, &runs)?;
+    if let Some(e) = estimator {
+        let work = std::env::temp_dir().join(format!("vmt-study-{}-{seed:x}", std::process::id()));
+        let table = e.estimate(&set, &work);
+        let _ = std::fs::remove_dir_all(&work);
+        let rows = score_profiles(truth_table, &table?).map_err(|e| {
+            VmtError::Usage(format!("--estimator-cmd: its profile CSV cannot be scored against the truth: {e}"))
+        })?;
+        return Ok(rows
+            .into_iter()
+            .map(|r| TrialRow {
+                value: v,
+                trial: k,
+                estimate: format!("{} RMS", r.effect),
+                difference: r.rms,
+                pass: tolerance.map(|t| r.rms <= t),
+                bound: f64::NAN,
+                quantity: motion_quantity(&r.effect),
+                sampled: Vec::new(),
+            })
+            .collect());
+    }
+    // The compensation check re-measures on this trial's sensors, after the session simulated once.
+    let again = |q: &_, x: &[f64], y: &[f64]| remeasure(p, sc.seed, truths.end, q, x, y);
+    let est = estimate_recording(sc, p.view(), &runs, &set, &again)?;
+    Ok(est
+        .checks
+        .into_iter()
+        .map(|c| TrialRow {
+            value: v,
+            trial: k,
+            estimate: c.error,
+            difference: c.difference,
+            pass: Some(c.pass),
+            bound: c.bound.unwrap_or(f64::NAN),
+            quantity: c.quantity,
+            sampled: Vec::new(),
+        })
+        .collect())
+}
+
+/// CSV of trial rows (value, trial, estimate, difference, pass, bound, quantity, then one column per
+/// sampled parameter named by its key path), sorted so shards merge to the same file.
+pub fn rows_csv(rows: &[TrialRow], sampled: &[String]) -> String {
     let mut rows = rows.to_vec();
     rows.sort_by(|a, b| a.value.total_cmp(&b.value).then(a.trial.cmp(&b.trial)).then(a.estimate.cmp(&b.estimate)));
-    let mut s = String::from("value,trial,estimate,difference,pass,bound,quantity\n");
+    let mut s = String::from("value,trial,estimate,difference,pass,bound,quantity");
+    for name in sampled {
+        s += &format!(",\"{}\"", name.replace('"', "'"));
+    }
+    s.push('\n');
     for r in rows {
         s += &format!(
-            "{},{},\"{}\",{},{},{},{}\n",
+            "{},{},\"{}\",{},{},{},{}",
             r.value,
             r.trial,
             r.estimate.replace('"', "'"),
@@ -369,14 +628,25 @@ pub fn rows_csv(rows: &[TrialRow]) -> String {
             r.bound,
             quantity_id(r.quantity)
         );
+        for v in &r.sampled {
+            s += &format!(",{v}");
+        }
+        s.push('\n');
     }
     s
 }
 
-/// Reads a CSV written by `rows_csv`.
-pub fn read_rows(path: &Path) -> Result<Vec<TrialRow>, VmtError> {
+/// Reads a CSV written by `rows_csv`: its rows and the names of its sampled-parameter columns.
+pub fn read_rows(path: &Path) -> Result<(Vec<TrialRow>, Vec<String>), VmtError> {
     let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading", e))?;
     let mut rdr = csv::ReaderBuilder::new().from_reader(text.as_bytes());
+    let sampled: Vec<String> = rdr
+        .headers()
+        .map_err(|e| VmtError::bad(path, "line 1 (header)", e.to_string()))?
+        .iter()
+        .skip(7)
+        .map(str::to_string)
+        .collect();
     let mut out = Vec::new();
     for (i, rec) in rdr.records().enumerate() {
         let rec = rec.map_err(|e| VmtError::bad(path, format!("line {}", i + 2), e.to_string()))?;
@@ -425,9 +695,10 @@ pub fn read_rows(path: &Path) -> Result<Vec<TrialRow>, VmtError> {
                     ))
                 }
             },
+            sampled: (7..7 + sampled.len()).map(&num).collect::<Result<_, _>>()?,
         });
     }
-    Ok(out)
+    Ok((out, sampled))
 }
 
 /// Summary per (value, estimate): trials, mean |difference|, 95th percentile of |difference|, pass rate.
