@@ -168,6 +168,30 @@ fn scenario_cases() -> Vec<Case> {
         ("tolerance negative", vec![("estimators[0].tolerance", Some(num(-1e-6)))], "estimators[0]"),
         ("tolerance nan", vec![("estimators[0].tolerance", Some(num(f64::NAN)))], "estimators[0]"),
         ("tolerance inf", vec![("estimators[0].tolerance", Some(num(f64::INFINITY)))], "estimators[0]"),
+        // Truth profiles: finite but beyond any machine, or too large to evaluate every step (issue 14:
+        // a 200 000-term polynomial hung; 1e300 coefficients surfaced as NaN blamed on the output).
+        (
+            "poly 200 000 terms",
+            vec![("truth.effects.positioning.poly", Some(arr(&vec![1e-9; 200_000])))],
+            "truth.effects.positioning.poly",
+        ),
+        ("poly 1e300", vec![("truth.effects.positioning.poly", Some(arr(&[0.0, 1e300])))], "truth.effects.positioning"),
+        (
+            "poly 1 m/m slope",
+            vec![("truth.effects.positioning.poly", Some(arr(&[0.0, 2.0])))],
+            "truth.effects.positioning",
+        ),
+        ("pitch 1 rad", vec![("truth.effects.pitch.poly", Some(arr(&[0.5])))], "truth.effects.pitch"),
+        (
+            "wavelength 1e-300",
+            vec![("truth.effects.straightness_y.harmonics[0].wavelength", Some(num(1e-300)))],
+            "truth.effects.straightness_y.harmonics[0].wavelength",
+        ),
+        (
+            "amplitude 1e300",
+            vec![("truth.effects.straightness_y.harmonics[0].amplitude", Some(num(1e300)))],
+            "truth.effects.straightness_y.harmonics[0].amplitude",
+        ),
     ] {
         cases.push(scenario_case(label, &edits, place));
     }

@@ -966,8 +966,9 @@ impl Effect {
         // Beyond the scalars checked above from `param_specs` (every effect's, generically), three
         // effects carry structure of their own: a profile, cyclic-lead harmonics, the cascade gains.
         if let EffectParams::ErrorMotion(p) = &self.params {
-            let q = if self.name.is_translational() { LENGTH } else { ANGLE };
-            validate_profile(p, q, &mut bad);
+            let (q, unit) =
+                if self.name.is_translational() { (LENGTH, ParamUnit::Length) } else { (ANGLE, ParamUnit::Angle) };
+            validate_profile(p, q, unit, &mut bad);
         }
         if let EffectParams::CyclicLead(c) = &self.params {
             for (i, h) in c.harmonics.iter().enumerate() {
@@ -1003,10 +1004,34 @@ impl Effect {
 }
 
 /// Range checks of a profile's terms; `quantity` names the unit of the error motion.
-fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, String)) {
+/// Most coefficients of a `poly` term: a smooth error motion needs a few; monomials beyond degree ~20
+/// are ill-conditioned anyway, and every term is evaluated at every physics step (size budget).
+pub const MAX_POLY_TERMS: usize = 64;
+/// Most `harmonics` of one profile (each is a sine evaluated at every physics step).
+pub const MAX_HARMONICS: usize = 4096;
+/// Most rows of a profile `table`.
+pub const MAX_TABLE_ROWS: usize = 1_000_000;
+
+fn validate_profile(p: &Profile, quantity: &str, unit: ParamUnit, bad: &mut dyn FnMut(String, String)) {
+    // An error motion's size: |e| up to an axis travel for a length would already be absurd; the
+    // amplitude bound is the unit's physical limit (lengths ≤ 100 m, angles ≤ 0.1 rad), wavelengths
+    // and correlation lengths are lengths of 1 nm to 100 m.
+    let (_, max_size) = unit.limits();
+    let (min_len, max_len) = ParamUnit::Length.limits();
+    let length_ok = |x: f64| x.is_finite() && (min_len..=max_len).contains(&x);
     for term in &p.terms {
         match term {
             Term::Poly(c) => {
+                if c.len() > MAX_POLY_TERMS {
+                    bad(
+                        "poly".into(),
+                        format!(
+                            "expected at most {MAX_POLY_TERMS} coefficients (a smooth error motion), got {}",
+                            c.len()
+                        ),
+                    );
+                    continue;
+                }
                 for (i, ci) in c.iter().enumerate() {
                     if !ci.is_finite() {
                         bad(format!("poly[{i}]"), format!("expected a finite coefficient, got {ci}"));
@@ -1014,14 +1039,30 @@ fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, Str
                 }
             }
             Term::Harmonics(h) => {
+                if h.len() > MAX_HARMONICS {
+                    bad("harmonics".into(), format!("expected at most {MAX_HARMONICS} harmonics, got {}", h.len()));
+                    continue;
+                }
                 for (i, hi) in h.iter().enumerate() {
-                    if !hi.amplitude.is_finite() {
-                        bad(format!("harmonics[{i}].amplitude"), format!("expected {quantity}, got {}", hi.amplitude));
+                    if !(hi.amplitude.is_finite() && hi.amplitude.abs() <= max_size) {
+                        bad(
+                            format!("harmonics[{i}].amplitude"),
+                            format!(
+                                "expected {quantity} of at most {} in size, got {}",
+                                unit.display(max_size),
+                                fmt_num(hi.amplitude)
+                            ),
+                        );
                     }
-                    if !Range::Positive.contains(hi.wavelength) {
+                    if !length_ok(hi.wavelength) {
                         bad(
                             format!("harmonics[{i}].wavelength"),
-                            format!("expected a wavelength in metres > 0, got {}", fmt_num(hi.wavelength)),
+                            format!(
+                                "expected a wavelength in metres between {} and {}, got {}",
+                                fmt_num(min_len),
+                                fmt_num(max_len),
+                                fmt_num(hi.wavelength)
+                            ),
                         );
                     }
                     if !hi.phase.is_finite() {
@@ -1030,17 +1071,43 @@ fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, Str
                 }
             }
             Term::Random { spec, .. } => {
-                if !Range::NonNegative.contains(spec.rms) {
-                    bad("random.rms".into(), format!("expected {quantity} ≥ 0, got {}", fmt_num(spec.rms)));
+                if !(Range::NonNegative.contains(spec.rms) && spec.rms <= max_size) {
+                    bad(
+                        "random.rms".into(),
+                        format!(
+                            "expected {quantity} ≥ 0 and at most {}, got {}",
+                            unit.display(max_size),
+                            fmt_num(spec.rms)
+                        ),
+                    );
                 }
-                if !Range::Positive.contains(spec.correlation_length) {
+                if !length_ok(spec.correlation_length) {
                     bad(
                         "random.correlation_length".into(),
-                        format!("expected a length in metres > 0, got {}", fmt_num(spec.correlation_length)),
+                        format!(
+                            "expected a length in metres between {} and {}, got {}",
+                            fmt_num(min_len),
+                            fmt_num(max_len),
+                            fmt_num(spec.correlation_length)
+                        ),
                     );
                 }
             }
             Term::Table { x, y } => {
+                if x.len() > MAX_TABLE_ROWS {
+                    bad("table".into(), format!("expected at most {MAX_TABLE_ROWS} rows, got {}", x.len()));
+                    continue;
+                }
+                if let Some(i) = y.iter().position(|v| v.abs() > max_size) {
+                    bad(
+                        "table".into(),
+                        format!(
+                            "expected {quantity} of at most {} in size, got {} at entry {i}",
+                            unit.display(max_size),
+                            fmt_num(y[i])
+                        ),
+                    );
+                }
                 if x.len() != y.len() || x.len() < 2 {
                     bad(
                         "table".into(),
