@@ -168,6 +168,30 @@ fn scenario_cases() -> Vec<Case> {
         ("tolerance negative", vec![("estimators[0].tolerance", Some(num(-1e-6)))], "estimators[0]"),
         ("tolerance nan", vec![("estimators[0].tolerance", Some(num(f64::NAN)))], "estimators[0]"),
         ("tolerance inf", vec![("estimators[0].tolerance", Some(num(f64::INFINITY)))], "estimators[0]"),
+        // Truth profiles: finite but beyond any machine, or too large to evaluate every step (issue 14:
+        // a 200 000-term polynomial hung; 1e300 coefficients surfaced as NaN blamed on the output).
+        (
+            "poly 200 000 terms",
+            vec![("truth.effects.positioning.poly", Some(arr(&vec![1e-9; 200_000])))],
+            "truth.effects.positioning.poly",
+        ),
+        ("poly 1e300", vec![("truth.effects.positioning.poly", Some(arr(&[0.0, 1e300])))], "truth.effects.positioning"),
+        (
+            "poly 1 m/m slope",
+            vec![("truth.effects.positioning.poly", Some(arr(&[0.0, 2.0])))],
+            "truth.effects.positioning",
+        ),
+        ("pitch 1 rad", vec![("truth.effects.pitch.poly", Some(arr(&[0.5])))], "truth.effects.pitch"),
+        (
+            "wavelength 1e-300",
+            vec![("truth.effects.straightness_y.harmonics[0].wavelength", Some(num(1e-300)))],
+            "truth.effects.straightness_y.harmonics[0].wavelength",
+        ),
+        (
+            "amplitude 1e300",
+            vec![("truth.effects.straightness_y.harmonics[0].amplitude", Some(num(1e300)))],
+            "truth.effects.straightness_y.harmonics[0].amplitude",
+        ),
     ] {
         cases.push(scenario_case(label, &edits, place));
     }
@@ -389,6 +413,7 @@ fn set_cases() -> Vec<Case> {
         place: "input".into(),
     });
     cases.extend(dat_cases());
+    cases.extend(model_cases());
     cases.push(Case {
         label: ".dat not UTF-8".into(),
         files: vec![("t.dat".into(), b"UNIT=mm\nTGT_DATA=[0,\xff]\n".to_vec())],
@@ -447,6 +472,34 @@ fn dat_cases() -> Vec<Case> {
         }
     }
     cases
+}
+
+/// Model files whose numbers are finite but beyond any machine (issue 14: a period of 1e-300 m was
+/// used as given): every scalar parameter is bounded by its unit's physical limits
+/// (`vmt_sim::effects::ParamUnit::limits`), with the key path in the message.
+fn model_cases() -> Vec<Case> {
+    let data = dat_text(&[-20.0, -10.0, 0.0, 10.0, 20.0], 0.004, None);
+    let bad = [
+        ("cyclic_lead", "period = 1e-300\namplitude = 1e-6", "effects.cyclic_lead.period"),
+        ("cyclic_lead", "period = 5e3\namplitude = 1e-6", "effects.cyclic_lead.period"),
+        ("thermal_drift", "value = 1e-6\ntau = 1e20", "effects.thermal_drift.tau"),
+        ("thermal_expansion", "alpha = 1.0\ndelta_t = 1.0\ntau = 100.0", "effects.thermal_expansion.alpha"),
+        ("scale_error", "value = 0.5", "effects.scale_error.value"),
+        ("interpolation_error", "period = 1e-15\namplitude = 1e-7", "effects.interpolation_error.period"),
+    ];
+    bad.iter()
+        .flat_map(|(effect, keys, place)| {
+            let model =
+                format!("format = \"vmt-model/1\"\n[effects.positioning]\nfit = true\n[effects.{effect}]\n{keys}\n");
+            ["compare", "diagnose"].map(|cmd| Case {
+                label: format!("{cmd}: model {place} out of physical bounds"),
+                files: vec![("t.dat".into(), data.clone()), ("m.toml".into(), model.clone().into_bytes())],
+                args: args(&[cmd, "--model", "{dir}/m.toml", "--data", "{dir}/t.dat"]),
+                blamed: "m.toml".into(),
+                place: place.to_string(),
+            })
+        })
+        .collect()
 }
 
 fn urdf_cases() -> Vec<Case> {

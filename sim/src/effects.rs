@@ -258,6 +258,33 @@ pub enum ParamUnit {
 }
 
 impl ParamUnit {
+    /// The physical bounds of a value in this unit (SI): (smallest magnitude of a strictly positive
+    /// parameter, largest magnitude of any). A value outside them is a typo or a unit mistake, not a
+    /// machine: a length or period of 1 nm to 100 m (an axis travel is at most [`MAX_LENGTH`]), an
+    /// angular error up to 0.1 rad, a strain up to 1 % (10 000 µm/m), an expansion coefficient up to
+    /// 1000 µm/(m·K) (metals 1–25, plastics up to ~200), time constants 1 ns to 1e9 s (30 years),
+    /// velocities up to 100 m/s, frequencies 1 µHz to 1 MHz, forces up to 10 MN.
+    pub fn limits(self) -> (f64, f64) {
+        match self {
+            ParamUnit::Length => (1e-9, MAX_LENGTH),
+            ParamUnit::Angle => (1e-12, 0.1),
+            ParamUnit::Phase => (0.0, 1e3),
+            ParamUnit::Force => (1e-9, 1e7),
+            ParamUnit::Time => (1e-9, 1e9),
+            ParamUnit::Velocity => (1e-9, 100.0),
+            ParamUnit::Frequency => (1e-6, 1e6),
+            ParamUnit::Strain => (1e-12, 1e-2),
+            ParamUnit::ExpansionCoefficient => (1e-12, 1e-3),
+            ParamUnit::Temperature => (1e-6, 1e3),
+            ParamUnit::Stiffness => (1e-9, 1e15),
+            ParamUnit::Damping => (1e-9, 1e12),
+            ParamUnit::Rate => (1e-9, 1e9),
+            ParamUnit::Dimensionless => (1e-6, 1e3),
+            ParamUnit::AccelRandomWalk => (0.0, 1e3),
+            ParamUnit::Gain => (1e-9, 1e12),
+        }
+    }
+
     /// `v` (SI) in display units with four significant digits, e.g. `25.37 µm`, `10.49 mm`,
     /// `3.1 µrad`, `300.1 s`, `2.5 mm/s`.
     pub fn display(self, v: f64) -> String {
@@ -295,6 +322,10 @@ impl ParamUnit {
         }
     }
 }
+
+/// The largest length an effect parameter may have, m: an axis travel (vmt's readers bound
+/// positions by the same 100 m).
+pub const MAX_LENGTH: f64 = 100.0;
 
 /// Description of one scalar parameter of an effect: its TOML key, what it is in SI units, its
 /// admissible range, the starting value used when a model leaves it out under `fit = true`, and
@@ -911,10 +942,23 @@ impl Effect {
         }
         for s in param_specs(self.name) {
             if let Some(v) = self.params.get(s.key) {
+                let (min_positive, max) = s.unit.limits();
                 if !s.range.contains(v) {
                     bad(
                         s.key.to_string(),
                         format!("expected {}{}, got {}", s.quantity, s.range.describe(), fmt_num(v)),
+                    );
+                } else if v.abs() > max || (s.range == Range::Positive && v < min_positive) {
+                    bad(
+                        s.key.to_string(),
+                        format!(
+                            "expected {}{} between {} and {} (physical bounds), got {} (a unit mistake?)",
+                            s.quantity,
+                            s.range.describe(),
+                            s.unit.display(if s.range == Range::Positive { min_positive } else { -max }),
+                            s.unit.display(max),
+                            fmt_num(v)
+                        ),
                     );
                 }
             }
@@ -922,8 +966,9 @@ impl Effect {
         // Beyond the scalars checked above from `param_specs` (every effect's, generically), three
         // effects carry structure of their own: a profile, cyclic-lead harmonics, the cascade gains.
         if let EffectParams::ErrorMotion(p) = &self.params {
-            let q = if self.name.is_translational() { LENGTH } else { ANGLE };
-            validate_profile(p, q, &mut bad);
+            let (q, unit) =
+                if self.name.is_translational() { (LENGTH, ParamUnit::Length) } else { (ANGLE, ParamUnit::Angle) };
+            validate_profile(p, q, unit, &mut bad);
         }
         if let EffectParams::CyclicLead(c) = &self.params {
             for (i, h) in c.harmonics.iter().enumerate() {
@@ -959,10 +1004,34 @@ impl Effect {
 }
 
 /// Range checks of a profile's terms; `quantity` names the unit of the error motion.
-fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, String)) {
+/// Most coefficients of a `poly` term: a smooth error motion needs a few; monomials beyond degree ~20
+/// are ill-conditioned anyway, and every term is evaluated at every physics step (size budget).
+pub const MAX_POLY_TERMS: usize = 64;
+/// Most `harmonics` of one profile (each is a sine evaluated at every physics step).
+pub const MAX_HARMONICS: usize = 4096;
+/// Most rows of a profile `table`.
+pub const MAX_TABLE_ROWS: usize = 1_000_000;
+
+fn validate_profile(p: &Profile, quantity: &str, unit: ParamUnit, bad: &mut dyn FnMut(String, String)) {
+    // An error motion's size: |e| up to an axis travel for a length would already be absurd; the
+    // amplitude bound is the unit's physical limit (lengths ≤ 100 m, angles ≤ 0.1 rad), wavelengths
+    // and correlation lengths are lengths of 1 nm to 100 m.
+    let (_, max_size) = unit.limits();
+    let (min_len, max_len) = ParamUnit::Length.limits();
+    let length_ok = |x: f64| x.is_finite() && (min_len..=max_len).contains(&x);
     for term in &p.terms {
         match term {
             Term::Poly(c) => {
+                if c.len() > MAX_POLY_TERMS {
+                    bad(
+                        "poly".into(),
+                        format!(
+                            "expected at most {MAX_POLY_TERMS} coefficients (a smooth error motion), got {}",
+                            c.len()
+                        ),
+                    );
+                    continue;
+                }
                 for (i, ci) in c.iter().enumerate() {
                     if !ci.is_finite() {
                         bad(format!("poly[{i}]"), format!("expected a finite coefficient, got {ci}"));
@@ -970,14 +1039,30 @@ fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, Str
                 }
             }
             Term::Harmonics(h) => {
+                if h.len() > MAX_HARMONICS {
+                    bad("harmonics".into(), format!("expected at most {MAX_HARMONICS} harmonics, got {}", h.len()));
+                    continue;
+                }
                 for (i, hi) in h.iter().enumerate() {
-                    if !hi.amplitude.is_finite() {
-                        bad(format!("harmonics[{i}].amplitude"), format!("expected {quantity}, got {}", hi.amplitude));
+                    if !(hi.amplitude.is_finite() && hi.amplitude.abs() <= max_size) {
+                        bad(
+                            format!("harmonics[{i}].amplitude"),
+                            format!(
+                                "expected {quantity} of at most {} in size, got {}",
+                                unit.display(max_size),
+                                fmt_num(hi.amplitude)
+                            ),
+                        );
                     }
-                    if !Range::Positive.contains(hi.wavelength) {
+                    if !length_ok(hi.wavelength) {
                         bad(
                             format!("harmonics[{i}].wavelength"),
-                            format!("expected a wavelength in metres > 0, got {}", fmt_num(hi.wavelength)),
+                            format!(
+                                "expected a wavelength in metres between {} and {}, got {}",
+                                fmt_num(min_len),
+                                fmt_num(max_len),
+                                fmt_num(hi.wavelength)
+                            ),
                         );
                     }
                     if !hi.phase.is_finite() {
@@ -986,17 +1071,43 @@ fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, Str
                 }
             }
             Term::Random { spec, .. } => {
-                if !Range::NonNegative.contains(spec.rms) {
-                    bad("random.rms".into(), format!("expected {quantity} ≥ 0, got {}", fmt_num(spec.rms)));
+                if !(Range::NonNegative.contains(spec.rms) && spec.rms <= max_size) {
+                    bad(
+                        "random.rms".into(),
+                        format!(
+                            "expected {quantity} ≥ 0 and at most {}, got {}",
+                            unit.display(max_size),
+                            fmt_num(spec.rms)
+                        ),
+                    );
                 }
-                if !Range::Positive.contains(spec.correlation_length) {
+                if !length_ok(spec.correlation_length) {
                     bad(
                         "random.correlation_length".into(),
-                        format!("expected a length in metres > 0, got {}", fmt_num(spec.correlation_length)),
+                        format!(
+                            "expected a length in metres between {} and {}, got {}",
+                            fmt_num(min_len),
+                            fmt_num(max_len),
+                            fmt_num(spec.correlation_length)
+                        ),
                     );
                 }
             }
             Term::Table { x, y } => {
+                if x.len() > MAX_TABLE_ROWS {
+                    bad("table".into(), format!("expected at most {MAX_TABLE_ROWS} rows, got {}", x.len()));
+                    continue;
+                }
+                if let Some(i) = y.iter().position(|v| v.abs() > max_size) {
+                    bad(
+                        "table".into(),
+                        format!(
+                            "expected {quantity} of at most {} in size, got {} at entry {i}",
+                            unit.display(max_size),
+                            fmt_num(y[i])
+                        ),
+                    );
+                }
                 if x.len() != y.len() || x.len() < 2 {
                     bad(
                         "table".into(),
