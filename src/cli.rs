@@ -811,7 +811,10 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, units: &str,
             return identify_axes(path, n_lines, &ci, out, json);
         }
     }
-    let (run, n_lines, id) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
+    let (run, n_lines, id, notes) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
+    for n in &notes {
+        eprintln!("note: {n}");
+    }
     if json {
         print_json(
             "vmt-identify/1",

@@ -516,3 +516,51 @@ fn a_sampled_study_is_the_same_in_shards_and_draws_within_its_distribution() {
     let sens = read("whole", "sensitivity.csv");
     assert!(sens.starts_with("estimate,parameter,S1,S1_conf,trials\n") && sens.lines().count() > 2, "{sens}");
 }
+
+/// `vmt identify` on laser lines whose manifest gives no `sigma` (issue 14: it printed standard errors of
+/// 0): with repeats enough (4 runs of 4 targets both ways: 24 degrees of freedom per line) σ is estimated from
+/// them and said so, and the standard errors are those of the stated σ within the estimate's scatter
+/// (a factor 0.6–1.6: χ² with 24 dof is within ±40 % at 4σ); with 2 runs (8 dof) the line is refused.
+#[test]
+fn identify_without_sigma_estimates_it_from_repeats_or_refuses() {
+    let tmp = tempfile::tempdir().unwrap();
+    let small = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml")).unwrap();
+    let se = |runs: usize, strip: bool| -> (Option<i32>, String, String) {
+        let dir = tmp.path().join(format!("r{runs}{strip}"));
+        std::fs::create_dir_all(&dir).unwrap();
+        let sc = dir.join("s.toml");
+        // The positioning test read by all six laser lines (the 9-line layout), `runs` bidirectional runs.
+        let text = small.replace("runs = 2\n", &format!("runs = {runs}\n")).replace(
+            r#"sensors = ["scale", "laser_x3", "laser_y1"]"#,
+            r#"sensors = ["laser_x1", "laser_x2", "laser_x3", "laser_y1", "laser_y2", "laser_z1"]"#,
+        );
+        std::fs::write(&sc, text).unwrap();
+        let set = dir.join("set");
+        let o = vmt().arg("simulate").arg(&sc).arg("-o").arg(&set).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        if strip {
+            let m = std::fs::read_to_string(set.join("manifest.toml")).unwrap();
+            let m: String = m.lines().filter(|l| !l.starts_with("sigma")).map(|l| format!("{l}\n")).collect();
+            std::fs::write(set.join("manifest.toml"), m).unwrap();
+        }
+        let o = vmt().args(["identify", "--json"]).arg(&set).output().unwrap();
+        (o.status.code(), String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
+    };
+    let worst = |json: &str| -> f64 {
+        let v: serde_json::Value = serde_json::from_str(json).unwrap();
+        let profiles = v["profiles"].as_array().unwrap();
+        let p = profiles.iter().find(|p| p["name"] == "EXX").unwrap();
+        p["std_errors"].as_array().unwrap().iter().filter_map(|s| s.as_f64()).fold(0.0, f64::max)
+    };
+    let (code, stated, _) = se(4, false);
+    assert_eq!(code, Some(0));
+    let (code, estimated, err) = se(4, true);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("estimated from its repeated readings"), "{err}");
+    let ratio = worst(&estimated) / worst(&stated);
+    println!("largest EXX standard error: σ from repeats / σ stated = {ratio:.3}");
+    assert!((0.6..1.6).contains(&ratio), "standard error with σ from repeats / with σ stated = {ratio}");
+    let (code, _, err) = se(2, true);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("no sigma in the manifest") && err.contains("give `sigma`"), "{err}");
+}
