@@ -412,6 +412,21 @@ fn set_cases() -> Vec<Case> {
         blamed: "iso.csv".into(),
         place: "input".into(),
     });
+    // 100 000 sensors in a manifest (issue 14): the pairwise name checks hung; the count is bounded first.
+    let mut many = set_files(&table(&good_rows()));
+    let extra: String = (0..100_000)
+        .map(|i| format!("[[sensors]]\nname = \"s{i}\"\nkind = \"laser_linear\"\naxis = \"x\"\nposition = [0.0, 0.0, 0.0]\ndirection = [1.0, 0.0, 0.0]\n"))
+        .collect();
+    let m = String::from_utf8(many[0].1.clone()).unwrap();
+    let (head, runs) = m.split_once("[[runs]]").unwrap();
+    many[0].1 = format!("{head}{extra}[[runs]]{runs}").into_bytes();
+    cases.push(Case {
+        label: "100 000 sensors".into(),
+        files: many,
+        args: args(&["iso230-2", "{dir}/set"]),
+        blamed: "manifest.toml".into(),
+        place: "sensors".into(),
+    });
     cases.extend(dat_cases());
     cases.extend(model_cases());
     cases.push(Case {
