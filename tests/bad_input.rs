@@ -533,12 +533,16 @@ fn urdf_cases() -> Vec<Case> {
         .join("\n");
     assert_ne!(light, base);
     let nan_mass = base.replacen("<mass value=\"300\"/>", "<mass value=\"nan\"/>", 1);
+    // A travel of 1e9 m (issue 14: truth profiles sampled every mm over it would take terabytes).
+    let far = base.replacen("upper=\"1.0\"", "upper=\"1e9\"", 1);
+    assert_ne!(far, base);
     for (label, urdf, blamed, place) in [
         ("URDF nested 20000 deep", deep.into_bytes(), "m.urdf", "line"),
         ("URDF not UTF-8", b"<robot name=\"\xff\"></robot>".to_vec(), "m.urdf", "UTF-8"),
         ("URDF not XML", b"<robot name=".to_vec(), "m.urdf", "robot"),
         ("URDF 1 ug moving body", light.into_bytes(), "s.toml", "axis.dt"),
         ("URDF NaN mass", nan_mass.into_bytes(), "m.urdf", "line"),
+        ("URDF travel 1e9 m", far.into_bytes(), "m.urdf", "joint `x`"),
     ] {
         cases.push(Case {
             label: label.into(),
