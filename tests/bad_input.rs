@@ -427,6 +427,23 @@ fn set_cases() -> Vec<Case> {
         blamed: "manifest.toml".into(),
         place: "sensors".into(),
     });
+    // The stick-slip index of an accelerometer column (it computed one, and called the pass "crawling").
+    let ts_manifest = "format = \"vmt-measurements/1\"\n\
+        [[sensors]]\nname = \"acc\"\nkind = \"accelerometer\"\naxis = \"x\"\nposition = [0.0, 0.0, 0.0]\ndirection = [0.0, 0.0, 1.0]\nnoise_density = 1e-6\n\
+        [[runs]]\nname = \"crawl\"\nfile = \"crawl.csv\"\nprocedure = \"crawl\"\naxis = \"x\"\nfeed = 1e-4\n";
+    let ts: String = std::iter::once("t,x_cmd,acc\n".to_string())
+        .chain((0..200).map(|i| format!("{},{},{}\n", i as f64 * 1e-3, i as f64 * 1e-7, (i as f64).sin() * 1e-3)))
+        .collect();
+    cases.push(Case {
+        label: "ssi of an accelerometer".into(),
+        files: vec![
+            ("set/manifest.toml".into(), ts_manifest.as_bytes().to_vec()),
+            ("set/crawl.csv".into(), ts.into_bytes()),
+        ],
+        args: args(&["ssi", "{dir}/set", "--sensor", "acc"]),
+        blamed: "set".into(),
+        place: "sensors.acc".into(),
+    });
     cases.extend(dat_cases());
     cases.extend(model_cases());
     cases.push(Case {
