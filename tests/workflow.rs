@@ -564,3 +564,38 @@ fn identify_without_sigma_estimates_it_from_repeats_or_refuses() {
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("no sigma in the manifest") && err.contains("give `sigma`"), "{err}");
 }
+
+/// A study report draws one figure per estimate, whatever the number of values (issue 14's class: it
+/// drew one per value and estimate, each with every point — 42 MB of HTML for 200 values).
+#[test]
+fn a_study_report_has_one_figure_per_estimate() {
+    let tmp = tempfile::tempdir().unwrap();
+    let small = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
+    let o = vmt()
+        .arg("study")
+        .arg(&small)
+        .args(["--vary", "sensors.laser_x3.sigma=1e-9,2e-9,3e-9,4e-9,5e-9", "--trials", "1", "-o"])
+        .arg(tmp.path().join("s"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("s/report.json")).unwrap()).unwrap();
+    let figures: Vec<&serde_json::Value> =
+        report["sections"].as_array().unwrap().iter().flat_map(|s| s["figures"].as_array().unwrap()).collect();
+    let trials = std::fs::read_to_string(tmp.path().join("s/trials.csv")).unwrap();
+    let mut estimates: Vec<&str> = trials.lines().skip(1).map(|l| l.split('"').nth(1).unwrap()).collect();
+    estimates.sort_unstable();
+    estimates.dedup();
+    assert!(
+        !figures.is_empty() && figures.len() <= estimates.len(),
+        "{} figures for {} estimates",
+        figures.len(),
+        estimates.len()
+    );
+    for f in &figures {
+        for s in f["series"].as_array().unwrap() {
+            assert!(s["x"].as_array().unwrap().len() <= 5, "a series has more points than values: {}", f["title"]);
+        }
+    }
+}
