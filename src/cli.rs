@@ -518,8 +518,26 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
     let mut results = Vec::new();
     for r in &set.runs {
         let measurement::RunData::TimeSeries { t, .. } = &r.data else { continue };
+        // The encoder method reads a position: an encoder's or a linear laser's, never an acceleration.
+        let is_position = |k: SensorKind| {
+            matches!(k, SensorKind::EncoderLinear | SensorKind::EncoderRotary | SensorKind::LaserLinear)
+        };
         let s = match sensor {
-            Some(s) => set.sensor(s).ok_or_else(|| VmtError::bad(path, "sensors", format!("no sensor `{s}`")))?,
+            Some(s) => {
+                let s = set.sensor(s).ok_or_else(|| VmtError::bad(path, "sensors", format!("no sensor `{s}`")))?;
+                if !is_position(s.kind) {
+                    return Err(VmtError::bad(
+                        path,
+                        format!("sensors.{}", s.name),
+                        format!(
+                            "the stick-slip index reads a position: expected an encoder_linear, encoder_rotary or laser_linear \
+                             sensor, got kind `{}`",
+                            s.kind.as_str()
+                        ),
+                    ));
+                }
+                s
+            }
             None => match set.sensors.iter().find(|s| {
                 matches!(s.kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary)
                     && r.data.column(&s.name).is_some()
@@ -811,7 +829,10 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, units: &str,
             return identify_axes(path, n_lines, &ci, out, json);
         }
     }
-    let (run, n_lines, id) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
+    let (run, n_lines, id, notes) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
+    for n in &notes {
+        eprintln!("note: {n}");
+    }
     if json {
         print_json(
             "vmt-identify/1",

@@ -412,6 +412,38 @@ fn set_cases() -> Vec<Case> {
         blamed: "iso.csv".into(),
         place: "input".into(),
     });
+    // 100 000 sensors in a manifest (issue 14): the pairwise name checks hung; the count is bounded first.
+    let mut many = set_files(&table(&good_rows()));
+    let extra: String = (0..100_000)
+        .map(|i| format!("[[sensors]]\nname = \"s{i}\"\nkind = \"laser_linear\"\naxis = \"x\"\nposition = [0.0, 0.0, 0.0]\ndirection = [1.0, 0.0, 0.0]\n"))
+        .collect();
+    let m = String::from_utf8(many[0].1.clone()).unwrap();
+    let (head, runs) = m.split_once("[[runs]]").unwrap();
+    many[0].1 = format!("{head}{extra}[[runs]]{runs}").into_bytes();
+    cases.push(Case {
+        label: "100 000 sensors".into(),
+        files: many,
+        args: args(&["iso230-2", "{dir}/set"]),
+        blamed: "manifest.toml".into(),
+        place: "sensors".into(),
+    });
+    // The stick-slip index of an accelerometer column (it computed one, and called the pass "crawling").
+    let ts_manifest = "format = \"vmt-measurements/1\"\n\
+        [[sensors]]\nname = \"acc\"\nkind = \"accelerometer\"\naxis = \"x\"\nposition = [0.0, 0.0, 0.0]\ndirection = [0.0, 0.0, 1.0]\nnoise_density = 1e-6\n\
+        [[runs]]\nname = \"crawl\"\nfile = \"crawl.csv\"\nprocedure = \"crawl\"\naxis = \"x\"\nfeed = 1e-4\n";
+    let ts: String = std::iter::once("t,x_cmd,acc\n".to_string())
+        .chain((0..200).map(|i| format!("{},{},{}\n", i as f64 * 1e-3, i as f64 * 1e-7, (i as f64).sin() * 1e-3)))
+        .collect();
+    cases.push(Case {
+        label: "ssi of an accelerometer".into(),
+        files: vec![
+            ("set/manifest.toml".into(), ts_manifest.as_bytes().to_vec()),
+            ("set/crawl.csv".into(), ts.into_bytes()),
+        ],
+        args: args(&["ssi", "{dir}/set", "--sensor", "acc"]),
+        blamed: "set".into(),
+        place: "sensors.acc".into(),
+    });
     cases.extend(dat_cases());
     cases.extend(model_cases());
     cases.push(Case {
@@ -518,12 +550,16 @@ fn urdf_cases() -> Vec<Case> {
         .join("\n");
     assert_ne!(light, base);
     let nan_mass = base.replacen("<mass value=\"300\"/>", "<mass value=\"nan\"/>", 1);
+    // A travel of 1e9 m (issue 14: truth profiles sampled every mm over it would take terabytes).
+    let far = base.replacen("upper=\"1.0\"", "upper=\"1e9\"", 1);
+    assert_ne!(far, base);
     for (label, urdf, blamed, place) in [
         ("URDF nested 20000 deep", deep.into_bytes(), "m.urdf", "line"),
         ("URDF not UTF-8", b"<robot name=\"\xff\"></robot>".to_vec(), "m.urdf", "UTF-8"),
         ("URDF not XML", b"<robot name=".to_vec(), "m.urdf", "robot"),
         ("URDF 1 ug moving body", light.into_bytes(), "s.toml", "axis.dt"),
         ("URDF NaN mass", nan_mass.into_bytes(), "m.urdf", "line"),
+        ("URDF travel 1e9 m", far.into_bytes(), "m.urdf", "joint `x`"),
     ] {
         cases.push(Case {
             label: label.into(),

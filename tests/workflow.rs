@@ -516,3 +516,86 @@ fn a_sampled_study_is_the_same_in_shards_and_draws_within_its_distribution() {
     let sens = read("whole", "sensitivity.csv");
     assert!(sens.starts_with("estimate,parameter,S1,S1_conf,trials\n") && sens.lines().count() > 2, "{sens}");
 }
+
+/// `vmt identify` on laser lines whose manifest gives no `sigma` (issue 14: it printed standard errors of
+/// 0): with repeats enough (4 runs of 4 targets both ways: 24 degrees of freedom per line) σ is estimated from
+/// them and said so, and the standard errors are those of the stated σ within the estimate's scatter
+/// (a factor 0.6–1.6: χ² with 24 dof is within ±40 % at 4σ); with 2 runs (8 dof) the line is refused.
+#[test]
+fn identify_without_sigma_estimates_it_from_repeats_or_refuses() {
+    let tmp = tempfile::tempdir().unwrap();
+    let small = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml")).unwrap();
+    let se = |runs: usize, strip: bool| -> (Option<i32>, String, String) {
+        let dir = tmp.path().join(format!("r{runs}{strip}"));
+        std::fs::create_dir_all(&dir).unwrap();
+        let sc = dir.join("s.toml");
+        // The positioning test read by all six laser lines (the 9-line layout), `runs` bidirectional runs.
+        let text = small.replace("runs = 2\n", &format!("runs = {runs}\n")).replace(
+            r#"sensors = ["scale", "laser_x3", "laser_y1"]"#,
+            r#"sensors = ["laser_x1", "laser_x2", "laser_x3", "laser_y1", "laser_y2", "laser_z1"]"#,
+        );
+        std::fs::write(&sc, text).unwrap();
+        let set = dir.join("set");
+        let o = vmt().arg("simulate").arg(&sc).arg("-o").arg(&set).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        if strip {
+            let m = std::fs::read_to_string(set.join("manifest.toml")).unwrap();
+            let m: String = m.lines().filter(|l| !l.starts_with("sigma")).map(|l| format!("{l}\n")).collect();
+            std::fs::write(set.join("manifest.toml"), m).unwrap();
+        }
+        let o = vmt().args(["identify", "--json"]).arg(&set).output().unwrap();
+        (o.status.code(), String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
+    };
+    let worst = |json: &str| -> f64 {
+        let v: serde_json::Value = serde_json::from_str(json).unwrap();
+        let profiles = v["profiles"].as_array().unwrap();
+        let p = profiles.iter().find(|p| p["name"] == "EXX").unwrap();
+        p["std_errors"].as_array().unwrap().iter().filter_map(|s| s.as_f64()).fold(0.0, f64::max)
+    };
+    let (code, stated, _) = se(4, false);
+    assert_eq!(code, Some(0));
+    let (code, estimated, err) = se(4, true);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("estimated from its repeated readings"), "{err}");
+    let ratio = worst(&estimated) / worst(&stated);
+    println!("largest EXX standard error: σ from repeats / σ stated = {ratio:.3}");
+    assert!((0.6..1.6).contains(&ratio), "standard error with σ from repeats / with σ stated = {ratio}");
+    let (code, _, err) = se(2, true);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("no sigma in the manifest") && err.contains("give `sigma`"), "{err}");
+}
+
+/// A study report draws one figure per estimate, whatever the number of values (issue 14's class: it
+/// drew one per value and estimate, each with every point — 42 MB of HTML for 200 values).
+#[test]
+fn a_study_report_has_one_figure_per_estimate() {
+    let tmp = tempfile::tempdir().unwrap();
+    let small = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
+    let o = vmt()
+        .arg("study")
+        .arg(&small)
+        .args(["--vary", "sensors.laser_x3.sigma=1e-9,2e-9,3e-9,4e-9,5e-9", "--trials", "1", "-o"])
+        .arg(tmp.path().join("s"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("s/report.json")).unwrap()).unwrap();
+    let figures: Vec<&serde_json::Value> =
+        report["sections"].as_array().unwrap().iter().flat_map(|s| s["figures"].as_array().unwrap()).collect();
+    let trials = std::fs::read_to_string(tmp.path().join("s/trials.csv")).unwrap();
+    let mut estimates: Vec<&str> = trials.lines().skip(1).map(|l| l.split('"').nth(1).unwrap()).collect();
+    estimates.sort_unstable();
+    estimates.dedup();
+    assert!(
+        !figures.is_empty() && figures.len() <= estimates.len(),
+        "{} figures for {} estimates",
+        figures.len(),
+        estimates.len()
+    );
+    for f in &figures {
+        for s in f["series"].as_array().unwrap() {
+            assert!(s["x"].as_array().unwrap().len() <= 5, "a series has more points than values: {}", f["title"]);
+        }
+    }
+}

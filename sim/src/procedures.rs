@@ -469,9 +469,10 @@ impl ProcedureSpec {
         let steps = time / dt;
         if steps.is_nan() || steps > MAX_STEPS {
             return err(
-                "dwell",
+                "",
                 format!(
-                    "the procedure needs about {steps:.3e} physics steps ({time:.4e} s of machine time at dt = {dt} s); the limit is {MAX_STEPS:e}"
+                    "the procedure needs about {steps:.3e} physics steps ({time:.4e} s of machine time at dt = {dt} s, \
+                     from its speeds, distances, dwells, runs and durations); the limit is {MAX_STEPS:e}"
                 ),
             );
         }

@@ -234,6 +234,8 @@ struct CsvText {
 /// Most columns a CSV may have (size budget, DESIGN.md §2): a run holds t or the point-table keys,
 /// the commands and one column per sensor.
 pub const MAX_COLUMNS: usize = 1_000;
+/// Most runs (CSV files) of a measurement set (size budget).
+pub const MAX_RUNS: usize = 100_000;
 
 fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
     let bytes = std::fs::read(path).map_err(|e| VmtError::io(path, "reading", e))?;
@@ -736,13 +738,20 @@ pub fn read(dir: &Path) -> Result<MeasurementSet, VmtError> {
     let description = r.opt_str("description", "a string")?.map(str::to_string);
     let machine = r.opt_str("machine", "a bundled machine name or URDF path")?.map(str::to_string);
     let seed = r.opt_u64("seed", "a non-negative integer seed")?;
-    let sensors: Vec<Sensor> = r
-        .opt_tables("sensors")?
-        .unwrap_or_default()
-        .iter()
-        .map(parse_sensor)
-        .collect::<Result<Vec<Sensor>, VmtError>>()?;
+    let sensor_tables = r.opt_tables("sensors")?.unwrap_or_default();
+    // Size budget before any per-sensor work (the name checks compare every pair): each sensor is a
+    // CSV column, so the column limit bounds them; runs are files.
+    if sensor_tables.len() > MAX_COLUMNS {
+        return Err(r.bad(
+            "sensors",
+            format!("{} sensors; the limit is {MAX_COLUMNS} (one CSV column each)", sensor_tables.len()),
+        ));
+    }
+    let sensors: Vec<Sensor> = sensor_tables.iter().map(parse_sensor).collect::<Result<Vec<Sensor>, VmtError>>()?;
     let entries = r.opt_tables("runs")?.unwrap_or_default();
+    if entries.len() > MAX_RUNS {
+        return Err(r.bad("runs", format!("{} runs; the limit is {MAX_RUNS} (one CSV file each)", entries.len())));
+    }
     r.deny_unknown()?;
     let mut runs: Vec<Run> = Vec::with_capacity(entries.len());
     let mut set_so_far = MeasurementSet { description, machine, seed, sensors, runs: Vec::new() };

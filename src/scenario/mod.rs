@@ -202,7 +202,13 @@ fn build_chain(
     let tool = raw.tool.as_deref().unwrap_or("tool");
     let chain = ChainModel::build(machine, &configs, &set, tool).map_err(|e| ("axes".to_string(), e.to_string()))?;
     for (i, p) in raw.chain_procedures.iter().enumerate() {
-        let at = |k: &str| format!("chain_procedures[{i}] ({}).{k}", p.name());
+        let at = |k: &str| {
+            if k.is_empty() {
+                format!("chain_procedures[{i}] ({})", p.name())
+            } else {
+                format!("chain_procedures[{i}] ({}).{k}", p.name())
+            }
+        };
         if raw.chain_procedures[..i].iter().any(|o| o.name() == p.name())
             || raw.procedures.iter().any(|o| o.name() == p.name())
         {
@@ -324,7 +330,14 @@ fn validate_procedures(
     let tol = 1e-9;
     let (mut samples, mut steps) = (0.0, 0.0);
     for (i, p) in procs.iter().enumerate() {
-        let at = |k: &str| format!("procedures[{i}] ({}).{k}", p.name());
+        // An empty key blames the procedure as a whole (its machine time, from several keys).
+        let at = |k: &str| {
+            if k.is_empty() {
+                format!("procedures[{i}] ({})", p.name())
+            } else {
+                format!("procedures[{i}] ({}).{k}", p.name())
+            }
+        };
         if !p.name().is_empty() && procs[..i].iter().any(|o| o.name() == p.name()) {
             return Err((at("name"), "procedure names must be unique".into()));
         }

@@ -133,42 +133,73 @@ pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Result<Vec<Sc
     Ok(rows)
 }
 
+/// Fewest degrees of freedom of the repeats from which a laser line's σ is estimated when the manifest
+/// gives none (σ̂ from 10 dof is within ±22 % of σ at 1σ).
+pub const MIN_REPEAT_DOF_IDENTIFY: usize = 10;
+
 /// The laser lines (linear and straightness lasers) of a point-table run of a measurement set, identified:
 /// the run `run` or else the first point-table run with at least two lines. Returns the run's name, the
-/// number of lines and the identification.
+/// number of lines, the identification and notes for the reader. A line whose manifest gives no `sigma`
+/// gets σ from its repeated readings (pooled scatter per target and direction across runs, ≥
+/// [`MIN_REPEAT_DOF_IDENTIFY`] degrees of freedom; said in a note); without enough repeats the line is
+/// refused, since the weights and every standard error depend on σ (a σ of 0 printed standard errors of 0).
 pub fn identify_set(
     set: &MeasurementSet,
     run: Option<&str>,
-) -> Result<(String, usize, vmt_estimators::laser_ls::Identification), String> {
+) -> Result<(String, usize, vmt_estimators::laser_ls::Identification, Vec<String>), String> {
     use crate::estimate::{identify_laser_lines, LaserLine};
     use crate::measurement::{RunData, SensorKind};
     let is_line = |k: SensorKind| matches!(k, SensorKind::LaserLinear | SensorKind::LaserStraightness);
-    let lines_of = |r: &crate::measurement::Run| -> Vec<LaserLine> {
-        set.sensors
-            .iter()
-            .filter(|s| is_line(s.kind) && r.data.column(&s.name).is_some())
-            .map(|s| LaserLine {
-                name: s.name.clone(),
-                point: s.position,
-                direction: s.direction,
-                sigma: s.sigma.unwrap_or(0.0),
-            })
-            .collect()
+    let with_lines = |r: &&crate::measurement::Run| {
+        set.sensors.iter().filter(|s| is_line(s.kind) && r.data.column(&s.name).is_some()).count() >= 2
     };
     let r = match run {
         Some(n) => set.run(n).ok_or_else(|| format!("no run named `{n}`"))?,
         None => set
             .runs
             .iter()
-            .find(|r| matches!(r.data, RunData::PointTable { .. }) && lines_of(r).len() >= 2)
+            .filter(|r| matches!(r.data, RunData::PointTable { .. }))
+            .find(with_lines)
             .ok_or("expected a point-table run with at least two laser lines")?,
     };
-    let RunData::PointTable { target, columns, .. } = &r.data else {
+    let RunData::PointTable { target, run: run_no, direction, columns, .. } = &r.data else {
         return Err(format!("run {} is not a point table", r.name));
     };
-    let lines = lines_of(r);
+    let mut notes = Vec::new();
+    let mut lines = Vec::new();
+    for s in set.sensors.iter().filter(|s| is_line(s.kind)) {
+        let Some(values) = r.data.column(&s.name) else { continue };
+        let sigma = match s.sigma {
+            Some(sigma) => sigma,
+            None => {
+                let keyed = target.iter().zip(direction).zip(values).map(|((x, d), v)| ((x.to_bits(), *d), *v));
+                match vmt_estimators::modelcheck::pooled_group_scatter(keyed) {
+                    Some((ss, dof)) if dof >= MIN_REPEAT_DOF_IDENTIFY && ss > 0.0 => {
+                        let sigma = (ss / dof as f64).sqrt();
+                        notes.push(format!(
+                            "sigma of `{}` estimated from its repeated readings: {} m ({dof} degrees of freedom; the manifest gives none)",
+                            s.name,
+                            crate::error::fmt_num(sigma)
+                        ));
+                        sigma
+                    }
+                    other => {
+                        let runs = run_no.iter().collect::<std::collections::BTreeSet<_>>().len();
+                        return Err(format!(
+                            "laser line `{}` has no sigma in the manifest and its readings ({runs} run(s)) give {} degrees of \
+                             freedom of repeats, fewer than the {MIN_REPEAT_DOF_IDENTIFY} needed to estimate it: give `sigma` \
+                             for the sensor (the weights and every standard error depend on it)",
+                            s.name,
+                            other.map_or(0, |(_, d)| d)
+                        ));
+                    }
+                }
+            }
+        };
+        lines.push(LaserLine { name: s.name.clone(), point: s.position, direction: s.direction, sigma });
+    }
     let (id, _) = identify_laser_lines(target, columns, &lines).map_err(|m| format!("run {}: {m}", r.name))?;
-    Ok((r.name.clone(), lines.len(), id))
+    Ok((r.name.clone(), lines.len(), id, notes))
 }
 
 /// Multi-axis laser lines of a measurement set (the seed 001 line set of a chain, e.g. what `vmt simulate`
@@ -247,7 +278,7 @@ impl Estimator for LaserLines {
     }
 
     fn estimate(&self, set: &MeasurementSet, _work: &Path) -> Result<ProfileTable, VmtError> {
-        let (_, _, id) =
+        let (_, _, id, _) =
             identify_set(set, None).map_err(|m| VmtError::bad(Path::new("<measurement set>"), "runs", m))?;
         Ok(profiles_of(&id))
     }

@@ -108,8 +108,14 @@ pub fn report_files(report: &Report) -> Result<(String, String), VmtError> {
 /// summary table.
 pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow], label: &str) -> Report {
     use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
-    let mut names: Vec<&str> = summary.iter().map(|s| s.estimate.as_str()).collect();
-    names.dedup();
+    // One figure per estimate, in first-appearance order (the summary is sorted by value, then estimate:
+    // a plain `dedup` kept every repetition and drew values × estimates figures of all points each).
+    let mut names: Vec<&str> = Vec::new();
+    for s in summary {
+        if !names.contains(&s.estimate.as_str()) {
+            names.push(&s.estimate);
+        }
+    }
     let positive = crate::study::all_positive(summary);
     // An estimate without a difference (a one-sided limit or a found/not-found check) has only a pass
     // rate, which the table shows: no figure for it.

@@ -38,8 +38,8 @@ pub use refine::{refine_projected, ProjectedResidualFn, Refined};
 pub use spectrum::{amplitude_spectrum, frequency_grid, ls_periodogram, AmplitudeSpectrum, Periodogram};
 pub use stats::{
     autocorrelation, bin_by_edges, bin_by_label, chi_square_isf, chi_square_sf, estimate_noise_sigma, fit_percent,
-    ljung_box, normalized_rms, rms, uniform_edges, Autocorrelation, BinnedResidual, LabelBin, LjungBox, RangeBin,
-    MIN_SAMPLES_NOISE_SIGMA,
+    ljung_box, normalized_rms, pooled_group_scatter, rms, uniform_edges, Autocorrelation, BinnedResidual, LabelBin,
+    LjungBox, RangeBin, MIN_SAMPLES_NOISE_SIGMA,
 };
 
 use serde::{Deserialize, Serialize};
