@@ -132,11 +132,7 @@ pub fn identify_axis_readings(
         if p.len() < 2 {
             return Err(format!("the lines stop at only one position of axis {l}: at least two are needed"));
         }
-        let name = match l {
-            'x' => AxisName::X,
-            'y' => AxisName::Y,
-            _ => AxisName::Z,
-        };
+        let name = AxisName::from_letter(*l).ok_or_else(|| format!("expected axis letters x, y or z, got `{l}`"))?;
         axes.push(AxisModel::with_nodes(name, &p));
         positions.push(p);
     }

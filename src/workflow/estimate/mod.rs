@@ -8,7 +8,7 @@
 //! [`iso`] (ISO 230-2 evaluation, figure and table), [`compensation`] (seed 004), [`laser_lines`]
 //! (seeds 001/003, one axis), [`chain`] (seed 001, the 21 errors of a chain), [`ssi`] (seed 002),
 //! [`straightness`] (seed 000, accelerometers), [`model_check`] (the compare → diagnose → add loop).
-//! The workflow never sees the scenario or the simulator's physics (checked by a test below): the truth
+//! The workflow never sees the scenario or the simulator's physics (checked by a test in `workflow`): the truth
 //! comes as a [`TruthView`], a re-measurement as a [`Remeasure`] callback.
 
 use crate::error::VmtError;
@@ -397,62 +397,4 @@ pub fn estimate_recording(
         }
     }
     Ok(out)
-}
-
-#[cfg(test)]
-mod tests {
-    /// The estimate workflow's boundary (issue 12): no file of `src/workflow/estimate/` names the scenario
-    /// or a type of the simulator's physics; it sees a measurement set, plain settings and a
-    /// [`super::TruthView`]. A grep over the code (comments skipped): it fails as soon as one of these names
-    /// is written in the module, e.g. an adapter taking `&Scenario` or a run record again.
-    #[test]
-    fn the_estimate_workflow_sees_no_scenario_or_physics_type() {
-        // By path where a name is shared (`laser_ls::AxisModel` is the identifier's, not the machine's).
-        const FORBIDDEN: [&str; 19] = [
-            "Scenario",
-            "crate::scenario::Scenario",
-            "crate::simulate",
-            "workflow::simulate",
-            "crate::cli",
-            "crate::report",
-            "workflow::report",
-            "Physics",
-            "RunRecord",
-            "ProcedureSpec",
-            "SensorSpec",
-            "ChainModel",
-            "vmt_sim::procedures",
-            "vmt_sim::machine",
-            "vmt_sim::axis_sim",
-            "vmt_sim::chain",
-            "vmt_sim::sensors",
-            "vmt_sim::truth",
-            "rapier3d_f64",
-        ];
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/workflow/estimate");
-        let mut files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).collect();
-        files.sort();
-        assert!(files.len() >= 8, "expected the estimate module's files in {}, got {files:?}", dir.display());
-        let mut found = Vec::new();
-        for f in &files {
-            let text = std::fs::read_to_string(f).unwrap();
-            // This test's own list of names is not a use of them.
-            let code = text.split("const FORBIDDEN").next().unwrap_or("");
-            for (i, line) in code.lines().enumerate() {
-                let line = line.split("//").next().unwrap_or("");
-                for name in FORBIDDEN {
-                    let word = line.match_indices(name).any(|(at, _)| {
-                        let before = line[..at].chars().next_back();
-                        let after = line[at + name.len()..].chars().next();
-                        let ident = |c: Option<char>| c.is_some_and(|c| c.is_alphanumeric() || c == '_');
-                        !ident(before) && !ident(after)
-                    });
-                    if word {
-                        found.push(format!("{}:{}: {name}", f.display(), i + 1));
-                    }
-                }
-            }
-        }
-        assert!(found.is_empty(), "the estimate workflow names scenario or physics types:\n{}", found.join("\n"));
-    }
 }
