@@ -607,36 +607,63 @@ fn is_safe_relative(file: &str) -> bool {
 }
 
 /// Reads what `--data` names: a measurement set directory ([`read`]), or an ISO 230-2 test in the
-/// ecmc key=value `.dat` format (a file; [`from_iso230_2_dat`]).
+/// ecmc key=value `.dat` format (a file; [`read_dat`], [`from_iso230_2_dat`]).
 pub fn read_data(path: &Path) -> Result<MeasurementSet, VmtError> {
     if path.is_file() && path.extension().is_some_and(|e| e.eq_ignore_ascii_case("dat")) {
-        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the ISO 230-2 test", e))?;
-        let dat =
-            vmt_estimators::iso230_2::dat::parse_dat(&text).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
-        let set = from_iso230_2_dat(&dat);
-        for (k, x) in dat.targets.iter().enumerate() {
-            if !(x.is_finite() && x.abs() <= MAX_POSITION) {
+        return Ok(from_iso230_2_dat(&read_dat(path)?));
+    }
+    read(path)
+}
+
+/// Reads an ISO 230-2 test in the ecmc key=value `.dat` format, with the checks every command that
+/// reads one applies: each target a finite position within ±[`MAX_POSITION`], distinct from the
+/// others, and every reading within half the smallest target spacing of its target (a deviation that
+/// large cannot be attributed to its target: the file is in another unit or a target is mistyped;
+/// ISO 230-2 deviations are µm to mm on targets mm to m apart).
+pub fn read_dat(path: &Path) -> Result<vmt_estimators::iso230_2::dat::DatFile, VmtError> {
+    let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the ISO 230-2 test", e))?;
+    let dat = vmt_estimators::iso230_2::dat::parse_dat(&text).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+    for (k, x) in dat.targets.iter().enumerate() {
+        if !(x.is_finite() && x.abs() <= MAX_POSITION) {
+            return Err(VmtError::bad(
+                path,
+                format!("target {}", k + 1),
+                format!("expected a target position within ±{MAX_POSITION} m, got {} m", fmt_num(*x)),
+            ));
+        }
+        if let Some(j) = dat.targets[..k].iter().position(|y| y == x) {
+            return Err(VmtError::bad(
+                path,
+                format!("target {}", k + 1),
+                format!(
+                    "the same position {} m as target {}: each target must be a distinct position",
+                    fmt_num(*x),
+                    j + 1
+                ),
+            ));
+        }
+    }
+    let mut sorted = dat.targets.clone();
+    sorted.sort_by(f64::total_cmp);
+    let spacing = sorted.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
+    for (table, name) in [(&dat.up, "REF_DATA_FWD"), (&dat.down, "REF_DATA_BWD")] {
+        for (i, row) in table.iter().enumerate() {
+            if let Some((j, d)) = row.iter().enumerate().find(|(_, d)| !(d.abs() < 0.5 * spacing)) {
                 return Err(VmtError::bad(
                     path,
-                    format!("target {}", k + 1),
-                    format!("expected a target position within ±{MAX_POSITION} m, got {} m", fmt_num(*x)),
-                ));
-            }
-            if let Some(j) = dat.targets[..k].iter().position(|y| y == x) {
-                return Err(VmtError::bad(
-                    path,
-                    format!("target {}", k + 1),
+                    format!("{name}[{},{}]", i + 1, j + 1),
                     format!(
-                        "the same position {} m as target {}: each target must be a distinct position",
-                        fmt_num(*x),
-                        j + 1
+                        "expected a reading within half the smallest target spacing ({} m) of its target {} m, \
+                         got a deviation of {} m (another unit, or a mistyped target?)",
+                        fmt_num(0.5 * spacing),
+                        fmt_num(dat.targets[i]),
+                        fmt_num(*d)
                     ),
                 ));
             }
         }
-        return Ok(set);
     }
-    read(path)
+    Ok(dat)
 }
 
 /// An ISO 230-2 test (`.dat`) as a measurement set: one reference sensor `ref` (a linear laser along

@@ -44,26 +44,50 @@ impl Estimator for CommandEstimator {
     }
 }
 
-/// One error motion's comparison: RMS and max of estimate − truth on the estimate's positions.
+/// One error motion's comparison: RMS and max of estimate − truth on the estimate's positions
+/// inside the truth's range.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ScoreRow {
+    /// The error-motion column (`positioning`, `y.pitch`, …).
     pub effect: String,
+    /// RMS of d = estimate − truth over the scored positions, the column's SI unit (m or rad).
     pub rms: f64,
+    /// max |d| over the scored positions, same unit.
     pub max: f64,
+    /// Number of scored positions (the estimate's positions inside the truth's range).
     pub points: usize,
+    /// The estimate's positions outside the truth's range, not scored (the truth is never
+    /// extrapolated); optional JSON key `outside_truth`.
+    #[serde(rename = "outside_truth")]
+    pub outside: usize,
 }
 
-/// Compares estimated profiles with the truth on the estimate's positions (truth interpolated linearly):
-/// straightness about its least-squares line on both sides, positioning and angles relative to their
-/// first position (the conventions of the laser identifier and of ISO 230-1).
-pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Vec<ScoreRow> {
+/// Compares estimated profiles with the truth on the estimate's positions inside the truth's range
+/// (truth interpolated linearly, never extrapolated): straightness about its least-squares line on
+/// both sides, positioning and angles relative to their first position (the conventions of the
+/// laser identifier and of ISO 230-1).
+///
+/// Refuses (an `Err` naming the column) a comparison that could not fail: a truth with fewer than
+/// two positions, or fewer scored positions than the reference removes plus one (three for
+/// straightness, whose line takes two; two for the others, whose first value is the reference) —
+/// one estimate point would otherwise score as perfect.
+pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Result<Vec<ScoreRow>, String> {
     use vmt_sim::effects::EffectName;
-    let interp = |xs: &[f64], ys: &[f64], x: f64| -> f64 {
-        if xs.len() < 2 {
-            return ys.first().copied().unwrap_or(0.0);
-        }
-        let i = xs.partition_point(|&v| v <= x).clamp(1, xs.len() - 1);
-        let w = (x - xs[i - 1]) / (xs[i] - xs[i - 1]);
+    let (Some(&t_lo), Some(&t_hi)) = (truth.position.first(), truth.position.last()) else {
+        return Err("the truth has no positions".into());
+    };
+    if truth.position.len() < 2 {
+        return Err(format!("the truth has one position ({t_lo} m): it cannot be interpolated"));
+    }
+    // A position within 1e-9 of the span of an end counts as inside (rounding of written CSVs).
+    let slack = 1e-9 * (t_hi - t_lo);
+    let inside: Vec<usize> =
+        (0..est.position.len()).filter(|&i| (t_lo - slack..=t_hi + slack).contains(&est.position[i])).collect();
+    let xs: Vec<f64> = inside.iter().map(|&i| est.position[i].clamp(t_lo, t_hi)).collect();
+    let interp = |ys: &[f64], x: f64| -> f64 {
+        let p = &truth.position;
+        let i = p.partition_point(|&v| v <= x).clamp(1, p.len() - 1);
+        let w = (x - p[i - 1]) / (p[i] - p[i - 1]);
         ys[i - 1] + w * (ys[i] - ys[i - 1])
     };
     let mut rows = Vec::new();
@@ -72,24 +96,41 @@ pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Vec<ScoreRow>
         if c.values.is_empty() {
             continue;
         }
-        let tv: Vec<f64> = est.position.iter().map(|&x| interp(&truth.position, &tc.values, x)).collect();
         let straightness = matches!(c.effect, EffectName::StraightnessY | EffectName::StraightnessZ);
+        let need = if straightness { 3 } else { 2 };
+        if xs.len() < need {
+            return Err(format!(
+                "column {}: {} of the estimate's {} positions lie inside the truth's range [{t_lo}, {t_hi}] m; \
+                 scoring needs at least {need} there ({})",
+                c.column_name(),
+                xs.len(),
+                est.position.len(),
+                if straightness {
+                    "straightness is compared about its least-squares line"
+                } else {
+                    "the first value is the reference"
+                }
+            ));
+        }
+        let ev: Vec<f64> = inside.iter().map(|&i| c.values[i]).collect();
+        let tv: Vec<f64> = xs.iter().map(|&x| interp(&tc.values, x)).collect();
         let norm = |v: &[f64]| -> Vec<f64> {
             if straightness {
-                vmt_estimators::line::remove_line(&est.position, v)
+                vmt_estimators::line::remove_line(&xs, v)
             } else {
                 v.iter().map(|x| x - v[0]).collect()
             }
         };
-        let d: Vec<f64> = norm(&c.values).iter().zip(norm(&tv)).map(|(a, b)| a - b).collect();
+        let d: Vec<f64> = norm(&ev).iter().zip(norm(&tv)).map(|(a, b)| a - b).collect();
         rows.push(ScoreRow {
             effect: c.column_name(),
             rms: (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt(),
             max: d.iter().fold(0.0f64, |m, x| m.max(x.abs())),
             points: d.len(),
+            outside: est.position.len() - xs.len(),
         });
     }
-    rows
+    Ok(rows)
 }
 
 pub use crate::estimate::chain::identify_axes_set;
