@@ -13,7 +13,7 @@ fn workflows(c: &mut Criterion) {
             let ph = vmt::simulate::physics(&sc).unwrap();
             let truths = vmt::simulate::simulate_truth(&sc, &ph);
             let runs = vmt::simulate::read_all(&sc, &ph, &truths, sc.seed).unwrap();
-            vmt::estimate::run_estimators(&sc, &ph, &runs).unwrap()
+            vmt::workflow::run::run_estimators(&sc, &ph, &runs).unwrap()
         })
     });
     let study =
@@ -29,8 +29,7 @@ fn workflows(c: &mut Criterion) {
             // run on it with the compensation check re-measuring after the session simulated once.
             let runs = vmt::simulate::read_all(&study, &ph, &truths, seed).unwrap();
             let set = vmt::simulate::to_measurement_set(&study, &runs).unwrap();
-            let again = |p: &_, x: &[f64], y: &[f64]| vmt::simulate::remeasure(&ph, study.seed, truths.end, p, x, y);
-            vmt::estimate::estimate_recording(&study, ph.view(), &runs, &set, &again).unwrap()
+            vmt::workflow::run::estimate_session(&study, &ph, truths.end, &set).unwrap()
         })
     });
     g.finish();

@@ -3,10 +3,13 @@
 //! bad input).
 
 use crate::error::VmtError;
-use crate::estimate::{display, estimate_recording, Check, Quantity, CHECK_HEADER, CHECK_LEGEND};
-use crate::measurement::{self, MeasurementSet, SensorKind, UnitChoice};
+use crate::estimate::straightness::{
+    parse_method, profile_table, sensor_straightness, PassSelection, SensorStraightness,
+};
+use crate::estimate::{display, Check, Quantity, CHECK_HEADER, CHECK_LEGEND};
+use crate::measurement::{self, MeasurementSet, Procedure, SensorKind, UnitChoice};
 use crate::scenario::Scenario;
-use crate::simulate::{physics, read_all, remeasure, simulate_truth, to_measurement_set, truth_extras};
+use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set, truth_extras};
 use std::path::{Path, PathBuf};
 
 /// Loads the scenario at `path`, or the bundled default.
@@ -92,8 +95,7 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
         crate::output::refuse_input_overwrite(&out, &[p])?;
     }
     let files = measurement::set_files(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc, &ph)?)?;
-    let again = |p: &_, x: &[f64], y: &[f64]| remeasure(&ph, sc.seed, truths.end, p, x, y);
-    let est = estimate_recording(&sc, ph.view(), &runs, &set, &again)?;
+    let est = crate::workflow::run::estimate_session(&sc, &ph, truths.end, &set)?;
     let checks = &est.checks;
     let html = out.join("report.html");
     let (report, report_json) = crate::report::report_files(&crate::report::run_report(&sc, &set, &est))?;
@@ -247,15 +249,7 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
                 .map(|s| s.name.clone())
                 .ok_or_else(|| VmtError::bad(path, format!("run {}", r.name), "expected a sensor column"))?,
         };
-        let rec = vmt_sim::procedures::RunRecord {
-            name: r.name.clone(),
-            procedure: r.procedure,
-            feed: r.feed,
-            direction: r.direction,
-            start_time: r.start_time.unwrap_or(0.0),
-            data: r.data.clone(),
-        };
-        let (t, u, d) = crate::estimate::point_table_deviations(&rec, &col).ok_or_else(|| {
+        let (t, u, d) = crate::estimate::point_table_deviations(r, &col).ok_or_else(|| {
             VmtError::bad(path, format!("run {}", r.name), format!("expected a point table with column `{col}`"))
         })?;
         (format!("{} / {} / {}", path.display(), r.name, col), t, u, d)
@@ -513,7 +507,6 @@ fn write_study(
 
 /// `vmt ssi DATA [--sensor NAME]`: seed 002's stick-slip index of every time-series run (crawl first).
 pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtError> {
-    use vmt_estimators::ssi::stick_slip_index;
     let set = measurement::read(path)?;
     let mut results = Vec::new();
     for r in &set.runs {
@@ -550,9 +543,8 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
         if t.len() < 3 {
             continue;
         }
-        let dt = measurement::uniform_interval(t).map_err(|m| VmtError::bad(path, format!("run {}", r.name), m))?;
-        let res =
-            stick_slip_index(x, dt, None).map_err(|e| VmtError::bad(path, format!("run {}", r.name), e.to_string()))?;
+        let (_, res) =
+            crate::estimate::ssi::run_ssi(t, x, None).map_err(|m| VmtError::bad(path, format!("run {}", r.name), m))?;
         results
             .push(serde_json::json!({"run": r.name, "sensor": s.name, "feed": r.feed, "ssi": res.ssi, "result": res}));
     }
@@ -645,15 +637,7 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
             .map(|s| s.name.clone())
     });
     let col = col.ok_or_else(|| VmtError::bad(path, format!("run {}", run.name), "expected a laser_linear column"))?;
-    let rec = vmt_sim::procedures::RunRecord {
-        name: run.name.clone(),
-        procedure: run.procedure,
-        feed: run.feed,
-        direction: run.direction,
-        start_time: 0.0,
-        data: run.data.clone(),
-    };
-    let (t, u, d) = crate::estimate::point_table_deviations(&rec, &col)
+    let (t, u, d) = crate::estimate::point_table_deviations(run, &col)
         .ok_or_else(|| VmtError::bad(path, format!("run {}", run.name), format!("no column `{col}`")))?;
     let iso = evaluate_bidirectional(&t, &u, &d).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
     let dev: Vec<f64> = iso.targets.iter().map(|x| x.mean_bidirectional).collect();
@@ -692,6 +676,122 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
     println!("wrote {} (from run {}, sensor {col}; E before {:.3} µm)", out.display(), run.name, iso.e * 1e6);
     Ok(0)
 }
+/// `vmt straightness DIR [-o EST.csv] [--method seed|fusion] [--sensor NAME…] [--json]`: the straightness
+/// (and tilt) of each accelerometer from the constant-velocity passes of a measurement set, printed or as
+/// JSON, optionally written as a FORMAT.md §5 profile table.
+pub fn straightness(
+    path: &Path,
+    out: Option<&Path>,
+    method: &str,
+    sensors: &[String],
+    json: bool,
+) -> Result<i32, VmtError> {
+    let method = parse_method(method).map_err(VmtError::Usage)?;
+    let set = measurement::read(path)?;
+    let names: Vec<String> = if sensors.is_empty() {
+        set.sensors
+            .iter()
+            .filter(|s| {
+                s.kind == SensorKind::Accelerometer
+                    && set
+                        .runs
+                        .iter()
+                        .any(|r| r.procedure == Procedure::ConstantVelocity && r.data.column(&s.name).is_some())
+            })
+            .map(|s| s.name.clone())
+            .collect()
+    } else {
+        sensors.to_vec()
+    };
+    if names.is_empty() {
+        return Err(VmtError::bad(
+            path,
+            "sensors",
+            "expected an accelerometer with a column in a constant_velocity run, found none",
+        ));
+    }
+    let results = names
+        .iter()
+        .map(|n| sensor_straightness(&set, path, n, PassSelection::ConstantVelocity, method))
+        .collect::<Result<Vec<_>, _>>()?;
+    let table = match out {
+        Some(o) => Some((o, profile_table(&results, o)?)),
+        None => None,
+    };
+    if json {
+        let v = serde_json::json!({
+            "data": path,
+            "method": method,
+            "sensors": results,
+        });
+        print_json("vmt-straightness/1", &v)?;
+    } else {
+        print_straightness(path, &results);
+    }
+    if let Some((o, t)) = table {
+        measurement::write_profiles(&t, o, measurement::UnitChoice::Si)?;
+        eprintln!("wrote {}", o.display());
+    }
+    Ok(0)
+}
+
+/// Root mean square of `v` (same unit), 0 for none.
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
+fn print_straightness(path: &Path, results: &[SensorStraightness]) {
+    println!("vmt straightness: {}", path.display());
+    for r in results {
+        let e = &r.estimate;
+        println!(
+            "\n{} → {} ({:?}), {} passes, travel {:.1} mm",
+            r.sensor,
+            r.effect.as_str(),
+            e.method,
+            r.passes.len(),
+            e.travel * 1e3
+        );
+        for p in &r.passes {
+            println!(
+                "  {:<16} {:>8.1} mm/s {:>8.1} Hz {:>7} samples  noise density {:.3} µg/√Hz ({})",
+                p.run,
+                p.speed * 1e3,
+                p.sample_rate,
+                p.samples,
+                p.noise_density / vmt_estimators::accel_straightness::STANDARD_GRAVITY * 1e6,
+                p.noise_density_source
+            );
+        }
+        println!("  band: {}", e.band.note);
+        println!(
+            "  straightness: RMS {:.4} µm, peak-to-valley {:.4} µm; Cramér–Rao bound of the in-band RMS error {:.4} µm",
+            rms(&e.straightness) * 1e6,
+            (e.straightness.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+                - e.straightness.iter().cloned().fold(f64::INFINITY, f64::min))
+                * 1e6,
+            r.bounds.straightness_rms * 1e6
+        );
+        if let (Some(t), Some(tb)) = (&e.tilt, r.bounds.tilt_rms) {
+            let what = r.tilt_effect.map_or("gravity tilt of the sensitive axis", |(eff, _)| eff.as_str());
+            println!(
+                "  {what} (mean removed): RMS {:.4} µrad; Cramér–Rao bound of the in-band RMS error {:.4} µrad",
+                rms(t) * 1e6,
+                tb * 1e6
+            );
+        }
+        println!("  Cramér–Rao bound per harmonic (1σ per quadrature component), a selection:");
+        println!("  {:>12} {:>16} {:>16}", "λ mm", "straightness µm", "tilt µrad");
+        let n = r.bounds.bins.len();
+        let step = (n / 8).max(1);
+        for b in r.bounds.bins.iter().step_by(step) {
+            let s = b.straightness.map_or("-".to_string(), |v| format!("{:.5}", v * 1e6));
+            let t = b.tilt.map_or("-".to_string(), |v| format!("{:.5}", v * 1e6));
+            println!("  {:>12.1} {:>16} {:>16}", b.wavelength * 1e3, s, t);
+        }
+    }
+}
+
 /// Reads a model and a measurement set for the model-check commands.
 fn model_and_data(model: &Path, data: &Path) -> Result<(crate::model::Model, MeasurementSet), VmtError> {
     let m = crate::model::read_model(model)?;

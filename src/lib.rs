@@ -4,7 +4,8 @@
 //! format/    FORMAT readers and writers (error, units, measurement, model)       plain data
 //! scenario/  Scenario, load, chain building; spec.rs: EstimatorSpec             uses format
 //! modelcheck/ compare / diagnose / add                                           uses format
-//! workflow/  simulate → estimate (straightness, byo) → report; study            uses scenario, modelcheck, format
+//! workflow/  simulate → truth view + measurement set → estimate (one adapter      uses scenario, modelcheck, format
+//!            per estimator; byo) → report; run, study join them; estimate sees no scenario or physics
 //! cli, main  the commands                                                        uses all
 //! ```
 //!
@@ -20,4 +21,5 @@ pub mod scenario;
 pub mod workflow;
 
 pub use format::{error, measurement, model, units};
-pub use workflow::{byo, estimate, report, simulate, straightness, study};
+pub use workflow::estimate::straightness;
+pub use workflow::{byo, estimate, report, simulate, study};

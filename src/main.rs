@@ -237,7 +237,7 @@ fn main() -> ExitCode {
             }
         }
         Command::Straightness { data, out, method, sensor, json } => {
-            vmt::straightness::command(&data, out.as_deref(), &method, &sensor, json)
+            vmt::cli::straightness(&data, out.as_deref(), &method, &sensor, json)
         }
         Command::Ssi { data, sensor, json } => vmt::cli::ssi(&data, sensor.as_deref(), json),
         Command::Friction { data, sensor, json } => vmt::cli::friction(&data, sensor.as_deref(), json),

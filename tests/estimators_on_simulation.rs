@@ -11,7 +11,7 @@ fn crawl_preset_gives_seed_002_stick_slip_indices_through_the_workflow() {
     let ph = vmt::simulate::physics(&sc).unwrap();
     let truths = vmt::simulate::simulate_truth(&sc, &ph);
     let runs = vmt::simulate::read_all(&sc, &ph, &truths, sc.seed).unwrap();
-    let checks = vmt::estimate::run_estimators(&sc, &ph, &runs).unwrap().checks;
+    let checks = vmt::workflow::run::run_estimators(&sc, &ph, &runs).unwrap().checks;
     assert_eq!(checks.len(), 3);
     for c in &checks {
         println!("{}: {:.3} (expected {} ± {})", c.error, c.recovered, c.injected, c.tolerance);

@@ -12,9 +12,9 @@
 //! order of newtons per count). The bounds below are those physical scales, not fitted to the result.
 
 use std::path::{Path, PathBuf};
-use vmt::estimate::run_estimators;
 use vmt::scenario::Scenario;
 use vmt::simulate::{physics, read_all, simulate_truth};
+use vmt::workflow::run::run_estimators;
 
 /// The bundled scenarios: scenarios/*.toml and the lessons.
 fn bundled() -> Vec<PathBuf> {

@@ -3,11 +3,11 @@
 //! The physics is simulated once per truth; the laser noise is redrawn per seed.
 
 use std::path::{Path, PathBuf};
-use vmt::estimate::identify_chain_lines;
 use vmt::measurement::{self, UnitChoice};
 use vmt::scenario::Scenario;
 use vmt::simulate::{chain_truths, read_chain};
 use vmt::simulate::{to_measurement_set, truth_extras};
+use vmt::workflow::run::identify_chain_lines;
 use vmt_sim::chain::{LineTruth, SquarenessAngles};
 use vmt_sim::procedures::RunData;
 

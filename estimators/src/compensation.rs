@@ -51,33 +51,94 @@ use crate::line::fit_line;
 pub enum CompensationError {
     /// Too few points or nodes.
     #[error("{what}: at least {need} are needed, got {got}")]
-    TooFew { what: &'static str, need: usize, got: usize },
+    TooFew {
+        /// Name of the input the error is about.
+        what: &'static str,
+        /// How many are needed (count).
+        need: usize,
+        /// How many were given (count).
+        got: usize,
+    },
     /// Two arrays that must pair up differ in length.
     #[error("{what}: lengths differ ({a} vs {b})")]
-    LengthMismatch { what: &'static str, a: usize, b: usize },
+    LengthMismatch {
+        /// Name of the input the error is about.
+        what: &'static str,
+        /// Length of the first array (count).
+        a: usize,
+        /// Length of the second array (count).
+        b: usize,
+    },
     /// A value is NaN or infinite.
     #[error("{what}[{index}] must be finite, got {value}")]
-    NonFinite { what: &'static str, index: usize, value: f64 },
+    NonFinite {
+        /// Name of the input the error is about.
+        what: &'static str,
+        /// Index of the offending element, 0-based.
+        index: usize,
+        /// The offending value, in the unit the message states (m for positions, m/s for feeds).
+        value: f64,
+    },
     /// Positions are not strictly increasing.
     #[error("{what} must be strictly increasing, got {value} m at index {index} after {previous} m")]
-    NotIncreasing { what: &'static str, index: usize, previous: f64, value: f64 },
+    NotIncreasing {
+        /// Name of the input the error is about.
+        what: &'static str,
+        /// Index of the offending position, 0-based.
+        index: usize,
+        /// The position before it, m.
+        previous: f64,
+        /// The position, m.
+        value: f64,
+    },
     /// A parameter is out of its range.
     #[error("parameter {name} = {value}: expected {expected}")]
-    BadParameter { name: &'static str, value: f64, expected: &'static str },
+    BadParameter {
+        /// The parameter's name.
+        name: &'static str,
+        /// The offending value, in the unit the message states (m for positions, m/s for feeds).
+        value: f64,
+        /// What the parameter must be (a range in words).
+        expected: &'static str,
+    },
     /// A node of the table has no measured point in its two neighbouring intervals.
     #[error("node {index} at {position} m has no measured point in its neighbouring intervals; use fewer nodes")]
-    UnsupportedNode { index: usize, position: f64 },
+    UnsupportedNode {
+        /// Index of the node, 0-based.
+        index: usize,
+        /// The node's position, m.
+        position: f64,
+    },
     /// p + c(p) is not increasing on a table segment, so the display cannot be inverse-compensated.
     #[error("table is not invertible: on segment {index} (from {start} m) dc/dp = {slope} <= -1")]
-    NotInvertible { index: usize, start: f64, slope: f64 },
+    NotInvertible {
+        /// Index of the table segment, 0-based.
+        index: usize,
+        /// Position where the segment starts, m.
+        start: f64,
+        /// Slope dc/dp of the correction on the segment (dimensionless).
+        slope: f64,
+    },
     /// The table's nodes are not equally spaced (controller export).
     #[error(
         "node spacing must be constant for a controller table: interval {index} is {spacing} m, first is {first} m"
     )]
-    NotEquidistant { index: usize, spacing: f64, first: f64 },
+    NotEquidistant {
+        /// Index of the interval, 0-based.
+        index: usize,
+        /// Length of this interval, m.
+        spacing: f64,
+        /// Length of the first interval, m.
+        first: f64,
+    },
     /// A correction does not fit a 32-bit integer in units of 0.1 µm.
     #[error("correction {value} m at node {index} overflows a 32-bit count of 0.1 um")]
-    Overflow { index: usize, value: f64 },
+    Overflow {
+        /// Index of the node, 0-based.
+        index: usize,
+        /// The correction, m.
+        value: f64,
+    },
 }
 
 fn check_finite(what: &'static str, v: &[f64]) -> Result<(), CompensationError> {

@@ -88,6 +88,16 @@ impl AxisName {
     fn letter(self) -> char {
         ['X', 'Y', 'Z'][self.index()]
     }
+
+    /// The axis of a letter (`x`, `y`, `z`, either case); None for any other.
+    pub fn from_letter(letter: char) -> Option<AxisName> {
+        match letter.to_ascii_lowercase() {
+            'x' => Some(AxisName::X),
+            'y' => Some(AxisName::Y),
+            'z' => Some(AxisName::Z),
+            _ => None,
+        }
+    }
 }
 
 const TRANS: [char; 3] = ['X', 'Y', 'Z'];

@@ -3,6 +3,8 @@
 //! Pure functions on numbers: no physics engine, no file I/O. Each estimator names the seed
 //! (`shared/seeds/`) or paper it follows. Units are SI unless a doc comment says otherwise.
 
+#![deny(missing_docs)]
+
 pub mod accel_straightness;
 pub mod compensation;
 pub mod dsp;
@@ -11,5 +13,9 @@ pub mod input;
 pub mod iso230_2;
 pub mod laser_ls;
 pub mod line;
+// `modelcheck/` is worked on in parallel (issues 11, 19): its error variants' fields are not documented
+// yet (ModelCheckError::{TooFewSamples, TooLittleDataForSigma, LengthMismatch, NotFinite, BadSigma,
+// Candidate}); lift this allow once they are.
+#[allow(missing_docs)]
 pub mod modelcheck;
 pub mod ssi;

@@ -33,7 +33,12 @@ pub enum SsiError {
     TooFewSamples(usize),
     /// A position sample is NaN or infinite.
     #[error("position sample {index} must be finite, got {value}")]
-    NonFinite { index: usize, value: f64 },
+    NonFinite {
+        /// Index of the offending element, 0-based.
+        index: usize,
+        /// The offending value, in the unit the message states (m for positions, m/s for feeds).
+        value: f64,
+    },
     /// The axis did not move on average: SSI is undefined (division by s_mean = 0).
     #[error("mean velocity is zero (x(N) = x(0)); the stick-slip index needs a moving axis")]
     NoMotion,
@@ -45,7 +50,12 @@ pub enum SsiError {
     BadFeed(f64),
     /// Percentiles out of order or outside [0, 100].
     #[error("percentiles must satisfy 0 <= lower < upper <= 100, got lower {lower}, upper {upper}")]
-    BadPercentiles { lower: f64, upper: f64 },
+    BadPercentiles {
+        /// Lower percentile, %.
+        lower: f64,
+        /// Upper percentile, %.
+        upper: f64,
+    },
 }
 
 /// Crawling verdict of seed 002, step 4.

@@ -50,6 +50,18 @@ impl ErrorMotions {
         e + DVec3::new(d(&self.roll), d(&self.pitch), d(&self.yaw)).cross(r)
     }
 
+    /// [`ErrorMotions::deviation`] on plain arrays (for callers without the physics engine's vector type):
+    /// δ = E(x) + ε(x) × r, m, for body point `r` (m, axis frame) at axis position `x` (m).
+    pub fn deviation_at(&self, x: f64, r: [f64; 3]) -> [f64; 3] {
+        self.deviation(x, DVec3::from_array(r)).to_array()
+    }
+
+    /// [`ErrorMotions::curvature`] on plain arrays: δ'' = E''(x) + ε''(x) × r, 1/m·m, for body point `r`
+    /// (m, axis frame) at axis position `x` (m).
+    pub fn curvature_at(&self, x: f64, r: [f64; 3]) -> [f64; 3] {
+        self.curvature(x, DVec3::from_array(r)).to_array()
+    }
+
     /// Derivatives with respect to position of (translation, rotation): (E'(x), ε'(x)).
     pub fn slope(&self, x: f64) -> (DVec3, DVec3) {
         let d = |p: &Profile| p.eval3(x)[1];

@@ -7,7 +7,6 @@ use crate::measurement::MeasurementSet;
 use crate::scenario::Scenario;
 
 mod conditions;
-pub mod iso;
 pub use conditions::{command_line, conditions, conditions_for_data, report_date, version};
 use vmt_report::{render_html, Report, RowStatus, Section, Table};
 

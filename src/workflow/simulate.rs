@@ -8,6 +8,7 @@ use crate::error::VmtError;
 use crate::measurement::{self, MeasurementSet, ProfileColumn, ProfileTable, Run, Sensor, SensorKind, UnitChoice};
 use crate::model::model_to_toml;
 use crate::scenario::Scenario;
+use crate::workflow::truth::{ChainTruth, SensorTruth, TruthView};
 use rayon::prelude::*;
 use std::path::Path;
 use vmt_sim::axis_sim::AxisTruth;
@@ -16,7 +17,6 @@ use vmt_sim::chain::{
     LinePlan, LineTruth,
 };
 use vmt_sim::effects::EffectName;
-use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::machine::AxisModel;
 use vmt_sim::procedures::{
     plan_procedure, plan_session, read_run, simulate_run, ProcedureSpec, RunPlan, RunRecord, RunTruth,
@@ -57,41 +57,59 @@ pub fn physics(sc: &Scenario) -> Result<Physics, VmtError> {
     Ok(Physics { model, truth, sensors })
 }
 
-impl Physics {
-    /// What the estimate workflow may know of this truth (to compare its estimates with).
-    pub fn view(&self) -> TruthView<'_> {
-        TruthView { motions: &self.truth.motions, sensors: &self.sensors }
-    }
+/// What the estimate workflow may know of the truth of `sc` simulated on `ph` (to compare its estimates
+/// with): the axis's injected error motions, the sensors as simulated (their noise and instrument values,
+/// for the Cramér–Rao bounds, the quantisation floor and the uncertainty statement) and, for a multi-axis
+/// scenario, the chain's error motions and squareness.
+pub fn truth_view<'a>(sc: &'a Scenario, ph: &'a Physics) -> TruthView<'a> {
+    let sensors = ph
+        .sensors
+        .iter()
+        .map(|s| SensorTruth {
+            name: s.name.clone(),
+            sigma: s.sigma,
+            resolution: s.resolution,
+            noise_density: s.resolved().noise_density,
+            environment_scale_error: s.air_scale_error() + s.material_scale_error(),
+        })
+        .collect();
+    let chain = sc.chain.as_ref().map(|c| ChainTruth {
+        axes: c.axes.iter().map(|a| (a.letter, &a.motions)).collect(),
+        squareness: c.squareness.to_array(),
+        effective_squareness: Box::new(move |positions: &[Vec<f64>]| c.effective_squareness(positions).to_array()),
+    });
+    TruthView { motions: &ph.truth.motions, sensors, chain }
 }
 
-/// The truth as the estimate workflow sees it, without the machine: the injected error motions of the
-/// axis and the sensors as simulated (their noise model, for the Cramér–Rao bounds).
-#[derive(Clone, Copy, Debug)]
-pub struct TruthView<'a> {
-    /// The six injected error motions of the scenario's axis.
-    pub motions: &'a ErrorMotions,
-    /// The sensors as the physics reads them (the truth's sensor effects applied).
-    pub sensors: &'a [SensorSpec],
-}
-
-/// The compensation check's re-measurement (seed 004): `procedure` (a positioning procedure) run on the
-/// machine of `ph` with the compensation table (`positions`, `corrections`, m) in its CNC, starting at
-/// session time `session_end` (s; time-dependent effects have moved on during the session), read by
-/// the sensors with noise seed `seed`. The one place the estimate workflow's
+/// The compensation check's re-measurement (seed 004): the positioning procedure that recorded run `run`
+/// run again at other irregular targets (they derive from the procedure name, `{run}_after_compensation`;
+/// as many as before) on the machine of `ph` with the compensation table (`positions`, `corrections`, m)
+/// in its CNC, starting at session time `session_end` (s; time-dependent effects have moved on during
+/// the session), read by the sensors with noise seed `seed`. The one place the estimate workflow's
 /// [`crate::estimate::Remeasure`] callback reaches the physics.
 pub fn remeasure(
+    sc: &Scenario,
     ph: &Physics,
     seed: u64,
     session_end: f64,
-    procedure: &ProcedureSpec,
+    run: &str,
     positions: &[f64],
     corrections: &[f64],
-) -> Result<RunRecord, String> {
+) -> Result<Run, String> {
+    let spec = sc.procedures.iter().find(|p| p.name() == run).ok_or_else(|| format!("no procedure `{run}`"))?;
+    let mut verify = spec.clone();
+    let ProcedureSpec::Positioning { name, targets, n_targets, .. } = &mut verify else {
+        return Err("expected a positioning procedure".into());
+    };
+    *n_targets = targets.as_ref().map_or(*n_targets, Vec::len);
+    *targets = None;
+    *name = format!("{run}_after_compensation");
     let mut model = ph.model.clone();
     model.compensation = Profile { terms: vec![Term::Table { x: positions.to_vec(), y: corrections.to_vec() }] };
-    let plan = plan_procedure(&model, procedure, seed);
+    let plan = plan_procedure(&model, &verify, seed);
     let truth = simulate_run(&model, &ph.truth, &plan[0], session_end);
-    read_run(&model, &ph.truth, &truth, &ph.sensors, seed)
+    let rec = read_run(&model, &ph.truth, &truth, &ph.sensors, seed)?;
+    Ok(run_of(sc, &rec))
 }
 
 /// The runs of every procedure of a scenario, in scenario order, with their session start times: the
@@ -233,22 +251,7 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
             }
         }
     }
-    let runs = runs
-        .iter()
-        .map(|r| Run {
-            name: r.name.clone(),
-            file: format!("{}.csv", r.name),
-            procedure: r.procedure,
-            axis: match (&sc.chain, chain_line(sc, &r.name)) {
-                (Some(chain), Some((_, line))) => dominant_axis(chain, line),
-                _ => axis,
-            },
-            start_time: Some(r.start_time),
-            feed: r.feed,
-            direction: r.direction,
-            data: r.data.clone(),
-        })
-        .collect();
+    let runs = runs.iter().map(|r| run_of(sc, r)).collect();
     Ok(MeasurementSet {
         description: Some(sc.description.clone()),
         machine: Some(sc.machine_name.clone()),
@@ -256,6 +259,24 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
         sensors,
         runs,
     })
+}
+
+/// A simulated run as its measurement-set run (FORMAT.md §1): the data as read, its file `NAME.csv`, the
+/// axis it moves (a chain line's dominant axis; the scenario's axis otherwise).
+fn run_of(sc: &Scenario, r: &RunRecord) -> Run {
+    Run {
+        name: r.name.clone(),
+        file: format!("{}.csv", r.name),
+        procedure: r.procedure,
+        axis: match (&sc.chain, chain_line(sc, &r.name)) {
+            (Some(chain), Some((_, line))) => dominant_axis(chain, line),
+            _ => axis_letter(&sc.axis.joint),
+        },
+        start_time: Some(r.start_time),
+        feed: r.feed,
+        direction: r.direction,
+        data: r.data.clone(),
+    }
 }
 
 /// The truth written beside a measurement set (FORMAT.md §5): `truth.toml` (the truth in the model

@@ -7,9 +7,9 @@
 
 use crate::byo::{score_profiles, Estimator};
 use crate::error::VmtError;
-use crate::estimate::{estimate_recording, Quantity};
+use crate::estimate::Quantity;
 use crate::scenario::Scenario;
-use crate::simulate::{physics, read_all, remeasure, simulate_truth, to_measurement_set, Physics};
+use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set, Physics};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
@@ -589,8 +589,7 @@ fn trial_rows(
             .collect());
     }
     // The compensation check re-measures on this trial's sensors, after the session simulated once.
-    let again = |q: &_, x: &[f64], y: &[f64]| remeasure(p, sc.seed, truths.end, q, x, y);
-    let est = estimate_recording(sc, p.view(), &runs, &set, &again)?;
+    let est = crate::workflow::run::estimate_session(sc, p, truths.end, &set)?;
     Ok(est
         .checks
         .into_iter()

@@ -28,10 +28,24 @@ use thiserror::Error;
 pub enum DatError {
     /// A line could not be understood.
     #[error("line {line}: expected {expected}, got `{found}`")]
-    Line { line: usize, expected: String, found: String },
+    Line {
+        /// Line number, 1-based.
+        line: usize,
+        /// What the line should hold.
+        expected: String,
+        /// The text found there.
+        found: String,
+    },
     /// A key was given twice.
     #[error("line {line}: `{key}` was already given on line {first_line}")]
-    Duplicate { line: usize, key: String, first_line: usize },
+    Duplicate {
+        /// Line number, 1-based.
+        line: usize,
+        /// The key given twice.
+        key: String,
+        /// Line where the key was first given, 1-based.
+        first_line: usize,
+    },
     /// The data tables are incomplete or inconsistent with the metadata.
     #[error("{0}")]
     Incomplete(String),

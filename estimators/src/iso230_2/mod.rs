@@ -37,23 +37,59 @@ use thiserror::Error;
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum Iso230Error {
     /// No target position was given.
+    /// No target position was given.
     #[error("at least one target position is needed, got none")]
     NoTargets,
     /// A target position is NaN or infinite.
     #[error("target position {index} must be finite, got {value}")]
-    NonFiniteTarget { index: usize, value: f64 },
+    NonFiniteTarget {
+        /// Index of the target, 0-based.
+        index: usize,
+        /// The target position, m.
+        value: f64,
+    },
     /// Targets are not strictly increasing.
     #[error("targets must be strictly increasing, got {value} m (target {index}) after {previous} m")]
-    TargetsNotIncreasing { index: usize, previous: f64, value: f64 },
+    TargetsNotIncreasing {
+        /// Index of the target, 0-based.
+        index: usize,
+        /// The target before it, m.
+        previous: f64,
+        /// The target position, m.
+        value: f64,
+    },
     /// The deviation table does not have one row per target.
     #[error("{direction} deviations: expected one row per target ({expected} rows), got {got}")]
-    RowCount { direction: &'static str, expected: usize, got: usize },
+    RowCount {
+        /// Approach direction of the table (`up` or `down`).
+        direction: &'static str,
+        /// Rows expected: one per target (count).
+        expected: usize,
+        /// How many were given (count).
+        got: usize,
+    },
     /// Fewer than two runs at a target: the standard deviation s_i (n − 1 in the denominator) is undefined.
     #[error("{direction} deviations at target {index}: at least 2 runs are needed for s_i, got {got}")]
-    TooFewRuns { direction: &'static str, index: usize, got: usize },
+    TooFewRuns {
+        /// Approach direction of the table (`up` or `down`).
+        direction: &'static str,
+        /// Index of the target, 0-based.
+        index: usize,
+        /// How many were given (count).
+        got: usize,
+    },
     /// A deviation is NaN or infinite.
     #[error("{direction} deviation at target {index}, run {run} must be finite, got {value}")]
-    NonFiniteDeviation { direction: &'static str, index: usize, run: usize, value: f64 },
+    NonFiniteDeviation {
+        /// Approach direction of the table (`up` or `down`).
+        direction: &'static str,
+        /// Index of the target, 0-based.
+        index: usize,
+        /// Index of the run, 0-based.
+        run: usize,
+        /// The deviation, m.
+        value: f64,
+    },
 }
 
 /// Direction of approach to a target (ISO 230-2:2014, 3.7): `Up` = ↑ = approach in the positive

@@ -1,10 +1,82 @@
-//! The ISO 230-2 figure and table as laser-calibration software draws them (issue 16): every run's
+//! The ISO 230-2 adapter (`vmt run`'s check, and the glue `vmt iso230-2` and `vmt compensate` share) and the
+//! ISO 230-2 figure and table as laser-calibration software draws them (issue 16): every run's
 //! trace per approach direction, the mean ↑ and ↓ lines, the x̄ ± 2s envelopes, the injected truth,
 //! and A, B, E, M, R beside it; the table with s↑ and s↓; the uncertainty statement (ISO 230-2:2014
 //! §8 asks the report to state the measurement uncertainty, ISO/TR 230-9 with coverage factor k = 2).
 
-use vmt_estimators::iso230_2::AxisResult;
+use super::{Check, Estimates, Quantity, TruthView};
+use crate::error::VmtError;
+use crate::measurement::{MeasurementSet, Run, RunData};
+use std::path::Path;
+use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle, Table};
+use vmt_sim::geometry::ErrorMotions;
+
+/// Deviations of one sensor column of a point-table run, split by direction: (targets, up[i][j],
+/// down[i][j]), target i in increasing order, j the i-th target's readings in that direction in run order;
+/// None when the run is not a point table or has no column `sensor`. The one reader of a positioning test
+/// for the ISO 230-2 check, the compensation check, `vmt iso230-2` and `vmt compensate`.
+pub fn point_table_deviations(run: &Run, sensor: &str) -> Option<(Vec<f64>, Vec<Vec<f64>>, Vec<Vec<f64>>)> {
+    let RunData::PointTable { target, direction, columns, .. } = &run.data else { return None };
+    let values = &columns.iter().find(|(n, _)| n == sensor)?.1;
+    let mut targets: Vec<f64> = target.clone();
+    targets.sort_by(f64::total_cmp);
+    targets.dedup();
+    let index = |x: f64| targets.iter().position(|&t| t == x).unwrap_or(0);
+    let mut up = vec![Vec::new(); targets.len()];
+    let mut down = vec![Vec::new(); targets.len()];
+    for ((&x, &d), &v) in target.iter().zip(direction).zip(values) {
+        let side = if d > 0 { &mut up } else { &mut down };
+        side[index(x)].push(v);
+    }
+    Some((targets, up, down))
+}
+
+/// ISO 230-2 values of the noise-free injected deviation along x at body point r (m, axis frame) at the
+/// targets (m): with no noise and a purely geometric truth, both directions see δx(P_i) = EXX + (ε × r)_x.
+pub fn iso_truth(errors: &ErrorMotions, r: [f64; 3], targets: &[f64]) -> Result<AxisResult, VmtError> {
+    let dev: Vec<Vec<f64>> = targets.iter().map(|&x| vec![errors.deviation_at(x, r)[0]; 2]).collect();
+    evaluate_bidirectional(targets, &dev, &dev).map_err(|e| VmtError::Internal(e.to_string()))
+}
+
+/// The ISO 230-2 check of `sensor` in the positioning run `run`: E, M and B̄ against the values of the
+/// injected deviation at the sensor's point (within `tolerance`, m), with the standard's figure, table and
+/// uncertainty statement added to `out`.
+pub(super) fn iso_check(
+    source: &Path,
+    set: &MeasurementSet,
+    truth: &TruthView<'_>,
+    run: &str,
+    sensor: &str,
+    tolerance: f64,
+    out: &mut Estimates,
+) -> Result<(), VmtError> {
+    let bad = |m: String| VmtError::bad(source, format!("estimators (iso230_2 {run})"), m);
+    let rec = set.run(run).ok_or_else(|| bad(format!("no run `{run}`")))?;
+    let (targets, up, down) = point_table_deviations(rec, sensor)
+        .ok_or_else(|| bad(format!("run `{run}` is not a point table with sensor `{sensor}`")))?;
+    let est = evaluate_bidirectional(&targets, &up, &down).map_err(|e| bad(e.to_string()))?;
+    let (Some(manifest), Some(simulated)) = (set.sensor(sensor), truth.sensor(sensor)) else {
+        return Err(bad(format!("sensor `{sensor}` is not declared")));
+    };
+    let expected = iso_truth(truth.motions, manifest.position, &targets)?;
+    let checks =
+        [("E", "e", expected.e, est.e), ("M", "m", expected.m, est.m), ("B̄", "b_mean", expected.b_mean, est.b_mean)]
+            .into_iter()
+            .map(|(label, id, t, e)| {
+                Check::new(format!("ISO 230-2 {label} ({sensor})"), Quantity::Length, t, e, tolerance)
+                    .with_id(format!("iso230_2.{sensor}.{id}"))
+                    .with_statistic(format!("ISO 230-2 {label}"))
+            })
+            .collect();
+    let injected: Vec<f64> = expected.targets.iter().map(|t| t.mean_bidirectional).collect();
+    let fig = iso_figure(sensor, &targets, &up, &down, &est, Some(&injected));
+    out.push(checks, fig);
+    out.tables.push(iso_table(&format!("ISO 230-2:2014 evaluation of run {run}, {sensor}"), &est));
+    let travel = targets.last().copied().unwrap_or(0.0) - targets.first().copied().unwrap_or(0.0);
+    out.notes.push(uncertainty_statement(sensor, simulated.sigma, simulated.environment_scale_error, travel));
+    Ok(())
+}
 
 /// One run's deviations per target (µm) in one direction, from `per_target[i][j]` (target i, run j).
 fn run_trace(per_target: &[Vec<f64>], j: usize) -> Vec<f64> {

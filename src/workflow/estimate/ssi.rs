@@ -1,0 +1,81 @@
+//! Seed 002's stick-slip index (DESIGN.md §7): SSI = (v_max − v_min)/v_mean of the differentiated encoder.
+//! The adapter of `vmt run`'s crawl check and the glue `vmt ssi` shares ([`run_ssi`]).
+
+use super::{Check, Quantity, TruthView};
+use crate::error::VmtError;
+use crate::measurement::{uniform_interval, MeasurementSet, RunData};
+use std::path::Path;
+use vmt_estimators::ssi::{stick_slip_index, SsiResult};
+use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
+
+/// The stick-slip index of a position record `x` (m) sampled at the time stamps `t` (s, uniform), with
+/// the encoder's quantisation step `resolution` (m) for the floor 2q/(Ts·v) where known: returns the
+/// sample interval Ts (s) and the result. The one path from a time series to the estimator, for `vmt run`
+/// and `vmt ssi`; errors (a non-uniform or too short `t`, a record the index is not defined on) are the
+/// caller's to place.
+pub fn run_ssi(t: &[f64], x: &[f64], resolution: Option<f64>) -> Result<(f64, SsiResult), String> {
+    let dt = uniform_interval(t)?;
+    let res = stick_slip_index(x, dt, resolution).map_err(|e| e.to_string())?;
+    Ok((dt, res))
+}
+
+/// The crawl check: the SSI of `sensor` in every run of `procedure` (named `{procedure}_*`, one per feed)
+/// against the patent's example values `expected` within `tolerance` (dimensionless), each with a figure
+/// of the differentiated velocity.
+pub(super) fn ssi_checks(
+    source: &Path,
+    set: &MeasurementSet,
+    truth: &TruthView<'_>,
+    procedure: &str,
+    sensor: &str,
+    expected: &[f64],
+    tolerance: &[f64],
+) -> Result<Vec<(Check, Figure)>, VmtError> {
+    let bad = |m: String| VmtError::bad(source, format!("estimators (ssi {procedure})"), m);
+    let prefix = format!("{procedure}_");
+    let crawl: Vec<_> = set.runs.iter().filter(|r| r.name.starts_with(&prefix)).collect();
+    if crawl.len() != expected.len() || expected.len() != tolerance.len() {
+        return Err(bad(format!(
+            "{} runs but {} expected values and {} tolerances",
+            crawl.len(),
+            expected.len(),
+            tolerance.len()
+        )));
+    }
+    let q = truth.sensor(sensor).map(|s| s.resolution).filter(|&q| q > 0.0);
+    let mut out = Vec::new();
+    for ((r, e), tol) in crawl.iter().zip(expected).zip(tolerance) {
+        let RunData::TimeSeries { t, .. } = &r.data else { return Err(bad("expected time series".into())) };
+        let x = r.data.column(sensor).ok_or_else(|| bad(format!("run `{}` has no `{sensor}`", r.name)))?;
+        let (dt, res) = run_ssi(t, x, q).map_err(|m| bad(format!("run `{}`: {m}", r.name)))?;
+        let feed = r.feed.unwrap_or(0.0) * 60_000.0;
+        let v: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]) / dt * 60_000.0).collect();
+        let fig = Figure {
+            title: format!("crawl at {feed:.0} mm/min: velocity from the differentiated {sensor} (SSI {:.2})", res.ssi),
+            x_label: "time".into(),
+            x_unit: "s".into(),
+            y_label: "velocity".into(),
+            y_unit: "mm/min".into(),
+            series: vec![Series { label: sensor.to_string(), x: t[1..].to_vec(), y: v, style: SeriesStyle::Line }],
+            kind: FigureKind::Line,
+            log_x: false,
+            log_y: false,
+        };
+        // The patent's example value is a reference, not an injected truth (the SSI follows from the
+        // simulated physics). An interval that reaches 0 is a one-sided limit: say so.
+        let id = format!("ssi.{sensor}.{feed:.0}_mm_per_min");
+        let label = format!("SSI at {feed:.0} mm/min");
+        let check = if e - tol <= 0.0 {
+            Check::at_most(id, label, Quantity::Ratio, *e, res.ssi, e + tol)
+        } else {
+            Check::new(label, Quantity::Ratio, *e, res.ssi, *tol).with_id(id)
+        };
+        let check = check.with_statistic("stick-slip index").with_note(format!(
+            "`injected` is the patent's example SSI at this feed ({e:.2}); SSI ≥ 1 means crawling (SSI {:.3}: {})",
+            res.ssi,
+            if res.ssi >= 1.0 { "crawling" } else { "smooth" }
+        ));
+        out.push((check, fig));
+    }
+    Ok(out)
+}

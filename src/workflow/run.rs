@@ -1,0 +1,41 @@
+//! The `vmt run` pipeline in one place: a scenario's recording, simulated ([`crate::simulate`]), handed to
+//! the estimate workflow ([`crate::estimate`]) as a measurement set, a truth view and a re-measurement
+//! callback. `vmt run`, a study's trials and the benchmarks go through [`estimate_session`].
+
+use crate::error::VmtError;
+use crate::estimate::chain::{identify_chain_runs, procedure_runs, ChainIdentification, LineSigma};
+use crate::estimate::{estimate_recording, Estimates};
+use crate::measurement::MeasurementSet;
+use crate::scenario::Scenario;
+use crate::simulate::{remeasure, session_end, session_plan, to_measurement_set, truth_view, Physics};
+use vmt_sim::procedures::RunRecord;
+
+/// Runs every estimator of `sc` on its recording `set`, simulated on `ph` (the truth view compared with),
+/// the compensation check re-measuring on `ph` from session time `end` (s, after the session) with the
+/// scenario's seed.
+pub fn estimate_session(sc: &Scenario, ph: &Physics, end: f64, set: &MeasurementSet) -> Result<Estimates, VmtError> {
+    let again = |run: &str, x: &[f64], y: &[f64]| remeasure(sc, ph, sc.seed, end, run, x, y);
+    estimate_recording(&sc.source, &sc.estimators, &truth_view(sc, ph), set, &again)
+}
+
+/// Runs every estimator of a scenario on its simulated recording `runs` and returns the checks with their
+/// figures: [`estimate_session`] on the measurement set written from `runs`, after the session planned
+/// on `ph`.
+pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result<Estimates, VmtError> {
+    let set = to_measurement_set(sc, runs)?;
+    let end = session_end(&session_plan(sc, ph));
+    estimate_session(sc, ph, end, &set)
+}
+
+/// The 21-error identification of the chain procedure `procedure`'s laser lines in the simulated runs
+/// `runs` of a multi-axis scenario, as `vmt run`'s 3D check makes it (the axes in chain order, a line of
+/// σ = 0 weighted as 1e-12 m).
+pub fn identify_chain_lines(sc: &Scenario, runs: &[RunRecord], procedure: &str) -> Result<ChainIdentification, String> {
+    let chain = sc.chain.as_ref().ok_or("laser_lines_3d needs a multi-axis scenario (axes = [...])")?;
+    let set = to_measurement_set(sc, runs).map_err(|e| e.to_string())?;
+    if procedure_runs(&set, procedure).next().is_none() {
+        return Err(format!("no laser-line runs of chain procedure `{procedure}`"));
+    }
+    let lines = procedure_runs(&set, procedure);
+    identify_chain_runs(&set, lines, &chain.letters(), LineSigma::AtLeast(1e-12)).map(|(_, ci)| ci)
+}

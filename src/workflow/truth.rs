@@ -1,0 +1,59 @@
+//! The truth as the estimate workflow sees it: plain data and functions of position, built by
+//! [`crate::simulate::truth_view`] from the scenario's physics and read by [`crate::estimate`] to compare
+//! its estimates with. Neither side imports the other: the simulator's types (machine, procedures,
+//! sensor specs, chain model) stay behind this view.
+
+use vmt_sim::geometry::ErrorMotions;
+
+/// What the estimate workflow may know of the truth of a recording.
+pub struct TruthView<'a> {
+    /// The six injected error motions of the scenario's (single) axis, functions of the axis position.
+    pub motions: &'a ErrorMotions,
+    /// The sensors as simulated (the truth's sensor effects applied), by name.
+    pub sensors: Vec<SensorTruth>,
+    /// The chain of a multi-axis scenario, None for one axis.
+    pub chain: Option<ChainTruth<'a>>,
+}
+
+impl TruthView<'_> {
+    /// The simulated sensor `name`.
+    pub fn sensor(&self, name: &str) -> Option<&SensorTruth> {
+        self.sensors.iter().find(|s| s.name == name)
+    }
+}
+
+/// A sensor as simulated: the noise and instrument values a measurement-set manifest does not carry
+/// (for the Cramér–Rao bounds, the SSI quantisation floor and the ISO 230-2 uncertainty statement).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SensorTruth {
+    /// The sensor's name (its column in the runs).
+    pub name: String,
+    /// White noise of one reading, 1σ, in the unit of the reading (m for lasers and encoders).
+    pub sigma: f64,
+    /// Quantisation step of a reading, same unit (0 = none).
+    pub resolution: f64,
+    /// One-sided white-noise density with presets filled in, reading unit per √Hz (0 = given by `sigma`).
+    pub noise_density: f64,
+    /// Remaining relative scale error of a laser reading from the environment: the air's refractive-index
+    /// error (Edlén) plus the material's thermal expansion left uncorrected (dimensionless).
+    pub environment_scale_error: f64,
+}
+
+/// The injected truth of a serial chain (DESIGN.md §3, `vmc_3axis`), as the 3D laser-line check compares.
+pub struct ChainTruth<'a> {
+    /// The axes in chain order (bed first): letter and injected error motions.
+    pub axes: Vec<(char, &'a ErrorMotions)>,
+    /// The injected squareness values [EC0Y (xy), EB0Z (xz), EA0Z (yz)], rad.
+    pub squareness: [f64; 3],
+    /// The squareness as laser line sets see it over the node positions of each axis (m, chain order):
+    /// the injected angles plus the error motions' linear trends, [EC0Y, EB0Z, EA0Z], rad
+    /// (`vmt_sim::chain::ChainModel::effective_squareness`).
+    pub effective_squareness: Box<dyn Fn(&[Vec<f64>]) -> [f64; 3] + Sync + 'a>,
+}
+
+impl ChainTruth<'_> {
+    /// The axis letters in chain order.
+    pub fn letters(&self) -> Vec<char> {
+        self.axes.iter().map(|a| a.0).collect()
+    }
+}
