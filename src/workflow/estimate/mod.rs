@@ -368,10 +368,13 @@ pub fn estimate_recording(
                 }
             }
             EstimatorSpec::ModelCheck { model, expected, max_steps, tolerance } => {
-                let (checks, fig, residuals) =
+                let (checks, figures) =
                     model_check::model_check_loop(source, set, model, expected, *max_steps, *tolerance)?;
-                out.push(checks, fig);
-                out.push_figure(residuals);
+                let mut figures = figures.into_iter();
+                if let Some(first) = figures.next() {
+                    out.push(checks, first);
+                }
+                figures.for_each(|f| out.push_figure(f));
             }
             EstimatorSpec::LaserLines3d { procedure, k_sigma, bias, bias_angle } => {
                 let bias_angle = bias_angle.unwrap_or(*bias);

@@ -18,7 +18,7 @@ pub(super) fn model_check_loop(
     expected: &[String],
     max_steps: usize,
     tolerance: f64,
-) -> Result<(Vec<Check>, Figure, Figure), VmtError> {
+) -> Result<(Vec<Check>, Vec<Figure>), VmtError> {
     use crate::modelcheck::{add_effect, compare, diagnose};
     use vmt_estimators::modelcheck::Verdict;
     let base = source.parent().unwrap_or(Path::new("."));
@@ -27,8 +27,10 @@ pub(super) fn model_check_loop(
     let mut history = vec![first.normalized_rms];
     let mut last_report = first.clone();
     let mut added: Vec<String> = Vec::new();
+    let mut first_ranking: Option<Vec<vmt_estimators::modelcheck::RankingEntry>> = None;
     for _ in 0..max_steps {
         let d = diagnose(&m, set, source)?;
+        first_ranking.get_or_insert_with(|| d.ranking.clone());
         let Some(top) = d.ranking.iter().find(|r| r.verdict == Verdict::Significant) else { break };
         let name: vmt_sim::effects::EffectName =
             top.effect.parse().map_err(|e: vmt_sim::effects::UnknownEffect| VmtError::Internal(e.to_string()))?;
@@ -59,7 +61,12 @@ pub(super) fn model_check_loop(
             history[0]
         )),
     );
-    let fig = Figure {
+    // The loop's evidence (issue 16): the error per iteration against the noise level, the first
+    // diagnosis's ranking (which effect explains how much), and the signed residual where the effects
+    // live — by approach direction (backlash, lost motion), over time (thermal drift), by position (pitch,
+    // positioning, lead errors) — for the starting and the final model.
+    let iterations: Vec<f64> = (0..history.len()).map(|i| i as f64).collect();
+    let nrms = Figure {
         title: format!(
             "model-check loop: normalised residual RMS per iteration (added: {})",
             if added.is_empty() { "nothing".into() } else { added.join(", ") }
@@ -68,36 +75,131 @@ pub(super) fn model_check_loop(
         x_unit: vmt_report::DIMENSIONLESS.into(),
         y_label: "normalised RMS".into(),
         y_unit: "1 = noise".into(),
-        series: vec![Series {
-            label: "residual / σ".into(),
-            x: (0..history.len()).map(|i| i as f64).collect(),
-            y: history.clone(),
-            style: SeriesStyle::Points,
-        }],
+        series: vec![
+            Series {
+                label: "residual RMS / σ".into(),
+                x: iterations.clone(),
+                y: history.clone(),
+                style: SeriesStyle::LinePoints,
+            },
+            Series {
+                label: "noise level (1.0)".into(),
+                x: vec![0.0, iterations.last().copied().unwrap_or(0.0).max(1.0)],
+                y: vec![1.0, 1.0],
+                style: SeriesStyle::Dashed,
+            },
+        ],
         kind: FigureKind::Line,
         log_x: false,
         log_y: history.iter().all(|v| *v > 0.0),
     };
-    // Residual RMS by position of the first channel, before and after the loop.
-    let by_pos = |r: &crate::modelcheck::CompareReport, label: &str| -> Option<Series> {
+    let mut figures = vec![nrms];
+    if let Some(ranking) = first_ranking.filter(|r| !r.is_empty()) {
+        figures.push(Figure {
+            title: "model-check loop: first diagnosis, share of the residual each candidate explains (verdict, ΔBIC)"
+                .into(),
+            x_label: "rank".into(),
+            x_unit: vmt_report::DIMENSIONLESS.into(),
+            y_label: "explained residual".into(),
+            y_unit: "%".into(),
+            series: ranking
+                .iter()
+                .enumerate()
+                .map(|(i, e)| Series {
+                    label: format!(
+                        "{}: {}, ΔBIC {:.1}",
+                        e.effect,
+                        format!("{:?}", e.verdict).to_lowercase(),
+                        e.delta_bic
+                    ),
+                    x: vec![(i + 1) as f64],
+                    y: vec![100.0 * e.explained],
+                    style: SeriesStyle::Points,
+                })
+                .collect(),
+            kind: FigureKind::Bar,
+            log_x: false,
+            log_y: false,
+        });
+    }
+    // The first channel's residual, in µm for deviations (N for forces, m/s² for accelerations).
+    let scale = |r: &crate::modelcheck::CompareReport| -> Option<(f64, &'static str, String)> {
         let c = r.channels.first()?;
-        Some(Series {
-            label: format!("{label} ({} / {})", c.run, c.sensor),
-            x: c.by_position.iter().map(|b| 0.5 * (b.0 + b.1) * 1e3).collect(),
-            y: c.by_position.iter().map(|b| b.3 * 1e6).collect(),
-            style: SeriesStyle::Line,
-        })
+        let (k, u) = match c.unit.as_str() {
+            "N" => (1.0, "N"),
+            "m/s²" => (1.0, "m/s²"),
+            _ => (1e6, "µm"),
+        };
+        Some((k, u, format!("{} / {}", c.run, c.sensor)))
     };
-    let residuals = Figure {
-        title: "model-check loop: residual RMS by position, starting model and final model".into(),
-        x_label: "position".into(),
-        x_unit: "mm".into(),
-        y_label: "residual RMS".into(),
-        y_unit: "µm (or N for force channels)".into(),
-        series: [by_pos(&first, "starting model"), by_pos(&last_report, "final model")].into_iter().flatten().collect(),
-        kind: FigureKind::Line,
-        log_x: false,
-        log_y: false,
-    };
-    Ok((checks, fig, residuals))
+    if let Some((k, unit, channel)) = scale(&first) {
+        let pick = |label: &str, f: &dyn Fn(&crate::modelcheck::ChannelReport) -> (Vec<f64>, Vec<f64>)| {
+            [(&first, "starting model"), (&last_report, "final model")]
+                .into_iter()
+                .filter_map(|(r, which)| {
+                    let (x, y) = f(r.channels.first()?);
+                    (!x.is_empty()).then(|| Series {
+                        label: format!("{which} ({label})"),
+                        x,
+                        y: y.iter().map(|v| v * k).collect(),
+                        style: SeriesStyle::LinePoints,
+                    })
+                })
+                .collect::<Vec<Series>>()
+        };
+        let by_direction = pick("mean per direction", &|c| {
+            (c.by_direction.iter().map(|d| d.0 as f64).collect(), c.by_direction.iter().map(|d| d.1).collect())
+        });
+        if by_direction.iter().any(|s| s.x.len() > 1) {
+            figures.push(Figure {
+                title: format!(
+                    "model-check loop: mean residual by approach direction ({channel}), starting and final model"
+                ),
+                x_label: "approach direction".into(),
+                x_unit: "−1 = negative, +1 = positive".into(),
+                y_label: "mean residual".into(),
+                y_unit: unit.into(),
+                series: by_direction,
+                kind: FigureKind::Bar,
+                log_x: false,
+                log_y: false,
+            });
+        }
+        let by_position = pick("mean per position bin", &|c| {
+            (
+                c.by_position.iter().map(|b| 0.5 * (b.0 + b.1) * 1e3).collect(),
+                c.by_position.iter().map(|b| b.2).collect(),
+            )
+        });
+        figures.push(Figure {
+            title: format!("model-check loop: mean residual by position ({channel}), starting and final model"),
+            x_label: "position".into(),
+            x_unit: "mm".into(),
+            y_label: "mean residual".into(),
+            y_unit: unit.into(),
+            series: by_position,
+            kind: FigureKind::Line,
+            log_x: false,
+            log_y: false,
+        });
+        let by_time = pick("mean per time bin", &|c| {
+            (c.by_time.iter().map(|b| 0.5 * (b.0 + b.1)).collect(), c.by_time.iter().map(|b| b.2).collect())
+        });
+        if by_time.iter().any(|s| s.x.len() > 2) {
+            figures.push(Figure {
+                title: format!(
+                    "model-check loop: mean residual over the session time ({channel}), starting and final model"
+                ),
+                x_label: "time".into(),
+                x_unit: "s".into(),
+                y_label: "mean residual".into(),
+                y_unit: unit.into(),
+                series: by_time,
+                kind: FigureKind::Line,
+                log_x: false,
+                log_y: false,
+            });
+        }
+    }
+    Ok((checks, figures))
 }
