@@ -599,3 +599,37 @@ fn a_study_report_has_one_figure_per_estimate() {
         }
     }
 }
+
+/// Issue 17: `vmt straightness` on the measurement set `vmt run` wrote gives the same straightness
+/// estimate as `vmt run`'s own check on the same data (one adapter serves both): the RMS of the CLI's
+/// profile equals the check's `recovered` value bit for bit (the profile is already about its reference
+/// line).
+#[test]
+fn straightness_command_and_run_check_agree_on_the_same_data() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sc = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/study_accel.toml");
+    let out = tmp.path().join("run");
+    let o = vmt().arg("run").arg(&sc).arg("--out").arg(&out).arg("--json").output().unwrap();
+    assert!(o.status.code().is_some_and(|c| c == 0 || c == 1), "{}", String::from_utf8_lossy(&o.stderr));
+    let run: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let o = vmt().arg("straightness").arg(out.join("data")).arg("--json").output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cli: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let mut compared = 0;
+    for (id, check) in run["checks"].as_object().unwrap() {
+        let Some(sensor) = id.strip_prefix("accel_straightness.") else { continue };
+        let est = cli["sensors"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["sensor"] == sensor)
+            .expect("the sensor in the CLI output");
+        let y: Vec<f64> =
+            est["estimate"]["straightness"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let rms = (y.iter().map(|v| v * v).sum::<f64>() / y.len() as f64).sqrt();
+        let recovered = check["recovered"].as_f64().unwrap();
+        assert!((rms - recovered).abs() <= 1e-12 * recovered, "{sensor}: CLI RMS {rms:e} m, run check {recovered:e} m");
+        compared += 1;
+    }
+    assert!(compared > 0, "no accelerometer straightness check in the run");
+}
