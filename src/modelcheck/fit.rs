@@ -228,7 +228,7 @@ pub(crate) const BSPLINE_SEARCH_MAX: u32 = 100;
 
 /// The orders BIC chooses among for error motion `name` in `basis`, each with the weighted RSS of
 /// `target` after the offsets and the other terms (`base`) and its series, and its number of linear
-/// parameters: Legendre degrees 1..=`top` (`top` = m − 1) and harmonics 1..=`top`/2 from the nested
+/// parameters: Legendre degrees 1..=`top` (`top` = m − 1) and harmonics 1..=(`top` − 1)/2 from the nested
 /// sums of one QR (`nested_rss`; for harmonics only complete sine–cosine pairs); B-spline numbers
 /// 2..=min(`top` + 1, [`BSPLINE_SEARCH_MAX`]) one fit each; a table only at one value per distinct
 /// position (`top` + 1: its meaning, not a choice).
@@ -252,14 +252,15 @@ pub(crate) fn order_curve(
         Ok((0..nr.rss.len())
             .filter_map(|k| {
                 let index = if k == 0 { basis.top_index(1) } else { nr.used[k - 1] as u32 + 1 };
-                let complete = k == 0 || basis != ShapeBasis::Harmonics || index % 2 == 0;
+                // Harmonics: the slope, then complete sine–cosine pairs (a cosine's odd index).
+                let complete = k == 0 || basis != ShapeBasis::Harmonics || (index % 2 == 1 && index >= 3);
                 complete.then(|| (basis.user_order(index).max(1), nr.rss[k], base.rank() + k))
             })
             .collect())
     };
     match basis {
         ShapeBasis::Legendre | ShapeBasis::Cosine => nested(top),
-        ShapeBasis::Harmonics => nested((top / 2).max(1)),
+        ShapeBasis::Harmonics => nested((top.saturating_sub(1) / 2).max(1)),
         ShapeBasis::Bspline | ShapeBasis::Table => {
             let tp = base.project_vector(target, w);
             let ss: f64 = tp.iter().map(|v| v * v).sum();
@@ -436,6 +437,7 @@ pub(crate) fn lead_shape_scan(
     // Nested orthonormal series q_j (weighted, off the base), with the user order each one completes.
     let mut q: Vec<Vec<f64>> = Vec::new();
     let mut q_order: Vec<u32> = Vec::new();
+    let mut q_index: Vec<u32> = Vec::new();
     for (j, mut v) in base.project_columns(&columns(st, m0, &sh, &[]), w).into_iter().enumerate() {
         let n0 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
         for _ in 0..2 {
@@ -449,6 +451,7 @@ pub(crate) fn lead_shape_scan(
             v.iter_mut().for_each(|x| *x /= n1);
             q.push(v);
             q_order.push(cap0.basis.user_order(j as u32 + 1));
+            q_index.push(j as u32 + 1);
         }
     }
     let t = base.project_vector(&fs.target, w);
@@ -459,8 +462,9 @@ pub(crate) fn lead_shape_scan(
     }
     let n = st.n;
     let rb = base.rank();
-    // A basis vector completes an order only at a harmonic's cosine (complete pairs).
-    let complete = |k: usize| k == 0 || cap0.basis != ShapeBasis::Harmonics || (k - 1) % 2 == 1;
+    // A basis vector completes an order only at a harmonic's cosine (complete pairs, odd index ≥ 3).
+    let complete =
+        |k: usize| k == 0 || cap0.basis != ShapeBasis::Harmonics || (q_index[k - 1] % 2 == 1 && q_index[k - 1] >= 3);
     let order_of = |k: usize| if k == 0 { 1 } else { q_order[k - 1] };
     let free = (0..rss.len())
         .filter(|&k| complete(k))
@@ -899,9 +903,12 @@ pub(crate) fn describe(
                     m.insert("x_lo".into(), sh.range.0);
                     m.insert("x_hi".into(), sh.range.1);
                 }
-                // FORMAT.md §2 `harmonics` entries: a_s·sin θ + a_c·cos θ = A·sin(θ + φ).
+                // FORMAT.md §2 `poly = [0, slope]` (about x_lo) and `harmonics` entries:
+                // a_s·sin θ + a_c·cos θ = A·sin(θ + φ).
                 ShapeBasis::Harmonics => {
-                    for (h, pair) in c.chunks(2).enumerate() {
+                    m.insert("slope".into(), c.first().copied().unwrap_or(0.0));
+                    m.insert("x_lo".into(), sh.range.0);
+                    for (h, pair) in c.get(1..).unwrap_or(&[]).chunks(2).enumerate() {
                         let (a_s, a_c) = (pair[0], pair.get(1).copied().unwrap_or(0.0));
                         let k = h + 1;
                         m.insert(format!("h{k}_amplitude"), a_s.hypot(a_c));

@@ -415,7 +415,7 @@ pub(crate) fn significance_sigma(f: &Fitted, per: &[f64]) -> Vec<f64> {
 /// accelerometers, which see only its second derivative); `table` (one value per target) on a
 /// point table (the positions repeat: at most half as many distinct positions as readings); an
 /// `order` these m distinct positions can determine after the offsets (Legendre degree ≤ m − 1,
-/// B-splines and table values 2..=m, harmonics 1..=(m − 1)/2).
+/// B-splines and table values 2..=m, harmonics 1..=(m − 2)/2 beside their slope).
 pub(crate) fn check_basis(st: &Stack, me: &ModelEffect) -> Result<(), String> {
     let name = me.effect.name;
     let seeing: Vec<&Channel> = st.chans.iter().filter(|c| c.s_motion(name) != 0.0).collect();
@@ -444,7 +444,7 @@ pub(crate) fn check_basis(st: &Stack, me: &ModelEffect) -> Result<(), String> {
         Basis::Poly => (1, m.saturating_sub(1), "a Legendre degree"),
         Basis::Bspline => (2, m, "a number of B-splines"),
         Basis::Table => (2, m, "a number of table values"),
-        Basis::Harmonics => (1, m.saturating_sub(1) / 2, "a number of harmonics"),
+        Basis::Harmonics => (1, m.saturating_sub(2) / 2, "a number of harmonics"),
     };
     if order < lo || order > hi {
         return Err(format!(

@@ -338,9 +338,12 @@ pub(crate) enum ShapeBasis {
     /// interior knots over [a, b] (de Boor 1978, Cox–de Boor recursion); index k = 0..N − 1, the
     /// first left out (Σ B_k = 1: the offsets carry the constant). `order` = N.
     Bspline,
-    /// `basis = "harmonics"`: H harmonics of the fundamental wavelength 2(b − a), index 2h − 1 =
-    /// sin(2πx/λ_h), 2h = cos(2πx/λ_h), λ_h = 2(b − a)/h, h = 1..H (with x itself, so that the
-    /// fitted terms are FORMAT.md §2 `harmonics` entries A·sin(2πx/λ + φ)). `order` = H.
+    /// `basis = "harmonics"`: a slope and H harmonics of the fundamental wavelength 2(b − a):
+    /// index 1 = x − a (m), 2h = sin(2πx/λ_h), 2h + 1 = cos(2πx/λ_h), λ_h = 2(b − a)/h, h = 1..H
+    /// (of x itself, so that the fitted terms are FORMAT.md §2 `poly = [0, slope]` and
+    /// `harmonics` entries A·sin(2πx/λ + φ)). The slope: without it a machine's linear positioning
+    /// error (the commonest part) needs many harmonics (its half-range series converges as 1/h).
+    /// `order` = H.
     Harmonics,
     /// `basis = "table"`: values at N positions ([`Shape::knots`]: the distinct targets when N is
     /// their number, else N uniform points over [a, b]) joined by straight lines (hat functions,
@@ -355,7 +358,7 @@ impl ShapeBasis {
         match self {
             ShapeBasis::Legendre | ShapeBasis::Cosine => order,
             ShapeBasis::Bspline | ShapeBasis::Table => order.saturating_sub(1),
-            ShapeBasis::Harmonics => 2 * order,
+            ShapeBasis::Harmonics => 2 * order + 1,
         }
     }
 
@@ -364,7 +367,7 @@ impl ShapeBasis {
         match self {
             ShapeBasis::Legendre | ShapeBasis::Cosine => top,
             ShapeBasis::Bspline | ShapeBasis::Table => top + 1,
-            ShapeBasis::Harmonics => top / 2,
+            ShapeBasis::Harmonics => top.saturating_sub(1) / 2,
         }
     }
 
@@ -500,8 +503,8 @@ impl Shape {
             ShapeBasis::Bspline => bspline_basis(x, top + 1, (a, b)),
             ShapeBasis::Table => hat_basis(x, &self.knots),
             ShapeBasis::Harmonics => {
-                let (mut vals, mut slopes) = (vec![1.0], vec![0.0]);
-                for h in 1..=top / 2 {
+                let (mut vals, mut slopes) = (vec![1.0, x - a], vec![0.0, 1.0]);
+                for h in 1..=top.saturating_sub(1) / 2 {
                     let k = TWO_PI * h as f64 / (2.0 * (b - a));
                     let (sn, cs) = (k * x).sin_cos();
                     vals.extend([sn, cs]);
