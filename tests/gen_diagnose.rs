@@ -895,7 +895,7 @@ fn dump_draw() {
 /// residual at the noise: NRMS against the true σ ≤ 1.3 (the hidden-effect study's threshold:
 /// noise plus the χ² scatter and a fitted shape's small bias) in every draw (the Legendre series
 /// meets it in every draw of the same set), except harmonics at their largest order (complete
-/// sine–cosine pairs cannot use every coefficient the targets determine), in at most 2 of 8. A smooth profile is what all three represent: a
+/// sine–cosine pairs cannot use every coefficient the targets determine), in at most 1 of 8. A smooth profile is what all three represent: a
 /// B-spline or harmonic series of enough terms, a table exactly at its targets. With `order`
 /// given, that order is used and reported as the model's.
 #[test]
@@ -910,14 +910,11 @@ fn every_basis_fits_smooth_positioning_profiles_to_the_noise() {
             d.write(tmp.path()).unwrap();
             let text = std::fs::read_to_string(tmp.path().join("complete.toml")).unwrap();
             let mut out = Vec::new();
-            for (basis, order) in [
-                ("poly", None),
-                ("bspline", None),
-                ("harmonics", None),
-                ("table", None),
-                ("bspline", Some(6)),
-                ("harmonics", Some(4)),
-            ] {
+            // Fixed orders on the first three draws (the order respected is not a rate).
+            let fixed: &[(&str, Option<u32>)] =
+                if d.index < 3 { &[("bspline", Some(6)), ("harmonics", Some(3))] } else { &[] };
+            let free = [("poly", None), ("bspline", None), ("harmonics", None), ("table", None)];
+            for &(basis, order) in free.iter().chain(fixed) {
                 let key = match order {
                     Some(o) => format!("basis = \"{basis}\"\norder = {o}\n"),
                     None => format!("basis = \"{basis}\"\n"),
@@ -967,7 +964,7 @@ fn every_basis_fits_smooth_positioning_profiles_to_the_noise() {
                     if *order != o || chosen_by != "model" {
                         failures.push(format!("{what}: order {order} chosen by {chosen_by}, the model gave {o}"));
                     }
-                } else if at_max(chosen_by, *order) && basis == "harmonics" {
+                } else if *nrms > NRMS_AFTER_ADD && at_max(chosen_by, *order) && basis == "harmonics" {
                     // Complete pairs: at its largest order the series has 2H + 1 ≤ m − 1 of the m − 1
                     // coefficients the targets determine; a profile that needs them all is beyond it.
                     harmonics_at_max += 1;
@@ -977,9 +974,9 @@ fn every_basis_fits_smooth_positioning_profiles_to_the_noise() {
             }
         }
     }
-    // The harmonics' NRMS is judged on at least 6 of the 8 draws (measured: 7 of 8; draw 9, 17
-    // targets at 7 harmonics + slope = 15 of 16 coefficients, leaves NRMS 1.375).
-    assert!(harmonics_at_max <= 2, "harmonics at their largest order in {harmonics_at_max} of 8 draws");
+    // Harmonics above NRMS 1.3 at their largest order: at most 1 of 8 (measured: draw 9, 17
+    // targets, 7 harmonics + slope = 15 of the 16 coefficients, NRMS 1.375).
+    assert!(harmonics_at_max <= 1, "harmonics above NRMS 1.3 at their largest order in {harmonics_at_max} of 8 draws");
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 

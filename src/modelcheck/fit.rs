@@ -226,11 +226,24 @@ pub(crate) fn requested_basis(me: &ModelEffect) -> Option<ShapeBasis> {
 /// Largest number of B-splines searched by BIC (each number is a separate fit, O(n·N²)).
 pub(crate) const BSPLINE_SEARCH_MAX: u32 = 100;
 
+/// The numbers of B-splines BIC compares, up to `max`: every N from 2 to 16, then steps of ≈ 15 %
+/// (a B-spline series is not nested, so each N is its own fit; neighbouring N differ little).
+pub(crate) fn bspline_orders(max: u32) -> Vec<u32> {
+    let mut out: Vec<u32> = (2..=max.min(16)).collect();
+    let mut n = 16.0_f64;
+    while (n as u32) < max {
+        n = (n * 1.15).ceil();
+        out.push((n as u32).min(max));
+    }
+    out.dedup();
+    out
+}
+
 /// The orders BIC chooses among for error motion `name` in `basis`, each with the weighted RSS of
 /// `target` after the offsets and the other terms (`base`) and its series, and its number of linear
 /// parameters: Legendre degrees 1..=`top` (`top` = m − 1) and harmonics 1..=(`top` − 1)/2 from the nested
 /// sums of one QR (`nested_rss`; for harmonics only complete sine–cosine pairs); B-spline numbers
-/// 2..=min(`top` + 1, [`BSPLINE_SEARCH_MAX`]) one fit each; a table only at one value per distinct
+/// [`bspline_orders`] up to min(`top` + 1, [`BSPLINE_SEARCH_MAX`]), one fit each; a table only at one value per distinct
 /// position (`top` + 1: its meaning, not a choice).
 pub(crate) fn order_curve(
     st: &Stack,
@@ -262,21 +275,19 @@ pub(crate) fn order_curve(
         ShapeBasis::Legendre | ShapeBasis::Cosine => nested(top),
         ShapeBasis::Harmonics => nested((top.saturating_sub(1) / 2).max(1)),
         ShapeBasis::Bspline | ShapeBasis::Table => {
-            let tp = base.project_vector(target, w);
-            let ss: f64 = tp.iter().map(|v| v * v).sum();
             let orders: Vec<u32> = match basis {
                 ShapeBasis::Table => vec![top + 1],
-                _ => (2..=(top + 1).min(BSPLINE_SEARCH_MAX)).collect(),
+                _ => bspline_orders((top + 1).min(BSPLINE_SEARCH_MAX)),
             };
-            Ok(orders
-                .into_iter()
+            // One QR per N (`nested_rss`, its last sum: the whole series; columns the targets
+            // cannot determine are not counted).
+            orders
+                .into_par_iter()
                 .map(|o| {
-                    let cols = series(o);
-                    let p = base.rank()
-                        + base.project_columns(&cols, w).iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
-                    (o, (ss - base.explained(&tp, &cols, w)).max(0.0), p)
+                    let nr = nested_rss(target, w, base, &series(o)).map_err(|e| e.to_string())?;
+                    Ok((o, nr.rss[nr.rss.len() - 1], base.rank() + nr.used.len()))
                 })
-                .collect())
+                .collect()
         }
     }
 }
