@@ -226,7 +226,7 @@ pub fn summary_table(set: &MeasurementSet) -> String {
 /// `vmt iso230-2 PATH`: ISO 230-2 evaluation of a positioning test, from a measurement set directory
 /// (a point-table run and one of its deviation columns) or from an ecmc `.dat` file (key=value format).
 pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool) -> Result<i32, VmtError> {
-    use vmt_estimators::iso230_2::{dat::parse_dat, evaluate_bidirectional};
+    use vmt_estimators::iso230_2::evaluate_bidirectional;
     let (label, targets, up, down) = if path.is_dir() {
         let set = measurement::read(path)?;
         let r = match run {
@@ -260,8 +260,7 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
         })?;
         (format!("{} / {} / {}", path.display(), r.name, col), t, u, d)
     } else {
-        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading", e))?;
-        let dat = parse_dat(&text).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+        let dat = measurement::read_dat(path)?;
         (path.display().to_string(), dat.targets, dat.up, dat.down)
     };
     let res = evaluate_bidirectional(&targets, &up, &down).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
@@ -334,11 +333,13 @@ pub fn parse_shard(s: &str, env: &dyn Fn(&str) -> Option<String>) -> Result<(usi
     Ok((i, n))
 }
 
-/// `vmt study SCENARIO --vary sensors.NAME.KEY=V1,V2 --trials N [--shard i/n|auto] -o DIR`: writes
-/// `trials.csv` (every trial), `summary.csv` (mean and p95 per value and estimate) and `study.svg`.
+/// `vmt study SCENARIO (--vary KEY=V1,V2… | --sample KEY=DIST…) --trials N [--shard i/n|auto] -o DIR`:
+/// writes trials.csv, summary.csv, study.svg and the report (and sensitivity.csv for a sampled study).
+#[allow(clippy::too_many_arguments)]
 pub fn study(
     path: &Path,
-    vary: &str,
+    vary: Option<&str>,
+    sample: &[String],
     trials: usize,
     shard: Option<&str>,
     estimator_cmd: Option<&str>,
@@ -353,32 +354,64 @@ pub fn study(
     if let Some(t) = tolerance.filter(|t| !(t.is_finite() && *t >= 0.0)) {
         return Err(VmtError::Usage(format!("--tolerance: expected a finite number ≥ 0 (SI: m or rad), got {t}")));
     }
-    use crate::study::{run_study, Vary};
-    let vary = Vary::parse(vary)?;
+    use crate::study::{run_sampled_study, run_study, Sample, Vary};
     let shard = match shard {
         None => (0, 1),
         Some(s) => parse_shard(s, &|k| std::env::var(k).ok())?,
     };
     let sc = Scenario::load(path)?;
-    let bar = spinner(&format!("{} values × {trials} trials", vary.values.len()));
     let cmd = estimator_cmd.map(|c| crate::byo::CommandEstimator { command: c.to_string() });
-    let rows = run_study(&sc, &vary, trials, shard, cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator), tolerance)?;
-    bar.finish_and_clear();
-    write_study(&rows, &format!("sensors.{}.{}", vary.sensor, vary.key.key()), out, Some(&sc))
+    let cmd = cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator);
+    match (vary, sample) {
+        (Some(v), []) => {
+            let vary = Vary::parse(v)?;
+            let bar = spinner(&format!("{} values × {trials} trials", vary.values.len()));
+            let rows = run_study(&sc, &vary, trials, shard, cmd, tolerance)?;
+            bar.finish_and_clear();
+            write_study(&rows, &vary.label(), &[], out, Some(&sc))
+        }
+        (None, samples) if !samples.is_empty() => {
+            let samples: Vec<Sample> = samples.iter().map(|s| Sample::parse(s)).collect::<Result<_, _>>()?;
+            let names: Vec<String> = samples.iter().map(|s| s.path.clone()).collect();
+            let bar = spinner(&format!("{trials} trials, each with its own physics"));
+            let rows = run_sampled_study(&sc, &samples, trials, shard, cmd, tolerance)?;
+            bar.finish_and_clear();
+            write_study(&rows, "0 = all trials (parameters sampled per trial)", &names, out, Some(&sc))
+        }
+        _ => Err(VmtError::Usage(
+            "study needs either --vary KEY=V1,V2,… (sensors.NAME.KEY or a scenario key path) or one or more \
+             --sample KEY.PATH=DIST, not both"
+                .into(),
+        )),
+    }
 }
 
 /// `vmt study merge OUT SHARD_DIRS…`: joins the trials of shards and writes the same outputs as one run.
 pub fn study_merge(out: &Path, shards: &[PathBuf]) -> Result<i32, VmtError> {
     let mut rows = Vec::new();
+    let mut names: Option<Vec<String>> = None;
     for d in shards {
-        rows.extend(crate::study::read_rows(&d.join("trials.csv"))?);
+        let file = d.join("trials.csv");
+        let (r, n) = crate::study::read_rows(&file)?;
+        match &names {
+            Some(first) if first != &n => {
+                return Err(VmtError::bad(
+                    &file,
+                    "line 1 (header)",
+                    format!("sampled columns {n:?} differ from the first shard's {first:?}: not shards of one study"),
+                ))
+            }
+            _ => names = Some(n),
+        }
+        rows.extend(r);
     }
-    write_study(&rows, "varied parameter", out, None)
+    write_study(&rows, "varied parameter", &names.unwrap_or_default(), out, None)
 }
 
 fn write_study(
     rows: &[crate::study::TrialRow],
     label: &str,
+    sampled: &[String],
     out: &Path,
     sc: Option<&Scenario>,
 ) -> Result<i32, VmtError> {
@@ -402,13 +435,30 @@ fn write_study(
         );
     }
     let (html, json) = crate::report::report_files(&crate::report::study_report(sc, &summary, label))?;
-    let files = [
-        ("trials.csv".to_string(), rows_csv(rows).into_bytes()),
+    let mut files = vec![
+        ("trials.csv".to_string(), rows_csv(rows, sampled).into_bytes()),
         ("summary.csv".to_string(), s.into_bytes()),
         ("study.svg".to_string(), summary_svg(&summary, label)?.into_bytes()),
         ("report.html".to_string(), html.into_bytes()),
         ("report.json".to_string(), json.into_bytes()),
     ];
+    // A sampled study: first-order Sobol indices of each estimate's difference per parameter
+    // (SALib's S1 / S1_conf, one row per estimate and parameter).
+    let sens = crate::study::sensitivity(rows, sampled);
+    if !sampled.is_empty() {
+        let mut t = String::from("estimate,parameter,S1,S1_conf,trials\n");
+        for r in &sens {
+            t += &format!(
+                "\"{}\",\"{}\",{},{},{}\n",
+                r.estimate.replace('"', "'"),
+                r.parameter,
+                r.s1,
+                r.s1_conf,
+                r.trials
+            );
+        }
+        files.push(("sensitivity.csv".to_string(), t.into_bytes()));
+    }
     // One transaction: the study files and the report swapped in together.
     crate::output::replace_dir(out, |tmp| measurement::put_files(tmp, &files))?;
     let judged = summary.iter().all(|r| r.pass_rate.is_some());
@@ -442,6 +492,16 @@ fn write_study(
             r.pass_rate.map_or(String::new(), |p| format!("  {:>5.1} %", 100.0 * p))
         );
     }
+    if !sampled.is_empty() {
+        println!("first-order Sobol index S1 of each estimate's d per sampled parameter (share of Var d explained by");
+        println!(
+            "the parameter alone; ± the 95 % bootstrap half-width), from {} trials:",
+            sens.first().map_or(0, |r| r.trials)
+        );
+        for r in &sens {
+            println!("  {:<40} {:<44} S1 = {:.2} ± {:.2}", r.estimate, r.parameter, r.s1, r.s1_conf);
+        }
+    }
     println!("wrote {}", out.display());
     let missed = rows.iter().filter(|r| r.pass == Some(false)).count();
     if missed > 0 {
@@ -458,8 +518,26 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
     let mut results = Vec::new();
     for r in &set.runs {
         let measurement::RunData::TimeSeries { t, .. } = &r.data else { continue };
+        // The encoder method reads a position: an encoder's or a linear laser's, never an acceleration.
+        let is_position = |k: SensorKind| {
+            matches!(k, SensorKind::EncoderLinear | SensorKind::EncoderRotary | SensorKind::LaserLinear)
+        };
         let s = match sensor {
-            Some(s) => set.sensor(s).ok_or_else(|| VmtError::bad(path, "sensors", format!("no sensor `{s}`")))?,
+            Some(s) => {
+                let s = set.sensor(s).ok_or_else(|| VmtError::bad(path, "sensors", format!("no sensor `{s}`")))?;
+                if !is_position(s.kind) {
+                    return Err(VmtError::bad(
+                        path,
+                        format!("sensors.{}", s.name),
+                        format!(
+                            "the stick-slip index reads a position: expected an encoder_linear, encoder_rotary or laser_linear \
+                             sensor, got kind `{}`",
+                            s.kind.as_str()
+                        ),
+                    ));
+                }
+                s
+            }
             None => match set.sensors.iter().find(|s| {
                 matches!(s.kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary)
                     && r.data.column(&s.name).is_some()
@@ -751,7 +829,10 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, units: &str,
             return identify_axes(path, n_lines, &ci, out, json);
         }
     }
-    let (run, n_lines, id) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
+    let (run, n_lines, id, notes) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
+    for n in &notes {
+        eprintln!("note: {n}");
+    }
     if json {
         print_json(
             "vmt-identify/1",
@@ -855,19 +936,28 @@ fn print_profiles(profiles: &[vmt_estimators::laser_ls::ProfileEstimate]) {
 /// `vmt score --truth T --estimate E`: compares two FORMAT.md §5 profile CSVs (crate::byo::score_profiles):
 /// RMS and max difference per error motion.
 pub fn score(truth: &Path, estimate: &Path, json: bool) -> Result<i32, VmtError> {
-    let rows = crate::byo::score_profiles(&measurement::read_profiles(truth)?, &measurement::read_profiles(estimate)?);
+    let rows = crate::byo::score_profiles(&measurement::read_profiles(truth)?, &measurement::read_profiles(estimate)?)
+        .map_err(|e| VmtError::bad(estimate, "positions", &e))?;
     if rows.is_empty() {
         return Err(VmtError::bad(estimate, "line 1 (header)", "no error-motion column in common with the truth"));
     }
     if json {
         print_json("vmt-score/1", &serde_json::json!({ "rows": rows }))?;
     } else {
-        println!("difference d = estimate − truth on the estimate's positions (straightness about its least-squares");
-        println!("line, the other motions relative to their first position)");
-        println!("{:<20} {:>14} {:>14} {:>8}", "error motion", "RMS of d", "max |d|", "points");
+        println!("difference d = estimate − truth on the estimate's positions inside the truth's range (straightness");
+        println!("about its least-squares line, the other motions relative to their first position); positions");
+        println!("outside the truth's range are not scored (the truth is not extrapolated)");
+        println!("{:<20} {:>14} {:>14} {:>8} {:>8}", "error motion", "RMS of d", "max |d|", "points", "outside");
         for r in &rows {
             let q = crate::study::motion_quantity(&r.effect);
-            println!("{:<20} {:>14} {:>14} {:>8}", r.effect, display(q, r.rms), display(q, r.max), r.points);
+            println!(
+                "{:<20} {:>14} {:>14} {:>8} {:>8}",
+                r.effect,
+                display(q, r.rms),
+                display(q, r.max),
+                r.points,
+                r.outside
+            );
         }
     }
     Ok(0)

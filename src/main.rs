@@ -57,15 +57,23 @@ enum Command {
         #[arg(long, default_value = "si")]
         units: String,
     },
-    /// Monte Carlo tolerance study over a sensor parameter (physics simulated once), or `study merge`.
+    /// Monte Carlo tolerance study over a sensor or scenario parameter, or `study merge`.
     Study {
         /// Scenario file, or `merge` to join shard outputs.
         scenario: PathBuf,
         /// With `merge`: the shard output directories.
         shards: Vec<PathBuf>,
-        /// The varied parameter, e.g. sensors.acc_z.noise_density=1e-7,3e-7,1e-6
+        /// The varied parameter and its values (SI): a sensor parameter, e.g.
+        /// sensors.acc_z.noise_density=1e-7,3e-7,1e-6 (physics simulated once), or any number the scenario
+        /// file gives, by its key path, e.g. truth.effects.backlash.value=2e-6,4e-6 or axis.servo.kp=30,50
+        /// (each value a new scenario, validated as the file would be, simulated once)
         #[arg(long)]
         vary: Option<String>,
+        /// A scenario number drawn per trial (repeatable; instead of --vary): KEY.PATH=uniform(LO,HI),
+        /// normal(MEAN,SD) or loguniform(LO,HI), SI, e.g. truth.effects.backlash.value=uniform(2e-6,8e-6);
+        /// every trial simulates its own physics, and sensitivity.csv gives first-order Sobol indices
+        #[arg(long)]
+        sample: Vec<String>,
         /// Monte Carlo trials per value (each redraws the sensor noise; at least 1).
         #[arg(long, default_value_t = 100, value_parser = clap::builder::TypedValueParser::map(clap::value_parser!(u64).range(1..), |n| n as usize))]
         trials: usize,
@@ -212,22 +220,20 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run { scenario, out, json } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
         Command::Simulate { scenario, out, units } => vmt::cli::simulate(scenario.as_deref(), &out, &units).map(|_| 0),
-        Command::Study { scenario, shards, vary, trials, shard, estimator_cmd, tolerance, out } => {
+        Command::Study { scenario, shards, vary, sample, trials, shard, estimator_cmd, tolerance, out } => {
             if scenario.as_os_str() == "merge" {
                 vmt::cli::study_merge(&out, &shards)
             } else {
-                match vary {
-                    Some(v) => vmt::cli::study(
-                        &scenario,
-                        &v,
-                        trials,
-                        shard.as_deref(),
-                        estimator_cmd.as_deref(),
-                        tolerance,
-                        &out,
-                    ),
-                    None => Err(vmt::error::VmtError::Usage("study needs --vary sensors.NAME.KEY=V1,V2,…".into())),
-                }
+                vmt::cli::study(
+                    &scenario,
+                    vary.as_deref(),
+                    &sample,
+                    trials,
+                    shard.as_deref(),
+                    estimator_cmd.as_deref(),
+                    tolerance,
+                    &out,
+                )
             }
         }
         Command::Straightness { data, out, method, sensor, json } => {

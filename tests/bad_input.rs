@@ -168,6 +168,30 @@ fn scenario_cases() -> Vec<Case> {
         ("tolerance negative", vec![("estimators[0].tolerance", Some(num(-1e-6)))], "estimators[0]"),
         ("tolerance nan", vec![("estimators[0].tolerance", Some(num(f64::NAN)))], "estimators[0]"),
         ("tolerance inf", vec![("estimators[0].tolerance", Some(num(f64::INFINITY)))], "estimators[0]"),
+        // Truth profiles: finite but beyond any machine, or too large to evaluate every step (issue 14:
+        // a 200 000-term polynomial hung; 1e300 coefficients surfaced as NaN blamed on the output).
+        (
+            "poly 200 000 terms",
+            vec![("truth.effects.positioning.poly", Some(arr(&vec![1e-9; 200_000])))],
+            "truth.effects.positioning.poly",
+        ),
+        ("poly 1e300", vec![("truth.effects.positioning.poly", Some(arr(&[0.0, 1e300])))], "truth.effects.positioning"),
+        (
+            "poly 1 m/m slope",
+            vec![("truth.effects.positioning.poly", Some(arr(&[0.0, 2.0])))],
+            "truth.effects.positioning",
+        ),
+        ("pitch 1 rad", vec![("truth.effects.pitch.poly", Some(arr(&[0.5])))], "truth.effects.pitch"),
+        (
+            "wavelength 1e-300",
+            vec![("truth.effects.straightness_y.harmonics[0].wavelength", Some(num(1e-300)))],
+            "truth.effects.straightness_y.harmonics[0].wavelength",
+        ),
+        (
+            "amplitude 1e300",
+            vec![("truth.effects.straightness_y.harmonics[0].amplitude", Some(num(1e300)))],
+            "truth.effects.straightness_y.harmonics[0].amplitude",
+        ),
     ] {
         cases.push(scenario_case(label, &edits, place));
     }
@@ -388,6 +412,40 @@ fn set_cases() -> Vec<Case> {
         blamed: "iso.csv".into(),
         place: "input".into(),
     });
+    // 100 000 sensors in a manifest (issue 14): the pairwise name checks hung; the count is bounded first.
+    let mut many = set_files(&table(&good_rows()));
+    let extra: String = (0..100_000)
+        .map(|i| format!("[[sensors]]\nname = \"s{i}\"\nkind = \"laser_linear\"\naxis = \"x\"\nposition = [0.0, 0.0, 0.0]\ndirection = [1.0, 0.0, 0.0]\n"))
+        .collect();
+    let m = String::from_utf8(many[0].1.clone()).unwrap();
+    let (head, runs) = m.split_once("[[runs]]").unwrap();
+    many[0].1 = format!("{head}{extra}[[runs]]{runs}").into_bytes();
+    cases.push(Case {
+        label: "100 000 sensors".into(),
+        files: many,
+        args: args(&["iso230-2", "{dir}/set"]),
+        blamed: "manifest.toml".into(),
+        place: "sensors".into(),
+    });
+    // The stick-slip index of an accelerometer column (it computed one, and called the pass "crawling").
+    let ts_manifest = "format = \"vmt-measurements/1\"\n\
+        [[sensors]]\nname = \"acc\"\nkind = \"accelerometer\"\naxis = \"x\"\nposition = [0.0, 0.0, 0.0]\ndirection = [0.0, 0.0, 1.0]\nnoise_density = 1e-6\n\
+        [[runs]]\nname = \"crawl\"\nfile = \"crawl.csv\"\nprocedure = \"crawl\"\naxis = \"x\"\nfeed = 1e-4\n";
+    let ts: String = std::iter::once("t,x_cmd,acc\n".to_string())
+        .chain((0..200).map(|i| format!("{},{},{}\n", i as f64 * 1e-3, i as f64 * 1e-7, (i as f64).sin() * 1e-3)))
+        .collect();
+    cases.push(Case {
+        label: "ssi of an accelerometer".into(),
+        files: vec![
+            ("set/manifest.toml".into(), ts_manifest.as_bytes().to_vec()),
+            ("set/crawl.csv".into(), ts.into_bytes()),
+        ],
+        args: args(&["ssi", "{dir}/set", "--sensor", "acc"]),
+        blamed: "set".into(),
+        place: "sensors.acc".into(),
+    });
+    cases.extend(dat_cases());
+    cases.extend(model_cases());
     cases.push(Case {
         label: ".dat not UTF-8".into(),
         files: vec![("t.dat".into(), b"UNIT=mm\nTGT_DATA=[0,\xff]\n".to_vec())],
@@ -396,6 +454,84 @@ fn set_cases() -> Vec<Case> {
         place: "UTF-8".into(),
     });
     cases
+}
+
+/// An ISO 230-2 `.dat` (ecmc key=value format) with `targets` in mm, 2 cycles, every reading
+/// `dev` mm from its target, a target's text replaced by `mistyped` when given.
+fn dat_text(targets: &[f64], dev: f64, mistyped: Option<(usize, &str)>) -> Vec<u8> {
+    let mut t = format!("UNIT=mm\nCYCLES=2\nPOSITIONS={}\n", targets.len());
+    for (i, x) in targets.iter().enumerate() {
+        let text = match mistyped {
+            Some((k, v)) if k == i => v.to_string(),
+            _ => x.to_string(),
+        };
+        t += &format!("TGT_DATA[{}]={text}\n", i + 1);
+        for j in 1..=2 {
+            t += &format!("REF_DATA_FWD[{},{j}]={}\nREF_DATA_BWD[{},{j}]={}\n", i + 1, x + dev, i + 1, x - dev);
+        }
+    }
+    t.into_bytes()
+}
+
+/// `.dat` files every reader must refuse the same way (`iso230-2`, and `compare`/`diagnose` through
+/// `--data`): a repeated target, a target that is not finite or absurdly far, a reading that cannot
+/// belong to its target. Issue 14: compare/diagnose accepted a repeated target and a target at
+/// 1e20 mm was evaluated (and diagnosed as an 18.9 mm cyclic lead).
+fn dat_cases() -> Vec<Case> {
+    let model = b"format = \"vmt-model/1\"\n[effects.positioning]\nfit = true\n".to_vec();
+    let targets = [-20.0, -10.0, 0.0, 10.0, 20.0];
+    let bad: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("repeated target", dat_text(&targets, 0.004, Some((1, "-20"))), "target 2"),
+        ("target 1e20 mm", dat_text(&targets, 0.004, Some((4, "1e20"))), "target 5"),
+        ("target nan", dat_text(&targets, 0.004, Some((2, "nan"))), "line"),
+        ("target inf", dat_text(&targets, 0.004, Some((2, "inf"))), "line"),
+        ("readings in µm, targets in mm", dat_text(&targets, 6.0, None), "REF_DATA_FWD[1,1]"),
+    ];
+    let mut cases = Vec::new();
+    for (what, text, place) in bad {
+        for cmd in ["iso230-2", "compare", "diagnose"] {
+            let a = match cmd {
+                "iso230-2" => args(&["iso230-2", "{dir}/t.dat"]),
+                _ => args(&[cmd, "--model", "{dir}/m.toml", "--data", "{dir}/t.dat"]),
+            };
+            cases.push(Case {
+                label: format!("{cmd}: .dat {what}"),
+                files: vec![("t.dat".into(), text.clone()), ("m.toml".into(), model.clone())],
+                args: a,
+                blamed: "t.dat".into(),
+                place: place.into(),
+            });
+        }
+    }
+    cases
+}
+
+/// Model files whose numbers are finite but beyond any machine (issue 14: a period of 1e-300 m was
+/// used as given): every scalar parameter is bounded by its unit's physical limits
+/// (`vmt_sim::effects::ParamUnit::limits`), with the key path in the message.
+fn model_cases() -> Vec<Case> {
+    let data = dat_text(&[-20.0, -10.0, 0.0, 10.0, 20.0], 0.004, None);
+    let bad = [
+        ("cyclic_lead", "period = 1e-300\namplitude = 1e-6", "effects.cyclic_lead.period"),
+        ("cyclic_lead", "period = 5e3\namplitude = 1e-6", "effects.cyclic_lead.period"),
+        ("thermal_drift", "value = 1e-6\ntau = 1e20", "effects.thermal_drift.tau"),
+        ("thermal_expansion", "alpha = 1.0\ndelta_t = 1.0\ntau = 100.0", "effects.thermal_expansion.alpha"),
+        ("scale_error", "value = 0.5", "effects.scale_error.value"),
+        ("interpolation_error", "period = 1e-15\namplitude = 1e-7", "effects.interpolation_error.period"),
+    ];
+    bad.iter()
+        .flat_map(|(effect, keys, place)| {
+            let model =
+                format!("format = \"vmt-model/1\"\n[effects.positioning]\nfit = true\n[effects.{effect}]\n{keys}\n");
+            ["compare", "diagnose"].map(|cmd| Case {
+                label: format!("{cmd}: model {place} out of physical bounds"),
+                files: vec![("t.dat".into(), data.clone()), ("m.toml".into(), model.clone().into_bytes())],
+                args: args(&[cmd, "--model", "{dir}/m.toml", "--data", "{dir}/t.dat"]),
+                blamed: "m.toml".into(),
+                place: place.to_string(),
+            })
+        })
+        .collect()
 }
 
 fn urdf_cases() -> Vec<Case> {
@@ -414,12 +550,16 @@ fn urdf_cases() -> Vec<Case> {
         .join("\n");
     assert_ne!(light, base);
     let nan_mass = base.replacen("<mass value=\"300\"/>", "<mass value=\"nan\"/>", 1);
+    // A travel of 1e9 m (issue 14: truth profiles sampled every mm over it would take terabytes).
+    let far = base.replacen("upper=\"1.0\"", "upper=\"1e9\"", 1);
+    assert_ne!(far, base);
     for (label, urdf, blamed, place) in [
         ("URDF nested 20000 deep", deep.into_bytes(), "m.urdf", "line"),
         ("URDF not UTF-8", b"<robot name=\"\xff\"></robot>".to_vec(), "m.urdf", "UTF-8"),
         ("URDF not XML", b"<robot name=".to_vec(), "m.urdf", "robot"),
         ("URDF 1 ug moving body", light.into_bytes(), "s.toml", "axis.dt"),
         ("URDF NaN mass", nan_mass.into_bytes(), "m.urdf", "line"),
+        ("URDF travel 1e9 m", far.into_bytes(), "m.urdf", "joint `x`"),
     ] {
         cases.push(Case {
             label: label.into(),

@@ -669,7 +669,12 @@ fn model_value_out_of_range_unknown_key_and_missing_key_are_named() {
     let m = read(&format!("{head}[effects.backlash]\nvalue = 4e-6\nvalu = 4e-6\n"));
     assert!(m.contains("model.toml: effects.backlash.valu: unknown key `valu`"), "{m}");
     let m = read(&format!("{head}[effects.pitch]\nharmonics = [{{ amplitude = 1e-6, wavelength = 0.0 }}]\n"));
-    assert!(m.contains("effects.pitch.harmonics[0].wavelength: expected a wavelength in metres > 0, got 0"), "{m}");
+    assert!(
+        m.contains(
+            "effects.pitch.harmonics[0].wavelength: expected a wavelength in metres between 1e-9 and 100, got 0"
+        ),
+        "{m}"
+    );
     let m = read(&format!("{head}[effects.pitch]\n"));
     assert!(m.contains("effects.pitch: expected a profile"), "{m}");
     let m = read(&format!("{head}[effects.pitch]\npoly = [0.0]\nbasis = \"bspline\"\n"));

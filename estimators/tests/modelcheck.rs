@@ -180,6 +180,13 @@ mod modelcheck {
                     // τ = 300 s with 3 µm amplitude and σ = 1 µm: τ is known to ~10 %; allow 25 %.
                     assert!((top.params["tau"] - truth).abs() < 0.25 * truth, "{}", top.params["tau"]);
                 }
+                // A jointly refined hyper-parameter comes with a standard error (coefficients profiled
+                // out): the truth lies within 4 of them (a 4σ test fails by chance with p 6e-5).
+                if let Some(se) = fit.hyper_std_errors.get(*key) {
+                    let est = fit.hyper_parameters[*key];
+                    println!("  refined {key} = {est:.6e} ± {se:.2e} (truth {truth:.6e})");
+                    assert!((est - truth).abs() < 4.0 * se, "{key}: {est} vs {truth} ± {se}");
+                }
             }
         }
     }

@@ -219,6 +219,114 @@ impl Range {
     }
 }
 
+/// The physical unit of a scalar effect parameter (values are stored in SI); [`ParamUnit::display`]
+/// prints a value in the unit a metrologist reads it in, with four significant digits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum ParamUnit {
+    /// m; shown in µm below 1 mm, in mm below 1 m.
+    Length,
+    /// rad of a small angular error; shown in µrad.
+    Angle,
+    /// rad of a phase; shown in rad.
+    Phase,
+    /// N.
+    Force,
+    /// s.
+    Time,
+    /// m/s; shown in mm/s.
+    Velocity,
+    /// Hz.
+    Frequency,
+    /// m/m; shown in µm/m.
+    Strain,
+    /// 1/K; shown in µm/(m·K).
+    ExpansionCoefficient,
+    /// K.
+    Temperature,
+    /// N/m.
+    Stiffness,
+    /// N·s/m.
+    Damping,
+    /// 1/s.
+    Rate,
+    /// A pure number (ratio, exponent).
+    Dimensionless,
+    /// m/s²/√s.
+    AccelRandomWalk,
+    /// A gain whose unit depends on the other parameters given (servo `kv`); shown in SI.
+    Gain,
+}
+
+impl ParamUnit {
+    /// The physical bounds of a value in this unit (SI): (smallest magnitude of a strictly positive
+    /// parameter, largest magnitude of any). A value outside them is a typo or a unit mistake, not a
+    /// machine: a length or period of 1 nm to 100 m (an axis travel is at most [`MAX_LENGTH`]), an
+    /// angular error up to 0.1 rad, a strain up to 1 % (10 000 µm/m), an expansion coefficient up to
+    /// 1000 µm/(m·K) (metals 1–25, plastics up to ~200), time constants 1 ns to 1e9 s (30 years),
+    /// velocities up to 100 m/s, frequencies 1 µHz to 1 MHz, forces up to 10 MN.
+    pub fn limits(self) -> (f64, f64) {
+        match self {
+            ParamUnit::Length => (1e-9, MAX_LENGTH),
+            ParamUnit::Angle => (1e-12, 0.1),
+            ParamUnit::Phase => (0.0, 1e3),
+            ParamUnit::Force => (1e-9, 1e7),
+            ParamUnit::Time => (1e-9, 1e9),
+            ParamUnit::Velocity => (1e-9, 100.0),
+            ParamUnit::Frequency => (1e-6, 1e6),
+            ParamUnit::Strain => (1e-12, 1e-2),
+            ParamUnit::ExpansionCoefficient => (1e-12, 1e-3),
+            ParamUnit::Temperature => (1e-6, 1e3),
+            ParamUnit::Stiffness => (1e-9, 1e15),
+            ParamUnit::Damping => (1e-9, 1e12),
+            ParamUnit::Rate => (1e-9, 1e9),
+            ParamUnit::Dimensionless => (1e-6, 1e3),
+            ParamUnit::AccelRandomWalk => (0.0, 1e3),
+            ParamUnit::Gain => (1e-9, 1e12),
+        }
+    }
+
+    /// `v` (SI) in display units with four significant digits, e.g. `25.37 µm`, `10.49 mm`,
+    /// `3.1 µrad`, `300.1 s`, `2.5 mm/s`.
+    pub fn display(self, v: f64) -> String {
+        let (scale, unit) = match self {
+            ParamUnit::Length if v.abs() < 1e-3 => (1e6, "µm"),
+            ParamUnit::Length if v.abs() < 1.0 => (1e3, "mm"),
+            ParamUnit::Length => (1.0, "m"),
+            ParamUnit::Angle => (1e6, "µrad"),
+            ParamUnit::Phase => (1.0, "rad"),
+            ParamUnit::Force => (1.0, "N"),
+            ParamUnit::Time => (1.0, "s"),
+            ParamUnit::Velocity => (1e3, "mm/s"),
+            ParamUnit::Frequency => (1.0, "Hz"),
+            ParamUnit::Strain => (1e6, "µm/m"),
+            ParamUnit::ExpansionCoefficient => (1e6, "µm/(m·K)"),
+            ParamUnit::Temperature => (1.0, "K"),
+            ParamUnit::Stiffness => (1.0, "N/m"),
+            ParamUnit::Damping => (1.0, "N·s/m"),
+            ParamUnit::Rate => (1.0, "1/s"),
+            ParamUnit::Dimensionless => (1.0, ""),
+            ParamUnit::AccelRandomWalk => (1.0, "m/s²/√s"),
+            ParamUnit::Gain => (1.0, "(SI)"),
+        };
+        let x = v * scale;
+        let text = if !x.is_finite() || x == 0.0 || !(1e-3..1e7).contains(&x.abs()) {
+            fmt_num(x)
+        } else {
+            let decimals = (3 - x.abs().log10().floor() as i32).max(0) as usize;
+            format!("{x:.decimals$}")
+        };
+        if unit.is_empty() {
+            text
+        } else {
+            format!("{text} {unit}")
+        }
+    }
+}
+
+/// The largest length an effect parameter may have, m: an axis travel (vmt's readers bound
+/// positions by the same 100 m).
+pub const MAX_LENGTH: f64 = 100.0;
+
 /// Description of one scalar parameter of an effect: its TOML key, what it is in SI units, its
 /// admissible range, the starting value used when a model leaves it out under `fit = true`, and
 /// whether a file must give it when the effect is not fitted.
@@ -228,6 +336,8 @@ pub struct ParamSpec {
     pub key: &'static str,
     /// What it is, for messages: "a length in metres".
     pub quantity: &'static str,
+    /// Its physical unit, for display ([`ParamUnit::display`]).
+    pub unit: ParamUnit,
     /// Admissible range.
     pub range: Range,
     /// Starting value for a fit when the file gives none (SI).
@@ -237,8 +347,15 @@ pub struct ParamSpec {
     pub required: bool,
 }
 
-const fn spec(key: &'static str, quantity: &'static str, range: Range, default: f64, required: bool) -> ParamSpec {
-    ParamSpec { key, quantity, range, default, required }
+const fn spec(
+    key: &'static str,
+    quantity: &'static str,
+    unit: ParamUnit,
+    range: Range,
+    default: f64,
+    required: bool,
+) -> ParamSpec {
+    ParamSpec { key, quantity, unit, range, default, required }
 }
 
 const LENGTH: &str = "a length in metres";
@@ -247,54 +364,57 @@ const FORCE: &str = "a force in newtons";
 const TAU: &str = "a time constant in seconds";
 const VISC: &str = "a viscous coefficient in N·s/m";
 
-static SQUARENESS_SPECS: [ParamSpec; 1] = [spec("value", ANGLE, Range::Finite, 0.0, true)];
-static BACKLASH_SPECS: [ParamSpec; 1] = [spec("value", LENGTH, Range::NonNegative, 0.0, true)];
+static SQUARENESS_SPECS: [ParamSpec; 1] = [spec("value", ANGLE, ParamUnit::Angle, Range::Finite, 0.0, true)];
+static BACKLASH_SPECS: [ParamSpec; 1] = [spec("value", LENGTH, ParamUnit::Length, Range::NonNegative, 0.0, true)];
 static CYCLIC_LEAD_SPECS: [ParamSpec; 3] = [
-    spec("period", "a screw lead in metres", Range::Positive, 0.010, true),
-    spec("amplitude", LENGTH, Range::NonNegative, 0.0, true),
-    spec("phase", "a phase in radians", Range::Finite, 0.0, false),
+    spec("period", "a screw lead in metres", ParamUnit::Length, Range::Positive, 0.010, true),
+    spec("amplitude", LENGTH, ParamUnit::Length, Range::NonNegative, 0.0, true),
+    spec("phase", "a phase in radians", ParamUnit::Phase, Range::Finite, 0.0, false),
 ];
-static SCALE_ERROR_SPECS: [ParamSpec; 1] = [spec("value", "a strain in m/m", Range::Finite, 0.0, true)];
+static SCALE_ERROR_SPECS: [ParamSpec; 1] =
+    [spec("value", "a strain in m/m", ParamUnit::Strain, Range::Finite, 0.0, true)];
 static THERMAL_EXPANSION_SPECS: [ParamSpec; 3] = [
-    spec("alpha", "an expansion coefficient in 1/K", Range::Finite, 11.5e-6, true),
-    spec("delta_t", "a temperature rise in kelvin", Range::Finite, 0.0, true),
-    spec("tau", TAU, Range::NonNegative, 1800.0, true),
+    spec("alpha", "an expansion coefficient in 1/K", ParamUnit::ExpansionCoefficient, Range::Finite, 11.5e-6, true),
+    spec("delta_t", "a temperature rise in kelvin", ParamUnit::Temperature, Range::Finite, 0.0, true),
+    spec("tau", TAU, ParamUnit::Time, Range::NonNegative, 1800.0, true),
 ];
-static THERMAL_DRIFT_SPECS: [ParamSpec; 2] =
-    [spec("value", LENGTH, Range::Finite, 0.0, true), spec("tau", TAU, Range::NonNegative, 1800.0, true)];
+static THERMAL_DRIFT_SPECS: [ParamSpec; 2] = [
+    spec("value", LENGTH, ParamUnit::Length, Range::Finite, 0.0, true),
+    spec("tau", TAU, ParamUnit::Time, Range::NonNegative, 1800.0, true),
+];
 static INTERPOLATION_SPECS: [ParamSpec; 3] = [
-    spec("period", "a signal period in metres", Range::Positive, 20e-6, true),
-    spec("amplitude", LENGTH, Range::NonNegative, 0.0, true),
-    spec("phase", "a phase in radians", Range::Finite, 0.0, false),
+    spec("period", "a signal period in metres", ParamUnit::Length, Range::Positive, 20e-6, true),
+    spec("amplitude", LENGTH, ParamUnit::Length, Range::NonNegative, 0.0, true),
+    spec("phase", "a phase in radians", ParamUnit::Phase, Range::Finite, 0.0, false),
 ];
-static COULOMB_SPECS: [ParamSpec; 1] = [spec("fc", FORCE, Range::NonNegative, 0.0, true)];
-static VISCOUS_SPECS: [ParamSpec; 1] = [spec("fv", VISC, Range::NonNegative, 0.0, true)];
+static COULOMB_SPECS: [ParamSpec; 1] = [spec("fc", FORCE, ParamUnit::Force, Range::NonNegative, 0.0, true)];
+static VISCOUS_SPECS: [ParamSpec; 1] = [spec("fv", VISC, ParamUnit::Damping, Range::NonNegative, 0.0, true)];
 static STRIBECK_SPECS: [ParamSpec; 4] = [
-    spec("fc", FORCE, Range::NonNegative, 0.0, false),
-    spec("fs", FORCE, Range::NonNegative, 0.0, true),
-    spec("vs", "a Stribeck velocity in m/s", Range::Positive, 1e-3, true),
-    spec("shape", "a Stribeck shape exponent", Range::Positive, 2.0, false),
+    spec("fc", FORCE, ParamUnit::Force, Range::NonNegative, 0.0, false),
+    spec("fs", FORCE, ParamUnit::Force, Range::NonNegative, 0.0, true),
+    spec("vs", "a Stribeck velocity in m/s", ParamUnit::Velocity, Range::Positive, 1e-3, true),
+    spec("shape", "a Stribeck shape exponent", ParamUnit::Dimensionless, Range::Positive, 2.0, false),
 ];
 static LUGRE_SPECS: [ParamSpec; 7] = [
-    spec("sigma0", "a bristle stiffness in N/m", Range::Positive, 1e5, true),
-    spec("sigma1", "a bristle damping in N·s/m", Range::NonNegative, 316.227_766_016_837_94, true),
-    spec("sigma2", VISC, Range::NonNegative, 0.0, true),
-    spec("fc", FORCE, Range::NonNegative, 0.0, true),
-    spec("fs", FORCE, Range::NonNegative, 0.0, true),
-    spec("vs", "a Stribeck velocity in m/s", Range::Positive, 1e-3, true),
-    spec("shape", "a Stribeck shape exponent", Range::Positive, 2.0, false),
+    spec("sigma0", "a bristle stiffness in N/m", ParamUnit::Stiffness, Range::Positive, 1e5, true),
+    spec("sigma1", "a bristle damping in N·s/m", ParamUnit::Damping, Range::NonNegative, 316.227_766_016_837_94, true),
+    spec("sigma2", VISC, ParamUnit::Damping, Range::NonNegative, 0.0, true),
+    spec("fc", FORCE, ParamUnit::Force, Range::NonNegative, 0.0, true),
+    spec("fs", FORCE, ParamUnit::Force, Range::NonNegative, 0.0, true),
+    spec("vs", "a Stribeck velocity in m/s", ParamUnit::Velocity, Range::Positive, 1e-3, true),
+    spec("shape", "a Stribeck shape exponent", ParamUnit::Dimensionless, Range::Positive, 2.0, false),
 ];
 static SERVO_LAG_SPECS: [ParamSpec; 3] = [
-    spec("kv", "a gain (1/s alone; N·s/m with kp)", Range::Positive, 30.0, true),
-    spec("kp", "a position-loop gain in 1/s", Range::Positive, 30.0, false),
-    spec("ki", "a velocity-loop integral gain in N/m", Range::NonNegative, 0.0, false),
+    spec("kv", "a gain (1/s alone; N·s/m with kp)", ParamUnit::Gain, Range::Positive, 30.0, true),
+    spec("kp", "a position-loop gain in 1/s", ParamUnit::Rate, Range::Positive, 30.0, false),
+    spec("ki", "a velocity-loop integral gain in N/m", ParamUnit::Stiffness, Range::NonNegative, 0.0, false),
 ];
 static RESONANCE_SPECS: [ParamSpec; 2] = [
-    spec("frequency", "a frequency in Hz", Range::Positive, 100.0, true),
-    spec("damping", "a damping ratio", Range::UnitInterval, 0.02, true),
+    spec("frequency", "a frequency in Hz", ParamUnit::Frequency, Range::Positive, 100.0, true),
+    spec("damping", "a damping ratio", ParamUnit::Dimensionless, Range::UnitInterval, 0.02, true),
 ];
 static ACCEL_BIAS_DRIFT_SPECS: [ParamSpec; 1] =
-    [spec("rate", "a random-walk rate in m/s²/√s", Range::NonNegative, 0.0, true)];
+    [spec("rate", "a random-walk rate in m/s²/√s", ParamUnit::AccelRandomWalk, Range::NonNegative, 0.0, true)];
 
 /// The scalar parameters of an effect, in the order they are written. Error motions (whose
 /// parameter is a profile), `gravity_tilt` (none) and the list-valued `cyclic_lead.harmonics`
@@ -822,10 +942,23 @@ impl Effect {
         }
         for s in param_specs(self.name) {
             if let Some(v) = self.params.get(s.key) {
+                let (min_positive, max) = s.unit.limits();
                 if !s.range.contains(v) {
                     bad(
                         s.key.to_string(),
                         format!("expected {}{}, got {}", s.quantity, s.range.describe(), fmt_num(v)),
+                    );
+                } else if v.abs() > max || (s.range == Range::Positive && v < min_positive) {
+                    bad(
+                        s.key.to_string(),
+                        format!(
+                            "expected {}{} between {} and {} (physical bounds), got {} (a unit mistake?)",
+                            s.quantity,
+                            s.range.describe(),
+                            s.unit.display(if s.range == Range::Positive { min_positive } else { -max }),
+                            s.unit.display(max),
+                            fmt_num(v)
+                        ),
                     );
                 }
             }
@@ -833,8 +966,9 @@ impl Effect {
         // Beyond the scalars checked above from `param_specs` (every effect's, generically), three
         // effects carry structure of their own: a profile, cyclic-lead harmonics, the cascade gains.
         if let EffectParams::ErrorMotion(p) = &self.params {
-            let q = if self.name.is_translational() { LENGTH } else { ANGLE };
-            validate_profile(p, q, &mut bad);
+            let (q, unit) =
+                if self.name.is_translational() { (LENGTH, ParamUnit::Length) } else { (ANGLE, ParamUnit::Angle) };
+            validate_profile(p, q, unit, &mut bad);
         }
         if let EffectParams::CyclicLead(c) = &self.params {
             for (i, h) in c.harmonics.iter().enumerate() {
@@ -870,10 +1004,34 @@ impl Effect {
 }
 
 /// Range checks of a profile's terms; `quantity` names the unit of the error motion.
-fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, String)) {
+/// Most coefficients of a `poly` term: a smooth error motion needs a few; monomials beyond degree ~20
+/// are ill-conditioned anyway, and every term is evaluated at every physics step (size budget).
+pub const MAX_POLY_TERMS: usize = 64;
+/// Most `harmonics` of one profile (each is a sine evaluated at every physics step).
+pub const MAX_HARMONICS: usize = 4096;
+/// Most rows of a profile `table`.
+pub const MAX_TABLE_ROWS: usize = 1_000_000;
+
+fn validate_profile(p: &Profile, quantity: &str, unit: ParamUnit, bad: &mut dyn FnMut(String, String)) {
+    // An error motion's size: |e| up to an axis travel for a length would already be absurd; the
+    // amplitude bound is the unit's physical limit (lengths ≤ 100 m, angles ≤ 0.1 rad), wavelengths
+    // and correlation lengths are lengths of 1 nm to 100 m.
+    let (_, max_size) = unit.limits();
+    let (min_len, max_len) = ParamUnit::Length.limits();
+    let length_ok = |x: f64| x.is_finite() && (min_len..=max_len).contains(&x);
     for term in &p.terms {
         match term {
             Term::Poly(c) => {
+                if c.len() > MAX_POLY_TERMS {
+                    bad(
+                        "poly".into(),
+                        format!(
+                            "expected at most {MAX_POLY_TERMS} coefficients (a smooth error motion), got {}",
+                            c.len()
+                        ),
+                    );
+                    continue;
+                }
                 for (i, ci) in c.iter().enumerate() {
                     if !ci.is_finite() {
                         bad(format!("poly[{i}]"), format!("expected a finite coefficient, got {ci}"));
@@ -881,14 +1039,30 @@ fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, Str
                 }
             }
             Term::Harmonics(h) => {
+                if h.len() > MAX_HARMONICS {
+                    bad("harmonics".into(), format!("expected at most {MAX_HARMONICS} harmonics, got {}", h.len()));
+                    continue;
+                }
                 for (i, hi) in h.iter().enumerate() {
-                    if !hi.amplitude.is_finite() {
-                        bad(format!("harmonics[{i}].amplitude"), format!("expected {quantity}, got {}", hi.amplitude));
+                    if !(hi.amplitude.is_finite() && hi.amplitude.abs() <= max_size) {
+                        bad(
+                            format!("harmonics[{i}].amplitude"),
+                            format!(
+                                "expected {quantity} of at most {} in size, got {}",
+                                unit.display(max_size),
+                                fmt_num(hi.amplitude)
+                            ),
+                        );
                     }
-                    if !Range::Positive.contains(hi.wavelength) {
+                    if !length_ok(hi.wavelength) {
                         bad(
                             format!("harmonics[{i}].wavelength"),
-                            format!("expected a wavelength in metres > 0, got {}", fmt_num(hi.wavelength)),
+                            format!(
+                                "expected a wavelength in metres between {} and {}, got {}",
+                                fmt_num(min_len),
+                                fmt_num(max_len),
+                                fmt_num(hi.wavelength)
+                            ),
                         );
                     }
                     if !hi.phase.is_finite() {
@@ -897,17 +1071,43 @@ fn validate_profile(p: &Profile, quantity: &str, bad: &mut dyn FnMut(String, Str
                 }
             }
             Term::Random { spec, .. } => {
-                if !Range::NonNegative.contains(spec.rms) {
-                    bad("random.rms".into(), format!("expected {quantity} ≥ 0, got {}", fmt_num(spec.rms)));
+                if !(Range::NonNegative.contains(spec.rms) && spec.rms <= max_size) {
+                    bad(
+                        "random.rms".into(),
+                        format!(
+                            "expected {quantity} ≥ 0 and at most {}, got {}",
+                            unit.display(max_size),
+                            fmt_num(spec.rms)
+                        ),
+                    );
                 }
-                if !Range::Positive.contains(spec.correlation_length) {
+                if !length_ok(spec.correlation_length) {
                     bad(
                         "random.correlation_length".into(),
-                        format!("expected a length in metres > 0, got {}", fmt_num(spec.correlation_length)),
+                        format!(
+                            "expected a length in metres between {} and {}, got {}",
+                            fmt_num(min_len),
+                            fmt_num(max_len),
+                            fmt_num(spec.correlation_length)
+                        ),
                     );
                 }
             }
             Term::Table { x, y } => {
+                if x.len() > MAX_TABLE_ROWS {
+                    bad("table".into(), format!("expected at most {MAX_TABLE_ROWS} rows, got {}", x.len()));
+                    continue;
+                }
+                if let Some(i) = y.iter().position(|v| v.abs() > max_size) {
+                    bad(
+                        "table".into(),
+                        format!(
+                            "expected {quantity} of at most {} in size, got {} at entry {i}",
+                            unit.display(max_size),
+                            fmt_num(y[i])
+                        ),
+                    );
+                }
                 if x.len() != y.len() || x.len() < 2 {
                     bad(
                         "table".into(),
@@ -1081,6 +1281,26 @@ impl EffectSet {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parameters_display_in_the_units_a_metrologist_reads() {
+        assert_eq!(ParamUnit::Length.display(2.5368308714870326e-5), "25.37 µm");
+        assert_eq!(ParamUnit::Length.display(0.010494734293211277), "10.49 mm");
+        assert_eq!(ParamUnit::Length.display(1.25), "1.250 m");
+        assert_eq!(ParamUnit::Angle.display(3.1e-6), "3.100 µrad");
+        assert_eq!(ParamUnit::Velocity.display(0.0025), "2.500 mm/s");
+        assert_eq!(ParamUnit::Time.display(312.1477), "312.1 s");
+        assert_eq!(ParamUnit::ExpansionCoefficient.display(11.5e-6), "11.50 µm/(m·K)");
+        assert_eq!(ParamUnit::Dimensionless.display(2.0), "2.000");
+        assert_eq!(ParamUnit::Length.display(0.0), "0 µm");
+        // Every catalogue parameter has a unit whose display names it (no bare SI number).
+        for e in EffectName::ALL {
+            for p in param_specs(e) {
+                let text = p.unit.display(1e-3);
+                assert!(text.contains(' ') || p.unit == ParamUnit::Dimensionless, "{}.{}: {text}", e.as_str(), p.key);
+            }
+        }
+    }
 
     #[test]
     fn names_round_trip_through_strings_and_unknown_names_list_the_catalogue() {

@@ -351,6 +351,14 @@ pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
                         what: format!("limits lower={lower} upper={upper}: expected finite with lower ≤ upper"),
                     });
                 }
+                // A machine-tool axis travels metres; profiles and truth tables are sampled over it.
+                let max = crate::effects::MAX_LENGTH;
+                if lower.abs() > max || upper.abs() > max {
+                    return Err(UrdfError::Joint {
+                        joint: j.name.clone(),
+                        what: format!("limits lower={lower} upper={upper}: expected a travel within ±{max} m"),
+                    });
+                }
                 let dynamics = j.dynamics.clone().unwrap_or(urdf_rs::Dynamics { damping: 0.0, friction: 0.0 });
                 axes.push(PrismaticAxis {
                     joint: j.name.clone(),

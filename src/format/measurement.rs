@@ -234,6 +234,8 @@ struct CsvText {
 /// Most columns a CSV may have (size budget, DESIGN.md §2): a run holds t or the point-table keys,
 /// the commands and one column per sensor.
 pub const MAX_COLUMNS: usize = 1_000;
+/// Most runs (CSV files) of a measurement set (size budget).
+pub const MAX_RUNS: usize = 100_000;
 
 fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
     let bytes = std::fs::read(path).map_err(|e| VmtError::io(path, "reading", e))?;
@@ -607,36 +609,63 @@ fn is_safe_relative(file: &str) -> bool {
 }
 
 /// Reads what `--data` names: a measurement set directory ([`read`]), or an ISO 230-2 test in the
-/// ecmc key=value `.dat` format (a file; [`from_iso230_2_dat`]).
+/// ecmc key=value `.dat` format (a file; [`read_dat`], [`from_iso230_2_dat`]).
 pub fn read_data(path: &Path) -> Result<MeasurementSet, VmtError> {
     if path.is_file() && path.extension().is_some_and(|e| e.eq_ignore_ascii_case("dat")) {
-        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the ISO 230-2 test", e))?;
-        let dat =
-            vmt_estimators::iso230_2::dat::parse_dat(&text).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
-        let set = from_iso230_2_dat(&dat);
-        for (k, x) in dat.targets.iter().enumerate() {
-            if !(x.is_finite() && x.abs() <= MAX_POSITION) {
+        return Ok(from_iso230_2_dat(&read_dat(path)?));
+    }
+    read(path)
+}
+
+/// Reads an ISO 230-2 test in the ecmc key=value `.dat` format, with the checks every command that
+/// reads one applies: each target a finite position within ±[`MAX_POSITION`], distinct from the
+/// others, and every reading within half the smallest target spacing of its target (a deviation that
+/// large cannot be attributed to its target: the file is in another unit or a target is mistyped;
+/// ISO 230-2 deviations are µm to mm on targets mm to m apart).
+pub fn read_dat(path: &Path) -> Result<vmt_estimators::iso230_2::dat::DatFile, VmtError> {
+    let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the ISO 230-2 test", e))?;
+    let dat = vmt_estimators::iso230_2::dat::parse_dat(&text).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+    for (k, x) in dat.targets.iter().enumerate() {
+        if !(x.is_finite() && x.abs() <= MAX_POSITION) {
+            return Err(VmtError::bad(
+                path,
+                format!("target {}", k + 1),
+                format!("expected a target position within ±{MAX_POSITION} m, got {} m", fmt_num(*x)),
+            ));
+        }
+        if let Some(j) = dat.targets[..k].iter().position(|y| y == x) {
+            return Err(VmtError::bad(
+                path,
+                format!("target {}", k + 1),
+                format!(
+                    "the same position {} m as target {}: each target must be a distinct position",
+                    fmt_num(*x),
+                    j + 1
+                ),
+            ));
+        }
+    }
+    let mut sorted = dat.targets.clone();
+    sorted.sort_by(f64::total_cmp);
+    let spacing = sorted.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
+    for (table, name) in [(&dat.up, "REF_DATA_FWD"), (&dat.down, "REF_DATA_BWD")] {
+        for (i, row) in table.iter().enumerate() {
+            if let Some((j, d)) = row.iter().enumerate().find(|(_, d)| !(d.abs() < 0.5 * spacing)) {
                 return Err(VmtError::bad(
                     path,
-                    format!("target {}", k + 1),
-                    format!("expected a target position within ±{MAX_POSITION} m, got {} m", fmt_num(*x)),
-                ));
-            }
-            if let Some(j) = dat.targets[..k].iter().position(|y| y == x) {
-                return Err(VmtError::bad(
-                    path,
-                    format!("target {}", k + 1),
+                    format!("{name}[{},{}]", i + 1, j + 1),
                     format!(
-                        "the same position {} m as target {}: each target must be a distinct position",
-                        fmt_num(*x),
-                        j + 1
+                        "expected a reading within half the smallest target spacing ({} m) of its target {} m, \
+                         got a deviation of {} m (another unit, or a mistyped target?)",
+                        fmt_num(0.5 * spacing),
+                        fmt_num(dat.targets[i]),
+                        fmt_num(*d)
                     ),
                 ));
             }
         }
-        return Ok(set);
     }
-    read(path)
+    Ok(dat)
 }
 
 /// An ISO 230-2 test (`.dat`) as a measurement set: one reference sensor `ref` (a linear laser along
@@ -709,13 +738,20 @@ pub fn read(dir: &Path) -> Result<MeasurementSet, VmtError> {
     let description = r.opt_str("description", "a string")?.map(str::to_string);
     let machine = r.opt_str("machine", "a bundled machine name or URDF path")?.map(str::to_string);
     let seed = r.opt_u64("seed", "a non-negative integer seed")?;
-    let sensors: Vec<Sensor> = r
-        .opt_tables("sensors")?
-        .unwrap_or_default()
-        .iter()
-        .map(parse_sensor)
-        .collect::<Result<Vec<Sensor>, VmtError>>()?;
+    let sensor_tables = r.opt_tables("sensors")?.unwrap_or_default();
+    // Size budget before any per-sensor work (the name checks compare every pair): each sensor is a
+    // CSV column, so the column limit bounds them; runs are files.
+    if sensor_tables.len() > MAX_COLUMNS {
+        return Err(r.bad(
+            "sensors",
+            format!("{} sensors; the limit is {MAX_COLUMNS} (one CSV column each)", sensor_tables.len()),
+        ));
+    }
+    let sensors: Vec<Sensor> = sensor_tables.iter().map(parse_sensor).collect::<Result<Vec<Sensor>, VmtError>>()?;
     let entries = r.opt_tables("runs")?.unwrap_or_default();
+    if entries.len() > MAX_RUNS {
+        return Err(r.bad("runs", format!("{} runs; the limit is {MAX_RUNS} (one CSV file each)", entries.len())));
+    }
     r.deny_unknown()?;
     let mut runs: Vec<Run> = Vec::with_capacity(entries.len());
     let mut set_so_far = MeasurementSet { description, machine, seed, sensors, runs: Vec::new() };

@@ -41,7 +41,7 @@ pub fn compare_text(r: &CompareReport) -> String {
     }
     s += &format!("normalised RMS (all samples): {:.3}   (1.0 = noise level; * σ estimated)\n", r.normalized_rms);
     for (e, p) in &r.fitted {
-        let kv: Vec<String> = p.iter().map(|(k, v)| format!("{k} = {}", fmt_num(*v))).collect();
+        let kv: Vec<String> = p.iter().map(|(k, v)| format!("{k} = {}", param_text(e, k, *v))).collect();
         s += &format!("fitted {e}: {}\n", kv.join(", "));
     }
     s += &shapes_text(&r.shapes);
@@ -66,7 +66,7 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
     // p: upper bound of the probability that noise alone gives any candidate a reduction this large.
     s += &format!("{:<22} {:>12} {:>9} {:>10} {:<12} params\n", "effect", "ΔBIC", "p", "explained", "verdict");
     for e in &r.ranking {
-        let kv: Vec<String> = e.params.iter().map(|(k, v)| format!("{k}={}", fmt_num(*v))).collect();
+        let kv: Vec<String> = e.params.iter().map(|(k, v)| format!("{k}={}", param_text(&e.effect, k, *v))).collect();
         let v = match e.verdict {
             Verdict::Significant => "significant",
             Verdict::Noise => "noise",
@@ -135,4 +135,19 @@ fn sigma_text(sc: Option<&SigmaCheck>) -> String {
         sc.from_repeats * 1e6,
         sc.dof
     )
+}
+
+/// A fitted or diagnosed parameter in the unit of the effect catalogue
+/// (`vmt_sim::effects::ParamSpec::unit`): `value=25.37 µm`, `period=10.49 mm`; a key the catalogue
+/// does not list (a gain per sensor, a shape coefficient) in SI as written to files.
+fn param_text(effect: &str, key: &str, v: f64) -> String {
+    let unit = effect
+        .parse::<vmt_sim::effects::EffectName>()
+        .ok()
+        .and_then(|e| vmt_sim::effects::param_specs(e).iter().find(|s| s.key == key))
+        .map(|s| s.unit);
+    match unit {
+        Some(u) => u.display(v),
+        None => fmt_num(v),
+    }
 }

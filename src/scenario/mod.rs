@@ -113,6 +113,7 @@ impl Scenario {
             toml::Value::Table(t) => model::parse_model(t, source, &base_dir, "truth")?,
             _ => return Err(bad("truth", "expected a table (inline truth) or a file name".into())),
         };
+        check_truth_size(&truth, axis.travel).map_err(|(p, m)| bad(&p, m))?;
         validate_sensors(&raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
         for (i, e) in raw.estimators.iter().enumerate() {
             e.check().map_err(|(k, m)| bad(&format!("estimators[{i}].{k}"), m))?;
@@ -439,6 +440,36 @@ fn validate_procedures(
                     return Err((at("duration"), format!("expected a pause of ≥ 0 s, got {duration}")));
                 }
             }
+        }
+    }
+    Ok(())
+}
+
+/// The largest error motion a truth may inject anywhere on the travel: 1 m (translational) or 0.1 rad
+/// (angular). A machine's geometric errors are µm and µrad; a profile that reaches these sizes (e.g.
+/// polynomial coefficients of 1e300, which are finite and pass the per-term checks) is a unit mistake,
+/// and would otherwise surface as NaN in an output file far from its cause.
+pub const MAX_ERROR_MOTION: (f64, f64) = (1.0, 0.1);
+
+/// Evaluates every error motion of the truth at 1001 points over the axis travel: finite and within
+/// [`MAX_ERROR_MOTION`], else the key path and the worst position.
+fn check_truth_size(truth: &model::Model, travel: (f64, f64)) -> Result<(), (String, String)> {
+    for me in &truth.effects {
+        let Some(profile) = me.effect.params.profile() else { continue };
+        let (max, unit) =
+            if me.effect.name.is_translational() { (MAX_ERROR_MOTION.0, "m") } else { (MAX_ERROR_MOTION.1, "rad") };
+        let at = |i: usize| travel.0 + (travel.1 - travel.0) * i as f64 / 1000.0;
+        if let Some(x) = (0..=1000).map(at).find(|x| !(profile.value(*x).abs() <= max)) {
+            return Err((
+                format!("truth.effects.{}", me.effect.name),
+                format!(
+                    "the profile reaches {} {unit} at x = {} m (travel {}..{} m); an error motion stays within ±{max} {unit}",
+                    crate::error::fmt_num(profile.value(x)),
+                    crate::error::fmt_num(x),
+                    crate::error::fmt_num(travel.0),
+                    crate::error::fmt_num(travel.1)
+                ),
+            ));
         }
     }
     Ok(())

@@ -44,26 +44,50 @@ impl Estimator for CommandEstimator {
     }
 }
 
-/// One error motion's comparison: RMS and max of estimate − truth on the estimate's positions.
+/// One error motion's comparison: RMS and max of estimate − truth on the estimate's positions
+/// inside the truth's range.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ScoreRow {
+    /// The error-motion column (`positioning`, `y.pitch`, …).
     pub effect: String,
+    /// RMS of d = estimate − truth over the scored positions, the column's SI unit (m or rad).
     pub rms: f64,
+    /// max |d| over the scored positions, same unit.
     pub max: f64,
+    /// Number of scored positions (the estimate's positions inside the truth's range).
     pub points: usize,
+    /// The estimate's positions outside the truth's range, not scored (the truth is never
+    /// extrapolated); optional JSON key `outside_truth`.
+    #[serde(rename = "outside_truth")]
+    pub outside: usize,
 }
 
-/// Compares estimated profiles with the truth on the estimate's positions (truth interpolated linearly):
-/// straightness about its least-squares line on both sides, positioning and angles relative to their
-/// first position (the conventions of the laser identifier and of ISO 230-1).
-pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Vec<ScoreRow> {
+/// Compares estimated profiles with the truth on the estimate's positions inside the truth's range
+/// (truth interpolated linearly, never extrapolated): straightness about its least-squares line on
+/// both sides, positioning and angles relative to their first position (the conventions of the
+/// laser identifier and of ISO 230-1).
+///
+/// Refuses (an `Err` naming the column) a comparison that could not fail: a truth with fewer than
+/// two positions, or fewer scored positions than the reference removes plus one (three for
+/// straightness, whose line takes two; two for the others, whose first value is the reference) —
+/// one estimate point would otherwise score as perfect.
+pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Result<Vec<ScoreRow>, String> {
     use vmt_sim::effects::EffectName;
-    let interp = |xs: &[f64], ys: &[f64], x: f64| -> f64 {
-        if xs.len() < 2 {
-            return ys.first().copied().unwrap_or(0.0);
-        }
-        let i = xs.partition_point(|&v| v <= x).clamp(1, xs.len() - 1);
-        let w = (x - xs[i - 1]) / (xs[i] - xs[i - 1]);
+    let (Some(&t_lo), Some(&t_hi)) = (truth.position.first(), truth.position.last()) else {
+        return Err("the truth has no positions".into());
+    };
+    if truth.position.len() < 2 {
+        return Err(format!("the truth has one position ({t_lo} m): it cannot be interpolated"));
+    }
+    // A position within 1e-9 of the span of an end counts as inside (rounding of written CSVs).
+    let slack = 1e-9 * (t_hi - t_lo);
+    let inside: Vec<usize> =
+        (0..est.position.len()).filter(|&i| (t_lo - slack..=t_hi + slack).contains(&est.position[i])).collect();
+    let xs: Vec<f64> = inside.iter().map(|&i| est.position[i].clamp(t_lo, t_hi)).collect();
+    let interp = |ys: &[f64], x: f64| -> f64 {
+        let p = &truth.position;
+        let i = p.partition_point(|&v| v <= x).clamp(1, p.len() - 1);
+        let w = (x - p[i - 1]) / (p[i] - p[i - 1]);
         ys[i - 1] + w * (ys[i] - ys[i - 1])
     };
     let mut rows = Vec::new();
@@ -72,62 +96,110 @@ pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Vec<ScoreRow>
         if c.values.is_empty() {
             continue;
         }
-        let tv: Vec<f64> = est.position.iter().map(|&x| interp(&truth.position, &tc.values, x)).collect();
         let straightness = matches!(c.effect, EffectName::StraightnessY | EffectName::StraightnessZ);
+        let need = if straightness { 3 } else { 2 };
+        if xs.len() < need {
+            return Err(format!(
+                "column {}: {} of the estimate's {} positions lie inside the truth's range [{t_lo}, {t_hi}] m; \
+                 scoring needs at least {need} there ({})",
+                c.column_name(),
+                xs.len(),
+                est.position.len(),
+                if straightness {
+                    "straightness is compared about its least-squares line"
+                } else {
+                    "the first value is the reference"
+                }
+            ));
+        }
+        let ev: Vec<f64> = inside.iter().map(|&i| c.values[i]).collect();
+        let tv: Vec<f64> = xs.iter().map(|&x| interp(&tc.values, x)).collect();
         let norm = |v: &[f64]| -> Vec<f64> {
             if straightness {
-                vmt_estimators::line::remove_line(&est.position, v)
+                vmt_estimators::line::remove_line(&xs, v)
             } else {
                 v.iter().map(|x| x - v[0]).collect()
             }
         };
-        let d: Vec<f64> = norm(&c.values).iter().zip(norm(&tv)).map(|(a, b)| a - b).collect();
+        let d: Vec<f64> = norm(&ev).iter().zip(norm(&tv)).map(|(a, b)| a - b).collect();
         rows.push(ScoreRow {
             effect: c.column_name(),
             rms: (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt(),
             max: d.iter().fold(0.0f64, |m, x| m.max(x.abs())),
             points: d.len(),
+            outside: est.position.len() - xs.len(),
         });
     }
-    rows
+    Ok(rows)
 }
+
+/// Fewest degrees of freedom of the repeats from which a laser line's σ is estimated when the manifest
+/// gives none (σ̂ from 10 dof is within ±22 % of σ at 1σ).
+pub const MIN_REPEAT_DOF_IDENTIFY: usize = 10;
 
 /// The laser lines (linear and straightness lasers) of a point-table run of a measurement set, identified:
 /// the run `run` or else the first point-table run with at least two lines. Returns the run's name, the
-/// number of lines and the identification.
+/// number of lines, the identification and notes for the reader. A line whose manifest gives no `sigma`
+/// gets σ from its repeated readings (pooled scatter per target and direction across runs, ≥
+/// [`MIN_REPEAT_DOF_IDENTIFY`] degrees of freedom; said in a note); without enough repeats the line is
+/// refused, since the weights and every standard error depend on σ (a σ of 0 printed standard errors of 0).
 pub fn identify_set(
     set: &MeasurementSet,
     run: Option<&str>,
-) -> Result<(String, usize, vmt_estimators::laser_ls::Identification), String> {
+) -> Result<(String, usize, vmt_estimators::laser_ls::Identification, Vec<String>), String> {
     use crate::estimate::{identify_laser_lines, LaserLine};
     use crate::measurement::{RunData, SensorKind};
     let is_line = |k: SensorKind| matches!(k, SensorKind::LaserLinear | SensorKind::LaserStraightness);
-    let lines_of = |r: &crate::measurement::Run| -> Vec<LaserLine> {
-        set.sensors
-            .iter()
-            .filter(|s| is_line(s.kind) && r.data.column(&s.name).is_some())
-            .map(|s| LaserLine {
-                name: s.name.clone(),
-                point: s.position,
-                direction: s.direction,
-                sigma: s.sigma.unwrap_or(0.0),
-            })
-            .collect()
+    let with_lines = |r: &&crate::measurement::Run| {
+        set.sensors.iter().filter(|s| is_line(s.kind) && r.data.column(&s.name).is_some()).count() >= 2
     };
     let r = match run {
         Some(n) => set.run(n).ok_or_else(|| format!("no run named `{n}`"))?,
         None => set
             .runs
             .iter()
-            .find(|r| matches!(r.data, RunData::PointTable { .. }) && lines_of(r).len() >= 2)
+            .filter(|r| matches!(r.data, RunData::PointTable { .. }))
+            .find(with_lines)
             .ok_or("expected a point-table run with at least two laser lines")?,
     };
-    let RunData::PointTable { target, columns, .. } = &r.data else {
+    let RunData::PointTable { target, run: run_no, direction, columns, .. } = &r.data else {
         return Err(format!("run {} is not a point table", r.name));
     };
-    let lines = lines_of(r);
+    let mut notes = Vec::new();
+    let mut lines = Vec::new();
+    for s in set.sensors.iter().filter(|s| is_line(s.kind)) {
+        let Some(values) = r.data.column(&s.name) else { continue };
+        let sigma = match s.sigma {
+            Some(sigma) => sigma,
+            None => {
+                let keyed = target.iter().zip(direction).zip(values).map(|((x, d), v)| ((x.to_bits(), *d), *v));
+                match vmt_estimators::modelcheck::pooled_group_scatter(keyed) {
+                    Some((ss, dof)) if dof >= MIN_REPEAT_DOF_IDENTIFY && ss > 0.0 => {
+                        let sigma = (ss / dof as f64).sqrt();
+                        notes.push(format!(
+                            "sigma of `{}` estimated from its repeated readings: {} m ({dof} degrees of freedom; the manifest gives none)",
+                            s.name,
+                            crate::error::fmt_num(sigma)
+                        ));
+                        sigma
+                    }
+                    other => {
+                        let runs = run_no.iter().collect::<std::collections::BTreeSet<_>>().len();
+                        return Err(format!(
+                            "laser line `{}` has no sigma in the manifest and its readings ({runs} run(s)) give {} degrees of \
+                             freedom of repeats, fewer than the {MIN_REPEAT_DOF_IDENTIFY} needed to estimate it: give `sigma` \
+                             for the sensor (the weights and every standard error depend on it)",
+                            s.name,
+                            other.map_or(0, |(_, d)| d)
+                        ));
+                    }
+                }
+            }
+        };
+        lines.push(LaserLine { name: s.name.clone(), point: s.position, direction: s.direction, sigma });
+    }
     let (id, _) = identify_laser_lines(target, columns, &lines).map_err(|m| format!("run {}: {m}", r.name))?;
-    Ok((r.name.clone(), lines.len(), id))
+    Ok((r.name.clone(), lines.len(), id, notes))
 }
 
 /// Multi-axis laser lines of a measurement set (the seed 001 line set of a chain, e.g. what `vmt simulate`
@@ -206,7 +278,7 @@ impl Estimator for LaserLines {
     }
 
     fn estimate(&self, set: &MeasurementSet, _work: &Path) -> Result<ProfileTable, VmtError> {
-        let (_, _, id) =
+        let (_, _, id, _) =
             identify_set(set, None).map_err(|m| VmtError::bad(Path::new("<measurement set>"), "runs", m))?;
         Ok(profiles_of(&id))
     }

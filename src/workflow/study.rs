@@ -1,13 +1,15 @@
-//! Workflow `study`: a Monte Carlo tolerance study over one sensor parameter (DESIGN.md §6, §9). The
-//! physics is simulated once; every trial redraws the sensor noise with its own seed (derived from the
-//! scenario seed, the value index and the trial number), so the results are the same on any number of
-//! threads and shards can be computed on different machines and merged.
+//! Workflow `study`: a Monte Carlo tolerance study over one parameter (DESIGN.md §6, §9): a sensor
+//! parameter (the physics is simulated once and shared) or any number of the scenario file (a truth
+//! effect's parameter, a servo gain, a feed: the physics is simulated once per value). Every trial
+//! redraws the sensor noise with its own seed (derived from the scenario seed, the value index and the
+//! trial number), so the results are the same on any number of threads and shards can be computed on
+//! different machines and merged.
 
 use crate::byo::{score_profiles, Estimator};
 use crate::error::VmtError;
 use crate::estimate::{estimate_recording, Quantity};
 use crate::scenario::Scenario;
-use crate::simulate::{physics, read_all, remeasure, simulate_truth, to_measurement_set};
+use crate::simulate::{physics, read_all, remeasure, simulate_truth, to_measurement_set, Physics};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
@@ -66,41 +68,361 @@ impl SensorParam {
     }
 }
 
-/// The varied parameter: `sensors.NAME.KEY` with KEY one of [`SensorParam`]'s keys, and its values.
+/// What a study varies.
+#[derive(Clone, Debug, PartialEq)]
+pub enum VaryKey {
+    /// `sensors.NAME.KEY` with KEY one of [`SensorParam`]'s keys: the physics is simulated once and
+    /// shared by every value; each trial redraws the sensor noise.
+    Sensor {
+        /// The sensor's name.
+        sensor: String,
+        /// Which of its parameters.
+        key: SensorParam,
+    },
+    /// Any number the scenario file gives, by its TOML key path (`truth.effects.backlash.value`,
+    /// `axis.servo.kp`, `truth.effects.pitch.poly[1]`, `procedures[1].feed`): each value is a new
+    /// scenario, parsed and validated as the file would be (its range checks included), with its own
+    /// physics; the trials of a value share it and redraw the sensor noise.
+    Scenario {
+        /// The path, as written.
+        path: String,
+        /// Its parts: a key and an optional array index each.
+        parts: Vec<(String, Option<usize>)>,
+    },
+}
+
+/// The varied parameter and its values.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Vary {
-    /// The sensor's name.
-    pub sensor: String,
-    /// Which of its parameters.
-    pub key: SensorParam,
-    /// The values, in the parameter's unit.
+    /// What is varied.
+    pub key: VaryKey,
+    /// The values, in the parameter's SI unit.
     pub values: Vec<f64>,
 }
 
+/// Most values of a parameter that changes the physics (each is simulated and held in memory).
+pub const MAX_PHYSICS_VALUES: usize = 256;
+
 impl Vary {
-    /// Parses `sensors.acc_z.noise_density=1e-7,2e-7`.
+    /// Parses `sensors.acc_z.noise_density=1e-7,2e-7` or `truth.effects.backlash.value=2e-6,4e-6`.
     pub fn parse(s: &str) -> Result<Vary, VmtError> {
-        let usage = |m: &str| VmtError::Usage(format!("--vary {s}: {m} (expected sensors.NAME.KEY=V1,V2,…)"));
+        let usage = |m: &str| {
+            VmtError::Usage(format!(
+                "--vary {s}: {m} (expected sensors.NAME.KEY=V1,V2,… or a scenario key path such as \
+                 truth.effects.backlash.value=V1,V2,…)"
+            ))
+        };
         let (path, vals) = s.split_once('=').ok_or_else(|| usage("no `=`"))?;
         let parts: Vec<&str> = path.split('.').collect();
-        let [root, sensor, key] = parts.as_slice() else { return Err(usage("expected three dot-separated parts")) };
-        if *root != "sensors" {
-            return Err(usage("only sensor parameters can be varied without new physics"));
-        }
-        let key = SensorParam::ALL
-            .into_iter()
-            .find(|p| p.key() == *key)
-            .ok_or_else(|| usage(&format!("unknown sensor key `{key}`")))?;
         let values = vals
             .split(',')
-            .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0))
+            .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
             .collect::<Option<Vec<f64>>>()
-            .ok_or_else(|| usage("values must be finite numbers ≥ 0"))?;
+            .ok_or_else(|| usage("values must be finite numbers"))?;
         if values.is_empty() {
             return Err(usage("no values"));
         }
-        Ok(Vary { sensor: sensor.to_string(), key, values })
+        let key = if parts.first() == Some(&"sensors") {
+            let [_, sensor, key] = parts.as_slice() else { return Err(usage("expected sensors.NAME.KEY")) };
+            let key = SensorParam::ALL
+                .into_iter()
+                .find(|p| p.key() == *key)
+                .ok_or_else(|| usage(&format!("unknown sensor key `{key}`")))?;
+            if values.iter().any(|v| *v < 0.0) {
+                return Err(usage("sensor parameter values must be ≥ 0"));
+            }
+            VaryKey::Sensor { sensor: sensor.to_string(), key }
+        } else {
+            if values.len() > MAX_PHYSICS_VALUES {
+                return Err(usage(&format!(
+                    "{} values of a parameter that changes the physics; the limit is {MAX_PHYSICS_VALUES}",
+                    values.len()
+                )));
+            }
+            VaryKey::Scenario { path: path.to_string(), parts: parse_key_path(path).map_err(|m| usage(&m))? }
+        };
+        Ok(Vary { key, values })
     }
+
+    /// The varied parameter as written (`sensors.acc_z.noise_density`, `axis.servo.kp`).
+    pub fn label(&self) -> String {
+        match &self.key {
+            VaryKey::Sensor { sensor, key } => format!("sensors.{sensor}.{}", key.key()),
+            VaryKey::Scenario { path, .. } => path.clone(),
+        }
+    }
+}
+
+/// A scenario key path `a.b[2].c` as (key, optional array index) parts.
+fn parse_key_path(path: &str) -> Result<Vec<(String, Option<usize>)>, String> {
+    path.split('.')
+        .map(|p| match p.split_once('[') {
+            None if !p.is_empty() => Ok((p.to_string(), None)),
+            Some((k, i)) if !k.is_empty() => i
+                .strip_suffix(']')
+                .and_then(|i| i.parse::<usize>().ok())
+                .map(|i| (k.to_string(), Some(i)))
+                .ok_or_else(|| format!("`{p}`: expected KEY or KEY[INDEX]")),
+            _ => Err(format!("`{p}`: expected KEY or KEY[INDEX]")),
+        })
+        .collect()
+}
+
+/// A distribution a physical parameter is drawn from once per trial (`--sample KEY=DIST`), SI.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Distribution {
+    /// `uniform(lo,hi)`: every value in [lo, hi) equally likely.
+    Uniform {
+        /// Lower end.
+        lo: f64,
+        /// Upper end.
+        hi: f64,
+    },
+    /// `normal(mean,sd)`: Gaussian.
+    Normal {
+        /// Mean.
+        mean: f64,
+        /// Standard deviation.
+        sd: f64,
+    },
+    /// `loguniform(lo,hi)`: ln x uniform on [ln lo, ln hi) (0 < lo < hi), for a parameter known
+    /// to an order of magnitude.
+    LogUniform {
+        /// Lower end (> 0).
+        lo: f64,
+        /// Upper end.
+        hi: f64,
+    },
+}
+
+impl Distribution {
+    /// Parses `uniform(2e-6,8e-6)`, `normal(5e-6,1e-6)` or `loguniform(1e-7,1e-5)`.
+    pub fn parse(s: &str) -> Result<Distribution, String> {
+        let expected = "expected uniform(LO,HI), normal(MEAN,SD) or loguniform(LO,HI) with finite numbers";
+        let (name, rest) = s.split_once('(').ok_or(expected)?;
+        let args: Vec<f64> = rest
+            .strip_suffix(')')
+            .ok_or(expected)?
+            .split(',')
+            .map(|a| a.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
+            .collect::<Option<_>>()
+            .ok_or(expected)?;
+        let [a, b] = args[..] else { return Err(expected.into()) };
+        match name.trim() {
+            "uniform" if a < b => Ok(Distribution::Uniform { lo: a, hi: b }),
+            "normal" if b > 0.0 => Ok(Distribution::Normal { mean: a, sd: b }),
+            "loguniform" if 0.0 < a && a < b => Ok(Distribution::LogUniform { lo: a, hi: b }),
+            "uniform" => Err(format!("uniform({a},{b}): expected LO < HI")),
+            "normal" => Err(format!("normal({a},{b}): expected SD > 0")),
+            "loguniform" => Err(format!("loguniform({a},{b}): expected 0 < LO < HI")),
+            _ => Err(expected.into()),
+        }
+    }
+
+    /// One draw.
+    pub fn draw(self, rng: &mut impl rand::Rng) -> f64 {
+        match self {
+            Distribution::Uniform { lo, hi } => rng.gen_range(lo..hi),
+            Distribution::Normal { mean, sd } => {
+                mean + sd * rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
+            }
+            Distribution::LogUniform { lo, hi } => rng.gen_range(lo.ln()..hi.ln()).exp(),
+        }
+    }
+}
+
+/// A parameter of the scenario file drawn per trial: `--sample KEY.PATH=DIST`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sample {
+    /// The key path, as written.
+    pub path: String,
+    /// Its parts ([`set_scenario_number`]).
+    pub parts: Vec<(String, Option<usize>)>,
+    /// Its distribution.
+    pub dist: Distribution,
+}
+
+impl Sample {
+    /// Parses `truth.effects.backlash.value=uniform(2e-6,8e-6)`.
+    pub fn parse(s: &str) -> Result<Sample, VmtError> {
+        let usage = |m: &str| {
+            VmtError::Usage(format!(
+                "--sample {s}: {m} (expected KEY.PATH=uniform(LO,HI), normal(MEAN,SD) or loguniform(LO,HI))"
+            ))
+        };
+        let (path, dist) = s.split_once('=').ok_or_else(|| usage("no `=`"))?;
+        if path.starts_with("sensors.") {
+            return Err(usage("sensor parameters are studied with --vary (their physics is shared)"));
+        }
+        Ok(Sample {
+            path: path.to_string(),
+            parts: parse_key_path(path).map_err(|m| usage(&m))?,
+            dist: Distribution::parse(dist).map_err(|m| usage(&m))?,
+        })
+    }
+}
+
+/// Runs a sampled study: trials `k` with k % shard.1 == shard.0; each trial draws every sampled
+/// parameter (its own counter-based random stream `sample/k` from the scenario seed, so a trial's
+/// values do not depend on the shard count or threads), simulates that scenario's physics and runs
+/// the estimators as [`run_study`] does. Rows carry `value` 0 (one group: all trials) and the drawn
+/// values in `sampled`.
+pub fn run_sampled_study(
+    sc: &Scenario,
+    samples: &[Sample],
+    trials: usize,
+    shard: (usize, usize),
+    estimator: Option<&dyn Estimator>,
+    tolerance: Option<f64>,
+) -> Result<Vec<TrialRow>, VmtError> {
+    if trials == 0 || samples.is_empty() {
+        return Err(VmtError::Usage("--sample: expected at least one parameter and 1 trial".into()));
+    }
+    if trials / shard.1 > MAX_TRIALS {
+        return Err(VmtError::Usage(format!(
+            "{trials} trials in this shard; the limit is {MAX_TRIALS} (split with --shard i/n)"
+        )));
+    }
+    let text = std::fs::read_to_string(&sc.source)
+        .map_err(|e| VmtError::io(&sc.source, "reading the scenario to sample it", e))?;
+    let jobs: Vec<usize> = (0..trials).filter(|k| k % shard.1 == shard.0).collect();
+    let rows: Result<Vec<Vec<TrialRow>>, VmtError> = jobs
+        .par_iter()
+        .map(|&k| {
+            let mut rng = vmt_sim::rng::source_rng(sc.seed, &format!("sample/{k}"));
+            let values: Vec<f64> = samples.iter().map(|s| s.dist.draw(&mut rng)).collect();
+            let drawn = || {
+                samples.iter().zip(&values).map(|(s, v)| format!("{} = {v}", s.path)).collect::<Vec<_>>().join(", ")
+            };
+            let at = |m: String| {
+                VmtError::Usage(format!(
+                    "--sample: trial {k} drew {}, which the scenario refuses: {m} (narrow the distribution to values the parameter can take)",
+                    drawn()
+                ))
+            };
+            let mut t = text.clone();
+            for (s, v) in samples.iter().zip(&values) {
+                t = set_scenario_number(&t, &s.parts, *v).map_err(at)?;
+            }
+            let scenario = Scenario::parse(&t, &sc.source, sc.source.parent()).map_err(|e| at(e.to_string()))?;
+            let ph = physics(&scenario).map_err(|e| at(e.to_string()))?;
+            let truth_table = crate::simulate::truth_profiles(&scenario, &ph).map_err(|e| at(e.to_string()))?;
+            let truths = simulate_truth(&scenario, &ph);
+            let session = Session { sc: &scenario, ph: &ph, truths: &truths, truth_table: &truth_table };
+            let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/0/{k}"));
+            let mut rows = trial_rows(&session, seed, (0.0, k), estimator, tolerance)?;
+            rows.iter_mut().for_each(|r| r.sampled = values.clone());
+            Ok(rows)
+        })
+        .collect();
+    Ok(rows?.into_iter().flatten().collect())
+}
+
+/// First-order sensitivity of one estimate to one sampled parameter.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SensitivityRow {
+    /// The estimate (run-table row).
+    pub estimate: String,
+    /// The sampled parameter's key path.
+    pub parameter: String,
+    /// First-order Sobol index S1 = Var(E[d | x]) / Var(d) of the estimate's difference d.
+    pub s1: f64,
+    /// Half-width of its 95 % bootstrap interval (SALib's `S1_conf`).
+    pub s1_conf: f64,
+    /// Trials it is computed from.
+    pub trials: usize,
+}
+
+/// First-order Sobol index from given data (no extra model runs): the trials sorted by x and cut
+/// into M = ⌊√n⌋ bins of equal count, S1 = (Var_b(ȳ_b) − mean_b(s_b²/n_b)) / Var(y), the variance of
+/// the bin means corrected for the scatter each mean carries (Plischke, Borgonovo & Smith 2013, Eur.
+/// J. Oper. Res. 226:536, the "given data" estimator). 0 when y does not vary.
+pub fn first_order_index(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len().min(y.len());
+    let mut idx: Vec<usize> = (0..n).collect();
+    idx.sort_by(|a, b| x[*a].total_cmp(&x[*b]).then(a.cmp(b)));
+    let mean = y[..n].iter().sum::<f64>() / n as f64;
+    let var = y[..n].iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
+    let m = ((n as f64).sqrt().floor() as usize).max(1);
+    if n < 4 || var <= 0.0 {
+        return 0.0;
+    }
+    let (mut between, mut noise) = (0.0, 0.0);
+    for b in 0..m {
+        let bin: Vec<f64> = idx[b * n / m..(b + 1) * n / m].iter().map(|&i| y[i]).collect();
+        let nb = bin.len() as f64;
+        let mb = bin.iter().sum::<f64>() / nb;
+        let sb = if nb > 1.0 { bin.iter().map(|v| (v - mb).powi(2)).sum::<f64>() / (nb - 1.0) } else { 0.0 };
+        between += nb / n as f64 * (mb - mean).powi(2);
+        noise += nb / n as f64 * sb / nb;
+    }
+    ((between - noise) / var).clamp(0.0, 1.0)
+}
+
+/// First-order indices of every estimate's difference to every sampled parameter, with 95 %
+/// bootstrap half-widths (200 resamples of the trials, a fixed stream: deterministic).
+pub fn sensitivity(rows: &[TrialRow], names: &[String]) -> Vec<SensitivityRow> {
+    use rand::Rng;
+    let mut estimates: Vec<&str> = rows.iter().map(|r| r.estimate.as_str()).collect();
+    estimates.sort_unstable();
+    estimates.dedup();
+    let mut out = Vec::new();
+    for e in estimates {
+        let mut of: Vec<&TrialRow> = rows.iter().filter(|r| r.estimate == e && r.difference.is_finite()).collect();
+        of.sort_by_key(|r| r.trial);
+        let y: Vec<f64> = of.iter().map(|r| r.difference).collect();
+        for (j, name) in names.iter().enumerate() {
+            let x: Vec<f64> = of.iter().map(|r| r.sampled.get(j).copied().unwrap_or(f64::NAN)).collect();
+            let s1 = first_order_index(&x, &y);
+            let mut rng = vmt_sim::rng::source_rng(0, &format!("sensitivity/{e}/{name}"));
+            let mut boot: Vec<f64> = (0..200)
+                .map(|_| {
+                    let pick: Vec<usize> = (0..y.len()).map(|_| rng.gen_range(0..y.len().max(1))).collect();
+                    let xb: Vec<f64> = pick.iter().map(|&i| x[i]).collect();
+                    let yb: Vec<f64> = pick.iter().map(|&i| y[i]).collect();
+                    first_order_index(&xb, &yb)
+                })
+                .collect();
+            boot.sort_by(f64::total_cmp);
+            let s1_conf = if y.len() >= 4 { 0.5 * (boot[194] - boot[4]) } else { f64::NAN };
+            out.push(SensitivityRow { estimate: e.to_string(), parameter: name.clone(), s1, s1_conf, trials: y.len() });
+        }
+    }
+    out
+}
+
+/// The scenario text with the number at `parts` replaced by `v`. The key must be in the file (a new
+/// key would be ignored where the format accepts unknown keys, so a typo would pass silently); an
+/// integer key takes only integral values.
+pub fn set_scenario_number(text: &str, parts: &[(String, Option<usize>)], v: f64) -> Result<String, String> {
+    let mut root: toml::Table = toml::from_str(text).map_err(|e| e.message().to_string())?;
+    let mut node: &mut toml::Value =
+        root.get_mut(&parts[0].0).ok_or_else(|| format!("no key `{}` in the scenario", parts[0].0))?;
+    let mut walked = parts[0].0.clone();
+    for (i, (key, index)) in parts.iter().enumerate() {
+        if i > 0 {
+            walked += &format!(".{key}");
+            node = node.as_table_mut().and_then(|t| t.get_mut(key)).ok_or_else(|| {
+                format!(
+                    "no key `{walked}` in the scenario (--vary changes a number the file gives; add it there first)"
+                )
+            })?;
+        }
+        if let Some(j) = index {
+            walked += &format!("[{j}]");
+            node = node
+                .as_array_mut()
+                .and_then(|a| a.get_mut(*j))
+                .ok_or_else(|| format!("no item `{walked}` in the scenario"))?;
+        }
+    }
+    *node = match node {
+        toml::Value::Float(_) => toml::Value::Float(v),
+        toml::Value::Integer(_) if v.fract() == 0.0 && v.abs() < 9.0e15 => toml::Value::Integer(v as i64),
+        toml::Value::Integer(_) => return Err(format!("`{walked}` is an integer; got {v}")),
+        other => return Err(format!("`{walked}` is {}, not a number", crate::error::describe_value(other))),
+    };
+    toml::to_string(&root).map_err(|e| e.to_string())
 }
 
 /// One trial's result for one estimate.
@@ -117,6 +439,9 @@ pub struct TrialRow {
     pub bound: f64,
     /// What the difference measures (its SI unit: m, rad or none); the `quantity` column of trials.csv.
     pub quantity: Quantity,
+    /// A sampled study's parameter values of this trial, in the order of its `--sample` keys (SI);
+    /// empty otherwise. The trailing columns of trials.csv, named by their key paths.
+    pub sampled: Vec<f64>,
 }
 
 /// The quantity of an error motion named as in a profile CSV (`pitch`, `y.straightness_z`): lengths for
@@ -155,74 +480,146 @@ pub fn run_study(
             vary.values.len()
         )));
     }
-    let ph = physics(sc)?;
-    let truth_table = crate::simulate::truth_profiles(sc, &ph)?;
-    if !ph.sensors.iter().any(|s| s.name == vary.sensor) {
-        return Err(VmtError::Usage(format!("--vary: no sensor `{}` in the scenario", vary.sensor)));
-    }
-    let truths = simulate_truth(sc, &ph);
+    // The scenario and physics of each value: one shared for a sensor parameter, one per value for
+    // a scenario key (simulated in parallel; each value's trials then share it).
+    let scenarios: Vec<Scenario> = match &vary.key {
+        VaryKey::Sensor { sensor, .. } => {
+            if !sc.sensors.iter().any(|s| &s.name == sensor) {
+                return Err(VmtError::Usage(format!("--vary: no sensor `{sensor}` in the scenario")));
+            }
+            vec![sc.clone()]
+        }
+        VaryKey::Scenario { path, parts } => {
+            let text = std::fs::read_to_string(&sc.source)
+                .map_err(|e| VmtError::io(&sc.source, "reading the scenario to vary it", e))?;
+            vary.values
+                .iter()
+                .map(|&v| {
+                    let at = |m: String| VmtError::Usage(format!("--vary {path}={v}: {m}"));
+                    let t = set_scenario_number(&text, parts, v).map_err(at)?;
+                    Scenario::parse(&t, &sc.source, sc.source.parent()).map_err(|e| at(e.to_string()))
+                })
+                .collect::<Result<_, _>>()?
+        }
+    };
+    let sessions: Vec<(Physics, crate::simulate::SessionTruth, crate::measurement::ProfileTable)> = scenarios
+        .par_iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let session = || -> Result<_, VmtError> {
+                let ph = physics(s)?;
+                let table = crate::simulate::truth_profiles(s, &ph)?;
+                let truths = simulate_truth(s, &ph);
+                Ok((ph, truths, table))
+            };
+            session().map_err(|e| match &vary.key {
+                VaryKey::Sensor { .. } => e,
+                VaryKey::Scenario { path, .. } => VmtError::Usage(format!(
+                    "--vary {path}={}: the scenario with this value cannot be simulated: {e}",
+                    vary.values[i]
+                )),
+            })
+        })
+        .collect::<Result<_, VmtError>>()?;
+    let of_value = |i: usize| i.min(scenarios.len() - 1);
     let jobs: Vec<(usize, usize)> = (0..vary.values.len())
         .flat_map(|i| (0..trials).filter(|k| k % shard.1 == shard.0).map(move |k| (i, k)))
         .collect();
     let rows: Result<Vec<Vec<TrialRow>>, VmtError> = jobs
         .par_iter()
         .map(|&(i, k)| {
+            let (sc, (ph, truths, truth_table)) = (&scenarios[of_value(i)], &sessions[of_value(i)]);
             let mut p = ph.clone();
             let v = vary.values[i];
-            for s in p.sensors.iter_mut().filter(|s| s.name == vary.sensor) {
-                *s = s.resolved();
-                vary.key.set(s, v);
-                s.preset = None;
+            if let VaryKey::Sensor { sensor, key } = &vary.key {
+                for s in p.sensors.iter_mut().filter(|s| &s.name == sensor) {
+                    *s = s.resolved();
+                    key.set(s, v);
+                    s.preset = None;
+                }
             }
             let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/{i}/{k}"));
-            let runs = read_all(sc, &p, &truths, seed)?;
-            let set = to_measurement_set(sc, &runs)?;
-            if let Some(e) = estimator {
-                let work = std::env::temp_dir().join(format!("vmt-study-{}-{i}-{k}", std::process::id()));
-                let table = e.estimate(&set, &work);
-                let _ = std::fs::remove_dir_all(&work);
-                return Ok(score_profiles(&truth_table, &table?)
-                    .into_iter()
-                    .map(|r| TrialRow {
-                        value: v,
-                        trial: k,
-                        estimate: format!("{} RMS", r.effect),
-                        difference: r.rms,
-                        pass: tolerance.map(|t| r.rms <= t),
-                        bound: f64::NAN,
-                        quantity: motion_quantity(&r.effect),
-                    })
-                    .collect());
-            }
-            // The compensation check re-measures on this trial's sensors, after the session simulated once.
-            let again = |q: &_, x: &[f64], y: &[f64]| remeasure(&p, sc.seed, truths.end, q, x, y);
-            let est = estimate_recording(sc, p.view(), &runs, &set, &again)?;
-            Ok(est
-                .checks
-                .into_iter()
-                .map(|c| TrialRow {
-                    value: v,
-                    trial: k,
-                    estimate: c.error,
-                    difference: c.difference,
-                    pass: Some(c.pass),
-                    bound: c.bound.unwrap_or(f64::NAN),
-                    quantity: c.quantity,
-                })
-                .collect())
+            trial_rows(&Session { sc, ph: &p, truths, truth_table }, seed, (v, k), estimator, tolerance)
         })
         .collect();
     Ok(rows?.into_iter().flatten().collect())
 }
 
-/// CSV of trial rows (value, trial, estimate, difference, pass), sorted so shards merge to the same file.
-pub fn rows_csv(rows: &[TrialRow]) -> String {
+/// One value's session: the scenario, its physics with the trial's sensors, the simulated truth of
+/// every run and the truth profiles.
+struct Session<'a> {
+    sc: &'a Scenario,
+    ph: &'a Physics,
+    truths: &'a crate::simulate::SessionTruth,
+    truth_table: &'a crate::measurement::ProfileTable,
+}
+
+/// The rows of one trial: the session read by its sensors with the trial's `seed`, then the
+/// scenario's estimators (or `estimator`, scored against the truth). `(v, k)`: the row's value and
+/// trial number.
+fn trial_rows(
+    session: &Session,
+    seed: u64,
+    (v, k): (f64, usize),
+    estimator: Option<&dyn Estimator>,
+    tolerance: Option<f64>,
+) -> Result<Vec<TrialRow>, VmtError> {
+    let Session { sc, ph: p, truths, truth_table } = *session;
+    let runs = read_all(sc, p, truths, seed)?;
+    let set = to_measurement_set(sc, &runs)?;
+    if let Some(e) = estimator {
+        let work = std::env::temp_dir().join(format!("vmt-study-{}-{seed:x}", std::process::id()));
+        let table = e.estimate(&set, &work);
+        let _ = std::fs::remove_dir_all(&work);
+        let rows = score_profiles(truth_table, &table?).map_err(|e| {
+            VmtError::Usage(format!("--estimator-cmd: its profile CSV cannot be scored against the truth: {e}"))
+        })?;
+        return Ok(rows
+            .into_iter()
+            .map(|r| TrialRow {
+                value: v,
+                trial: k,
+                estimate: format!("{} RMS", r.effect),
+                difference: r.rms,
+                pass: tolerance.map(|t| r.rms <= t),
+                bound: f64::NAN,
+                quantity: motion_quantity(&r.effect),
+                sampled: Vec::new(),
+            })
+            .collect());
+    }
+    // The compensation check re-measures on this trial's sensors, after the session simulated once.
+    let again = |q: &_, x: &[f64], y: &[f64]| remeasure(p, sc.seed, truths.end, q, x, y);
+    let est = estimate_recording(sc, p.view(), &runs, &set, &again)?;
+    Ok(est
+        .checks
+        .into_iter()
+        .map(|c| TrialRow {
+            value: v,
+            trial: k,
+            estimate: c.error,
+            difference: c.difference,
+            pass: Some(c.pass),
+            bound: c.bound.unwrap_or(f64::NAN),
+            quantity: c.quantity,
+            sampled: Vec::new(),
+        })
+        .collect())
+}
+
+/// CSV of trial rows (value, trial, estimate, difference, pass, bound, quantity, then one column per
+/// sampled parameter named by its key path), sorted so shards merge to the same file.
+pub fn rows_csv(rows: &[TrialRow], sampled: &[String]) -> String {
     let mut rows = rows.to_vec();
     rows.sort_by(|a, b| a.value.total_cmp(&b.value).then(a.trial.cmp(&b.trial)).then(a.estimate.cmp(&b.estimate)));
-    let mut s = String::from("value,trial,estimate,difference,pass,bound,quantity\n");
+    let mut s = String::from("value,trial,estimate,difference,pass,bound,quantity");
+    for name in sampled {
+        s += &format!(",\"{}\"", name.replace('"', "'"));
+    }
+    s.push('\n');
     for r in rows {
         s += &format!(
-            "{},{},\"{}\",{},{},{},{}\n",
+            "{},{},\"{}\",{},{},{},{}",
             r.value,
             r.trial,
             r.estimate.replace('"', "'"),
@@ -231,14 +628,25 @@ pub fn rows_csv(rows: &[TrialRow]) -> String {
             r.bound,
             quantity_id(r.quantity)
         );
+        for v in &r.sampled {
+            s += &format!(",{v}");
+        }
+        s.push('\n');
     }
     s
 }
 
-/// Reads a CSV written by `rows_csv`.
-pub fn read_rows(path: &Path) -> Result<Vec<TrialRow>, VmtError> {
+/// Reads a CSV written by `rows_csv`: its rows and the names of its sampled-parameter columns.
+pub fn read_rows(path: &Path) -> Result<(Vec<TrialRow>, Vec<String>), VmtError> {
     let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading", e))?;
     let mut rdr = csv::ReaderBuilder::new().from_reader(text.as_bytes());
+    let sampled: Vec<String> = rdr
+        .headers()
+        .map_err(|e| VmtError::bad(path, "line 1 (header)", e.to_string()))?
+        .iter()
+        .skip(7)
+        .map(str::to_string)
+        .collect();
     let mut out = Vec::new();
     for (i, rec) in rdr.records().enumerate() {
         let rec = rec.map_err(|e| VmtError::bad(path, format!("line {}", i + 2), e.to_string()))?;
@@ -287,9 +695,10 @@ pub fn read_rows(path: &Path) -> Result<Vec<TrialRow>, VmtError> {
                     ))
                 }
             },
+            sampled: (7..7 + sampled.len()).map(&num).collect::<Result<_, _>>()?,
         });
     }
-    Ok(out)
+    Ok((out, sampled))
 }
 
 /// Summary per (value, estimate): trials, mean |difference|, 95th percentile of |difference|, pass rate.

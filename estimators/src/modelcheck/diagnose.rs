@@ -2,8 +2,9 @@
 //!
 //! A [`Candidate`] is a named effect whose *signature* maps hyper-parameters (a period, a time
 //! constant, a Stribeck velocity...) to design columns, one value per residual sample. For each
-//! candidate the hyper-parameters are searched on a grid and refined by golden-section search,
-//! the linear coefficients are fitted by weighted least squares together with the model's base
+//! candidate the hyper-parameters are searched on a grid and refined jointly by Levenberg–Marquardt
+//! over variable projection ([`super::refine`]; golden-section search where the solver cannot
+//! improve), the linear coefficients are fitted by weighted least squares together with the model's base
 //! columns, and the fit is scored by the change of the Bayesian information criterion
 //! (Schwarz 1978; Kass & Raftery 1995, J. Am. Stat. Assoc. 90:773):
 //!
@@ -52,14 +53,15 @@ pub type SignatureFn<'a> = dyn Fn(&[f64]) -> Result<Vec<Vec<f64>>, String> + Sen
 pub type DescribeFn<'a> = dyn Fn(&[f64], &[f64]) -> BTreeMap<String, f64> + Send + Sync + 'a;
 
 /// A hyper-parameter searched on a grid (then refined between the neighbours of the best grid
-/// value by golden-section search when `refine` is set), in its own unit (s, m, m/s...).
+/// value, jointly with the candidate's other refinable ones, when `refine` is set), in its own unit
+/// (s, m, m/s...).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HyperParameter {
     /// Name used in `params` (e.g. "period", "tau").
     pub name: String,
     /// Grid of values to try; a grid of one value is a fixed, not-searched parameter.
     pub grid: Vec<f64>,
-    /// Refine the best grid value by golden-section search.
+    /// Refine the best grid value (module doc).
     pub refine: bool,
 }
 
@@ -96,7 +98,7 @@ impl<'a> Candidate<'a> {
         }
     }
 
-    /// Adds a hyper-parameter searched over `grid` and refined by golden-section search.
+    /// Adds a hyper-parameter searched over `grid` and refined (module doc).
     pub fn with_hyper(mut self, name: &str, grid: Vec<f64>) -> Self {
         self.hyper_parameters.push(HyperParameter { name: name.to_string(), grid, refine: true });
         self
@@ -138,7 +140,9 @@ pub struct DiagnoseConfig {
     pub collinearity_cosine: f64,
     /// ΔBIC difference below which two collinear candidates are inseparable (default 10).
     pub inseparable_margin: f64,
-    /// Golden-section iterations per hyper-parameter refinement (default 40).
+    /// Evaluation budget of a candidate's refinement (default 40): Levenberg–Marquardt residual
+    /// evaluations of the joint refinement, or golden-section iterations per hyper-parameter where
+    /// the solver cannot improve on the grid.
     pub refine_iterations: usize,
     /// Largest number of points of a candidate's hyper-parameter grid (default 200 000).
     pub max_grid_points: usize,
@@ -215,6 +219,11 @@ pub struct CandidateFit {
     pub coefficients: BTreeMap<String, f64>,
     /// Their standard errors (hyper-parameters held at their fitted values).
     pub std_errors: BTreeMap<String, f64>,
+    /// Standard errors of the jointly refined hyper-parameters by name, coefficients profiled out
+    /// ([`super::refine`]); absent where the refinement fell back to the grid or golden section, or
+    /// the curvature is not positive.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub hyper_std_errors: BTreeMap<String, f64>,
     /// Fitted hyper-parameters by name.
     pub hyper_parameters: BTreeMap<String, f64>,
     /// Reported params (coefficients + hyper-parameters, or the candidate's `describe`).
@@ -340,8 +349,8 @@ fn candidate_basis(p: &Prepared, cols: &[Vec<f64>]) -> Basis {
     b
 }
 
-/// Evaluates a candidate's signature at `h` and returns (χ² or RSS reduction, columns).
-fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<f64>>), String> {
+/// The candidate's signature at `h`, checked: one column per coefficient name, n finite values each.
+fn checked_columns(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<Vec<Vec<f64>>, String> {
     let cols = (cand.signature)(h)?;
     if cols.len() != cand.coefficient_names.len() {
         return Err(format!(
@@ -358,7 +367,27 @@ fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<
             return Err(format!("signature column {j} is not finite at sample {i}: {}", c[i]));
         }
     }
+    Ok(cols)
+}
+
+/// Evaluates a candidate's signature at `h` and returns (χ² or RSS reduction, columns).
+fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<f64>>), String> {
+    let cols = checked_columns(p, cand, h)?;
     Ok((reduction_of(p, &cols), cols))
+}
+
+/// The weighted residual that base + candidate columns at `h` leave, P⊥(h)·W^{1/2}·r (the
+/// variable-projection residual [`super::refine`] minimises; its squared norm is χ²_new or the
+/// weighted RSS).
+fn projected_residual(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<Vec<f64>, String> {
+    let cols = checked_columns(p, cand, h)?;
+    let b = candidate_basis(p, &cols);
+    let mut r = p.r_t.clone();
+    for q in &b.q {
+        let dot: f64 = q.iter().zip(&p.r_t).map(|(a, b)| a * b).sum();
+        r.iter_mut().zip(q).for_each(|(r, q)| *r -= dot * q);
+    }
+    Ok(r)
 }
 
 /// The screening score of a candidate at `h` ([`Candidate::with_screen`]): ‖projection of the
@@ -383,7 +412,7 @@ fn reduction_of(p: &Prepared, cols: &[Vec<f64>]) -> f64 {
     b.q.iter().map(|q| q.iter().zip(&p.r_t).map(|(a, b)| a * b).sum::<f64>().powi(2)).sum()
 }
 
-/// Fits one candidate: grid search of its hyper-parameters, golden-section refinement, weighted
+/// Fits one candidate: grid search of its hyper-parameters, joint refinement, weighted
 /// least squares of base + candidate columns ([`fit_signature`]), ΔBIC and explained fraction
 /// (module doc for the equations).
 pub fn fit_candidate(
@@ -464,19 +493,54 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
         Some(b) => b,
         None => return Err(err(first_error.unwrap_or_else(|| "no grid point".into()))),
     };
-    // Golden-section refinement of each hyper-parameter between the neighbours of its best grid
-    // value, the others held (two sweeps when there are several).
-    let sweeps = if cand.hyper_parameters.len() > 1 { 2 } else { 1 };
-    for _ in 0..sweeps {
-        for (d, hp) in cand.hyper_parameters.iter().enumerate() {
-            if !hp.refine || hp.grid.len() < 2 {
-                continue;
+    // Joint refinement (Levenberg–Marquardt over variable projection, [`super::refine`]) of the
+    // refinable hyper-parameters inside the box between the neighbours of their best grid values;
+    // golden-section sweeps, one parameter at a time, where the solver cannot start or does not
+    // improve (an invalid value inside the box).
+    let free: Vec<usize> = (0..cand.hyper_parameters.len())
+        .filter(|d| cand.hyper_parameters[*d].refine && cand.hyper_parameters[*d].grid.len() > 1)
+        .collect();
+    let bracket = |d: usize, x: f64| -> (f64, f64) {
+        let mut g = cand.hyper_parameters[d].grid.clone();
+        g.sort_by(|a, b| a.total_cmp(b));
+        let i = g.partition_point(|v| *v < x).min(g.len() - 1);
+        (g[i.saturating_sub(1)], g[(i + 1).min(g.len() - 1)])
+    };
+    let mut hyper_se: BTreeMap<String, f64> = BTreeMap::new();
+    let mut refined = false;
+    if !free.is_empty() {
+        let (lo, hi): (Vec<f64>, Vec<f64>) = free.iter().map(|d| bracket(*d, best_h[*d])).unzip();
+        let start: Vec<f64> = free.iter().map(|d| best_h[*d]).collect();
+        let full = |x: &[f64]| -> Vec<f64> {
+            let mut h = best_h.clone();
+            free.iter().zip(x).for_each(|(d, v)| h[*d] = *v);
+            h
+        };
+        let f = |x: &[f64]| projected_residual(p, cand, &full(x));
+        if let Some(r) = super::refine::refine_projected(&f, &start, &lo, &hi, config.refine_iterations) {
+            evaluations += r.evaluations;
+            if p.stat_old - r.cost > best_red {
+                best_red = p.stat_old - r.cost;
+                best_h = full(&r.theta);
+                refined = true;
+                for (d, se) in free.iter().zip(&r.std_errors) {
+                    if let Some(se) = se {
+                        hyper_se.insert(cand.hyper_parameters[*d].name.clone(), *se);
+                    }
+                }
             }
-            let mut g = hp.grid.clone();
-            g.sort_by(|a, b| a.total_cmp(b));
-            let i = g.partition_point(|v| *v < best_h[d]).min(g.len() - 1);
-            let lo = g[i.saturating_sub(1)];
-            let hi = g[(i + 1).min(g.len() - 1)];
+        }
+    }
+    let sweeps = if refined {
+        0
+    } else if free.len() > 1 {
+        2
+    } else {
+        1
+    };
+    for _ in 0..sweeps {
+        for &d in &free {
+            let (lo, hi) = bracket(d, best_h[d]);
             let mut eval = |x: f64| -> f64 {
                 evaluations += 1;
                 let mut h = best_h.clone();
@@ -515,6 +579,7 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
     };
     let std_errors: BTreeMap<String, f64> =
         cand.coefficient_names.iter().cloned().zip(fit.std_errors.iter().map(|s| s * se_scale)).collect();
+    let hyper_std_errors: BTreeMap<String, f64> = hyper_se.into_iter().map(|(k, s)| (k, s * se_scale)).collect();
     let hyper_parameters: BTreeMap<String, f64> =
         cand.hyper_parameters.iter().map(|h| h.name.clone()).zip(best_h.iter().copied()).collect();
     let params = match &cand.describe {
@@ -525,6 +590,7 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
         effect: cand.effect.clone(),
         coefficients,
         std_errors,
+        hyper_std_errors,
         hyper_parameters,
         params,
         n: p.n,

@@ -13,6 +13,8 @@
 //! - [`lsq`]: weighted linear least squares of a residual on signature columns (faer SVD);
 //! - [`ortho`]: orthonormal bases of fixed columns reused across a search (variable projection)
 //!   and the residual sums of squares of nested series (order choice) from one QR;
+//! - [`refine`]: joint Levenberg–Marquardt refinement of nonlinear parameters over variable
+//!   projection, with their standard errors;
 //! - [`diagnose`]: ranking of candidate effects by ΔBIC with the verdicts `significant`, `noise`,
 //!   `inseparable` (FORMAT.md §4 `ranking`), and greedy forward selection.
 //!
@@ -22,6 +24,7 @@
 pub mod diagnose;
 pub mod lsq;
 pub mod ortho;
+pub mod refine;
 pub mod spectrum;
 pub mod stats;
 
@@ -31,11 +34,12 @@ pub use diagnose::{
 };
 pub use lsq::{fit_signature, LinearFit};
 pub use ortho::{lstsq_qr, nested_rss, NestedRss, OrthoBase};
+pub use refine::{refine_projected, ProjectedResidualFn, Refined};
 pub use spectrum::{amplitude_spectrum, frequency_grid, ls_periodogram, AmplitudeSpectrum, Periodogram};
 pub use stats::{
     autocorrelation, bin_by_edges, bin_by_label, chi_square_isf, chi_square_sf, estimate_noise_sigma, fit_percent,
-    ljung_box, normalized_rms, rms, uniform_edges, Autocorrelation, BinnedResidual, LabelBin, LjungBox, RangeBin,
-    MIN_SAMPLES_NOISE_SIGMA,
+    ljung_box, normalized_rms, pooled_group_scatter, rms, uniform_edges, Autocorrelation, BinnedResidual, LabelBin,
+    LjungBox, RangeBin, MIN_SAMPLES_NOISE_SIGMA,
 };
 
 use serde::{Deserialize, Serialize};

@@ -366,6 +366,28 @@ pub fn uniform_edges(min: f64, max: f64, n_bins: usize) -> Result<Vec<f64>, Mode
 /// MAD-based estimate has a relative standard error of roughly 30 %; below that it is not useful.
 pub const MIN_SAMPLES_NOISE_SIGMA: usize = 20;
 
+/// Pooled within-group scatter of repeated readings (the ISO 230-2 repeatability sum): the values
+/// grouped by `key` (e.g. target and approach direction), SS = Σ_g Σ_i (y_gi − ȳ_g)², with
+/// N − G degrees of freedom. Returns (SS, dof), or None when no reading is repeated. σ̂ = √(SS/dof)
+/// is the unbiased pooled estimate of one reading's noise when every group shares one mean.
+pub fn pooled_group_scatter<K: Ord>(readings: impl IntoIterator<Item = (K, f64)>) -> Option<(f64, usize)> {
+    let mut groups: std::collections::BTreeMap<K, Vec<f64>> = std::collections::BTreeMap::new();
+    let mut n: usize = 0;
+    for (k, v) in readings {
+        groups.entry(k).or_default().push(v);
+        n += 1;
+    }
+    let dof = n.checked_sub(groups.len()).filter(|d| *d > 0)?;
+    let ss = groups
+        .values()
+        .map(|g| {
+            let m = g.iter().sum::<f64>() / g.len() as f64;
+            g.iter().map(|v| (v - m).powi(2)).sum::<f64>()
+        })
+        .sum();
+    Some((ss, dof))
+}
+
 /// Noise standard deviation estimated from the data, for a residual whose noise level the
 /// measurement set does not give, in the residual's unit.
 ///
