@@ -485,7 +485,7 @@ fn cli_json_contract_history_and_bad_input() {
     bad("format = \"vmt-model/1\"\n[effects.warp_drive]\nfit = true\n", &data, "unknown effect `warp_drive`");
     bad("format = \"vmt-model/1\"\n[effects.straightness_y]\nfit = true\n", &data, "no channel of the data sees it");
     // Fitted error motions: a Legendre series whose order BIC chooses, reported as `shapes`; the
-    // bases not implemented are refused rather than silently fitted as `poly`.
+    // a bad order of a basis is refused.
     let mp = tmp.path().join("shape.toml");
     std::fs::write(&mp, "format = \"vmt-model/1\"\naxis = \"x\"\n[effects.positioning]\nfit = true\n").unwrap();
     let c2 = run_json(&["compare", "--model", mp.to_str().unwrap(), "--data", data.to_str().unwrap(), "--json"]);
@@ -493,10 +493,11 @@ fn cli_json_contract_history_and_bad_input() {
     assert_eq!(sh["basis"], "legendre", "{c2}");
     assert!(sh["order"].as_u64().is_some_and(|o| o >= 1), "{c2}");
     assert!(sh["chosen_by"].as_str().is_some_and(|s| s.starts_with("BIC over 1..")), "{c2}");
+    // Every basis is fitted now (tests/gen_diagnose.rs); a bad order is refused.
     bad(
-        "format = \"vmt-model/1\"\naxis = \"x\"\n[effects.positioning]\nfit = true\nbasis = \"bspline\"\n",
+        "format = \"vmt-model/1\"\naxis = \"x\"\n[effects.positioning]\nfit = true\nbasis = \"bspline\"\norder = 1\n",
         &data,
-        "basis `bspline` is not implemented",
+        "effects.positioning.order",
     );
     // Too few readings without σ: a 2-target, 1-run table (4 readings) with sigma removed.
     let small = tmp.path().join("small");

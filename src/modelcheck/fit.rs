@@ -144,8 +144,9 @@ pub(crate) struct ShapeChoice {
     pub(crate) best: u32,
     /// The model gave `order`.
     pub(crate) given: bool,
-    /// Highest order searched by BIC (what the data support, capped at [`MAX_ORDER`] or
-    /// [`MAX_ACCEL_ORDER`]); None when the order was not searched.
+    /// Highest order searched by BIC (what the data support: m − 1 distinct positions, the
+    /// [`LeadCap`] when the model fits a cyclic lead, [`MAX_ACCEL_ORDER`]); None when the order
+    /// was not searched.
     pub(crate) max: Option<u32>,
     /// Seen only through accelerometers: its constant and slope have no acceleration and are
     /// pinned at 0 (not fitted).
@@ -154,10 +155,9 @@ pub(crate) struct ShapeChoice {
     pub(crate) basis: ShapeBasis,
     /// A sparse series: the number of terms selected of 1..=order (None: all of them).
     pub(crate) terms: Option<usize>,
+    /// The order's cap against a cyclic lead (point tables), when a lead is fitted or searched.
+    pub(crate) lead_cap: Option<LeadCap>,
 }
-
-/// Highest Legendre order searched for a fitted error motion.
-pub(crate) const MAX_ORDER: u32 = 30;
 
 /// BIC of a weighted residual sum of squares `ss` over n samples with p linear parameters,
 /// σ unknown (Schwarz 1978): n·ln(ss/n) + p·ln n. Free of the stated σ's scale, so a σ stated
@@ -167,19 +167,152 @@ pub(crate) fn bic_unknown_sigma(ss: f64, n: usize, p: usize) -> f64 {
     nf * (ss.max(1e-300) / nf).ln() + p as f64 * nf.ln()
 }
 
+/// A fitted error motion's order held below what a cyclic lead of period P could be confused
+/// with: a Legendre series of order K on a range of length L has K zeros, so its shortest
+/// (mean) wavelength is ≈ 2L/K ([`ShapeBasis::shortest_wavelength`] for the other bases); it can
+/// represent a wave of period P, and a lead and the shape are then separable on no data, once
+/// 2L/K ≤ P. The cap is the largest K with 2L/K > P.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct LeadCap {
+    /// The period P (m): the model's fitted cyclic lead's, or the longest period a `cyclic_lead`
+    /// candidate is searched at on these positions.
+    pub(crate) period: f64,
+    /// The model fits the cyclic lead (else: the lead is a diagnose candidate).
+    pub(crate) in_model: bool,
+    /// The largest order K with 2L/K > P.
+    pub(crate) order: u32,
+    /// The order BIC prefers below the cap.
+    pub(crate) capped_best: u32,
+    /// The order BIC prefers over 1..m − 1 without the cap.
+    pub(crate) free_best: u32,
+    /// BIC (σ unknown, [`bic_unknown_sigma`]) at `free_best` minus at `capped_best` (≤ 0): what the
+    /// orders beyond the cap gain.
+    pub(crate) free_gain: f64,
+    /// The series' basis and the length L (m) of its range.
+    pub(crate) basis: ShapeBasis,
+    pub(crate) span: f64,
+}
+
+impl LeadCap {
+    /// The largest order (≤ `free_best`) whose shortest wavelength stays longer than `period` (m).
+    pub(crate) fn order_below(&self, period: f64) -> u32 {
+        (1..=self.free_best).take_while(|&o| self.basis.shortest_wavelength(self.span, o) > period).last().unwrap_or(1)
+    }
+}
+
+/// The cyclic-lead period (m) that caps the order of the fitted error motions, with whether the
+/// model fits the lead: the fitted lead's period (from `first`), or, when the model lacks a lead
+/// that some channel's drive would show, the longest period the candidate is searched at
+/// ([`hyper_grid`]). None when no lead is fitted or searched here.
+pub(crate) fn lead_period(st: &Stack, model: &Model, first: &FitState) -> Option<(f64, bool)> {
+    if let Some(t) = first.terms.iter().find(|t| t.name == EffectName::CyclicLead) {
+        return t.hyper.first().copied().filter(|p| p.is_finite() && *p > 0.0).map(|p| (p, true));
+    }
+    if model.get(EffectName::CyclicLead, model.axis).is_some() || !st.chans.iter().any(|c| c.s_drive() != 0.0) {
+        return None;
+    }
+    hyper_grid(st, EffectName::CyclicLead, "period").0.last().map(|p| (*p, false))
+}
+
+/// The series basis a model asks for a fitted error motion (`basis`, FORMAT.md §2); None for
+/// `poly` or none: the Legendre series (a cosine series where only accelerometers see it).
+pub(crate) fn requested_basis(me: &ModelEffect) -> Option<ShapeBasis> {
+    match me.basis {
+        None | Some(Basis::Poly) => None,
+        Some(Basis::Bspline) => Some(ShapeBasis::Bspline),
+        Some(Basis::Harmonics) => Some(ShapeBasis::Harmonics),
+        Some(Basis::Table) => Some(ShapeBasis::Table),
+    }
+}
+
+/// Largest number of B-splines searched by BIC (each number is a separate fit, O(n·N²)).
+pub(crate) const BSPLINE_SEARCH_MAX: u32 = 100;
+
+/// The numbers of B-splines BIC compares, up to `max`: every N from 2 to 16, then steps of ≈ 15 %
+/// (a B-spline series is not nested, so each N is its own fit; neighbouring N differ little).
+pub(crate) fn bspline_orders(max: u32) -> Vec<u32> {
+    let mut out: Vec<u32> = (2..=max.min(16)).collect();
+    let mut n = 16.0_f64;
+    while (n as u32) < max {
+        n = (n * 1.15).ceil();
+        out.push((n as u32).min(max));
+    }
+    out.dedup();
+    out
+}
+
+/// The orders BIC chooses among for error motion `name` in `basis`, each with the weighted RSS of
+/// `target` after the offsets and the other terms (`base`) and its series, and its number of linear
+/// parameters: Legendre degrees 1..=`top` (`top` = m − 1) and harmonics 1..=(`top` − 1)/2 from the nested
+/// sums of one QR (`nested_rss`; for harmonics only complete sine–cosine pairs); B-spline numbers
+/// [`bspline_orders`] up to min(`top` + 1, [`BSPLINE_SEARCH_MAX`]), one fit each; a table only at one value per distinct
+/// position (`top` + 1: its meaning, not a choice).
+pub(crate) fn order_curve(
+    st: &Stack,
+    name: EffectName,
+    basis: ShapeBasis,
+    top: u32,
+    target: &[f64],
+    w: &[f64],
+    base: &OrthoBase,
+) -> Result<Vec<(u32, f64, usize)>, String> {
+    let series = |order: u32| {
+        let sh = shape(st, name, 1, order, false);
+        let sh = if basis == ShapeBasis::Legendre { sh } else { sh.in_basis(st, basis, order) };
+        columns(st, name, &sh, &[])
+    };
+    let nested = |order: u32| -> Result<Vec<(u32, f64, usize)>, String> {
+        let nr = nested_rss(target, w, base, &series(order)).map_err(|e| e.to_string())?;
+        // k series columns taken: the order of the k-th (the lowest when none is needed).
+        Ok((0..nr.rss.len())
+            .filter_map(|k| {
+                let index = if k == 0 { basis.top_index(1) } else { nr.used[k - 1] as u32 + 1 };
+                // Harmonics: the slope, then complete sine–cosine pairs (a cosine's odd index).
+                let complete = k == 0 || basis != ShapeBasis::Harmonics || (index % 2 == 1 && index >= 3);
+                complete.then(|| (basis.user_order(index).max(1), nr.rss[k], base.rank() + k))
+            })
+            .collect())
+    };
+    match basis {
+        ShapeBasis::Legendre | ShapeBasis::Cosine => nested(top),
+        ShapeBasis::Harmonics => nested((top.saturating_sub(1) / 2).max(1)),
+        ShapeBasis::Bspline | ShapeBasis::Table => {
+            let orders: Vec<u32> = match basis {
+                ShapeBasis::Table => vec![top + 1],
+                _ => bspline_orders((top + 1).min(BSPLINE_SEARCH_MAX)),
+            };
+            // One QR per N (`nested_rss`, its last sum: the whole series; columns the targets
+            // cannot determine are not counted).
+            orders
+                .into_par_iter()
+                .map(|o| {
+                    let nr = nested_rss(target, w, base, &series(o)).map_err(|e| e.to_string())?;
+                    Ok((o, nr.rss[nr.rss.len() - 1], base.rank() + nr.used.len()))
+                })
+                .collect()
+        }
+    }
+}
+
 /// Fits the model (see [`fit_model_fixed`]); each fitted error motion whose model gives no `order`
-/// gets the Legendre order BIC (σ unknown, [`bic_unknown_sigma`]) prefers among 1..=max, where
-/// max = min([`MAX_ORDER`], m − 1) with m the distinct sample positions: the data cannot support
-/// more shape coefficients after the offsets. The orders are chosen with the hyper-parameters held
-/// at a first fit's values (coordinate-wise, one order at a time, two sweeps when several
-/// motions are fitted), then the model is refitted at the chosen orders with its searches. For a
-/// given `order` the preferred one is still computed (a shape too stiff for the data is a finding).
-/// Data with accelerometer channels keep the default order (their order choice is not implemented).
+/// gets the Legendre order that BIC (σ unknown, [`bic_unknown_sigma`]) prefers among 1..=m − 1,
+/// m the distinct sample positions (the data cannot support more shape coefficients after the
+/// offsets), from the nested residual sums of squares of one QR (`nested_rss`) with the offsets
+/// and the other terms held at a first fit's columns (coordinate-wise, two sweeps when several
+/// motions are fitted); then the model is refitted at the chosen orders with its searches.
+///
+/// Shape and cyclic lead are decided jointly ([`LeadCap`]): when the model fits a cyclic lead of
+/// period P, the orders are searched only up to the cap (2L/K > P), so the shape cannot absorb the
+/// lead; when the lead is a diagnose candidate, the fit keeps the order BIC prefers over 1..m − 1
+/// and records the order below the cap (for the candidate's base) and what the orders beyond it
+/// gain (`diagnose` weighs the lead against them). For a given `order` the preferred one is still
+/// computed (a shape too stiff for the data is a finding). Data with accelerometer channels:
+/// [`fit_orders_nested`].
 pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) -> Result<FitState, String> {
     let default = |me: &ModelEffect| me.order.unwrap_or(DEFAULT_ORDER);
     let first = fit_model_fixed(st, model, sigma, w, &|_, me: &ModelEffect| (default(me), None))?;
     let m = distinct_positions(st).len() as u32;
-    let max = MAX_ORDER.min(m.saturating_sub(1)).max(1);
+    let top = m.saturating_sub(1).max(1);
     let motions: Vec<usize> = (0..first.terms.len()).filter(|&t| first.terms[t].name.is_error_motion()).collect();
     if motions.is_empty() {
         return Ok(first);
@@ -187,37 +320,75 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
     if st.chans.iter().any(|c| c.is_accel()) {
         return fit_orders_nested(st, model, sigma, w, first, &motions);
     }
+    let lead = lead_period(st, model, &first);
     let n = st.n;
     let mut terms = first.terms.clone();
-    let mut best: BTreeMap<usize, u32> = BTreeMap::new();
+    // Per motion: (order BIC prefers within the searched range, highest searched, lead cap).
+    let mut best: BTreeMap<usize, (u32, u32, Option<LeadCap>)> = BTreeMap::new();
     let sweeps = if motions.len() > 1 { 2 } else { 1 };
     for _ in 0..sweeps {
         for &ti in &motions {
-            let mut top = (f64::INFINITY, terms[ti].shape.order);
-            for k in 1..=max {
-                terms[ti].shape = shape(st, terms[ti].name, 1, k, false);
-                let cols = design(st, &terms);
-                let p = cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
-                if let Ok((_, r)) = solve(&first.target, &cols, sigma) {
-                    let b = bic_unknown_sigma(weighted_ss(&r, w), n, p);
-                    if b < top.0 {
-                        top = (b, k);
-                    }
-                }
-            }
-            best.insert(ti, top.1);
+            let name = terms[ti].name;
             let me = &model.effects[terms[ti].index];
-            terms[ti].shape = shape(st, terms[ti].name, 1, me.order.unwrap_or(top.1), false);
+            let basis = requested_basis(me).unwrap_or(ShapeBasis::Legendre);
+            let span = {
+                let r = shape(st, name, 1, 1, false).range;
+                r.1 - r.0
+            };
+            let others: Vec<FitTerm> =
+                terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
+            let fixed: Vec<Vec<f64>> =
+                design(st, &others).into_iter().filter(|c| c.iter().any(|v| *v != 0.0)).collect();
+            let base = OrthoBase::new(&fixed, w).map_err(|e| e.to_string())?;
+            // (user order, weighted RSS, linear parameters) of every order BIC may choose.
+            let curve = order_curve(st, name, basis, top, &first.target, w, &base)?;
+            let bic = |k: usize| bic_unknown_sigma(curve[k].1, n, curve[k].2);
+            let argmin = |upto: u32| {
+                (0..curve.len()).filter(|&k| curve[k].0 <= upto).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0)
+            };
+            let searched = curve.last().map_or(1, |c| c.0);
+            let k_free = argmin(u32::MAX);
+            // A table represents any shape at its positions: no order separates it from a lead.
+            let cap = lead.filter(|_| basis != ShapeBasis::Table).map(|(p, in_model)| {
+                let order = (1..=searched).take_while(|&o| basis.shortest_wavelength(span, o) > p).last().unwrap_or(1);
+                let k_cap = argmin(order);
+                LeadCap {
+                    period: p,
+                    in_model,
+                    order,
+                    capped_best: curve[k_cap].0,
+                    free_best: curve[k_free].0,
+                    free_gain: bic(k_free) - bic(k_cap),
+                    basis,
+                    span,
+                }
+            });
+            let chosen = match cap {
+                Some(c) if c.in_model => c.capped_best,
+                _ => curve[k_free].0,
+            };
+            let max = match cap {
+                Some(c) if c.in_model => c.order.min(searched),
+                _ => searched,
+            };
+            best.insert(ti, (chosen, max, cap));
+            let order = me.order.unwrap_or(chosen);
+            terms[ti].shape = match requested_basis(me) {
+                Some(b) => shape(st, name, 1, order, false).in_basis(st, b, order),
+                None => shape(st, name, 1, order, false),
+            };
         }
     }
-    let chosen: BTreeMap<usize, u32> = motions.iter().map(|&ti| (terms[ti].index, terms[ti].shape.order)).collect();
+    let chosen: BTreeMap<usize, u32> =
+        motions.iter().map(|&ti| (terms[ti].index, terms[ti].shape.basis.user_order(terms[ti].shape.order))).collect();
     let mut fs = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| {
         (chosen.get(&index).copied().unwrap_or(default(me)), None)
     })?;
     for c in fs.shapes.iter_mut() {
-        if let Some((_, b)) = motions.iter().map(|&ti| (terms[ti].name, best[&ti])).find(|(nm, _)| *nm == c.name) {
+        if let Some(&(b, mx, cap)) = motions.iter().find(|&&ti| terms[ti].name == c.name).map(|ti| &best[ti]) {
             c.best = b;
-            c.max = Some(max);
+            c.max = Some(mx);
+            c.lead_cap = cap;
         }
     }
     Ok(fs)
@@ -230,6 +401,145 @@ pub(crate) const GREEDY_STOP: f64 = 1.0;
 /// Largest number of values (columns × samples) of the series searched for one error motion
 /// (memory: 8 bytes each, held about three times during the search).
 pub(crate) const MAX_SERIES_VALUES: usize = 20_000_000;
+
+/// The joint choice of a shape's order and a cyclic lead's period (`diagnose`, [`LeadCap`]).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct LeadScan {
+    /// The lead period P* (m) of the lowest joint BIC.
+    pub(crate) period: f64,
+    /// Per binding motion, its order in that joint fit (the scanned motion's chosen by BIC below
+    /// its cap at P*, the others held at their orders below the cap at the longest period).
+    pub(crate) orders: Vec<(EffectName, u32)>,
+    /// BIC (σ unknown) of the lead at P* with the shapes at `orders`, minus that of the shapes
+    /// alone at the orders BIC prefers without a lead (the model as fitted): < 0 favours the lead.
+    pub(crate) delta_bic: f64,
+    /// Number of periods scanned.
+    pub(crate) scanned: usize,
+}
+
+/// Periods per e-fold of the lead scan ([`lead_shape_scan`]): steps of 0.25 %, so that a lead
+/// over 25 periods drifts by at most 25·2π·0.00125 ≈ 0.2 rad between a grid point and the truth.
+pub(crate) const LEAD_SCAN_PER_E: f64 = 400.0;
+
+/// Scans the cyclic lead's periods P over [p_lo, p_hi] (m) jointly with the order of the first
+/// binding motion's series (a nested basis: Legendre or harmonics): for every P, every order K with
+/// shortest wavelength > P ([`LeadCap::order_below`]) is scored by BIC with σ unknown,
+/// n·ln(RSS/n) + (rank + K + 3)·ln n (the lead's sine, cosine and period), where the RSS comes from
+/// one orthonormal nested basis of the series (modified Gram–Schmidt off the other columns, the
+/// other binding motions held at their orders below the cap at p_hi) and a 2 × 2 solve per (P, K)
+/// (variable projection). The best grid period is refined by golden-section search between its
+/// neighbours. Compared with the shapes alone at their free BIC order. None when the motion's basis
+/// is not nested (B-splines, table) or nothing is scanned.
+pub(crate) fn lead_shape_scan(
+    st: &Stack,
+    fs: &FitState,
+    binding: &[(EffectName, LeadCap)],
+    w: &[f64],
+    (p_lo, p_hi): (f64, f64),
+) -> Result<Option<LeadScan>, String> {
+    let Some(&(m0, cap0)) = binding.first() else { return Ok(None) };
+    if !matches!(cap0.basis, ShapeBasis::Legendre | ShapeBasis::Harmonics) || !(p_hi > p_lo) {
+        return Ok(None);
+    }
+    let held: Vec<(EffectName, u32)> = binding[1..].iter().map(|(m, l)| (*m, l.order_below(p_hi))).collect();
+    let mut terms = fs.terms.clone();
+    for t in terms.iter_mut() {
+        if let Some((_, o)) = held.iter().find(|(m, _)| *m == t.name) {
+            let sh = shape(st, t.name, 1, *o, false);
+            t.shape = if t.shape.basis == ShapeBasis::Legendre { sh } else { sh.in_basis(st, t.shape.basis, *o) };
+        }
+    }
+    let others: Vec<FitTerm> = terms.iter().filter(|t| t.name != m0).cloned().collect();
+    let fixed: Vec<Vec<f64>> = design(st, &others).into_iter().filter(|c| c.iter().any(|v| *v != 0.0)).collect();
+    let base = OrthoBase::new(&fixed, w).map_err(|e| e.to_string())?;
+    let top = cap0.free_best;
+    let sh = shape(st, m0, 1, top, false);
+    let sh = if cap0.basis == ShapeBasis::Legendre { sh } else { sh.in_basis(st, cap0.basis, top) };
+    // Nested orthonormal series q_j (weighted, off the base), with the user order each one completes.
+    let mut q: Vec<Vec<f64>> = Vec::new();
+    let mut q_order: Vec<u32> = Vec::new();
+    let mut q_index: Vec<u32> = Vec::new();
+    for (j, mut v) in base.project_columns(&columns(st, m0, &sh, &[]), w).into_iter().enumerate() {
+        let n0 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        for _ in 0..2 {
+            for qk in &q {
+                let d: f64 = qk.iter().zip(&v).map(|(a, b)| a * b).sum();
+                v.iter_mut().zip(qk).for_each(|(x, a)| *x -= d * a);
+            }
+        }
+        let n1 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if n0 > 0.0 && n1 > 1e-9 * n0 {
+            v.iter_mut().for_each(|x| *x /= n1);
+            q.push(v);
+            q_order.push(cap0.basis.user_order(j as u32 + 1));
+            q_index.push(j as u32 + 1);
+        }
+    }
+    let t = base.project_vector(&fs.target, w);
+    let qt: Vec<f64> = q.iter().map(|qk| qk.iter().zip(&t).map(|(a, b)| a * b).sum()).collect();
+    let mut rss = vec![t.iter().map(|x| x * x).sum::<f64>()];
+    for v in &qt {
+        rss.push((rss[rss.len() - 1] - v * v).max(0.0));
+    }
+    let n = st.n;
+    let rb = base.rank();
+    // A basis vector completes an order only at a harmonic's cosine (complete pairs, odd index ≥ 3).
+    let complete =
+        |k: usize| k == 0 || cap0.basis != ShapeBasis::Harmonics || (q_index[k - 1] % 2 == 1 && q_index[k - 1] >= 3);
+    let order_of = |k: usize| if k == 0 { 1 } else { q_order[k - 1] };
+    let free = (0..rss.len())
+        .filter(|&k| complete(k))
+        .map(|k| bic_unknown_sigma(rss[k], n, rb + k))
+        .fold(f64::INFINITY, f64::min);
+    let lead_shape = shape(st, EffectName::CyclicLead, 1, DEFAULT_ORDER, false);
+    let t_dot = |a: &[f64]| a.iter().zip(&t).map(|(x, y)| x * y).sum::<f64>();
+    // (BIC, K) of the lead at period p with the best order K below its cap.
+    let joint = |p: f64| -> (f64, usize) {
+        let cp = base.project_columns(&columns(st, EffectName::CyclicLead, &lead_shape, &[p]), w);
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let (mut g00, mut g01, mut g11) = (dot(&cp[0], &cp[0]), dot(&cp[0], &cp[1]), dot(&cp[1], &cp[1]));
+        let (mut b0, mut b1) = (t_dot(&cp[0]), t_dot(&cp[1]));
+        let limit = cap0.order_below(p);
+        let mut best = (f64::INFINITY, 0);
+        for k in 0..rss.len() {
+            if k > 0 {
+                let (c0, c1) = (dot(&q[k - 1], &cp[0]), dot(&q[k - 1], &cp[1]));
+                g00 -= c0 * c0;
+                g01 -= c0 * c1;
+                g11 -= c1 * c1;
+                b0 -= c0 * qt[k - 1];
+                b1 -= c1 * qt[k - 1];
+            }
+            if order_of(k) > limit {
+                break;
+            }
+            if !complete(k) {
+                continue;
+            }
+            let det = g00 * g11 - g01 * g01;
+            let explained = if det > 1e-12 * (g00 * g11).max(1e-300) {
+                (g11 * b0 * b0 - 2.0 * g01 * b0 * b1 + g00 * b1 * b1) / det
+            } else {
+                0.0
+            };
+            let b = bic_unknown_sigma((rss[k] - explained).max(0.0), n, rb + k + 3);
+            if b < best.0 {
+                best = (b, k);
+            }
+        }
+        best
+    };
+    let count = (((p_hi / p_lo).ln() * LEAD_SCAN_PER_E).ceil() as usize).max(2);
+    let grid = log_grid(p_lo, p_hi, count);
+    let scores: Vec<(f64, usize)> = grid.par_iter().map(|&p| joint(p)).collect();
+    let Some(i) = (0..grid.len()).min_by(|a, b| scores[*a].0.total_cmp(&scores[*b].0)) else { return Ok(None) };
+    let (a, b) = (grid[i.saturating_sub(1)], grid[(i + 1).min(grid.len() - 1)]);
+    let p = golden(a, b, 30, &mut |p| joint(p).0);
+    let (p, (bic, k)) = if joint(p).0 < scores[i].0 { (p, joint(p)) } else { (grid[i], scores[i]) };
+    let mut orders = vec![(m0, order_of(k))];
+    orders.extend(held);
+    Ok(Some(LeadScan { period: p, orders, delta_bic: bic - free, scanned: grid.len() }))
+}
 
 /// Highest number of frequencies searched for an error motion seen only by accelerometers (cost
 /// cap; wavelengths down to 2L/600, 2 mm on a 0.6 m travel).
@@ -410,6 +720,10 @@ pub(crate) fn fit_model_fixed(
         if let Some(sel) = select {
             sh = sh.selected(sel);
         }
+        let sh = match requested_basis(me) {
+            Some(b) => sh.in_basis(st, b, order),
+            None => sh,
+        };
         let mut hyper = Vec::new();
         let mut searched = Vec::new();
         for h in &sh.hypers {
@@ -532,15 +846,17 @@ pub(crate) fn fit_model_fixed(
         .filter(|t| t.name.is_error_motion())
         .map(|t| {
             let given = model.effects[t.index].order.is_some();
+            let order = t.shape.basis.user_order(t.shape.order);
             ShapeChoice {
                 name: t.name,
-                order: t.shape.order,
-                best: t.shape.order,
+                order,
+                best: order,
                 given,
                 max: None,
                 pinned: false,
                 basis: t.shape.basis,
                 terms: t.shape.select.as_ref().map(Vec::len),
+                lead_cap: None,
             }
         })
         .collect();
@@ -669,6 +985,10 @@ pub(crate) fn term_params(fs: &FitState, model: &Model) -> BTreeMap<String, BTre
     out
 }
 
+/// Highest Legendre degree whose series is also written as monomials c_j·x^j: above it the
+/// conversion's rounding (binomial sums of (2/(b − a))^j) swamps the coefficients.
+pub(crate) const MONOMIAL_MAX_ORDER: u32 = 20;
+
 /// Linear coefficients + hyper-parameters → the effect's parameters by FORMAT.md §2 key.
 pub(crate) fn describe(
     name: EffectName,
@@ -683,9 +1003,48 @@ pub(crate) fn describe(
             // The Legendre series as monomials c_j·x^j (FORMAT.md §2 keys); c0 is left out (the
             // per-channel offsets carry the constant).
             match sh.basis {
+                // The monomials c_j (rounding grows with the order: only up to
+                // [`MONOMIAL_MAX_ORDER`]), and always the series itself, p_k on [x_lo, x_hi].
                 ShapeBasis::Legendre => {
-                    for (j, v) in legendre_to_monomials(sh.first_power, c, sh.range).into_iter().enumerate().skip(1) {
-                        m.insert(format!("c{j}"), v);
+                    if sh.order <= MONOMIAL_MAX_ORDER {
+                        for (j, v) in legendre_to_monomials(sh.first_power, c, sh.range).into_iter().enumerate().skip(1)
+                        {
+                            m.insert(format!("c{j}"), v);
+                        }
+                    }
+                    for (i, v) in c.iter().enumerate() {
+                        m.insert(format!("p{}", sh.first_power as usize + i), *v);
+                    }
+                    m.insert("x_lo".into(), sh.range.0);
+                    m.insert("x_hi".into(), sh.range.1);
+                }
+                // Σ b_k·B_k(x) (k ≥ 1; b_0 = 0, the offsets carry the constant), knots over [x_lo, x_hi].
+                ShapeBasis::Bspline => {
+                    for (i, v) in c.iter().enumerate() {
+                        m.insert(format!("b{}", sh.first_power as usize + i), *v);
+                    }
+                    m.insert("n_splines".into(), (sh.order + 1) as f64);
+                    m.insert("x_lo".into(), sh.range.0);
+                    m.insert("x_hi".into(), sh.range.1);
+                }
+                // FORMAT.md §2 `poly = [0, slope]` (about x_lo) and `harmonics` entries:
+                // a_s·sin θ + a_c·cos θ = A·sin(θ + φ).
+                ShapeBasis::Harmonics => {
+                    m.insert("slope".into(), c.first().copied().unwrap_or(0.0));
+                    m.insert("x_lo".into(), sh.range.0);
+                    for (h, pair) in c.get(1..).unwrap_or(&[]).chunks(2).enumerate() {
+                        let (a_s, a_c) = (pair[0], pair.get(1).copied().unwrap_or(0.0));
+                        let k = h + 1;
+                        m.insert(format!("h{k}_amplitude"), a_s.hypot(a_c));
+                        m.insert(format!("h{k}_wavelength"), 2.0 * (sh.range.1 - sh.range.0) / k as f64);
+                        m.insert(format!("h{k}_phase"), a_c.atan2(a_s));
+                    }
+                }
+                // FORMAT.md §2 `table`: the value at each position (the first 0: offsets).
+                ShapeBasis::Table => {
+                    for (k, x) in sh.knots.iter().enumerate() {
+                        m.insert(format!("x{k}"), *x);
+                        m.insert(format!("v{k}"), if k == 0 { 0.0 } else { c.get(k - 1).copied().unwrap_or(0.0) });
                     }
                 }
                 // Σ cos_k·cos(kπ(x − x_lo)/(x_hi − x_lo)), m (no monomials: hundreds of terms).

@@ -96,10 +96,13 @@
 //! They are listed in the report's `notes`. Error motions fitted with `basis = "poly"` (or none)
 //! are Legendre series Σ_{k=1..K} c_k·P_k(u), u = (2x − a − b)/(b − a) over the range [a, b] of
 //! the sample positions, without P_0 (the offsets carry it); K is the model's `order`, else the
-//! order BIC (σ unknown) prefers among 1..min(30, m − 1) for m distinct positions, re-chosen for
-//! every fit (compare, diagnose, after add); reported as `shapes` (FORMAT.md §4). The fitted
-//! parameters are written back as monomials c_j·x^j. `bspline`, `harmonics` and `table` are
-//! refused with an error (not implemented). On data with accelerometer channels the order is
+//! order BIC (σ unknown) prefers among 1..m − 1 for m distinct positions, re-chosen for every fit
+//! (compare, diagnose, after add); reported as `shapes` (FORMAT.md §4). `bspline`, `harmonics`
+//! and `table` are the other series of [`ShapeBasis`] (one column generator each in
+//! [`Shape::basis_at`], orders chosen by [`order_curve`]). The fitted parameters are written back
+//! in the basis itself (Legendre `p_k` with `x_lo`, `x_hi`; monomials c_j·x^j too up to degree 20).
+//! A shape's order and a cyclic lead are decided jointly ([`LeadCap`], docs/formats.md). On data
+//! with accelerometer channels the order is
 //! chosen per motion by BIC (σ unknown) on the samples of the channels that see it, over 1..N
 //! with N what the passes resolve (P_N's shortest wavelength ≈ π(b − a)/N spans two sample
 //! spacings |v|·Δt of the finest pass; at most [`MAX_ACCEL_ORDER`]), from the nested residual

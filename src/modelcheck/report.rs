@@ -122,12 +122,32 @@ pub(crate) fn shape_reports(fs: &FitState) -> BTreeMap<String, ShapeReport> {
             if c.pinned {
                 chosen_by += "; constant and slope pinned at 0 (accelerometers do not see them)";
             }
+            match c.lead_cap.filter(|_| !c.given) {
+                Some(l) if l.in_model => {
+                    chosen_by += &format!(
+                        "; at most {} so that the shortest wavelength 2L/K stays longer than the cyclic lead's \
+                         {} mm period",
+                        l.order,
+                        fmt_num(l.period * 1e3)
+                    );
+                    if l.free_best > l.order {
+                        chosen_by += &format!(" (BIC without that cap: order {})", l.free_best);
+                    }
+                }
+                Some(l) if l.free_best > l.order => {
+                    chosen_by += &format!(
+                        "; orders above {} have wavelengths down to the cyclic-lead periods searched (≤ {} mm): \
+                         diagnose ranks a lead against order {}",
+                        l.order,
+                        fmt_num(l.period * 1e3),
+                        l.capped_best
+                    );
+                }
+                Some(_) | None => {}
+            }
             let bic_order = (c.given && c.max.is_some()).then_some(c.best);
-            let basis = match c.basis {
-                ShapeBasis::Legendre => "legendre",
-                ShapeBasis::Cosine => "cosine",
-            };
-            let r = ShapeReport { basis: basis.into(), order: c.order, chosen_by, bic_order, terms: c.terms };
+            let r =
+                ShapeReport { basis: c.basis.as_str().into(), order: c.order, chosen_by, bic_order, terms: c.terms };
             (c.name.as_str().to_string(), r)
         })
         .collect()
@@ -170,20 +190,11 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
     // Every fitted effect must be seen by some channel; a periodic one whose periods these
     // positions cannot resolve is held at zero with a note (its aliases would fit per-target misfit).
     for me in model.effects.iter().filter(|m| m.fit && m.effect.axis == model.axis && predicts(m.effect.name)) {
-        // Fitted error motions use the Legendre basis (`poly`); the other bases are not implemented.
-        match me.basis {
-            None | Some(Basis::Poly) => {}
-            Some(b @ (Basis::Bspline | Basis::Harmonics | Basis::Table)) => {
-                return Err(VmtError::bad(
-                    &model.source,
-                    format!("effects.{}.basis", me.effect.name),
-                    format!(
-                        "basis `{}` is not implemented by compare/diagnose; use `poly` or leave `basis` out \
-                         (a Legendre series whose order BIC chooses unless `order` is given)",
-                        b.as_str()
-                    ),
-                ));
-            }
+        if me.effect.name.is_error_motion() {
+            check_basis(&st, me).map_err(|m| {
+                let key = if me.order.is_some() && !m.starts_with("basis") { "order" } else { "basis" };
+                VmtError::bad(&model.source, format!("effects.{}.{key}", me.effect.name), m)
+            })?;
         }
         let sh = shape(&st, me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER), lacks_coulomb(model));
         let period = me.given.iter().any(|g| g == "period").then(|| me.effect.params.get("period")).flatten();
@@ -406,6 +417,52 @@ pub(crate) fn significance_sigma(f: &Fitted, per: &[f64]) -> Vec<f64> {
         k0 += m;
     }
     out
+}
+
+/// Whether a fitted error motion's `basis` and `order` (FORMAT.md §2) can be fitted on these
+/// channels: the bases other than `poly` on readings of the motion itself (lasers; not on
+/// accelerometers, which see only its second derivative); `table` (one value per target) on a
+/// point table (the positions repeat: at most half as many distinct positions as readings); an
+/// `order` these m distinct positions can determine after the offsets (Legendre degree ≤ m − 1,
+/// B-splines and table values 2..=m, harmonics 1..=(m − 2)/2 beside their slope).
+pub(crate) fn check_basis(st: &Stack, me: &ModelEffect) -> Result<(), String> {
+    let name = me.effect.name;
+    let seeing: Vec<&Channel> = st.chans.iter().filter(|c| c.s_motion(name) != 0.0).collect();
+    let mut xs: Vec<f64> = seeing.iter().flat_map(|c| c.x.iter().copied()).collect();
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    let m = xs.len() as u32;
+    let readings: usize = seeing.iter().map(|c| c.y.len()).sum();
+    let basis = me.basis.unwrap_or(Basis::Poly);
+    if basis != Basis::Poly && seeing.iter().any(|c| c.is_accel()) {
+        return Err(format!(
+            "basis `{}` is fitted to readings of the motion itself; `{name}` is seen here by accelerometers \
+             (its second derivative): use `poly` or leave `basis` out",
+            basis.as_str()
+        ));
+    }
+    if basis == Basis::Table && 2 * m as usize > readings {
+        return Err(format!(
+            "basis `table` is one value per target of a point table; these data have {m} distinct positions in \
+             {readings} readings (a time series, or no repeated targets): use `poly`, `bspline` or `harmonics` \
+             with an `order`"
+        ));
+    }
+    let Some(order) = me.order else { return Ok(()) };
+    let (lo, hi, what) = match basis {
+        Basis::Poly => (1, m.saturating_sub(1), "a Legendre degree"),
+        Basis::Bspline => (2, m, "a number of B-splines"),
+        Basis::Table => (2, m, "a number of table values"),
+        Basis::Harmonics => (1, m.saturating_sub(2) / 2, "a number of harmonics"),
+    };
+    if order < lo || order > hi {
+        return Err(format!(
+            "order {order} for basis `{}`: expected {what} from {lo} to {hi}, what {m} distinct positions \
+             determine after the per-run offsets",
+            basis.as_str()
+        ));
+    }
+    Ok(())
 }
 
 /// Per-sample σ from per-channel σ (NaN → 1: unweighted first pass).
@@ -686,19 +743,124 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         })
         .collect();
     let mut ranking: Vec<RankingEntry> = Vec::new();
-    if !cands.is_empty() {
-        let sigma = Sigma::PerSample(significance_sigma(&f, &per));
-        let base: Vec<Vec<f64>> = f.fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
+    let sigma = Sigma::PerSample(significance_sigma(&f, &per));
+    let config = DiagnoseConfig::default();
+    // Shape against cyclic lead (fit.rs `LeadCap`): where the model's shapes keep orders whose
+    // shortest wavelength 2L/K reaches the lead's searched periods, the lead is ranked against the
+    // model refitted with its shapes capped (2L/K > P, so they cannot absorb it), the others
+    // against the model as fitted.
+    let binding: Vec<(EffectName, LeadCap)> =
+        f.fs.shapes
+            .iter()
+            .filter(|c| !c.given)
+            .filter_map(|c| c.lead_cap.filter(|l| !l.in_model && l.free_best > l.order).map(|l| (c.name, l)))
+            .collect();
+    let split = !binding.is_empty() && names.contains(&EffectName::CyclicLead);
+    let w: Vec<f64> = per.iter().map(|s| 1.0 / s).collect();
+    let fit_sigma = Sigma::PerSample(per.clone());
+    // The lead's period and the shapes' orders chosen jointly (`lead_shape_scan`): the orders K*
+    // at the best period set the lead's base, and the lead is searched only at periods those orders
+    // cannot represent.
+    let scan = if split {
+        let grid = hyper_grid(st, EffectName::CyclicLead, "period").0;
+        match (grid.first(), grid.last()) {
+            (Some(lo), Some(hi)) => lead_shape_scan(st, &f.fs, &binding, &w, (*lo, *hi))
+                .map_err(|m| VmtError::bad(data, "", format!("scanning the cyclic lead against the shapes: {m}")))?,
+            _ => None,
+        }
+    } else {
+        None
+    };
+    let joint: Option<Vec<(EffectName, u32)>> = match &scan {
+        Some(sc) => Some(sc.orders.clone()),
+        // Not nested (B-splines): the shapes capped below the longest period searched.
+        None if split => Some(binding.iter().map(|(m, l)| (*m, l.capped_best)).collect()),
+        None => None,
+    };
+    let capped = match &joint {
+        Some(orders) => {
+            // Point-table shapes (Legendre, all terms): no sparse selection to carry over.
+            let order_of = |_: usize, me: &ModelEffect| {
+                let n = me.effect.name;
+                let order = orders.iter().find(|(m, _)| *m == n).map(|(_, o)| *o).unwrap_or_else(|| {
+                    f.fs.shapes.iter().find(|c| c.name == n).map_or(me.order.unwrap_or(DEFAULT_ORDER), |c| c.order)
+                });
+                (order, None)
+            };
+            let fs = fit_model_fixed(st, model, &fit_sigma, &w, &order_of)
+                .map_err(|m| VmtError::bad(data, "", format!("fitting the model with its shapes capped: {m}")))?;
+            Some(fs)
+        }
+        None => None,
+    };
+    // The lead is searched at periods shorter than the capped shapes' shortest wavelengths.
+    let lead_limit = joint.as_ref().map(|orders| {
+        binding
+            .iter()
+            .zip(orders)
+            .map(|((_, l), (_, o))| l.basis.shortest_wavelength(l.span, *o))
+            .fold(f64::INFINITY, f64::min)
+    });
+    let mut cands = cands;
+    if let Some(lim) = lead_limit {
+        for c in cands.iter_mut().filter(|c| c.effect == EffectName::CyclicLead.as_str()) {
+            for h in c.hyper_parameters.iter_mut() {
+                h.grid.retain(|p| *p < lim);
+            }
+        }
+    }
+    let split = split && capped.is_some();
+    let total = cands.len();
+    let (lead_cands, other_cands): (Vec<Candidate>, Vec<Candidate>) =
+        cands.into_iter().partition(|c| split && c.effect == EffectName::CyclicLead.as_str());
+    for (group, fs) in [(other_cands, &f.fs), (lead_cands, capped.as_ref().unwrap_or(&f.fs))] {
+        if group.is_empty() {
+            continue;
+        }
+        let base: Vec<Vec<f64>> = fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
         let input =
-            vmt_estimators::modelcheck::ResidualInput { residual: &f.fs.residual, sigma: &sigma, base_columns: &base };
-        match rank_candidates(&input, &cands, &DiagnoseConfig::default()) {
-            Ok(d) => ranking = d.ranking,
+            vmt_estimators::modelcheck::ResidualInput { residual: &fs.residual, sigma: &sigma, base_columns: &base };
+        match rank_candidates(&input, &group, &config) {
+            Ok(d) => {
+                // Bonferroni over all `total` candidates of this diagnosis, not the group's.
+                let scale = total as f64 / group.len() as f64;
+                for mut r in d.ranking {
+                    r.p_value = r.p_value.map(|p| (p * scale).min(1.0));
+                    if r.verdict == Verdict::Significant && r.p_value.is_some_and(|p| p > config.family_alpha) {
+                        r.verdict = Verdict::Noise;
+                    }
+                    ranking.push(r);
+                }
+            }
             Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) => {
                 notes.push("the model explains the data exactly: nothing to diagnose".into())
             }
             Err(e) => return Err(VmtError::bad(data, "", format!("diagnose: {e}"))),
         }
     }
+    if let (Some(cf), Some(orders)) = (&capped, &joint) {
+        if let Some(r) = ranking.iter_mut().find(|r| r.effect == EffectName::CyclicLead.as_str()) {
+            let fit_bic = |fs: &FitState| {
+                let k = fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
+                (weighted_ss(&fs.residual, &w), k)
+            };
+            // The joint scan's BIC change; without one (B-splines), the capped model with the
+            // ranked lead: RSS_capped·(1 − explained), k = sine, cosine and the searched period.
+            let delta = match &scan {
+                Some(sc) => sc.delta_bic,
+                None => {
+                    let (free, cap) = (fit_bic(&f.fs), fit_bic(cf));
+                    let k = 2 + usize::from(r.searched.is_some_and(|m| m > 1));
+                    bic_unknown_sigma(cap.0 * (1.0 - r.explained).max(0.0), st.n, cap.1 + k)
+                        - bic_unknown_sigma(free.0, st.n, free.1)
+                }
+            };
+            let caps: Vec<(EffectName, LeadCap, u32)> =
+                binding.iter().zip(orders).map(|((m, l), (_, o))| (*m, *l, *o)).collect();
+            weigh_lead_against_shapes(r, &caps, delta, config.inseparable_margin);
+        }
+    }
+    ranking.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic).then_with(|| a.effect.cmp(&b.effect)));
     // A fitted period that other periods reproduce on these positions is not identified: the
     // claim is `inseparable` from its aliases (the data cannot say which one), with the advice.
     for r in ranking.iter_mut().filter(|r| r.verdict == Verdict::Significant) {
@@ -760,6 +922,50 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     Ok(DiagnoseReport { normalized_rms: nrms, ranking, advice, notes, shapes, sigma: f.sigma })
 }
 
+/// The cyclic-lead entry of a diagnosis whose shapes were capped for it ([`LeadCap`]): ranked
+/// against the model with its shapes at orders K* (`caps`: motion, cap, K*; from the joint scan
+/// over the lead's periods, [`lead_shape_scan`]), searched only at periods shorter than their
+/// shortest wavelength. It stays significant only if lead + capped shapes beat the model as fitted
+/// (shapes at the orders BIC prefers without a lead) by `margin`: `delta` is that BIC change with
+/// σ unknown. Otherwise the data cannot tell a lead at that period from a more flexible shape:
+/// `inseparable`, confused with the shapes.
+pub(crate) fn weigh_lead_against_shapes(
+    r: &mut RankingEntry,
+    caps: &[(EffectName, LeadCap, u32)],
+    delta: f64,
+    margin: f64,
+) {
+    let period = r.params.get("period").copied().unwrap_or(f64::NAN);
+    let list: Vec<String> = caps
+        .iter()
+        .map(|(m, l, o)| {
+            format!(
+                "{m} at order {o} (shortest wavelength {} mm; BIC without a lead prefers order {})",
+                fmt_num(l.basis.shortest_wavelength(l.span, *o) * 1e3),
+                l.free_best
+            )
+        })
+        .collect();
+    let against = format!(
+        "ranked against {} and searched only at shorter periods; lead + capped shapes against the model as \
+         fitted: BIC change (σ unknown) {delta:.1}",
+        list.join(", ")
+    );
+    if r.verdict != Verdict::Significant {
+        r.note = Some(against);
+    } else if delta < -margin {
+        r.note = Some(format!("{against}: a lead at {} mm is the better explanation", fmt_num(period * 1e3)));
+    } else {
+        r.verdict = Verdict::Inseparable;
+        r.confused_with = caps.iter().map(|(m, _, _)| m.as_str().to_string()).collect();
+        r.note = Some(format!(
+            "{against}: a lead at {} mm and the shapes' higher orders, whose wavelengths reach that period, fit \
+             these data about as well, so the data cannot tell them apart",
+            fmt_num(period * 1e3)
+        ));
+    }
+}
+
 /// Why a periodic effect is not searched on these positions, and what measurement would show it.
 pub(crate) fn unresolved_period_note(st: &Stack, name: EffectName) -> String {
     let range = match name {
@@ -791,6 +997,13 @@ pub fn separating_measurement(a: &str, b: &str) -> String {
     } else if (angular(a) && linear(b)) || (angular(b) && linear(a)) || (angular(a) && angular(b)) {
         "measure with a second laser at another height or lateral offset (a different Abbe offset), or with an \
          angular laser: an angular error motion scales with the offset, a translation does not"
+            .into()
+    } else if (a == "cyclic_lead" && b.parse::<EffectName>().is_ok_and(|e| e.is_error_motion()))
+        || (b == "cyclic_lead" && a.parse::<EffectName>().is_ok_and(|e| e.is_error_motion()))
+    {
+        "measure dense runs (targets every ≤ P/3 over at least three periods P) at two or more places along \
+         the travel: a lead repeats with the same period and phase everywhere, a shape does not; or give the \
+         screw's lead as `period` of a fitted `cyclic_lead`"
             .into()
     } else if pair("cyclic_lead", "interpolation_error") {
         "measure at target spacings finer than the screw lead and than the scale's signal period".into()

@@ -373,6 +373,8 @@ pub(crate) struct Shape {
     /// Error motions: the basis orders used, when a sparse selection of first_power..=order
     /// (`fit_orders_nested` on a cosine series: the terms chosen by their explained χ²); None: all.
     pub(crate) select: Option<Vec<u32>>,
+    /// [`ShapeBasis::Table`]: the positions (m) of its values, ascending; empty otherwise.
+    pub(crate) knots: Vec<f64>,
 }
 
 /// The basis of a fitted error motion's series (over the range [a, b] of the sample positions).
@@ -387,6 +389,132 @@ pub(crate) enum ShapeBasis {
     /// down to the rail waviness), where Legendre columns of the sampled accelerations become
     /// dependent (to 1e-9) near order 270 on 3 500 samples while the waviness needs more.
     Cosine,
+    /// `basis = "bspline"`: N clamped B-splines of degree min(3, N − 1) on N − degree − 1 uniform
+    /// interior knots over [a, b] (de Boor 1978, Cox–de Boor recursion); index k = 0..N − 1, the
+    /// first left out (Σ B_k = 1: the offsets carry the constant). `order` = N.
+    Bspline,
+    /// `basis = "harmonics"`: a slope and H harmonics of the fundamental wavelength 2(b − a):
+    /// index 1 = x − a (m), 2h = sin(2πx/λ_h), 2h + 1 = cos(2πx/λ_h), λ_h = 2(b − a)/h, h = 1..H
+    /// (of x itself, so that the fitted terms are FORMAT.md §2 `poly = [0, slope]` and
+    /// `harmonics` entries A·sin(2πx/λ + φ)). The slope: without it a machine's linear positioning
+    /// error (the commonest part) needs many harmonics (its half-range series converges as 1/h).
+    /// `order` = H.
+    Harmonics,
+    /// `basis = "table"`: values at N positions ([`Shape::knots`]: the distinct targets when N is
+    /// their number, else N uniform points over [a, b]) joined by straight lines (hat functions,
+    /// a linear B-spline), the first value left out (the offsets carry the constant). `order` = N.
+    Table,
+}
+
+impl ShapeBasis {
+    /// The highest column index of a series of user order `order` (FORMAT.md §2 `order`:
+    /// the Legendre degree, B-splines or table values N, harmonics H).
+    pub(crate) fn top_index(self, order: u32) -> u32 {
+        match self {
+            ShapeBasis::Legendre | ShapeBasis::Cosine => order,
+            ShapeBasis::Bspline | ShapeBasis::Table => order.saturating_sub(1),
+            ShapeBasis::Harmonics => 2 * order + 1,
+        }
+    }
+
+    /// The user order of a series whose highest column index is `top` (inverse of [`Self::top_index`]).
+    pub(crate) fn user_order(self, top: u32) -> u32 {
+        match self {
+            ShapeBasis::Legendre | ShapeBasis::Cosine => top,
+            ShapeBasis::Bspline | ShapeBasis::Table => top + 1,
+            ShapeBasis::Harmonics => top.saturating_sub(1) / 2,
+        }
+    }
+
+    /// The shortest wavelength (m) a series of user order `order` represents on a range of length
+    /// `span` (m): Legendre P_K has K zeros on the range, ≈ 2L/K; harmonic H is 2L/H; cubic
+    /// B-splines resolve about two knot intervals, 2L/(N − 3); a table, two of its N − 1
+    /// intervals, 2L/(N − 1). The cosine series (accelerometers): 2L/(K − 2).
+    pub(crate) fn shortest_wavelength(self, span: f64, order: u32) -> f64 {
+        let per = match self {
+            ShapeBasis::Legendre | ShapeBasis::Harmonics => order as f64,
+            ShapeBasis::Bspline => order.saturating_sub(3).max(1) as f64,
+            ShapeBasis::Table => order.saturating_sub(1).max(1) as f64,
+            ShapeBasis::Cosine => order.saturating_sub(2).max(1) as f64,
+        };
+        2.0 * span / per
+    }
+
+    /// The name reported in `shapes` (FORMAT.md §4).
+    pub(crate) fn as_str(self) -> &'static str {
+        match self {
+            ShapeBasis::Legendre => "legendre",
+            ShapeBasis::Cosine => "cosine",
+            ShapeBasis::Bspline => "bspline",
+            ShapeBasis::Harmonics => "harmonics",
+            ShapeBasis::Table => "table",
+        }
+    }
+}
+
+/// Values and derivatives of the N clamped B-splines of degree p = min(3, N − 1) with uniform
+/// interior knots on [a, b] at x (Cox–de Boor: B_{i,0} = 1 on [t_i, t_{i+1}), B_{i,q} =
+/// (x − t_i)/(t_{i+q} − t_i)·B_{i,q−1} + (t_{i+q+1} − x)/(t_{i+q+1} − t_{i+1})·B_{i+1,q−1};
+/// B'_{i,p} = p·[B_{i,p−1}/(t_{i+p} − t_i) − B_{i+1,p−1}/(t_{i+p+1} − t_{i+1})]; de Boor 1978).
+/// x = b belongs to the last interval.
+pub(crate) fn bspline_basis(x: f64, n: usize, (a, b): (f64, f64)) -> (Vec<f64>, Vec<f64>) {
+    let p = n.saturating_sub(1).min(3);
+    let inner = n - p - 1;
+    let mut t: Vec<f64> = vec![a; p + 1];
+    t.extend((1..=inner).map(|k| a + (b - a) * k as f64 / (inner + 1) as f64));
+    t.extend(std::iter::repeat(b).take(p + 1));
+    let x = x.clamp(a, b);
+    // Degree 0: the one knot interval holding x (the last non-empty one for x = b).
+    let span = (0..t.len() - 1).rev().find(|&i| t[i] <= x && t[i] < t[i + 1]).unwrap_or(0);
+    let mut lower: Vec<f64> = (0..t.len() - 1).map(|i| if i == span { 1.0 } else { 0.0 }).collect();
+    let ratio = |num: f64, den: f64| if den > 0.0 { num / den } else { 0.0 };
+    let mut prev = lower.clone();
+    for q in 1..=p {
+        prev = lower.clone();
+        lower = (0..t.len() - 1 - q)
+            .map(|i| {
+                ratio(x - t[i], t[i + q] - t[i]) * prev[i]
+                    + ratio(t[i + q + 1] - x, t[i + q + 1] - t[i + 1]) * prev[i + 1]
+            })
+            .collect();
+    }
+    let deriv: Vec<f64> = (0..n)
+        .map(|i| {
+            if p == 0 {
+                return 0.0;
+            }
+            let pf = p as f64;
+            pf * (ratio(prev[i], t[i + p] - t[i]) - ratio(prev[i + 1], t[i + p + 1] - t[i + 1]))
+        })
+        .collect();
+    (lower[..n].to_vec(), deriv)
+}
+
+/// Values and slopes of the hat functions on `knots` (ascending) at x: 1 at its knot, linear to
+/// 0 at the neighbours (constant beyond the ends).
+pub(crate) fn hat_basis(x: f64, knots: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let n = knots.len();
+    let (mut v, mut d) = (vec![0.0; n], vec![0.0; n]);
+    if n == 1 {
+        v[0] = 1.0;
+        return (v, d);
+    }
+    if x <= knots[0] {
+        v[0] = 1.0;
+        return (v, d);
+    }
+    if x >= knots[n - 1] {
+        v[n - 1] = 1.0;
+        return (v, d);
+    }
+    let i = knots.partition_point(|k| *k <= x).saturating_sub(1).min(n - 2);
+    let h = knots[i + 1] - knots[i];
+    let f = (x - knots[i]) / h;
+    v[i] = 1.0 - f;
+    v[i + 1] = f;
+    d[i] = -1.0 / h;
+    d[i + 1] = 1.0 / h;
+    (v, d)
 }
 
 impl Shape {
@@ -455,7 +583,47 @@ impl Shape {
                 }
                 (vals, slopes)
             }
+            ShapeBasis::Bspline => bspline_basis(x, top + 1, (a, b)),
+            ShapeBasis::Table => hat_basis(x, &self.knots),
+            ShapeBasis::Harmonics => {
+                let (mut vals, mut slopes) = (vec![1.0, x - a], vec![0.0, 1.0]);
+                for h in 1..=top.saturating_sub(1) / 2 {
+                    let k = TWO_PI * h as f64 / (2.0 * (b - a));
+                    let (sn, cs) = (k * x).sin_cos();
+                    vals.extend([sn, cs]);
+                    slopes.extend([k * cs, -k * sn]);
+                }
+                (vals, slopes)
+            }
         }
+    }
+
+    /// This shape (an error motion's, from [`shape`]) in `basis` with user order `order`
+    /// ([`ShapeBasis::top_index`]); a table's positions are the distinct sample positions when
+    /// `order` is their number, else `order` uniform points over the range.
+    pub(crate) fn in_basis(mut self, st: &Stack, basis: ShapeBasis, order: u32) -> Shape {
+        self.basis = basis;
+        self.order = basis.top_index(order);
+        let (a, b) = self.range;
+        self.knots = match basis {
+            ShapeBasis::Table => {
+                let xs = distinct_positions(st);
+                if xs.len() == order as usize {
+                    xs
+                } else {
+                    (0..order).map(|k| a + (b - a) * k as f64 / (order.max(2) - 1) as f64).collect()
+                }
+            }
+            ShapeBasis::Legendre | ShapeBasis::Cosine | ShapeBasis::Bspline | ShapeBasis::Harmonics => vec![],
+        };
+        let prefix = match basis {
+            ShapeBasis::Legendre | ShapeBasis::Cosine => "c",
+            ShapeBasis::Bspline => "b",
+            ShapeBasis::Harmonics => "h",
+            ShapeBasis::Table => "v",
+        };
+        self.coefs = (self.first_power..=self.order).map(|k| format!("{prefix}{k}")).collect();
+        self
     }
 }
 
@@ -613,7 +781,7 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
     } else {
         ShapeBasis::Legendre
     };
-    Shape { coefs, hypers, first_power, order, with_fc, range, basis, select: None }
+    Shape { coefs, hypers, first_power, order, with_fc, range, basis, select: None, knots: vec![] }
 }
 
 /// Legendre polynomials P_0..P_n at u and their derivatives dP_k/du, by Bonnet's recurrence

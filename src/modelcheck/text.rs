@@ -106,7 +106,15 @@ fn shapes_text(shapes: &BTreeMap<String, ShapeReport>) -> String {
             ("model", None) => "given by the model".to_string(),
             (how, _) => format!("chosen by {how} (model gave none)"),
         };
-        s += &format!("{n}: Legendre order {} {why}\n", sh.order);
+        let series = match sh.basis.as_str() {
+            "legendre" => format!("Legendre order {}", sh.order),
+            "cosine" => format!("cosine series order {}", sh.order),
+            "bspline" => format!("{} B-splines", sh.order),
+            "harmonics" => format!("{} harmonics", sh.order),
+            "table" => format!("table of {} values", sh.order),
+            other => format!("{other} order {}", sh.order),
+        };
+        s += &format!("{n}: {series} {why}\n");
     }
     s
 }
