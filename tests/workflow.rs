@@ -633,3 +633,33 @@ fn straightness_command_and_run_check_agree_on_the_same_data() {
     }
     assert!(compared > 0, "no accelerometer straightness check in the run");
 }
+
+/// An effect of a model on an axis the comparison does not run along is named in a note, never dropped
+/// without a word (issue 14), and an estimated σ carries its channel's unit (m/s² for accelerometers).
+#[test]
+fn compare_names_effects_it_leaves_out_and_the_unit_of_an_estimated_sigma() {
+    let tmp = tempfile::tempdir().unwrap();
+    let set = tmp.path().join("set");
+    let small = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
+    assert!(vmt().arg("simulate").arg(&small).arg("-o").arg(&set).output().unwrap().status.success());
+    // The accelerometers' noise density is left out of the manifest, so σ is estimated from the data.
+    let m = std::fs::read_to_string(set.join("manifest.toml")).unwrap();
+    let m: String = m.lines().filter(|l| !l.starts_with("noise_density")).map(|l| format!("{l}\n")).collect();
+    std::fs::write(set.join("manifest.toml"), m).unwrap();
+    let model = tmp.path().join("m.toml");
+    std::fs::write(
+        &model,
+        "format = \"vmt-model/1\"\naxis = \"x\"\n[effects.positioning]\nfit = true\n[effects.pitch]\npoly = [1e-6]\naxis = \"y\"\n",
+    )
+    .unwrap();
+    let o = vmt().args(["compare", "--json", "--model"]).arg(&model).arg("--data").arg(&set).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let notes: Vec<&str> = v["notes"].as_array().unwrap().iter().map(|n| n.as_str().unwrap()).collect();
+    assert!(notes.iter().any(|n| n.contains("`pitch` on axis y is left out")), "{notes:?}");
+    let accel: Vec<&&str> = notes.iter().filter(|n| n.contains("sigma of `acc_")).collect();
+    assert!(!accel.is_empty(), "{notes:?}");
+    for n in accel {
+        assert!(n.ends_with("m/s²"), "{n}");
+    }
+}

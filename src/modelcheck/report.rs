@@ -249,10 +249,11 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                     };
                     sig[j] = s;
                     notes.push(format!(
-                        "sigma of `{}` in run `{}` estimated from the data ({how}): {} m",
+                        "sigma of `{}` in run `{}` estimated from the data ({how}): {} {}",
                         c.sensor,
                         c.run,
-                        fmt_num(s)
+                        fmt_num(s),
+                        channel_unit(c)
                     ));
                 }
             }
@@ -512,6 +513,15 @@ pub(crate) fn needs(name: EffectName) -> &'static str {
     }
 }
 
+/// The SI unit of a channel's readings and residual: N (motor force), m/s² (accelerometer), else m.
+fn channel_unit(c: &Channel) -> &'static str {
+    match c.kind {
+        SensorKind::MotorForce => "N",
+        SensorKind::Accelerometer => "m/s²",
+        _ => "m",
+    }
+}
+
 pub(crate) fn load_channels(
     model: &Model,
     set: &MeasurementSet,
@@ -532,6 +542,14 @@ pub(crate) fn load_channels(
     }
     for me in model.effects.iter().filter(|m| !predicts(m.effect.name)) {
         notes.push(format!("effect `{}` is not predicted (module doc): left out", me.effect.name));
+    }
+    // The comparison runs along the model's axis; an effect of another axis is never silently dropped.
+    for me in model.effects.iter().filter(|m| m.effect.axis != model.axis) {
+        notes.push(format!(
+            "effect `{}` on axis {} is left out: this comparison is along axis {} (the model's `axis`), and the data's \
+             channels of that axis are the ones compared",
+            me.effect.name, me.effect.axis, model.axis
+        ));
     }
     Ok((chans, notes))
 }
@@ -613,11 +631,7 @@ pub(crate) fn channel_report(c: &Channel, r: &[f64], p: &[f64], s: f64, est: boo
         .unwrap_or_default();
     ChannelReport {
         run: c.run.clone(),
-        unit: match c.kind {
-            SensorKind::MotorForce => "N".into(),
-            SensorKind::Accelerometer => "m/s²".into(),
-            _ => "m".into(),
-        },
+        unit: channel_unit(c).into(),
         sensor: c.sensor.clone(),
         rms,
         normalized_rms: rms / s,
