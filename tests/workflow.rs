@@ -663,3 +663,23 @@ fn compare_names_effects_it_leaves_out_and_the_unit_of_an_estimated_sigma() {
         assert!(n.ends_with("m/s²"), "{n}");
     }
 }
+
+/// The compensation table a user loads carries no float-conversion noise (issue 13: a position was
+/// written as 335.95000000000005 mm): every number has at most 12 significant digits.
+#[test]
+fn compensation_table_numbers_have_no_conversion_noise() {
+    let tmp = tempfile::tempdir().unwrap();
+    let set = tmp.path().join("set");
+    let small = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
+    assert!(vmt().arg("simulate").arg(&small).arg("-o").arg(&set).output().unwrap().status.success());
+    for extra in [&[][..], &["--equidistant", "4"][..]] {
+        let out = tmp.path().join(format!("comp{}.csv", extra.len()));
+        let o = vmt().arg("compensate").arg(&set).arg("-o").arg(&out).args(extra).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = std::fs::read_to_string(&out).unwrap();
+        for field in text.lines().filter(|l| !l.starts_with('#')).skip(1).flat_map(|l| l.split(',')) {
+            let digits = field.trim_start_matches('-').replace('.', "").trim_start_matches('0').len();
+            assert!(digits <= 12, "{field} in {text}");
+        }
+    }
+}
