@@ -293,19 +293,8 @@ pub(crate) const MIN_REPEAT_DOF: usize = 10;
 /// (target, direction), returns (SS = Σ (r − r̄_group)², dof = N − G); None when no reading is
 /// repeated.
 pub(crate) fn repeat_scatter(c: &Channel, r: &[f64]) -> Option<(f64, usize)> {
-    let mut groups: BTreeMap<(u64, i8), Vec<f64>> = BTreeMap::new();
-    for i in 0..r.len() {
-        groups.entry((c.x[i].to_bits(), if c.d[i] > 0.0 { 1 } else { -1 })).or_default().push(r[i]);
-    }
-    let dof = r.len().checked_sub(groups.len()).filter(|d| *d > 0)?;
-    let ss: f64 = groups
-        .values()
-        .map(|g| {
-            let m = g.iter().sum::<f64>() / g.len() as f64;
-            g.iter().map(|v| (v - m).powi(2)).sum::<f64>()
-        })
-        .sum();
-    Some((ss, dof))
+    let key = |i: usize| (c.x[i].to_bits(), if c.d[i] > 0.0 { 1i8 } else { -1 });
+    vmt_estimators::modelcheck::pooled_group_scatter((0..r.len()).map(|i| (key(i), r[i])))
 }
 
 /// σ of one reading from repeated approaches: σ̂² = SS/(N − G) ([`repeat_scatter`]); None with

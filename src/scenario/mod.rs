@@ -202,13 +202,7 @@ fn build_chain(
     let tool = raw.tool.as_deref().unwrap_or("tool");
     let chain = ChainModel::build(machine, &configs, &set, tool).map_err(|e| ("axes".to_string(), e.to_string()))?;
     for (i, p) in raw.chain_procedures.iter().enumerate() {
-        let at = |k: &str| {
-            if k.is_empty() {
-                format!("chain_procedures[{i}] ({})", p.name())
-            } else {
-                format!("chain_procedures[{i}] ({}).{k}", p.name())
-            }
-        };
+        let at = |k: &str| procedure_place("chain_procedures", i, p.name(), k);
         if raw.chain_procedures[..i].iter().any(|o| o.name() == p.name())
             || raw.procedures.iter().any(|o| o.name() == p.name())
         {
@@ -330,14 +324,7 @@ fn validate_procedures(
     let tol = 1e-9;
     let (mut samples, mut steps) = (0.0, 0.0);
     for (i, p) in procs.iter().enumerate() {
-        // An empty key blames the procedure as a whole (its machine time, from several keys).
-        let at = |k: &str| {
-            if k.is_empty() {
-                format!("procedures[{i}] ({})", p.name())
-            } else {
-                format!("procedures[{i}] ({}).{k}", p.name())
-            }
-        };
+        let at = |k: &str| procedure_place("procedures", i, p.name(), k);
         if !p.name().is_empty() && procs[..i].iter().any(|o| o.name() == p.name()) {
             return Err((at("name"), "procedure names must be unique".into()));
         }
@@ -486,4 +473,14 @@ fn check_truth_size(truth: &model::Model, travel: (f64, f64)) -> Result<(), (Str
         }
     }
     Ok(())
+}
+
+/// The place of a procedure's key in messages: `procedures[1] (iso).dwell`; an empty key blames the
+/// procedure as a whole (e.g. its machine time, which several keys set).
+fn procedure_place(list: &str, i: usize, name: &str, key: &str) -> String {
+    if key.is_empty() {
+        format!("{list}[{i}] ({name})")
+    } else {
+        format!("{list}[{i}] ({name}).{key}")
+    }
 }

@@ -247,13 +247,9 @@ pub struct NestedRss {
     pub used: Vec<usize>,
 }
 
-/// Weighted residual sums of squares Σ(w_i·r_i)² of `y` after least squares on the span of
-/// `base` plus the first columns of `series`, in the series' order (no pivoting): a series column
-/// that the base alone spans (less than 1e-9 of its weighted norm left after the projection, or
-/// all zero) adds nothing and is skipped; the nesting stops before the first column dependent on
-/// the base and the series columns before it (its part left ≤ 1e-9), so that the caller cannot
-/// choose an order these samples cannot determine.
-pub fn nested_rss(y: &[f64], w: &[f64], base: &OrthoBase, series: &[Vec<f64>]) -> Result<NestedRss, ModelCheckError> {
+/// Checks the inputs of [`nested_rss`] and [`greedy_rss`] (one value per sample in `y`, every series
+/// column and the base, all finite) and returns the number of samples n.
+fn check_series(y: &[f64], w: &[f64], base: &OrthoBase, series: &[Vec<f64>]) -> Result<usize, ModelCheckError> {
     let n = w.len();
     check_len("y", n, y.len())?;
     check_finite("y", y)?;
@@ -262,6 +258,17 @@ pub fn nested_rss(y: &[f64], w: &[f64], base: &OrthoBase, series: &[Vec<f64>]) -
         check_finite(&format!("series column {j}"), c)?;
     }
     check_len("base rows", n, base.nrows())?;
+    Ok(n)
+}
+
+/// Weighted residual sums of squares Σ(w_i·r_i)² of `y` after least squares on the span of
+/// `base` plus the first columns of `series`, in the series' order (no pivoting): a series column
+/// that the base alone spans (less than 1e-9 of its weighted norm left after the projection, or
+/// all zero) adds nothing and is skipped; the nesting stops before the first column dependent on
+/// the base and the series columns before it (its part left ≤ 1e-9), so that the caller cannot
+/// choose an order these samples cannot determine.
+pub fn nested_rss(y: &[f64], w: &[f64], base: &OrthoBase, series: &[Vec<f64>]) -> Result<NestedRss, ModelCheckError> {
+    let n = check_series(y, w, base, series)?;
     // The series columns the base does not span (projected, unit weighted norm before), then W·y.
     let projected = base.project_columns(series, w);
     let used: Vec<usize> = (0..series.len()).filter(|&j| projected[j].iter().any(|v| *v != 0.0)).collect();
@@ -318,14 +325,7 @@ pub fn greedy_rss(
     series: &[Vec<f64>],
     stop: f64,
 ) -> Result<NestedRss, ModelCheckError> {
-    let n = w.len();
-    check_len("y", n, y.len())?;
-    check_finite("y", y)?;
-    for (j, c) in series.iter().enumerate() {
-        check_len(&format!("series column {j}"), n, c.len())?;
-        check_finite(&format!("series column {j}"), c)?;
-    }
-    check_len("base rows", n, base.nrows())?;
+    let n = check_series(y, w, base, series)?;
     let k = series.len();
     // Projected weighted columns at unit norm (before the projection; a column the base spans is
     // zero and never taken).
