@@ -5,13 +5,9 @@
 //! leftover temporary directory). Cases run in parallel; each fails in milliseconds because every
 //! check happens before any simulation.
 
+use crate::util::{root, small, vmt};
 use rayon::prelude::*;
-use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn small() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml")
-}
+use std::path::Path;
 
 /// One bad input: the files to write (relative name, bytes; a name ending in `/` is a directory),
 /// the vmt arguments (`{dir}` is replaced by the case's directory), the file the message must name
@@ -535,7 +531,7 @@ fn model_cases() -> Vec<Case> {
 }
 
 fn urdf_cases() -> Vec<Case> {
-    let base = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("urdf/slide_column.urdf")).unwrap();
+    let base = std::fs::read_to_string(root().join("urdf/slide_column.urdf")).unwrap();
     let scen = |urdf_name: &str| scenario_text(&[("machine", Some(toml::Value::String(urdf_name.into())))]);
     let mut cases = Vec::new();
     let mut deep = String::from("<?xml version=\"1.0\"?>\n<robot name=\"r\">\n");
@@ -679,7 +675,7 @@ fn check(c: &Case) -> Option<String> {
     let d = dir.to_string_lossy();
     let argv: Vec<String> = c.args.iter().map(|a| a.replace("{dir}", &d)).collect();
     let t0 = std::time::Instant::now();
-    let out = Command::new(env!("CARGO_BIN_EXE_vmt")).args(&argv).env("RAYON_NUM_THREADS", "1").output().unwrap();
+    let out = vmt().args(&argv).env("RAYON_NUM_THREADS", "1").output().unwrap();
     let secs = t0.elapsed().as_secs_f64();
     let err = String::from_utf8_lossy(&out.stderr);
     let mut problems = Vec::new();
@@ -741,7 +737,7 @@ fn every_bad_input_exits_2_names_file_and_place_and_writes_nothing() {
 /// but 0.5–1.4 samples of it take milliseconds.
 #[test]
 fn a_crawl_shorter_than_two_samples_exits_2_naming_the_ssi_check() {
-    let seed002 = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/crawl_seed002.toml");
+    let seed002 = root().join("scenarios/crawl_seed002.toml");
     let text = std::fs::read_to_string(&seed002).unwrap();
     let failures: Vec<String> = [0.5, 1.0, 1.4]
         .into_iter()

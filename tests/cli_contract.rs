@@ -3,16 +3,9 @@
 //! the report; `--trials 0` is refused; an external estimator (examples/my_estimator.py) is judged by the
 //! `--tolerance` it is given — exit code and table differ between a tolerance it meets and one it misses.
 
+use crate::util::{root, small, vmt};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-
-fn vmt() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_vmt"))
-}
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
 
 fn ok(out: Output, what: &str) -> String {
     assert!(out.status.success(), "{what}: {}", String::from_utf8_lossy(&out.stderr));
@@ -21,7 +14,7 @@ fn ok(out: Output, what: &str) -> String {
 
 /// The small test scenario with the six laser lines of the nine-line layout read in its positioning run.
 fn lines_scenario(dir: &Path) -> PathBuf {
-    let text = std::fs::read_to_string(root().join("tests/data/small.toml")).unwrap();
+    let text = std::fs::read_to_string(small()).unwrap();
     let from = "sensors = [\"scale\", \"laser_x3\", \"laser_y1\"]";
     assert!(text.contains(from), "test setup: `{from}` not in tests/data/small.toml");
     let p = dir.join("lines.toml");
@@ -87,7 +80,7 @@ fn every_json_output_is_an_object_whose_first_key_is_a_versioned_format() {
     let accel = root().join("scenarios/study_accel.toml");
     ok(vmt().arg("simulate").arg(&accel).arg("-o").arg(&passes).output().unwrap(), "simulate study_accel");
     let run_out = t.join("run");
-    let small = root().join("tests/data/small.toml");
+    let small = small();
     let cases: Vec<(&str, Vec<String>, &str)> = vec![
         (
             "run",

@@ -2,12 +2,11 @@
 //! friction sweep (through `vmt friction`), the stick-slip index of the crawl preset, the default
 //! scenario's `vmt run`, and the model-check loop on a lesson.
 
-use std::path::Path;
+use crate::util::{rms, root, vmt};
 
 #[test]
 fn crawl_preset_gives_seed_002_stick_slip_indices_through_the_workflow() {
-    let sc = vmt::scenario::Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/crawl_seed002.toml"))
-        .unwrap();
+    let sc = vmt::scenario::Scenario::load(&root().join("scenarios/crawl_seed002.toml")).unwrap();
     let ph = vmt::simulate::physics(&sc).unwrap();
     let truths = vmt::simulate::simulate_truth(&sc, &ph);
     let runs = vmt::simulate::read_all(&sc, &ph, &truths, sc.seed).unwrap();
@@ -23,8 +22,7 @@ fn crawl_preset_gives_seed_002_stick_slip_indices_through_the_workflow() {
 #[test]
 fn default_run_exits_zero_with_every_estimate_within_tolerance() {
     let tmp = tempfile::tempdir().unwrap();
-    let out =
-        std::process::Command::new(env!("CARGO_BIN_EXE_vmt")).args(["run", "--out"]).arg(tmp.path()).output().unwrap();
+    let out = vmt().args(["run", "--out"]).arg(tmp.path()).output().unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
     assert_eq!(out.status.code(), Some(0), "{text}{}", String::from_utf8_lossy(&out.stderr));
     for row in ["ISO 230-2 E", "straightness acc_z", "EBX pitch", "E after compensation"] {
@@ -42,14 +40,8 @@ fn vmt_run_on_a_lesson_runs_the_model_check_loop_to_the_noise_floor() {
         [("drift_and_lead", &["cyclic_lead", "thermal_drift"][..]), ("warm_up", &["thermal_expansion"][..])]
     {
         let tmp = tempfile::tempdir().unwrap();
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/lessons").join(lesson).join("scenario.toml");
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_vmt"))
-            .arg("run")
-            .arg(&path)
-            .arg("--out")
-            .arg(tmp.path())
-            .output()
-            .unwrap();
+        let path = root().join("scenarios/lessons").join(lesson).join("scenario.toml");
+        let out = vmt().arg("run").arg(&path).arg("--out").arg(tmp.path()).output().unwrap();
         let text = String::from_utf8_lossy(&out.stdout);
         assert_eq!(out.status.code(), Some(0), "{lesson}: {text}{}", String::from_utf8_lossy(&out.stderr));
         for h in hidden {
@@ -64,7 +56,7 @@ fn vmt_run_on_a_lesson_runs_the_model_check_loop_to_the_noise_floor() {
 fn vmt_friction_identifies_the_stribeck_curve_of_the_friction_sweep_scenario() {
     let tmp = tempfile::tempdir().unwrap();
     let vmt = env!("CARGO_BIN_EXE_vmt");
-    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/friction_sweep.toml");
+    let scenario = root().join("scenarios/friction_sweep.toml");
     let data = tmp.path().join("sweep");
     assert!(std::process::Command::new(vmt)
         .arg("simulate")
@@ -98,10 +90,6 @@ fn components(x: &[f64], e: &[f64], wl: f64) -> (f64, f64) {
     (-h.sin * k * k, -h.cos * k * k)
 }
 
-fn rms(v: &[f64]) -> f64 {
-    (v.iter().map(|e| e * e).sum::<f64>() / v.len() as f64).sqrt()
-}
-
 /// One accelerometer on the default scenario's `cv` procedure: the estimate `vmt run` makes and the
 /// truth band-limited by the same operator (the mount point's noise-free curvature u·(E'' + ε''×r)
 /// integrated in the cosine basis over the estimate's band: see `integrate_curvature_cosine`).
@@ -115,8 +103,7 @@ struct AccelOutcome {
 fn default_cv(preset: vmt_sim::sensors::AccelPreset, seeds: &[Option<u64>]) -> Vec<Vec<(&'static str, AccelOutcome)>> {
     use rapier3d_f64::glamx::DVec3;
     use vmt_estimators::accel_straightness::*;
-    let mut sc =
-        vmt::scenario::Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/default.toml")).unwrap();
+    let mut sc = vmt::scenario::Scenario::load(&root().join("scenarios/default.toml")).unwrap();
     sc.procedures.retain(|p| p.name() == "cv");
     for s in sc.sensors.iter_mut().filter(|s| s.name.starts_with("acc_")) {
         s.preset = Some(preset);

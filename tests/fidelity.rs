@@ -11,28 +11,11 @@
 //! (the servo-held direction) and much less across the guideway (1e9 N/m bearings, forces of the
 //! order of newtons per count). The bounds below are those physical scales, not fitted to the result.
 
-use std::path::{Path, PathBuf};
+use crate::util::{bundled, root};
+use std::path::Path;
 use vmt::scenario::Scenario;
 use vmt::simulate::{physics, read_all, simulate_truth};
 use vmt::workflow::run::run_estimators;
-
-/// The bundled scenarios: scenarios/*.toml and the lessons.
-fn bundled() -> Vec<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios");
-    let mut v: Vec<PathBuf> = std::fs::read_dir(&root)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    for e in std::fs::read_dir(root.join("lessons")).unwrap() {
-        let p = e.unwrap().path().join("scenario.toml");
-        if p.exists() {
-            v.push(p);
-        }
-    }
-    v.sort();
-    v
-}
 
 /// The scenario at `path` with its top-level `fidelity` set to `fidelity`.
 fn with_fidelity(path: &Path, fidelity: &str) -> Scenario {
@@ -73,8 +56,8 @@ fn fast_integrator_follows_rapier_on_every_bundled_scenario() {
             failures.push(msg);
         }
     };
-    for path in bundled() {
-        let name = path.strip_prefix(env!("CARGO_MANIFEST_DIR")).unwrap().display().to_string();
+    for name in bundled() {
+        let path = root().join(&name);
         let [fast, reference] = ["fast", "reference"].map(|f| {
             let sc = with_fidelity(&path, f);
             let ph = physics(&sc).unwrap();

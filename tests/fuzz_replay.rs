@@ -3,8 +3,10 @@
 //! interesting tokens — nan, inf, 1e300, -1, 4294967295, quotes, brackets, deep nesting — deleted and
 //! duplicated spans). A panic in any reader fails the test, naming the target and the input.
 
+use crate::util::root;
 use rand::{Rng, SeedableRng};
-use std::path::Path;
+use std::cell::Cell;
+use std::sync::Once;
 
 /// Mutations per target: small enough for CI (a few seconds), enough to reach every reader's
 /// number, structure and encoding paths from the seeds.
@@ -76,20 +78,43 @@ fn mutate(seed: &[u8], rng: &mut rand_chacha::ChaCha8Rng) -> Vec<u8> {
     v
 }
 
+thread_local! {
+    /// Whether a panic on this thread is an expected one of [`panics_quietly`] (not printed).
+    static QUIET: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Whether `f` panics, without printing the panic message. All the tests share one process (one test
+/// binary): the panic hook is process-wide, so it is replaced once, by one that stays silent only on a
+/// thread inside this function and passes every other panic (another test's failure) to the previous
+/// hook. (Taking the hook and setting it back per call raced between concurrent tests and could leave
+/// the silent hook in place, hiding every later failure message.)
+fn panics_quietly(f: impl FnOnce()) -> bool {
+    static HOOK: Once = Once::new();
+    HOOK.call_once(|| {
+        let prev = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(Cell::get) {
+                prev(info)
+            }
+        }));
+    });
+    QUIET.with(|q| q.set(true));
+    let panicked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).is_err();
+    QUIET.with(|q| q.set(false));
+    panicked
+}
+
 fn replay(name: &str, target: fn(&[u8]), seeds: &[Vec<u8>]) {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(14);
     let mut inputs: Vec<Vec<u8>> = seeds.to_vec();
     for k in 0..MUTATIONS {
         inputs.push(mutate(&seeds[k % seeds.len()], &mut rng));
     }
-    let prev = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
     let failures: Vec<String> = inputs
         .iter()
-        .filter(|d| std::panic::catch_unwind(|| target(d)).is_err())
+        .filter(|d| panics_quietly(|| target(d)))
         .map(|d| String::from_utf8_lossy(&d[..d.len().min(400)]).into_owned())
         .collect();
-    std::panic::set_hook(prev);
     assert!(
         failures.is_empty(),
         "{name}: {} of {} inputs panicked, e.g.:\n{}",
@@ -97,10 +122,6 @@ fn replay(name: &str, target: fn(&[u8]), seeds: &[Vec<u8>]) {
         inputs.len(),
         failures[0]
     );
-}
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
 fn read(p: &str) -> Vec<u8> {

@@ -8,14 +8,14 @@
 //! `VMT_GEN_DRAWS=20` for a quick look). The default suite runs small fixed-seed versions of the
 //! rate studies (`complete_models_have_at_most_2_percent_false_alarms`, `hidden_effects_in_ci`);
 //! the full studies are `#[ignore]`d tools:
-//! `cargo test --release --test gen_diagnose -- --ignored --nocapture`.
+//! `cargo test --release --test tests gen_diagnose:: -- --ignored --nocapture`.
 //!
 //! The normalised RMS the harness judges ("NRMS vs true σ") is the residual RMS over all channels
 //! (`channels[].rms`, weighted by each channel's reading count) divided by the generator's true σ,
 //! so it does not depend on how vmt treats a manifest σ that is understated or missing. vmt's own
 //! `normalized_rms` is printed beside it.
 
-mod gen;
+use crate::gen;
 
 use gen::{draw, Draw, Effect, Family};
 use rayon::prelude::*;
@@ -870,7 +870,7 @@ fn unresolvable_cyclic_error_is_never_claimed_at_a_wrong_period() {
 
 /// Write one draw for inspection: `VMT_GEN_DUMP="LABEL INDEX DIR"` (LABEL as the tables print it,
 /// e.g. `complete_table`, `hidden_backlash`, `hidden_cyclic_lead+backlash`, `unresolved_cyclic`),
-/// then `cargo test --release --test gen_diagnose dump_draw -- --ignored`. Writes DIR/data/ and
+/// then `cargo test --release --test tests gen_diagnose::dump_draw -- --ignored`. Writes DIR/data/ and
 /// DIR/{truth,complete,start}.toml.
 #[test]
 #[ignore = "a tool: writes the draw named by VMT_GEN_DUMP"]

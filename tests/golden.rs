@@ -6,34 +6,12 @@
 //! by `<out>`, the program path by `<vmt>` and the build's `(git COMMIT)` by `(git <commit>)`).
 //! `SOURCE_DATE_EPOCH=0` fixes the report date.
 //!
-//! Re-capture after a deliberate change of behaviour: `VMT_BLESS=1 cargo test --release --test golden`;
+//! Re-capture after a deliberate change of behaviour: `VMT_BLESS=1 cargo test --release --test tests golden::`;
 //! `VMT_BIN=PATH` runs another build of vmt (how the goldens were captured from the build of 04efba4).
 
+use crate::util::{bundled, root};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// Every bundled scenario and lesson, as paths relative to the repository root (the table prints the path).
-fn bundled() -> Vec<String> {
-    let mut v = Vec::new();
-    for e in std::fs::read_dir(root().join("scenarios")).unwrap() {
-        let p = e.unwrap().path();
-        if p.extension().is_some_and(|x| x == "toml") {
-            v.push(format!("scenarios/{}", p.file_name().unwrap().to_string_lossy()));
-        }
-    }
-    for e in std::fs::read_dir(root().join("scenarios/lessons")).unwrap() {
-        let p = e.unwrap().path();
-        if p.join("scenario.toml").is_file() {
-            v.push(format!("scenarios/lessons/{}/scenario.toml", p.file_name().unwrap().to_string_lossy()));
-        }
-    }
-    v.sort();
-    v
-}
 
 /// FNV-1a, 64 bit (a stable content hash needing no dependency).
 fn fnv1a(bytes: &[u8]) -> u64 {

@@ -5,6 +5,7 @@
 //! complete old output or exactly the complete new one (file names and bytes): never a mix, never
 //! nothing. The leftovers of killed runs (`NAME.vmt-partial-PID`) are removed by the next run.
 
+use crate::util::{small, vmt};
 use rand::{Rng, SeedableRng};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -15,7 +16,7 @@ const KILLS: usize = 30;
 
 /// A tiny scenario: the small test scenario's positioning test only (3 targets, 2 runs), seed `seed`.
 fn tiny(dir: &Path, seed: i64) -> PathBuf {
-    let small = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
+    let small = small();
     let mut t: toml::Table = toml::from_str(&std::fs::read_to_string(small).unwrap()).unwrap();
     t.insert("seed".into(), toml::Value::Integer(seed));
     let procs = t.get_mut("procedures").unwrap().as_array_mut().unwrap();
@@ -50,7 +51,7 @@ fn snapshot(dir: &Path) -> Option<BTreeMap<String, Vec<u8>>> {
 }
 
 fn command(kind: &str, scenario: &Path, out: &Path) -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_vmt"));
+    let mut c = vmt();
     match kind {
         "run" => c.arg("run").arg(scenario).arg("-o").arg(out),
         "simulate" => c.arg("simulate").arg(scenario).arg("-o").arg(out),

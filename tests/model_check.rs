@@ -17,8 +17,7 @@ use vmt::simulate::{physics, read_all, simulate_truth, to_measurement_set};
 use vmt_estimators::modelcheck::Verdict;
 use vmt_sim::effects::{Effect, EffectName, EffectParams};
 
-#[path = "common/realdata.rs"]
-mod realdata;
+use crate::util::realdata;
 
 /// After adding the hidden effect the residual must be at the noise level: normalised RMS ≤ 1.3.
 /// (1.0 is the noise floor, and with ~90 samples its scatter is about ±0.1; the simulator adds some
@@ -359,7 +358,7 @@ fn real_b02_x_no_cyclic_lead_shorter_than_the_targets_resolve() {
 /// `significant` effect from the diagnosis, up to 5 times. Prints per file the normalised RMS before
 /// and after (against σ from the repeats: the files state none), the σ check, what was added and
 /// every other claim (inseparable entries with their aliases). Run with
-/// `cargo test --release --test model_check -- --ignored --nocapture real_data_loop_table`.
+/// `cargo test --release --test tests model_check::real_data_loop_table -- --ignored --nocapture`.
 #[test]
 #[ignore = "a tool: prints the real-data loop table of issue 11"]
 fn real_data_loop_table() {

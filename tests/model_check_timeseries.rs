@@ -3,9 +3,7 @@
 //! the FORMAT.md contract and run through the `vmt` binary (`diagnose --json`, `add`,
 //! `compare --json`) over many draws in parallel; results are rates over draws.
 
-mod gen_timeseries;
-
-use gen_timeseries::*;
+use crate::gen_timeseries::*;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -159,7 +157,7 @@ fn accelerometer_generator_writes_a_readable_set() {
 
 // ------------------------------------------------------------------------------------------
 // Rates over draws (the "must show"). Each prints its rates; run with
-// `cargo test --release --test model_check_timeseries -- --ignored --nocapture`.
+// `cargo test --release --test tests model_check_timeseries:: -- --ignored --nocapture`.
 
 fn accel_rates(hidden: AccelHidden, draws: u64, add: bool) -> Vec<(AccelTruth, Outcome)> {
     let root = workdir(&format!("acc{hidden:?}"));

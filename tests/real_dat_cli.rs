@@ -1,13 +1,10 @@
 //! `vmt compare` and `vmt diagnose` read an ISO 230-2 `.dat` file (the ecmc key=value format of
 //! ../shared/realdata/ecmc_iso230_2/) directly as `--data`, as they read a measurement set.
 
-use std::process::Command;
-
-#[path = "common/realdata.rs"]
-mod realdata;
+use crate::util::{self, realdata};
 
 fn vmt(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_vmt")).args(args).output().unwrap();
+    let out = util::vmt().args(args).output().unwrap();
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stdout).into(),

@@ -15,6 +15,7 @@
 //! Each report also passes [`vmt_report::lint`] on the `report.json` written beside it: every figure
 //! names both axes with units, every table column of bare numbers names its unit, no section is empty.
 
+use crate::util::{self, root};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -29,7 +30,7 @@ fn chromium() -> Option<PathBuf> {
 }
 
 fn vmt(args: &[&str]) {
-    let out = Command::new(env!("CARGO_BIN_EXE_vmt")).args(args).output().expect("running vmt");
+    let out = util::vmt().args(args).output().expect("running vmt");
     // Exit 1 (an estimate missed its tolerance) still writes a report; 2 (bad input) does not.
     assert!(
         matches!(out.status.code(), Some(0) | Some(1)),
@@ -116,7 +117,7 @@ fn render(browser: &Path, page: &Path, png: &Path) -> Result<(), String> {
 
 #[test]
 fn every_kind_of_report_renders_in_chromium_and_is_readable() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = root();
     let tmp = tempfile::tempdir().unwrap();
     let out = |name: &str| tmp.path().join(name);
     let sc = |rel: &str| root.join("scenarios").join(rel).display().to_string();

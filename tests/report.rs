@@ -1,7 +1,7 @@
 //! The HTML report of `vmt run` (issue 7): well-formed, self-contained, and a plot for every estimate of
 //! the table.
 
-use std::path::Path;
+use crate::util::{small, vmt};
 
 /// Counts of opening and closing tags of `name` (opening tags `<name` followed by space or `>`).
 fn tag_balance(html: &str, name: &str) -> (usize, usize) {
@@ -19,14 +19,8 @@ fn tag_balance(html: &str, name: &str) -> (usize, usize) {
 #[test]
 fn run_report_is_well_formed_and_has_a_figure_for_every_estimate() {
     let tmp = tempfile::tempdir().unwrap();
-    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_vmt"))
-        .arg("run")
-        .arg(&scenario)
-        .arg("--out")
-        .arg(tmp.path())
-        .output()
-        .unwrap();
+    let scenario = small();
+    let out = vmt().arg("run").arg(&scenario).arg("--out").arg(tmp.path()).output().unwrap();
     assert!(out.status.code() == Some(0) || out.status.code() == Some(1), "{}", String::from_utf8_lossy(&out.stderr));
     let html = std::fs::read_to_string(tmp.path().join("report.html")).unwrap();
     assert_eq!(html.matches("<html").count(), 1);

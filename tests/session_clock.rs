@@ -3,6 +3,7 @@
 //! tests. That is what makes the advice of `diagnose` for an inseparable thermal expansion / scale
 //! error pair ("repeat the positioning test later, when the machine is warm") work in simulation.
 
+use crate::util::root;
 use std::path::Path;
 use vmt::model::{Model, ModelEffect};
 use vmt::modelcheck::diagnose;
@@ -14,7 +15,7 @@ use vmt_estimators::modelcheck::Verdict;
 /// (α 11.5e-6 1/K, ΔT∞ 2 K, τ 600 s), a laser along X at the head (σ 50 nm), and two short ISO 230-2
 /// cycles with `between` in between them.
 fn scenario(between: &str) -> Scenario {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = root();
     let lesson = std::fs::read_to_string(root.join("scenarios/lessons/backlash/scenario.toml")).unwrap();
     let head = lesson.split("[truth]").next().unwrap();
     let iso = |name: &str| {

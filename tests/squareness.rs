@@ -2,7 +2,8 @@
 //! of rapier axes (vmt_sim::chain) and identified by laser_ls from the seed-001 laser line set.
 //! The physics is simulated once per truth; the laser noise is redrawn per seed.
 
-use std::path::{Path, PathBuf};
+use crate::util::{root, vmt};
+use std::path::PathBuf;
 use vmt::measurement::{self, UnitChoice};
 use vmt::scenario::Scenario;
 use vmt::simulate::{chain_truths, read_chain};
@@ -60,17 +61,13 @@ fn written_set_reads_back(sc: &Scenario, truths: &[(usize, LineTruth)]) {
         // 1e-12 rad: the CSV round trip is exact; what is left is summation order in the solver.
         assert!((a.value - b.value).abs() < 1e-12 && a.std_error.is_some(), "{name}: {} vs {}", a.value, b.value);
     }
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_vmt"))
-        .arg("identify")
-        .arg(dir.path().join("set"))
-        .output()
-        .unwrap();
+    let out = vmt().arg("identify").arg(dir.path().join("set")).output().unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success() && text.contains("EC0Y squareness_xy"), "{text}");
 }
 
 fn scenario_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/squareness_3axis.toml")
+    root().join("scenarios/squareness_3axis.toml")
 }
 
 fn scenario_text() -> String {

@@ -12,6 +12,7 @@
 //! time stamp (an averaging ADC), computed exactly from the analytic slope `E'` and the antiderivative
 //! of `τ`: `a_j = dir·v·(E'(x_j) − E'(x_{j−1}))/Δt + g·(T(x_j) − T(x_{j−1}))/(x_j − x_{j−1}) + b + n_j`.
 
+use crate::util::{rms, vmt};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal, StudentT};
@@ -148,10 +149,6 @@ fn generate(seed: u64, with_tilt: bool) -> Draw {
         passes.push((run, x_cmd));
     }
     Draw { profile, tilt, rho, passes }
-}
-
-fn rms(v: &[f64]) -> f64 {
-    (v.iter().map(|e| e * e).sum::<f64>() / v.len() as f64).sqrt()
 }
 
 /// What one method did on one draw.
@@ -448,7 +445,7 @@ fn vmt_straightness_on_a_generated_set_matches_the_library() {
         }
         // The binary: JSON and the profile CSV.
         let csv = dir.join("estimate.csv");
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_vmt"))
+        let out = vmt()
             .args(["straightness", dir.to_str().unwrap(), "--json", "-o", csv.to_str().unwrap()])
             .output()
             .unwrap();
@@ -492,7 +489,7 @@ fn vmt_straightness_refuses_unusable_passes() {
     let run = |dir: &Path, extra: &[&str]| {
         let mut args = vec!["straightness", dir.to_str().unwrap()];
         args.extend_from_slice(extra);
-        std::process::Command::new(env!("CARGO_BIN_EXE_vmt")).args(&args).output().unwrap()
+        vmt().args(&args).output().unwrap()
     };
     let edit = |name: &str, f: &dyn Fn(&mut MeasurementSet)| {
         let dir = tmp.path().join(name);

@@ -10,13 +10,13 @@
 //! the bound: the test also requires RMS d ≤ 1.5·bound at 1e-5 (the SNR-weighted fusion is the
 //! Gauss–Markov estimate of the model, docs/methods.md).
 
-use std::path::Path;
+use crate::util::root;
 use vmt::scenario::Scenario;
 use vmt::study::{run_study, Vary};
 
 #[test]
 fn a_studys_rms_error_is_not_below_its_cramer_rao_bound() {
-    let sc = Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/study_accel.toml")).unwrap();
+    let sc = Scenario::load(&root().join("scenarios/study_accel.toml")).unwrap();
     let vary = Vary::parse("sensors.acc_z.noise_density=1e-6,3e-6,1e-5").unwrap();
     let rows = run_study(&sc, &vary, 40, (0, 1), None, None).unwrap();
     for &v in &vary.values {

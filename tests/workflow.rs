@@ -2,16 +2,8 @@
 //! independence, round trips of simulated measurement sets, and bad input (exit code 2, a message that
 //! names the file and the place).
 
+use crate::util::{root, small, vmt};
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn vmt() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_vmt"))
-}
-
-fn small() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml")
-}
 
 /// All files of a directory, sorted, with their bytes.
 fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
@@ -169,7 +161,7 @@ fn csv_with_a_missing_column_or_nan_is_rejected_with_file_line_and_column() {
 #[test]
 fn a_study_gives_identical_trials_on_1_and_2_threads_and_shards_merge_to_the_same_file() {
     let tmp = tempfile::tempdir().unwrap();
-    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/study_accel.toml");
+    let scenario = root().join("scenarios/study_accel.toml");
     let run = |threads: &str, shard: Option<&str>, out: &Path| {
         let mut c = vmt();
         c.args(["study"])
@@ -388,7 +380,7 @@ fn a_study_over_a_scenario_number_resimulates_the_physics_per_value() {
     use vmt::scenario::Scenario;
     use vmt::study::{run_study, set_scenario_number, Vary, VaryKey};
     let tmp = tempfile::tempdir().unwrap();
-    let small = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
+    let small = small();
     let text = std::fs::read_to_string(&small).unwrap();
     let path = tmp.path().join("s.toml");
     std::fs::write(&path, &text).unwrap();
@@ -473,7 +465,7 @@ fn first_order_sobol_indices_match_an_analytic_model() {
 fn a_sampled_study_is_the_same_in_shards_and_draws_within_its_distribution() {
     let tmp = tempfile::tempdir().unwrap();
     let sc = tmp.path().join("s.toml");
-    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml"), &sc).unwrap();
+    std::fs::copy(small(), &sc).unwrap();
     let study = |extra: &[&str], out: &str| {
         let o = vmt()
             .arg("study")
@@ -524,7 +516,7 @@ fn a_sampled_study_is_the_same_in_shards_and_draws_within_its_distribution() {
 #[test]
 fn identify_without_sigma_estimates_it_from_repeats_or_refuses() {
     let tmp = tempfile::tempdir().unwrap();
-    let small = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml")).unwrap();
+    let small = std::fs::read_to_string(small()).unwrap();
     let se = |runs: usize, strip: bool| -> (Option<i32>, String, String) {
         let dir = tmp.path().join(format!("r{runs}{strip}"));
         std::fs::create_dir_all(&dir).unwrap();
@@ -570,7 +562,7 @@ fn identify_without_sigma_estimates_it_from_repeats_or_refuses() {
 #[test]
 fn a_study_report_has_one_figure_per_estimate() {
     let tmp = tempfile::tempdir().unwrap();
-    let small = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
+    let small = small();
     let o = vmt()
         .arg("study")
         .arg(&small)
@@ -607,7 +599,7 @@ fn a_study_report_has_one_figure_per_estimate() {
 #[test]
 fn straightness_command_and_run_check_agree_on_the_same_data() {
     let tmp = tempfile::tempdir().unwrap();
-    let sc = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/study_accel.toml");
+    let sc = root().join("scenarios/study_accel.toml");
     let out = tmp.path().join("run");
     let o = vmt().arg("run").arg(&sc).arg("--out").arg(&out).arg("--json").output().unwrap();
     assert!(o.status.code().is_some_and(|c| c == 0 || c == 1), "{}", String::from_utf8_lossy(&o.stderr));
@@ -640,7 +632,7 @@ fn straightness_command_and_run_check_agree_on_the_same_data() {
 fn compare_names_effects_it_leaves_out_and_the_unit_of_an_estimated_sigma() {
     let tmp = tempfile::tempdir().unwrap();
     let set = tmp.path().join("set");
-    let small = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
+    let small = small();
     assert!(vmt().arg("simulate").arg(&small).arg("-o").arg(&set).output().unwrap().status.success());
     // The accelerometers' noise density is left out of the manifest, so σ is estimated from the data.
     let m = std::fs::read_to_string(set.join("manifest.toml")).unwrap();
@@ -670,7 +662,7 @@ fn compare_names_effects_it_leaves_out_and_the_unit_of_an_estimated_sigma() {
 fn compensation_table_numbers_have_no_conversion_noise() {
     let tmp = tempfile::tempdir().unwrap();
     let set = tmp.path().join("set");
-    let small = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/small.toml");
+    let small = small();
     assert!(vmt().arg("simulate").arg(&small).arg("-o").arg(&set).output().unwrap().status.success());
     for extra in [&[][..], &["--equidistant", "4"][..]] {
         let out = tmp.path().join(format!("comp{}.csv", extra.len()));

@@ -17,8 +17,7 @@ use vmt_estimators::friction_id::{
     StribeckCoefficients, StribeckFit, StribeckFitOptions, StribeckShape, SweepDirection,
 };
 
-#[path = "../../tests/common/realdata.rs"]
-mod realdata;
+use crate::realdata;
 
 /// Numeric rows of a CSV after `skip` header lines (the first line may carry a UTF-8 BOM).
 fn read_rows(dir: &Path, name: &str, skip: usize) -> Vec<Vec<f64>> {

@@ -11,8 +11,7 @@ use std::path::{Path, PathBuf};
 use vmt_estimators::iso230_2::dat::{parse_dat, DatFile};
 use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
 
-#[path = "../../tests/common/realdata.rs"]
-mod realdata;
+use crate::realdata;
 
 /// `realdata/ecmc_iso230_2`, or `None` (the test is skipped, visibly) when the real data is absent.
 fn realdata_dir(test: &str) -> Option<PathBuf> {

@@ -1,6 +1,6 @@
 //! Signatures of drive effects where physics puts them (issue 3).
 
-mod common;
+use crate::util;
 use vmt_sim::axis_sim::{AxisTruth, GuideFriction};
 use vmt_sim::drive::{BallScrewConfig, DriveConfig, FeedbackKind};
 use vmt_sim::friction::StribeckParams;
@@ -51,7 +51,7 @@ fn mean_reversal(model: &AxisModel, truth: &AxisTruth) -> f64 {
 }
 
 fn screw_model(feedback: FeedbackKind) -> AxisModel {
-    let mut m = common::slide_column();
+    let mut m = util::slide_column();
     m.drive = DriveConfig::BallScrew(BallScrewConfig { feedback, ..Default::default() });
     m
 }
@@ -82,7 +82,7 @@ fn acceleration_pitches_the_column_as_the_nut_offset_and_bearing_stiffness_predi
     // centre of mass (z_c above it). Moment about y at the bearing plane: M = F·(z_n − z_c), resisted by
     // the blocks' vertical stiffness k_θ = Σ k_z·x_b². Quasi-static pitch θ = M/k_θ: negative (the column
     // top lags) while accelerating in +x.
-    let model = common::slide_column();
+    let model = util::slide_column();
     let truth = AxisTruth::default();
     let a = 2.0;
     let mut plan = vmt_sim::motion::MotionPlan::starting_at(0.1);

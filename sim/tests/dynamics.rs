@@ -1,8 +1,7 @@
 //! Dynamics are real (issue 2): the accelerometer feels the carriage pushed along its error path, and
 //! the bearing resonance sits where k/m puts it.
 
-mod common;
-use common as common_machine;
+use crate::util;
 use rapier3d_f64::glamx::DVec3;
 use vmt_sim::axis_sim::AxisTruth;
 use vmt_sim::axis_sim::{AxisSim, GRAVITY};
@@ -14,7 +13,7 @@ use vmt_sim::sensors::{SensorKind, SensorSpec};
 
 #[test]
 fn noise_free_accelerometer_reads_v2_times_curvature_at_constant_speed() {
-    let model = common_machine::slide_column();
+    let model = util::slide_column();
     let (amp, wl, v) = (2e-6, 0.1, 0.5);
     let errors = AxisTruth::geometric(ErrorMotions {
         straightness_z: Profile::harmonics(vec![Harmonic { amplitude: amp, wavelength: wl, phase: 0.4 }]),
@@ -63,7 +62,7 @@ fn noise_free_accelerometer_reads_v2_times_curvature_at_constant_speed() {
 
 #[test]
 fn vertical_bearing_resonance_sits_at_sqrt_of_n_k_over_m() {
-    let model = common_machine::slide_column();
+    let model = util::slide_column();
     let errors = AxisTruth::default();
     let mut sim = AxisSim::new(&model, &errors, 0.5);
     let hold = Command { pos: 0.5, vel: 0.0, acc: 0.0 };

@@ -2,7 +2,7 @@
 //! is injected alone into the slide_column X axis and read by a noise-free laser at the axis reference
 //! point (or an accelerometer), and its signature is recovered from the readings.
 
-mod common;
+use crate::util;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use vmt_sim::air::Air;
@@ -92,7 +92,7 @@ fn lead_amplitude(tab: &Table) -> f64 {
 }
 
 fn screw_model(feedback: FeedbackKind) -> AxisModel {
-    let mut m = common::slide_column();
+    let mut m = util::slide_column();
     m.drive = DriveConfig::BallScrew(BallScrewConfig { lead: LEAD, feedback, ..Default::default() });
     m
 }
@@ -118,7 +118,7 @@ fn cyclic_lead_error_shows_at_the_screw_period_in_semi_closed_loop_and_vanishes_
 
 #[test]
 fn thermal_expansion_grows_with_position_and_time_as_alpha_x_delta_t() {
-    let model = common::slide_column();
+    let model = util::slide_column();
     // τ = 10 s instead of a real machine's ~1200 s: the 24 s cycle (two runs, starting the session at
     // t = 0) then sees ΔT(t) rise from 0 to 91 % of ΔT∞ — the same law
     // δ = α·x·ΔT∞·(1 − e^(−t/τ)) at a time scale the test can afford.
@@ -166,7 +166,7 @@ fn thermal_expansion_grows_with_position_and_time_as_alpha_x_delta_t() {
 fn thermal_drift_carries_over_from_one_run_to_the_next_on_the_session_clock() {
     use vmt_sim::effects::ThermalDrift;
     use vmt_sim::procedures::{plan_procedure, session_schedule, simulate_run};
-    let model = common::slide_column();
+    let model = util::slide_column();
     let drift = ThermalDrift { value: 5e-6, tau: 20.0 };
     let truth = AxisTruth {
         feedback: FeedbackErrors { thermal_drift: Some(drift.clone()), ..Default::default() },
@@ -216,7 +216,7 @@ fn thermal_drift_carries_over_from_one_run_to_the_next_on_the_session_clock() {
 
 #[test]
 fn scale_error_gives_a_deviation_linear_in_position_with_the_scale_slope() {
-    let model = common::slide_column();
+    let model = util::slide_column();
     let s = 20e-6;
     let truth = AxisTruth {
         feedback: FeedbackErrors { along: Profile::poly(vec![0.0, s]), ..Default::default() },
@@ -234,7 +234,7 @@ fn scale_error_gives_a_deviation_linear_in_position_with_the_scale_slope() {
 
 #[test]
 fn tilted_accelerometer_at_rest_reads_gravity_times_sine_of_the_tilt() {
-    let model = common::slide_column();
+    let model = util::slide_column();
     let truth = AxisTruth::default();
     let theta = 1e-3;
     let acc = SensorSpec {
@@ -266,7 +266,7 @@ fn tilted_accelerometer_at_rest_reads_gravity_times_sine_of_the_tilt() {
 
 /// Change of a laser's (error-applied, noise-free) reading over a 0.8 m move, 0.1 → 0.9 m, m.
 fn laser_reading_over_move(spec: &SensorSpec) -> f64 {
-    let model = common::slide_column();
+    let model = util::slide_column();
     let mut plan = MotionPlan::starting_at(0.1);
     plan.dwell(0.2);
     plan.move_to(0.9, 0.4, 2.0);
@@ -338,10 +338,10 @@ fn servo_lag_gives_a_following_error_of_velocity_over_kv_at_constant_velocity() 
         let spread = e.iter().map(|x| (x - mean).abs()).fold(0.0, f64::max);
         (mean, spread)
     };
-    let mut lag = common::slide_column();
+    let mut lag = util::slide_column();
     Adjustments { servo_kv: Some(kv), ..Default::default() }.apply(&mut lag);
     let (e, spread) = following(&lag);
-    let (e_ff, _) = following(&common::slide_column());
+    let (e_ff, _) = following(&util::slide_column());
     println!(
         "servo lag: following error {e:e} m (v/kv = {:e} m), spread {spread:e} m; with feed-forward {e_ff:e} m",
         v / kv

@@ -11,7 +11,7 @@
 //! limit cycle — and the window mean is the steady state; what is left is the force ripple from the
 //! 1 nm feedback quantisation, which averages out over the 0.5 s window.
 
-mod common;
+use crate::util;
 use vmt_sim::axis_sim::{AxisTruth, GuideFriction};
 use vmt_sim::friction::{stribeck_force, StribeckParams};
 use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureKind, ProcedureSpec, RunData};
@@ -29,7 +29,7 @@ fn steady_motor_force_follows_the_injected_stribeck_curve_over_four_decades() {
 }
 
 fn sweep_follows_stribeck(delta: f64) {
-    let model = common::slide_column();
+    let model = util::slide_column();
     let truth = AxisTruth { friction: GuideFriction::Stribeck(stribeck(delta)), ..Default::default() };
     let sensors = [SensorSpec::new("force", SensorKind::MotorForce), SensorSpec::new("vel", SensorKind::Velocity)];
     let spec = ProcedureSpec::FrictionSweep {

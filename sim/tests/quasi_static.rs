@@ -2,8 +2,7 @@
 //! relative to the same traverse with every error set to zero (which removes gravity sag and the
 //! drive-force tilt), equals δ(r) = E(x) + ε(x) × r, and the body's rotation equals ε(x).
 
-mod common;
-use common as common_machine;
+use crate::util;
 use rapier3d_f64::glamx::DVec3;
 use vmt_sim::axis_sim::simulate;
 use vmt_sim::axis_sim::AxisTruth;
@@ -25,7 +24,7 @@ fn errors() -> ErrorMotions {
 
 #[test]
 fn slow_traverse_reproduces_the_injected_error_motions() {
-    let model = common_machine::slide_column();
+    let model = util::slide_column();
     let mut plan = MotionPlan::starting_at(0.1);
     plan.dwell(0.3);
     let (t0, t1) = plan.move_to(0.4, 0.01, 0.5);

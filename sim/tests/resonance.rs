@@ -2,7 +2,7 @@
 //! the speed (issue 3): it is a temporal frequency, unlike guideway errors, whose temporal frequency
 //! scales with the speed.
 
-mod common;
+use crate::util;
 use vmt_sim::axis_sim::{AxisTruth, StructuralMode};
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureSpec, RunData};
@@ -35,7 +35,7 @@ fn peak_frequency(x: &[f64], fs: f64, f_lo: f64, f_hi: f64) -> f64 {
 
 #[test]
 fn column_mode_appears_at_its_frequency_for_every_speed() {
-    let model = common::slide_column();
+    let model = util::slide_column();
     let f_mode = 45.0;
     let truth = AxisTruth {
         // A fine random straightness (roughness, 0.5 mm correlation) excites the column broadly.

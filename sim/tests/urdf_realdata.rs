@@ -3,8 +3,7 @@
 
 use vmt_sim::urdf::parse_urdf;
 
-#[path = "../../tests/common/realdata.rs"]
-mod realdata;
+use crate::util::realdata;
 
 #[test]
 fn every_real_urdf_with_prismatic_joints_loads() {

@@ -9,8 +9,8 @@
 //! `--nocapture` needed) and a person reading the test output sees every skipped real-data test.
 //! CI (`.ci/run`) requires the data to be present, so nothing is skipped there.
 //!
-//! One source file shared by the test crates of the workspace (root `tests/`, `sim/tests/`,
-//! `estimators/tests/`), included with `#[path = …] mod realdata;`.
+//! One source file shared by the test binaries of the workspace: the root's `util::realdata`; vmt-sim's
+//! and vmt-estimators' `tests/tests.rs` include it with `#[path = …]`.
 #![allow(dead_code)]
 
 use std::io::Write;
