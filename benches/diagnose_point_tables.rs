@@ -9,7 +9,6 @@
 //! `cargo bench --bench diagnose_point_tables`
 use criterion::{criterion_group, criterion_main, Criterion};
 
-#[allow(dead_code)]
 #[path = "../tests/gen/mod.rs"]
 mod gen;
 

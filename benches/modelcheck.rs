@@ -6,7 +6,6 @@
 //! `cargo bench --bench modelcheck`.
 use criterion::{criterion_group, criterion_main, Criterion};
 
-#[allow(dead_code)]
 #[path = "../tests/gen_timeseries/mod.rs"]
 mod gen_timeseries;
 

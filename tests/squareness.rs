@@ -104,11 +104,10 @@ const K_SIGMA: f64 = 4.0;
 const BIAS: f64 = 1e-8;
 
 /// Recovered squareness [EC0Y, EB0Z, EA0Z] with 1σ, and the effective injected values, per seed.
-fn recover(
-    sc: &Scenario,
-    truths: &[(usize, LineTruth)],
-    seeds: &[u64],
-) -> (Vec<([f64; 3], [f64; 3])>, SquarenessAngles) {
+/// Recovered squareness angles [EC0Y, EB0Z, EA0Z] and their standard errors, rad.
+type AnglesAndErrors = ([f64; 3], [f64; 3]);
+
+fn recover(sc: &Scenario, truths: &[(usize, LineTruth)], seeds: &[u64]) -> (Vec<AnglesAndErrors>, SquarenessAngles) {
     let mut out = Vec::new();
     let mut eff = SquarenessAngles::default();
     for &seed in seeds {
@@ -153,9 +152,9 @@ fn squareness_is_recovered_over_three_seeds_and_vanishes_without_it() {
     let (without, eff0) = recover(&sc0, &chain_truths(&sc0, 0.0), &seeds);
     // The lines see the injected angle plus the trend of the error motions (the same in both truths):
     // the difference of the effective values is the injected value (exact: both are linear in it).
-    for k in 0..3 {
-        let d = eff.to_array()[k] - eff0.to_array()[k];
-        assert!((d - raw[k]).abs() < 1e-12, "effective difference {d:e} vs injected {:e}", raw[k]);
+    for ((e, e0), r) in eff.to_array().iter().zip(eff0.to_array()).zip(raw) {
+        let d = e - e0;
+        assert!((d - r).abs() < 1e-12, "effective difference {d:e} vs injected {r:e}");
     }
     for (i, seed) in seeds.iter().enumerate() {
         for (k, name) in ["EC0Y", "EB0Z", "EA0Z"].iter().enumerate() {

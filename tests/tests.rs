@@ -20,10 +20,14 @@ mod estimators_on_simulation;
 mod fidelity;
 mod formats;
 mod fuzz_replay;
+// TODO(issues 11/19, owners of these files): clippy's type_complexity (gen_diagnose.rs) and
+// type_complexity, needless_range_loop (model_check.rs) are left to them; drop these allows once fixed.
+#[allow(clippy::type_complexity)]
 mod gen_diagnose;
 mod golden;
 mod kill;
 mod laser_independent;
+#[allow(clippy::type_complexity, clippy::needless_range_loop)]
 mod model_check;
 mod model_check_timeseries;
 mod real_dat_cli;

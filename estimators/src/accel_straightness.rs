@@ -363,9 +363,10 @@ fn solve3(mut m: [[f64; 3]; 3], mut r: [f64; 3]) -> Option<[f64; 3]> {
         m.swap(col, p);
         r.swap(col, p);
         for row in col + 1..3 {
-            let f = m[row][col] / m[col][col];
-            for k in col..3 {
-                m[row][k] -= f * m[col][k];
+            let pivot = m[col];
+            let f = m[row][col] / pivot[col];
+            for (x, y) in m[row][col..].iter_mut().zip(&pivot[col..]) {
+                *x -= f * y;
             }
             r[row] -= f * r[col];
         }
@@ -1108,7 +1109,7 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
             None => estimate_noise_density(&r.acceleration, r.sample_rate)?,
         });
     }
-    if let Some((i, _)) = rhos.iter().enumerate().find(|(_, r)| !(**r > 0.0)) {
+    if let Some((i, _)) = rhos.iter().enumerate().find(|(_, r)| r.is_nan() || **r <= 0.0) {
         return Err(AccelStraightnessError::BadInput(format!(
             "run {i}: the estimated noise density is zero (noise-free record?): pass config.noise_density"
         )));
@@ -1361,7 +1362,8 @@ pub fn cramer_rao_harmonic(
     let known = 1.0 / (k4 * s4).sqrt();
     let (sj, tj) = if joint_tilt {
         let d = s0 * s4 - s2 * s2;
-        if !(d > 1e-9 * s0 * s4) {
+        // Not strictly above the floor, NaN included (a NaN determinant must fail too).
+        if d.partial_cmp(&(1e-9 * s0 * s4)) != Some(std::cmp::Ordering::Greater) {
             return Err(AccelStraightnessError::BadInput(format!(
                 "gravity-tilt separation needs at least two distinct speeds, got {speeds:?}"
             )));

@@ -195,7 +195,7 @@ pub fn irfft(spec: &mut [Complex<f64>], n: usize) -> Vec<f64> {
     let mut planner = RealFftPlanner::<f64>::new();
     let fft = planner.plan_fft_inverse(n);
     spec[0].im = 0.0;
-    if n % 2 == 0 {
+    if n.is_multiple_of(2) {
         spec[n / 2].im = 0.0;
     }
     let mut out = fft.make_output_vec();
@@ -246,7 +246,7 @@ pub fn idct2(c: &[f64]) -> Vec<f64> {
 ///
 /// so `x̂ = x − x_0` (the lost DC is an unknown constant, like the offset). Noise added after the
 /// coupling becomes red: its density at `f` is multiplied by `|1/α − e^{−iω}|/|1 − e^{−iω}| ≈
-/// √(1 + (f_c/f)²)` ([`coefficient_information`] accounts for it). `corner_hz = 0` returns the record.
+/// √(1 + (f_c/f)²)` ([`crate::accel_straightness::coefficient_information`] accounts for it). `corner_hz = 0` returns the record.
 pub fn undo_ac_coupling(y: &[f64], corner_hz: f64, sample_rate: f64) -> Result<Vec<f64>> {
     finite_slice("AC-coupled record", y)?;
     positive("sample rate (Hz)", sample_rate)?;

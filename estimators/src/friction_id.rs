@@ -525,7 +525,7 @@ pub enum FilterMode {
 /// Second-order Butterworth low-pass, cutoff `cutoff_hz` (Hz), sample interval dt (s), designed by
 /// the bilinear transform with frequency pre-warping (K = tan(π·fc·dt)):
 /// b = [K², 2K², K²]/(1 + √2K + K²), a = [1, 2(K² − 1), 1 − √2K + K²]/(1 + √2K + K²),
-/// y[n] = b0·x[n] + b1·x[n−1] + b2·x[n−2] − a1·y[n−1] − a2·y[n−2].
+/// `y[n] = b0·x[n] + b1·x[n−1] + b2·x[n−2] − a1·y[n−1] − a2·y[n−2]`.
 /// The filter starts in the steady state of the first sample (no start-up transient for a signal
 /// that starts constant). `ZeroPhase` runs it forward then backward over the signal extended at
 /// both ends by odd reflection (as scipy `filtfilt`) by one cutoff period (at most n − 1 samples).
@@ -582,8 +582,8 @@ pub fn butterworth2_lowpass(x: &[f64], dt: f64, cutoff_hz: f64, mode: FilterMode
 }
 
 /// Derivative of a uniformly sampled signal (interval dt, s) by central differences,
-/// d[i] = (x[i+1] − x[i−1])/(2·dt), and second-order one-sided differences at the ends,
-/// d[0] = (−3x0 + 4x1 − x2)/(2dt), d[n−1] = (3x[n−1] − 4x[n−2] + x[n−3])/(2dt): exact for
+/// `d[i] = (x[i+1] − x[i−1])/(2·dt)`, and second-order one-sided differences at the ends,
+/// `d[0] = (−3x0 + 4x1 − x2)/(2dt)`, `d[n−1] = (3x[n−1] − 4x[n−2] + x[n−3])/(2dt)`: exact for
 /// quadratics. Needs at least 3 samples.
 pub fn central_difference(x: &[f64], dt: f64) -> Result<Vec<f64>, FrictionIdError> {
     check_series("signal", x, 3)?;
@@ -660,7 +660,7 @@ pub struct Sigma0Fit {
 /// up to break-away (Canudas de Wit et al. 1995: at |v| ≪ vs, g ≈ Fs and σ1·dz/dt is small, so
 /// dF/dx = σ0·(1 − F/Fs), i.e. F = Fs·(1 − exp(−σ0·(x − x0)/Fs)) for a monotone ramp from rest).
 /// Linearised: y = −Fs·ln(1 − (F − F0)/Fs) = σ0·(x − x0), fitted with an intercept by least squares
-/// on the samples from the start until |F − F0| first exceeds Fs/2 (F0 = F[0], the force at rest).
+/// on the samples from the start until |F − F0| first exceeds Fs/2 (`F0 = F[0]`, the force at rest).
 /// Pass only the stick segment: from rest up to the break-away (before gross sliding is detected).
 /// `fs` (N) is the static level from a Stribeck fit. Returns `NotIdentifiable` if fewer than 5
 /// samples qualify, if the force rises by less than 10 % of Fs over them (no pre-sliding ramp in

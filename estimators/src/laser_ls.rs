@@ -336,7 +336,7 @@ pub struct SquarenessEstimate {
 /// Result of [`identify`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Identification {
-    /// Names of the parameters (e.g. "EBX[3]" = 4th basis coefficient, "EC0Y", "offset line 2").
+    /// Names of the parameters (e.g. `EBX[3]` = 4th basis coefficient, "EC0Y", "offset line 2").
     pub param_names: Vec<String>,
     /// Parameter values (SI) in the reporting gauge.
     pub params: Vec<f64>,
@@ -626,14 +626,14 @@ fn functionals(model: &Model, layout: &Layout) -> (Vec<Functional>, Vec<Vec<f64>
         // angles of axes a ≤ i < b at their reference positions: ε_i·(ê_b × ê_a)
         let bxa = cross(eb, ea);
         for i in a..b {
-            for kk in 0..3 {
+            for (kk, &b) in bxa.iter().enumerate() {
                 let (start, len) = layout.blocks[i][3 + kk];
-                if len == 0 || bxa[kk] == 0.0 {
+                if len == 0 || b == 0.0 {
                     continue;
                 }
                 model.axes[i].motions[3 + kk].eval(model.axes[i].reference_position, &mut buf).expect("validated");
                 for (t, v) in buf.iter().enumerate() {
-                    inner[start + t] += bxa[kk] * v;
+                    inner[start + t] += b * v;
                 }
             }
         }
@@ -645,9 +645,11 @@ fn functionals(model: &Model, layout: &Layout) -> (Vec<Functional>, Vec<Vec<f64>
     (out, gauge, group_names)
 }
 
-/// SVD with at least as many rows as columns (zero rows appended if needed):
-/// returns (U (rows × n), s (n), V (n × n)).
-fn svd_padded(a: &Mat<f64>) -> Result<(Mat<f64>, Vec<f64>, Mat<f64>), LaserLsError> {
+/// A thin SVD: (U (rows × n), singular values s (n), V (n × n)).
+type Svd = (Mat<f64>, Vec<f64>, Mat<f64>);
+
+/// SVD with at least as many rows as columns (zero rows appended if needed).
+fn svd_padded(a: &Mat<f64>) -> Result<Svd, LaserLsError> {
     let (m, n) = (a.nrows(), a.ncols());
     let padded;
     let src = if m < n {
@@ -946,7 +948,7 @@ fn describe_unobservable(
     let dims: Vec<usize> = (0..ng).map(|g| rows_rank(&rows_of(g), tol)).collect();
     // union-find over coupled groups
     let mut parent: Vec<usize> = (0..ng).collect();
-    fn find(p: &mut Vec<usize>, i: usize) -> usize {
+    fn find(p: &mut [usize], i: usize) -> usize {
         let mut i = i;
         while p[i] != i {
             p[i] = p[p[i]];
@@ -1716,7 +1718,7 @@ mod tests {
             sigma: 1e-8,
             line: Some(0),
         };
-        let e = identify(&[r.clone()], &model, &IdOptions::default()).unwrap_err();
+        let e = identify(std::slice::from_ref(&r), &model, &IdOptions::default()).unwrap_err();
         assert!(e.to_string().contains("NaN"), "{e}");
         let mut r2 = r.clone();
         r2.value = 0.0;

@@ -471,9 +471,10 @@ fn remove_quadratic(x: &[f64], y: &[f64]) -> Vec<f64> {
     }
     for c in 0..3 {
         for row in c + 1..3 {
-            let f = m[row][c] / m[c][c];
-            for j in c..3 {
-                m[row][j] -= f * m[c][j];
+            let pivot = m[c];
+            let f = m[row][c] / pivot[c];
+            for (x, y) in m[row][c..].iter_mut().zip(&pivot[c..]) {
+                *x -= f * y;
             }
             r[row] -= f * r[c];
         }

@@ -70,11 +70,12 @@ fn lstsq(x: &[f64], y: &[f64], f: &dyn Fn(f64) -> Vec<f64>) -> Vec<f64> {
     for p in 0..n {
         let piv = (p..n).max_by(|&i, &j| a[i][p].abs().total_cmp(&a[j][p].abs())).unwrap();
         a.swap(p, piv);
-        for i in 0..n {
+        let pivot = a[p].clone();
+        for (i, row) in a.iter_mut().enumerate() {
             if i != p {
-                let m = a[i][p] / a[p][p];
-                for k in p..=n {
-                    a[i][k] -= m * a[p][k];
+                let m = row[p] / pivot[p];
+                for (x, y) in row[p..].iter_mut().zip(&pivot[p..]) {
+                    *x -= m * y;
                 }
             }
         }

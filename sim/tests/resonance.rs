@@ -64,7 +64,7 @@ fn column_mode_appears_at_its_frequency_for_every_speed() {
         sensors: vec!["acc".into()],
     };
     for run in simulate_procedure(&model, &truth, &spec, 2) {
-        let rec = read_run(&model, &truth, &run, &[acc.clone()], 2).unwrap();
+        let rec = read_run(&model, &truth, &run, std::slice::from_ref(&acc), 2).unwrap();
         let RunData::TimeSeries { t, columns } = rec.data else { panic!() };
         let fs = 1.0 / (t[1] - t[0]);
         let f = peak_frequency(&columns[1].1, fs, 0.5 * f_mode, 2.0 * f_mode);

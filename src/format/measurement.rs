@@ -650,7 +650,11 @@ pub fn read_dat(path: &Path) -> Result<vmt_estimators::iso230_2::dat::DatFile, V
     let spacing = sorted.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
     for (table, name) in [(&dat.up, "REF_DATA_FWD"), (&dat.down, "REF_DATA_BWD")] {
         for (i, row) in table.iter().enumerate() {
-            if let Some((j, d)) = row.iter().enumerate().find(|(_, d)| !(d.abs() < 0.5 * spacing)) {
+            if let Some((j, d)) = row
+                .iter()
+                .enumerate()
+                .find(|(_, d)| d.abs().partial_cmp(&(0.5 * spacing)) != Some(std::cmp::Ordering::Less))
+            {
                 return Err(VmtError::bad(
                     path,
                     format!("{name}[{},{}]", i + 1, j + 1),

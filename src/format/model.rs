@@ -225,7 +225,7 @@ pub fn parse_model(table: &toml::Table, file: &Path, base_dir: &Path, prefix: &s
         er.deny_unknown()?;
     }
     r.deny_unknown()?;
-    effects.sort_by(|(a, _), (b, _)| (a.effect.name, a.effect.axis).cmp(&(b.effect.name, b.effect.axis)));
+    effects.sort_by_key(|(m, _)| (m.effect.name, m.effect.axis));
     for w in effects.windows(2) {
         let (a, _) = &w[0];
         let (b, path) = &w[1];

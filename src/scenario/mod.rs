@@ -55,15 +55,23 @@ struct RawScenario {
 pub struct Scenario {
     /// Where it came from (a path, or the bundled default's source path).
     pub source: PathBuf,
+    /// Free text describing the scenario.
     pub description: String,
+    /// Seed of every noise stream of the session.
     pub seed: u64,
     /// Machine name as written (bundled name or URDF path) and its structure.
     pub machine_name: String,
+    /// The machine's links and joints (from the URDF).
     pub machine: MachineStructure,
+    /// The simulated axis: masses, drive, servo and guideway settings (SI units).
     pub axis: AxisModel,
+    /// The injected truth: the effects switched on and their parameters.
     pub truth: Model,
+    /// The sensors, in the order of the scenario file.
     pub sensors: Vec<SensorSpec>,
+    /// The single-axis procedures, in session order.
     pub procedures: Vec<ProcedureSpec>,
+    /// The estimators to run on the recording, each with its tolerance.
     pub estimators: Vec<EstimatorSpec>,
     /// Multi-axis scenarios (`axes = [...]`): the chain of axes with the truth injected.
     pub chain: Option<ChainModel>,
@@ -369,7 +377,9 @@ fn validate_procedures(
                 for v in speeds {
                     feed_ok("speeds", *v)?;
                 }
-                if !(*high_rate > 0.0 && high_rate.is_finite()) || !(end > start) || !finite_nonneg(*settle) {
+                // start and end are finite here (in_travel).
+                let rate_ok = high_rate.is_finite() && *high_rate > 0.0;
+                if !rate_ok || end <= start || !finite_nonneg(*settle) {
                     return Err((at("high_rate"), "expected high_rate > 0, end > start and settle ≥ 0".into()));
                 }
             }
@@ -403,7 +413,7 @@ fn validate_procedures(
                 if accel.is_some_and(|a| !(a > 0.0 && a.is_finite())) {
                     return Err((at("accel"), format!("expected an acceleration > 0 m/s², got {accel:?}")));
                 }
-                if *runs < 1 || !(end > start) || !dwell_ok(*dwell, *average, *rate, *overrun) {
+                if *runs < 1 || end <= start || !dwell_ok(*dwell, *average, *rate, *overrun) {
                     return Err((
                         at("dwell"),
                         "expected runs ≥ 1, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into(),
@@ -428,7 +438,7 @@ fn validate_procedures(
                 in_travel("start", *start)?;
                 in_travel("end", *end)?;
                 feed_ok("feed", *feed)?;
-                if !(*step > 0.0) || !(end > start) || !dwell_ok(*dwell, *average, *rate, *overrun) {
+                if step.is_nan() || *step <= 0.0 || end <= start || !dwell_ok(*dwell, *average, *rate, *overrun) {
                     return Err((
                         at("step"),
                         "expected step > 0, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into(),
@@ -459,7 +469,13 @@ fn check_truth_size(truth: &model::Model, travel: (f64, f64)) -> Result<(), (Str
         let (max, unit) =
             if me.effect.name.is_translational() { (MAX_ERROR_MOTION.0, "m") } else { (MAX_ERROR_MOTION.1, "rad") };
         let at = |i: usize| travel.0 + (travel.1 - travel.0) * i as f64 / 1000.0;
-        if let Some(x) = (0..=1000).map(at).find(|x| !(profile.value(*x).abs() <= max)) {
+        if let Some(x) = (0..=1000).map(at).find(|x| {
+            // Above the bound or NaN.
+            !matches!(
+                profile.value(*x).abs().partial_cmp(&max),
+                Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+            )
+        }) {
             return Err((
                 format!("truth.effects.{}", me.effect.name),
                 format!(

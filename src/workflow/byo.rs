@@ -18,6 +18,7 @@ pub trait Estimator: Sync {
 /// A program run as `sh -c CMD` with `{data}` and `{out}` replaced by the paths of the measurement set
 /// and of the profile CSV it must write.
 pub struct CommandEstimator {
+    /// The shell command line, with the `{data}` and `{out}` placeholders.
     pub command: String,
 }
 

@@ -34,8 +34,11 @@ pub fn axis_letter(joint: &str) -> char {
 /// servo changes, the injected effects, and the sensors with the truth's sensor effects.
 #[derive(Clone, Debug)]
 pub struct Physics {
+    /// The axis model with the truth's servo changes applied.
     pub model: AxisModel,
+    /// The injected effects as the physics applies them (error motions, friction, drive, …).
     pub truth: AxisTruth,
+    /// The sensors with the truth's sensor effects applied.
     pub sensors: Vec<SensorSpec>,
 }
 
@@ -129,6 +132,7 @@ pub fn session_end(plan: &[(RunPlan, f64)]) -> f64 {
 /// as a study needs ([`read_all`]).
 #[derive(Clone, Debug)]
 pub struct SessionTruth {
+    /// The noise-free runs of the single-axis procedures, in session order.
     pub runs: Vec<RunTruth>,
     /// Session time at which the last single-axis run ends, s ([`session_end`] of the plan).
     pub end: f64,

@@ -428,9 +428,14 @@ pub fn set_scenario_number(text: &str, parts: &[(String, Option<usize>)], v: f64
 /// One trial's result for one estimate.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct TrialRow {
+    /// The varied parameter's value of this trial, in its key's unit (0 in a sampled study, whose draws
+    /// are columns of their own).
     pub value: f64,
+    /// Trial number, from 0.
     pub trial: usize,
+    /// The estimate's label (`Check::error`; `EFFECT RMS` for an external estimator).
     pub estimate: String,
+    /// Recovered − injected, SI unit of `quantity`.
     pub difference: f64,
     /// Whether the difference met the tolerance; `None` where no tolerance was given (an external
     /// estimator run without `--tolerance`).
@@ -724,6 +729,7 @@ pub struct SummaryRow {
     pub pass_rate: Option<f64>,
     /// Mean Cramér–Rao bound over the trials (NaN where none exists).
     pub bound: f64,
+    /// What the differences are (their unit).
     pub quantity: Quantity,
 }
 
@@ -736,6 +742,8 @@ pub fn quantity_id(q: Quantity) -> &'static str {
     }
 }
 
+/// One summary row per (value, estimate) of the trials, sorted by value then estimate: mean, RMS and
+/// 95th percentile of |difference|, pass rate and mean bound ([`SummaryRow`]).
 pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
     let mut keys: Vec<(f64, String)> = rows.iter().map(|r| (r.value, r.estimate.clone())).collect();
     keys.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));

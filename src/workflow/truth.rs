@@ -39,6 +39,10 @@ pub struct SensorTruth {
     pub environment_scale_error: f64,
 }
 
+/// The squareness [EC0Y, EB0Z, EA0Z] (rad) that laser line sets see over given node positions (m, one
+/// list per axis in chain order).
+pub type SquarenessOf<'a> = Box<dyn Fn(&[Vec<f64>]) -> [f64; 3] + Sync + 'a>;
+
 /// The injected truth of a serial chain (DESIGN.md §3, `vmc_3axis`), as the 3D laser-line check compares.
 pub struct ChainTruth<'a> {
     /// The axes in chain order (bed first): letter and injected error motions.
@@ -48,7 +52,7 @@ pub struct ChainTruth<'a> {
     /// The squareness as laser line sets see it over the node positions of each axis (m, chain order):
     /// the injected angles plus the error motions' linear trends, [EC0Y, EB0Z, EA0Z], rad
     /// (`vmt_sim::chain::ChainModel::effective_squareness`).
-    pub effective_squareness: Box<dyn Fn(&[Vec<f64>]) -> [f64; 3] + Sync + 'a>,
+    pub effective_squareness: SquarenessOf<'a>,
 }
 
 impl ChainTruth<'_> {

@@ -10,12 +10,15 @@ use vmt_estimators::laser_ls::Reading;
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
 use vmt_sim::effects::EffectName;
 
-/// The result of [`identify_chain_lines`]: the identification, the model it used and the node
+/// The result of [`crate::workflow::run::identify_chain_lines`]: the identification, the model it used and the node
 /// positions of each axis (m, chain order).
 #[derive(Clone, Debug, Serialize)]
 pub struct ChainIdentification {
+    /// The identifier's result (error motions m / rad, squareness rad, standard errors).
     pub identification: vmt_estimators::laser_ls::Identification,
+    /// The model it used (axes in chain order, node bases, squareness on).
     pub model: vmt_estimators::laser_ls::Model,
+    /// The node positions of each axis, m, chain order.
     pub positions: Vec<Vec<f64>>,
 }
 
@@ -162,9 +165,13 @@ pub(super) fn laser_lines_3d_checks(
     bias_angle: f64,
 ) -> Result<Vec<(Vec<Check>, Figure)>, VmtError> {
     let bad = |m: String| VmtError::bad(source, format!("estimators (laser_lines_3d {procedure})"), m);
-    if !(k_sigma.is_finite() && k_sigma > 0.0 && bias.is_finite() && bias >= 0.0)
-        || !(bias_angle.is_finite() && bias_angle >= 0.0)
-    {
+    let settings_ok = k_sigma.is_finite()
+        && k_sigma > 0.0
+        && bias.is_finite()
+        && bias >= 0.0
+        && bias_angle.is_finite()
+        && bias_angle >= 0.0;
+    if !settings_ok {
         return Err(bad(format!(
             "expected k_sigma > 0, bias ≥ 0 and bias_angle ≥ 0 (rad), got {k_sigma}, {bias} and {bias_angle}"
         )));

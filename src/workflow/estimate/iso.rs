@@ -12,11 +12,15 @@ use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle, Table};
 use vmt_sim::geometry::ErrorMotions;
 
-/// Deviations of one sensor column of a point-table run, split by direction: (targets, up[i][j],
-/// down[i][j]), target i in increasing order, j the i-th target's readings in that direction in run order;
+/// A positioning test split by approach direction: (targets (m), `up[i][j]`, `down[i][j]`), target i in
+/// increasing order, j the i-th target's readings (deviations, m) in that direction in run order — the
+/// arguments of `vmt_estimators::iso230_2::evaluate_bidirectional`.
+pub type DirectionalDeviations = (Vec<f64>, Vec<Vec<f64>>, Vec<Vec<f64>>);
+
+/// Deviations of one sensor column of a point-table run, split by direction ([`DirectionalDeviations`]);
 /// None when the run is not a point table or has no column `sensor`. The one reader of a positioning test
 /// for the ISO 230-2 check, the compensation check, `vmt iso230-2` and `vmt compensate`.
-pub fn point_table_deviations(run: &Run, sensor: &str) -> Option<(Vec<f64>, Vec<Vec<f64>>, Vec<Vec<f64>>)> {
+pub fn point_table_deviations(run: &Run, sensor: &str) -> Option<DirectionalDeviations> {
     let RunData::PointTable { target, direction, columns, .. } = &run.data else { return None };
     let values = &columns.iter().find(|(n, _)| n == sensor)?.1;
     let mut targets: Vec<f64> = target.clone();

@@ -12,9 +12,13 @@ use vmt_sim::geometry::ErrorMotions;
 /// 1σ noise of a reading (m).
 #[derive(Clone, Debug, PartialEq)]
 pub struct LaserLine {
+    /// The sensor's column name.
     pub name: String,
+    /// Measuring point in the axis frame, m.
     pub point: [f64; 3],
+    /// Unit beam direction in the axis frame.
     pub direction: [f64; 3],
+    /// 1σ noise of one reading, m.
     pub sigma: f64,
 }
 

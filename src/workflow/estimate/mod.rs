@@ -35,8 +35,11 @@ pub use laser_lines::{identify_laser_lines, LaserLine};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Quantity {
+    /// A length, m (shown in µm).
     Length,
+    /// An angle, rad (shown in µrad).
     Angle,
+    /// A dimensionless ratio.
     Ratio,
 }
 
@@ -90,14 +93,20 @@ pub struct Check {
     /// A lower bound of the achievable difference where one exists (Cramér–Rao), same unit.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bound: Option<f64>,
+    /// What `injected`, `recovered`, `difference` and `tolerance` are (their unit).
     pub quantity: Quantity,
+    /// The value from the injected truth (or the reference of a one-sided limit), SI unit of `quantity`.
     pub injected: f64,
+    /// The value the estimator recovered, same unit.
     pub recovered: f64,
     /// As `rule` defines it; NaN (JSON null) for [`Rule::AtMost`] and [`Rule::Found`], which form none.
     pub difference: f64,
+    /// The limit `rule` compares with, same unit.
     pub tolerance: f64,
+    /// How `difference`, `tolerance` and `pass` are formed.
     #[serde(default)]
     pub rule: Rule,
+    /// Whether the estimate met its tolerance.
     pub pass: bool,
 }
 
@@ -192,14 +201,17 @@ impl Check {
         }
     }
 
+    /// The check with its stable identifier replaced.
     pub fn with_id(self, id: impl Into<String>) -> Check {
         Check { id: id.into(), ..self }
     }
 
+    /// The check with what its values are (e.g. `RMS of profile`).
     pub fn with_statistic(self, statistic: impl Into<String>) -> Check {
         Check { statistic: statistic.into(), ..self }
     }
 
+    /// The check with a sentence to print under the table.
     pub fn with_note(self, note: impl Into<String>) -> Check {
         Check { note: Some(note.into()), ..self }
     }
@@ -290,7 +302,9 @@ pub fn profile_figure(title: String, q: Quantity, x: &[f64], series: &[(&str, &[
 /// The result of the estimators: the checks (rows of the table) and the figures they point to.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Estimates {
+    /// One row of the table per estimate.
     pub checks: Vec<Check>,
+    /// The figures the checks point to (`Check::figure`).
     #[serde(skip)]
     pub figures: Vec<Figure>,
     /// Tables an estimator reports in full (e.g. the ISO 230-2 table).

@@ -133,7 +133,9 @@ pub(super) fn model_check_loop(
         Some((k, u, format!("{} / {}", c.run, c.sensor)))
     };
     if let Some((k, unit, channel)) = scale(&first) {
-        let pick = |label: &str, f: &dyn Fn(&crate::modelcheck::ChannelReport) -> (Vec<f64>, Vec<f64>)| {
+        // One curve of a channel report: (x, y) in the report's units.
+        type Curve = (Vec<f64>, Vec<f64>);
+        let pick = |label: &str, f: &dyn Fn(&crate::modelcheck::ChannelReport) -> Curve| {
             [(&first, "starting model"), (&last_report, "final model")]
                 .into_iter()
                 .filter_map(|(r, which)| {

@@ -2,7 +2,7 @@
 //! gravity-tilt / roll separation) from the constant-velocity passes of any measurement set (FORMAT.md §1),
 //! whatever program wrote it (issue 17). The one adapter from a measurement set to the estimator of
 //! `vmt_estimators::accel_straightness` (seed 000 and the SNR-weighted fusion of DESIGN.md §7): `vmt run`
-//! goes through it too ([`accel_straightness_check`]), so both paths give the same estimate from the same data.
+//! goes through it too (`accel_straightness_check`), so both paths give the same estimate from the same data.
 //!
 //! What a pass must be (checked here, each refusal names the file and the run): a `constant_velocity`
 //! time series with `t` uniformly spaced (within 1 %), an `x_cmd` column moving at the manifest's `feed`
@@ -51,7 +51,9 @@ pub fn parse_method(name: &str) -> Result<FusionMethod, String> {
 /// (`vmt straightness`), or the runs named `<procedure>_*` (a scenario's procedure, `vmt run`).
 #[derive(Clone, Copy, Debug)]
 pub enum PassSelection<'a> {
+    /// Every `constant_velocity` run holding the sensor's column.
     ConstantVelocity,
+    /// The runs of the scenario procedure of this name.
     Procedure(&'a str),
 }
 
@@ -191,11 +193,13 @@ pub fn accel_config(sensor: &Sensor, method: FusionMethod) -> StraightnessConfig
 /// One pass as the report shows it.
 #[derive(Clone, Debug, Serialize)]
 pub struct PassReport {
+    /// The run's name.
     pub run: String,
     /// m/s
     pub speed: f64,
     /// Hz
     pub sample_rate: f64,
+    /// Number of samples in the pass.
     pub samples: usize,
     /// One-sided white-noise density used, m/s²/√Hz.
     pub noise_density: f64,
@@ -206,7 +210,9 @@ pub struct PassReport {
 /// The straightness of one sensor: estimate, band, bounds, and the profile columns it fills.
 #[derive(Clone, Debug, Serialize)]
 pub struct SensorStraightness {
+    /// The accelerometer's name.
     pub sensor: String,
+    /// The axis moved (`x`, `y` or `z`).
     pub axis: char,
     /// The error motion the sensor's direction reads (`straightness_y`/`straightness_z`: the first/second
     /// transverse direction of the axis), at the sensor's mounting point (Abbe terms ε×r included).
@@ -215,11 +221,14 @@ pub struct SensorStraightness {
     pub sign: f64,
     /// The error motion the separated tilt is (`roll` when `direction × ẑ` lies along the axis), with its sign.
     pub tilt_effect: Option<(EffectName, f64)>,
+    /// The passes used.
     pub passes: Vec<PassReport>,
     /// The passes as the estimator took them (not in the JSON: the data).
     #[serde(skip)]
     pub runs: Vec<AccelRun>,
+    /// The estimated straightness (positions m, straightness m) and what the estimator did.
     pub estimate: StraightnessEstimate,
+    /// Cramér–Rao bounds of the estimate within the recoverable band, m.
     pub bounds: InBandBounds,
 }
 
