@@ -282,6 +282,23 @@ fn linear_lstsq(a: &Mat<f64>, b: &[f64]) -> Result<(Vec<f64>, f64), FrictionIdEr
 /// by bounded nonlinear least squares (module doc: variable-projection grid start, then
 /// Levenberg–Marquardt). Velocities must be nonzero (friction at rest is undetermined in
 /// [−Fs, Fs]). Returns coefficients, standard errors (Jacobian at the solution) and residual RMS.
+///
+/// # Example
+///
+/// A velocity sweep of ±0.5 … ±50 mm/s whose friction force follows the exponential law exactly: the
+/// fit returns the coefficients it was made with.
+///
+/// ```rust
+/// use vmt_estimators::friction_id::{fit_stribeck, stribeck_curve, StribeckCoefficients, StribeckFitOptions, StribeckShape};
+/// // Fc, Fs (N), vs (m/s), δ, Fv (N·s/m)
+/// let truth = StribeckCoefficients { fc: 10.0, fs: 15.0, vs: 5e-3, delta: 1.0, fv: 40.0 };
+/// let v: Vec<f64> = (1..=100).flat_map(|k| [5e-4 * k as f64, -5e-4 * k as f64]).collect(); // m/s
+/// let f: Vec<f64> = v.iter().map(|&v| stribeck_curve(StribeckShape::Exponential, &truth, v)).collect(); // N
+/// let fit = fit_stribeck(&v, &f, &StribeckFitOptions::default()).unwrap();
+/// let c = fit.coefficients;
+/// assert!((c.fc - 10.0).abs() < 1e-3 && (c.fs - 15.0).abs() < 1e-3 && (c.fv - 40.0).abs() < 1e-2);
+/// assert!((c.vs - 5e-3).abs() < 1e-6 && fit.residual_rms < 1e-6);
+/// ```
 pub fn fit_stribeck(v: &[f64], f: &[f64], opts: &StribeckFitOptions) -> Result<StribeckFit, FrictionIdError> {
     if v.len() != f.len() {
         return bad(format!("v and F must have the same length, got {} and {}", v.len(), f.len()));

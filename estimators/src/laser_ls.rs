@@ -674,6 +674,37 @@ fn svd_padded(a: &Mat<f64>) -> Result<Svd, LaserLsError> {
 /// Cov = s²·P (AᵀWA)⁺ Pᵀ (P the gauge projection, s² = 1 or the a-posteriori factor).
 /// Profiles are reported at each axis' `report_positions` with σ from Cov. Undetermined
 /// error motions, or combinations of them, are named in `unobservable`.
+///
+/// # Example
+///
+/// One X axis, only its positioning error EXX modelled (values at four nodes); one laser line along X
+/// read at the nodes going out and back. The truth is a 10 µm/m scale error, so EXX, reported relative
+/// to the reference position 0 m, is 3 µm at 0.3 m.
+///
+/// ```rust
+/// use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, Basis, IdOptions, Model, Reading};
+/// let nodes = [0.0, 0.1, 0.2, 0.3]; // m
+/// let mut axis = AxisModel::with_nodes(AxisName::X, &nodes);
+/// for m in &mut axis.motions[1..] {
+///     *m = Basis::Fixed; // EYX … ECX not modelled
+/// }
+/// let model = Model { axes: vec![axis], squareness: false };
+/// let reading = |q: f64| Reading {
+///     q: vec![q],
+///     point: [0.0; 3],
+///     direction: [1.0, 0.0, 0.0],
+///     value: 1e-5 * q + 0.7e-6, // m: the error plus the laser's unknown zero
+///     sigma: 1e-7,              // m
+///     line: Some(0),
+/// };
+/// let readings: Vec<Reading> = nodes.iter().chain(nodes.iter().rev()).map(|&q| reading(q)).collect();
+/// let id = identify(&readings, &model, &IdOptions::default()).unwrap();
+/// let exx = id.profile("EXX").unwrap();
+/// assert_eq!(exx.positions, nodes);
+/// for (q, e) in exx.positions.iter().zip(&exx.values) {
+///     assert!((e - 1e-5 * q).abs() < 1e-12, "EXX({q} m) = {e} m");
+/// }
+/// ```
 pub fn identify(readings: &[Reading], model: &Model, opts: &IdOptions) -> Result<Identification, LaserLsError> {
     validate_model(model)?;
     validate_readings(readings, model.axes.len())?;

@@ -172,6 +172,22 @@ fn evaluate(x: &[f64], dt: f64, q: Option<f64>, percentiles: Option<(f64, f64)>)
 /// `x`: encoder positions (m) of a one-way constant-feed run, sampled every `dt` seconds.
 /// `resolution`: the encoder's count q (m), if known, to report the floor 2q/(Δt·|s_mean|).
 /// Verdict: crawling iff SSI ≥ 1.
+///
+/// # Example
+///
+/// ```rust
+/// use vmt_estimators::ssi::{stick_slip_index, CrawlVerdict};
+/// let dt = 1e-3; // s
+/// // A smooth crawl at 1 mm/s: every first-difference velocity is the same, SSI = 0.
+/// let smooth: Vec<f64> = (0..1001).map(|i| 1e-3 * dt * i as f64).collect();
+/// let r = stick_slip_index(&smooth, dt, None).unwrap();
+/// assert!(r.ssi < 1e-9 && r.verdict == CrawlVerdict::NoCrawling);
+/// // Stick-slip: the slide stands for one sample, then jumps two. Velocities 0 and 2 mm/s about a
+/// // mean of 1 mm/s: SSI = (2 − 0) / 1 = 2.
+/// let jerky: Vec<f64> = (0..1001).map(|i| 2e-3 * dt * (i / 2) as f64).collect();
+/// let r = stick_slip_index(&jerky, dt, None).unwrap();
+/// assert!((r.ssi - 2.0).abs() < 1e-9 && r.verdict == CrawlVerdict::Crawling);
+/// ```
 pub fn stick_slip_index(x: &[f64], dt: f64, resolution: Option<f64>) -> Result<SsiResult, SsiError> {
     evaluate(x, dt, resolution, None)
 }

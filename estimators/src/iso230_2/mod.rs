@@ -246,6 +246,23 @@ fn min_of(v: impl Iterator<Item = f64>) -> f64 {
 /// x_ij = actual − target (m) at target i, run j, approached in the + / − direction. Runs may
 /// differ in number between targets and directions, but at least 2 are needed per target and
 /// direction (the standard asks for 5).
+///
+/// # Example
+///
+/// Three targets, two runs each way, deviations in m (whole micrometres, so the results are exact):
+///
+/// ```rust
+/// use vmt_estimators::iso230_2::evaluate_bidirectional;
+/// let um = 1e-6;
+/// let targets = [0.0, 0.1, 0.2]; // m
+/// let up = vec![vec![1.0 * um, 1.0 * um], vec![2.0 * um, 2.0 * um], vec![1.0 * um, 1.0 * um]];
+/// let down = vec![vec![0.0, 0.0], vec![0.5 * um, 0.5 * um], vec![0.0, 0.0]];
+/// let r = evaluate_bidirectional(&targets, &up, &down).unwrap();
+/// // Reversal value B = max_i |x̄↑_i − x̄↓_i| = 1.5 µm (at 0.1 m);
+/// // bidirectional systematic positioning error E = max(x̄↑, x̄↓) − min(x̄↑, x̄↓) = 2 µm − 0 µm.
+/// assert!((r.b - 1.5 * um).abs() < 1e-15);
+/// assert!((r.e - 2.0 * um).abs() < 1e-15);
+/// ```
 pub fn evaluate_bidirectional(targets: &[f64], up: &[Vec<f64>], down: &[Vec<f64>]) -> Result<AxisResult, Iso230Error> {
     check_targets(targets)?;
     let su = all_stats(targets, up, Approach::Up)?;
