@@ -32,15 +32,25 @@ fn simulate_set_on(sc: &Scenario, ph: &crate::simulate::Physics) -> Result<Measu
     to_measurement_set(sc, &runs)
 }
 
-/// `vmt simulate [SCENARIO] -o DIR`: writes the measurement set with the truth beside it.
-pub fn simulate(path: Option<&Path>, out: &Path, units: &str) -> Result<(), VmtError> {
+/// `vmt simulate [SCENARIO] -o DIR [--compensation TABLE]`: writes the measurement set with the truth
+/// beside it; with a compensation table (any `vmt compensate` format) loaded in the simulated CNC.
+pub fn simulate(path: Option<&Path>, out: &Path, units: &str, compensation: Option<&Path>) -> Result<(), VmtError> {
     let units = parse_units(units)?;
     let sc = load_scenario(path)?;
-    if let Some(p) = path {
-        crate::output::refuse_input_overwrite(out, &[p])?;
+    let inputs: Vec<&Path> = path.into_iter().chain(compensation).collect();
+    crate::output::refuse_input_overwrite(out, &inputs)?;
+    let table = compensation.map(crate::format::compensation::read_table).transpose()?;
+    let mut ph = physics(&sc)?;
+    if let Some(table) = table {
+        ph.model.compensation = vmt_sim::profile::Profile {
+            terms: vec![vmt_sim::profile::Term::Table { x: table.positions, y: table.corrections }],
+        };
     }
-    let ph = physics(&sc)?;
-    let set = simulate_set_on(&sc, &ph)?;
+    let mut set = simulate_set_on(&sc, &ph)?;
+    if let Some(c) = compensation {
+        let with = format!("compensation table {} loaded in the simulated CNC", c.display());
+        set.description = Some(set.description.map_or(with.clone(), |d| format!("{d}; {with}")));
+    }
     measurement::write_with_extras(&set, out, units, &truth_extras(&sc, &ph)?)?;
     eprintln!("wrote {} runs to {}", set.runs.len(), out.display());
     Ok(())
@@ -616,13 +626,56 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
 /// Most points of an equidistant compensation table (size budget, DESIGN.md §2).
 pub const MAX_TABLE_NODES: usize = 100_000;
 
-/// `vmt compensate DATA -o TABLE.csv [--controller]`: seed 004's variable-step compensation table from the
-/// mean bidirectional deviations of a positioning run; `--equidistant N` for the controller-style table.
-pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Option<usize>) -> Result<i32, VmtError> {
+/// What `vmt compensate` writes (its options).
+#[derive(Clone, Debug, Default)]
+pub struct CompensateOptions {
+    /// Deviation column (default: the first linear laser of the run).
+    pub sensor: Option<String>,
+    /// `--equidistant N`: the legacy controller-style table of N points in 0.1 µm units.
+    pub equidistant: Option<usize>,
+    /// `--format csv|siemens|fanuc` (default csv).
+    pub format: Option<String>,
+    /// `--points N`: equidistant points (siemens/fanuc default: one per target; csv: variable step).
+    pub points: Option<usize>,
+    /// `--axis NAME`: the controller's axis name (default: the run's axis letter and 1, e.g. X1).
+    pub axis: Option<String>,
+}
+
+/// `vmt compensate DATA -o TABLE [--format csv|siemens|fanuc] [--points N] [--axis NAME]`: a compensation
+/// table from the mean bidirectional deviations of a positioning run — seed 004's variable-step table
+/// (CSV), or an equidistant least-squares table of N points (SINUMERIK-, FANUC-style, or CSV with
+/// `--points`), each format's limits checked and its sign convention written into the file
+/// (docs/formats.md §7); `--equidistant N` for the legacy controller-style table.
+pub fn compensate(path: &Path, out: &Path, opts: &CompensateOptions) -> Result<i32, VmtError> {
+    use crate::format::compensation::{equidistant_nodes, table_text, ControllerFormat};
     use vmt_estimators::compensation::{
-        equidistant_table, export_controller_table, variable_step_table, VariableStepParams,
+        equidistant_table, export_controller_table, fit_table_on_nodes, variable_step_table, VariableStepParams,
     };
     use vmt_estimators::iso230_2::evaluate_bidirectional;
+    let format = opts.format.as_deref().map(ControllerFormat::parse).transpose().map_err(VmtError::Usage)?;
+    if opts.equidistant.is_some() && (format.is_some() || opts.points.is_some()) {
+        return Err(VmtError::Usage("--equidistant: give either it or --format/--points, not both".into()));
+    }
+    let format = format.unwrap_or(ControllerFormat::Csv);
+    if let Some(n) = opts.points {
+        if n < 2 || n > format.max_points() {
+            return Err(VmtError::Usage(format!(
+                "--points {n}: a {} table holds 2..={} points",
+                format.name(),
+                format.max_points()
+            )));
+        }
+    }
+    if let Some(a) = &opts.axis {
+        let ok = a.len() <= 16
+            && a.starts_with(|c: char| c.is_ascii_alphabetic())
+            && a.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        if !ok {
+            return Err(VmtError::Usage(format!(
+                "--axis `{a}`: expected a controller axis name (a letter, then letters, digits or _; ≤ 16)"
+            )));
+        }
+    }
     crate::output::refuse_input_overwrite(out, &[path])?;
     let set = measurement::read(path)?;
     let run = set
@@ -630,7 +683,7 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
         .iter()
         .find(|r| r.procedure == measurement::Procedure::Positioning)
         .ok_or_else(|| VmtError::bad(path, "runs", "expected a positioning run"))?;
-    let col = sensor.map(str::to_string).or_else(|| {
+    let col = opts.sensor.clone().or_else(|| {
         set.sensors
             .iter()
             .find(|s| s.kind == SensorKind::LaserLinear && run.data.column(&s.name).is_some())
@@ -640,43 +693,65 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
     let (t, u, d) = crate::estimate::point_table_deviations(run, &col)
         .ok_or_else(|| VmtError::bad(path, format!("run {}", run.name), format!("no column `{col}`")))?;
     let iso = evaluate_bidirectional(&t, &u, &d).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+    let targets: Vec<f64> = iso.targets.iter().map(|x| x.target).collect();
     let dev: Vec<f64> = iso.targets.iter().map(|x| x.mean_bidirectional).collect();
-    let text = match equidistant {
-        None => {
-            let table = variable_step_table(&t, &dev, &VariableStepParams::default())
-                .map_err(|e| VmtError::bad(path, "", e.to_string()))?
-                .table;
-            // Converted to mm and µm at 12 significant digits: no conversion noise (335.95000000000005).
-            let r = |x: f64| measurement::round_significant(x, 12);
-            let mut s = String::from("position[mm],correction[um]\n");
-            for (p, c) in table.positions.iter().zip(&table.corrections) {
-                s += &format!("{},{}\n", r(p * 1e3), r(c * 1e6));
-            }
-            s
+    let bad = |e: String| VmtError::bad(path, format!("run {}", run.name), e);
+    let axis = opts.axis.clone().unwrap_or_else(|| format!("{}1", run.axis.to_ascii_uppercase()));
+    let text = if let Some(n) = opts.equidistant {
+        if n > MAX_TABLE_NODES {
+            return Err(VmtError::Usage(format!(
+                "--equidistant {n}: the limit is {MAX_TABLE_NODES} table points (controllers hold a few thousand)"
+            )));
         }
-        Some(n) => {
-            if n > MAX_TABLE_NODES {
-                return Err(VmtError::Usage(format!(
-                    "--equidistant {n}: the limit is {MAX_TABLE_NODES} table points (controllers hold a few thousand)"
-                )));
-            }
-            let table = equidistant_table(&t, &dev, n).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
-            let ctl = export_controller_table(&table).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
-            let r = |x: f64| measurement::round_significant(x, 12);
-            let mut s = format!(
-                "# controller table: start {} mm, spacing {} mm, corrections in 0.1 µm\n",
-                r(ctl.start * 1e3),
-                r(ctl.spacing * 1e3)
-            );
-            s += "index,correction_0p1um\n";
-            for (i, c) in ctl.corrections_0p1um.iter().enumerate() {
-                s += &format!("{i},{c}\n");
-            }
-            s
+        let table = equidistant_table(&t, &dev, n).map_err(|e| bad(e.to_string()))?;
+        let ctl = export_controller_table(&table).map_err(|e| bad(e.to_string()))?;
+        let r = |x: f64| measurement::round_significant(x, 12);
+        let mut s = format!(
+            "# controller table: start {} mm, spacing {} mm, corrections in 0.1 µm\n",
+            r(ctl.start * 1e3),
+            r(ctl.spacing * 1e3)
+        );
+        s += "index,correction_0p1um\n";
+        for (i, c) in ctl.corrections_0p1um.iter().enumerate() {
+            s += &format!("{i},{c}\n");
         }
+        s
+    } else {
+        let table = match (format.equidistant(), opts.points) {
+            (false, None) => {
+                variable_step_table(&targets, &dev, &VariableStepParams::default())
+                    .map_err(|e| bad(e.to_string()))?
+                    .table
+            }
+            (true, None) | (_, Some(_)) => {
+                let n = opts.points.unwrap_or(targets.len()).min(format.max_points());
+                let (lo, hi) = (targets[0], targets[targets.len() - 1]);
+                fit_table_on_nodes(&equidistant_nodes(lo, hi, n), &targets, &dev).map_err(|e| {
+                    bad(format!(
+                        "{e} (an equidistant table of {n} points over {} targets: choose fewer --points)",
+                        targets.len()
+                    ))
+                })?
+            }
+        };
+        let about = format!("from run {} sensor {col} of {}", run.name, path.display());
+        let (text, notes) = table_text(format, &table, &axis, &about).map_err(bad)?;
+        for n in notes {
+            eprintln!("note: {n}");
+        }
+        text
     };
     measurement::write_file_atomic(out, text.as_bytes())?;
-    println!("wrote {} (from run {}, sensor {col}; E before {:.3} µm)", out.display(), run.name, iso.e * 1e6);
+    println!(
+        "wrote {} ({} format; from run {}, sensor {col}; E before {:.3} µm)",
+        out.display(),
+        if opts.equidistant.is_some() { "legacy equidistant" } else { format.name() },
+        run.name,
+        iso.e * 1e6
+    );
+    if opts.equidistant.is_none() {
+        println!("sign: {}", format.sign_convention());
+    }
     Ok(0)
 }
 /// `vmt straightness DIR [-o EST.csv] [--method seed|fusion] [--sensor NAME…] [--json]`: the straightness
