@@ -907,25 +907,50 @@ pub(crate) fn print_json<T: serde::Serialize>(format: &str, v: &T) -> Result<(),
     Ok(())
 }
 
-/// `vmt compare --model M --data D [--json]`: fit the model's free parameters, predict, report the
+/// `vmt compare --model M --data D [--json] [--report FILE.html]`: fit the model's free parameters, predict, report the
 /// residual (FORMAT.md §4).
-pub fn compare(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
+pub fn compare(model: &Path, data: &Path, json: bool, report: Option<&Path>) -> Result<i32, VmtError> {
+    if let Some(out) = report {
+        crate::output::refuse_input_overwrite(out, &[model, data])?;
+    }
     let (m, set) = model_and_data(model, data)?;
     let bar = slow_spinner("compare: fitting the model");
     let r = crate::modelcheck::compare(&m, &set, data);
     bar.finish_and_clear();
     let r = r?;
+    if let Some(out) = report {
+        write_report_html(out, &crate::report::model_check_report(model, data, &r, None))?;
+    }
     print_result("vmt-compare/1", &r, json, crate::modelcheck::compare_text)
 }
 
-/// `vmt diagnose --model M --data D [--json]`: rank the effects the model lacks (FORMAT.md §4).
-pub fn diagnose(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
+/// `vmt diagnose --model M --data D [--json] [--report FILE.html]`: rank the effects the model lacks
+/// (FORMAT.md §4).
+pub fn diagnose(model: &Path, data: &Path, json: bool, report: Option<&Path>) -> Result<i32, VmtError> {
+    if let Some(out) = report {
+        crate::output::refuse_input_overwrite(out, &[model, data])?;
+    }
     let (m, set) = model_and_data(model, data)?;
     let bar = slow_spinner("diagnose: fitting the model and every candidate it lacks");
     let r = crate::modelcheck::diagnose(&m, &set, data);
+    let cmp = match (&r, report) {
+        (Ok(_), Some(_)) => Some(crate::modelcheck::compare(&m, &set, data)),
+        _ => None,
+    };
     bar.finish_and_clear();
     let r = r?;
+    if let (Some(out), Some(cmp)) = (report, cmp) {
+        write_report_html(out, &crate::report::model_check_report(model, data, &cmp?, Some(&r)))?;
+    }
     print_result("vmt-diagnose/1", &r, json, crate::modelcheck::diagnose_text)
+}
+
+/// Writes a report's self-contained HTML page to `out` (atomically) and says so on stderr.
+fn write_report_html(out: &Path, report: &vmt_report::Report) -> Result<(), VmtError> {
+    let (html, _) = crate::report::report_files(report)?;
+    measurement::write_file_atomic(out, html.as_bytes())?;
+    eprintln!("wrote {}", out.display());
+    Ok(())
 }
 
 /// `vmt add --model M --effect NAME [--from-diagnosis] [--data D] -o M2`: writes the model with the

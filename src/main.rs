@@ -31,6 +31,10 @@ struct ModelAndData {
     /// Print JSON (`vmt-compare/1` / `vmt-diagnose/1`, docs/formats.md) instead of the text report.
     #[arg(long)]
     json: bool,
+    /// Also write an HTML report (self-contained page: the channels, the fitted model, the ranking and
+    /// the residual's figures).
+    #[arg(long)]
+    report: Option<PathBuf>,
 }
 
 #[derive(Subcommand)]
@@ -269,8 +273,8 @@ fn main() -> ExitCode {
         Command::Iso230_2 { path, run, sensor, json } => {
             vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json)
         }
-        Command::Compare(a) => vmt::cli::compare(&a.model, &a.data, a.json),
-        Command::Diagnose(a) => vmt::cli::diagnose(&a.model, &a.data, a.json),
+        Command::Compare(a) => vmt::cli::compare(&a.model, &a.data, a.json, a.report.as_deref()),
+        Command::Diagnose(a) => vmt::cli::diagnose(&a.model, &a.data, a.json, a.report.as_deref()),
         Command::Add { model, effect, from_diagnosis, data, out } => {
             vmt::cli::add(&model, &effect, from_diagnosis, data.as_deref(), &out)
         }
