@@ -639,6 +639,8 @@ pub struct CompensateOptions {
     pub points: Option<usize>,
     /// `--axis NAME`: the controller's axis name (default: the run's axis letter and 1, e.g. X1).
     pub axis: Option<String>,
+    /// `--json`: print `vmt-compensate/1` (the nodes with their uncertainties, the targets) instead of text.
+    pub json: bool,
 }
 
 /// `vmt compensate DATA -o TABLE [--format csv|siemens|fanuc] [--points N] [--axis NAME]`: a compensation
@@ -697,7 +699,7 @@ pub fn compensate(path: &Path, out: &Path, opts: &CompensateOptions) -> Result<i
     let dev: Vec<f64> = iso.targets.iter().map(|x| x.mean_bidirectional).collect();
     let bad = |e: String| VmtError::bad(path, format!("run {}", run.name), e);
     let axis = opts.axis.clone().unwrap_or_else(|| format!("{}1", run.axis.to_ascii_uppercase()));
-    let text = if let Some(n) = opts.equidistant {
+    let (table, text) = if let Some(n) = opts.equidistant {
         if n > MAX_TABLE_NODES {
             return Err(VmtError::Usage(format!(
                 "--equidistant {n}: the limit is {MAX_TABLE_NODES} table points (controllers hold a few thousand)"
@@ -715,7 +717,7 @@ pub fn compensate(path: &Path, out: &Path, opts: &CompensateOptions) -> Result<i
         for (i, c) in ctl.corrections_0p1um.iter().enumerate() {
             s += &format!("{i},{c}\n");
         }
-        s
+        (table, s)
     } else {
         let table = match (format.equidistant(), opts.points) {
             (false, None) => {
@@ -739,20 +741,141 @@ pub fn compensate(path: &Path, out: &Path, opts: &CompensateOptions) -> Result<i
         for n in notes {
             eprintln!("note: {n}");
         }
-        text
+        (table, text)
     };
+    let summary = compensation_summary(&iso, &table);
     measurement::write_file_atomic(out, text.as_bytes())?;
+    let format_name = if opts.equidistant.is_some() { "legacy equidistant" } else { format.name() };
+    if opts.json {
+        #[derive(serde::Serialize)]
+        struct Out<'a> {
+            data: String,
+            run: &'a str,
+            sensor: &'a str,
+            file: String,
+            table_format: &'a str,
+            sign: &'a str,
+            e_before: f64,
+            a_before: f64,
+            #[serde(flatten)]
+            summary: &'a CompensationSummary,
+        }
+        let sign = if opts.equidistant.is_some() {
+            "correction_0p1um = deviation (vmt's convention)"
+        } else {
+            format.sign_convention()
+        };
+        return print_json(
+            "vmt-compensate/1",
+            &Out {
+                data: path.display().to_string(),
+                run: &run.name,
+                sensor: &col,
+                file: out.display().to_string(),
+                table_format: format_name,
+                sign,
+                e_before: iso.e,
+                a_before: iso.a,
+                summary: &summary,
+            },
+        )
+        .map(|_| 0);
+    }
     println!(
-        "wrote {} ({} format; from run {}, sensor {col}; E before {:.3} µm)",
+        "wrote {} ({format_name} format, {} points; from run {}, sensor {col}; E before {:.3} µm)",
         out.display(),
-        if opts.equidistant.is_some() { "legacy equidistant" } else { format.name() },
+        table.positions.len(),
         run.name,
         iso.e * 1e6
+    );
+    let worst_u =
+        summary.nodes.iter().filter_map(|n| n.u).fold(None, |m: Option<f64>, u| Some(m.map_or(u, |m| m.max(u))));
+    println!(
+        "largest |mean deviation − table| at the targets: {:.3} µm; largest standard uncertainty of a table value (from the repeats): {}",
+        summary.max_table_residual * 1e6,
+        worst_u.map_or("not available (fewer than 2 runs per direction)".into(), |u| format!("{:.3} µm", u * 1e6))
     );
     if opts.equidistant.is_none() {
         println!("sign: {}", format.sign_convention());
     }
     Ok(0)
+}
+
+/// One table node of `vmt compensate --json`.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CompensationNode {
+    /// Node position, m.
+    pub position: f64,
+    /// The deviation the table removes there (vmt's sign: measured − target), m.
+    pub correction: f64,
+    /// Its standard uncertainty from the repeats (nodes held fixed), m; null with fewer than 2 runs per
+    /// direction at some target.
+    pub u: Option<f64>,
+}
+
+/// One ISO 230-2 target of `vmt compensate --json`.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CompensationTarget {
+    /// Target position, m.
+    pub position: f64,
+    /// Mean bidirectional deviation x̄, m.
+    pub mean_deviation: f64,
+    /// Its standard uncertainty ½·√(s↑²/n↑ + s↓²/n↓), m; null with fewer than 2 runs in a direction.
+    pub u: Option<f64>,
+    /// x̄ − c(P): what the table leaves at the target, m.
+    pub table_residual: f64,
+}
+
+/// What `vmt compensate` reports beside the table file: nodes with uncertainties, targets with what the
+/// table leaves there.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CompensationSummary {
+    /// The table's nodes.
+    pub nodes: Vec<CompensationNode>,
+    /// The ISO 230-2 targets the table was fitted to.
+    pub targets: Vec<CompensationTarget>,
+    /// max |x̄ − c(P)| over the targets, m.
+    pub max_table_residual: f64,
+}
+
+/// The nodes with their standard uncertainties (the fit propagated, [`node_uncertainties`]) and the
+/// targets with the mean deviation's uncertainty and what the table leaves there.
+///
+/// [`node_uncertainties`]: vmt_estimators::compensation::node_uncertainties
+fn compensation_summary(
+    iso: &vmt_estimators::iso230_2::AxisResult,
+    table: &vmt_estimators::compensation::CompensationTable,
+) -> CompensationSummary {
+    let u_of = |t: &vmt_estimators::iso230_2::TargetResult| {
+        (t.up.runs >= 2 && t.down.runs >= 2)
+            .then(|| 0.5 * (t.up.s * t.up.s / t.up.runs as f64 + t.down.s * t.down.s / t.down.runs as f64).sqrt())
+    };
+    let targets: Vec<CompensationTarget> = iso
+        .targets
+        .iter()
+        .map(|t| CompensationTarget {
+            position: t.target,
+            mean_deviation: t.mean_bidirectional,
+            u: u_of(t),
+            table_residual: t.mean_bidirectional - table.correction_at(t.target),
+        })
+        .collect();
+    let u: Option<Vec<f64>> = targets.iter().map(|t| t.u).collect();
+    let p: Vec<f64> = targets.iter().map(|t| t.position).collect();
+    let node_u = u.and_then(|u| vmt_estimators::compensation::node_uncertainties(&table.positions, &p, &u).ok());
+    let nodes = table
+        .positions
+        .iter()
+        .zip(&table.corrections)
+        .enumerate()
+        .map(|(k, (&position, &correction))| CompensationNode {
+            position,
+            correction,
+            u: node_u.as_ref().map(|v| v[k]),
+        })
+        .collect();
+    let max_table_residual = targets.iter().map(|t| t.table_residual.abs()).fold(0.0, f64::max);
+    CompensationSummary { nodes, targets, max_table_residual }
 }
 /// `vmt straightness DIR [-o EST.csv] [--method seed|fusion] [--sensor NAME…] [--json]`: the straightness
 /// (and tilt) of each accelerometer from the constant-velocity passes of a measurement set, printed or as

@@ -164,6 +164,10 @@ enum Command {
         /// The controller's axis name (default: the run's axis letter and 1, e.g. X1).
         #[arg(long)]
         axis: Option<String>,
+        /// Print JSON (`vmt-compensate/1`, docs/formats.md §4): the nodes with their standard
+        /// uncertainties and what the table leaves at each target.
+        #[arg(long)]
+        json: bool,
     },
     /// Error motions (and squareness) from laser lines: least-squares line-set identification (docs/methods.md).
     Identify {
@@ -261,10 +265,10 @@ fn main() -> ExitCode {
         }
         Command::Ssi { data, sensor, json } => vmt::cli::ssi(&data, sensor.as_deref(), json),
         Command::Friction { data, sensor, json } => vmt::cli::friction(&data, sensor.as_deref(), json),
-        Command::Compensate { data, sensor, out, equidistant, format, points, axis } => vmt::cli::compensate(
+        Command::Compensate { data, sensor, out, equidistant, format, points, axis, json } => vmt::cli::compensate(
             &data,
             &out,
-            &vmt::cli::CompensateOptions { sensor, equidistant, format, points, axis },
+            &vmt::cli::CompensateOptions { sensor, equidistant, format, points, axis, json },
         ),
         Command::Identify { data, run, out, units, json } => {
             vmt::cli::identify(&data, run.as_deref(), out.as_deref(), &units, json)

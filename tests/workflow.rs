@@ -736,6 +736,25 @@ fn controller_tables_round_trip_through_the_simulated_cnc() {
         println!("{format}: E {:.3} → {:.3} µm, A {:.3} → {:.3} µm", e0 * 1e6, e1 * 1e6, a0 * 1e6, a1 * 1e6);
         assert!(e1 <= 0.3 * e0 && a1 <= 0.3 * a0, "{format}: E {e0:e} → {e1:e} m, A {a0:e} → {a1:e} m");
     }
+    // `--json` gives each node with its standard uncertainty from the repeats (5 runs of 20 nm readings:
+    // a mean deviation's u ≈ ½·√(2·σ²/5) ≈ 6 nm; a node's is of that order) and what the table leaves.
+    let o = vmt()
+        .arg("compensate")
+        .arg(&set)
+        .args(["--format", "siemens", "--json", "-o"])
+        .arg(tmp.path().join("t.mpf"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["format"], "vmt-compensate/1");
+    let nodes = j["nodes"].as_array().unwrap();
+    assert_eq!(nodes.len(), 11, "siemens default: one point per target");
+    for n in nodes {
+        let u = n["u"].as_f64().unwrap();
+        assert!((1e-9..1e-7).contains(&u), "node uncertainty {u:e} m: {n}");
+    }
+    assert!(j["max_table_residual"].as_f64().unwrap() < 0.5e-6, "{}", j["max_table_residual"]);
     // The same data without the table: the re-test's own E stays near the original (the fall is the table's).
     let plain = tmp.path().join("plain");
     assert!(vmt().arg("simulate").arg(&retest).arg("-o").arg(&plain).output().unwrap().status.success());
