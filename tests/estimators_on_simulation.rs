@@ -118,7 +118,8 @@ fn default_cv(preset: vmt_sim::sensors::AccelPreset, seeds: &[Option<u64>]) -> V
         for sensor in ["acc_y", "acc_z"] {
             let spec = sc.sensors.iter().find(|s| s.name == sensor).unwrap();
             let set = vmt::simulate::to_measurement_set(&sc, &runs).unwrap();
-            let cv = vmt::straightness::PassSelection::Procedure("cv");
+            let names = vmt::simulate::procedure_run_names(&sc, &ph.model).remove("cv").unwrap();
+            let cv = vmt::straightness::PassSelection::Procedure { name: "cv", runs: &names };
             let est = vmt::straightness::sensor_straightness(&set, &sc.source, sensor, cv, FusionMethod::SnrWeighted)
                 .unwrap()
                 .estimate;

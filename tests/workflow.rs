@@ -779,3 +779,28 @@ fn controller_tables_round_trip_through_the_simulated_cnc() {
     let (e_plain, _) = iso_e_a(&plain);
     assert!(e_plain > 0.7 * e0, "uncompensated re-test: E {e_plain:e} m against {e0:e} m");
 }
+
+/// A procedure's runs are the ones its session plan names, not every run starting with `{procedure}_`:
+/// seed 002's scenario with a second crawl procedure `crawl_again` (runs `crawl_again_1`, …) still gives
+/// the SSI check of `crawl` exactly its own three runs. (By the prefix the check saw four runs against
+/// three expected values and refused the scenario.)
+#[test]
+fn a_procedure_whose_name_extends_another_lends_it_no_runs() {
+    let text = std::fs::read_to_string(root().join("scenarios/crawl_seed002.toml")).unwrap();
+    let mut t: toml::Table = toml::from_str(&text).unwrap();
+    let procedures = t["procedures"].as_array_mut().unwrap();
+    let mut again = procedures[0].as_table().unwrap().clone();
+    assert_eq!(again["name"].as_str(), Some("crawl"), "test setup: procedures[0] of seed 002 is `crawl`");
+    again.insert("name".into(), "crawl_again".into());
+    again.insert("feeds".into(), toml::Value::Array(vec![toml::Value::Float(3.333333333333333e-4)]));
+    procedures.push(toml::Value::Table(again));
+    let dir = tempfile::tempdir().unwrap();
+    let sc = dir.path().join("s.toml");
+    std::fs::write(&sc, toml::to_string(&t).unwrap()).unwrap();
+    let out = vmt().arg("run").arg(&sc).arg("-o").arg(dir.path().join("out")).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "stdout:\n{stdout}\nstderr:\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("crawl_again_1"), "the second procedure's run is recorded:\n{stdout}");
+    let ssi_rows = stdout.lines().filter(|l| l.starts_with("SSI at ")).count();
+    assert_eq!(ssi_rows, 3, "one SSI row per run of `crawl`:\n{stdout}");
+}

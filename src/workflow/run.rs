@@ -3,11 +3,13 @@
 //! callback. `vmt run`, a study's trials and the benchmarks go through [`estimate_session`].
 
 use crate::error::VmtError;
-use crate::estimate::chain::{identify_chain_runs, procedure_runs, ChainIdentification, LineSigma};
+use crate::estimate::chain::{identify_chain_runs, ChainIdentification, LineSigma};
 use crate::estimate::{estimate_recording, Estimates};
 use crate::measurement::MeasurementSet;
 use crate::scenario::Scenario;
-use crate::simulate::{remeasure, session_end, session_plan, to_measurement_set, truth_view, Physics};
+use crate::simulate::{
+    procedure_run_names, remeasure, session_end, session_plan, to_measurement_set, truth_view, Physics,
+};
 use vmt_sim::procedures::RunRecord;
 
 /// Runs every estimator of `sc` on its recording `set`, simulated on `ph` (the truth view compared with),
@@ -33,9 +35,10 @@ pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result
 pub fn identify_chain_lines(sc: &Scenario, runs: &[RunRecord], procedure: &str) -> Result<ChainIdentification, String> {
     let chain = sc.chain.as_ref().ok_or("laser_lines_3d needs a multi-axis scenario (axes = [...])")?;
     let set = to_measurement_set(sc, runs).map_err(|e| e.to_string())?;
-    if procedure_runs(&set, procedure).next().is_none() {
+    let names = procedure_run_names(sc, &sc.axis).remove(procedure).unwrap_or_default();
+    let lines: Vec<_> = set.runs.iter().filter(|r| names.contains(&r.name)).collect();
+    if lines.is_empty() {
         return Err(format!("no laser-line runs of chain procedure `{procedure}`"));
     }
-    let lines = procedure_runs(&set, procedure);
     identify_chain_runs(&set, lines, &chain.letters(), LineSigma::AtLeast(1e-12)).map(|(_, ci)| ci)
 }

@@ -10,6 +10,7 @@ use crate::model::model_to_toml;
 use crate::scenario::Scenario;
 use crate::workflow::truth::{ChainTruth, SensorTruth, TruthView};
 use rayon::prelude::*;
+use std::collections::BTreeMap;
 use std::path::Path;
 use vmt_sim::axis_sim::AxisTruth;
 use vmt_sim::chain::{
@@ -81,7 +82,26 @@ pub fn truth_view<'a>(sc: &'a Scenario, ph: &'a Physics) -> TruthView<'a> {
         squareness: c.squareness.to_array(),
         effective_squareness: Box::new(move |positions: &[Vec<f64>]| c.effective_squareness(positions).to_array()),
     });
-    TruthView { motions: &ph.truth.motions, sensors, chain }
+    TruthView { motions: &ph.truth.motions, sensors, chain, procedure_runs: procedure_run_names(sc, &ph.model) }
+}
+
+/// The run names each procedure of the scenario records, procedure name → names in session order: the
+/// session plan's names for a single-axis procedure (planned on `model`), `{procedure}_{line}` for each
+/// line of a chain procedure. The estimate workflow picks a procedure's runs by them
+/// ([`TruthView::runs_of`]).
+pub fn procedure_run_names(sc: &Scenario, model: &AxisModel) -> BTreeMap<String, Vec<String>> {
+    let mut out = BTreeMap::new();
+    for p in &sc.procedures {
+        if let ProcedureSpec::Pause { .. } = p {
+            continue;
+        }
+        out.insert(p.name().to_string(), plan_procedure(model, p, sc.seed).into_iter().map(|r| r.name).collect());
+    }
+    for c in &sc.chain_procedures {
+        let ChainProcedureSpec::LaserLines(l) = c;
+        out.insert(l.name.clone(), l.lines.iter().map(|line| format!("{}_{}", l.name, line.name)).collect());
+    }
+    out
 }
 
 /// The compensation check's re-measurement (seed 004): the positioning procedure that recorded run `run`

@@ -3,6 +3,8 @@
 //! its estimates with. Neither side imports the other: the simulator's types (machine, procedures,
 //! sensor specs, chain model) stay behind this view.
 
+use crate::measurement::{MeasurementSet, Run};
+use std::collections::BTreeMap;
 use vmt_sim::geometry::ErrorMotions;
 
 /// What the estimate workflow may know of the truth of a recording.
@@ -13,12 +15,23 @@ pub struct TruthView<'a> {
     pub sensors: Vec<SensorTruth>,
     /// The chain of a multi-axis scenario, None for one axis.
     pub chain: Option<ChainTruth<'a>>,
+    /// The runs each procedure of the scenario recorded: procedure name → run names, from the session
+    /// plan (`crate::simulate::procedure_run_names`).
+    pub procedure_runs: BTreeMap<String, Vec<String>>,
 }
 
 impl TruthView<'_> {
     /// The simulated sensor `name`.
     pub fn sensor(&self, name: &str) -> Option<&SensorTruth> {
         self.sensors.iter().find(|s| s.name == name)
+    }
+
+    /// The runs of `set` that the scenario procedure `procedure` recorded, in the set's order (none for
+    /// an unknown procedure). Selected by the plan's run names, never by a name prefix: a prefix
+    /// `crawl_` would also take the runs of a procedure `crawl_fast`.
+    pub fn runs_of<'s>(&self, set: &'s MeasurementSet, procedure: &str) -> Vec<&'s Run> {
+        let names = self.procedure_runs.get(procedure).map_or(&[][..], |v| v.as_slice());
+        set.runs.iter().filter(|r| names.contains(&r.name)).collect()
     }
 }
 

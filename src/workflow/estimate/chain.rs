@@ -97,12 +97,6 @@ pub fn identify_axes_set(set: &MeasurementSet) -> Result<Option<(usize, ChainIde
     identify_chain_runs(set, set.runs.iter().filter(multi), &letters, LineSigma::Required).map(Some)
 }
 
-/// The chain procedure `procedure`'s line runs of a set: the runs named `{procedure}_{line}`.
-pub fn procedure_runs<'a>(set: &'a MeasurementSet, procedure: &'a str) -> impl Iterator<Item = &'a Run> + 'a {
-    let prefix = format!("{procedure}_");
-    set.runs.iter().filter(move |r| r.name.starts_with(&prefix))
-}
-
 /// Column `name` of run `run`'s point table.
 fn column_of<'a>(run: &str, columns: &'a [(String, Vec<f64>)], name: &str) -> Result<&'a Vec<f64>, String> {
     columns.iter().find(|(c, _)| c == name).map(|(_, v)| v).ok_or_else(|| format!("run `{run}` has no column `{name}`"))
@@ -178,12 +172,12 @@ pub(super) fn laser_lines_3d_checks(
     }
     let chain = truth.chain.as_ref().ok_or_else(|| bad("needs a multi-axis scenario (axes = [...])".into()))?;
     let letters = chain.letters();
-    if procedure_runs(set, procedure).next().is_none() {
+    let lines = truth.runs_of(set, procedure);
+    if lines.is_empty() {
         return Err(bad(format!("no laser-line runs of chain procedure `{procedure}`")));
     }
     // σ = 0 weighs as 1e-12 m (the scenario allows a noise-free line; the identifier needs a weight).
-    let (_, ci) =
-        identify_chain_runs(set, procedure_runs(set, procedure), &letters, LineSigma::AtLeast(1e-12)).map_err(bad)?;
+    let (_, ci) = identify_chain_runs(set, lines, &letters, LineSigma::AtLeast(1e-12)).map_err(bad)?;
     let injected = (chain.effective_squareness)(&ci.positions);
     let mut checks = Vec::new();
     let (mut names, mut inj, mut rec, mut raw) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());

@@ -149,7 +149,9 @@ pub(crate) fn residual_figures(
     let Some(c) = reports.first().and_then(|(r, _)| r.channels.get(channel)) else { return Vec::new() };
     let (k, unit) = display_unit(&c.unit);
     let name = format!("{} / {}", c.run, c.sensor);
-    let pick = |label: &str, f: &dyn Fn(&crate::modelcheck::ChannelReport) -> (Vec<f64>, Vec<f64>)| {
+    // One curve of a channel report: (x, y) in the report's units.
+    type Curve = (Vec<f64>, Vec<f64>);
+    let pick = |label: &str, f: &dyn Fn(&crate::modelcheck::ChannelReport) -> Curve| {
         reports
             .iter()
             .filter_map(|(r, model)| {

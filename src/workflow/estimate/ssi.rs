@@ -32,8 +32,7 @@ pub(super) fn ssi_checks(
     tolerance: &[f64],
 ) -> Result<Vec<(Check, Figure)>, VmtError> {
     let bad = |m: String| VmtError::bad(source, format!("estimators (ssi {procedure})"), m);
-    let prefix = format!("{procedure}_");
-    let crawl: Vec<_> = set.runs.iter().filter(|r| r.name.starts_with(&prefix)).collect();
+    let crawl = truth.runs_of(set, procedure);
     if crawl.len() != expected.len() || expected.len() != tolerance.len() {
         return Err(bad(format!(
             "{} runs but {} expected values and {} tolerances",

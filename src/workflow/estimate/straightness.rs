@@ -48,13 +48,18 @@ pub fn parse_method(name: &str) -> Result<FusionMethod, String> {
 }
 
 /// Which runs of a set are the passes: every `constant_velocity` run holding the sensor's column
-/// (`vmt straightness`), or the runs named `<procedure>_*` (a scenario's procedure, `vmt run`).
+/// (`vmt straightness`), or the runs a scenario's procedure recorded (`vmt run`).
 #[derive(Clone, Copy, Debug)]
 pub enum PassSelection<'a> {
     /// Every `constant_velocity` run holding the sensor's column.
     ConstantVelocity,
-    /// The runs of the scenario procedure of this name.
-    Procedure(&'a str),
+    /// The runs a scenario procedure recorded ([`crate::workflow::truth::TruthView::runs_of`]).
+    Procedure {
+        /// The procedure's name.
+        name: &'a str,
+        /// The names of its runs.
+        runs: &'a [String],
+    },
 }
 
 /// A unit vector of an axis letter (validated manifests hold x, y or z only).
@@ -90,7 +95,7 @@ pub fn accel_passes(
         let bad = |m: String| VmtError::bad(file, place.clone(), m);
         let selected = match selection {
             PassSelection::ConstantVelocity => r.procedure == Procedure::ConstantVelocity,
-            PassSelection::Procedure(p) => r.name.starts_with(&format!("{p}_")),
+            PassSelection::Procedure { runs, .. } => runs.contains(&r.name),
         };
         let (true, Some(a)) = (selected, r.data.column(sensor)) else { continue };
         let RunData::TimeSeries { t, .. } = &r.data else {
@@ -159,7 +164,7 @@ pub fn accel_passes(
     if passes.is_empty() {
         let which = match selection {
             PassSelection::ConstantVelocity => "constant_velocity runs".to_string(),
-            PassSelection::Procedure(p) => format!("runs named `{p}_*`"),
+            PassSelection::Procedure { name, .. } => format!("runs of procedure `{name}`"),
         };
         return Err(VmtError::bad(file, "runs", format!("expected {which} with a `{sensor}` column, found none")));
     }
@@ -376,7 +381,9 @@ pub(super) fn accel_straightness_check(
     let spec = set.sensor(sensor).ok_or_else(|| bad("sensor not declared".into()))?;
     // The same adapter as `vmt straightness` on the measurement set this recording is written as.
     let method = parse_method(method.unwrap_or("snr_weighted")).map_err(bad)?;
-    let result = sensor_straightness(set, source, sensor, PassSelection::Procedure(procedure), method)?;
+    let runs = truth.procedure_runs.get(procedure).map_or(&[][..], |v| v.as_slice());
+    let selection = PassSelection::Procedure { name: procedure, runs };
+    let result = sensor_straightness(set, source, sensor, selection, method)?;
     let (acc_runs, est) = (result.runs, result.estimate);
     let (r, u) = (spec.position, spec.direction);
     let n = est.positions.len();
