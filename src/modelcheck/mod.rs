@@ -138,6 +138,7 @@ const ALPHA_STEEL: f64 = 11.5e-6;
 
 mod add;
 mod channels;
+mod coupled;
 mod encoder;
 mod fit;
 mod report;
@@ -146,6 +147,7 @@ mod text;
 
 pub use add::*;
 pub use channels::*;
+pub(crate) use coupled::*;
 pub use encoder::*;
 pub(crate) use fit::*;
 pub use report::*;
