@@ -242,7 +242,6 @@ impl Problem<'_> {
         let p = mix.first().map_or(0, |m| m.1);
         let q = p + self.n_fixed + self.n_free;
         let (f, zeta) = fz;
-        let w_ang = TWO_PI * f;
         // Per channel (in parallel), its free-vibration columns and its share of the normal equations.
         let parts: Vec<(Vec<f64>, Vec<f64>, Vec<Vec<f64>>)> = self
             .chans
@@ -285,8 +284,7 @@ impl Problem<'_> {
                 if let Some(slot) = ch.free {
                     let c = &self.st.chans[ch.index];
                     let wch = &self.w[ch.start..ch.start + ch.y.len()];
-                    for start in [(1.0 / (w_ang * w_ang), 0.0), (0.0, 1.0 / w_ang)] {
-                        let resp = mode_response(c, None, f, zeta, start);
+                    for resp in free_vibration(c, f, zeta) {
                         free_cols.push(resp.iter().zip(wch).map(|(x, w)| x * w).collect::<Vec<f64>>());
                     }
                     for (j, phi) in free_cols.iter().enumerate() {
@@ -661,14 +659,9 @@ fn reselect(st: &Stack, pb: &Problem, terms: &[FitTerm], theta: &[f64], target: 
         }
         cols
     };
-    let w_ang = TWO_PI * f;
     let mut free_cols: Vec<Vec<f64>> = Vec::new();
-    for (j, c) in st.chans.iter().enumerate() {
-        if st.excitation[j].is_empty() {
-            continue;
-        }
-        for start in [(1.0 / (w_ang * w_ang), 0.0), (0.0, 1.0 / w_ang)] {
-            let r = mode_response(c, None, f, zeta, start);
+    for (j, c) in st.chans.iter().enumerate().filter(|(j, _)| !st.excitation[*j].is_empty()) {
+        for r in free_vibration(c, f, zeta) {
             free_cols.push(st.col_j(|_, i, jj| if jj == j { r[i] } else { 0.0 }));
         }
     }
@@ -860,27 +853,12 @@ mod tests {
     #[test]
     fn steady_mode_response_of_a_basis_wave_is_its_columns_times_t() {
         let m = 800;
-        let t: Vec<f64> = (0..m).map(|i| i as f64 / 200.0).collect();
-        let c = Channel {
-            run: "a".into(),
-            sensor: "acc".into(),
-            kind: SensorKind::Accelerometer,
-            u: [0.0, 1.0, 0.0],
-            r: [0.0; 3],
-            x: t.iter().map(|t| 0.05 + 0.1 * t).collect(),
-            d: vec![1.0; m],
-            cycle: vec![1; m],
-            t: t.clone(),
-            v: vec![0.1; m],
-            y: vec![0.0; m],
-            sigma: Some(1e-3),
-            encoder: None,
-        };
+        let c = crate::modelcheck::tests::accel("a", m);
         let chans = vec![c];
         let st = Stack::new(&chans);
         let sh = shape(&st, EffectName::StraightnessY, 1, 90, false);
         assert_eq!(sh.basis, ShapeBasis::Cosine);
-        let (f, zeta) = (6.0, 0.2);
+        let (f, zeta) = (3.0, 0.2);
         let c = &chans[0];
         let plain = |k: usize| -> Vec<f64> {
             (0..m)
