@@ -374,6 +374,9 @@ pub(crate) const COUPLED_EVALUATIONS: usize = 60;
 pub(crate) const COUPLED_SCAN_STEP: f64 = 0.03;
 /// Damping ratio of the joint frequency scan (the refinement then frees it).
 pub(crate) const COUPLED_SCAN_DAMPING: f64 = 0.02;
+/// Rounds of the joint frequency scan, each followed by the shapes re-chosen at its optimum: the
+/// first scans with the shapes of the fit without the mode, which miss the terms that drive it.
+pub(crate) const COUPLED_ROUNDS: usize = 2;
 /// Starts refined after the joint frequency scan: its best points at least a box apart.
 pub(crate) const COUPLED_STARTS: usize = 3;
 
@@ -716,7 +719,7 @@ fn input_coefs(pb: &Problem, fs: &FitState) -> Vec<Vec<f64>> {
 /// jointly with the shapes (module doc): a scan of the frequency over the catalogue's range (5 Hz
 /// to 0.4 × the slowest accelerometer rate, steps of [`COUPLED_SCAN_STEP`]) with the fit's shapes,
 /// the best points and the fit's own (f, ζ) refined; then the shapes re-chosen with that mode in the
-/// model ([`reselect`]) and (f, ζ, gains) refined again with them. The excitation is then taken from
+/// model ([`reselect`]), [`COUPLED_ROUNDS`] times, and (f, ζ, gains) refined again with them. The excitation is then taken from
 /// the joint shapes and the model refitted at the joint (f, ζ), its linear parameters (shapes,
 /// gains, free vibration, offsets, other terms) by least squares. Returns the new stack, fit and
 /// joint optimum when that lowers the weighted residual sum of squares.
@@ -739,8 +742,17 @@ pub(crate) fn refit_coupled<'a>(
         .collect();
     let mut own = vec![fs.terms[ti_r].hyper[0], fs.terms[ti_r].hyper[1]];
     own.extend(&g0);
-    let (theta1, cost1) = pb1.search(&grid, &c0, &g0, &[own])?;
-    let terms2 = reselect(st_mode, &pb1, &fs.terms, &theta1, &fs.target)?;
+    let (mut theta1, mut cost1) = pb1.search(&grid, &c0, &g0, &[own])?;
+    let mut terms2 = reselect(st_mode, &pb1, &fs.terms, &theta1, &fs.target)?;
+    // Further rounds: the scan again with the re-chosen shapes (their coefficients and gains at
+    // the last optimum), then the shapes re-chosen at its optimum.
+    for _ in 1..COUPLED_ROUNDS {
+        let pb = problem(st_mode, &terms2, &fs.target, w)?;
+        let (beta, _) = pb.coupled(&theta1).ok()?;
+        let (c, g) = (pb.shape_coefs(&beta), theta1[2..].to_vec());
+        (theta1, cost1) = pb.search(&grid, &c, &g, &[theta1.clone()])?;
+        terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target)?;
+    }
     let pb2 = problem(st_mode, &terms2, &fs.target, w)?;
     let (theta, cost) = pb2.search(&[], &[], &[], &[theta1.clone()])?;
     let (beta, _) = pb2.coupled(&theta).ok()?;
