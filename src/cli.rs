@@ -877,7 +877,7 @@ fn compensation_summary(
     let max_table_residual = targets.iter().map(|t| t.table_residual.abs()).fold(0.0, f64::max);
     CompensationSummary { nodes, targets, max_table_residual }
 }
-/// `vmt straightness DIR [-o EST.csv] [--method seed|fusion] [--sensor NAME…] [--json]`: the straightness
+/// `vmt straightness DIR [-o EST.csv] [--units si|human] [--method seed|fusion] [--sensor NAME…] [--json]`: the straightness
 /// (and tilt) of each accelerometer from the constant-velocity passes of a measurement set, printed or as
 /// JSON, optionally written as a FORMAT.md §5 profile table.
 pub fn straightness(
@@ -886,8 +886,10 @@ pub fn straightness(
     method: &str,
     sensors: &[String],
     json: bool,
+    units: &str,
 ) -> Result<i32, VmtError> {
     let method = parse_method(method).map_err(VmtError::Usage)?;
+    let units = parse_units(units)?;
     let set = measurement::read(path)?;
     let names: Vec<String> = if sensors.is_empty() {
         set.sensors
@@ -930,7 +932,7 @@ pub fn straightness(
         print_straightness(path, &results);
     }
     if let Some((o, t)) = table {
-        measurement::write_profiles(&t, o, measurement::UnitChoice::Si)?;
+        measurement::write_profiles(&t, o, units)?;
         eprintln!("wrote {}", o.display());
     }
     Ok(0)

@@ -118,6 +118,9 @@ enum Command {
         /// Print the result as one JSON object (format `vmt-straightness/1`) instead of the text table.
         #[arg(long)]
         json: bool,
+        /// Write the profile CSV in these units instead of SI ("si" or "human": mm, um, urad).
+        #[arg(long, default_value = "si")]
+        units: String,
     },
     /// Stick-slip (crawl) index of the time-series runs (encoder method, docs/methods.md).
     Ssi {
@@ -260,8 +263,8 @@ fn main() -> ExitCode {
                 )
             }
         }
-        Command::Straightness { data, out, method, sensor, json } => {
-            vmt::cli::straightness(&data, out.as_deref(), &method, &sensor, json)
+        Command::Straightness { data, out, method, sensor, json, units } => {
+            vmt::cli::straightness(&data, out.as_deref(), &method, &sensor, json, &units)
         }
         Command::Ssi { data, sensor, json } => vmt::cli::ssi(&data, sensor.as_deref(), json),
         Command::Friction { data, sensor, json } => vmt::cli::friction(&data, sensor.as_deref(), json),

@@ -632,6 +632,32 @@ fn straightness_command_and_run_check_agree_on_the_same_data() {
         compared += 1;
     }
     assert!(compared > 0, "no accelerometer straightness check in the run");
+    // `-o` writes the profile CSV in SI or, with `--units human`, in mm and µm (issue 13: every command
+    // that writes CSV takes `--units`); both read back to the same numbers (12 significant digits).
+    let (si, human) = (tmp.path().join("si.csv"), tmp.path().join("human.csv"));
+    for (file, units) in [(&si, "si"), (&human, "human")] {
+        let o = vmt()
+            .arg("straightness")
+            .arg(out.join("data"))
+            .arg("-o")
+            .arg(file)
+            .args(["--units", units])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let header = std::fs::read_to_string(&human).unwrap().lines().next().unwrap().to_string();
+    assert!(header.contains("[mm]") && header.contains("[um]"), "{header}");
+    let (a, b) = (vmt::measurement::read_profiles(&si).unwrap(), vmt::measurement::read_profiles(&human).unwrap());
+    assert_eq!(a.columns.len(), b.columns.len());
+    for (x, y) in a.position.iter().zip(&b.position) {
+        assert!((x - y).abs() <= 1e-11 * x.abs().max(1e-3), "position {x} vs {y}");
+    }
+    for (ca, cb) in a.columns.iter().zip(&b.columns) {
+        for (x, y) in ca.values.iter().zip(&cb.values) {
+            assert!((x - y).abs() <= 1e-11 * x.abs().max(1e-9), "{}: {x:e} vs {y:e}", ca.column_name());
+        }
+    }
 }
 
 /// An effect of a model on an axis the comparison does not run along is named in a note, never dropped
