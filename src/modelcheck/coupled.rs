@@ -543,6 +543,7 @@ impl Problem<'_> {
         lo.extend(start[2..].iter().map(|v| v - 4.0 * scale));
         hi.extend(start[2..].iter().map(|v| v + 4.0 * scale));
         let mut s = start.to_vec();
+        // clamp: the box's constants are ordered (0.001·1.01 < 0.3·0.99): the start strictly inside it.
         s[1] = s[1].clamp(COUPLED_DAMPING_BOX.0 * 1.01, COUPLED_DAMPING_BOX.1 * 0.99);
         let resid = |th: &[f64]| self.coupled(th).map(|(_, r)| r);
         refine_projected(&resid, &s, &lo, &hi, COUPLED_EVALUATIONS).map_or(s, |r| r.theta)
