@@ -230,6 +230,45 @@ fn accel_complete_model_fits_to_the_noise() {
     }
 }
 
+/// A mode fitted together with the shapes that drive it (src/modelcheck/coupled.rs), on 2 draws
+/// of the generator with a hidden structural mode (frequency 20–80 Hz, damping 0.5–5 %, random
+/// mode shape in the y–z plane), the model given `resonance` with a starting frequency 25 % off and
+/// damping 2 % (as a wrong diagnosis would): `compare` must find the frequency within 1 % and the
+/// damping within 10 % (the issue's thresholds) and leave normalised RMS ≤ 1.3 (the manifest states
+/// the true σ). The sequential fit (shapes first, then the mode driven by them) missed all four
+/// draws of the last report (52.2 Hz for 38.13, 84.5 for 72.22). The rate over many draws is
+/// `accel_hidden_resonance` (ignored).
+#[test]
+fn accel_mode_fitted_with_its_shapes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out: Vec<(u64, (f64, f64), Result<serde_json::Value, String>)> = [1001u64, 1002]
+        .into_par_iter()
+        .map(|seed| {
+            let dir = tmp.path().join(format!("r{seed}"));
+            let t = accel_set(&dir, seed, AccelHidden::Resonance, 200.0);
+            let (f, z) = t.mode.unwrap();
+            let model = dir.with_extension("toml");
+            let text = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+            std::fs::write(
+                &model,
+                format!("{text}[effects.resonance]\nfit = true\nfrequency = {:?}\ndamping = 0.02\n", f * 1.25),
+            )
+            .unwrap();
+            (seed, (f, z), vmt(&["compare", "--model", s(&model), "--data", s(&dir), "--json"]))
+        })
+        .collect();
+    for (seed, (f, z), r) in out {
+        let c = r.unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+        let nrms = c["normalized_rms"].as_f64().unwrap_or(f64::NAN);
+        let fa = c["fitted"]["resonance"]["frequency"].as_f64().unwrap_or(f64::NAN);
+        let za = c["fitted"]["resonance"]["damping"].as_f64().unwrap_or(f64::NAN);
+        assert!(
+            (fa / f - 1.0).abs() <= 0.01 && (za / z - 1.0).abs() <= 0.10 && nrms <= 1.3,
+            "seed {seed}: mode {f:.3} Hz ζ {z:.4}, fitted {fa:.3} Hz ζ {za:.4}, normalised RMS {nrms:.3}"
+        );
+    }
+}
+
 /// Complete accelerometer models: the share of draws with any `significant` claim (goal ≤ 2 %).
 #[test]
 #[ignore = "rate study; prints the measured rates (see the report of issue 19)"]

@@ -76,6 +76,11 @@
 //!   acceleration, read along each sensor's direction), plus the free vibration per channel
 //!   (`fitted_excitation`; in diagnose for the candidate, in compare and after add for a fitted
 //!   `resonance`). The diagnose search over (f, ζ) is then screened (`Candidate::with_screen`).
+//!   That sequential fit takes the excitation from shapes that have absorbed part of the mode's
+//!   response; `compare` (and `diagnose` for a significant mode) then fit the mode jointly with
+//!   the shapes that drive it (`coupled.rs`: each shape column carries its closed-form steady mode
+//!   response, (f, ζ, gains) refined by variable projection after a scan of f, the shapes
+//!   re-chosen with the mode in the model).
 //!
 //! Not predicted in phase 3: the carriage's own dynamics on its bearing blocks (it follows the
 //! geometry only quasi-statically, with a relative error ≈ (f/f_b)² at frequency f below its
@@ -138,6 +143,7 @@ const ALPHA_STEEL: f64 = 11.5e-6;
 
 mod add;
 mod channels;
+mod coupled;
 mod encoder;
 mod fit;
 mod report;
@@ -146,6 +152,7 @@ mod text;
 
 pub use add::*;
 pub use channels::*;
+pub(crate) use coupled::*;
 pub use encoder::*;
 pub(crate) use fit::*;
 pub use report::*;
@@ -158,11 +165,11 @@ pub fn is_positioning(p: Procedure) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// An accelerometer channel of `m` samples at 100 Hz from t = 0, x = 0.1·t.
-    fn accel(run: &str, m: usize) -> Channel {
+    pub(crate) fn accel(run: &str, m: usize) -> Channel {
         let t: Vec<f64> = (0..m).map(|i| i as f64 / 100.0).collect();
         Channel {
             run: run.into(),

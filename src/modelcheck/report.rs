@@ -264,8 +264,12 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                 Some(ex) => st.with_excitation(ex),
                 None => st.with_excitation(st.excitation.clone()),
             };
-            let fs = fit_model_on(&st2, model, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
-            (st2, fs)
+            let fs2 = fit_model_on(&st2, model, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
+            // The mode refitted jointly with the shapes that drive it (`refit_coupled`).
+            match refit_coupled(&st, &st2, &fs2, &sigma, &w) {
+                Some((st3, fs3, _)) => (st3, fs3),
+                None => (st2, fs2),
+            }
         } else {
             (st, fs)
         };
@@ -861,6 +865,27 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             let caps: Vec<(EffectName, LeadCap, u32)> =
                 binding.iter().zip(orders).map(|((m, l), (_, o))| (*m, *l, *o)).collect();
             weigh_lead_against_shapes(r, &caps, delta, config.inseparable_margin);
+        }
+    }
+    // A significant mode over fitted shapes: its frequency, damping and gains refitted jointly with
+    // the shapes that drive it (`refit_coupled`; the candidate's search held the shapes of the fit
+    // without it, which have absorbed part of its response).
+    if let (Some(sm), Some(r)) = (
+        &st_mode,
+        ranking.iter_mut().find(|r| r.effect == EffectName::Resonance.as_str() && r.verdict == Verdict::Significant),
+    ) {
+        if let Some((fq, dz, gains)) = joint_mode(st, sm, &f.fs, &r.params, &fit_sigma, &w) {
+            r.note = Some(format!(
+                "frequency and damping refitted jointly with the shapes that drive the mode: {} Hz → {} Hz, \
+                 damping {} → {}",
+                fmt_num(r.params.get("frequency").copied().unwrap_or(f64::NAN)),
+                fmt_num(fq),
+                fmt_num(r.params.get("damping").copied().unwrap_or(f64::NAN)),
+                fmt_num(dz)
+            ));
+            r.params.insert("frequency".into(), fq);
+            r.params.insert("damping".into(), dz);
+            r.params.extend(gains);
         }
     }
     ranking.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic).then_with(|| a.effect.cmp(&b.effect)));

@@ -205,6 +205,14 @@ pub(crate) fn free_map(f: f64, zeta: f64, h: f64) -> [[f64; 2]; 2] {
     [[e * (c + zw / wd * s), e * s / wd], [-e * w * w / wd * s, e * (c - zw / wd * s)]]
 }
 
+/// The two free-vibration responses of a mode on channel `c` ([`mode_response`] without input)
+/// from the unit-scaled states at t_{−1}, (q₀, q̇₀) = (1/ω², 0) and (0, 1/ω), ω = 2πf: the
+/// columns of an unknown starting state.
+pub(crate) fn free_vibration(c: &Channel, f: f64, zeta: f64) -> [Vec<f64>; 2] {
+    let w = TWO_PI * f;
+    [(1.0 / (w * w), 0.0), (0.0, 1.0 / w)].map(|start| mode_response(c, None, f, zeta, start))
+}
+
 /// Interval means of q̈ of a mode q̈ + 2ζω·q̇ + ω²·q = −a(τ) over each sample interval of channel
 /// `c`, (q̇_i − q̇_{i−1})/Δt_i (what the simulator's accelerometer reads of a point moving by q), from
 /// the state (q, q̇) = `start` at t_{−1}, with the input a from `ex` (None: free vibration) held at
@@ -942,15 +950,12 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
                     _ => 0.0,
                 }));
             }
-            // Free vibration from the unknown state at t_{−1} (q₀ = 1/ω², q̇₀ = 1/ω: unit scale),
-            // per excited channel.
-            let w = TWO_PI * f;
+            // Free vibration from the unknown state at t_{−1}, per excited channel.
             for (j, c) in st.chans.iter().enumerate() {
                 if st.excitation[j].is_empty() {
                     continue;
                 }
-                for start in [(1.0 / (w * w), 0.0), (0.0, 1.0 / w)] {
-                    let r = mode_response(c, None, f, zeta, start);
+                for r in free_vibration(c, f, zeta) {
                     cols.push(st.col_j(|_, i, jj| if jj == j { r[i] } else { 0.0 }));
                 }
             }
