@@ -581,16 +581,6 @@ impl Problem<'_> {
             .map(|t| {
                 let th = self.refine(t);
                 let cost = self.cost(&th);
-                if std::env::var_os("VMT_DEBUG_COUPLED").is_some() {
-                    eprintln!(
-                        "coupled start {:.2} Hz ζ {:.4}: → {:.2} Hz ζ {:.4} gains {:?} cost {cost:.1}",
-                        t[0],
-                        t[1],
-                        th[0],
-                        th[1],
-                        &th[2..]
-                    );
-                }
                 (th, cost)
             })
             .collect();
@@ -743,7 +733,7 @@ pub(crate) fn refit_coupled<'a>(
         .collect();
     let mut own = vec![fs.terms[ti_r].hyper[0], fs.terms[ti_r].hyper[1]];
     own.extend(&g0);
-    let (mut theta1, mut cost1) = pb1.search(&grid, &c0, &g0, &[own])?;
+    let (mut theta1, _) = pb1.search(&grid, &c0, &g0, &[own])?;
     let mut terms2 = reselect(st_mode, &pb1, &fs.terms, &theta1, &fs.target)?;
     // Further rounds: the scan again with the re-chosen shapes (their coefficients and gains at
     // the last optimum), then the shapes re-chosen at its optimum.
@@ -751,11 +741,11 @@ pub(crate) fn refit_coupled<'a>(
         let pb = problem(st_mode, &terms2, &fs.target, w)?;
         let (beta, _) = pb.coupled(&theta1).ok()?;
         let (c, g) = (pb.shape_coefs(&beta), theta1[2..].to_vec());
-        (theta1, cost1) = pb.search(&grid, &c, &g, &[theta1.clone()])?;
+        (theta1, _) = pb.search(&grid, &c, &g, &[theta1.clone()])?;
         terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target)?;
     }
     let pb2 = problem(st_mode, &terms2, &fs.target, w)?;
-    let (theta, cost) = pb2.search(&[], &[], &[], &[theta1.clone()])?;
+    let (theta, _) = pb2.search(&[], &[], &[], &[theta1.clone()])?;
     let (beta, _) = pb2.coupled(&theta).ok()?;
     // The coefficient vector of a fit over `terms2` with the joint shapes in their slots (the
     // excitation reads only those).
@@ -778,14 +768,6 @@ pub(crate) fn refit_coupled<'a>(
     terms[ti_r].hyper = vec![theta[0], theta[1]];
     let cols = design(&st3, &terms);
     let (coefs, residual) = solve_blocks(&st3, &fs.target, &cols, sigma).ok()?;
-    if std::env::var_os("VMT_DEBUG_COUPLED").is_some() {
-        eprintln!(
-            "coupled: θ1 {theta1:?} cost {cost1:.1}; reselected θ {theta:?} cost {cost:.1}; sequential {:.1}, refit {:.1}, n {}",
-            weighted_ss(&fs.residual, w),
-            weighted_ss(&residual, w),
-            st.n
-        );
-    }
     if weighted_ss(&residual, w) >= weighted_ss(&fs.residual, w) {
         return None;
     }
