@@ -65,7 +65,7 @@ pub(crate) fn wave_of(sh: &Shape, k: usize) -> Option<Wave> {
             0..=2 => Wave::Still,
             _ => {
                 let kappa = ((k - 3) / 2 + 1) as f64 * std::f64::consts::PI / l;
-                if (k - 3) % 2 == 0 {
+                if (k - 3).is_multiple_of(2) {
                     Wave::Cos { kappa, partner: k + 1 }
                 } else {
                     Wave::Sin { kappa, partner: k - 1 }
@@ -77,7 +77,7 @@ pub(crate) fn wave_of(sh: &Shape, k: usize) -> Option<Wave> {
             0 | 1 => Wave::Still,
             _ => {
                 let kappa = (k / 2) as f64 * std::f64::consts::PI / l;
-                if k % 2 == 0 {
+                if k.is_multiple_of(2) {
                     Wave::Sin { kappa, partner: k + 1 }
                 } else {
                     Wave::Cos { kappa, partner: k - 1 }
