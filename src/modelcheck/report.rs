@@ -1073,8 +1073,14 @@ impl Reshape<'_, '_> {
         };
         let Some(mut r2) = d.ranking.into_iter().next() else { return Ok(()) };
         bonferroni(&mut r2, self.total as f64, self.config.family_alpha);
+        // What the first ranking found among the candidates stands: explained away by a better one,
+        // or inseparable from another candidate (the collinearity test compares candidates).
         if away && r2.verdict == Verdict::Significant {
             r2.verdict = Verdict::Noise;
+        } else if r.verdict == Verdict::Inseparable && r2.verdict == Verdict::Significant && !r.confused_with.is_empty()
+        {
+            r2.verdict = Verdict::Inseparable;
+            r2.confused_with = r.confused_with.clone();
         }
         let chi2 = |fs: &FitState| fs.residual.iter().zip(self.sig).map(|(r, s)| (r / s).powi(2)).sum::<f64>();
         r2.delta_bic +=
