@@ -1091,11 +1091,21 @@ impl Reshape<'_, '_> {
             .filter_map(|&(m, o)| orders.iter().find(|(om, oo)| *om == m && *oo != o).map(|(_, oo)| (m, o, *oo)))
             .collect();
         let list: Vec<String> = changed.iter().map(|(m, a, b)| format!("{m} order {a} → {b}")).collect();
+        // The candidate model at either set of orders: the one with the lower ΔBIC (σ of the
+        // significance) is its evidence. (The lead's first ranking was against capped shapes, not
+        // the model as fitted: its entry is always the re-ranked one.)
+        let lead_capped = self.joint.is_some() && name == EffectName::CyclicLead;
+        let better = lead_capped || r2.delta_bic < r.delta_bic;
         let said = format!(
             "shapes re-chosen by BIC with `{name}` in the model: {}; with it against the model as fitted: BIC \
-             change (σ unknown) {delta_u:.1}",
-            if list.is_empty() { "unchanged from the free orders".to_string() } else { list.join(", ") }
+             change (σ unknown) {delta_u:.1}{}",
+            if list.is_empty() { "unchanged from the free orders".to_string() } else { list.join(", ") },
+            if better { "" } else { "; its ΔBIC is lower at the free orders, which it keeps" }
         );
+        if !better {
+            r2 = r.clone();
+            r2.note = None;
+        }
         if r2.verdict == Verdict::Significant && delta_u >= -self.config.inseparable_margin && !changed.is_empty() {
             r2.verdict = Verdict::Inseparable;
             r2.confused_with = changed.iter().map(|(m, _, _)| m.as_str().to_string()).collect();
