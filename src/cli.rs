@@ -32,15 +32,25 @@ fn simulate_set_on(sc: &Scenario, ph: &crate::simulate::Physics) -> Result<Measu
     to_measurement_set(sc, &runs)
 }
 
-/// `vmt simulate [SCENARIO] -o DIR`: writes the measurement set with the truth beside it.
-pub fn simulate(path: Option<&Path>, out: &Path, units: &str) -> Result<(), VmtError> {
+/// `vmt simulate [SCENARIO] -o DIR [--compensation TABLE]`: writes the measurement set with the truth
+/// beside it; with a compensation table (any `vmt compensate` format) loaded in the simulated CNC.
+pub fn simulate(path: Option<&Path>, out: &Path, units: &str, compensation: Option<&Path>) -> Result<(), VmtError> {
     let units = parse_units(units)?;
     let sc = load_scenario(path)?;
-    if let Some(p) = path {
-        crate::output::refuse_input_overwrite(out, &[p])?;
+    let inputs: Vec<&Path> = path.into_iter().chain(compensation).collect();
+    crate::output::refuse_input_overwrite(out, &inputs)?;
+    let table = compensation.map(crate::format::compensation::read_table).transpose()?;
+    let mut ph = physics(&sc)?;
+    if let Some(table) = table {
+        ph.model.compensation = vmt_sim::profile::Profile {
+            terms: vec![vmt_sim::profile::Term::Table { x: table.positions, y: table.corrections }],
+        };
     }
-    let ph = physics(&sc)?;
-    let set = simulate_set_on(&sc, &ph)?;
+    let mut set = simulate_set_on(&sc, &ph)?;
+    if let Some(c) = compensation {
+        let with = format!("compensation table {} loaded in the simulated CNC", c.display());
+        set.description = Some(set.description.map_or(with.clone(), |d| format!("{d}; {with}")));
+    }
     measurement::write_with_extras(&set, out, units, &truth_extras(&sc, &ph)?)?;
     eprintln!("wrote {} runs to {}", set.runs.len(), out.display());
     Ok(())
@@ -616,13 +626,58 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
 /// Most points of an equidistant compensation table (size budget, DESIGN.md §2).
 pub const MAX_TABLE_NODES: usize = 100_000;
 
-/// `vmt compensate DATA -o TABLE.csv [--controller]`: seed 004's variable-step compensation table from the
-/// mean bidirectional deviations of a positioning run; `--equidistant N` for the controller-style table.
-pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Option<usize>) -> Result<i32, VmtError> {
+/// What `vmt compensate` writes (its options).
+#[derive(Clone, Debug, Default)]
+pub struct CompensateOptions {
+    /// Deviation column (default: the first linear laser of the run).
+    pub sensor: Option<String>,
+    /// `--equidistant N`: the legacy controller-style table of N points in 0.1 µm units.
+    pub equidistant: Option<usize>,
+    /// `--format csv|siemens|fanuc` (default csv).
+    pub format: Option<String>,
+    /// `--points N`: equidistant points (siemens/fanuc default: one per target; csv: variable step).
+    pub points: Option<usize>,
+    /// `--axis NAME`: the controller's axis name (default: the run's axis letter and 1, e.g. X1).
+    pub axis: Option<String>,
+    /// `--json`: print `vmt-compensate/1` (the nodes with their uncertainties, the targets) instead of text.
+    pub json: bool,
+}
+
+/// `vmt compensate DATA -o TABLE [--format csv|siemens|fanuc] [--points N] [--axis NAME]`: a compensation
+/// table from the mean bidirectional deviations of a positioning run — seed 004's variable-step table
+/// (CSV), or an equidistant least-squares table of N points (SINUMERIK-, FANUC-style, or CSV with
+/// `--points`), each format's limits checked and its sign convention written into the file
+/// (docs/formats.md §7); `--equidistant N` for the legacy controller-style table.
+pub fn compensate(path: &Path, out: &Path, opts: &CompensateOptions) -> Result<i32, VmtError> {
+    use crate::format::compensation::{equidistant_nodes, table_text, ControllerFormat};
     use vmt_estimators::compensation::{
-        equidistant_table, export_controller_table, variable_step_table, VariableStepParams,
+        equidistant_table, export_controller_table, fit_table_on_nodes, variable_step_table, VariableStepParams,
     };
     use vmt_estimators::iso230_2::evaluate_bidirectional;
+    let format = opts.format.as_deref().map(ControllerFormat::parse).transpose().map_err(VmtError::Usage)?;
+    if opts.equidistant.is_some() && (format.is_some() || opts.points.is_some()) {
+        return Err(VmtError::Usage("--equidistant: give either it or --format/--points, not both".into()));
+    }
+    let format = format.unwrap_or(ControllerFormat::Csv);
+    if let Some(n) = opts.points {
+        if n < 2 || n > format.max_points() {
+            return Err(VmtError::Usage(format!(
+                "--points {n}: a {} table holds 2..={} points",
+                format.name(),
+                format.max_points()
+            )));
+        }
+    }
+    if let Some(a) = &opts.axis {
+        let ok = a.len() <= 16
+            && a.starts_with(|c: char| c.is_ascii_alphabetic())
+            && a.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        if !ok {
+            return Err(VmtError::Usage(format!(
+                "--axis `{a}`: expected a controller axis name (a letter, then letters, digits or _; ≤ 16)"
+            )));
+        }
+    }
     crate::output::refuse_input_overwrite(out, &[path])?;
     let set = measurement::read(path)?;
     let run = set
@@ -630,7 +685,7 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
         .iter()
         .find(|r| r.procedure == measurement::Procedure::Positioning)
         .ok_or_else(|| VmtError::bad(path, "runs", "expected a positioning run"))?;
-    let col = sensor.map(str::to_string).or_else(|| {
+    let col = opts.sensor.clone().or_else(|| {
         set.sensors
             .iter()
             .find(|s| s.kind == SensorKind::LaserLinear && run.data.column(&s.name).is_some())
@@ -640,46 +695,189 @@ pub fn compensate(path: &Path, sensor: Option<&str>, out: &Path, equidistant: Op
     let (t, u, d) = crate::estimate::point_table_deviations(run, &col)
         .ok_or_else(|| VmtError::bad(path, format!("run {}", run.name), format!("no column `{col}`")))?;
     let iso = evaluate_bidirectional(&t, &u, &d).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+    let targets: Vec<f64> = iso.targets.iter().map(|x| x.target).collect();
     let dev: Vec<f64> = iso.targets.iter().map(|x| x.mean_bidirectional).collect();
-    let text = match equidistant {
-        None => {
-            let table = variable_step_table(&t, &dev, &VariableStepParams::default())
-                .map_err(|e| VmtError::bad(path, "", e.to_string()))?
-                .table;
-            // Converted to mm and µm at 12 significant digits: no conversion noise (335.95000000000005).
-            let r = |x: f64| measurement::round_significant(x, 12);
-            let mut s = String::from("position[mm],correction[um]\n");
-            for (p, c) in table.positions.iter().zip(&table.corrections) {
-                s += &format!("{},{}\n", r(p * 1e3), r(c * 1e6));
-            }
-            s
+    let bad = |e: String| VmtError::bad(path, format!("run {}", run.name), e);
+    let axis = opts.axis.clone().unwrap_or_else(|| format!("{}1", run.axis.to_ascii_uppercase()));
+    let (table, text) = if let Some(n) = opts.equidistant {
+        if n > MAX_TABLE_NODES {
+            return Err(VmtError::Usage(format!(
+                "--equidistant {n}: the limit is {MAX_TABLE_NODES} table points (controllers hold a few thousand)"
+            )));
         }
-        Some(n) => {
-            if n > MAX_TABLE_NODES {
-                return Err(VmtError::Usage(format!(
-                    "--equidistant {n}: the limit is {MAX_TABLE_NODES} table points (controllers hold a few thousand)"
-                )));
-            }
-            let table = equidistant_table(&t, &dev, n).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
-            let ctl = export_controller_table(&table).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
-            let r = |x: f64| measurement::round_significant(x, 12);
-            let mut s = format!(
-                "# controller table: start {} mm, spacing {} mm, corrections in 0.1 µm\n",
-                r(ctl.start * 1e3),
-                r(ctl.spacing * 1e3)
-            );
-            s += "index,correction_0p1um\n";
-            for (i, c) in ctl.corrections_0p1um.iter().enumerate() {
-                s += &format!("{i},{c}\n");
-            }
-            s
+        let table = equidistant_table(&t, &dev, n).map_err(|e| bad(e.to_string()))?;
+        let ctl = export_controller_table(&table).map_err(|e| bad(e.to_string()))?;
+        let r = |x: f64| measurement::round_significant(x, 12);
+        let mut s = format!(
+            "# controller table: start {} mm, spacing {} mm, corrections in 0.1 µm\n",
+            r(ctl.start * 1e3),
+            r(ctl.spacing * 1e3)
+        );
+        s += "index,correction_0p1um\n";
+        for (i, c) in ctl.corrections_0p1um.iter().enumerate() {
+            s += &format!("{i},{c}\n");
         }
+        (table, s)
+    } else {
+        let table = match (format.equidistant(), opts.points) {
+            (false, None) => {
+                variable_step_table(&targets, &dev, &VariableStepParams::default())
+                    .map_err(|e| bad(e.to_string()))?
+                    .table
+            }
+            (true, None) | (_, Some(_)) => {
+                let n = opts.points.unwrap_or(targets.len()).min(format.max_points());
+                let (lo, hi) = (targets[0], targets[targets.len() - 1]);
+                fit_table_on_nodes(&equidistant_nodes(lo, hi, n), &targets, &dev).map_err(|e| {
+                    bad(format!(
+                        "{e} (an equidistant table of {n} points over {} targets: choose fewer --points)",
+                        targets.len()
+                    ))
+                })?
+            }
+        };
+        let about = format!("from run {} sensor {col} of {}", run.name, path.display());
+        let (text, notes) = table_text(format, &table, &axis, &about).map_err(bad)?;
+        for n in notes {
+            eprintln!("note: {n}");
+        }
+        (table, text)
     };
+    let summary = compensation_summary(&iso, &table);
     measurement::write_file_atomic(out, text.as_bytes())?;
-    println!("wrote {} (from run {}, sensor {col}; E before {:.3} µm)", out.display(), run.name, iso.e * 1e6);
+    let format_name = if opts.equidistant.is_some() { "legacy equidistant" } else { format.name() };
+    if opts.json {
+        #[derive(serde::Serialize)]
+        struct Out<'a> {
+            data: String,
+            run: &'a str,
+            sensor: &'a str,
+            file: String,
+            table_format: &'a str,
+            sign: &'a str,
+            e_before: f64,
+            a_before: f64,
+            #[serde(flatten)]
+            summary: &'a CompensationSummary,
+        }
+        let sign = if opts.equidistant.is_some() {
+            "correction_0p1um = deviation (vmt's convention)"
+        } else {
+            format.sign_convention()
+        };
+        return print_json(
+            "vmt-compensate/1",
+            &Out {
+                data: path.display().to_string(),
+                run: &run.name,
+                sensor: &col,
+                file: out.display().to_string(),
+                table_format: format_name,
+                sign,
+                e_before: iso.e,
+                a_before: iso.a,
+                summary: &summary,
+            },
+        )
+        .map(|_| 0);
+    }
+    println!(
+        "wrote {} ({format_name} format, {} points; from run {}, sensor {col}; E before {:.3} µm)",
+        out.display(),
+        table.positions.len(),
+        run.name,
+        iso.e * 1e6
+    );
+    let worst_u =
+        summary.nodes.iter().filter_map(|n| n.u).fold(None, |m: Option<f64>, u| Some(m.map_or(u, |m| m.max(u))));
+    println!(
+        "largest |mean deviation − table| at the targets: {:.3} µm; largest standard uncertainty of a table value (from the repeats): {}",
+        summary.max_table_residual * 1e6,
+        worst_u.map_or("not available (fewer than 2 runs per direction)".into(), |u| format!("{:.3} µm", u * 1e6))
+    );
+    if opts.equidistant.is_none() {
+        println!("sign: {}", format.sign_convention());
+    }
     Ok(0)
 }
-/// `vmt straightness DIR [-o EST.csv] [--method seed|fusion] [--sensor NAME…] [--json]`: the straightness
+
+/// One table node of `vmt compensate --json`.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CompensationNode {
+    /// Node position, m.
+    pub position: f64,
+    /// The deviation the table removes there (vmt's sign: measured − target), m.
+    pub correction: f64,
+    /// Its standard uncertainty from the repeats (nodes held fixed), m; null with fewer than 2 runs per
+    /// direction at some target.
+    pub u: Option<f64>,
+}
+
+/// One ISO 230-2 target of `vmt compensate --json`.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CompensationTarget {
+    /// Target position, m.
+    pub position: f64,
+    /// Mean bidirectional deviation x̄, m.
+    pub mean_deviation: f64,
+    /// Its standard uncertainty ½·√(s↑²/n↑ + s↓²/n↓), m; null with fewer than 2 runs in a direction.
+    pub u: Option<f64>,
+    /// x̄ − c(P): what the table leaves at the target, m.
+    pub table_residual: f64,
+}
+
+/// What `vmt compensate` reports beside the table file: nodes with uncertainties, targets with what the
+/// table leaves there.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CompensationSummary {
+    /// The table's nodes.
+    pub nodes: Vec<CompensationNode>,
+    /// The ISO 230-2 targets the table was fitted to.
+    pub targets: Vec<CompensationTarget>,
+    /// max |x̄ − c(P)| over the targets, m.
+    pub max_table_residual: f64,
+}
+
+/// The nodes with their standard uncertainties (the fit propagated, [`node_uncertainties`]) and the
+/// targets with the mean deviation's uncertainty and what the table leaves there.
+///
+/// [`node_uncertainties`]: vmt_estimators::compensation::node_uncertainties
+fn compensation_summary(
+    iso: &vmt_estimators::iso230_2::AxisResult,
+    table: &vmt_estimators::compensation::CompensationTable,
+) -> CompensationSummary {
+    let u_of = |t: &vmt_estimators::iso230_2::TargetResult| {
+        (t.up.runs >= 2 && t.down.runs >= 2)
+            .then(|| 0.5 * (t.up.s * t.up.s / t.up.runs as f64 + t.down.s * t.down.s / t.down.runs as f64).sqrt())
+    };
+    let targets: Vec<CompensationTarget> = iso
+        .targets
+        .iter()
+        .map(|t| CompensationTarget {
+            position: t.target,
+            mean_deviation: t.mean_bidirectional,
+            u: u_of(t),
+            table_residual: t.mean_bidirectional - table.correction_at(t.target),
+        })
+        .collect();
+    let u: Option<Vec<f64>> = targets.iter().map(|t| t.u).collect();
+    let p: Vec<f64> = targets.iter().map(|t| t.position).collect();
+    let node_u = u.and_then(|u| vmt_estimators::compensation::node_uncertainties(&table.positions, &p, &u).ok());
+    let nodes = table
+        .positions
+        .iter()
+        .zip(&table.corrections)
+        .enumerate()
+        .map(|(k, (&position, &correction))| CompensationNode {
+            position,
+            correction,
+            u: node_u.as_ref().map(|v| v[k]),
+        })
+        .collect();
+    let max_table_residual = targets.iter().map(|t| t.table_residual.abs()).fold(0.0, f64::max);
+    CompensationSummary { nodes, targets, max_table_residual }
+}
+/// `vmt straightness DIR [-o EST.csv] [--units si|human] [--method seed|fusion] [--sensor NAME…] [--json]`: the straightness
 /// (and tilt) of each accelerometer from the constant-velocity passes of a measurement set, printed or as
 /// JSON, optionally written as a FORMAT.md §5 profile table.
 pub fn straightness(
@@ -688,8 +886,10 @@ pub fn straightness(
     method: &str,
     sensors: &[String],
     json: bool,
+    units: &str,
 ) -> Result<i32, VmtError> {
     let method = parse_method(method).map_err(VmtError::Usage)?;
+    let units = parse_units(units)?;
     let set = measurement::read(path)?;
     let names: Vec<String> = if sensors.is_empty() {
         set.sensors
@@ -732,7 +932,7 @@ pub fn straightness(
         print_straightness(path, &results);
     }
     if let Some((o, t)) = table {
-        measurement::write_profiles(&t, o, measurement::UnitChoice::Si)?;
+        measurement::write_profiles(&t, o, units)?;
         eprintln!("wrote {}", o.display());
     }
     Ok(0)
@@ -832,25 +1032,50 @@ pub(crate) fn print_json<T: serde::Serialize>(format: &str, v: &T) -> Result<(),
     Ok(())
 }
 
-/// `vmt compare --model M --data D [--json]`: fit the model's free parameters, predict, report the
+/// `vmt compare --model M --data D [--json] [--report FILE.html]`: fit the model's free parameters, predict, report the
 /// residual (FORMAT.md §4).
-pub fn compare(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
+pub fn compare(model: &Path, data: &Path, json: bool, report: Option<&Path>) -> Result<i32, VmtError> {
+    if let Some(out) = report {
+        crate::output::refuse_input_overwrite(out, &[model, data])?;
+    }
     let (m, set) = model_and_data(model, data)?;
     let bar = slow_spinner("compare: fitting the model");
     let r = crate::modelcheck::compare(&m, &set, data);
     bar.finish_and_clear();
     let r = r?;
+    if let Some(out) = report {
+        write_report_html(out, &crate::report::model_check_report(model, data, &r, None))?;
+    }
     print_result("vmt-compare/1", &r, json, crate::modelcheck::compare_text)
 }
 
-/// `vmt diagnose --model M --data D [--json]`: rank the effects the model lacks (FORMAT.md §4).
-pub fn diagnose(model: &Path, data: &Path, json: bool) -> Result<i32, VmtError> {
+/// `vmt diagnose --model M --data D [--json] [--report FILE.html]`: rank the effects the model lacks
+/// (FORMAT.md §4).
+pub fn diagnose(model: &Path, data: &Path, json: bool, report: Option<&Path>) -> Result<i32, VmtError> {
+    if let Some(out) = report {
+        crate::output::refuse_input_overwrite(out, &[model, data])?;
+    }
     let (m, set) = model_and_data(model, data)?;
     let bar = slow_spinner("diagnose: fitting the model and every candidate it lacks");
     let r = crate::modelcheck::diagnose(&m, &set, data);
+    let cmp = match (&r, report) {
+        (Ok(_), Some(_)) => Some(crate::modelcheck::compare(&m, &set, data)),
+        _ => None,
+    };
     bar.finish_and_clear();
     let r = r?;
+    if let (Some(out), Some(cmp)) = (report, cmp) {
+        write_report_html(out, &crate::report::model_check_report(model, data, &cmp?, Some(&r)))?;
+    }
     print_result("vmt-diagnose/1", &r, json, crate::modelcheck::diagnose_text)
+}
+
+/// Writes a report's self-contained HTML page to `out` (atomically) and says so on stderr.
+fn write_report_html(out: &Path, report: &vmt_report::Report) -> Result<(), VmtError> {
+    let (html, _) = crate::report::report_files(report)?;
+    measurement::write_file_atomic(out, html.as_bytes())?;
+    eprintln!("wrote {}", out.display());
+    Ok(())
 }
 
 /// `vmt add --model M --effect NAME [--from-diagnosis] [--data D] -o M2`: writes the model with the

@@ -31,6 +31,10 @@ struct ModelAndData {
     /// Print JSON (`vmt-compare/1` / `vmt-diagnose/1`, docs/formats.md) instead of the text report.
     #[arg(long)]
     json: bool,
+    /// Also write an HTML report (self-contained page: the channels, the fitted model, the ranking and
+    /// the residual's figures).
+    #[arg(long)]
+    report: Option<PathBuf>,
 }
 
 #[derive(Subcommand)]
@@ -56,6 +60,10 @@ enum Command {
         /// Write CSV columns in these units instead of SI ("si" or "human": um, urad, mm/s, ...).
         #[arg(long, default_value = "si")]
         units: String,
+        /// A compensation table loaded in the simulated CNC (`vmt compensate` output in any of its formats,
+        /// docs/formats.md §7): every run is measured with it applied.
+        #[arg(long)]
+        compensation: Option<PathBuf>,
     },
     /// Monte Carlo tolerance study over a sensor or scenario parameter, or `study merge`.
     Study {
@@ -110,6 +118,9 @@ enum Command {
         /// Print the result as one JSON object (format `vmt-straightness/1`) instead of the text table.
         #[arg(long)]
         json: bool,
+        /// Write the profile CSV in these units instead of SI ("si" or "human": mm, um, urad).
+        #[arg(long, default_value = "si")]
+        units: String,
     },
     /// Stick-slip (crawl) index of the time-series runs (encoder method, docs/methods.md).
     Ssi {
@@ -133,19 +144,33 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Variable-step compensation table (docs/methods.md) from the positioning run of a measurement set.
+    /// Compensation table (docs/methods.md, docs/formats.md §7) from the positioning run of a measurement set.
     Compensate {
         /// Measurement set directory (docs/formats.md).
         data: PathBuf,
         /// Deviation column (default: the first linear laser of the run).
         #[arg(long)]
         sensor: Option<String>,
-        /// Output CSV of the table.
+        /// Output file of the table (written atomically).
         #[arg(short, long)]
         out: PathBuf,
-        /// Write an equidistant controller-style table of N points (0.1 µm units) instead.
+        /// Write an equidistant controller-style table of N points (0.1 µm units) instead (legacy).
         #[arg(long)]
         equidistant: Option<usize>,
+        /// Table format: csv (default; variable-step nodes), siemens ($AA_ENC_COMP, ≤ 5000 points) or
+        /// fanuc (parameters 3620–3624, incremental 0.1 µm values, ≤ 128 points); docs/formats.md §7.
+        #[arg(long)]
+        format: Option<String>,
+        /// Equidistant table points (siemens/fanuc default: one per target; csv default: variable step).
+        #[arg(long)]
+        points: Option<usize>,
+        /// The controller's axis name (default: the run's axis letter and 1, e.g. X1).
+        #[arg(long)]
+        axis: Option<String>,
+        /// Print JSON (`vmt-compensate/1`, docs/formats.md §4): the nodes with their standard
+        /// uncertainties and what the table leaves at each target.
+        #[arg(long)]
+        json: bool,
     },
     /// Error motions (and squareness) from laser lines: least-squares line-set identification (docs/methods.md).
     Identify {
@@ -219,7 +244,9 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run { scenario, out, json } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
-        Command::Simulate { scenario, out, units } => vmt::cli::simulate(scenario.as_deref(), &out, &units).map(|_| 0),
+        Command::Simulate { scenario, out, units, compensation } => {
+            vmt::cli::simulate(scenario.as_deref(), &out, &units, compensation.as_deref()).map(|_| 0)
+        }
         Command::Study { scenario, shards, vary, sample, trials, shard, estimator_cmd, tolerance, out } => {
             if scenario.as_os_str() == "merge" {
                 vmt::cli::study_merge(&out, &shards)
@@ -236,14 +263,16 @@ fn main() -> ExitCode {
                 )
             }
         }
-        Command::Straightness { data, out, method, sensor, json } => {
-            vmt::cli::straightness(&data, out.as_deref(), &method, &sensor, json)
+        Command::Straightness { data, out, method, sensor, json, units } => {
+            vmt::cli::straightness(&data, out.as_deref(), &method, &sensor, json, &units)
         }
         Command::Ssi { data, sensor, json } => vmt::cli::ssi(&data, sensor.as_deref(), json),
         Command::Friction { data, sensor, json } => vmt::cli::friction(&data, sensor.as_deref(), json),
-        Command::Compensate { data, sensor, out, equidistant } => {
-            vmt::cli::compensate(&data, sensor.as_deref(), &out, equidistant)
-        }
+        Command::Compensate { data, sensor, out, equidistant, format, points, axis, json } => vmt::cli::compensate(
+            &data,
+            &out,
+            &vmt::cli::CompensateOptions { sensor, equidistant, format, points, axis, json },
+        ),
         Command::Identify { data, run, out, units, json } => {
             vmt::cli::identify(&data, run.as_deref(), out.as_deref(), &units, json)
         }
@@ -251,8 +280,8 @@ fn main() -> ExitCode {
         Command::Iso230_2 { path, run, sensor, json } => {
             vmt::cli::iso230_2(&path, run.as_deref(), sensor.as_deref(), json)
         }
-        Command::Compare(a) => vmt::cli::compare(&a.model, &a.data, a.json),
-        Command::Diagnose(a) => vmt::cli::diagnose(&a.model, &a.data, a.json),
+        Command::Compare(a) => vmt::cli::compare(&a.model, &a.data, a.json, a.report.as_deref()),
+        Command::Diagnose(a) => vmt::cli::diagnose(&a.model, &a.data, a.json, a.report.as_deref()),
         Command::Add { model, effect, from_diagnosis, data, out } => {
             vmt::cli::add(&model, &effect, from_diagnosis, data.as_deref(), &out)
         }

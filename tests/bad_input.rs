@@ -649,6 +649,48 @@ fn cli_cases() -> Vec<Case> {
         blamed: String::new(),
         place: "--equidistant".into(),
     });
+    // Compensation tables (issue 16): a table that does not fit its format, an unknown format, and
+    // malformed controller files loaded into the simulated CNC.
+    for (label, a, place) in [
+        (
+            "fanuc table of 129 points",
+            args(&["compensate", "{dir}/set", "--format", "fanuc", "--points", "129", "-o", "{dir}/out.txt"]),
+            "--points",
+        ),
+        ("--format dxf", args(&["compensate", "{dir}/set", "--format", "dxf", "-o", "{dir}/out.txt"]), "--format"),
+        (
+            "--axis with a space",
+            args(&["compensate", "{dir}/set", "--format", "siemens", "--axis", "X 1", "-o", "{dir}/out.txt"]),
+            "--axis",
+        ),
+    ] {
+        let mut f = set_files(&table(&good_rows()));
+        f.push(("s.toml".into(), s.clone()));
+        cases.push(Case { label: label.into(), files: f, args: a, blamed: String::new(), place: place.into() });
+    }
+    let siemens_head = "CHANDATA(1)\n$AA_ENC_COMP_STEP[0,X1]=100\n$AA_ENC_COMP_MIN[0,X1]=0\n";
+    let fanuc_head = "P3620=0\nP3621=0\nP3623=1\nP3624=100\nREF=0\n";
+    for (label, text, place) in [
+        ("siemens value not a number", format!("{siemens_head}$AA_ENC_COMP[0,0,X1]=0\n$AA_ENC_COMP[0,1,X1]=abc\n"), "line 5"),
+        ("siemens point missing", format!("{siemens_head}$AA_ENC_COMP[0,0,X1]=0\n$AA_ENC_COMP[0,2,X1]=0\n"), "point 1 is missing"),
+        ("siemens MAX inconsistent", format!("{siemens_head}$AA_ENC_COMP[0,0,X1]=0\n$AA_ENC_COMP[0,1,X1]=0\n$AA_ENC_COMP_MAX[0,X1]=900\n"), "$AA_ENC_COMP_MAX"),
+        ("siemens modulo table", format!("{siemens_head}$AA_ENC_COMP[0,0,X1]=0\n$AA_ENC_COMP[0,1,X1]=0\n$AA_ENC_COMP_IS_MODULO[0,X1]=1\n"), "line 6"),
+        ("siemens step 0", "CHANDATA(1)\n$AA_ENC_COMP_STEP[0,X1]=0\n$AA_ENC_COMP_MIN[0,X1]=0\n$AA_ENC_COMP[0,0,X1]=0\n$AA_ENC_COMP[0,1,X1]=0\n".to_string(), "$AA_ENC_COMP_STEP"),
+        ("fanuc increment beyond a byte", format!("{fanuc_head}N0=0\nN1=300\n"), "line 7, N1"),
+        ("fanuc fractional increment", format!("{fanuc_head}N0=0\nN1=1.5\n"), "line 7, N1"),
+        ("fanuc magnification 0", "P3620=0\nP3623=0\nP3624=100\nREF=0\nN0=0\nN1=1\n".to_string(), "line 2, P3623"),
+        ("fanuc without interval", "P3620=0\nP3623=1\nREF=0\nN0=0\nN1=1\n".to_string(), "P3624"),
+        ("fanuc 200 points", format!("{fanuc_head}{}", (0..200).map(|k| format!("N{k}=0\n")).collect::<String>()), "128"),
+        ("csv table decreasing", "position[mm],correction[um]\n10,1\n5,2\n".to_string(), "line 3"),
+    ] {
+        cases.push(Case {
+            label: label.into(),
+            files: vec![("s.toml".into(), s.clone()), ("t.txt".into(), text.into_bytes())],
+            args: args(&["simulate", "{dir}/s.toml", "--compensation", "{dir}/t.txt", "-o", "{dir}/out"]),
+            blamed: "t.txt".into(),
+            place: place.into(),
+        });
+    }
     cases.push(Case {
         label: "study merge of a NaN value".into(),
         files: vec![(

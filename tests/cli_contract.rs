@@ -102,6 +102,11 @@ fn every_json_output_is_an_object_whose_first_key_is_a_versioned_format() {
         ("straightness", vec!["straightness".into(), passes.display().to_string()], "vmt-straightness/1"),
         ("friction", vec!["friction".into(), friction.display().to_string()], "vmt-friction/1"),
         (
+            "compensate",
+            vec!["compensate".into(), d.into(), "-o".into(), t.join("table.csv").display().to_string()],
+            "vmt-compensate/1",
+        ),
+        (
             "score",
             vec![
                 "score".into(),

@@ -2,6 +2,8 @@
 //! lesson, the crawl and the 3-axis scenario, and `vmt study` on the study scenario write their HTML
 //! reports; headless Chromium (Debian package `chromium`) then loads each page from disk and
 //!
+//! `vmt diagnose --report` on the lesson's recording is rendered and linted the same way.
+//!
 //! 1. parses it: `--dump-dom` serialises the DOM after parsing; it must hold every `<svg>`, `<figure>`,
 //!    `<table>` and `<section>` of the file (an HTML parser drops or re-parents markup it cannot place,
 //!    so a malformed page loses elements here);
@@ -167,6 +169,34 @@ fn every_kind_of_report_renders_in_chromium_and_is_readable() {
             "{name}: the report must open with the test conditions"
         );
     }
+    // `vmt diagnose --report` on the lesson's recording, as a user would on their own data: the page is
+    // written by the command; its data, built by the same library calls, pass the same lint.
+    let model = root.join("scenarios/lessons/backlash/start_model.toml");
+    let data = out("lesson").join("data");
+    let diagnose_page = out("diagnose.html");
+    vmt(&[
+        "diagnose",
+        "--model",
+        &model.display().to_string(),
+        "--data",
+        &data.display().to_string(),
+        "--report",
+        &diagnose_page.display().to_string(),
+    ]);
+    {
+        let m = vmt::model::read_model(&model).unwrap();
+        let set = vmt::measurement::read_data(&data).unwrap();
+        let cmp = vmt::modelcheck::compare(&m, &set, &data).unwrap();
+        let d = vmt::modelcheck::diagnose(&m, &set, &data).unwrap();
+        let report = vmt::report::model_check_report(&model, &data, &cmp, Some(&d));
+        problems.extend(vmt_report::lint(&report).into_iter().map(|p| format!("diagnose --report: {p}")));
+        assert_eq!(report.sections[0].heading, "Test conditions");
+        let titles: Vec<&str> =
+            report.sections.iter().flat_map(|s| s.figures.iter().map(|f| f.title.as_str())).collect();
+        for view in ["share of the residual each candidate explains", "by approach direction", "by position"] {
+            assert!(titles.iter().any(|t| t.contains(view)), "diagnose --report lacks the {view} figure: {titles:?}");
+        }
+    }
     assert!(problems.is_empty(), "{} readability problems:\n{}", problems.len(), problems.join("\n"));
 
     let Some(browser) = chromium() else {
@@ -182,6 +212,10 @@ fn every_kind_of_report_renders_in_chromium_and_is_readable() {
         .zip(dirs)
         .map(|((name, _), dir)| render(&browser, &out(dir).join("report.html"), &shots.join(format!("{name}.png"))))
         .collect();
-    let failed: Vec<String> = results.into_iter().filter_map(Result::err).collect();
+    let failed: Vec<String> = results
+        .into_iter()
+        .chain(std::iter::once(render(&browser, &diagnose_page, &shots.join("diagnose.png"))))
+        .filter_map(Result::err)
+        .collect();
     assert!(failed.is_empty(), "render errors:\n{}", failed.join("\n"));
 }

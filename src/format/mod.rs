@@ -4,8 +4,10 @@
 //! - [`error`]: the error type (bad input names file and place) and a key-path-tracking TOML reader;
 //! - [`units`]: the units of CSV header cells;
 //! - [`measurement`]: measurement sets (FORMAT.md §1) and error-motion profile CSVs (§5);
-//! - [`model`]: models and truths (`vmt-model/1`, §2).
+//! - [`model`]: models and truths (`vmt-model/1`, §2);
+//! - [`compensation`]: compensation tables as controllers load them (CSV, SINUMERIK-, FANUC-style).
 
+pub mod compensation;
 pub mod error;
 pub mod measurement;
 pub mod model;

@@ -98,7 +98,7 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
 
 /// One line per fitted error motion: its basis, order and why, e.g. "positioning: Legendre order 11
 /// chosen by BIC over 1..20 (model gave none)".
-fn shapes_text(shapes: &BTreeMap<String, ShapeReport>) -> String {
+pub(crate) fn shapes_text(shapes: &BTreeMap<String, ShapeReport>) -> String {
     let mut s = String::new();
     for (n, sh) in shapes {
         let why = match (sh.chosen_by.as_str(), sh.bic_order) {
@@ -121,7 +121,7 @@ fn shapes_text(shapes: &BTreeMap<String, ShapeReport>) -> String {
 
 /// One line on the noise σ checked against the repeats, e.g. "σ: stated 0.100 µm, from repeats
 /// 0.310 µm (1σ of one reading, 80 degrees of freedom), χ² test p = 1.2e-30: ...".
-fn sigma_text(sc: Option<&SigmaCheck>) -> String {
+pub(crate) fn sigma_text(sc: Option<&SigmaCheck>) -> String {
     let Some(sc) = sc else { return String::new() };
     let stated = sc.stated.map_or("none".to_string(), |v| format!("{:.4} µm", v * 1e6));
     let p = sc.p_value.map_or(String::new(), |p| format!(", χ² test p = {p:.2e}"));
@@ -140,7 +140,7 @@ fn sigma_text(sc: Option<&SigmaCheck>) -> String {
 /// A fitted or diagnosed parameter in the unit of the effect catalogue
 /// (`vmt_sim::effects::ParamSpec::unit`): `value=25.37 µm`, `period=10.49 mm`; a key the catalogue
 /// does not list (a gain per sensor, a shape coefficient) in SI as written to files.
-fn param_text(effect: &str, key: &str, v: f64) -> String {
+pub(crate) fn param_text(effect: &str, key: &str, v: f64) -> String {
     let unit = effect
         .parse::<vmt_sim::effects::EffectName>()
         .ok()

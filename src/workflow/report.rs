@@ -213,3 +213,167 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
         ],
     }
 }
+
+/// Channels a `--report` of compare/diagnose draws residual figures for (each channel 3–4 figures).
+pub const MAX_REPORT_CHANNELS: usize = 8;
+
+/// The HTML report of `vmt compare` / `vmt diagnose --report FILE` on a user's data: the test
+/// conditions (program, date, command, model, data), each channel's residual against its noise, the
+/// fitted shapes and parameters, for a diagnosis its ranking (table and bar chart of the share each
+/// candidate explains) with the advice, and per channel the signed residual where the effects live (by
+/// approach direction, position, time, spatial period).
+pub fn model_check_report(
+    model: &std::path::Path,
+    data: &std::path::Path,
+    cmp: &crate::modelcheck::CompareReport,
+    diag: Option<&crate::modelcheck::DiagnoseReport>,
+) -> Report {
+    use crate::modelcheck::{param_text, shapes_text, sigma_text};
+    use vmt_estimators::modelcheck::Verdict;
+    let kind = if diag.is_some() { "diagnose" } else { "compare" };
+    let unit_of = crate::estimate::model_check::display_unit;
+    let channels = Table {
+        caption: "The model against each channel: residual RMS, the noise σ of one reading, their ratio (1 = the \
+                  residual is noise), NRMSE fit and the Ljung–Box p-value of the residual in acquisition order"
+            .into(),
+        header: [
+            "run",
+            "sensor",
+            "residual RMS",
+            "σ",
+            "normalised RMS (1 = noise)",
+            "fit (%)",
+            "Ljung–Box p (probability)",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows: cmp
+            .channels
+            .iter()
+            .map(|c| {
+                let (k, u) = unit_of(&c.unit);
+                vec![
+                    c.run.clone(),
+                    c.sensor.clone(),
+                    format!("{:.4} {u}", c.rms * k),
+                    format!("{:.4} {u}{}", c.sigma * k, if c.sigma_estimated { " (estimated)" } else { "" }),
+                    format!("{:.3}", c.normalized_rms),
+                    format!("{:.1}", c.fit_percent),
+                    c.ljung_box_p.map_or("—".into(), |p| format!("{p:.3}")),
+                ]
+            })
+            .collect(),
+        highlight: Vec::new(),
+    };
+    let fitted = Table {
+        caption: "Fitted parameters of the model (units of the effect catalogue; other keys SI)".into(),
+        header: ["effect", "parameter", "value"].map(String::from).to_vec(),
+        rows: cmp
+            .fitted
+            .iter()
+            .flat_map(|(e, p)| p.iter().map(move |(k, v)| vec![e.clone(), k.clone(), param_text(e, k, *v)]))
+            .collect(),
+        highlight: Vec::new(),
+    };
+    let mut text = vec![format!(
+        "Normalised RMS over all {} samples: {:.3} (1.0 = noise level), {} fitted parameters.",
+        cmp.n, cmp.normalized_rms, cmp.n_params
+    )];
+    text.extend(shapes_text(&cmp.shapes).lines().map(|l| format!("Shape of {l}.")));
+    text.extend(sigma_text(cmp.sigma.as_ref()).lines().map(String::from));
+    text.extend(cmp.notes.iter().map(|n| format!("Note: {n}")));
+    let mut sections = vec![
+        conditions_for_data(vec![
+            vec!["model".into(), model.display().to_string()],
+            vec!["data".into(), data.display().to_string()],
+        ]),
+        Section {
+            heading: "The model against the data".into(),
+            text,
+            figures: Vec::new(),
+            tables: [channels, fitted].into_iter().filter(|t| !t.rows.is_empty()).collect(),
+        },
+    ];
+    if let Some(d) = diag {
+        let verdict = |v: Verdict| match v {
+            Verdict::Significant => "significant",
+            Verdict::Noise => "noise",
+            Verdict::Inseparable => "inseparable",
+        };
+        let ranking = Table {
+            caption: "Candidate effects the model lacks, best first: ΔBIC of adding each alone (negative favours \
+                      it), the bound on the probability that noise alone explains this much (searches counted), \
+                      the share of the residual it explains, the verdict and its fitted parameters"
+                .into(),
+            header: ["rank (order)", "effect", "ΔBIC (1)", "p (noise alone)", "explained (%)", "verdict", "parameters"]
+                .map(String::from)
+                .to_vec(),
+            rows: d
+                .ranking
+                .iter()
+                .enumerate()
+                .map(|(i, e)| {
+                    let mut v = verdict(e.verdict).to_string();
+                    if !e.confused_with.is_empty() {
+                        v += &format!(" (confused with {})", e.confused_with.join(", "));
+                    }
+                    vec![
+                        (i + 1).to_string(),
+                        e.effect.clone(),
+                        format!("{:.1}", e.delta_bic),
+                        e.p_value.map_or("—".into(), |p| format!("{p:.1e}")),
+                        format!("{:.1}", 100.0 * e.explained),
+                        v,
+                        e.params
+                            .iter()
+                            .map(|(k, x)| format!("{k} = {}", param_text(&e.effect, k, *x)))
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                    ]
+                })
+                .collect(),
+            highlight: Vec::new(),
+        };
+        let mut text = vec![format!("Advice: {}", d.advice)];
+        // A candidate's note is often also one of the diagnosis's notes: each sentence once.
+        let notes = d.ranking.iter().filter_map(|e| e.note.as_ref().map(|n| format!("{}: {n}", e.effect)));
+        for n in notes.chain(d.notes.iter().map(|n| format!("Note: {n}"))) {
+            if !text.iter().any(|t| t.ends_with(n.split_once(": ").map_or(n.as_str(), |x| x.1))) {
+                text.push(n);
+            }
+        }
+        sections.push(Section {
+            heading: "Diagnosis: which effect is missing".into(),
+            text,
+            figures: crate::estimate::model_check::ranking_figure(
+                "vmt diagnose: share of the residual each candidate explains (verdict, ΔBIC)".into(),
+                &d.ranking,
+            )
+            .into_iter()
+            .collect(),
+            tables: if ranking.rows.is_empty() { Vec::new() } else { vec![ranking] },
+        });
+    }
+    let figures: Vec<vmt_report::Figure> = (0..cmp.channels.len().min(MAX_REPORT_CHANNELS))
+        .flat_map(|i| {
+            crate::estimate::model_check::residual_figures(&format!("vmt {kind}"), "model", i, &[(cmp, "model")])
+        })
+        .collect();
+    let mut text = vec!["The signed residual (measured − model) where each effect lives: by approach direction \
+                         (backlash, lost motion), by position (pitch, positioning and lead errors), over the \
+                         session time (thermal drift) and its strongest spatial periods (cyclic errors)."
+        .to_string()];
+    if cmp.channels.len() > MAX_REPORT_CHANNELS {
+        text.push(format!(
+            "Figures for the first {MAX_REPORT_CHANNELS} of {} channels; the table above lists all.",
+            cmp.channels.len()
+        ));
+    }
+    sections.push(Section { heading: "Where the residual lives".into(), text, figures, tables: Vec::new() });
+    sections.retain(|s| !(s.text.is_empty() && s.figures.is_empty() && s.tables.is_empty()));
+    Report {
+        title: format!("vmt {kind}: {} against {}", model.display(), data.display()),
+        subtitle: String::new(),
+        sections,
+    }
+}

@@ -94,112 +94,151 @@ pub(super) fn model_check_loop(
         log_y: history.iter().all(|v| *v > 0.0),
     };
     let mut figures = vec![nrms];
-    if let Some(ranking) = first_ranking.filter(|r| !r.is_empty()) {
-        figures.push(Figure {
-            title: "model-check loop: first diagnosis, share of the residual each candidate explains (verdict, ΔBIC)"
-                .into(),
-            x_label: "rank".into(),
-            x_unit: vmt_report::DIMENSIONLESS.into(),
-            y_label: "explained residual".into(),
-            y_unit: "%".into(),
-            series: ranking
-                .iter()
-                .enumerate()
-                .map(|(i, e)| Series {
-                    label: format!(
-                        "{}: {}, ΔBIC {:.1}",
-                        e.effect,
-                        format!("{:?}", e.verdict).to_lowercase(),
-                        e.delta_bic
-                    ),
-                    x: vec![(i + 1) as f64],
-                    y: vec![100.0 * e.explained],
-                    style: SeriesStyle::Points,
-                })
-                .collect(),
-            kind: FigureKind::Bar,
-            log_x: false,
-            log_y: false,
-        });
-    }
-    // The first channel's residual, in µm for deviations (N for forces, m/s² for accelerations).
-    let scale = |r: &crate::modelcheck::CompareReport| -> Option<(f64, &'static str, String)> {
-        let c = r.channels.first()?;
-        let (k, u) = match c.unit.as_str() {
-            "N" => (1.0, "N"),
-            "m/s²" => (1.0, "m/s²"),
-            _ => (1e6, "µm"),
-        };
-        Some((k, u, format!("{} / {}", c.run, c.sensor)))
-    };
-    if let Some((k, unit, channel)) = scale(&first) {
-        let pick = |label: &str, f: &dyn Fn(&crate::modelcheck::ChannelReport) -> (Vec<f64>, Vec<f64>)| {
-            [(&first, "starting model"), (&last_report, "final model")]
-                .into_iter()
-                .filter_map(|(r, which)| {
-                    let (x, y) = f(r.channels.first()?);
-                    (!x.is_empty()).then(|| Series {
-                        label: format!("{which} ({label})"),
-                        x,
-                        y: y.iter().map(|v| v * k).collect(),
-                        style: SeriesStyle::LinePoints,
-                    })
-                })
-                .collect::<Vec<Series>>()
-        };
-        let by_direction = pick("mean per direction", &|c| {
-            (c.by_direction.iter().map(|d| d.0 as f64).collect(), c.by_direction.iter().map(|d| d.1).collect())
-        });
-        if by_direction.iter().any(|s| s.x.len() > 1) {
-            figures.push(Figure {
-                title: format!(
-                    "model-check loop: mean residual by approach direction ({channel}), starting and final model"
-                ),
-                x_label: "approach direction".into(),
-                x_unit: "−1 = negative, +1 = positive".into(),
-                y_label: "mean residual".into(),
-                y_unit: unit.into(),
-                series: by_direction,
-                kind: FigureKind::Bar,
-                log_x: false,
-                log_y: false,
-            });
-        }
-        let by_position = pick("mean per position bin", &|c| {
-            (
-                c.by_position.iter().map(|b| 0.5 * (b.0 + b.1) * 1e3).collect(),
-                c.by_position.iter().map(|b| b.2).collect(),
-            )
-        });
-        figures.push(Figure {
-            title: format!("model-check loop: mean residual by position ({channel}), starting and final model"),
-            x_label: "position".into(),
-            x_unit: "mm".into(),
-            y_label: "mean residual".into(),
-            y_unit: unit.into(),
-            series: by_position,
-            kind: FigureKind::Line,
-            log_x: false,
-            log_y: false,
-        });
-        let by_time = pick("mean per time bin", &|c| {
-            (c.by_time.iter().map(|b| 0.5 * (b.0 + b.1)).collect(), c.by_time.iter().map(|b| b.2).collect())
-        });
-        if by_time.iter().any(|s| s.x.len() > 2) {
-            figures.push(Figure {
-                title: format!(
-                    "model-check loop: mean residual over the session time ({channel}), starting and final model"
-                ),
-                x_label: "time".into(),
-                x_unit: "s".into(),
-                y_label: "mean residual".into(),
-                y_unit: unit.into(),
-                series: by_time,
-                kind: FigureKind::Line,
-                log_x: false,
-                log_y: false,
-            });
-        }
-    }
+    figures.extend(first_ranking.and_then(|r| {
+        ranking_figure(
+            "model-check loop: first diagnosis, share of the residual each candidate explains (verdict, ΔBIC)".into(),
+            &r,
+        )
+    }));
+    figures.extend(residual_figures(
+        "model-check loop",
+        "starting and final model",
+        0,
+        &[(&first, "starting model"), (&last_report, "final model")],
+    ));
     Ok((checks, figures))
+}
+
+/// The diagnosis ranking as a bar chart: the share of the residual each candidate explains (%), one bar
+/// per candidate labelled `effect: verdict, ΔBIC` — the "which effect contributes how much" view. None
+/// for an empty ranking.
+pub(crate) fn ranking_figure(title: String, ranking: &[vmt_estimators::modelcheck::RankingEntry]) -> Option<Figure> {
+    (!ranking.is_empty()).then(|| Figure {
+        title,
+        x_label: "rank".into(),
+        x_unit: vmt_report::DIMENSIONLESS.into(),
+        y_label: "explained residual".into(),
+        y_unit: "%".into(),
+        series: ranking
+            .iter()
+            .enumerate()
+            .map(|(i, e)| Series {
+                label: format!("{}: {}, ΔBIC {:.1}", e.effect, format!("{:?}", e.verdict).to_lowercase(), e.delta_bic),
+                x: vec![(i + 1) as f64],
+                y: vec![100.0 * e.explained],
+                style: SeriesStyle::Points,
+            })
+            .collect(),
+        kind: FigureKind::Bar,
+        log_x: false,
+        log_y: false,
+    })
+}
+
+/// The signed residual of channel `channel` where the effects live, one series per (report, label):
+/// mean by approach direction (bars; backlash, lost motion), mean by position bin (pitch, positioning,
+/// lead errors), mean over the session time (thermal drift), and the strongest spatial periods of the
+/// residual (bars; cyclic errors). In µm for deviations, N for forces, m/s² for accelerations. Titles
+/// read `{prefix}: … ({run} / {sensor}), {which}`; a view without data draws no figure.
+pub(crate) fn residual_figures(
+    prefix: &str,
+    which: &str,
+    channel: usize,
+    reports: &[(&crate::modelcheck::CompareReport, &str)],
+) -> Vec<Figure> {
+    let Some(c) = reports.first().and_then(|(r, _)| r.channels.get(channel)) else { return Vec::new() };
+    let (k, unit) = display_unit(&c.unit);
+    let name = format!("{} / {}", c.run, c.sensor);
+    let pick = |label: &str, f: &dyn Fn(&crate::modelcheck::ChannelReport) -> (Vec<f64>, Vec<f64>)| {
+        reports
+            .iter()
+            .filter_map(|(r, model)| {
+                let (x, y) = f(r.channels.get(channel)?);
+                (!x.is_empty()).then(|| Series {
+                    label: format!("{model} ({label})"),
+                    x,
+                    y: y.iter().map(|v| v * k).collect(),
+                    style: SeriesStyle::LinePoints,
+                })
+            })
+            .collect::<Vec<Series>>()
+    };
+    let figure = |what: &str, x_label: &str, x_unit: &str, y_label: &str, y_unit: &str, series, kind| Figure {
+        title: format!("{prefix}: {what} ({name}), {which}"),
+        x_label: x_label.into(),
+        x_unit: x_unit.into(),
+        y_label: y_label.into(),
+        y_unit: y_unit.into(),
+        series,
+        kind,
+        log_x: false,
+        log_y: false,
+    };
+    let mut figures = Vec::new();
+    let by_direction = pick("mean per direction", &|c| {
+        (c.by_direction.iter().map(|d| d.0 as f64).collect(), c.by_direction.iter().map(|d| d.1).collect())
+    });
+    if by_direction.iter().any(|s| s.x.len() > 1) {
+        figures.push(figure(
+            "mean residual by approach direction",
+            "approach direction",
+            "−1 = negative, +1 = positive",
+            "mean residual",
+            unit,
+            by_direction,
+            FigureKind::Bar,
+        ));
+    }
+    let by_position = pick("mean per position bin", &|c| {
+        (c.by_position.iter().map(|b| 0.5 * (b.0 + b.1) * 1e3).collect(), c.by_position.iter().map(|b| b.2).collect())
+    });
+    figures.push(figure(
+        "mean residual by position",
+        "position",
+        "mm",
+        "mean residual",
+        unit,
+        by_position,
+        FigureKind::Line,
+    ));
+    let by_time = pick("mean per time bin", &|c| {
+        (c.by_time.iter().map(|b| 0.5 * (b.0 + b.1)).collect(), c.by_time.iter().map(|b| b.2).collect())
+    });
+    if by_time.iter().any(|s| s.x.len() > 2) {
+        figures.push(figure(
+            "mean residual over the session time",
+            "time",
+            "s",
+            "mean residual",
+            unit,
+            by_time,
+            FigureKind::Line,
+        ));
+    }
+    // Amplitudes of a least-squares periodogram over position: drawn in the channel's unit like the rest.
+    let spectrum = pick("strongest periods", &|c| {
+        (c.spectrum_peaks.iter().map(|p| p.0 * 1e3).collect(), c.spectrum_peaks.iter().map(|p| p.1).collect())
+    });
+    if !spectrum.is_empty() {
+        figures.push(figure(
+            "strongest spatial periods of the residual (least-squares periodogram over position)",
+            "wavelength",
+            "mm",
+            "amplitude",
+            unit,
+            spectrum,
+            FigureKind::Bar,
+        ));
+    }
+    figures
+}
+
+/// How a channel's values are shown: (factor from SI, unit) — deviations in µm, forces in N,
+/// accelerations in m/s².
+pub(crate) fn display_unit(si_unit: &str) -> (f64, &'static str) {
+    match si_unit {
+        "N" => (1.0, "N"),
+        "m/s²" => (1.0, "m/s²"),
+        _ => (1e6, "µm"),
+    }
 }
