@@ -4,8 +4,10 @@
 //!
 //! Besides criterion's per-function timings, `interleaved_ratios` alternates short rounds of the fast
 //! and the reference step and prints the median per-step times and their ratio measured in the same
-//! run, so machine load affects both sides alike. (No MuJoCo anchor yet: python `mujoco` is not
-//! installed on the build machine.)
+//! run, so machine load affects both sides alike. When python's `mujoco` is importable, each round also
+//! runs the MuJoCo anchor `benches/anchors/slide_column_mujoco.py` (the same body, mass and inertia, the
+//! four blocks' stiffness and damping lumped about the centre of mass into five joint springs, a PD
+//! position servo on x, `mj_step(nstep)`), and the ratios to it are printed; otherwise it says it skipped.
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::time::Instant;
 use vmt_sim::axis_sim::{AxisSim, AxisTruth, GuideFriction};
@@ -110,7 +112,75 @@ fn interleaved_ratios(_c: &mut Criterion) {
             case.name,
             r / f
         );
+        if let Some(mj) = (matches!(case.cfg.drive, DriveConfig::LinearMotor) && mujoco_available()).then(|| {
+            let args = mujoco_args(&mf, case.feed);
+            // Rounds of its own, alternating with the fast engine so the same load hits both.
+            let (mut tf2, mut tm) = (Vec::new(), Vec::new());
+            for _ in 0..ROUNDS {
+                let t0 = Instant::now();
+                for _ in 0..STEPS {
+                    fast.step();
+                }
+                tf2.push(t0.elapsed().as_secs_f64() / STEPS as f64 * 1e6);
+                tm.extend(run_mujoco(&args));
+            }
+            (median(tf2), median(tm))
+        }) {
+            let (f2, m) = mj;
+            println!(
+                "interleaved {}: fast {f2:.3} µs/step, MuJoCo anchor {m:.3} µs/step (medians of {ROUNDS} rounds); MuJoCo/fast = {:.2}",
+                case.name,
+                m / f2
+            );
+        } else if matches!(case.cfg.drive, DriveConfig::LinearMotor) {
+            println!("MuJoCo anchor skipped: python3 cannot import mujoco (pip install mujoco)");
+        }
     }
+}
+
+/// True when `python3 -c "import mujoco"` succeeds.
+fn mujoco_available() -> bool {
+    std::process::Command::new("python3").args(["-c", "import mujoco"]).output().is_ok_and(|o| o.status.success())
+}
+
+/// The anchor's command line: steps, then the body and its lumped springs from vmt's model (mass,
+/// principal inertia taken as the inertia tensor's diagonal, Σk_y, Σk_z, rotational stiffnesses
+/// Σ(k_y·z² + k_z·y²), Σk_z·x², Σk_y·x² about the centre of mass and the same for damping), the
+/// servo as a PD (kp = m·2π·f_v·kp_pos N/m, kv = m·2π·f_v N·s/m), the feed and the step.
+fn mujoco_args(m: &AxisModel, feed: f64) -> Vec<String> {
+    let rel: Vec<_> = m.blocks.iter().map(|b| *b - m.com).collect();
+    let sum = |f: &dyn Fn(&(f64, f64, f64)) -> f64| rel.iter().map(|r| f(&(r.x, r.y, r.z))).sum::<f64>();
+    let (ky, kz, cy, cz) = (m.k_y, m.k_z, m.c_y, m.c_z);
+    let kv = m.mass * std::f64::consts::TAU * m.servo.velocity_bandwidth;
+    let v = [
+        m.mass,
+        m.inertia.x_axis.x,
+        m.inertia.y_axis.y,
+        m.inertia.z_axis.z,
+        ky * rel.len() as f64,
+        kz * rel.len() as f64,
+        sum(&|r| ky * r.2 * r.2 + kz * r.1 * r.1),
+        sum(&|r| kz * r.0 * r.0),
+        sum(&|r| ky * r.0 * r.0),
+        cy * rel.len() as f64,
+        cz * rel.len() as f64,
+        sum(&|r| cy * r.2 * r.2 + cz * r.1 * r.1),
+        sum(&|r| cz * r.0 * r.0),
+        sum(&|r| cy * r.0 * r.0),
+        kv * m.servo.kp,
+        kv,
+        feed,
+        m.dt,
+    ];
+    std::iter::once("200000".to_string()).chain(v.iter().map(|x| format!("{x:e}"))).collect()
+}
+
+/// One round of the MuJoCo anchor: its median µs/step, None if it failed.
+fn run_mujoco(args: &[String]) -> Option<f64> {
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/anchors/slide_column_mujoco.py");
+    let o = std::process::Command::new("python3").arg(script).args(args).output().ok()?;
+    let text = String::from_utf8_lossy(&o.stdout);
+    text.lines().find_map(|l| l.strip_prefix("us_per_step=")).and_then(|v| v.trim().parse().ok())
 }
 
 criterion_group!(benches, step, interleaved_ratios);

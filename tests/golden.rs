@@ -166,3 +166,99 @@ fn vmt_run_on_every_bundled_scenario_and_lesson_matches_its_golden_output() {
         failed.join("\n")
     );
 }
+
+/// One value of a result-table cell: a number (in the row's printed unit), yes/no, or none (—).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Cell {
+    Number(f64),
+    Yes(bool),
+    None,
+}
+
+/// The four value cells (injected, recovered, difference, tolerance), the pass rule and the verdict of a
+/// result-table line, or None for a line that is not a result row. Cells are read from the right: a
+/// value is `—`, `yes`/`no`, or a number optionally followed by one unit token.
+fn table_row(line: &str) -> Option<([Cell; 4], &'static str, bool)> {
+    let (rest, pass) =
+        if let Some(r) = line.strip_suffix("pass") { (r, true) } else { (line.strip_suffix("FAIL")?, false) };
+    let rules = ["|difference| ≤ tolerance", "RMS difference ≤ tolerance", "recovered ≤ tolerance", "found"];
+    let rest = rest.trim_end();
+    let rule = rules.into_iter().find(|r| rest.ends_with(r))?;
+    let mut tokens: Vec<&str> = rest[..rest.len() - rule.len()].split_whitespace().collect();
+    let mut cells = Vec::new();
+    while cells.len() < 4 {
+        let t = tokens.pop()?;
+        let cell = match t {
+            "—" => Cell::None,
+            "yes" => Cell::Yes(true),
+            "no" => Cell::Yes(false),
+            _ => match t.parse::<f64>() {
+                Ok(v) => Cell::Number(v),
+                // A unit: the number is the token before it.
+                Err(_) => Cell::Number(tokens.pop()?.parse().ok()?),
+            },
+        };
+        cells.push(cell);
+    }
+    cells.reverse();
+    Some(([cells[0], cells[1], cells[2], cells[3]], rule, pass))
+}
+
+/// Issue 13: every row of `vmt run`'s table can be read literally. On every bundled scenario's golden
+/// output (the test above holds them equal to the program's), the printed numbers obey the printed
+/// rule: `difference` = recovered − injected and |difference| ≤ tolerance ⇔ pass for `|difference| ≤
+/// tolerance`; difference ≥ 0 and difference ≤ tolerance ⇔ pass for RMS rows; no difference and
+/// recovered ≤ tolerance ⇔ pass for one-sided limits; found = expected ⇔ pass. Printed values carry 3
+/// decimals, so comparisons allow the rounding of the cells involved (± 0.0005 each); a row whose
+/// verdict sits within that rounding of its limit is not judged (counted, and must be rare).
+#[test]
+fn every_result_row_reads_literally() {
+    let dir = root().join("tests/golden/run");
+    let (mut rows, mut undecided, mut problems) = (0, 0, Vec::new());
+    let r = 0.0005;
+    for e in std::fs::read_dir(&dir).unwrap().flatten() {
+        let p = e.path();
+        if p.extension().is_none_or(|x| x != "txt") {
+            continue;
+        }
+        for line in std::fs::read_to_string(&p).unwrap().lines() {
+            let Some(([inj, rec, diff, tol], rule, pass)) = table_row(line) else { continue };
+            rows += 1;
+            let mut bad =
+                |why: &str| problems.push(format!("{}: {why}: {line}", p.file_name().unwrap().to_string_lossy()));
+            let judge = |value: f64, limit: f64, slack: f64, bad: &mut dyn FnMut(&str), undecided: &mut usize| {
+                if (value - limit).abs() <= slack {
+                    *undecided += 1;
+                } else if (value <= limit) != pass {
+                    bad("the verdict contradicts the printed numbers");
+                }
+            };
+            match (rule, inj, rec, diff, tol) {
+                ("|difference| ≤ tolerance", Cell::Number(i), Cell::Number(x), Cell::Number(d), Cell::Number(t)) => {
+                    if (d - (x - i)).abs() > 3.0 * r {
+                        bad("difference ≠ recovered − injected");
+                    }
+                    judge(d.abs(), t, 2.0 * r, &mut bad, &mut undecided);
+                }
+                ("RMS difference ≤ tolerance", Cell::Number(_), Cell::Number(_), Cell::Number(d), Cell::Number(t)) => {
+                    if d < 0.0 {
+                        bad("an RMS difference is negative");
+                    }
+                    judge(d, t, 2.0 * r, &mut bad, &mut undecided);
+                }
+                ("recovered ≤ tolerance", _, Cell::Number(x), Cell::None, Cell::Number(t)) => {
+                    judge(x, t, 2.0 * r, &mut bad, &mut undecided);
+                }
+                ("found", Cell::Yes(i), Cell::Yes(x), Cell::None, Cell::None) => {
+                    if (i == x) != pass {
+                        bad("found/expected contradicts the verdict");
+                    }
+                }
+                _ => bad("cells do not fit the rule"),
+            }
+        }
+    }
+    assert!(rows >= 30, "read only {rows} result rows from {} (38 when written)", dir.display());
+    assert!(undecided * 20 <= rows, "{undecided} of {rows} rows sit within rounding of their limit");
+    assert!(problems.is_empty(), "{} rows do not read literally:\n{}", problems.len(), problems.join("\n"));
+}

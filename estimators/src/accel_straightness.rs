@@ -573,6 +573,7 @@ fn resample_run(run: &AccelRun, values: &[f64], grid: &[f64]) -> Vec<f64> {
     grid.iter()
         .map(|&x| {
             // fractional sample index along the run
+            // clamp: n ≥ 16 samples per run (validate_run), so 0 ≤ n − 1.
             let u = ((x - run.start_position) * run.direction as f64 / step).clamp(0.0, (n - 1) as f64);
             let j = (u.floor() as usize).min(n - 2);
             let f = u - j as f64;

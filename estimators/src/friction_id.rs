@@ -362,6 +362,7 @@ pub fn fit_stribeck(v: &[f64], f: &[f64], opts: &StribeckFitOptions) -> Result<S
                 if !free[k] && k != 3 {
                     th[k] = lo[k];
                 }
+                // clamp: lo[k] ≤ hi[k], neither NaN (checked at the top of fit_stribeck).
                 th[k] = th[k].clamp(lo[k], hi[k]);
             }
             if let Some(dfix) = delta_fixed {
@@ -432,6 +433,7 @@ pub fn fit_stribeck(v: &[f64], f: &[f64], opts: &StribeckFitOptions) -> Result<S
             }
             let mut cand = th;
             for (c, &k) in act.iter().enumerate() {
+                // clamp: lo[k] ≤ hi[k], neither NaN (checked at the top of fit_stribeck).
                 cand[k] = (th[k] + step[c] / scale[c]).clamp(lo[k], hi[k]);
             }
             let c_new = sse(opts.shape, &cand, &vv, &ff);
@@ -563,6 +565,7 @@ pub fn butterworth2_lowpass(x: &[f64], dt: f64, cutoff_hz: f64, mode: FilterMode
         FilterMode::Causal => Ok(run(x)),
         FilterMode::ZeroPhase => {
             let n = x.len();
+            // clamp: n ≥ 3 (check_series above), so 1 ≤ n − 1.
             let pad = ((1.0 / (cutoff_hz * dt)).ceil() as usize).clamp(1, n - 1);
             let mut ext = Vec::with_capacity(n + 2 * pad);
             for i in (1..=pad).rev() {

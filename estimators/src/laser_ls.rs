@@ -191,6 +191,7 @@ impl Basis {
                     return Err(format!("position {q} m is outside the nodes [{}, {}] m", n[0], n[n.len() - 1]));
                 }
                 out.resize(n.len(), 0.0);
+                // clamp: nodes finite and strictly increasing, at least two (Basis::validate).
                 let qc = q.clamp(n[0], n[n.len() - 1]);
                 let k = match n.iter().position(|&v| v > qc) {
                     Some(0) => 0,

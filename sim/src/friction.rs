@@ -251,6 +251,7 @@ pub fn stick_slip_step(p: &StribeckParams, input: &StepInput) -> Result<f64, Fri
     input.validate()?;
     let StepInput { v, f_ext, mass, dt, stick_band } = *input;
     let f_stick = -(mass * v / dt + f_ext);
+    // clamp: p.validate() above: fs finite and ≥ fc ≥ 0, so −fs ≤ fs.
     let stuck = f_stick.clamp(-p.fs, p.fs);
     if v.abs() <= stick_band {
         return Ok(stuck);

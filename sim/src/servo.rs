@@ -155,6 +155,7 @@ pub fn servo_update(
     let ki = std::f64::consts::TAU * cfg.integral_corner;
     let ff = if cfg.acceleration_feed_forward { mass * cmd_acc } else { 0.0 };
     let unclipped = kv * (e_v + ki * (st.integral + e_v * ts)) + ff;
+    // clamp: force_limit finite and > 0 (ServoConfig::validate, run when the scenario is read).
     let force = unclipped.clamp(-cfg.force_limit, cfg.force_limit);
     if force == unclipped {
         st.integral += e_v * ts;

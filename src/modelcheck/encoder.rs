@@ -231,6 +231,8 @@ pub fn play(drive: &[f64], b: f64) -> Vec<f64> {
     let mut out = Vec::with_capacity(drive.len());
     for (k, &x) in drive.iter().enumerate() {
         if k > 0 {
+            // clamp: half = |b|/2 ≥ 0; b is finite (a model's value is range-checked when read, a
+            // candidate's comes from a finite search bracket).
             p = (p - (x - drive[k - 1])).clamp(-half, half);
         }
         out.push(p);

@@ -463,6 +463,7 @@ pub(crate) fn bspline_basis(x: f64, n: usize, (a, b): (f64, f64)) -> (Vec<f64>, 
     let mut t: Vec<f64> = vec![a; p + 1];
     t.extend((1..=inner).map(|k| a + (b - a) * k as f64 / (inner + 1) as f64));
     t.extend(std::iter::repeat(b).take(p + 1));
+    // clamp: a ≤ b, the least and greatest sample position of the motion's channels.
     let x = x.clamp(a, b);
     // Degree 0: the one knot interval holding x (the last non-empty one for x = b).
     let span = (0..t.len() - 1).rev().find(|&i| t[i] <= x && t[i] < t[i + 1]).unwrap_or(0);

@@ -83,9 +83,11 @@ pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Result<Vec<Sc
     let slack = 1e-9 * (t_hi - t_lo);
     let inside: Vec<usize> =
         (0..est.position.len()).filter(|&i| (t_lo - slack..=t_hi + slack).contains(&est.position[i])).collect();
+    // clamp: t_lo ≤ t_hi, the first and last of the truth's positions (read as strictly increasing, ≥ 2).
     let xs: Vec<f64> = inside.iter().map(|&i| est.position[i].clamp(t_lo, t_hi)).collect();
     let interp = |ys: &[f64], x: f64| -> f64 {
         let p = &truth.position;
+        // clamp: 1 ≤ p.len() − 1, the truth has ≥ 2 positions (checked above).
         let i = p.partition_point(|&v| v <= x).clamp(1, p.len() - 1);
         let w = (x - p[i - 1]) / (p[i] - p[i - 1]);
         ys[i - 1] + w * (ys[i] - ys[i - 1])

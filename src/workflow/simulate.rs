@@ -298,6 +298,7 @@ pub const MAX_PROFILE_POINTS: usize = 10_001;
 /// Positions of a truth profile over [lo, hi] (m): every millimetre, but at most
 /// [`MAX_PROFILE_POINTS`] points evenly spread (a 1000 m URDF travel gets 10 cm steps, not 10⁶ points).
 fn profile_positions(lo: f64, hi: f64) -> Vec<f64> {
+    // clamp: constant bounds, 1 ≤ MAX_PROFILE_POINTS − 1.
     let n = ((hi - lo) / 1e-3).round().clamp(1.0, (MAX_PROFILE_POINTS - 1) as f64);
     let n = if n.is_finite() { n as usize } else { 1 };
     (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect()

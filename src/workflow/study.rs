@@ -762,6 +762,7 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
                 trials: n,
                 mean_abs: stat(&|d| d.iter().sum::<f64>() / n as f64),
                 rms: stat(&|d| (d.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt()),
+                // clamp: `stat` runs only when `defined`, i.e. n ≥ 1.
                 p95_abs: stat(&|d| d[((0.95 * n as f64).ceil() as usize).clamp(1, n) - 1]),
                 pass_rate,
                 bound,

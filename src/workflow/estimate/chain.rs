@@ -180,6 +180,7 @@ pub(super) fn laser_lines_3d_checks(
     let injected = (chain.effective_squareness)(&ci.positions);
     let mut checks = Vec::new();
     let (mut names, mut inj, mut rec, mut raw) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut sig: Vec<f64> = Vec::new();
     for (k, (effect, iso, (a, b))) in [
         ("squareness_xy", "EC0Y", ('x', 'y')),
         ("squareness_xz", "EB0Z", ('x', 'z')),
@@ -225,39 +226,46 @@ pub(super) fn laser_lines_3d_checks(
         names.push(iso);
         inj.push(expected);
         rec.push(est.value);
+        sig.push(sigma);
         raw.push(chain.squareness[k]);
     }
     let x: Vec<f64> = (1..=names.len()).map(|i| i as f64).collect();
+    let numbered: Vec<String> = names.iter().enumerate().map(|(i, n)| format!("{} = {n}", i + 1)).collect();
     let fig = Figure {
         title: format!(
-            "squareness from the laser line set `{procedure}` ({}): injected vs recovered, µrad",
-            names.join(", ")
+            "squareness from the laser line set `{procedure}`: injected (ISO 230-1) vs recovered ± 1σ, µrad"
         ),
-        x_label: "angle (1 = first listed)".into(),
+        x_label: format!("angle: {}", numbered.join(", ")),
         x_unit: vmt_report::DIMENSIONLESS.into(),
         y_label: "angle".into(),
         y_unit: "µrad".into(),
         series: vec![
             Series {
-                label: "injected".into(),
+                label: "injected (ISO 230-1: between the least-squares lines)".into(),
                 x: x.clone(),
                 y: inj.iter().map(|v| v * 1e6).collect(),
-                style: SeriesStyle::Line,
+                style: SeriesStyle::Points,
             },
             Series {
                 label: "recovered".into(),
                 x: x.clone(),
                 y: rec.iter().map(|v| v * 1e6).collect(),
-                style: SeriesStyle::Line,
+                style: SeriesStyle::Points,
+            },
+            Series {
+                label: "recovered ± 1σ".into(),
+                x: x.iter().flat_map(|&v| [v, v]).collect(),
+                y: rec.iter().zip(&sig).flat_map(|(r, s)| [(r - s) * 1e6, (r + s) * 1e6]).collect(),
+                style: SeriesStyle::ErrorBars,
             },
             Series {
                 label: "squareness value of the truth (without the error motions' trends)".into(),
                 x,
                 y: raw.iter().map(|v| v * 1e6).collect(),
-                style: SeriesStyle::Line,
+                style: SeriesStyle::Points,
             },
         ],
-        kind: FigureKind::Bar,
+        kind: FigureKind::Line,
         log_x: false,
         log_y: false,
     };
@@ -276,12 +284,18 @@ pub(super) fn laser_lines_3d_checks(
             let truth: Vec<f64> = p.positions.iter().map(|&q| profile.value(q) - r0).collect();
             let s = rms(&sig);
             let name = format!("{iso} {letter}.{effect} (laser lines 3D)");
-            let fig = profile_figure(
-                format!("{name}: injected vs identified (±{:.3} µrad RMS 1σ)", s * 1e6),
+            let mut fig = profile_figure(
+                format!("{name}: injected vs identified ± 1σ (RMS 1σ {:.3} µrad)", s * 1e6),
                 Quantity::Angle,
                 &p.positions,
                 &[("injected", &truth, SeriesStyle::Line), ("identified", &p.values, SeriesStyle::Points)],
             );
+            fig.series.push(Series {
+                label: "identified ± 1σ".into(),
+                x: p.positions.iter().flat_map(|&q| [q * 1e3, q * 1e3]).collect(),
+                y: p.values.iter().zip(&sig).flat_map(|(v, e)| [(v - e) * 1e6, (v + e) * 1e6]).collect(),
+                style: SeriesStyle::ErrorBars,
+            });
             let check = Check {
                 bound: Some(s),
                 ..Check::profile(name, Quantity::Angle, &truth, &p.values, k_sigma * s + bias_angle)

@@ -363,8 +363,9 @@ pub fn estimate_recording(
                 out.push(checks, fig);
             }
             EstimatorSpec::Ssi { procedure, sensor, expected, tolerance } => {
-                for (check, fig) in ssi::ssi_checks(source, set, truth, procedure, sensor, expected, tolerance)? {
+                for (check, fig, zoom) in ssi::ssi_checks(source, set, truth, procedure, sensor, expected, tolerance)? {
                     out.push(vec![check], fig);
+                    zoom.into_iter().for_each(|z| out.push_figure(z));
                 }
             }
             EstimatorSpec::ModelCheck { model, expected, max_steps, tolerance } => {

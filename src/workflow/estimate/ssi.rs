@@ -21,7 +21,8 @@ pub fn run_ssi(t: &[f64], x: &[f64], resolution: Option<f64>) -> Result<(f64, Ss
 
 /// The crawl check: the SSI of `sensor` in every run of `procedure` (named `{procedure}_*`, one per feed)
 /// against the patent's example values `expected` within `tolerance` (dimensionless), each with a figure
-/// of the differentiated velocity.
+/// of the differentiated velocity against the commanded feed and, where the axis crawls, a zoom on four
+/// stick-slip cycles.
 pub(super) fn ssi_checks(
     source: &Path,
     set: &MeasurementSet,
@@ -30,7 +31,7 @@ pub(super) fn ssi_checks(
     sensor: &str,
     expected: &[f64],
     tolerance: &[f64],
-) -> Result<Vec<(Check, Figure)>, VmtError> {
+) -> Result<Vec<(Check, Figure, Option<Figure>)>, VmtError> {
     let bad = |m: String| VmtError::bad(source, format!("estimators (ssi {procedure})"), m);
     let prefix = format!("{procedure}_");
     let crawl: Vec<_> = set.runs.iter().filter(|r| r.name.starts_with(&prefix)).collect();
@@ -50,17 +51,53 @@ pub(super) fn ssi_checks(
         let (dt, res) = run_ssi(t, x, q).map_err(|m| bad(format!("run `{}`: {m}", r.name)))?;
         let feed = r.feed.unwrap_or(0.0) * 60_000.0;
         let v: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]) / dt * 60_000.0).collect();
-        let fig = Figure {
-            title: format!("crawl at {feed:.0} mm/min: velocity from the differentiated {sensor} (SSI {:.2})", res.ssi),
+        let tv = &t[1..];
+        let view = |title: String, range: std::ops::Range<usize>| Figure {
+            title,
             x_label: "time".into(),
             x_unit: "s".into(),
             y_label: "velocity".into(),
             y_unit: "mm/min".into(),
-            series: vec![Series { label: sensor.to_string(), x: t[1..].to_vec(), y: v, style: SeriesStyle::Line }],
+            series: vec![
+                Series {
+                    label: format!("{sensor}, differentiated"),
+                    x: tv[range.clone()].to_vec(),
+                    y: v[range.clone()].to_vec(),
+                    style: SeriesStyle::Line,
+                },
+                Series {
+                    label: "commanded feed".into(),
+                    x: vec![tv[range.start], tv[range.end - 1]],
+                    y: vec![feed, feed],
+                    style: SeriesStyle::Dashed,
+                },
+            ],
             kind: FigureKind::Line,
             log_x: false,
             log_y: false,
         };
+        let fig = view(
+            format!(
+                "crawl at {feed:.0} mm/min: velocity from the differentiated {sensor}; SSI = (v_max − v_min)/v_mean = {:.2}",
+                res.ssi
+            ),
+            0..v.len(),
+        );
+        // Four stick-slip cycles: from the 2nd to the 6th upward crossing of the mean velocity.
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        let up: Vec<usize> = (1..v.len()).filter(|&i| v[i - 1] < mean && v[i] >= mean).collect();
+        let zoom = (res.ssi >= 1.0 && up.len() >= 6).then(|| {
+            view(
+                format!(
+                    "crawl at {feed:.0} mm/min, zoom: four stick-slip cycles, {:.3}–{:.3} s of the record's {:.2}–{:.2} s",
+                    tv[up[1]],
+                    tv[up[5]],
+                    tv[0],
+                    tv[tv.len() - 1]
+                ),
+                up[1]..up[5] + 1,
+            )
+        });
         // The patent's example value is a reference, not an injected truth (the SSI follows from the
         // simulated physics). An interval that reaches 0 is a one-sided limit: say so.
         let id = format!("ssi.{sensor}.{feed:.0}_mm_per_min");
@@ -75,7 +112,7 @@ pub(super) fn ssi_checks(
             res.ssi,
             if res.ssi >= 1.0 { "crawling" } else { "smooth" }
         ));
-        out.push((check, fig));
+        out.push((check, fig, zoom));
     }
     Ok(out)
 }

@@ -346,6 +346,44 @@ pub fn profile_table(results: &[SensorStraightness], file: &Path) -> Result<Prof
     Ok(ProfileTable { position, columns })
 }
 
+/// What [`band_geometry`] depends on, bit for bit: the estimate's grid, the band's wavelengths, the
+/// harmonics' period and origin, and whether the DFT pipeline's high-pass and edge trim apply.
+#[derive(Clone, PartialEq, Eq)]
+struct GeometryKey {
+    positions: Vec<u64>,
+    band: [u64; 4],
+    periodic: bool,
+}
+
+/// Per band harmonic, its wavelength (m) and per phase Σ(P φ_k)² with the number of points — the
+/// post-processed basis function's mean square, which weights σ_k² in the Cramér–Rao bound of the
+/// check's RMS difference.
+type BandGeometry = std::sync::Arc<Vec<(f64, Vec<(f64, f64)>)>>;
+
+/// The band geometry for `key`, computed by `compute` once and shared by later calls with the same key
+/// (a study's trials: the same grid, a different noise). The cache holds the last few keys; a value is a
+/// pure function of its key, so results do not depend on the cache or on thread scheduling.
+fn band_geometry(
+    key: GeometryKey,
+    compute: impl FnOnce() -> Result<Vec<(f64, Vec<(f64, f64)>)>, VmtError>,
+) -> Result<BandGeometry, VmtError> {
+    use std::sync::{Mutex, PoisonError};
+    static CACHE: Mutex<Vec<(GeometryKey, BandGeometry)>> = Mutex::new(Vec::new());
+    const KEPT: usize = 8;
+    let cached =
+        CACHE.lock().unwrap_or_else(PoisonError::into_inner).iter().find(|(k, _)| *k == key).map(|e| e.1.clone());
+    if let Some(g) = cached {
+        return Ok(g);
+    }
+    let g = std::sync::Arc::new(compute()?);
+    let mut cache = CACHE.lock().unwrap_or_else(PoisonError::into_inner);
+    if cache.len() >= KEPT {
+        cache.remove(0);
+    }
+    cache.push((key, g.clone()));
+    Ok(g)
+}
+
 /// The accelerometer straightness check of one sensor (seed 000 / SNR-weighted fusion): the profile of
 /// `sensor` from the passes of `procedure` by `method` (default `snr_weighted`), against the injected
 /// deviation at the sensor's point band-limited the same way, within `tolerance` (m, RMS), with the
@@ -445,21 +483,42 @@ pub(super) fn accel_straightness_check(
             SpectralBasis::Periodic => 0.0,
             SpectralBasis::Cosine => dx / 2.0,
         };
+    // Σ(P φ_k)² per band harmonic and phase depends on the grid, band and basis only, not on the
+    // noise: the trials of a study share it (`band_geometry`), each weighting it by its own σ_k².
+    let key = GeometryKey {
+        positions: est.positions.iter().map(|v| v.to_bits()).collect(),
+        band: [est.band.min_wavelength.to_bits(), est.band.max_wavelength.to_bits(), period.to_bits(), x0.to_bits()],
+        periodic: matches!(est.basis, SpectralBasis::Periodic),
+    };
+    let geometry = band_geometry(key, || {
+        let mut g = Vec::new();
+        for k in 1.. {
+            let lam = period / k as f64;
+            if lam < est.band.min_wavelength {
+                break;
+            }
+            if lam > est.band.max_wavelength {
+                continue;
+            }
+            let mut per_phase = Vec::with_capacity(phases.len());
+            for &phase in phases {
+                let phi: Vec<f64> = est
+                    .positions
+                    .iter()
+                    .map(|&x| (2.0 * std::f64::consts::PI * (x - x0) / lam - phase).cos())
+                    .collect();
+                let p = post(&phi)?;
+                per_phase.push((p.iter().map(|v| v * v).sum::<f64>(), p.len() as f64));
+            }
+            g.push((lam, per_phase));
+        }
+        Ok(g)
+    })?;
     let mut var = 0.0;
-    for k in 1.. {
-        let lam = period / k as f64;
-        if lam < est.band.min_wavelength {
-            break;
-        }
-        if lam > est.band.max_wavelength {
-            continue;
-        }
-        let Ok(s) = sigma_k(lam) else { continue };
-        for &phase in phases {
-            let phi: Vec<f64> =
-                est.positions.iter().map(|&x| (2.0 * std::f64::consts::PI * (x - x0) / lam - phase).cos()).collect();
-            let p = post(&phi)?;
-            var += s * s * p.iter().map(|v| v * v).sum::<f64>() / p.len() as f64;
+    for (lam, per_phase) in geometry.iter() {
+        let Ok(s) = sigma_k(*lam) else { continue };
+        for (sum, len) in per_phase {
+            var += s * s * sum / len;
         }
     }
     let bound = var.sqrt();
