@@ -124,6 +124,22 @@ fn over_draws<T: Send>(family: &Family, n: u64, f: impl Fn(&Draw, &Path) -> T + 
         .collect()
 }
 
+/// Number of complete point tables the default suite diagnoses (the first, by index).
+const CI_TABLES: u64 = 24;
+
+/// `diagnose` of `complete.toml` on the first `n` complete point tables; the default suite's `n`
+/// ([`CI_TABLES`]) is computed once per test process and shared by the tests that read it (the σ
+/// check and the false-alarm rate read the same diagnoses).
+fn complete_table_diagnoses(n: u64) -> std::borrow::Cow<'static, [(Draw, Result<Value, String>)]> {
+    static CI: std::sync::OnceLock<Vec<(Draw, Result<Value, String>)>> = std::sync::OnceLock::new();
+    let run = |n| over_draws(&Family::CompletePointTable, n, |_, dir| diagnose(dir, "complete.toml"));
+    if n == CI_TABLES {
+        std::borrow::Cow::Borrowed(CI.get_or_init(|| run(n)))
+    } else {
+        std::borrow::Cow::Owned(run(n))
+    }
+}
+
 fn rate(k: usize, n: usize) -> String {
     format!("{k}/{n} ({:.1} %)", 100.0 * k as f64 / n.max(1) as f64)
 }
@@ -220,10 +236,9 @@ fn given_coulomb_and_stribeck_predict_the_simulators_law() {
 ///   smallest dof, and the draws have far more).
 #[test]
 fn stated_sigma_is_checked_against_the_repeats() {
-    let n = draws_for(24);
     let (mut correct, mut rejected) = (0, 0);
-    for (d, r) in over_draws(&Family::CompletePointTable, n, |_, dir| diagnose(dir, "complete.toml")) {
-        let diag = r.unwrap_or_else(|e| panic!("{}: {e}", d.describe()));
+    for (d, r) in complete_table_diagnoses(draws_for(CI_TABLES)).iter() {
+        let diag = r.as_ref().unwrap_or_else(|e| panic!("{}: {e}", d.describe()));
         let sc = &diag["sigma"];
         assert!(sc.is_object(), "{}: no `sigma` check although the tables repeat every target", d.describe());
         let from = sc["from_repeats"].as_f64().unwrap();
@@ -261,16 +276,17 @@ fn stated_sigma_is_checked_against_the_repeats() {
 /// `significant` candidate. Issue 11: at most 2 % over ≥ 200 draws (goal 1 %). The default suite
 /// runs the first 24 point tables + 6 friction sweeps (the draws are fixed by their index, so this
 /// is a fixed set of 30 data sets, about 30 s): 2 % of 30 allows no alarm. Measured over 160 + 40
-/// draws (the ignored tool below): 1/200 at the session-5 merge (a `cyclic_lead` at 60.000 mm, dense layout, σ understated).
+/// draws (the ignored tool below): 0/200 in session 6 (1/200 at the session-5 merge: a `cyclic_lead` at
+/// 60.000 mm, the end of the periods searched, now `inseparable` from the shapes: `at_bound`).
 #[test]
 fn complete_models_have_at_most_2_percent_false_alarms() {
-    false_alarm_study(24, 6);
+    false_alarm_study(CI_TABLES, 6);
 }
 
 /// The full study of [`complete_models_have_at_most_2_percent_false_alarms`]: 160 point tables +
 /// 40 friction sweeps (`VMT_GEN_DRAWS` replaces both counts).
 #[test]
-#[ignore = "a tool: the 200-draw false-alarm study (1/200 at the session-5 merge)"]
+#[ignore = "a tool: the 200-draw false-alarm study (0/200 in session 6)"]
 fn complete_models_false_alarm_study() {
     false_alarm_study(draws_for(160), draws_for(40));
 }
@@ -283,13 +299,15 @@ fn false_alarm_study(n_table: u64, n_fric: u64) {
     // (alarms, draws) by layout and by how the manifest states σ.
     let mut by_kind: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
     let mut lines = Vec::new();
-    for (fam, n) in [(Family::CompletePointTable, n_table), (Family::CompleteFriction, n_fric)] {
-        for (d, r) in over_draws(&fam, n, |_, dir| diagnose(dir, "complete.toml")) {
+    let tables = complete_table_diagnoses(n_table);
+    let sweeps = over_draws(&Family::CompleteFriction, n_fric, |_, dir| diagnose(dir, "complete.toml"));
+    for part in [&tables[..], &sweeps[..]] {
+        for (d, r) in part {
             total += 1;
             match r {
                 Err(e) => errors.push(format!("{}: {e}", d.describe())),
                 Ok(diag) => {
-                    let c = claims(&diag);
+                    let c = claims(diag);
                     let layout = d.layout.map_or("friction sweep".to_string(), |l| format!("layout {l:?}"));
                     for k in [layout, format!("σ {:?}", d.sigma_stated)] {
                         let e = by_kind.entry(k).or_default();
@@ -813,10 +831,22 @@ fn thresholds(
 /// resolved there): `diagnose` must never make a significant claim of a periodic effect at a wrong
 /// period (not within 10 % of the truth). Issue 11: 0 in ≥ 50 draws. Also counted: any
 /// significant claim. The cyclic_lead entry must name its aliases or say why it cannot be seen
-/// (FORMAT.md §4 `aliases`, `note`).
+/// (FORMAT.md §4 `aliases`, `note`). The default suite runs the first 25 draws (fixed by their
+/// index); the 50-draw count of the issue is the ignored study below.
 #[test]
 fn unresolvable_cyclic_error_is_never_claimed_at_a_wrong_period() {
-    let n = draws_for(50);
+    unresolvable_study(draws_for(25));
+}
+
+/// The full study of [`unresolvable_cyclic_error_is_never_claimed_at_a_wrong_period`]: 50 draws
+/// (issue 11: 0 wrong-period claims in ≥ 50).
+#[test]
+#[ignore = "a tool: the 50-draw unresolvable-cyclic-error study"]
+fn unresolvable_cyclic_error_study() {
+    unresolvable_study(draws_for(50));
+}
+
+fn unresolvable_study(n: u64) {
     let res = over_draws(&Family::UnresolvedCyclic, n, |_, dir| diagnose(dir, "start.toml"));
     let (mut wrong, mut any, mut aliases, mut errors) = (0, 0, 0, 0);
     let mut lines = Vec::new();

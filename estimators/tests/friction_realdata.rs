@@ -9,80 +9,15 @@
 //!   c1 = 10.0000000001 N sits on that bound);
 //! - the author's model F = c2·v + c1 + v·(c3 − c1)·e/c4·exp(−v/c4) is `StribeckShape::Mnich`.
 //!
-//! The CSV parsing lives here; the estimator only sees numbers.
+//! The CSV parsing lives in `tests/util/realdata.rs` (shared with the model-check loop on the same
+//! files, `tests/model_check.rs`); the estimator only sees numbers.
 
-use std::path::Path;
 use vmt_estimators::friction_id::{
     fit_stribeck, friction_from_motion, lugre_sigma0_from_presliding, stribeck_curve, FilterMode, FrictionIdError,
     StribeckCoefficients, StribeckFit, StribeckFitOptions, StribeckShape, SweepDirection,
 };
 
 use crate::realdata;
-
-/// Numeric rows of a CSV after `skip` header lines (the first line may carry a UTF-8 BOM).
-fn read_rows(dir: &Path, name: &str, skip: usize) -> Vec<Vec<f64>> {
-    let path = dir.join(name);
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    text.lines()
-        .skip(skip)
-        .filter(|l| !l.trim().is_empty())
-        .enumerate()
-        .map(|(i, l)| {
-            l.split(',')
-                .map(|c| {
-                    c.trim()
-                        .parse::<f64>()
-                        .unwrap_or_else(|_| panic!("{name}: line {}: not a number: {c:?}", i + skip + 1))
-                })
-                .collect()
-        })
-        .collect()
-}
-
-/// Linear interpolation of (tx, x) at t (tx increasing); None outside the range.
-fn interp(tx: &[f64], x: &[f64], t: f64) -> Option<f64> {
-    if t < tx[0] || t > tx[tx.len() - 1] {
-        return None;
-    }
-    let j = tx.partition_point(|&s| s <= t).clamp(1, tx.len() - 1);
-    let f = (t - tx[j - 1]) / (tx[j] - tx[j - 1]);
-    Some(x[j - 1] + f * (x[j] - x[j - 1]))
-}
-
-struct Prepared {
-    t: Vec<f64>,
-    v_raw: Vec<f64>,
-    force_raw: Vec<f64>,
-    dt: f64,
-}
-
-/// Reads both files and puts force and velocity on the servo timebase (README processing); `None`
-/// (the test `test` is skipped, visibly) when the real data is absent.
-fn prepare(test: &str) -> Option<Prepared> {
-    let dir = realdata::realdata("friction_rack_pinion", test)?;
-    let ni = read_rows(&dir, "a3NI.csv", 4);
-    let mr = read_rows(&dir, "a3MR.csv", 5);
-    assert!(ni.len() > 1000 && mr.len() == 1024, "{} NI rows, {} MR rows", ni.len(), mr.len());
-    let v0: f64 = ni[..10].iter().map(|r| r[1]).sum::<f64>() / 10.0;
-    let t_ni: Vec<f64> = ni.iter().map(|r| r[0] + 0.004).collect();
-    let f_ni: Vec<f64> = ni.iter().map(|r| -(r[1] - v0) * 200.0).collect();
-    let mut t = Vec::new();
-    let mut v_raw = Vec::new();
-    let mut force_raw = Vec::new();
-    for r in &mr {
-        let ts = r[0] * 1e-3;
-        // Before the shifted NI record starts (first 4 ms) the axis is at rest and unloaded: the
-        // force is the offset-corrected zero.
-        let f = if ts < t_ni[0] { Some(0.0) } else { interp(&t_ni, &f_ni, ts) };
-        if let Some(f) = f {
-            t.push(ts);
-            v_raw.push(-r[1] * 20.0 / 1000.0 / 60.0);
-            force_raw.push(f);
-        }
-    }
-    let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
-    Some(Prepared { t, v_raw, force_raw, dt })
-}
 
 /// The fit window of the README: acceleration phase (from the start up to the velocity peak),
 /// 0 < v ≤ 0.55 m/s.
@@ -110,7 +45,9 @@ fn rms_of(c: &StribeckCoefficients, shape: StribeckShape, v: &[f64], f: &[f64]) 
 
 #[test]
 fn rack_pinion_author_processing_lands_within_15_percent_of_the_published_coefficients() {
-    let Some(d) = prepare("rack_pinion_author_processing_lands_within_15_percent_of_the_published_coefficients") else {
+    let Some(d) =
+        realdata::rack_pinion("rack_pinion_author_processing_lands_within_15_percent_of_the_published_coefficients")
+    else {
         return;
     };
     println!("{} samples on the servo timebase, dt = {} s", d.t.len(), d.dt);
@@ -145,7 +82,7 @@ fn rack_pinion_author_processing_lands_within_15_percent_of_the_published_coeffi
 fn rack_pinion_variants_are_reported() {
     // Not tolerance tests of the author's numbers: how the answer moves with choices the README
     // leaves open. Printed for the report; only sanity bounds are asserted.
-    let Some(d) = prepare("rack_pinion_variants_are_reported") else { return };
+    let Some(d) = realdata::rack_pinion("rack_pinion_variants_are_reported") else { return };
     for (label, mode) in [("causal", FilterMode::Causal), ("zero-phase", FilterMode::ZeroPhase)] {
         let mf = friction_from_motion(&d.v_raw, &d.force_raw, 24.7, d.dt, Some(30.0), mode).unwrap();
         let (v, f) = window(&mf.v, &mf.friction);
@@ -171,7 +108,7 @@ fn rack_pinion_lugre_sigma0_is_not_identifiable() {
     // t ≈ 0.046 s) and the load-cell force does not rise before that (summary.png: force and
     // acceleration start together at ≈0.05 s), so the stick segment holds no pre-sliding ramp and
     // σ0 is not identifiable from these files. The estimator must say so.
-    let Some(d) = prepare("rack_pinion_lugre_sigma0_is_not_identifiable") else { return };
+    let Some(d) = realdata::rack_pinion("rack_pinion_lugre_sigma0_is_not_identifiable") else { return };
     let mut x = vec![0.0; d.v_raw.len()];
     for i in 1..x.len() {
         x[i] = x[i - 1] + 0.5 * (d.v_raw[i] + d.v_raw[i - 1]) * d.dt;

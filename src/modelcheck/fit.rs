@@ -394,6 +394,75 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
     Ok(fs)
 }
 
+/// The orders of a model's fitted error motions re-chosen by BIC with a diagnose candidate in the
+/// model (every candidate, every basis; point tables and friction sweeps, not data with
+/// accelerometer channels, whose sparse series are chosen by [`fit_orders_nested`]): starting from
+/// `start` (motion, order), coordinate-wise over the motions whose order the model does not give
+/// (two sweeps when several), each from its [`order_curve`] with the offsets, the other terms at
+/// their current orders and the candidate's columns `extra` held. A periodic candidate of period
+/// `period` (m) caps every series but a table below it (shortest wavelength 2L/K > P,
+/// [`LeadCap`]): a shape that could represent the wave would absorb it. Returns the orders and the
+/// BIC with σ unknown, n·ln(RSS/n) + (rank + `k_extra`)·ln n ([`bic_unknown_sigma`]), of the model
+/// with the candidate (rank: offsets, terms, series and candidate columns; `k_extra`: the
+/// candidate's searched hyper-parameters).
+pub(crate) fn rechoose_orders(
+    st: &Stack,
+    model: &Model,
+    fs: &FitState,
+    w: &[f64],
+    extra: &[Vec<f64>],
+    k_extra: usize,
+    period: Option<f64>,
+    start: &[(EffectName, u32)],
+) -> Result<(Vec<(EffectName, u32)>, f64), String> {
+    let top = (distinct_positions(st).len() as u32).saturating_sub(1).max(1);
+    let mut terms = fs.terms.clone();
+    let mut orders: Vec<(EffectName, u32)> = start.to_vec();
+    let at_order = |t: &FitTerm, me: &ModelEffect, o: u32| match requested_basis(me) {
+        Some(b) => shape(st, t.name, 1, o, false).in_basis(st, b, o),
+        None => shape(st, t.name, 1, o, false),
+    };
+    for t in terms.iter_mut() {
+        if let Some((_, o)) = orders.iter().find(|(m, _)| *m == t.name) {
+            t.shape = at_order(t, &model.effects[t.index], *o);
+        }
+    }
+    let sweeps = if orders.len() > 1 { 2 } else { 1 };
+    let mut bic = bic_unknown_sigma(weighted_ss(&fs.residual, w), st.n, fs.cols.len() + extra.len() + k_extra);
+    for _ in 0..sweeps {
+        for slot in 0..orders.len() {
+            let name = orders[slot].0;
+            let Some(ti) = terms.iter().position(|t| t.name == name) else { continue };
+            let me = &model.effects[terms[ti].index];
+            let basis = requested_basis(me).unwrap_or(ShapeBasis::Legendre);
+            let span = {
+                let r = shape(st, name, 1, 1, false).range;
+                r.1 - r.0
+            };
+            let others: Vec<FitTerm> =
+                terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
+            let mut fixed: Vec<Vec<f64>> = design(st, &others);
+            fixed.extend(extra.iter().cloned());
+            fixed.retain(|c| c.iter().any(|v| *v != 0.0));
+            let base = OrthoBase::new(&fixed, w).map_err(|e| e.to_string())?;
+            let curve = order_curve(st, name, basis, top, &fs.target, w, &base)?;
+            let allowed = |o: u32| {
+                basis == ShapeBasis::Table || period.is_none_or(|p| basis.shortest_wavelength(span, o) > p) || o == 1
+            };
+            let score = |k: usize| bic_unknown_sigma(curve[k].1, st.n, curve[k].2 + k_extra);
+            let Some(k) =
+                (0..curve.len()).filter(|&k| allowed(curve[k].0)).min_by(|a, b| score(*a).total_cmp(&score(*b)))
+            else {
+                continue;
+            };
+            bic = score(k);
+            orders[slot].1 = curve[k].0;
+            terms[ti].shape = at_order(&terms[ti], me, curve[k].0);
+        }
+    }
+    Ok((orders, bic))
+}
+
 /// The greedy selection of a cosine series ([`greedy_rss`]) stops after 20 terms in a row that
 /// each explain less than this many times the residual mean square (BIC charges ln n ≥ 5 each).
 pub(crate) const GREEDY_STOP: f64 = 1.0;

@@ -712,9 +712,8 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     let st = &f.st;
     // A resonance over fitted translations is driven by the guideway the base fit shows.
     let st_mode = fitted_excitation(st, &f.fs).map(|ex| st.with_excitation(ex));
-    let cands: Vec<Candidate> = names
-        .iter()
-        .map(|&n| {
+    let make = |n: EffectName| -> Candidate {
+        {
             let st = match (&st_mode, n == EffectName::Resonance) {
                 (Some(sm), true) => sm,
                 _ => st,
@@ -747,10 +746,12 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             } else {
                 c
             }
-        })
-        .collect();
+        }
+    };
+    let cands: Vec<Candidate> = names.iter().map(|&n| make(n)).collect();
     let mut ranking: Vec<RankingEntry> = Vec::new();
-    let sigma = Sigma::PerSample(significance_sigma(&f, &per));
+    let sig_vec = significance_sigma(&f, &per);
+    let sigma = Sigma::PerSample(sig_vec.clone());
     let config = DiagnoseConfig::default();
     // Shape against cyclic lead (fit.rs `LeadCap`): where the model's shapes keep orders whose
     // shortest wavelength 2L/K reaches the lead's searched periods, the lead is ranked against the
@@ -808,18 +809,23 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             .map(|((_, l), (_, o))| l.basis.shortest_wavelength(l.span, *o))
             .fold(f64::INFINITY, f64::min)
     });
-    let mut cands = cands;
-    if let Some(lim) = lead_limit {
-        for c in cands.iter_mut().filter(|c| c.effect == EffectName::CyclicLead.as_str()) {
+    // The lead is searched only below the capped shapes' shortest wavelength.
+    let limit_lead = |c: &mut Candidate| {
+        if let (Some(lim), true) = (lead_limit, c.effect == EffectName::CyclicLead.as_str()) {
             for h in c.hyper_parameters.iter_mut() {
                 h.grid.retain(|p| *p < lim);
             }
         }
-    }
+    };
+    let mut cands = cands;
+    cands.iter_mut().for_each(limit_lead);
     let split = split && capped.is_some();
     let total = cands.len();
     let (lead_cands, other_cands): (Vec<Candidate>, Vec<Candidate>) =
         cands.into_iter().partition(|c| split && c.effect == EffectName::CyclicLead.as_str());
+    // Per ranked candidate: its columns at the fitted hyper-parameters, its number of searched
+    // hyper-parameters, and whether a better-ranked candidate explained it away.
+    let mut fitted: BTreeMap<String, (Vec<Vec<f64>>, usize, bool)> = BTreeMap::new();
     for (group, fs) in [(other_cands, &f.fs), (lead_cands, capped.as_ref().unwrap_or(&f.fs))] {
         if group.is_empty() {
             continue;
@@ -831,11 +837,12 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             Ok(d) => {
                 // Bonferroni over all `total` candidates of this diagnosis, not the group's.
                 let scale = total as f64 / group.len() as f64;
-                for mut r in d.ranking {
-                    r.p_value = r.p_value.map(|p| (p * scale).min(1.0));
-                    if r.verdict == Verdict::Significant && r.p_value.is_some_and(|p| p > config.family_alpha) {
-                        r.verdict = Verdict::Noise;
-                    }
+                for (mut r, fit) in d.ranking.into_iter().zip(d.fits) {
+                    bonferroni(&mut r, scale, config.family_alpha);
+                    // Marginally significant, then explained away by a better-ranked candidate.
+                    let away = fit.conditional_delta_bic.is_some() && r.verdict == Verdict::Noise;
+                    let k_hyper = fit.k - fit.coefficients.len();
+                    fitted.insert(r.effect.clone(), (fit.columns, k_hyper, away));
                     ranking.push(r);
                 }
             }
@@ -888,7 +895,59 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             r.params.extend(gains);
         }
     }
+    // Shapes re-chosen for every candidate model (fit.rs `rechoose_orders`).
+    if !st.chans.iter().any(|c| c.is_accel()) {
+        let ctx = Reshape {
+            st,
+            model,
+            f: &f,
+            w: &w,
+            sig: &sig_vec,
+            fit_sigma: &fit_sigma,
+            config: &config,
+            total,
+            joint: if split { joint.as_deref() } else { None },
+        };
+        for r in ranking.iter_mut() {
+            let Some((cols, k_hyper, away)) = fitted.get(&r.effect) else { continue };
+            let Ok(name) = r.effect.parse::<EffectName>() else { continue };
+            let mut c = make(name);
+            limit_lead(&mut c);
+            ctx.apply(r, name, c, cols, *k_hyper, *away).map_err(|m| {
+                VmtError::bad(data, "", format!("re-choosing the shapes with `{}` in the model: {m}", r.effect))
+            })?;
+        }
+    }
     ranking.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic).then_with(|| a.effect.cmp(&b.effect)));
+    // A fitted period at an end of the range searched is a bound, not an estimate: the criterion
+    // still improves beyond it, so the signal is not this candidate's in the range searched.
+    for r in ranking.iter_mut().filter(|r| r.verdict == Verdict::Significant) {
+        if !r.at_bound.iter().any(|h| h == "period") {
+            continue;
+        }
+        let p = r.params.get("period").copied().unwrap_or(f64::NAN);
+        // The long end: a wave longer than the candidate's periods, what the fitted shapes
+        // represent; the short end: a misfit faster than the periods these positions resolve.
+        let long = r.effect.parse::<EffectName>().ok().and_then(period_range).is_some_and(|(lo, hi)| p * p > lo * hi);
+        let shapes: Vec<String> = f.fs.shapes.iter().map(|c| c.name.as_str().to_string()).collect();
+        let beyond = match (long, shapes.is_empty()) {
+            (true, false) => format!(
+                "a longer wave, what the fitted shapes ({}) represent; give the screw's lead, or measure a dense run over \
+                 several leads",
+                shapes.join(", ")
+            ),
+            (true, true) => "a longer wave than the candidate's periods".to_string(),
+            (false, _) => "a misfit faster than the periods these sample positions resolve (per-target scatter)".into(),
+        };
+        r.verdict = if long && !shapes.is_empty() { Verdict::Inseparable } else { Verdict::Noise };
+        r.confused_with = if long { shapes } else { vec![] };
+        r.note = Some(format!(
+            "`{}` fits best at {} mm, an end of the periods searched: the fit still improves beyond the range, so \
+             it is not identified at a period in range; the signal is {beyond}",
+            r.effect,
+            fmt_num(p * 1e3),
+        ));
+    }
     // A fitted period that other periods reproduce on these positions is not identified: the
     // claim is `inseparable` from its aliases (the data cannot say which one), with the advice.
     for r in ranking.iter_mut().filter(|r| r.verdict == Verdict::Significant) {
@@ -928,9 +987,16 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             aliases: vec![],
             p_value: None,
             searched: None,
+            at_bound: vec![],
+            shape_orders: BTreeMap::new(),
         });
     }
-    let shapes = shape_reports(&f.fs);
+    let mut shapes = shape_reports(&f.fs);
+    if !st.chans.iter().any(|c| c.is_accel()) {
+        for (_, s) in shapes.iter_mut().filter(|(_, s)| s.chosen_by != "model") {
+            s.chosen_by += "; re-chosen by BIC with each candidate in the model (`shape_orders` of its ranking entry)";
+        }
+    }
     // A given order stiffer than the data show is itself a finding, named before any candidate.
     let stiff: Vec<String> = shapes
         .iter()
@@ -948,6 +1014,140 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         );
     }
     Ok(DiagnoseReport { normalized_rms: nrms, ranking, advice, notes, shapes, sigma: f.sigma })
+}
+
+/// Bonferroni over a diagnosis's candidates: the ranked group's p-value times `scale` (all
+/// candidates / the group's), capped at 1; a significant entry above `alpha` becomes noise.
+fn bonferroni(r: &mut RankingEntry, scale: f64, alpha: f64) {
+    r.p_value = r.p_value.map(|p| (p * scale).min(1.0));
+    if r.verdict == Verdict::Significant && r.p_value.is_some_and(|p| p > alpha) {
+        r.verdict = Verdict::Noise;
+    }
+}
+
+/// What `diagnose` needs to re-choose the shapes with one candidate in the model.
+struct Reshape<'s, 'a> {
+    st: &'s Stack<'a>,
+    model: &'s Model,
+    f: &'s Fitted<'a>,
+    /// Weights 1/σ of the fit; σ of the significance.
+    w: &'s [f64],
+    sig: &'s [f64],
+    fit_sigma: &'s Sigma,
+    config: &'s DiagnoseConfig,
+    /// Number of candidates of the diagnosis (Bonferroni).
+    total: usize,
+    /// The shapes' orders the cyclic lead was ranked against (the joint scan's), when capped.
+    joint: Option<&'s [(EffectName, u32)]>,
+}
+
+impl Reshape<'_, '_> {
+    /// Shapes re-chosen for one candidate model: the orders of the model's fitted error motions
+    /// re-chosen by BIC with the candidate's columns (at its fitted hyper-parameters) in the model
+    /// ([`rechoose_orders`], capped below a periodic candidate's period), recorded in
+    /// `shape_orders`. Where they differ from the orders the candidate was ranked against, the
+    /// model is refitted at them and the candidate ranked again against that fit; its ΔBIC is then
+    /// stated against the model as fitted (σ of the significance): ΔBIC_c + χ²_c − χ²_0 +
+    /// (k_c − k_0)·ln n. It stays significant only if candidate + re-chosen shapes beat the model
+    /// as fitted by the inseparable margin in BIC with σ unknown; otherwise the data cannot tell the
+    /// candidate from the shapes' flexibility: `inseparable`, confused with the shapes it changed.
+    fn apply(
+        &self,
+        r: &mut RankingEntry,
+        name: EffectName,
+        cand: Candidate,
+        cols: &[Vec<f64>],
+        k_hyper: usize,
+        away: bool,
+    ) -> Result<(), String> {
+        let (st, f, w) = (self.st, self.f, self.w);
+        let free: Vec<(EffectName, u32)> =
+            f.fs.shapes.iter().filter(|c| !c.given && c.max.is_some()).map(|c| (c.name, c.order)).collect();
+        if free.is_empty() {
+            return Ok(());
+        }
+        let start: Vec<(EffectName, u32)> = match (self.joint, name) {
+            (Some(j), EffectName::CyclicLead) => {
+                free.iter().map(|&(m, o)| (m, j.iter().find(|(jm, _)| *jm == m).map_or(o, |(_, jo)| *jo))).collect()
+            }
+            _ => free.clone(),
+        };
+        let period = period_range(name).and(r.params.get("period").copied());
+        let (orders, bic_c) = rechoose_orders(st, self.model, &f.fs, w, cols, k_hyper, period, &start)?;
+        r.shape_orders = orders.iter().map(|(m, o)| (m.as_str().to_string(), *o)).collect();
+        if orders == start {
+            return Ok(());
+        }
+        let order_of = |_: usize, me: &ModelEffect| {
+            let n = me.effect.name;
+            let o = orders.iter().find(|(m, _)| *m == n).map(|(_, o)| *o).unwrap_or_else(|| {
+                f.fs.shapes.iter().find(|c| c.name == n).map_or(me.order.unwrap_or(DEFAULT_ORDER), |c| c.order)
+            });
+            (o, None)
+        };
+        let fs_c = fit_model_fixed(st, self.model, self.fit_sigma, w, &order_of)?;
+        let nonzero = |fs: &FitState| fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
+        let base: Vec<Vec<f64>> = fs_c.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
+        let sigma = Sigma::PerSample(self.sig.to_vec());
+        let input =
+            vmt_estimators::modelcheck::ResidualInput { residual: &fs_c.residual, sigma: &sigma, base_columns: &base };
+        let d = match rank_candidates(&input, std::slice::from_ref(&cand), self.config) {
+            Ok(d) => d,
+            Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) => return Ok(()),
+            Err(e) => return Err(e.to_string()),
+        };
+        let Some(mut r2) = d.ranking.into_iter().next() else { return Ok(()) };
+        bonferroni(&mut r2, self.total as f64, self.config.family_alpha);
+        // What the first ranking found among the candidates stands: explained away by a better one,
+        // or inseparable from another candidate (the collinearity test compares candidates).
+        if away && r2.verdict == Verdict::Significant {
+            r2.verdict = Verdict::Noise;
+        } else if r.verdict == Verdict::Inseparable && r2.verdict == Verdict::Significant && !r.confused_with.is_empty()
+        {
+            r2.verdict = Verdict::Inseparable;
+            r2.confused_with = r.confused_with.clone();
+        }
+        let chi2 = |fs: &FitState| fs.residual.iter().zip(self.sig).map(|(r, s)| (r / s).powi(2)).sum::<f64>();
+        r2.delta_bic +=
+            chi2(&fs_c) - chi2(&f.fs) + (nonzero(&fs_c) as f64 - nonzero(&f.fs) as f64) * (st.n as f64).ln();
+        let delta_u = bic_c - bic_unknown_sigma(weighted_ss(&f.fs.residual, w), st.n, nonzero(&f.fs));
+        let changed: Vec<(EffectName, u32, u32)> = free
+            .iter()
+            .filter_map(|&(m, o)| orders.iter().find(|(om, oo)| *om == m && *oo != o).map(|(_, oo)| (m, o, *oo)))
+            .collect();
+        let list: Vec<String> = changed.iter().map(|(m, a, b)| format!("{m} order {a} → {b}")).collect();
+        // The candidate model at either set of orders: the one with the lower ΔBIC (σ of the
+        // significance) is its evidence. (The lead's first ranking was against capped shapes, not
+        // the model as fitted: its entry is always the re-ranked one.)
+        let lead_capped = self.joint.is_some() && name == EffectName::CyclicLead;
+        let better = lead_capped || r2.delta_bic < r.delta_bic;
+        let said = format!(
+            "shapes re-chosen by BIC with `{name}` in the model: {}; with it against the model as fitted: BIC \
+             change (σ unknown) {delta_u:.1}{}",
+            if list.is_empty() { "unchanged from the free orders".to_string() } else { list.join(", ") },
+            if better { "" } else { "; its ΔBIC is lower at the free orders, which it keeps" }
+        );
+        if !better {
+            r2 = r.clone();
+            r2.note = None;
+        }
+        if r2.verdict == Verdict::Significant && delta_u >= -self.config.inseparable_margin && !changed.is_empty() {
+            r2.verdict = Verdict::Inseparable;
+            r2.confused_with = changed.iter().map(|(m, _, _)| m.as_str().to_string()).collect();
+            r2.note = Some(format!(
+                "{said}: `{name}` and the shapes' flexibility fit these data about as well, so the data cannot tell \
+                 them apart"
+            ));
+        } else {
+            r2.note = Some(match r2.note.take().or(r.note.take()) {
+                Some(n) => format!("{n}; {said}"),
+                None => said,
+            });
+        }
+        r2.shape_orders = std::mem::take(&mut r.shape_orders);
+        *r = r2;
+        Ok(())
+    }
 }
 
 /// The cyclic-lead entry of a diagnosis whose shapes were capped for it ([`LeadCap`]): ranked

@@ -41,3 +41,72 @@ pub fn realdata(sub: &str, test: &str) -> Option<PathBuf> {
     let _ = std::io::stderr().lock().write_all(line.as_bytes());
     None
 }
+
+/// Numeric rows of a CSV after `skip` header lines (the first line may carry a UTF-8 BOM).
+fn read_rows(dir: &Path, name: &str, skip: usize) -> Vec<Vec<f64>> {
+    let path = dir.join(name);
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    text.lines()
+        .skip(skip)
+        .filter(|l| !l.trim().is_empty())
+        .enumerate()
+        .map(|(i, l)| {
+            l.split(',')
+                .map(|c| {
+                    c.trim()
+                        .parse::<f64>()
+                        .unwrap_or_else(|_| panic!("{name}: line {}: not a number: {c:?}", i + skip + 1))
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Linear interpolation of (tx, x) at t (tx increasing); None outside the range.
+fn interp(tx: &[f64], x: &[f64], t: f64) -> Option<f64> {
+    if t < tx[0] || t > tx[tx.len() - 1] {
+        return None;
+    }
+    let j = tx.partition_point(|&s| s <= t).clamp(1, tx.len() - 1);
+    let f = (t - tx[j - 1]) / (tx[j] - tx[j - 1]);
+    Some(x[j - 1] + f * (x[j] - x[j - 1]))
+}
+
+/// The rack-and-pinion move of `friction_rack_pinion/` on the servo timebase: time (s), servo
+/// velocity (m/s), offset-corrected load-cell force (N), sample interval (s).
+pub struct RackPinion {
+    pub t: Vec<f64>,
+    pub v_raw: Vec<f64>,
+    pub force_raw: Vec<f64>,
+    pub dt: f64,
+}
+
+/// The rack-and-pinion axis of K. Mnich (`friction_rack_pinion/`, see its README.txt): reads both
+/// files and puts force and velocity on the servo timebase (README processing: F = −(V − V₀)·200 N/V,
+/// NI time +4 ms, v = −rpm·20 mm/60 000, force interpolated linearly); `None` (the test `test` is
+/// skipped, visibly) when the real data is absent.
+pub fn rack_pinion(test: &str) -> Option<RackPinion> {
+    let dir = realdata("friction_rack_pinion", test)?;
+    let ni = read_rows(&dir, "a3NI.csv", 4);
+    let mr = read_rows(&dir, "a3MR.csv", 5);
+    assert!(ni.len() > 1000 && mr.len() == 1024, "{} NI rows, {} MR rows", ni.len(), mr.len());
+    let v0: f64 = ni[..10].iter().map(|r| r[1]).sum::<f64>() / 10.0;
+    let t_ni: Vec<f64> = ni.iter().map(|r| r[0] + 0.004).collect();
+    let f_ni: Vec<f64> = ni.iter().map(|r| -(r[1] - v0) * 200.0).collect();
+    let mut t = Vec::new();
+    let mut v_raw = Vec::new();
+    let mut force_raw = Vec::new();
+    for r in &mr {
+        let ts = r[0] * 1e-3;
+        // Before the shifted NI record starts (first 4 ms) the axis is at rest and unloaded: the
+        // force is the offset-corrected zero.
+        let f = if ts < t_ni[0] { Some(0.0) } else { interp(&t_ni, &f_ni, ts) };
+        if let Some(f) = f {
+            t.push(ts);
+            v_raw.push(-r[1] * 20.0 / 1000.0 / 60.0);
+            force_raw.push(f);
+        }
+    }
+    let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
+    Some(RackPinion { t, v_raw, force_raw, dt })
+}

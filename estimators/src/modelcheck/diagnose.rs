@@ -208,6 +208,14 @@ pub struct RankingEntry {
     /// Number of hyper-parameter values searched for this candidate (optional `searched`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub searched: Option<usize>,
+    /// Searched hyper-parameters whose best value lies at an end of the range searched
+    /// ([`CandidateFit::hyper_at_bound`]; optional `at_bound`): a bound, not an estimate.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub at_bound: Vec<String>,
+    /// The orders of the model's fitted shapes with this candidate in the model, re-chosen by BIC
+    /// (optional `shape_orders`, `vmt diagnose`): what the candidate's ΔBIC was computed against.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub shape_orders: BTreeMap<String, u32>,
 }
 
 /// The full fit of one candidate (details behind a [`RankingEntry`]).
@@ -226,6 +234,12 @@ pub struct CandidateFit {
     pub hyper_std_errors: BTreeMap<String, f64>,
     /// Fitted hyper-parameters by name.
     pub hyper_parameters: BTreeMap<String, f64>,
+    /// Searched, refined hyper-parameters (a continuous range, not a list of catalogue values)
+    /// whose best value (after the refinement) lies at an end of their grid, within 1 % of the step to its neighbour: the criterion still improves towards the
+    /// bound, so the best value lies at or beyond the range searched and the number is a bound of
+    /// the search, not an estimate (no standard error is reported for it).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hyper_at_bound: Vec<String>,
     /// Reported params (coefficients + hyper-parameters, or the candidate's `describe`).
     pub params: BTreeMap<String, f64>,
     /// Number of samples n.
@@ -639,7 +653,15 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
     };
     let std_errors: BTreeMap<String, f64> =
         cand.coefficient_names.iter().cloned().zip(fit.std_errors.iter().map(|s| s * se_scale)).collect();
-    let hyper_std_errors: BTreeMap<String, f64> = hyper_se.into_iter().map(|(k, s)| (k, s * se_scale)).collect();
+    let hyper_at_bound: Vec<String> = cand
+        .hyper_parameters
+        .iter()
+        .zip(&best_h)
+        .filter(|(h, x)| h.refine && at_grid_end(&h.grid, **x))
+        .map(|(h, _)| h.name.clone())
+        .collect();
+    let hyper_std_errors: BTreeMap<String, f64> =
+        hyper_se.into_iter().filter(|(k, _)| !hyper_at_bound.contains(k)).map(|(k, s)| (k, s * se_scale)).collect();
     let hyper_parameters: BTreeMap<String, f64> =
         cand.hyper_parameters.iter().map(|h| h.name.clone()).zip(best_h.iter().copied()).collect();
     let params = match &cand.describe {
@@ -652,6 +674,7 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
         std_errors,
         hyper_std_errors,
         hyper_parameters,
+        hyper_at_bound,
         params,
         n: p.n,
         k,
@@ -669,6 +692,16 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
         new_residual,
         fitted_change,
     })
+}
+
+/// A searched value `x` at an end of `grid` (more than one value): within 1 % of the step from
+/// that end to its neighbour ([`CandidateFit::hyper_at_bound`]).
+pub fn at_grid_end(grid: &[f64], x: f64) -> bool {
+    let mut g = grid.to_vec();
+    g.sort_by(f64::total_cmp);
+    g.dedup();
+    let n = g.len();
+    n > 1 && (x <= g[0] + 0.01 * (g[1] - g[0]) || x >= g[n - 1] - 0.01 * (g[n - 1] - g[n - 2]))
 }
 
 /// P(χ²_q > Δχ²)·M (module doc): Δχ² = stat_old − stat_new with σ known; with σ's scale free,
@@ -854,6 +887,8 @@ fn rank_refs(
             aliases: vec![],
             p_value: Some(f.p_value),
             searched: Some(f.searched),
+            at_bound: f.hyper_at_bound.clone(),
+            shape_orders: BTreeMap::new(),
         })
         .collect();
     Ok(Diagnosis { ranking, fits, stat_old: p.stat_old, n: p.n })
@@ -937,6 +972,8 @@ mod tests {
             aliases: vec![],
             p_value: None,
             searched: None,
+            at_bound: vec![],
+            shape_orders: BTreeMap::new(),
         };
         let s = serde_json::to_string(&e).unwrap();
         assert_eq!(
