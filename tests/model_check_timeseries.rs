@@ -230,6 +230,10 @@ fn accel_complete_model_fits_to_the_noise() {
     }
 }
 
+/// One draw of the joint mode-fit test: its seed, the true (frequency Hz, damping), and the diagnose JSON or
+/// why it failed.
+type DrawOutcome = (u64, (f64, f64), Result<serde_json::Value, String>);
+
 /// A mode fitted together with the shapes that drive it (src/modelcheck/coupled.rs), on 2 draws
 /// of the generator with a hidden structural mode (frequency 20–80 Hz, damping 0.5–5 %, random
 /// mode shape in the y–z plane), the model given `resonance` with a starting frequency 25 % off and
@@ -241,7 +245,7 @@ fn accel_complete_model_fits_to_the_noise() {
 #[test]
 fn accel_mode_fitted_with_its_shapes() {
     let tmp = tempfile::tempdir().unwrap();
-    let out: Vec<(u64, (f64, f64), Result<serde_json::Value, String>)> = [1001u64, 1002]
+    let out: Vec<DrawOutcome> = [1001u64, 1002]
         .into_par_iter()
         .map(|seed| {
             let dir = tmp.path().join(format!("r{seed}"));
