@@ -1193,7 +1193,19 @@ pub(crate) fn describe(
                 m.insert(format!("tilt_{k}"), *v);
             }
         }
-        _ => {
+        EffectName::Positioning
+        | EffectName::StraightnessY
+        | EffectName::StraightnessZ
+        | EffectName::Roll
+        | EffectName::Pitch
+        | EffectName::Yaw
+        | EffectName::SquarenessXy
+        | EffectName::SquarenessXz
+        | EffectName::SquarenessYz
+        | EffectName::Backlash
+        | EffectName::ScaleError
+        | EffectName::Lugre
+        | EffectName::AccelBiasDrift => {
             m.insert("value".into(), c[0]);
         }
     }

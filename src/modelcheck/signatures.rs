@@ -777,7 +777,17 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
         EffectName::GravityTilt => {
             (accel_sensors(st).iter().flat_map(|a| (1..=order).map(move |k| format!("{a}_c{k}"))).collect(), vec![])
         }
-        _ => (vec![], vec![]),
+        EffectName::Positioning
+        | EffectName::StraightnessY
+        | EffectName::StraightnessZ
+        | EffectName::Roll
+        | EffectName::Pitch
+        | EffectName::Yaw
+        | EffectName::SquarenessXy
+        | EffectName::SquarenessXz
+        | EffectName::SquarenessYz
+        | EffectName::Lugre
+        | EffectName::AccelBiasDrift => (vec![], vec![]),
     };
     let range = match distinct_positions(st) {
         xs if xs.len() >= 2 => (xs[0], xs[xs.len() - 1]),
@@ -984,7 +994,17 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
             }
             cols
         }
-        _ => vec![],
+        EffectName::Positioning
+        | EffectName::StraightnessY
+        | EffectName::StraightnessZ
+        | EffectName::Roll
+        | EffectName::Pitch
+        | EffectName::Yaw
+        | EffectName::SquarenessXy
+        | EffectName::SquarenessXz
+        | EffectName::SquarenessYz
+        | EffectName::Lugre
+        | EffectName::AccelBiasDrift => vec![],
     }
 }
 
