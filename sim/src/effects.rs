@@ -788,29 +788,27 @@ impl EffectParams {
 
     /// True if this parameter variant belongs to the effect `name`.
     pub fn fits(&self, name: EffectName) -> bool {
-        matches!(
-            (self, name),
-            (EffectParams::ErrorMotion(_), n) if n.is_error_motion()
-        ) || matches!(
-            (self, name),
-            (
-                EffectParams::Squareness(_),
-                EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz
-            ) | (EffectParams::Backlash(_), EffectName::Backlash)
-                | (EffectParams::CyclicLead(_), EffectName::CyclicLead)
-                | (EffectParams::ScaleError(_), EffectName::ScaleError)
-                | (EffectParams::ThermalExpansion(_), EffectName::ThermalExpansion)
-                | (EffectParams::ThermalDrift(_), EffectName::ThermalDrift)
-                | (EffectParams::InterpolationError(_), EffectName::InterpolationError)
-                | (EffectParams::Coulomb(_), EffectName::Coulomb)
-                | (EffectParams::Viscous(_), EffectName::Viscous)
-                | (EffectParams::Stribeck(_), EffectName::Stribeck)
-                | (EffectParams::Lugre(_), EffectName::Lugre)
-                | (EffectParams::ServoLag(_), EffectName::ServoLag)
-                | (EffectParams::Resonance(_), EffectName::Resonance)
-                | (EffectParams::GravityTilt, EffectName::GravityTilt)
-                | (EffectParams::AccelBiasDrift(_), EffectName::AccelBiasDrift)
-        )
+        // One arm per parameter set, no wildcard: a new set is named here by the compiler.
+        match self {
+            EffectParams::ErrorMotion(_) => name.is_error_motion(),
+            EffectParams::Squareness(_) => {
+                matches!(name, EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz)
+            }
+            EffectParams::Backlash(_) => name == EffectName::Backlash,
+            EffectParams::CyclicLead(_) => name == EffectName::CyclicLead,
+            EffectParams::ScaleError(_) => name == EffectName::ScaleError,
+            EffectParams::ThermalExpansion(_) => name == EffectName::ThermalExpansion,
+            EffectParams::ThermalDrift(_) => name == EffectName::ThermalDrift,
+            EffectParams::InterpolationError(_) => name == EffectName::InterpolationError,
+            EffectParams::Coulomb(_) => name == EffectName::Coulomb,
+            EffectParams::Viscous(_) => name == EffectName::Viscous,
+            EffectParams::Stribeck(_) => name == EffectName::Stribeck,
+            EffectParams::Lugre(_) => name == EffectName::Lugre,
+            EffectParams::ServoLag(_) => name == EffectName::ServoLag,
+            EffectParams::Resonance(_) => name == EffectName::Resonance,
+            EffectParams::GravityTilt => name == EffectName::GravityTilt,
+            EffectParams::AccelBiasDrift(_) => name == EffectName::AccelBiasDrift,
+        }
     }
 
     /// Value of the scalar parameter `key` (SI); `None` for unknown keys, unset optional
