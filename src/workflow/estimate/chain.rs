@@ -291,12 +291,7 @@ pub(super) fn laser_lines_3d_checks(
                 &p.positions,
                 &[("injected", &truth, SeriesStyle::Line), ("identified", &p.values, SeriesStyle::Points)],
             );
-            fig.series.push(Series {
-                label: "identified ± 1σ".into(),
-                x: p.positions.iter().flat_map(|&q| [q * 1e3, q * 1e3]).collect(),
-                y: p.values.iter().zip(&sig).flat_map(|(v, e)| [(v - e) * 1e6, (v + e) * 1e6]).collect(),
-                style: SeriesStyle::ErrorBars,
-            });
+            super::push_error_bars(&mut fig, Quantity::Angle, &p.positions, &p.values, &sig);
             let check = Check {
                 bound: Some(s),
                 ..Check::profile(name, Quantity::Angle, &truth, &p.values, k_sigma * s + bias_angle)

@@ -172,12 +172,15 @@ pub(super) fn laser_lines_checks(
         }
         let (q, tol) = if i < 3 { (Quantity::Length, tol_t) } else { (Quantity::Angle, tol_a) };
         let name = format!("{sym} {} (laser lines)", vmt_sim::geometry::ERROR_MOTION_NAMES[i]);
-        let fig = profile_figure(
-            format!("{name}: injected vs identified"),
+        let mut fig = profile_figure(
+            format!("{name}: injected vs identified ± 1σ"),
             q,
             &p.positions,
             &[("injected", &truth, SeriesStyle::Line), ("identified", &p.values, SeriesStyle::Points)],
         );
+        if let Some(sig) = p.std_errors.iter().copied().collect::<Option<Vec<f64>>>() {
+            super::push_error_bars(&mut fig, q, &p.positions, &p.values, &sig);
+        }
         let check = Check::profile(name, q, &truth, &p.values, tol).with_id(format!("laser_lines.{run}.{sym}"));
         checks.push((check, fig));
     }

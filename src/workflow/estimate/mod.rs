@@ -299,6 +299,18 @@ pub fn profile_figure(title: String, q: Quantity, x: &[f64], series: &[(&str, &[
     }
 }
 
+/// Adds `values ± sigma` at `x` (m; values and σ in the quantity's SI unit) to a [`profile_figure`] of
+/// quantity `q` as error bars in the colour of the series before it.
+pub fn push_error_bars(fig: &mut Figure, q: Quantity, x: &[f64], values: &[f64], sigma: &[f64]) {
+    let scale = if q == Quantity::Ratio { 1.0 } else { 1e6 };
+    fig.series.push(Series {
+        label: "± 1σ".into(),
+        x: x.iter().flat_map(|&p| [p * 1e3, p * 1e3]).collect(),
+        y: values.iter().zip(sigma).flat_map(|(v, s)| [(v - s) * scale, (v + s) * scale]).collect(),
+        style: SeriesStyle::ErrorBars,
+    });
+}
+
 /// The result of the estimators: the checks (rows of the table) and the figures they point to.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Estimates {
