@@ -5,6 +5,16 @@ use super::*;
 // ------------------------------------------------------------------------------------------
 // Human-readable output.
 
+/// How a channel's values are shown: (factor from SI, unit) — deviations in µm, forces in N,
+/// accelerations in m/s². The one rule for the text reports and the HTML figures.
+pub fn display_unit(si_unit: &str) -> (f64, &'static str) {
+    match si_unit {
+        "N" => (1.0, "N"),
+        "m/s²" => (1.0, "m/s²"),
+        _ => (1e6, "µm"),
+    }
+}
+
 /// The text report of a compare.
 pub fn compare_text(r: &CompareReport) -> String {
     let mut s = format!("vmt compare: model {} against {}\n", r.model, r.data);
@@ -13,12 +23,7 @@ pub fn compare_text(r: &CompareReport) -> String {
         "run", "sensor", "rms", "rms/σ", "fit %", "σ", "LB p"
     );
     for c in &r.channels {
-        // Deviations in µm, forces in N.
-        let (k, u) = match c.unit.as_str() {
-            "N" => (1.0, "N"),
-            "m/s²" => (1.0, "m/s²"),
-            _ => (1e6, "µm"),
-        };
+        let (k, u) = display_unit(&c.unit);
         s += &format!(
             "{:<12} {:<14} {:>9.4} {u:<2} {:>10.2} {:>8.1} {:>9.4} {u:<2}{} {:>8}\n",
             c.run,

@@ -231,7 +231,7 @@ pub fn model_check_report(
     use crate::modelcheck::{param_text, shapes_text, sigma_text};
     use vmt_estimators::modelcheck::Verdict;
     let kind = if diag.is_some() { "diagnose" } else { "compare" };
-    let unit_of = crate::estimate::model_check::display_unit;
+    let unit_of = crate::modelcheck::display_unit;
     let channels = Table {
         caption: "The model against each channel: residual RMS, the noise σ of one reading, their ratio (1 = the \
                   residual is noise), NRMSE fit and the Ljung–Box p-value of the residual in acquisition order"

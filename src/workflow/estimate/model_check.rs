@@ -147,7 +147,7 @@ pub(crate) fn residual_figures(
     reports: &[(&crate::modelcheck::CompareReport, &str)],
 ) -> Vec<Figure> {
     let Some(c) = reports.first().and_then(|(r, _)| r.channels.get(channel)) else { return Vec::new() };
-    let (k, unit) = display_unit(&c.unit);
+    let (k, unit) = crate::modelcheck::display_unit(&c.unit);
     let name = format!("{} / {}", c.run, c.sensor);
     // One curve of a channel report: (x, y) in the report's units.
     type Curve = (Vec<f64>, Vec<f64>);
@@ -233,14 +233,4 @@ pub(crate) fn residual_figures(
         ));
     }
     figures
-}
-
-/// How a channel's values are shown: (factor from SI, unit) — deviations in µm, forces in N,
-/// accelerations in m/s².
-pub(crate) fn display_unit(si_unit: &str) -> (f64, &'static str) {
-    match si_unit {
-        "N" => (1.0, "N"),
-        "m/s²" => (1.0, "m/s²"),
-        _ => (1e6, "µm"),
-    }
 }
