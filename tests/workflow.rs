@@ -195,6 +195,41 @@ fn a_study_gives_identical_trials_on_1_and_2_threads_and_shards_merge_to_the_sam
         one,
         "merged shards differ from one run"
     );
+    // `--units human` (issue 13): the same rows, each length in µm with a `unit` column saying so;
+    // merge refuses such a file (it reads SI files only) with exit 2 naming it.
+    let human = tmp.path().join("human");
+    let st = vmt()
+        .arg("study")
+        .arg(&scenario)
+        .args(["--vary", "sensors.acc_z.noise_density=3e-7,3e-6", "--trials", "6", "--units", "human", "-o"])
+        .arg(&human)
+        .output()
+        .unwrap();
+    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    for file in ["trials.csv", "summary.csv"] {
+        let si = csv_rows(&std::fs::read_to_string(tmp.path().join("one").join(file)).unwrap());
+        let hu = csv_rows(&std::fs::read_to_string(human.join(file)).unwrap());
+        assert_eq!(hu[0].last().map(String::as_str), Some("unit"), "{file}: {:?}", hu[0]);
+        assert_eq!(si.len(), hu.len());
+        for (a, b) in si.iter().zip(&hu).skip(1) {
+            assert_eq!(b.last().map(String::as_str), Some("um"), "{file}: every row here is a length");
+            for name in ["difference", "mean_abs", "rms", "tolerance"] {
+                if let Some(j) = si[0].iter().position(|h| h == name) {
+                    let (x, y): (f64, f64) = (a[j].parse().unwrap(), b[j].parse().unwrap());
+                    assert!((y - 1e6 * x).abs() <= 1e-9 * y.abs(), "{file} {name}: {x} m vs {y} um");
+                }
+            }
+        }
+    }
+    let st = vmt().args(["study", "merge"]).arg(&human).arg("-o").arg(tmp.path().join("m2")).output().unwrap();
+    assert_eq!(st.status.code(), Some(2), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(String::from_utf8_lossy(&st.stderr).contains("--units human"));
+}
+
+/// The cells of a CSV text, header first.
+fn csv_rows(text: &str) -> Vec<Vec<String>> {
+    let mut r = csv::ReaderBuilder::new().has_headers(false).from_reader(text.as_bytes());
+    r.records().map(|x| x.unwrap().iter().map(str::to_string).collect()).collect()
 }
 
 /// Regression: a study of a scenario with a compensation check exited 70 (internal error) because the

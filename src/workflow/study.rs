@@ -626,31 +626,51 @@ fn trial_rows(
         .collect())
 }
 
+/// How a study CSV writes a difference-like number of quantity `q` (SI m, rad or ratio): with
+/// `UnitChoice::Si` as is; with `UnitChoice::Metrology` ("human") lengths in µm and angles in µrad,
+/// returned with the unit the file's `unit` column names (`um`, `urad`, `1`).
+pub fn study_unit(q: Quantity, units: crate::measurement::UnitChoice) -> (f64, &'static str) {
+    use crate::measurement::UnitChoice;
+    match (units, q) {
+        (UnitChoice::Si, Quantity::Length) => (1.0, "m"),
+        (UnitChoice::Si, Quantity::Angle) => (1.0, "rad"),
+        (UnitChoice::Metrology, Quantity::Length) => (1e6, "um"),
+        (UnitChoice::Metrology, Quantity::Angle) => (1e6, "urad"),
+        (UnitChoice::Si | UnitChoice::Metrology, Quantity::Ratio) => (1.0, "1"),
+    }
+}
+
 /// CSV of trial rows (value, trial, estimate, difference, pass, bound, quantity, then one column per
 /// sampled parameter named by its key path, then `tolerance`), sorted so shards merge to the same file.
-pub fn rows_csv(rows: &[TrialRow], sampled: &[String]) -> String {
+/// With `UnitChoice::Metrology` the difference, bound and tolerance of each row are in µm or µrad as its
+/// quantity says, and a last column `unit` names it (`value` and the sampled parameters stay in their
+/// keys' SI units); `study merge` reads only the SI file.
+pub fn rows_csv(rows: &[TrialRow], sampled: &[String], units: crate::measurement::UnitChoice) -> String {
+    let human = units == crate::measurement::UnitChoice::Metrology;
     let mut rows = rows.to_vec();
     rows.sort_by(|a, b| a.value.total_cmp(&b.value).then(a.trial.cmp(&b.trial)).then(a.estimate.cmp(&b.estimate)));
     let mut s = String::from("value,trial,estimate,difference,pass,bound,quantity");
     for name in sampled {
         s += &format!(",\"{}\"", name.replace('"', "'"));
     }
-    s += ",tolerance\n";
+    s += if human { ",tolerance,unit\n" } else { ",tolerance\n" };
     for r in rows {
+        let (scale, unit) = study_unit(r.quantity, units);
         s += &format!(
             "{},{},\"{}\",{},{},{},{}",
             r.value,
             r.trial,
             r.estimate.replace('"', "'"),
-            r.difference,
+            r.difference * scale,
             r.pass.map_or(String::new(), |p| p.to_string()),
-            r.bound,
+            r.bound * scale,
             quantity_id(r.quantity)
         );
         for v in &r.sampled {
             s += &format!(",{v}");
         }
-        s += &format!(",{}\n", r.tolerance.map_or(String::new(), |t| t.to_string()));
+        s += &format!(",{}", r.tolerance.map_or(String::new(), |t| (t * scale).to_string()));
+        s += &if human { format!(",{unit}\n") } else { "\n".to_string() };
     }
     s
 }
@@ -666,6 +686,13 @@ pub fn read_rows(path: &Path) -> Result<(Vec<TrialRow>, Vec<String>), VmtError> 
         .skip(7)
         .map(str::to_string)
         .collect();
+    if sampled.last().is_some_and(|n| n == "unit") {
+        return Err(VmtError::bad(
+            path,
+            "line 1 (header)",
+            "a trials.csv written with --units human (µm/µrad per row); merge the SI files (--units si)",
+        ));
+    }
     // The last column `tolerance` (absent from files written before it existed).
     let with_tolerance = sampled.last().is_some_and(|n| n == "tolerance");
     if with_tolerance {
