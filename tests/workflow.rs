@@ -846,3 +846,32 @@ fn a_procedure_whose_name_extends_another_lends_it_no_runs() {
     let ssi_rows = stdout.lines().filter(|l| l.starts_with("SSI at ")).count();
     assert_eq!(ssi_rows, 3, "one SSI row per run of `crawl`:\n{stdout}");
 }
+
+/// The README's physical study (issue 15) on its scenario, two trials: each draws its own backlash and
+/// pitch amplitude and simulates its own physics; every estimate meets its tolerance (exit 0), and the
+/// drawn values are the trials' own columns.
+#[test]
+fn the_readme_physical_study_runs_on_its_bundled_scenario() {
+    let tmp = tempfile::tempdir().unwrap();
+    let st = vmt()
+        .arg("study")
+        .arg(root().join("benches/study_physical.toml"))
+        .args(["--sample", "truth.effects.backlash.value=uniform(2e-6,8e-6)"])
+        .args(["--sample", "truth.effects.pitch.harmonics[0].amplitude=normal(3e-6,0.5e-6)"])
+        .args(["--trials", "2", "-o"])
+        .arg(tmp.path().join("physical"))
+        .output()
+        .unwrap();
+    assert_eq!(
+        st.status.code(),
+        Some(0),
+        "{}{}",
+        String::from_utf8_lossy(&st.stdout),
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let rows = csv_rows(&std::fs::read_to_string(tmp.path().join("physical/trials.csv")).unwrap());
+    let col = rows[0].iter().position(|h| h == "truth.effects.backlash.value").expect("a column per sampled key");
+    let drawn: Vec<f64> = rows[1..].iter().map(|r| r[col].parse().unwrap()).collect();
+    assert!(drawn.iter().all(|b| (2e-6..=8e-6).contains(b)), "{drawn:?}");
+    assert!(drawn.iter().any(|b| *b != drawn[0]), "the two trials drew different backlash values");
+}
