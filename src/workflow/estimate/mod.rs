@@ -523,3 +523,21 @@ pub fn estimate_recording(
     }
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The `statistic` column and JSON key keep the words they had as strings, and read back.
+    #[test]
+    fn statistics_serialise_as_their_words_and_read_back() {
+        for s in Statistic::ALL {
+            let json = serde_json::to_string(&s).unwrap();
+            assert_eq!(json, serde_json::to_string(s.as_str()).unwrap());
+            assert_eq!(serde_json::from_str::<Statistic>(&json).unwrap(), s);
+        }
+        assert_eq!(Statistic::Iso230_2(Iso230_2Parameter::BMean).as_str(), "ISO 230-2 B̄");
+        let e = serde_json::from_str::<Statistic>("\"median\"").unwrap_err().to_string();
+        assert!(e.contains("unknown statistic \"median\"") && e.contains("RMS of profile"), "{e}");
+    }
+}
