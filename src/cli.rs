@@ -423,10 +423,11 @@ fn write_study(
     let summary = summarize(rows);
     // An undefined statistic (no tolerance; no difference) is an empty cell, as docs/formats.md §6 says.
     let opt = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
-    let mut s = String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate,cramer_rao_bound,rms,quantity\n");
+    let mut s =
+        String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate,cramer_rao_bound,rms,quantity,tolerance\n");
     for r in &summary {
         s += &format!(
-            "{},\"{}\",{},{},{},{},{},{},{}\n",
+            "{},\"{}\",{},{},{},{},{},{},{},{}\n",
             r.value,
             r.estimate,
             r.trials,
@@ -435,7 +436,8 @@ fn write_study(
             opt(r.pass_rate),
             r.bound,
             opt(r.rms),
-            crate::study::quantity_id(r.quantity)
+            crate::study::quantity_id(r.quantity),
+            opt(r.tolerance)
         );
     }
     let (html, json) = crate::report::report_files(&crate::report::study_report(sc, &summary, label))?;

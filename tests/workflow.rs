@@ -238,14 +238,21 @@ fn a_study_with_a_compensation_check_finishes_and_marks_its_undefined_error() {
         }
         let rate: f64 = r[col("pass_rate")].parse().unwrap();
         assert!((0.0..=1.0).contains(&rate), "{summary}");
+        // A one-sided limit holds no difference to a tolerance: no tolerance line for it.
+        assert_eq!(&r[col("tolerance")], "", "{summary}");
     }
-    // The estimates that do form a difference keep their statistics.
+    // The estimates that do form a difference keep their statistics and their tolerance (issue 16: the
+    // study plots draw it), each its scenario tolerance.
     let others: Vec<&csv::StringRecord> = rows.iter().filter(|r| !r[1].contains("after compensation")).collect();
     assert!(!others.is_empty(), "{summary}");
     for r in others {
         let m: f64 = r[col("mean_abs")].parse().unwrap_or_else(|_| panic!("{summary}"));
         assert!(m.is_finite() && m >= 0.0, "{summary}");
+        let t: f64 = r[col("tolerance")].parse().unwrap_or_else(|_| panic!("tolerance of {}: {summary}", &r[1]));
+        assert!(t > 0.0, "{summary}");
     }
+    let svg = std::fs::read_to_string(out.join("study.svg")).unwrap();
+    assert!(svg.contains(": tolerance"), "study.svg draws the tolerance line");
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("is undefined"), "the report says why the row has no |error|");
 }
