@@ -405,3 +405,26 @@ fn accel_diagnose_wall_time() {
         d["ranking"][0]
     );
 }
+
+/// The benchmark's sets written to `VMT_OUT` (a directory) for timing and profiling `vmt diagnose`
+/// and `compare` by hand (`perf record`): accelerometer sets complete (`acc_none_N`) and with a
+/// hidden mode (`acc_res_N`, its model also as `model_res.toml` with `resonance` fitted from 25 % off),
+/// and encoder logs (`enc_N`), at N ≈ 15 000 and 100 000 samples; the truth printed.
+#[test]
+#[ignore = "timing tool: writes the benchmark's sets to VMT_OUT"]
+fn write_timing_sets() {
+    let Some(out) = std::env::var_os("VMT_OUT").map(PathBuf::from) else { return };
+    for n in [15_000usize, 100_000] {
+        let t = accel_set_sized(&out.join(format!("acc_none_{n}")), 11, AccelHidden::None, 0.0, Some(n));
+        eprintln!("acc_none_{n}: {} samples", t.samples);
+        let dir = out.join(format!("acc_res_{n}"));
+        let t = accel_set_sized(&dir, 12, AccelHidden::Resonance, 200.0, Some(n));
+        let (f, z) = t.mode.unwrap();
+        let text = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+        let with_mode = format!("{text}[effects.resonance]\nfit = true\nfrequency = {:?}\ndamping = 0.02\n", f * 1.25);
+        std::fs::write(out.join(format!("acc_res_{n}.model_res.toml")), with_mode).unwrap();
+        eprintln!("acc_res_{n}: {} samples, mode {f:.3} Hz ζ {z:.4}", t.samples);
+        let t = encoder_set_sized(&out.join(format!("enc_{n}")), 13, EncoderHidden::None, Some(n));
+        eprintln!("enc_{n}: {} samples, {:?}", t.samples, t.feedback);
+    }
+}
