@@ -105,7 +105,7 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
         crate::output::refuse_input_overwrite(&out, &[p])?;
     }
     let files = measurement::set_files(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc, &ph)?)?;
-    let est = crate::workflow::run::estimate_session(&sc, &ph, truths.end, &set)?;
+    let est = crate::workflow::run::estimate_session(&sc, &ph, &truths, &set)?;
     let checks = &est.checks;
     let html = out.join("report.html");
     let (report, report_json) = crate::report::report_files(&crate::report::run_report(&sc, &set, &est))?;

@@ -63,7 +63,7 @@ fn fast_integrator_follows_rapier_on_every_bundled_scenario() {
             let ph = physics(&sc).unwrap();
             let truths = simulate_truth(&sc, &ph);
             let runs = read_all(&sc, &ph, &truths, sc.seed).unwrap();
-            let est = run_estimators(&sc, &ph, &runs).unwrap();
+            let est = run_estimators(&sc, &ph, &truths, &runs).unwrap();
             (sc, truths, runs, est)
         });
         // Trajectory of every run: the reference point and the body rotation at every recorded sample.

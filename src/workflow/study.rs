@@ -594,7 +594,7 @@ fn trial_rows(
             .collect());
     }
     // The compensation check re-measures on this trial's sensors, after the session simulated once.
-    let est = crate::workflow::run::estimate_session(sc, p, truths.end, &set)?;
+    let est = crate::workflow::run::estimate_session(sc, p, truths, &set)?;
     Ok(est
         .checks
         .into_iter()
