@@ -19,7 +19,7 @@ fn diagnose(c: &mut Criterion) {
     let mut g = c.benchmark_group("diagnose");
     g.sample_size(10);
     let tmp = tempfile::tempdir().unwrap();
-    let mut bench = |g: &mut criterion::BenchmarkGroup<_>, label: String, dir: &Path| {
+    let bench = |g: &mut criterion::BenchmarkGroup<_>, label: String, dir: &Path| {
         let model = vmt::model::read_model(&dir.join("model.toml")).unwrap();
         let set = vmt::measurement::read(dir).unwrap();
         g.bench_function(label, |b| b.iter(|| vmt::modelcheck::diagnose(&model, &set, dir).unwrap()));

@@ -436,6 +436,8 @@ fn write_timing_sets() {
 /// flagged: `compare --json` lists it in `at_bound` with a note, and so does the diagnose entry;
 /// a damping that is not flagged must be an estimate, away from the limit.
 #[test]
+#[ignore = "90–160 s on 2 loaded cores (diagnose → add → compare with the joint mode fit on 4 076 samples) \
+            against CI's ~10 min; the flag's logic is the unit test values_at_the_ends_of_the_joint_box_are_bounds"]
 fn accel_mode_at_its_damping_limit_is_flagged() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("d5");
