@@ -184,7 +184,7 @@ pub(crate) struct Fitted<'a> {
 }
 
 pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> Result<Fitted<'a>, VmtError> {
-    let st = Stack::with_model(chans, model);
+    let mut st = Stack::with_model(chans, model);
     let bad = |m: String| VmtError::bad(data, "", m);
     let mut notes = Vec::new();
     // Every fitted effect must be seen by some channel; a periodic one whose periods these
@@ -225,7 +225,20 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
         let per = st_sigma(&st, &sig);
         let w: Vec<f64> = per.iter().map(|s| 1.0 / s).collect();
         let sigma = Sigma::PerSample(per);
-        let fs = fit_model_on(&st, &bare, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
+        let mut fs = fit_model_on(&st, &bare, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
+        // A closed loop carries the transmission through the loop gain the fit finds
+        // ([`close_loop`]): refit with it until it holds (kv is fixed to ≈ 1e-5 by the lag v/kv
+        // of the passes, so this ends after one or two refits).
+        for _ in 0..3 {
+            let kv = fs.terms.iter().find(|t| t.name == EffectName::ServoLag).and_then(|t| t.hyper.first().copied());
+            match kv {
+                Some(kv) if has_closed_loop(chans) && kv > 0.0 && (kv / st.loop_kv - 1.0).abs() > 1e-6 => {
+                    st = st.with_loop_kv(kv);
+                    fs = fit_model_on(&st, &bare, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
+                }
+                _ => break,
+            }
+        }
         if pass == 0 && est.iter().any(|e| *e) {
             let mut k0 = 0;
             for (j, c) in chans.iter().enumerate() {
