@@ -13,7 +13,7 @@ fn workflows(c: &mut Criterion) {
             let ph = vmt::simulate::physics(&sc).unwrap();
             let truths = vmt::simulate::simulate_truth(&sc, &ph);
             let runs = vmt::simulate::read_all(&sc, &ph, &truths, sc.seed).unwrap();
-            vmt::workflow::run::run_estimators(&sc, &ph, &runs).unwrap()
+            vmt::workflow::run::run_estimators(&sc, &ph, &truths, &runs).unwrap()
         })
     });
     let study =
@@ -29,7 +29,7 @@ fn workflows(c: &mut Criterion) {
             // run on it with the compensation check re-measuring after the session simulated once.
             let runs = vmt::simulate::read_all(&study, &ph, &truths, seed).unwrap();
             let set = vmt::simulate::to_measurement_set(&study, &runs).unwrap();
-            vmt::workflow::run::estimate_session(&study, &ph, truths.end, &set).unwrap()
+            vmt::workflow::run::estimate_session(&study, &ph, &truths, &set).unwrap()
         })
     });
     g.finish();

@@ -105,7 +105,7 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
         crate::output::refuse_input_overwrite(&out, &[p])?;
     }
     let files = measurement::set_files(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc, &ph)?)?;
-    let est = crate::workflow::run::estimate_session(&sc, &ph, truths.end, &set)?;
+    let est = crate::workflow::run::estimate_session(&sc, &ph, &truths, &set)?;
     let checks = &est.checks;
     let html = out.join("report.html");
     let (report, report_json) = crate::report::report_files(&crate::report::run_report(&sc, &set, &est))?;
@@ -348,8 +348,10 @@ pub fn study(
     shard: Option<&str>,
     estimator_cmd: Option<&str>,
     tolerance: Option<f64>,
+    units: &str,
     out: &Path,
 ) -> Result<i32, VmtError> {
+    let units = parse_units(units)?;
     if tolerance.is_some() && estimator_cmd.is_none() {
         return Err(VmtError::Usage(
             "--tolerance applies to --estimator-cmd; the scenario's estimators carry their own tolerances".into(),
@@ -372,7 +374,7 @@ pub fn study(
             let bar = spinner(&format!("{} values × {trials} trials", vary.values.len()));
             let rows = run_study(&sc, &vary, trials, shard, cmd, tolerance)?;
             bar.finish_and_clear();
-            write_study(&rows, &vary.label(), &[], out, Some(&sc))
+            write_study(&rows, &vary.label(), &[], out, Some(&sc), units)
         }
         (None, samples) if !samples.is_empty() => {
             let samples: Vec<Sample> = samples.iter().map(|s| Sample::parse(s)).collect::<Result<_, _>>()?;
@@ -380,7 +382,7 @@ pub fn study(
             let bar = spinner(&format!("{trials} trials, each with its own physics"));
             let rows = run_sampled_study(&sc, &samples, trials, shard, cmd, tolerance)?;
             bar.finish_and_clear();
-            write_study(&rows, "0 = all trials (parameters sampled per trial)", &names, out, Some(&sc))
+            write_study(&rows, "0 = all trials (parameters sampled per trial)", &names, out, Some(&sc), units)
         }
         _ => Err(VmtError::Usage(
             "study needs either --vary KEY=V1,V2,… (sensors.NAME.KEY or a scenario key path) or one or more \
@@ -391,7 +393,8 @@ pub fn study(
 }
 
 /// `vmt study merge OUT SHARD_DIRS…`: joins the trials of shards and writes the same outputs as one run.
-pub fn study_merge(out: &Path, shards: &[PathBuf]) -> Result<i32, VmtError> {
+pub fn study_merge(out: &Path, shards: &[PathBuf], units: &str) -> Result<i32, VmtError> {
+    let units = parse_units(units)?;
     let mut rows = Vec::new();
     let mut names: Option<Vec<String>> = None;
     for d in shards {
@@ -409,7 +412,7 @@ pub fn study_merge(out: &Path, shards: &[PathBuf]) -> Result<i32, VmtError> {
         }
         rows.extend(r);
     }
-    write_study(&rows, "varied parameter", &names.unwrap_or_default(), out, None)
+    write_study(&rows, "varied parameter", &names.unwrap_or_default(), out, None, units)
 }
 
 fn write_study(
@@ -418,29 +421,36 @@ fn write_study(
     sampled: &[String],
     out: &Path,
     sc: Option<&Scenario>,
+    units: UnitChoice,
 ) -> Result<i32, VmtError> {
-    use crate::study::{rows_csv, summarize, summary_svg};
+    use crate::study::{rows_csv, study_unit, summarize, summary_svg};
     let summary = summarize(rows);
-    // An undefined statistic (no tolerance; no difference) is an empty cell, as docs/formats.md §6 says.
-    let opt = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
-    let mut s = String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate,cramer_rao_bound,rms,quantity\n");
+    let human = units == UnitChoice::Metrology;
+    let mut s =
+        String::from("value,estimate,trials,mean_abs,p95_abs,pass_rate,cramer_rao_bound,rms,quantity,tolerance");
+    s += if human { ",unit\n" } else { "\n" };
     for r in &summary {
+        // An undefined statistic (no tolerance; no difference) is an empty cell, as docs/formats.md §6 says.
+        let (scale, unit) = study_unit(r.quantity, units);
+        let opt = |x: Option<f64>| x.map_or(String::new(), |x| (x * scale).to_string());
         s += &format!(
-            "{},\"{}\",{},{},{},{},{},{},{}\n",
+            "{},\"{}\",{},{},{},{},{},{},{},{}",
             r.value,
             r.estimate,
             r.trials,
             opt(r.mean_abs),
             opt(r.p95_abs),
-            opt(r.pass_rate),
-            r.bound,
+            r.pass_rate.map_or(String::new(), |x| x.to_string()),
+            r.bound * scale,
             opt(r.rms),
-            crate::study::quantity_id(r.quantity)
+            crate::study::quantity_id(r.quantity),
+            opt(r.tolerance)
         );
+        s += &if human { format!(",{unit}\n") } else { "\n".to_string() };
     }
     let (html, json) = crate::report::report_files(&crate::report::study_report(sc, &summary, label))?;
     let mut files = vec![
-        ("trials.csv".to_string(), rows_csv(rows, sampled).into_bytes()),
+        ("trials.csv".to_string(), rows_csv(rows, sampled, units).into_bytes()),
         ("summary.csv".to_string(), s.into_bytes()),
         ("study.svg".to_string(), summary_svg(&summary, label)?.into_bytes()),
         ("report.html".to_string(), html.into_bytes()),

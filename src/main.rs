@@ -100,6 +100,10 @@ enum Command {
         /// Output directory for trials.csv, summary.csv and study.svg.
         #[arg(short, long)]
         out: PathBuf,
+        /// Write trials.csv and summary.csv in these units ("si", or "human": each row's differences in
+        /// um or urad, with a `unit` column; `study merge` reads only SI files).
+        #[arg(long, default_value = "si")]
+        units: String,
     },
     /// Straightness (and roll from a horizontal accelerometer) from the constant-velocity passes of a
     /// measurement set: recoverable band, Cramér–Rao bounds, profile CSV with standard errors.
@@ -247,9 +251,9 @@ fn main() -> ExitCode {
         Command::Simulate { scenario, out, units, compensation } => {
             vmt::cli::simulate(scenario.as_deref(), &out, &units, compensation.as_deref()).map(|_| 0)
         }
-        Command::Study { scenario, shards, vary, sample, trials, shard, estimator_cmd, tolerance, out } => {
+        Command::Study { scenario, shards, vary, sample, trials, shard, estimator_cmd, tolerance, out, units } => {
             if scenario.as_os_str() == "merge" {
-                vmt::cli::study_merge(&out, &shards)
+                vmt::cli::study_merge(&out, &shards, &units)
             } else {
                 vmt::cli::study(
                     &scenario,
@@ -259,6 +263,7 @@ fn main() -> ExitCode {
                     shard.as_deref(),
                     estimator_cmd.as_deref(),
                     tolerance,
+                    &units,
                     &out,
                 )
             }

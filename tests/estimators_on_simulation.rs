@@ -10,7 +10,7 @@ fn crawl_preset_gives_seed_002_stick_slip_indices_through_the_workflow() {
     let ph = vmt::simulate::physics(&sc).unwrap();
     let truths = vmt::simulate::simulate_truth(&sc, &ph);
     let runs = vmt::simulate::read_all(&sc, &ph, &truths, sc.seed).unwrap();
-    let checks = vmt::workflow::run::run_estimators(&sc, &ph, &runs).unwrap().checks;
+    let checks = vmt::workflow::run::run_estimators(&sc, &ph, &truths, &runs).unwrap().checks;
     assert_eq!(checks.len(), 3);
     for c in &checks {
         println!("{}: {:.3} (expected {} ± {})", c.error, c.recovered, c.injected, c.tolerance);
@@ -299,4 +299,49 @@ fn default_scenario_accelerometers_meet_rms_and_cramer_rao_piezo_then_mems() {
         // And it exceeds the piezo error (which is below 0.08 µm): at least 2×.
         assert!(rq > 2.0 * rp);
     }
+}
+
+/// The ISO 230-2 check of a semi-closed ball-screw axis with backlash and guideway friction (the backlash
+/// lesson's machine with an `iso230_2` estimator): E, M and B̄ are compared with the evaluation of the
+/// noise-free table — what the simulated table did at rest — not with the error motions alone, which
+/// miss the lost motion. The lost motion is not b: with Coulomb friction Fc the screw stays wound up by
+/// about Fc/k (k = 2e8 N/m) after the stop, and without friction the table floats in the clearance, so
+/// B̄ moves with Fc (this test found, at Fc = 0 / 100 / 200 N, noise-free B̄ −2.25 / −4.19 / −1.71 µm for
+/// b = 3 µm). Before the fix the check FAILed: injected B̄ 0 against −4.2 µm measured. Tolerance 0.15 µm:
+/// a reading is a 50 ms mean with σ = 50 nm, E and M are differences of extremes of 3-run means
+/// (σ ≈ 41 nm), B̄ a mean of 11 such differences; 0.15 µm is ≥ 3.6 σ of each.
+#[test]
+fn iso_check_of_a_backlash_axis_compares_with_the_noise_free_table() {
+    let lesson = std::fs::read_to_string(root().join("scenarios/lessons/backlash/scenario.toml")).unwrap();
+    let head = &lesson[..lesson.find("[[estimators]]").expect("the lesson has estimators")];
+    let tmp = tempfile::tempdir().unwrap();
+    let mut off_by_more_than_b = 0;
+    for fc in ["0.0", "100.0", "200.0"] {
+        let text = head.replace("runs = 2", "runs = 3").replace("fc = 100.0", &format!("fc = {fc}"))
+            + "[[estimators]]\nkind = \"iso230_2\"\nrun = \"iso\"\nsensor = \"laser_low\"\ntolerance = 0.15e-6\n";
+        let path = tmp.path().join(format!("backlash_fc{fc}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let sc = vmt::scenario::Scenario::load(&path).unwrap();
+        let ph = vmt::simulate::physics(&sc).unwrap();
+        let truths = vmt::simulate::simulate_truth(&sc, &ph);
+        let runs = vmt::simulate::read_all(&sc, &ph, &truths, sc.seed).unwrap();
+        let checks = vmt::workflow::run::run_estimators(&sc, &ph, &truths, &runs).unwrap().checks;
+        assert_eq!(checks.len(), 3, "fc = {fc}: E, M and B̄");
+        for c in &checks {
+            println!(
+                "fc = {fc} N: {} injected {:.3} µm, recovered {:.3} µm",
+                c.error,
+                c.injected * 1e6,
+                c.recovered * 1e6
+            );
+            assert!(c.pass, "fc = {fc} N: {} injected {} recovered {}", c.error, c.injected, c.recovered);
+        }
+        let b_mean = checks.iter().find(|c| c.id.ends_with(".b_mean")).unwrap();
+        if (b_mean.injected + 3e-6).abs() > 0.5e-6 {
+            off_by_more_than_b += 1;
+        }
+    }
+    // The truth is the table's, not a formula in b: at least the frictionless and the 200 N axis lose a
+    // motion more than 0.5 µm away from b (the 100 N one is b + 2·Fc/k ≈ 4 µm, also away).
+    assert!(off_by_more_than_b >= 2, "lost motion equals the backlash in {} of 3 axes", 3 - off_by_more_than_b);
 }

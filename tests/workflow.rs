@@ -195,6 +195,41 @@ fn a_study_gives_identical_trials_on_1_and_2_threads_and_shards_merge_to_the_sam
         one,
         "merged shards differ from one run"
     );
+    // `--units human` (issue 13): the same rows, each length in µm with a `unit` column saying so;
+    // merge refuses such a file (it reads SI files only) with exit 2 naming it.
+    let human = tmp.path().join("human");
+    let st = vmt()
+        .arg("study")
+        .arg(&scenario)
+        .args(["--vary", "sensors.acc_z.noise_density=3e-7,3e-6", "--trials", "6", "--units", "human", "-o"])
+        .arg(&human)
+        .output()
+        .unwrap();
+    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    for file in ["trials.csv", "summary.csv"] {
+        let si = csv_rows(&std::fs::read_to_string(tmp.path().join("one").join(file)).unwrap());
+        let hu = csv_rows(&std::fs::read_to_string(human.join(file)).unwrap());
+        assert_eq!(hu[0].last().map(String::as_str), Some("unit"), "{file}: {:?}", hu[0]);
+        assert_eq!(si.len(), hu.len());
+        for (a, b) in si.iter().zip(&hu).skip(1) {
+            assert_eq!(b.last().map(String::as_str), Some("um"), "{file}: every row here is a length");
+            for name in ["difference", "mean_abs", "rms", "tolerance"] {
+                if let Some(j) = si[0].iter().position(|h| h == name) {
+                    let (x, y): (f64, f64) = (a[j].parse().unwrap(), b[j].parse().unwrap());
+                    assert!((y - 1e6 * x).abs() <= 1e-9 * y.abs(), "{file} {name}: {x} m vs {y} um");
+                }
+            }
+        }
+    }
+    let st = vmt().args(["study", "merge"]).arg(&human).arg("-o").arg(tmp.path().join("m2")).output().unwrap();
+    assert_eq!(st.status.code(), Some(2), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(String::from_utf8_lossy(&st.stderr).contains("--units human"));
+}
+
+/// The cells of a CSV text, header first.
+fn csv_rows(text: &str) -> Vec<Vec<String>> {
+    let mut r = csv::ReaderBuilder::new().has_headers(false).from_reader(text.as_bytes());
+    r.records().map(|x| x.unwrap().iter().map(str::to_string).collect()).collect()
 }
 
 /// Regression: a study of a scenario with a compensation check exited 70 (internal error) because the
@@ -238,14 +273,21 @@ fn a_study_with_a_compensation_check_finishes_and_marks_its_undefined_error() {
         }
         let rate: f64 = r[col("pass_rate")].parse().unwrap();
         assert!((0.0..=1.0).contains(&rate), "{summary}");
+        // A one-sided limit holds no difference to a tolerance: no tolerance line for it.
+        assert_eq!(&r[col("tolerance")], "", "{summary}");
     }
-    // The estimates that do form a difference keep their statistics.
+    // The estimates that do form a difference keep their statistics and their tolerance (issue 16: the
+    // study plots draw it), each its scenario tolerance.
     let others: Vec<&csv::StringRecord> = rows.iter().filter(|r| !r[1].contains("after compensation")).collect();
     assert!(!others.is_empty(), "{summary}");
     for r in others {
         let m: f64 = r[col("mean_abs")].parse().unwrap_or_else(|_| panic!("{summary}"));
         assert!(m.is_finite() && m >= 0.0, "{summary}");
+        let t: f64 = r[col("tolerance")].parse().unwrap_or_else(|_| panic!("tolerance of {}: {summary}", &r[1]));
+        assert!(t > 0.0, "{summary}");
     }
+    let svg = std::fs::read_to_string(out.join("study.svg")).unwrap();
+    assert!(svg.contains(": tolerance"), "study.svg draws the tolerance line");
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("is undefined"), "the report says why the row has no |error|");
 }
@@ -803,4 +845,33 @@ fn a_procedure_whose_name_extends_another_lends_it_no_runs() {
     assert!(stdout.contains("crawl_again_1"), "the second procedure's run is recorded:\n{stdout}");
     let ssi_rows = stdout.lines().filter(|l| l.starts_with("SSI at ")).count();
     assert_eq!(ssi_rows, 3, "one SSI row per run of `crawl`:\n{stdout}");
+}
+
+/// The README's physical study (issue 15) on its scenario, two trials: each draws its own backlash and
+/// pitch amplitude and simulates its own physics; every estimate meets its tolerance (exit 0), and the
+/// drawn values are the trials' own columns.
+#[test]
+fn the_readme_physical_study_runs_on_its_bundled_scenario() {
+    let tmp = tempfile::tempdir().unwrap();
+    let st = vmt()
+        .arg("study")
+        .arg(root().join("benches/study_physical.toml"))
+        .args(["--sample", "truth.effects.backlash.value=uniform(2e-6,8e-6)"])
+        .args(["--sample", "truth.effects.pitch.harmonics[0].amplitude=normal(3e-6,0.5e-6)"])
+        .args(["--trials", "2", "-o"])
+        .arg(tmp.path().join("physical"))
+        .output()
+        .unwrap();
+    assert_eq!(
+        st.status.code(),
+        Some(0),
+        "{}{}",
+        String::from_utf8_lossy(&st.stdout),
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let rows = csv_rows(&std::fs::read_to_string(tmp.path().join("physical/trials.csv")).unwrap());
+    let col = rows[0].iter().position(|h| h == "truth.effects.backlash.value").expect("a column per sampled key");
+    let drawn: Vec<f64> = rows[1..].iter().map(|r| r[col].parse().unwrap()).collect();
+    assert!(drawn.iter().all(|b| (2e-6..=8e-6).contains(b)), "{drawn:?}");
+    assert!(drawn.iter().any(|b| *b != drawn[0]), "the two trials drew different backlash values");
 }

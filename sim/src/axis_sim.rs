@@ -8,10 +8,10 @@
 use crate::drive::{dead_zone_force, DriveConfig, FeedbackKind};
 use crate::feedback::FeedbackErrors;
 use crate::friction::{lugre_step, stick_slip_step, LugreParams, StepInput, StribeckParams};
-use crate::geometry::ErrorMotions;
+use crate::geometry::{ErrorMotions, MotionsAt};
 use crate::machine::{AxisModel, Fidelity};
 use crate::motion::{Command, MotionPlan};
-use crate::profile::Profile;
+use crate::profile::{Profile, Tabulated};
 use crate::servo::{quantise, servo_update, ServoState};
 use rapier3d_f64::glamx::{DQuat, DVec3};
 use rapier3d_f64::prelude::*;
@@ -320,6 +320,72 @@ pub struct AxisSim<'a> {
     session_start: f64,
     ey: DVec3,
     ez: DVec3,
+    /// The error motions and the lead error as this run's steps read them.
+    profiles: StepProfiles,
+}
+
+/// The profiles a step reads — the six error motions (ISO index 0..6: EXX, EYX, EZX, EAX, EBX, ECX) and
+/// the screw's lead error (7th) — tabulated ([`Profile::tabulate`], value within 1e-13, slope within
+/// 1e-11 of the exact profile) over the travel and a margin when the model's fidelity is
+/// [`Fidelity::Fast`], exact otherwise (and wherever a table is not possible or the axis leaves the
+/// domain). The fast engine evaluates every harmonic and random cosine once per run instead of every
+/// step; the rapier reference keeps the exact functions.
+struct StepProfiles {
+    tables: [Option<Tabulated>; 7],
+}
+
+impl StepProfiles {
+    fn new(model: &AxisModel, truth: &AxisTruth) -> StepProfiles {
+        let (lo, hi) = model.travel;
+        let margin = 0.05 * (hi - lo).abs() + 0.01;
+        let table = |p: &Profile| match model.fidelity {
+            Fidelity::Fast if !p.is_zero() => p.tabulate(lo - margin, hi + margin),
+            Fidelity::Fast | Fidelity::Reference => None,
+        };
+        let m = &truth.motions;
+        StepProfiles {
+            tables: [
+                table(&m.positioning),
+                table(&m.straightness_y),
+                table(&m.straightness_z),
+                table(&m.roll),
+                table(&m.pitch),
+                table(&m.yaw),
+                table(&truth.lead_error),
+            ],
+        }
+    }
+
+    /// Value and slope of profile `i` (`exact` is the profile itself) at x.
+    #[inline]
+    fn eval2(&self, i: usize, exact: &Profile, x: f64) -> [f64; 2] {
+        match self.tables[i].as_ref().and_then(|t| t.eval2(x)) {
+            Some(v) => v,
+            None if exact.is_zero() => [0.0; 2],
+            None => {
+                let e = exact.eval3(x);
+                [e[0], e[1]]
+            }
+        }
+    }
+
+    /// The six error motions and their slopes at x ([`ErrorMotions::at`]).
+    fn motions_at(&self, m: &ErrorMotions, x: f64) -> MotionsAt {
+        let [px, py, pz, rx, ry, rz] = [
+            self.eval2(0, &m.positioning, x),
+            self.eval2(1, &m.straightness_y, x),
+            self.eval2(2, &m.straightness_z, x),
+            self.eval2(3, &m.roll, x),
+            self.eval2(4, &m.pitch, x),
+            self.eval2(5, &m.yaw, x),
+        ];
+        MotionsAt {
+            translation: DVec3::new(px[0], py[0], pz[0]),
+            rotation: DVec3::new(rx[0], ry[0], rz[0]),
+            translation_slope: DVec3::new(px[1], py[1], pz[1]),
+            rotation_slope: DVec3::new(rx[1], ry[1], rz[1]),
+        }
+    }
 }
 
 impl<'a> AxisSim<'a> {
@@ -355,6 +421,7 @@ impl<'a> AxisSim<'a> {
             session_start,
             ey,
             ez,
+            profiles: StepProfiles::new(model, truth),
         };
         // The motor starts where the nut sits on the body, in contact on the + side of the clearance.
         sim.motor.u = sim.motor_rest_position();
@@ -367,10 +434,10 @@ impl<'a> AxisSim<'a> {
         match &self.model.drive {
             DriveConfig::BallScrew(b) if b.feedback == FeedbackKind::Rotary => {
                 // u + e(u) + lead(u) = x: one fixed-point pass is exact to second order in the errors.
-                let e = |u: f64| self.chain_error(u) + self.truth.lead_error.value(u);
+                let e = |u: f64| self.chain_error(u) + self.lead_error(u);
                 x - e(x - e(x)) + 0.5 * self.truth.backlash
             }
-            DriveConfig::BallScrew(_) => x - self.truth.lead_error.value(x) + 0.5 * self.truth.backlash,
+            DriveConfig::BallScrew(_) => x - self.lead_error(x) + 0.5 * self.truth.backlash,
             DriveConfig::LinearMotor => x,
         }
     }
@@ -392,7 +459,13 @@ impl<'a> AxisSim<'a> {
 
     /// Error of the positioning chain at x now: EXX(x) + feedback-chain error e(x, t), m.
     fn chain_error(&self, x: f64) -> f64 {
-        self.truth.motions.positioning.value(x) + self.truth.feedback.error(x, self.session_start + self.time())
+        self.profiles.eval2(0, &self.truth.motions.positioning, x)[0]
+            + self.truth.feedback.error(x, self.session_start + self.time())
+    }
+
+    /// Lead error of the screw at screw position u, m.
+    fn lead_error(&self, u: f64) -> f64 {
+        self.profiles.eval2(6, &self.truth.lead_error, u)[0]
     }
 
     /// Nominal axis position (what the machine believes) for a table at x: x − EXX(x) − e(x, t).
@@ -460,7 +533,7 @@ impl<'a> AxisSim<'a> {
             servo_update(&m.servo, &mut self.servo, mass, ts, cmd.pos, cmd.vel, cmd.acc, fb, vel_fb);
         }
         // Every error motion evaluated once per step: value (rest pose) and slope (its velocity).
-        let at = self.truth.motions.at(q);
+        let at = self.profiles.motions_at(&self.truth.motions, q);
         let rest = m.rest_pose_at(&at, q);
         let (de, deps) = (m.axis_rotation * at.translation_slope, m.axis_rotation * at.rotation_slope);
         // Drive force on the body at the nut, and the motor's own motion.
@@ -469,7 +542,7 @@ impl<'a> AxisSim<'a> {
             DriveConfig::BallScrew(b) => {
                 let semi = b.feedback == FeedbackKind::Rotary;
                 let u = self.motor.u;
-                let nut_free = u + self.truth.lead_error.value(u) + if semi { self.chain_error(u) } else { 0.0 };
+                let nut_free = u + self.lead_error(u) + if semi { self.chain_error(u) } else { 0.0 };
                 let nut_x = x_act; // the nut rides on the body: its axial coordinate moves with the reference point
                 let c = 2.0 * b.damping_ratio * (b.stiffness * m.mass).sqrt();
                 let f =
@@ -551,24 +624,34 @@ pub fn simulate_in_session(
     let t_end = record_times.last().copied().unwrap_or(0.0).max(0.0);
     let mut out = Vec::with_capacity(record_times.len());
     let mut next = 0;
-    let mut prev = sim.sample(plan.at(0.0));
+    let prev = sim.sample(plan.at(0.0));
     while next < record_times.len() && record_times[next] <= prev.t {
         out.push(Sample { t: record_times[next], ..prev });
         next += 1;
     }
+    // `prev` is the truth sample before the step when a record time falls within it; samples are taken
+    // only around record times (the same values as sampling every step: the state is the same).
+    let mut prev = Some(prev);
     while next < record_times.len() && sim.time() <= t_end + model.dt {
         let cmd = plan.at(sim.time());
+        let records = record_times[next] <= (sim.steps + 1) as f64 * model.dt;
+        if !records {
+            prev = None;
+            sim.step(cmd);
+            continue;
+        }
+        let before = prev.take().unwrap_or_else(|| sim.sample(cmd));
         sim.step(cmd);
         let cur = sim.sample(plan.at(sim.time()));
         while next < record_times.len() && record_times[next] <= cur.t {
             let tr = record_times[next];
-            let w = (tr - prev.t) / (cur.t - prev.t);
-            let mut s = prev.lerp(&cur, w);
+            let w = (tr - before.t) / (cur.t - before.t);
+            let mut s = before.lerp(&cur, w);
             s.cmd = plan.at(tr);
             out.push(s);
             next += 1;
         }
-        prev = cur;
+        prev = Some(cur);
     }
     Trace { samples: out }
 }

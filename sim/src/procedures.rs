@@ -980,19 +980,7 @@ pub fn read_run(
         let values = match &truth.layout {
             Layout::TimeSeries { rate } => apply_errors(&spec, &clean[1..], *rate, &mut rng),
             Layout::PointTable { visits } => {
-                let nominal = |target: f64| match spec.kind {
-                    SensorKind::EncoderLinear | SensorKind::EncoderRotary => target,
-                    SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => {
-                        spec.unit_direction().dot(model.axis) * target
-                    }
-                    _ => 0.0,
-                };
-                let means: Vec<f64> = visits
-                    .iter()
-                    .map(|a| {
-                        clean[a.first..=a.last].iter().sum::<f64>() / (a.last - a.first + 1) as f64 - nominal(a.target)
-                    })
-                    .collect();
+                let means = visit_means(&spec, model, &clean, visits);
                 let window = visits.first().map_or(1.0, |a| (a.last - a.first + 1) as f64);
                 apply_errors(&spec, &means, sample_rate(&truth.samples) / window, &mut rng)
             }
@@ -1031,6 +1019,45 @@ pub fn read_run(
         start_time: truth.start_time,
         data,
     })
+}
+
+/// Noise-free point-table values of a (resolved) sensor: per visit, the mean of its true reading `clean`
+/// (one value per sample) over the visit's averaging window, less the nominal reading at the target —
+/// the deviation (m) a noiseless instrument would write in the row.
+fn visit_means(spec: &SensorSpec, model: &AxisModel, clean: &[f64], visits: &[Visit]) -> Vec<f64> {
+    let nominal = |target: f64| match spec.kind {
+        SensorKind::EncoderLinear | SensorKind::EncoderRotary => target,
+        SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => {
+            spec.unit_direction().dot(model.axis) * target
+        }
+        _ => 0.0,
+    };
+    visits
+        .iter()
+        .map(|a| clean[a.first..=a.last].iter().sum::<f64>() / (a.last - a.first + 1) as f64 - nominal(a.target))
+        .collect()
+}
+
+/// The noise-free point table of sensor `name` in the positioning run `truth` (one value per row, in the
+/// row order [`read_run`] writes): what the instrument would read without noise, quantisation or bias —
+/// the truth an ISO 230-2 evaluation of the recorded table estimates, whatever the physics put on the
+/// table at rest (error motions, feedback chain, lead error, backlash, the screw's windup, settling).
+/// `Ok(None)` for a time series or a sensor the run does not record.
+pub fn noise_free_point_table(
+    model: &AxisModel,
+    physics: &AxisTruth,
+    truth: &RunTruth,
+    sensors: &[SensorSpec],
+    name: &str,
+) -> Result<Option<Vec<f64>>, String> {
+    let Layout::PointTable { visits } = &truth.layout else { return Ok(None) };
+    if !truth.sensors.iter().any(|s| s == name) {
+        return Ok(None);
+    }
+    let Some(spec) = sensors.iter().find(|s| s.name == name) else { return Ok(None) };
+    let spec = spec.resolved();
+    let clean = true_readings(&spec, model, physics.mode.as_ref(), &truth.samples)?;
+    Ok(Some(visit_means(&spec, model, &clean, visits)))
 }
 
 /// Sample rate of the averaging windows of a point table (from the first two samples), Hz.

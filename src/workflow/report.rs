@@ -140,6 +140,9 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
                     style: SeriesStyle::Dashed,
                 });
             }
+            if let Some(t) = crate::study::tolerance_line(&pts) {
+                series.push(t);
+            }
             Figure {
                 title: format!(
                     "{n}: error of the estimate against {label}, {} trials per value",

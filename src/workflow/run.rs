@@ -7,26 +7,32 @@ use crate::estimate::chain::{identify_chain_runs, ChainIdentification, LineSigma
 use crate::estimate::{estimate_recording, Estimates};
 use crate::measurement::MeasurementSet;
 use crate::scenario::Scenario;
-use crate::simulate::{
-    procedure_run_names, remeasure, session_end, session_plan, to_measurement_set, truth_view, Physics,
-};
+use crate::simulate::{procedure_run_names, remeasure, to_measurement_set, truth_view, Physics, SessionTruth};
 use vmt_sim::procedures::RunRecord;
 
-/// Runs every estimator of `sc` on its recording `set`, simulated on `ph` (the truth view compared with),
-/// the compensation check re-measuring on `ph` from session time `end` (s, after the session) with the
-/// scenario's seed.
-pub fn estimate_session(sc: &Scenario, ph: &Physics, end: f64, set: &MeasurementSet) -> Result<Estimates, VmtError> {
-    let again = |run: &str, x: &[f64], y: &[f64]| remeasure(sc, ph, sc.seed, end, run, x, y);
-    estimate_recording(&sc.source, &sc.estimators, &truth_view(sc, ph), set, &again)
+/// Runs every estimator of `sc` on its recording `set`, read from the session `truths` simulated on `ph`
+/// (the truth view compared with), the compensation check re-measuring on `ph` from the session's end
+/// with the scenario's seed.
+pub fn estimate_session(
+    sc: &Scenario,
+    ph: &Physics,
+    truths: &SessionTruth,
+    set: &MeasurementSet,
+) -> Result<Estimates, VmtError> {
+    let again = |run: &str, x: &[f64], y: &[f64]| remeasure(sc, ph, sc.seed, truths.end, run, x, y);
+    estimate_recording(&sc.source, &sc.estimators, &truth_view(sc, ph, truths), set, &again)
 }
 
-/// Runs every estimator of a scenario on its simulated recording `runs` and returns the checks with their
-/// figures: [`estimate_session`] on the measurement set written from `runs`, after the session planned
-/// on `ph`.
-pub fn run_estimators(sc: &Scenario, ph: &Physics, runs: &[RunRecord]) -> Result<Estimates, VmtError> {
+/// Runs every estimator of a scenario on its recording `runs` (read from the session `truths`) and
+/// returns the checks with their figures: [`estimate_session`] on the measurement set written from `runs`.
+pub fn run_estimators(
+    sc: &Scenario,
+    ph: &Physics,
+    truths: &SessionTruth,
+    runs: &[RunRecord],
+) -> Result<Estimates, VmtError> {
     let set = to_measurement_set(sc, runs)?;
-    let end = session_end(&session_plan(sc, ph));
-    estimate_session(sc, ph, end, &set)
+    estimate_session(sc, ph, truths, &set)
 }
 
 /// The 21-error identification of the chain procedure `procedure`'s laser lines in the simulated runs

@@ -20,7 +20,8 @@ use vmt_sim::chain::{
 use vmt_sim::effects::EffectName;
 use vmt_sim::machine::AxisModel;
 use vmt_sim::procedures::{
-    plan_procedure, plan_session, read_run, simulate_run, ProcedureSpec, RunPlan, RunRecord, RunTruth,
+    noise_free_point_table, plan_procedure, plan_session, read_run, simulate_run, ProcedureSpec, RunPlan, RunRecord,
+    RunTruth,
 };
 use vmt_sim::profile::{Profile, Term};
 use vmt_sim::sensors::SensorSpec;
@@ -64,8 +65,9 @@ pub fn physics(sc: &Scenario) -> Result<Physics, VmtError> {
 /// What the estimate workflow may know of the truth of `sc` simulated on `ph` (to compare its estimates
 /// with): the axis's injected error motions, the sensors as simulated (their noise and instrument values,
 /// for the Cramér–Rao bounds, the quantisation floor and the uncertainty statement) and, for a multi-axis
-/// scenario, the chain's error motions and squareness.
-pub fn truth_view<'a>(sc: &'a Scenario, ph: &'a Physics) -> TruthView<'a> {
+/// scenario, the chain's error motions and squareness; and the noise-free point tables of the session
+/// `truths` (what an ISO 230-2 evaluation is compared with).
+pub fn truth_view<'a>(sc: &'a Scenario, ph: &'a Physics, truths: &'a SessionTruth) -> TruthView<'a> {
     let sensors = ph
         .sensors
         .iter()
@@ -82,7 +84,17 @@ pub fn truth_view<'a>(sc: &'a Scenario, ph: &'a Physics) -> TruthView<'a> {
         squareness: c.squareness.to_array(),
         effective_squareness: Box::new(move |positions: &[Vec<f64>]| c.effective_squareness(positions).to_array()),
     });
-    TruthView { motions: &ph.truth.motions, sensors, chain, procedure_runs: procedure_run_names(sc, &ph.model) }
+    let noise_free = Box::new(move |run: &str, sensor: &str| {
+        let rt = truths.runs.iter().find(|r| r.name == run)?;
+        noise_free_point_table(&ph.model, &ph.truth, rt, &ph.sensors, sensor).ok().flatten()
+    });
+    TruthView {
+        motions: &ph.truth.motions,
+        sensors,
+        chain,
+        procedure_runs: procedure_run_names(sc, &ph.model),
+        noise_free,
+    }
 }
 
 /// The run names each procedure of the scenario records, procedure name → names in session order: the

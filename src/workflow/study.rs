@@ -445,8 +445,21 @@ pub struct TrialRow {
     /// What the difference measures (its SI unit: m, rad or none); the `quantity` column of trials.csv.
     pub quantity: Quantity,
     /// A sampled study's parameter values of this trial, in the order of its `--sample` keys (SI);
-    /// empty otherwise. The trailing columns of trials.csv, named by their key paths.
+    /// empty otherwise. The columns of trials.csv after `quantity`, named by their key paths.
     pub sampled: Vec<f64>,
+    /// The largest |difference| that passes (SI unit of `quantity`), where the pass rule compares the
+    /// difference with a tolerance; `None` for a one-sided limit, a found/not-found check or an external
+    /// estimator run without `--tolerance`. The last column of trials.csv.
+    pub tolerance: Option<f64>,
+}
+
+/// The tolerance a check's difference is held to ([`TrialRow::tolerance`]).
+fn difference_tolerance(c: &crate::estimate::Check) -> Option<f64> {
+    use crate::estimate::Rule;
+    match c.rule {
+        Rule::Difference | Rule::RmsDifference => c.tolerance.is_finite().then_some(c.tolerance),
+        Rule::AtMost | Rule::Found => None,
+    }
 }
 
 /// The quantity of an error motion named as in a profile CSV (`pitch`, `y.straightness_z`): lengths for
@@ -590,15 +603,17 @@ fn trial_rows(
                 bound: f64::NAN,
                 quantity: motion_quantity(&r.effect),
                 sampled: Vec::new(),
+                tolerance,
             })
             .collect());
     }
     // The compensation check re-measures on this trial's sensors, after the session simulated once.
-    let est = crate::workflow::run::estimate_session(sc, p, truths.end, &set)?;
+    let est = crate::workflow::run::estimate_session(sc, p, truths, &set)?;
     Ok(est
         .checks
         .into_iter()
         .map(|c| TrialRow {
+            tolerance: difference_tolerance(&c),
             value: v,
             trial: k,
             estimate: c.error,
@@ -611,31 +626,51 @@ fn trial_rows(
         .collect())
 }
 
+/// How a study CSV writes a difference-like number of quantity `q` (SI m, rad or ratio): with
+/// `UnitChoice::Si` as is; with `UnitChoice::Metrology` ("human") lengths in µm and angles in µrad,
+/// returned with the unit the file's `unit` column names (`um`, `urad`, `1`).
+pub fn study_unit(q: Quantity, units: crate::measurement::UnitChoice) -> (f64, &'static str) {
+    use crate::measurement::UnitChoice;
+    match (units, q) {
+        (UnitChoice::Si, Quantity::Length) => (1.0, "m"),
+        (UnitChoice::Si, Quantity::Angle) => (1.0, "rad"),
+        (UnitChoice::Metrology, Quantity::Length) => (1e6, "um"),
+        (UnitChoice::Metrology, Quantity::Angle) => (1e6, "urad"),
+        (UnitChoice::Si | UnitChoice::Metrology, Quantity::Ratio) => (1.0, "1"),
+    }
+}
+
 /// CSV of trial rows (value, trial, estimate, difference, pass, bound, quantity, then one column per
-/// sampled parameter named by its key path), sorted so shards merge to the same file.
-pub fn rows_csv(rows: &[TrialRow], sampled: &[String]) -> String {
+/// sampled parameter named by its key path, then `tolerance`), sorted so shards merge to the same file.
+/// With `UnitChoice::Metrology` the difference, bound and tolerance of each row are in µm or µrad as its
+/// quantity says, and a last column `unit` names it (`value` and the sampled parameters stay in their
+/// keys' SI units); `study merge` reads only the SI file.
+pub fn rows_csv(rows: &[TrialRow], sampled: &[String], units: crate::measurement::UnitChoice) -> String {
+    let human = units == crate::measurement::UnitChoice::Metrology;
     let mut rows = rows.to_vec();
     rows.sort_by(|a, b| a.value.total_cmp(&b.value).then(a.trial.cmp(&b.trial)).then(a.estimate.cmp(&b.estimate)));
     let mut s = String::from("value,trial,estimate,difference,pass,bound,quantity");
     for name in sampled {
         s += &format!(",\"{}\"", name.replace('"', "'"));
     }
-    s.push('\n');
+    s += if human { ",tolerance,unit\n" } else { ",tolerance\n" };
     for r in rows {
+        let (scale, unit) = study_unit(r.quantity, units);
         s += &format!(
             "{},{},\"{}\",{},{},{},{}",
             r.value,
             r.trial,
             r.estimate.replace('"', "'"),
-            r.difference,
+            r.difference * scale,
             r.pass.map_or(String::new(), |p| p.to_string()),
-            r.bound,
+            r.bound * scale,
             quantity_id(r.quantity)
         );
         for v in &r.sampled {
             s += &format!(",{v}");
         }
-        s.push('\n');
+        s += &format!(",{}", r.tolerance.map_or(String::new(), |t| (t * scale).to_string()));
+        s += &if human { format!(",{unit}\n") } else { "\n".to_string() };
     }
     s
 }
@@ -644,13 +679,25 @@ pub fn rows_csv(rows: &[TrialRow], sampled: &[String]) -> String {
 pub fn read_rows(path: &Path) -> Result<(Vec<TrialRow>, Vec<String>), VmtError> {
     let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading", e))?;
     let mut rdr = csv::ReaderBuilder::new().from_reader(text.as_bytes());
-    let sampled: Vec<String> = rdr
+    let mut sampled: Vec<String> = rdr
         .headers()
         .map_err(|e| VmtError::bad(path, "line 1 (header)", e.to_string()))?
         .iter()
         .skip(7)
         .map(str::to_string)
         .collect();
+    if sampled.last().is_some_and(|n| n == "unit") {
+        return Err(VmtError::bad(
+            path,
+            "line 1 (header)",
+            "a trials.csv written with --units human (µm/µrad per row); merge the SI files (--units si)",
+        ));
+    }
+    // The last column `tolerance` (absent from files written before it existed).
+    let with_tolerance = sampled.last().is_some_and(|n| n == "tolerance");
+    if with_tolerance {
+        sampled.pop();
+    }
     let mut out = Vec::new();
     for (i, rec) in rdr.records().enumerate() {
         let rec = rec.map_err(|e| VmtError::bad(path, format!("line {}", i + 2), e.to_string()))?;
@@ -700,6 +747,10 @@ pub fn read_rows(path: &Path) -> Result<(Vec<TrialRow>, Vec<String>), VmtError> 
                 }
             },
             sampled: (7..7 + sampled.len()).map(&num).collect::<Result<_, _>>()?,
+            tolerance: match (with_tolerance, f(7 + sampled.len())) {
+                (false, _) | (true, "") => None,
+                (true, _) => Some(num(7 + sampled.len())?),
+            },
         });
     }
     Ok((out, sampled))
@@ -731,6 +782,9 @@ pub struct SummaryRow {
     pub bound: f64,
     /// What the differences are (their unit).
     pub quantity: Quantity,
+    /// The tolerance every trial of the group held its difference to (SI), `None` when the trials had
+    /// none or differing ones.
+    pub tolerance: Option<f64>,
 }
 
 /// The `quantity` column of trials.csv and summary.csv.
@@ -764,6 +818,8 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
             let bounds: Vec<f64> = rows.iter().filter(|r| same(r, v, &e)).map(|r| r.bound).collect();
             let bound = bounds.iter().sum::<f64>() / bounds.len().max(1) as f64;
             let quantity = rows.iter().find(|r| same(r, v, &e)).map_or(Quantity::Ratio, |r| r.quantity);
+            let tolerances: Vec<Option<f64>> = rows.iter().filter(|r| same(r, v, &e)).map(|r| r.tolerance).collect();
+            let tolerance = tolerances.first().copied().flatten().filter(|t| tolerances.iter().all(|x| *x == Some(*t)));
             SummaryRow {
                 value: v,
                 estimate: e,
@@ -775,6 +831,7 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
                 pass_rate,
                 bound,
                 quantity,
+                tolerance,
             }
         })
         .collect()
@@ -784,6 +841,18 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
 /// (an estimate without a difference, e.g. the compensation check's one-sided limit, has none).
 pub fn defined_points(rows: &[&SummaryRow], stat: fn(&SummaryRow) -> Option<f64>, scale: f64) -> (Vec<f64>, Vec<f64>) {
     rows.iter().filter_map(|s| stat(s).map(|y| (s.value, y * scale))).filter(|(_, y)| y.is_finite()).unzip()
+}
+
+/// The tolerance of an estimate's summary rows as a figure series (µm or µrad against the varied value,
+/// drawn across the values it holds at), or None where the rows have no common tolerance.
+pub fn tolerance_line(rows: &[&SummaryRow]) -> Option<vmt_report::Series> {
+    let (x, y): (Vec<f64>, Vec<f64>) = rows.iter().filter_map(|s| s.tolerance.map(|t| (s.value, t * 1e6))).unzip();
+    (!x.is_empty()).then(|| vmt_report::Series {
+        label: "tolerance".into(),
+        x,
+        y,
+        style: vmt_report::SeriesStyle::Dashed,
+    })
 }
 
 /// Whether every defined statistic of `summary` and every varied value is > 0 (a log-log plot is possible).
@@ -811,6 +880,9 @@ pub fn summary_svg(summary: &[SummaryRow], x_label: &str) -> Result<String, VmtE
             if !x.is_empty() {
                 series.push(Series { label: format!("{n}: {label}"), x, y, style });
             }
+        }
+        if let Some(t) = tolerance_line(&pts) {
+            series.push(Series { label: format!("{n}: tolerance"), ..t });
         }
     }
     let positive = all_positive(summary);

@@ -18,6 +18,10 @@ pub struct TruthView<'a> {
     /// The runs each procedure of the scenario recorded: procedure name → run names, from the session
     /// plan (`crate::simulate::procedure_run_names`).
     pub procedure_runs: BTreeMap<String, Vec<String>>,
+    /// The noise-free point table of (run, sensor) as the simulation left the table at rest (deviations,
+    /// m, one per row in the recorded row order; `vmt_sim::procedures::noise_free_point_table`), None for
+    /// a time series or an unrecorded sensor.
+    pub noise_free: NoiseFreeOf<'a>,
 }
 
 impl TruthView<'_> {
@@ -51,6 +55,9 @@ pub struct SensorTruth {
     /// error (Edlén) plus the material's thermal expansion left uncorrected (dimensionless).
     pub environment_scale_error: f64,
 }
+
+/// (run, sensor) → the noise-free point table of [`TruthView::noise_free`].
+pub type NoiseFreeOf<'a> = Box<dyn Fn(&str, &str) -> Option<Vec<f64>> + Sync + 'a>;
 
 /// The squareness [EC0Y, EB0Z, EA0Z] (rad) that laser line sets see over given node positions (m, one
 /// list per axis in chain order).

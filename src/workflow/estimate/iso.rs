@@ -10,7 +10,6 @@ use crate::measurement::{MeasurementSet, Run, RunData};
 use std::path::Path;
 use vmt_estimators::iso230_2::{evaluate_bidirectional, AxisResult};
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle, Table};
-use vmt_sim::geometry::ErrorMotions;
 
 /// A positioning test split by approach direction: (targets (m), `up[i][j]`, `down[i][j]`), target i in
 /// increasing order, j the i-th target's readings (deviations, m) in that direction in run order — the
@@ -23,7 +22,12 @@ pub type DirectionalDeviations = (Vec<f64>, Vec<Vec<f64>>, Vec<Vec<f64>>);
 pub fn point_table_deviations(run: &Run, sensor: &str) -> Option<DirectionalDeviations> {
     let RunData::PointTable { target, direction, columns, .. } = &run.data else { return None };
     let values = &columns.iter().find(|(n, _)| n == sensor)?.1;
-    let mut targets: Vec<f64> = target.clone();
+    Some(split_by_direction(target, direction, values))
+}
+
+/// Rows (target, direction, value) of a point table split by direction ([`DirectionalDeviations`]).
+fn split_by_direction(target: &[f64], direction: &[i8], values: &[f64]) -> DirectionalDeviations {
+    let mut targets: Vec<f64> = target.to_vec();
     targets.sort_by(f64::total_cmp);
     targets.dedup();
     let index = |x: f64| targets.iter().position(|&t| t == x).unwrap_or(0);
@@ -33,18 +37,23 @@ pub fn point_table_deviations(run: &Run, sensor: &str) -> Option<DirectionalDevi
         let side = if d > 0 { &mut up } else { &mut down };
         side[index(x)].push(v);
     }
-    Some((targets, up, down))
+    (targets, up, down)
 }
 
-/// ISO 230-2 values of the noise-free injected deviation along x at body point r (m, axis frame) at the
-/// targets (m): with no noise and a purely geometric truth, both directions see δx(P_i) = EXX + (ε × r)_x.
-pub fn iso_truth(errors: &ErrorMotions, r: [f64; 3], targets: &[f64]) -> Result<AxisResult, VmtError> {
-    let dev: Vec<Vec<f64>> = targets.iter().map(|&x| vec![errors.deviation_at(x, r)[0]; 2]).collect();
-    evaluate_bidirectional(targets, &dev, &dev).map_err(|e| VmtError::Internal(e.to_string()))
+/// ISO 230-2 values of the truth of a positioning run: the evaluation of its noise-free point table
+/// `noise_free` (m, one value per row of `run`, [`TruthView::noise_free`]) — what the machine did at the
+/// sensor's point, whatever put it there (error motions, feedback chain, lead error, backlash, the
+/// screw's windup, settling). With a purely geometric truth both directions see δx(P_i) = EXX + (ε × r)ₓ.
+fn iso_truth(run: &Run, noise_free: &[f64]) -> Result<AxisResult, VmtError> {
+    let RunData::PointTable { target, direction, .. } = &run.data else {
+        return Err(VmtError::Internal(format!("run `{}` is not a point table", run.name)));
+    };
+    let (targets, up, down) = split_by_direction(target, direction, noise_free);
+    evaluate_bidirectional(&targets, &up, &down).map_err(|e| VmtError::Internal(e.to_string()))
 }
 
 /// The ISO 230-2 check of `sensor` in the positioning run `run`: E, M and B̄ against the values of the
-/// injected deviation at the sensor's point (within `tolerance`, m), with the standard's figure, table and
+/// noise-free deviation at the sensor's point (within `tolerance`, m), with the standard's figure, table and
 /// uncertainty statement added to `out`.
 pub(super) fn iso_check(
     source: &Path,
@@ -60,10 +69,12 @@ pub(super) fn iso_check(
     let (targets, up, down) = point_table_deviations(rec, sensor)
         .ok_or_else(|| bad(format!("run `{run}` is not a point table with sensor `{sensor}`")))?;
     let est = evaluate_bidirectional(&targets, &up, &down).map_err(|e| bad(e.to_string()))?;
-    let (Some(manifest), Some(simulated)) = (set.sensor(sensor), truth.sensor(sensor)) else {
+    let (Some(_), Some(simulated)) = (set.sensor(sensor), truth.sensor(sensor)) else {
         return Err(bad(format!("sensor `{sensor}` is not declared")));
     };
-    let expected = iso_truth(truth.motions, manifest.position, &targets)?;
+    let noise_free = (truth.noise_free)(run, sensor)
+        .ok_or_else(|| bad(format!("the simulation has no noise-free table of `{sensor}` in run `{run}`")))?;
+    let expected = iso_truth(rec, &noise_free)?;
     let checks =
         [("E", "e", expected.e, est.e), ("M", "m", expected.m, est.m), ("B̄", "b_mean", expected.b_mean, est.b_mean)]
             .into_iter()

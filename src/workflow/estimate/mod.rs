@@ -28,7 +28,7 @@ pub mod ssi;
 pub mod straightness;
 
 pub use chain::{axis_commands, identify_axis_readings, ChainIdentification};
-pub use iso::{iso_table, iso_truth, point_table_deviations};
+pub use iso::{iso_table, point_table_deviations};
 pub use laser_lines::{identify_laser_lines, LaserLine};
 
 /// What a check compares (for units in the table).
