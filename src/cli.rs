@@ -1163,11 +1163,14 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, units: &str,
     }
     let set = measurement::read(path)?;
     if run.is_none() {
-        if let Some((n_lines, ci)) = crate::byo::identify_axes_set(&set).map_err(|m| VmtError::bad(path, "runs", m))? {
+        if let Some((n_lines, ci)) =
+            crate::byo::identify_axes_set(&set).map_err(|e| VmtError::bad(path, "runs", e.to_string()))?
+        {
             return identify_axes(path, n_lines, &ci, out, json);
         }
     }
-    let (run, n_lines, id, notes) = crate::byo::identify_set(&set, run).map_err(|m| VmtError::bad(path, "runs", m))?;
+    let (run, n_lines, id, notes) =
+        crate::byo::identify_set(&set, run).map_err(|e| VmtError::bad(path, "runs", e.to_string()))?;
     for n in &notes {
         eprintln!("note: {n}");
     }

@@ -9,7 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
-use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, IdOptions, Model, Reading};
+use vmt_estimators::laser_ls::{identify, Axis, AxisModel, IdOptions, Model, Reading};
 
 /// A smooth random profile: `Σ a_j cos(k_j q + φ_j)`.
 struct Smooth(Vec<(f64, f64, f64)>);
@@ -95,7 +95,7 @@ fn readings(l: &Layout, motions: &[Smooth; 6], mut rng: Option<&mut ChaCha8Rng>)
 }
 
 fn model(l: &Layout) -> Model {
-    Model { axes: vec![AxisModel::with_nodes(AxisName::X, &l.targets)], squareness: false }
+    Model { axes: vec![AxisModel::with_nodes(Axis::X, &l.targets)], squareness: false }
 }
 
 fn random_motions(rng: &mut ChaCha8Rng, travel: f64) -> [Smooth; 6] {

@@ -30,6 +30,11 @@
 use faer::Mat;
 use serde::{Deserialize, Serialize};
 
+/// The Stribeck coefficients Fc (N), Fs (N), vs (m/s), δ (–), Fv (N·s/m) that [`fit_stribeck`] fits: vmt's
+/// one friction law (crate `vmt-core`, which the simulator integrates too). For [`StribeckShape::Mnich`]
+/// Fs is the peak of the dry part (at |v| = vs) and δ is unused (reported as 1).
+pub use vmt_core::friction::StribeckLaw;
+
 /// Errors of the friction identification.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FrictionIdError {
@@ -84,35 +89,9 @@ pub enum SweepDirection {
     Negative,
 }
 
-/// Stribeck coefficients: Fc (N), Fs (N), vs (m/s), δ (–), Fv (N·s/m). For [`StribeckShape::Mnich`]
-/// Fs is the peak of the dry part (at |v| = vs) and δ is unused (reported as 1).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct StribeckCoefficients {
-    /// Coulomb (dry) level Fc, N.
-    pub fc: f64,
-    /// Static level Fs (Exponential) or peak Fmax (Mnich), N.
-    pub fs: f64,
-    /// Stribeck velocity vs, m/s.
-    pub vs: f64,
-    /// Shape exponent δ (Exponential only).
-    pub delta: f64,
-    /// Viscous coefficient Fv, N·s/m.
-    pub fv: f64,
-}
+const NAMES: [&str; 5] = vmt_core::friction::PARAMETER_NAMES;
 
-impl StribeckCoefficients {
-    fn to_array(self) -> [f64; 5] {
-        [self.fc, self.fs, self.vs, self.delta, self.fv]
-    }
-    fn from_array(a: [f64; 5]) -> Self {
-        StribeckCoefficients { fc: a[0], fs: a[1], vs: a[2], delta: a[3], fv: a[4] }
-    }
-}
-
-const NAMES: [&str; 5] = ["fc", "fs", "vs", "delta", "fv"];
-
-/// Standard errors of [`StribeckCoefficients`] (same units); `None` for a parameter that was held
+/// Standard errors of [`StribeckLaw`] (same units); `None` for a parameter that was held
 /// fixed or ended on a bound (its uncertainty is not given by the Jacobian).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StribeckStdErrors {
@@ -138,9 +117,9 @@ pub struct StribeckFitOptions {
     /// Hold δ at this value (Exponential only); `None` fits δ.
     pub fixed_delta: Option<f64>,
     /// Lower bounds (default: Fc, Fs, Fv ≥ 0; vs ≥ 1e-9 m/s; δ ≥ 0.2).
-    pub lower: StribeckCoefficients,
+    pub lower: StribeckLaw,
     /// Upper bounds (default: none except δ ≤ 5).
-    pub upper: StribeckCoefficients,
+    pub upper: StribeckLaw,
     /// Maximum Levenberg–Marquardt iterations (default 200).
     pub max_iterations: usize,
 }
@@ -151,8 +130,8 @@ impl Default for StribeckFitOptions {
             shape: StribeckShape::Exponential,
             direction: SweepDirection::Both,
             fixed_delta: None,
-            lower: StribeckCoefficients { fc: 0.0, fs: 0.0, vs: 1e-9, delta: 0.2, fv: 0.0 },
-            upper: StribeckCoefficients {
+            lower: StribeckLaw { fc: 0.0, fs: 0.0, vs: 1e-9, delta: 0.2, fv: 0.0 },
+            upper: StribeckLaw {
                 fc: f64::INFINITY,
                 fs: f64::INFINITY,
                 vs: f64::INFINITY,
@@ -172,7 +151,7 @@ pub struct StribeckFit {
     /// Samples used.
     pub direction: SweepDirection,
     /// Estimated coefficients.
-    pub coefficients: StribeckCoefficients,
+    pub coefficients: StribeckLaw,
     /// Standard errors from the Jacobian at the solution.
     pub std_errors: StribeckStdErrors,
     /// Names of the parameters that ended on a bound.
@@ -189,35 +168,24 @@ pub struct StribeckFit {
 
 /// The friction curve F(v), N, of the given shape at velocity v (m/s) (equations in the module
 /// doc). F(0) = 0 (the static force at rest is undetermined in [−Fs, Fs]).
-pub fn stribeck_curve(shape: StribeckShape, c: &StribeckCoefficients, v: f64) -> f64 {
+pub fn stribeck_curve(shape: StribeckShape, c: &StribeckLaw, v: f64) -> f64 {
     model(shape, &c.to_array(), v, None)
 }
 
 /// Model value and (optionally) its gradient in θ = [fc, fs, vs, δ, fv].
 fn model(shape: StribeckShape, th: &[f64; 5], v: f64, grad: Option<&mut [f64; 5]>) -> f64 {
-    let [fc, fs, vs, delta, fv] = *th;
-    let s = if v > 0.0 {
-        1.0
-    } else if v < 0.0 {
-        -1.0
-    } else {
-        0.0
-    };
-    let u = v.abs() / vs;
     match shape {
         StribeckShape::Exponential => {
-            let ud = u.powf(delta);
-            let e = (-ud).exp();
-            if let Some(g) = grad {
-                g[0] = s * (1.0 - e);
-                g[1] = s * e;
-                g[2] = s * (fs - fc) * e * delta * ud / vs;
-                g[3] = if u > 0.0 { -s * (fs - fc) * e * ud * u.ln() } else { 0.0 };
-                g[4] = v;
+            let (f, g) = StribeckLaw::from_array(*th).force_and_gradient(v);
+            if let Some(out) = grad {
+                *out = g;
             }
-            s * (fc + (fs - fc) * e) + fv * v
+            f
         }
         StribeckShape::Mnich => {
+            let [fc, fs, vs, _, fv] = *th;
+            let s = vmt_core::friction::sign(v);
+            let u = v.abs() / vs;
             let eu = (-u).exp();
             let w = std::f64::consts::E * u * eu;
             if let Some(g) = grad {
@@ -289,9 +257,9 @@ fn linear_lstsq(a: &Mat<f64>, b: &[f64]) -> Result<(Vec<f64>, f64), FrictionIdEr
 /// fit returns the coefficients it was made with.
 ///
 /// ```rust
-/// use vmt_estimators::friction_id::{fit_stribeck, stribeck_curve, StribeckCoefficients, StribeckFitOptions, StribeckShape};
+/// use vmt_estimators::friction_id::{fit_stribeck, stribeck_curve, StribeckLaw, StribeckFitOptions, StribeckShape};
 /// // Fc, Fs (N), vs (m/s), δ, Fv (N·s/m)
-/// let truth = StribeckCoefficients { fc: 10.0, fs: 15.0, vs: 5e-3, delta: 1.0, fv: 40.0 };
+/// let truth = StribeckLaw { fc: 10.0, fs: 15.0, vs: 5e-3, delta: 1.0, fv: 40.0 };
 /// let v: Vec<f64> = (1..=100).flat_map(|k| [5e-4 * k as f64, -5e-4 * k as f64]).collect(); // m/s
 /// let f: Vec<f64> = v.iter().map(|&v| stribeck_curve(StribeckShape::Exponential, &truth, v)).collect(); // N
 /// let fit = fit_stribeck(&v, &f, &StribeckFitOptions::default()).unwrap();
@@ -514,7 +482,7 @@ pub fn fit_stribeck(v: &[f64], f: &[f64], opts: &StribeckFitOptions) -> Result<S
         }
     }
     let _ = res;
-    let mut coeffs = StribeckCoefficients::from_array(th);
+    let mut coeffs = StribeckLaw::from_array(th);
     if opts.shape == StribeckShape::Mnich {
         coeffs.delta = 1.0;
     }
@@ -742,7 +710,7 @@ mod tests {
 
     /// A friction sweep: 6 speeds per decade from 1e-5 to 0.3 m/s, both directions, each point the
     /// mean force of one constant-velocity segment with N(0, σ²) noise.
-    fn synthetic_sweep(truth: &StribeckCoefficients, sigma: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    fn synthetic_sweep(truth: &StribeckLaw, sigma: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let noise = Normal::new(0.0, sigma).unwrap();
         let mut v = Vec::new();
@@ -759,8 +727,7 @@ mod tests {
         (v, f)
     }
 
-    const SWEEP_TRUTH: StribeckCoefficients =
-        StribeckCoefficients { fc: 10.0, fs: 15.0, vs: 5e-3, delta: 1.2, fv: 40.0 };
+    const SWEEP_TRUTH: StribeckLaw = StribeckLaw { fc: 10.0, fs: 15.0, vs: 5e-3, delta: 1.2, fv: 40.0 };
 
     #[test]
     fn friction_sweep_recovers_each_stribeck_parameter_within_5_percent() {
@@ -826,7 +793,7 @@ mod tests {
         // Asymmetric axis: negative branch has Fc = 12 N. Fitting each direction separately
         // recovers each branch (noise 0.05 N as above; tolerance 5 % as above).
         let (mut v, mut f) = synthetic_sweep(&SWEEP_TRUTH, 0.05, 11);
-        let neg = StribeckCoefficients { fc: 12.0, ..SWEEP_TRUTH };
+        let neg = StribeckLaw { fc: 12.0, ..SWEEP_TRUTH };
         for (x, y) in v.iter().zip(f.iter_mut()) {
             if *x < 0.0 {
                 *y += stribeck_curve(StribeckShape::Exponential, &neg, *x)
@@ -850,7 +817,7 @@ mod tests {
         // A 25 kg carriage accelerates at 1 m/s² from rest to 0.5 m/s, cruises, decelerates
         // (trapezoid, 2 kHz). Drive force F = m·a + F_friction(v) with the exponential Stribeck
         // truth; encoder velocity noise 1e-4 m/s and load-cell noise 0.5 N (white, per sample).
-        let truth = StribeckCoefficients { fc: 10.0, fs: 20.0, vs: 0.02, delta: 1.0, fv: 60.0 };
+        let truth = StribeckLaw { fc: 10.0, fs: 20.0, vs: 0.02, delta: 1.0, fv: 60.0 };
         let (m, dt, acc, vmax) = (25.0, 5e-4, 1.0, 0.5);
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let nv = Normal::new(0.0, 1e-4).unwrap();
@@ -985,7 +952,7 @@ mod tests {
     #[test]
     fn noise_free_mnich_curve_is_recovered_exactly() {
         // Author's coefficients as truth (hand-checkable: peak of the dry part at v = vs is Fs).
-        let truth = StribeckCoefficients { fc: 10.0, fs: 29.6, vs: 0.0135, delta: 1.0, fv: 67.4 };
+        let truth = StribeckLaw { fc: 10.0, fs: 29.6, vs: 0.0135, delta: 1.0, fv: 67.4 };
         assert!((stribeck_curve(StribeckShape::Mnich, &truth, 0.0135) - (29.6 + 67.4 * 0.0135)).abs() < 1e-12);
         let v: Vec<f64> = (1..200).map(|i| i as f64 * 0.003).collect();
         let f: Vec<f64> = v.iter().map(|&x| stribeck_curve(StribeckShape::Mnich, &truth, x)).collect();

@@ -65,49 +65,18 @@ fn bad<T>(msg: String) -> Result<T, LaserLsError> {
     Err(LaserLsError::InvalidInput(msg))
 }
 
-/// Name of a linear axis, which is also its nominal direction in the machine frame.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum AxisName {
-    /// Along the bed, ê = (1, 0, 0).
-    X,
-    /// ê = (0, 1, 0).
-    Y,
-    /// Vertical, ê = (0, 0, 1).
-    Z,
-}
-
-impl AxisName {
-    /// Index of the direction: X → 0, Y → 1, Z → 2.
-    pub fn index(self) -> usize {
-        match self {
-            AxisName::X => 0,
-            AxisName::Y => 1,
-            AxisName::Z => 2,
-        }
-    }
-    fn letter(self) -> char {
-        ['X', 'Y', 'Z'][self.index()]
-    }
-
-    /// The axis of a letter (`x`, `y`, `z`, either case); None for any other.
-    pub fn from_letter(letter: char) -> Option<AxisName> {
-        match letter.to_ascii_lowercase() {
-            'x' => Some(AxisName::X),
-            'y' => Some(AxisName::Y),
-            'z' => Some(AxisName::Z),
-            _ => None,
-        }
-    }
-}
+/// Name of a linear axis, which is also its nominal direction in the machine frame: vmt's one [`Axis`]
+/// (crate `vmt-core`, which the simulator's chain uses too).
+pub use vmt_core::axis::Axis;
 
 const TRANS: [char; 3] = ['X', 'Y', 'Z'];
 const ROT: [char; 3] = ['A', 'B', 'C'];
 
 /// ISO 230-1 name of error motion `component` (0..3 translations along X, Y, Z; 3..6 rotations
 /// about X, Y, Z) of axis `axis`, e.g. (X, 4) → "EBX".
-pub fn motion_name(axis: AxisName, component: usize) -> String {
+pub fn motion_name(axis: Axis, component: usize) -> String {
     let c = if component < 3 { TRANS[component] } else { ROT[component.min(5) - 3] };
-    format!("E{}{}", c, axis.letter())
+    format!("E{}{}", c, axis.iso_letter())
 }
 
 fn unit(i: usize) -> [f64; 3] {
@@ -228,7 +197,7 @@ impl Basis {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AxisModel {
     /// Axis name = nominal direction.
-    pub name: AxisName,
+    pub name: Axis,
     /// Reference position (m): positioning and angles are reported relative to their value here,
     /// and squareness is defined with the other axes at their reference positions.
     pub reference_position: f64,
@@ -242,7 +211,7 @@ pub struct AxisModel {
 impl AxisModel {
     /// All six error motions as values at `nodes` (piecewise linear), reference position = first
     /// node, profiles reported at the nodes.
-    pub fn with_nodes(name: AxisName, nodes: &[f64]) -> AxisModel {
+    pub fn with_nodes(name: Axis, nodes: &[f64]) -> AxisModel {
         let b = Basis::Nodes(nodes.to_vec());
         AxisModel {
             name,
@@ -310,7 +279,7 @@ pub struct ProfileEstimate {
     /// ISO 230-1 name, e.g. "EBX".
     pub name: String,
     /// Axis it belongs to.
-    pub axis: AxisName,
+    pub axis: Axis,
     /// 0..3: translation along X, Y, Z; 3..6: rotation about X, Y, Z.
     pub component: usize,
     /// Positions (m).
@@ -601,7 +570,7 @@ fn functionals(model: &Model, layout: &Layout) -> (Vec<Functional>, Vec<Vec<f64>
         let group = group_names.len();
         let na = model.axes[a].name;
         let nb = model.axes[b].name;
-        group_names.push(format!("E{}0{}", ROT[c], nb.letter()));
+        group_names.push(format!("E{}0{}", ROT[c], nb.iso_letter()));
         let ea = unit(na.index());
         let eb = unit(nb.index());
         let sigma = dot(cross(unit(c), eb), ea);
@@ -683,9 +652,9 @@ fn svd_padded(a: &Mat<f64>) -> Result<Svd, LaserLsError> {
 /// to the reference position 0 m, is 3 µm at 0.3 m.
 ///
 /// ```rust
-/// use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, Basis, IdOptions, Model, Reading};
+/// use vmt_estimators::laser_ls::{identify, AxisModel, Axis, Basis, IdOptions, Model, Reading};
 /// let nodes = [0.0, 0.1, 0.2, 0.3]; // m
-/// let mut axis = AxisModel::with_nodes(AxisName::X, &nodes);
+/// let mut axis = AxisModel::with_nodes(Axis::X, &nodes);
 /// for m in &mut axis.motions[1..] {
 ///     *m = Basis::Fixed; // EYX … ECX not modelled
 /// }
@@ -903,7 +872,7 @@ pub fn identify(readings: &[Reading], model: &Model, opts: &IdOptions) -> Result
     }
     for &(a, b, _, _) in &layout.squareness {
         let (val, sd) = fvals[fi];
-        let mut pair = [model.axes[a].name.letter(), model.axes[b].name.letter()];
+        let mut pair = [model.axes[a].name.iso_letter(), model.axes[b].name.iso_letter()];
         pair.sort();
         squareness.push(SquarenessEstimate {
             name: group_names[funcs[fi].group].clone(),
@@ -1130,7 +1099,7 @@ fn lever_hint(model: &Model, _layout: &Layout, readings: &[Reading], name: &str)
     let b = name.as_bytes();
     let k = (b[1] - b'A') as usize;
     let axis_letter = b[2] as char;
-    let j = model.axes.iter().position(|a| a.name.letter() == axis_letter)?;
+    let j = model.axes.iter().position(|a| a.name.iso_letter() == axis_letter)?;
     let na = model.axes.len();
     // distinct lever values per distinct beam direction
     let mut per_dir: Vec<([f64; 3], Vec<f64>)> = Vec::new();
@@ -1741,7 +1710,7 @@ mod tests {
 
     #[test]
     fn rejects_bad_readings() {
-        let model = Model { axes: vec![AxisModel::with_nodes(AxisName::X, &[0.0, 0.5, 1.0])], squareness: false };
+        let model = Model { axes: vec![AxisModel::with_nodes(Axis::X, &[0.0, 0.5, 1.0])], squareness: false };
         let r = Reading {
             q: vec![0.5],
             point: [0.0; 3],

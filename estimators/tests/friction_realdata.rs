@@ -14,7 +14,7 @@
 
 use vmt_estimators::friction_id::{
     fit_stribeck, friction_from_motion, lugre_sigma0_from_presliding, stribeck_curve, FilterMode, FrictionIdError,
-    StribeckCoefficients, StribeckFit, StribeckFitOptions, StribeckShape, SweepDirection,
+    StribeckFit, StribeckFitOptions, StribeckLaw, StribeckShape, SweepDirection,
 };
 
 use crate::realdata;
@@ -26,8 +26,8 @@ fn window(v: &[f64], friction: &[f64]) -> (Vec<f64>, Vec<f64>) {
     v[..i_peak].iter().zip(&friction[..i_peak]).filter(|(x, _)| **x > 0.0 && **x <= 0.55).map(|(a, b)| (*a, *b)).unzip()
 }
 
-const AUTHOR: StribeckCoefficients =
-    StribeckCoefficients { fc: 10.0000000001, fs: 29.625596745, vs: 0.0135216268146, delta: 1.0, fv: 67.4406305914 };
+const AUTHOR: StribeckLaw =
+    StribeckLaw { fc: 10.0000000001, fs: 29.625596745, vs: 0.0135216268146, delta: 1.0, fv: 67.4406305914 };
 
 fn fit_mnich(v: &[f64], f: &[f64], dry_lower: f64) -> StribeckFit {
     let mut o =
@@ -36,7 +36,7 @@ fn fit_mnich(v: &[f64], f: &[f64], dry_lower: f64) -> StribeckFit {
     fit_stribeck(v, f, &o).unwrap()
 }
 
-fn rms_of(c: &StribeckCoefficients, shape: StribeckShape, v: &[f64], f: &[f64]) -> f64 {
+fn rms_of(c: &StribeckLaw, shape: StribeckShape, v: &[f64], f: &[f64]) -> f64 {
     (v.iter().zip(f).map(|(&x, &y)| (stribeck_curve(shape, c, x) - y).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
 }
 

@@ -134,7 +134,7 @@ const NAMES_X: [&str; 6] = ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"];
 const COLUMN: [[f64; 3]; 3] = [[0.10, 0.25, 1.2], [0.0, -0.25, 0.3], [-0.10, -0.25, 0.8]];
 
 fn slide_model(pos: &[f64]) -> Model {
-    Model { axes: vec![AxisModel::with_nodes(AxisName::X, pos)], squareness: false }
+    Model { axes: vec![AxisModel::with_nodes(Axis::X, pos)], squareness: false }
 }
 
 /// Errors of the six X profiles against the truth: (RMS of translations, RMS of angles).
@@ -393,9 +393,9 @@ fn plan_spec(n: usize) -> Seed001Plan {
 fn xyz_model(spec: &Seed001Plan) -> Model {
     Model {
         axes: vec![
-            AxisModel::with_nodes(AxisName::X, &spec.positions[0]),
-            AxisModel::with_nodes(AxisName::Y, &spec.positions[1]),
-            AxisModel::with_nodes(AxisName::Z, &spec.positions[2]),
+            AxisModel::with_nodes(Axis::X, &spec.positions[0]),
+            AxisModel::with_nodes(Axis::Y, &spec.positions[1]),
+            AxisModel::with_nodes(Axis::Z, &spec.positions[2]),
         ],
         squareness: true,
     }

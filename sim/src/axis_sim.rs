@@ -7,7 +7,7 @@
 
 use crate::drive::{dead_zone_force, DriveConfig, FeedbackKind};
 use crate::feedback::FeedbackErrors;
-use crate::friction::{lugre_step, stick_slip_step, LugreParams, StepInput, StribeckParams};
+use crate::friction::{lugre_step, stick_slip_step, LugreParams, StepInput, StribeckLaw};
 use crate::geometry::{ErrorMotions, MotionsAt};
 use crate::machine::{AxisModel, Fidelity};
 use crate::motion::{Command, MotionPlan};
@@ -65,7 +65,7 @@ pub enum GuideFriction {
     #[default]
     None,
     /// Static friction curve with true sticking.
-    Stribeck(StribeckParams),
+    Stribeck(StribeckLaw),
     /// Dynamic (bristle) model: pre-sliding and stick-slip.
     LuGre(LugreParams),
 }

@@ -64,6 +64,7 @@ use crate::profile::{Profile, Term};
 use crate::rng::source_rng;
 use crate::truth::{axis_physics, Adjustments};
 use crate::urdf::{Frame, MachineStructure};
+use crate::Axis;
 use rand_distr::{Distribution, Normal};
 use rapier3d_f64::glamx::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
@@ -83,18 +84,18 @@ pub enum ChainError {
     Machine(#[from] MachineError),
 }
 
+/// The axes' letters run together, as messages show a chain (`xyz`).
+fn axis_letters(axes: &[Axis]) -> String {
+    axes.iter().map(|a| a.letter()).collect()
+}
+
 fn invalid<T>(m: String) -> Result<T, ChainError> {
     Err(ChainError::Invalid(m))
 }
 
-/// Unit vector of a machine axis letter ('x' → (1, 0, 0), …).
-pub fn letter_unit(letter: char) -> Option<DVec3> {
-    match letter {
-        'x' => Some(DVec3::X),
-        'y' => Some(DVec3::Y),
-        'z' => Some(DVec3::Z),
-        _ => None,
-    }
+/// Unit vector of a machine axis (X → (1, 0, 0), …).
+fn axis_unit(axis: Axis) -> DVec3 {
+    DVec3::from_array(axis.unit())
 }
 
 /// The three squareness angles of a 3-axis machine (ISO 230-1 location errors), rad:
@@ -128,12 +129,18 @@ impl SquarenessAngles {
     }
 
     /// Angle θ_ab of the pair (a, b) in chain order and the index of its third direction ĉ.
-    pub fn pair(&self, a: char, b: char) -> Option<(f64, usize)> {
+    pub fn pair(&self, a: Axis, b: Axis) -> Option<(f64, usize)> {
         match (a, b) {
-            ('x', 'y') => Some((self.xy, 2)),
-            ('x', 'z') => Some((self.xz, 1)),
-            ('y', 'z') => Some((self.yz, 0)),
-            _ => None,
+            (Axis::X, Axis::Y) => Some((self.xy, 2)),
+            (Axis::X, Axis::Z) => Some((self.xz, 1)),
+            (Axis::Y, Axis::Z) => Some((self.yz, 0)),
+            // Not two different axes in chain order.
+            (Axis::X, Axis::X)
+            | (Axis::Y, Axis::Y)
+            | (Axis::Z, Axis::Z)
+            | (Axis::Y, Axis::X)
+            | (Axis::Z, Axis::X)
+            | (Axis::Z, Axis::Y) => None,
         }
     }
 
@@ -146,8 +153,8 @@ impl SquarenessAngles {
 /// One axis of the chain.
 #[derive(Clone, Debug)]
 pub struct ChainAxis {
-    /// Axis letter ('x', 'y', 'z'): the joint name's last letter.
-    pub letter: char,
+    /// The axis (X, Y or Z): the joint name's last letter.
+    pub axis: Axis,
     /// The single-axis model in its parent body's frame, with the merged subtree mass.
     pub model: AxisModel,
     /// The physics of this axis, error motions in the simulator's axis frame.
@@ -188,20 +195,17 @@ fn negated(p: &Profile) -> Profile {
     Profile { terms }
 }
 
-/// Machine directions of the FORMAT.md components of axis `letter`: [axis, first transverse,
-/// second transverse] (x, y, z order with the axis skipped; `iso230_symbol`).
-fn component_directions(letter: char) -> [DVec3; 3] {
-    match letter {
-        'x' => [DVec3::X, DVec3::Y, DVec3::Z],
-        'y' => [DVec3::Y, DVec3::X, DVec3::Z],
-        _ => [DVec3::Z, DVec3::X, DVec3::Y],
-    }
+/// Machine directions of the FORMAT.md components of `axis`: [axis, first transverse, second
+/// transverse] (x, y, z order with the axis skipped; `iso230_symbol`).
+fn component_directions(axis: Axis) -> [DVec3; 3] {
+    let [t1, t2] = axis.transverse();
+    [axis_unit(axis), axis_unit(t1), axis_unit(t2)]
 }
 
 /// Re-expresses error motions named by machine direction (FORMAT.md) in the simulator's axis frame
 /// (basis b_k = axis_rotation·e_k): component k of the axis frame is ±(the FORMAT component along b_k).
-fn to_axis_frame(m: &ErrorMotions, letter: char, axis_rotation: DQuat) -> ErrorMotions {
-    let dirs = component_directions(letter);
+fn to_axis_frame(m: &ErrorMotions, axis: Axis, axis_rotation: DQuat) -> ErrorMotions {
+    let dirs = component_directions(axis);
     let pick = |k: usize, profiles: [&Profile; 3]| -> Profile {
         let b = axis_rotation * [DVec3::X, DVec3::Y, DVec3::Z][k];
         for (c, d) in dirs.iter().enumerate() {
@@ -263,16 +267,19 @@ impl ChainModel {
             })?;
             joints.push(ax.clone());
         }
-        let letters: Vec<char> =
-            joints.iter().map(|a| a.joint.chars().last().unwrap_or('?').to_ascii_lowercase()).collect();
-        for (j, (ax, &l)) in joints.iter().zip(&letters).enumerate() {
-            let Some(e) = letter_unit(l) else {
+        let mut letters: Vec<Axis> = Vec::new();
+        for ax in &joints {
+            let Some(l) = ax.joint.chars().last().and_then(Axis::from_letter) else {
                 return invalid(format!("joint `{}`: expected a name ending in x, y or z", ax.joint));
             };
+            letters.push(l);
+        }
+        for (j, (ax, &l)) in joints.iter().zip(&letters).enumerate() {
+            let e = axis_unit(l);
             if j > 0 && letters[j - 1] >= l {
                 return invalid(format!(
                     "axes must be given in chain order x, y, z (a subsequence), got {}",
-                    letters.iter().collect::<String>()
+                    axis_letters(&letters)
                 ));
             }
             let parent_ok = if j == 0 { ax.parent == 0 } else { ax.parent == joints[j - 1].child };
@@ -303,14 +310,14 @@ impl ChainModel {
         };
         let squareness = SquarenessAngles::from_effects(set);
         for (name, v, a, b) in [
-            ("squareness_xy", squareness.xy, 'x', 'y'),
-            ("squareness_xz", squareness.xz, 'x', 'z'),
-            ("squareness_yz", squareness.yz, 'y', 'z'),
+            ("squareness_xy", squareness.xy, Axis::X, Axis::Y),
+            ("squareness_xz", squareness.xz, Axis::X, Axis::Z),
+            ("squareness_yz", squareness.yz, Axis::Y, Axis::Z),
         ] {
             if v != 0.0 && !(letters.contains(&a) && letters.contains(&b)) {
                 return invalid(format!(
                     "effect `{name}` needs axes {a} and {b} in the chain, which has {}",
-                    letters.iter().collect::<String>()
+                    axis_letters(&letters)
                 ));
             }
         }
@@ -343,7 +350,7 @@ impl ChainModel {
             let mut model = AxisModel::build_on_parent(&s, cfg)?;
             let letter = letters[j];
             let (truth, adj): (AxisTruth, Adjustments) =
-                axis_physics(set, letter, &model).map_err(ChainError::Invalid)?;
+                axis_physics(set, letter.letter(), &model).map_err(ChainError::Invalid)?;
             adj.apply(&mut model);
             let motions = truth.motions.clone();
             let truth = AxisTruth { motions: to_axis_frame(&motions, letter, model.axis_rotation), ..truth };
@@ -353,14 +360,14 @@ impl ChainModel {
                     sq *= coordinate_rotation(c, theta);
                 }
             }
-            axes.push(ChainAxis { letter, model, truth, motions, squareness: sq });
+            axes.push(ChainAxis { axis: letter, model, truth, motions, squareness: sq });
         }
         Ok(ChainModel { axes, tool, squareness })
     }
 
-    /// Letters of the axes in chain order.
-    pub fn letters(&self) -> Vec<char> {
-        self.axes.iter().map(|a| a.letter).collect()
+    /// The axes in chain order.
+    pub fn axis_names(&self) -> Vec<Axis> {
+        self.axes.iter().map(|a| a.axis).collect()
     }
 
     /// Travel (lower, upper) of each axis, m.
@@ -415,7 +422,7 @@ impl ChainModel {
         let p = self.nominal_point(q, r);
         let mut d = DVec3::ZERO;
         for (j, a) in self.axes.iter().enumerate() {
-            let dirs = component_directions(a.letter);
+            let dirs = component_directions(a.axis);
             let mo = &a.motions;
             let e = dirs[0] * mo.positioning.value(q[j])
                 + dirs[1] * mo.straightness_y.value(q[j])
@@ -423,7 +430,7 @@ impl ChainModel {
             let eps = dirs[0] * mo.roll.value(q[j]) + dirs[1] * mo.pitch.value(q[j]) + dirs[2] * mo.yaw.value(q[j]);
             d += e + eps.cross(p - frames[j].translation);
             for b in self.axes.iter().enumerate().skip(j + 1) {
-                if let Some((theta, c)) = self.squareness.pair(a.letter, b.1.letter) {
+                if let Some((theta, c)) = self.squareness.pair(a.axis, b.1.axis) {
                     let cv = [DVec3::X, DVec3::Y, DVec3::Z][c];
                     d += cv.cross(b.1.model.axis) * (theta * q[b.0]);
                 }
@@ -441,14 +448,9 @@ impl ChainModel {
     /// angular errors' lever-arm terms included, and no angle at the reference positions).
     pub fn effective_squareness(&self, positions: &[Vec<f64>]) -> SquarenessAngles {
         let q0: Vec<f64> = positions.iter().map(|p| p.first().copied().unwrap_or(0.0)).collect();
-        let idx = |l: char| self.axes.iter().position(|a| a.letter == l);
-        let comp = |l: char| match l {
-            'x' => 0,
-            'y' => 1,
-            _ => 2,
-        };
+        let idx = |l: Axis| self.axes.iter().position(|a| a.axis == l);
         // slope of δ_a along axis b
-        let slope = |a: char, b: char| -> f64 {
+        let slope = |a: Axis, b: Axis| -> f64 {
             let Some(j) = idx(b) else { return 0.0 };
             let xs = &positions[j];
             let ys: Vec<f64> = xs
@@ -456,16 +458,17 @@ impl ChainModel {
                 .map(|&x| {
                     let mut q = q0.clone();
                     q[j] = x;
-                    self.first_order_deviation(&q, DVec3::ZERO).to_array()[comp(a)]
+                    self.first_order_deviation(&q, DVec3::ZERO).to_array()[a.index()]
                 })
                 .collect();
             ls_slope(xs, &ys)
         };
-        let has = |a: char, b: char| idx(a).is_some() && idx(b).is_some();
+        let has = |a: Axis, b: Axis| idx(a).is_some() && idx(b).is_some();
+        let (x, y, z) = (Axis::X, Axis::Y, Axis::Z);
         SquarenessAngles {
-            xy: if has('x', 'y') { -(slope('y', 'x') + slope('x', 'y')) } else { 0.0 },
-            xz: if has('x', 'z') { slope('z', 'x') + slope('x', 'z') } else { 0.0 },
-            yz: if has('y', 'z') { -(slope('z', 'y') + slope('y', 'z')) } else { 0.0 },
+            xy: if has(x, y) { -(slope(y, x) + slope(x, y)) } else { 0.0 },
+            xz: if has(x, z) { slope(z, x) + slope(x, z) } else { 0.0 },
+            yz: if has(y, z) { -(slope(z, y) + slope(y, z)) } else { 0.0 },
         }
     }
 }
@@ -675,6 +678,12 @@ impl ChainProcedureSpec {
 }
 
 impl LaserLinesSpec {
+    /// The name of the run that records `line` of this set: `{procedure}_{line}` (the one place this
+    /// format is written; the session plan, the truth view and the chain-line lookup use it).
+    pub fn run_name(&self, line: &LaserLineSpec) -> String {
+        format!("{}_{}", self.name, line.name)
+    }
+
     /// Path acceleration, m/s².
     pub fn path_accel(&self, chain: &ChainModel) -> f64 {
         self.accel.unwrap_or_else(|| chain.axes.iter().map(|a| a.model.max_accel).fold(f64::INFINITY, f64::min))
@@ -713,7 +722,7 @@ impl LaserLinesSpec {
             return Err(("lines".into(), "expected at least one line".into()));
         }
         let travels = chain.travels();
-        let letters = chain.letters();
+        let letters = chain.axis_names();
         for (i, l) in self.lines.iter().enumerate() {
             let at = |k: &str| format!("lines[{i}] ({}).{k}", l.name);
             if l.name.is_empty() || l.name.contains(['[', ']', ',', '"']) || l.name == "t" || l.name.ends_with("_cmd") {
@@ -732,7 +741,7 @@ impl LaserLinesSpec {
                         format!(
                             "expected {} joint positions (axes {}), got {}",
                             travels.len(),
-                            letters.iter().collect::<String>(),
+                            axis_letters(&letters),
                             q.len()
                         ),
                     ));
@@ -791,7 +800,7 @@ pub struct LineTruth {
 /// and the visits (target = distance along the line, m) with their sample windows.
 #[derive(Clone, Debug)]
 pub struct LinePlan {
-    /// Run name `{procedure}_{line}`.
+    /// Run name `{procedure}_{line}` ([`LaserLinesSpec::run_name`]).
     pub name: String,
     /// The line as the procedure declares it.
     pub line: LaserLineSpec,
@@ -832,13 +841,7 @@ pub fn plan_laser_lines(chain: &ChainModel, spec: &LaserLinesSpec) -> Vec<LinePl
                 let s = len * k as f64 / (line.n - 1) as f64;
                 visits.push(Visit { target: s, run: 1, direction: 1, first, last: times.len() - 1 });
             }
-            LinePlan {
-                name: format!("{}_{}", spec.name, line.name),
-                line: line.clone(),
-                visits,
-                plan,
-                record_times: times,
-            }
+            LinePlan { name: spec.run_name(line), line: line.clone(), visits, plan, record_times: times }
         })
         .collect()
 }
@@ -902,7 +905,7 @@ pub fn read_line(chain: &ChainModel, truth: &LineTruth, sigma: f64, seed: u64) -
     let mut columns = Vec::new();
     for (j, a) in chain.axes.iter().enumerate() {
         columns.push((
-            format!("{}_cmd", a.letter),
+            format!("{}_cmd", a.axis),
             (0..truth.plan.visits.len()).map(|k| truth.plan.line.target(k)[j]).collect(),
         ));
     }
@@ -924,15 +927,16 @@ pub fn read_line(chain: &ChainModel, truth: &LineTruth, sigma: f64, seed: u64) -
     }
 }
 
-/// The axis a line mostly moves (largest |Δq|; first on ties), for the manifest's `axis`.
-pub fn dominant_axis(chain: &ChainModel, line: &LaserLineSpec) -> char {
+/// The axis a line mostly moves (largest |Δq|; first on ties), for the manifest's `axis`; `None` for a
+/// chain without axes.
+pub fn dominant_axis(chain: &ChainModel, line: &LaserLineSpec) -> Option<Axis> {
     let mut best = (0usize, -1.0);
     for (j, (a, b)) in line.from.iter().zip(&line.to).enumerate() {
         if (b - a).abs() > best.1 + 1e-12 {
             best = (j, (b - a).abs());
         }
     }
-    chain.axes.get(best.0).map_or('x', |a| a.letter)
+    chain.axes.get(best.0).map(|a| a.axis)
 }
 
 #[cfg(test)]
@@ -944,7 +948,7 @@ mod tests {
         // Hand-worked: Y tilted by EC0Y = 1e-3 about Z moves along (−sin θ, cos θ, 0): at q_y = 0.5 m
         // the point shifts by −θ·q_y = −0.5 mm in x (first order; sin θ − θ ≈ 1.7e-10 relative).
         let s = SquarenessAngles { xy: 1e-3, xz: 0.0, yz: 0.0 };
-        let (theta, c) = s.pair('x', 'y').unwrap();
+        let (theta, c) = s.pair(Axis::X, Axis::Y).unwrap();
         let moved = coordinate_rotation(c, theta) * (DVec3::Y * 0.5);
         assert!((moved.x - (-0.5e-3)).abs() < 1e-9, "{moved:?}");
         // Z tilted by EB0Z about Y moves +x, by EA0Z about X moves −y.
@@ -977,7 +981,7 @@ mod tests {
             ..Default::default()
         };
         let rot = DQuat::from_rotation_arc(DVec3::X, DVec3::Y);
-        let f = to_axis_frame(&m, 'y', rot);
+        let f = to_axis_frame(&m, Axis::Y, rot);
         let world_t = rot * f.translation(0.0);
         let world_r = rot * f.rotation(0.0);
         assert!((world_t - DVec3::new(1e-6, 0.0, 0.0)).length() < 1e-18);
@@ -990,7 +994,7 @@ mod tests {
             ..Default::default()
         };
         let rot = DQuat::from_rotation_arc(DVec3::X, DVec3::Z);
-        let f = to_axis_frame(&m, 'z', rot);
+        let f = to_axis_frame(&m, Axis::Z, rot);
         assert!((rot * f.translation(0.0) - DVec3::new(1e-6, 3e-6, 0.0)).length() < 1e-18);
         assert!((rot * f.rotation(0.0) - DVec3::new(0.0, 5e-6, 0.0)).length() < 1e-18);
     }

@@ -6,6 +6,7 @@
 //! problem (`effects.backlash.value: expected a length in metres ≥ 0, got -4e-6`).
 //! No file I/O here: the root package reads and writes the `vmt-model/1` TOML.
 
+use crate::friction::StribeckLaw;
 use crate::profile::{Profile, Term};
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -126,27 +127,16 @@ impl EffectName {
     /// and second transverse directions in the order x, y, z with the axis itself skipped, and
     /// `pitch`/`yaw` the rotations about those same two directions; `roll` is about the axis.
     /// So for Y: EYY, EXY, EZY, EBY, EAY, ECY; for Z: EZZ, EXZ, EYZ, ECZ, EAZ, EBZ.
-    /// `None` for effects that are not error motions or an axis other than x, y, z.
-    pub fn iso230_symbol(self, axis: char) -> Option<String> {
-        let a = axis.to_ascii_uppercase();
-        let (t1, t2) = match a {
-            'X' => ('Y', 'Z'),
-            'Y' => ('X', 'Z'),
-            'Z' => ('X', 'Y'),
-            _ => return None,
-        };
-        let rot = |d: char| match d {
-            'X' => 'A',
-            'Y' => 'B',
-            _ => 'C',
-        };
-        let component: char = match self {
-            EffectName::Positioning => a,
-            EffectName::StraightnessY => t1,
-            EffectName::StraightnessZ => t2,
-            EffectName::Roll => rot(a),
-            EffectName::Pitch => rot(t1),
-            EffectName::Yaw => rot(t2),
+    /// `None` for effects that are not error motions.
+    pub fn iso230_symbol(self, a: crate::Axis) -> Option<String> {
+        let [t1, t2] = a.transverse();
+        let component = match self {
+            EffectName::Positioning => a.iso_letter(),
+            EffectName::StraightnessY => t1.iso_letter(),
+            EffectName::StraightnessZ => t2.iso_letter(),
+            EffectName::Roll => a.rotation_letter(),
+            EffectName::Pitch => t1.rotation_letter(),
+            EffectName::Yaw => t2.rotation_letter(),
             EffectName::SquarenessXy
             | EffectName::SquarenessXz
             | EffectName::SquarenessYz
@@ -165,7 +155,7 @@ impl EffectName {
             | EffectName::GravityTilt
             | EffectName::AccelBiasDrift => return None,
         };
-        Some(format!("E{component}{a}"))
+        Some(format!("E{component}{}", a.iso_letter()))
     }
 }
 
@@ -1137,34 +1127,15 @@ fn validate_profile(p: &Profile, quantity: &str, unit: ParamUnit, bad: &mut dyn 
 }
 
 /// The friction law of one axis, assembled from its `coulomb`, `viscous`, `stribeck` and `lugre`
-/// effects: F(v) = sgn(v)·[Fc + (Fs − Fc)·exp(−|v/vs|^δ)] + Fv·v in steady sliding (DESIGN.md
-/// §4), plus the LuGre bristle parameters when a `lugre` effect is present.
+/// effects: the steady-sliding [`StribeckLaw`] F(v) = sgn(v)·[Fc + (Fs − Fc)·exp(−|v/vs|^δ)] + Fv·v
+/// (DESIGN.md §4), plus the LuGre bristle parameters when a `lugre` effect is present.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FrictionLaw {
-    /// Coulomb level Fc, N.
-    pub fc: f64,
-    /// Static friction Fs, N (= Fc without a Stribeck or LuGre effect).
-    pub fs: f64,
-    /// Stribeck velocity vs, m/s.
-    pub vs: f64,
-    /// Shape exponent δ.
-    pub shape: f64,
-    /// Viscous coefficient Fv, N·s/m (`viscous.fv` plus `lugre.sigma2`).
-    pub fv: f64,
+    /// The steady-sliding curve: Fs = Fc without a Stribeck or LuGre effect; Fv = `viscous.fv` plus
+    /// `lugre.sigma2`; δ is the effects' `shape`.
+    pub steady: StribeckLaw,
     /// LuGre [σ0 (N/m), σ1 (N·s/m)] when a `lugre` effect is present.
     pub lugre: Option<[f64; 2]>,
-}
-
-impl FrictionLaw {
-    /// Steady-sliding friction force at velocity v (m/s), N:
-    /// sgn(v)·[Fc + (Fs − Fc)·exp(−|v/vs|^δ)] + Fv·v (0 at v = 0: sticking is the simulator's).
-    pub fn steady_force(&self, v: f64) -> f64 {
-        if v == 0.0 {
-            return 0.0;
-        }
-        let g = crate::friction::stribeck_level(self.fc, self.fs, self.vs, self.shape, v);
-        v.signum() * g + self.fv * v
-    }
 }
 
 /// The effects switched on for a machine (the truth of a scenario, or a model's effects).
@@ -1254,25 +1225,19 @@ impl EffectSet {
             Some(EffectParams::Coulomb(c)) => c.fc,
             _ => 0.0,
         };
-        let mut law = FrictionLaw { fc: fc0, fs: fc0, vs: 1.0, shape: 2.0, fv: 0.0, lugre: None };
+        let mut law = StribeckLaw::coulomb(fc0);
+        let mut bristles = None;
         if let Some(EffectParams::Viscous(v)) = viscous.map(|e| &e.params) {
             law.fv = v.fv;
         }
         if let Some(EffectParams::Stribeck(s)) = stribeck.map(|e| &e.params) {
-            law.fc = s.fc.unwrap_or(fc0);
-            law.fs = s.fs;
-            law.vs = s.vs;
-            law.shape = s.shape;
+            law = StribeckLaw { fc: s.fc.unwrap_or(fc0), fs: s.fs, vs: s.vs, delta: s.shape, fv: law.fv };
         }
         if let Some(EffectParams::Lugre(l)) = lugre.map(|e| &e.params) {
-            law.fc = l.fc;
-            law.fs = l.fs;
-            law.vs = l.vs;
-            law.shape = l.shape;
-            law.fv += l.sigma2;
-            law.lugre = Some([l.sigma0, l.sigma1]);
+            law = StribeckLaw { fc: l.fc, fs: l.fs, vs: l.vs, delta: l.shape, fv: law.fv + l.sigma2 };
+            bristles = Some([l.sigma0, l.sigma1]);
         }
-        Some(law)
+        Some(FrictionLaw { steady: law, lugre: bristles })
     }
 }
 
@@ -1318,9 +1283,10 @@ mod tests {
 
     #[test]
     fn iso_symbols_of_the_x_axis_are_those_of_iso_230_1() {
-        let s: Vec<String> = EffectName::ERROR_MOTIONS.iter().map(|n| n.iso230_symbol('x').unwrap()).collect();
+        let s: Vec<String> =
+            EffectName::ERROR_MOTIONS.iter().map(|n| n.iso230_symbol(crate::Axis::X).unwrap()).collect();
         assert_eq!(s, ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"]);
-        assert_eq!(EffectName::Backlash.iso230_symbol('x'), None);
+        assert_eq!(EffectName::Backlash.iso230_symbol(crate::Axis::X), None);
     }
 
     #[test]
@@ -1403,7 +1369,7 @@ mod tests {
         });
         set.insert(Effect { name: EffectName::Viscous, axis: 'x', params: EffectParams::Viscous(Viscous { fv: 0.4 }) });
         let law = set.friction('x').unwrap();
-        let f = law.steady_force(-1e-3);
+        let f = law.steady.force(-1e-3);
         let want = -(1.0 + 0.5 / std::f64::consts::E) - 0.4e-3;
         assert!((f - want).abs() < 1e-15, "{f} vs {want}");
         assert!(set.friction('y').is_none());

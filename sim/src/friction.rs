@@ -1,10 +1,10 @@
 //! Friction elements for the simulator's explicit fixed-step integrator (DESIGN.md §4).
 //!
 //! Models, all forces in N, velocities in m/s, displacements in m:
-//! - Coulomb: F = Fc·sgn(v);
-//! - viscous: F = Fv·v;
 //! - Stribeck (Armstrong-Hélouvry 1991 form with shape exponent δ):
-//!   F = sgn(v)·[Fc + (Fs − Fc)·exp(−|v/vs|^δ)] + Fv·v;
+//!   F = sgn(v)·[Fc + (Fs − Fc)·exp(−|v/vs|^δ)] + Fv·v — the one [`StribeckLaw`] of vmt, defined in the
+//!   crate `vmt-core` that the estimators fit too; Coulomb (F = Fc·sgn(v), [`StribeckLaw::coulomb`])
+//!   and viscous (F = Fv·v, Fc = Fs = 0) friction are its special cases;
 //! - LuGre (Canudas de Wit, Olsson, Åström, Lischinsky 1995, "A new model for control of systems
 //!   with friction", IEEE TAC 40(3):419–425):
 //!   dz/dt = v − σ0·|v|/g(v)·z,  g(v) = Fc + (Fs − Fc)·exp(−|v/vs|^δ),
@@ -21,69 +21,11 @@
 //! step is computed from the state at the start of the step.
 
 use serde::{Deserialize, Serialize};
-
-/// Errors of the friction elements: bad parameters or step inputs.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum FrictionError {
-    /// A parameter is NaN, infinite or out of its physical range.
-    #[error("friction parameter `{name}` must be {expected}, got {value}")]
-    BadParameter {
-        /// Parameter name as in the TOML (fc, fs, vs, delta, fv, sigma0, ...).
-        name: &'static str,
-        /// What is expected, in words.
-        expected: &'static str,
-        /// The offending value.
-        value: f64,
-    },
-}
-
-fn check(name: &'static str, value: f64, ok: bool, expected: &'static str) -> Result<(), FrictionError> {
-    if value.is_finite() && ok {
-        Ok(())
-    } else {
-        Err(FrictionError::BadParameter { name, expected, value })
-    }
-}
+use vmt_core::friction::check;
+pub use vmt_core::friction::{stribeck_weight, FrictionError, StribeckLaw};
 
 fn default_delta() -> f64 {
     2.0
-}
-
-/// Coulomb friction: F = Fc·sgn(v), Fc in N (≥ 0).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CoulombParams {
-    /// Coulomb (dry, kinetic) friction level Fc, N (≥ 0).
-    pub fc: f64,
-}
-
-/// Viscous friction: F = Fv·v, Fv in N·s/m (≥ 0).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ViscousParams {
-    /// Viscous coefficient Fv, N·s/m (≥ 0).
-    pub fv: f64,
-}
-
-/// Stribeck friction: F = sgn(v)·[Fc + (Fs − Fc)·exp(−|v/vs|^δ)] + Fv·v (DESIGN.md §4).
-///
-/// Coulomb friction is the special case Fs = Fc, Fv = 0 (vs and δ then do not matter); viscous
-/// friction alone is Fc = Fs = 0.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct StribeckParams {
-    /// Coulomb level Fc, N (≥ 0).
-    pub fc: f64,
-    /// Static (break-away) level Fs, N (≥ Fc).
-    pub fs: f64,
-    /// Stribeck velocity vs, m/s (> 0).
-    pub vs: f64,
-    /// Shape exponent δ (> 0, typically 0.5…2; the LuGre paper uses 2). Default 2.
-    #[serde(default = "default_delta")]
-    pub delta: f64,
-    /// Viscous coefficient Fv, N·s/m (≥ 0).
-    #[serde(default)]
-    pub fv: f64,
 }
 
 /// LuGre friction (Canudas de Wit et al. 1995):
@@ -108,40 +50,6 @@ pub struct LugreParams {
     pub delta: f64,
 }
 
-impl CoulombParams {
-    /// Checks Fc is finite and ≥ 0.
-    pub fn validate(&self) -> Result<(), FrictionError> {
-        check("fc", self.fc, self.fc >= 0.0, "finite and >= 0 N")
-    }
-    /// The equivalent Stribeck parameters (Fs = Fc, Fv = 0), so Coulomb friction can use the
-    /// sticking element [`stick_slip_step`].
-    pub fn as_stribeck(&self) -> StribeckParams {
-        StribeckParams { fc: self.fc, fs: self.fc, vs: 1.0, delta: 2.0, fv: 0.0 }
-    }
-}
-
-impl ViscousParams {
-    /// Checks Fv is finite and ≥ 0.
-    pub fn validate(&self) -> Result<(), FrictionError> {
-        check("fv", self.fv, self.fv >= 0.0, "finite and >= 0 N*s/m")
-    }
-    /// Viscous force F = Fv·v, N (opposing motion when applied with a minus sign).
-    pub fn force(&self, v: f64) -> f64 {
-        self.fv * v
-    }
-}
-
-impl StribeckParams {
-    /// Checks 0 ≤ Fc ≤ Fs, vs > 0, δ > 0, Fv ≥ 0, all finite.
-    pub fn validate(&self) -> Result<(), FrictionError> {
-        check("fc", self.fc, self.fc >= 0.0, "finite and >= 0 N")?;
-        check("fs", self.fs, self.fs >= self.fc, "finite and >= fc")?;
-        check("vs", self.vs, self.vs > 0.0, "finite and > 0 m/s")?;
-        check("delta", self.delta, self.delta > 0.0, "finite and > 0")?;
-        check("fv", self.fv, self.fv >= 0.0, "finite and >= 0 N*s/m")
-    }
-}
-
 impl LugreParams {
     /// Checks σ0 > 0, σ1 ≥ 0, σ2 ≥ 0, 0 < Fc ≤ Fs, vs > 0, δ > 0, all finite.
     pub fn validate(&self) -> Result<(), FrictionError> {
@@ -161,32 +69,19 @@ impl LugreParams {
     }
 
     /// The Stribeck curve (N) that is this model's steady state, with Fv = σ2.
-    pub fn steady_state(&self) -> StribeckParams {
-        StribeckParams { fc: self.fc, fs: self.fs, vs: self.vs, delta: self.delta, fv: self.sigma2 }
+    pub fn steady_state(&self) -> StribeckLaw {
+        StribeckLaw { fc: self.fc, fs: self.fs, vs: self.vs, delta: self.delta, fv: self.sigma2 }
     }
-}
-
-/// Stribeck level g(v) = Fc + (Fs − Fc)·exp(−|v/vs|^δ), N: the magnitude of the Coulomb+Stribeck
-/// part at velocity v (m/s). Equals Fs at v = 0 and tends to Fc for |v| ≫ vs.
-pub fn stribeck_level(fc: f64, fs: f64, vs: f64, delta: f64, v: f64) -> f64 {
-    fc + (fs - fc) * (-(v / vs).abs().powf(delta)).exp()
 }
 
 /// Steady-state friction at constant velocity v (m/s), the Stribeck curve (DESIGN.md §4):
 /// F(v) = sgn(v)·[Fc + (Fs − Fc)·exp(−|v/vs|^δ)] + Fv·v, N, opposing the motion (F has the sign
 /// of v). At v = 0 exactly the static force is undetermined in [−Fs, Fs]; this returns 0.
 /// This is what a friction sweep (constant velocities, both directions) measures.
-pub fn stribeck_force(p: &StribeckParams, v: f64) -> Result<f64, FrictionError> {
+pub fn stribeck_force(p: &StribeckLaw, v: f64) -> Result<f64, FrictionError> {
     p.validate()?;
     check("v", v, true, "a finite velocity in m/s")?;
-    Ok(stribeck_force_unchecked(p, v))
-}
-
-fn stribeck_force_unchecked(p: &StribeckParams, v: f64) -> f64 {
-    if v == 0.0 {
-        return 0.0;
-    }
-    v.signum() * stribeck_level(p.fc, p.fs, p.vs, p.delta, v) + p.fv * v
+    Ok(p.force(v))
 }
 
 /// Steady-state friction of the LuGre model at constant velocity v (m/s), N:
@@ -194,7 +89,7 @@ fn stribeck_force_unchecked(p: &StribeckParams, v: f64) -> f64 {
 pub fn lugre_steady_state_force(p: &LugreParams, v: f64) -> Result<f64, FrictionError> {
     p.validate()?;
     check("v", v, true, "a finite velocity in m/s")?;
-    Ok(stribeck_force_unchecked(&p.steady_state(), v))
+    Ok(p.steady_state().force(v))
 }
 
 /// Inputs of one integrator step for a friction element with sticking.
@@ -245,8 +140,8 @@ impl StepInput {
 ///    F = clamp(F_stick, −Fs, +Fs) (so a reversal only happens if |F_stick| > Fs, i.e. the other
 ///    forces exceed the static level). Otherwise F = F_slide.
 ///
-/// Coulomb friction uses this with Fs = Fc ([`CoulombParams::as_stribeck`]).
-pub fn stick_slip_step(p: &StribeckParams, input: &StepInput) -> Result<f64, FrictionError> {
+/// Coulomb friction uses this with Fs = Fc ([`StribeckLaw::coulomb`]).
+pub fn stick_slip_step(p: &StribeckLaw, input: &StepInput) -> Result<f64, FrictionError> {
     p.validate()?;
     input.validate()?;
     let StepInput { v, f_ext, mass, dt, stick_band } = *input;
@@ -256,7 +151,7 @@ pub fn stick_slip_step(p: &StribeckParams, input: &StepInput) -> Result<f64, Fri
     if v.abs() <= stick_band {
         return Ok(stuck);
     }
-    let f_slide = -stribeck_force_unchecked(p, v);
+    let f_slide = -p.force(v);
     let v_next = v + dt * (f_ext + f_slide) / mass;
     if v_next * v <= 0.0 {
         Ok(stuck)
@@ -295,7 +190,7 @@ pub fn lugre_step(p: &LugreParams, z: f64, v: f64, dt: f64) -> Result<LugreStep,
     check("z", z, true, "a finite bristle deflection in m")?;
     check("v", v, true, "a finite velocity in m/s")?;
     check("dt", dt, dt > 0.0, "finite and > 0 s")?;
-    let g = stribeck_level(p.fc, p.fs, p.vs, p.delta, v);
+    let g = p.steady_state().level(v);
     let a = p.sigma0 * v.abs() / g;
     let x = a * dt;
     // φ(x) = (1 − e^{−x})/x, accurate for small x.
@@ -366,8 +261,8 @@ pub fn lugre_spring_pull(
 mod tests {
     use super::*;
 
-    fn p() -> StribeckParams {
-        StribeckParams { fc: 10.0, fs: 15.0, vs: 0.01, delta: 2.0, fv: 50.0 }
+    fn p() -> StribeckLaw {
+        StribeckLaw { fc: 10.0, fs: 15.0, vs: 0.01, delta: 2.0, fv: 50.0 }
     }
 
     #[test]
@@ -423,7 +318,7 @@ mod tests {
         let s = lugre_step(&q, z0, v, dt).unwrap();
         let n = 100_000;
         let h = dt / n as f64;
-        let g = stribeck_level(q.fc, q.fs, q.vs, q.delta, v);
+        let g = q.steady_state().level(v);
         let (mut z, mut zsum) = (z0, 0.0);
         for _ in 0..n {
             zsum += z + 0.5 * h * (v - q.sigma0 * v.abs() / g * z);

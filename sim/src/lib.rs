@@ -28,3 +28,6 @@ pub mod sensors;
 pub mod servo;
 pub mod truth;
 pub mod urdf;
+
+/// A machine axis X, Y or Z (crate `vmt-core`, shared with the estimators).
+pub use vmt_core::axis::Axis;

@@ -9,7 +9,7 @@
 
 use crate::axis_sim::{AxisTruth, GuideFriction};
 use crate::drive::{BallScrewConfig, DriveConfig, FeedbackKind};
-use crate::friction::StribeckParams;
+use crate::friction::StribeckLaw;
 use crate::machine::AxisConfig;
 use crate::sensors::{SensorKind, SensorSpec};
 use crate::servo::ServoConfig;
@@ -75,7 +75,7 @@ pub fn crawl_seed002() -> CrawlPreset {
         damping_ratio: 0.1,
         feedback: FeedbackKind::Linear,
     });
-    let friction = GuideFriction::Stribeck(StribeckParams { fc: 150.0, fs: 280.0, vs: 3.5e-4, delta: 1.5, fv: 1000.0 });
+    let friction = GuideFriction::Stribeck(StribeckLaw { fc: 150.0, fs: 280.0, vs: 3.5e-4, delta: 1.5, fv: 1000.0 });
     let mut scale = SensorSpec::new("scale", SensorKind::EncoderLinear);
     scale.resolution = SEED002_SCALE_RESOLUTION;
     CrawlPreset {

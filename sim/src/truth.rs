@@ -6,8 +6,8 @@
 //! parameter: they follow from the geometry.
 
 use crate::axis_sim::{AxisTruth, GuideFriction, StructuralMode};
-use crate::effects::{EffectName, EffectParams, EffectSet};
-use crate::friction::{LugreParams, StribeckParams};
+use crate::effects::{EffectName, EffectParams, EffectSet, FrictionLaw};
+use crate::friction::LugreParams;
 use crate::geometry::ErrorMotions;
 use crate::machine::AxisModel;
 use crate::profile::{Harmonic, Profile, Term};
@@ -98,8 +98,8 @@ pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(A
         None => GuideFriction::None,
         // The Stribeck curve falls from Fs at rest to Fc in sliding: Fs < Fc is no friction law (refused,
         // not raised to Fc behind the user's back).
-        Some(law) if law.fs < law.fc => {
-            let from = if law.lugre.is_some() { "lugre" } else { "stribeck (fc from coulomb unless given)" };
+        Some(FrictionLaw { steady: law, lugre }) if law.fs < law.fc => {
+            let from = if lugre.is_some() { "lugre" } else { "stribeck (fc from coulomb unless given)" };
             return Err(format!(
                 "friction on axis {axis} ({from}): static friction fs = {} N is below the Coulomb level fc = {} N; \
                  expected fs ≥ fc",
@@ -107,7 +107,7 @@ pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(A
                 crate::effects::fmt_num(law.fc)
             ));
         }
-        Some(law) => match law.lugre {
+        Some(FrictionLaw { steady: law, lugre }) => match lugre {
             Some([sigma0, sigma1]) => GuideFriction::LuGre(LugreParams {
                 sigma0,
                 sigma1,
@@ -115,15 +115,9 @@ pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(A
                 fc: law.fc,
                 fs: law.fs,
                 vs: law.vs,
-                delta: law.shape,
+                delta: law.delta,
             }),
-            None => GuideFriction::Stribeck(StribeckParams {
-                fc: law.fc,
-                fs: law.fs,
-                vs: law.vs,
-                delta: law.shape,
-                fv: law.fv,
-            }),
+            None => GuideFriction::Stribeck(law),
         },
     };
     Ok((truth, adj))

@@ -3,7 +3,7 @@
 use crate::util;
 use vmt_sim::axis_sim::{AxisTruth, GuideFriction};
 use vmt_sim::drive::{BallScrewConfig, DriveConfig, FeedbackKind};
-use vmt_sim::friction::StribeckParams;
+use vmt_sim::friction::StribeckLaw;
 use vmt_sim::machine::AxisModel;
 use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureSpec, RunData};
 use vmt_sim::sensors::{SensorKind, SensorSpec};
@@ -17,7 +17,7 @@ fn laser() -> SensorSpec {
 }
 
 fn guide_friction() -> GuideFriction {
-    GuideFriction::Stribeck(StribeckParams { fc: 150.0, fs: 220.0, vs: 0.002, delta: 1.0, fv: 800.0 })
+    GuideFriction::Stribeck(StribeckLaw { fc: 150.0, fs: 220.0, vs: 0.002, delta: 1.0, fv: 800.0 })
 }
 
 /// Mean reversal value B̄ = mean over targets of (mean↑ − mean↓) of a laser positioning run, m.

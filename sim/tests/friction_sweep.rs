@@ -13,12 +13,12 @@
 
 use crate::util;
 use vmt_sim::axis_sim::{AxisTruth, GuideFriction};
-use vmt_sim::friction::{stribeck_force, StribeckParams};
+use vmt_sim::friction::{stribeck_force, StribeckLaw};
 use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureKind, ProcedureSpec, RunData};
 use vmt_sim::sensors::{SensorKind, SensorSpec};
 
-fn stribeck(delta: f64) -> StribeckParams {
-    StribeckParams { fc: 150.0, fs: 250.0, vs: 0.002, delta, fv: 1000.0 }
+fn stribeck(delta: f64) -> StribeckLaw {
+    StribeckLaw { fc: 150.0, fs: 250.0, vs: 0.002, delta, fv: 1000.0 }
 }
 
 #[test]

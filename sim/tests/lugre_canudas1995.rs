@@ -10,7 +10,7 @@
 /// Wrapped in a module named `friction_…` so `cargo test -p vmt-sim friction` selects these tests.
 mod friction_lugre_canudas1995 {
     use vmt_sim::friction::{
-        lugre_spring_pull, stick_slip_step, stribeck_force, LugreParams, SpringPullSample, StepInput, StribeckParams,
+        lugre_spring_pull, stick_slip_step, stribeck_force, LugreParams, SpringPullSample, StepInput, StribeckLaw,
     };
 
     /// Velocity above which the mass counts as slipping, m/s. The paper's vs = 1 mm/s separates the
@@ -131,7 +131,7 @@ mod friction_lugre_canudas1995 {
 
     /// Integrates a 1-DOF body (semi-implicit Euler) under a constant force with the sticking
     /// Stribeck element; returns (final position, final velocity).
-    fn push(p: &StribeckParams, force: f64, mass: f64, dt: f64, duration: f64) -> (f64, f64) {
+    fn push(p: &StribeckLaw, force: f64, mass: f64, dt: f64, duration: f64) -> (f64, f64) {
         let (mut x, mut v) = (0.0f64, 0.0f64);
         let n = (duration / dt).round() as usize;
         for _ in 0..n {
@@ -144,7 +144,7 @@ mod friction_lugre_canudas1995 {
 
     #[test]
     fn stribeck_element_sticks_truly_below_fs_and_accelerates_above() {
-        let p = StribeckParams { fc: 1.0, fs: 1.5, vs: 1e-3, delta: 2.0, fv: 0.4 };
+        let p = StribeckLaw { fc: 1.0, fs: 1.5, vs: 1e-3, delta: 2.0, fv: 0.4 };
         // 1 kg, 10 s at the default step 1e-4 s.
         for force in [1.0, 1.49, -1.499_999, 0.0] {
             let (x, v) = push(&p, force, 1.0, 1e-4, 10.0);
@@ -170,7 +170,7 @@ mod friction_lugre_canudas1995 {
     fn stick_slip_element_stops_a_coasting_body_without_reversal() {
         // A body coasting at 0.05 m/s with no other force stops in finite time and stays at exactly
         // zero (Coulomb deceleration Fc/m = 1 m/s² → stop after ≈0.05 s), never reversing.
-        let p = StribeckParams { fc: 1.0, fs: 1.5, vs: 1e-3, delta: 2.0, fv: 0.0 };
+        let p = StribeckLaw { fc: 1.0, fs: 1.5, vs: 1e-3, delta: 2.0, fv: 0.0 };
         let (dt, mass) = (1e-4, 1.0);
         let mut v = 0.05f64;
         let mut stop_step = None;

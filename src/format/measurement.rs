@@ -17,6 +17,7 @@ use std::io::Write;
 use std::path::{Component, Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use vmt_sim::effects::EffectName;
+use vmt_sim::Axis;
 
 /// The `format` value of a measurement set's manifest.
 pub const FORMAT_ID: &str = "vmt-measurements/1";
@@ -521,10 +522,12 @@ fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
 // ------------------------------------------------------------------------------------------
 // Manifest.
 
-fn axis_char(r: &TomlReader<'_>, key: &str) -> Result<Option<char>, VmtError> {
+fn axis_of(r: &TomlReader<'_>, key: &str) -> Result<Option<Axis>, VmtError> {
     match r.opt_str(key, "an axis \"x\", \"y\" or \"z\"")? {
         None => Ok(None),
-        Some(s) if matches!(s, "x" | "y" | "z") => Ok(s.chars().next()),
+        Some("x") => Ok(Some(Axis::X)),
+        Some("y") => Ok(Some(Axis::Y)),
+        Some("z") => Ok(Some(Axis::Z)),
         Some(s) => Err(r.bad(key, format!("expected an axis \"x\", \"y\" or \"z\", got {s:?}"))),
     }
 }
@@ -537,15 +540,6 @@ fn vec3(r: &TomlReader<'_>, key: &str, what: &str) -> Result<Option<[f64; 3]>, V
     }
 }
 
-/// The unit vector of an axis.
-fn axis_unit(axis: char) -> [f64; 3] {
-    match axis {
-        'y' => [0.0, 1.0, 0.0],
-        'z' => [0.0, 0.0, 1.0],
-        _ => [1.0, 0.0, 0.0],
-    }
-}
-
 fn parse_sensor(r: &TomlReader<'_>) -> Result<Sensor, VmtError> {
     let name = r.req_str("name", "the sensor's CSV column name")?.to_string();
     let kind_s = r.req_str("kind", "a sensor kind")?;
@@ -553,10 +547,11 @@ fn parse_sensor(r: &TomlReader<'_>) -> Result<Sensor, VmtError> {
         let known: Vec<&str> = SensorKind::ALL.iter().map(|k| k.as_str()).collect();
         r.bad("kind", format!("unknown sensor kind {kind_s:?}; expected one of {}", known.join(", ")))
     })?;
-    let axis = axis_char(r, "axis")?
+    let axis = axis_of(r, "axis")?
         .ok_or_else(|| r.bad("axis", "missing key: expected the axis observed, \"x\", \"y\" or \"z\""))?;
     let position = vec3(r, "position", "a measuring point in metres")?.unwrap_or([0.0, 0.0, 0.0]);
-    let direction = vec3(r, "direction", "a sensitive direction")?.unwrap_or_else(|| axis_unit(axis));
+    let direction = vec3(r, "direction", "a sensitive direction")?.unwrap_or_else(|| axis.unit());
+    let axis = axis.letter();
     let sigma = r.opt_f64("sigma", "a 1-sigma noise in SI units of the channel")?;
     let closes_loop = r.opt_bool("closes_loop")?.unwrap_or(false);
     if closes_loop && !matches!(kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) {
@@ -577,8 +572,9 @@ fn parse_run_entry(r: &TomlReader<'_>) -> Result<(Run, String), VmtError> {
         let known: Vec<&str> = Procedure::ALL.iter().map(|p| p.as_str()).collect();
         r.bad("procedure", format!("unknown procedure {ps:?}; expected one of {}", known.join(", ")))
     })?;
-    let axis = axis_char(r, "axis")?
-        .ok_or_else(|| r.bad("axis", "missing key: expected the axis moved, \"x\", \"y\" or \"z\""))?;
+    let axis = axis_of(r, "axis")?
+        .ok_or_else(|| r.bad("axis", "missing key: expected the axis moved, \"x\", \"y\" or \"z\""))?
+        .letter();
     let start_time = r.opt_f64("start_time", "a time in seconds")?;
     let feed = r.opt_f64("feed", "a feed in m/s")?;
     let direction = match r.opt_i64("direction", "+1 or -1")? {

@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use vmt_sim::effects::{param_specs, Effect, EffectName, EffectParams, EffectSet, LeadHarmonic, Range};
 use vmt_sim::profile::{Harmonic, Profile, RandomProfile, Term};
+use vmt_sim::Axis;
 
 /// The `format` value of a model file.
 pub const MODEL_FORMAT: &str = "vmt-model/1";
@@ -498,7 +499,7 @@ pub fn model_to_toml(model: &Model, stem: &str) -> Result<(String, Vec<(String, 
         } else {
             out.push_str(&format!("\n[effects.{}]\n", e.name));
         }
-        if let Some(sym) = e.name.iso230_symbol(e.axis) {
+        if let Some(sym) = Axis::from_letter(e.axis).and_then(|a| e.name.iso230_symbol(a)) {
             out.pop();
             out.push_str(&format!("{}# {sym}\n", " ".repeat(2)));
         }

@@ -144,6 +144,8 @@ pub(crate) struct Coupled {
     /// Mode frequency, Hz, and damping ratio.
     pub(crate) frequency: f64,
     pub(crate) damping: f64,
+    /// (frequency, damping) ended at a limit of the refinement's box ([`box_limits`]).
+    pub(crate) at_bound: [bool; 2],
 }
 
 /// Adds to column `col` of A (R × p, row-major) `scale` times the steady mode response R_k of raw
@@ -362,6 +364,27 @@ impl Problem<'_> {
             .collect()
     }
 }
+
+/// Whether a refined θ = (f, ζ, …) ends at a limit of the box [`Problem::refine`] searched from a
+/// start at frequency `f0`: f within [`COUPLED_AT_BOUND`] of the log-width of f0·(1 ± [`COUPLED_FREQUENCY_BOX`])
+/// from an end, ζ within the same fraction of the log-width of [`COUPLED_DAMPING_BOX`] (0.1 %–30 %: a
+/// factor 1.059, ζ ≤ 0.00106 or ≥ 0.283). The box's change of variable (tanh) never reaches an end
+/// exactly; a value this close is where the criterion still improves towards the limit, so it is a
+/// bound of the search, not an estimate (issue 11's `at_bound`).
+pub(crate) fn box_limits(f0: f64, theta: &[f64]) -> [bool; 2] {
+    let near = |x: f64, lo: f64, hi: f64| {
+        let (l, h, v) = (lo.ln(), hi.ln(), x.ln());
+        v - l <= COUPLED_AT_BOUND * (h - l) || h - v <= COUPLED_AT_BOUND * (h - l)
+    };
+    [
+        near(theta[0], f0 * (1.0 - COUPLED_FREQUENCY_BOX), f0 * (1.0 + COUPLED_FREQUENCY_BOX)),
+        near(theta[1], COUPLED_DAMPING_BOX.0, COUPLED_DAMPING_BOX.1),
+    ]
+}
+
+/// Fraction of a box's (log) width from an end within which a refined value counts as at the limit
+/// ([`box_limits`]).
+pub(crate) const COUPLED_AT_BOUND: f64 = 0.01;
 
 /// Relative half-width of the frequency box of each start of the joint refinement.
 pub(crate) const COUPLED_FREQUENCY_BOX: f64 = 0.04;
@@ -746,6 +769,7 @@ pub(crate) fn refit_coupled<'a>(
     }
     let pb2 = problem(st_mode, &terms2, &fs.target, w)?;
     let (theta, _) = pb2.search(&[], &[], &[], &[theta1.clone()])?;
+    let at_bound = box_limits(theta1[0], &theta);
     let (beta, _) = pb2.coupled(&theta).ok()?;
     // The coefficient vector of a fit over `terms2` with the joint shapes in their slots (the
     // excitation reads only those).
@@ -766,6 +790,7 @@ pub(crate) fn refit_coupled<'a>(
     let st3 = st.with_excitation(fitted_excitation(st, &joint)?);
     let mut terms = terms2;
     terms[ti_r].hyper = vec![theta[0], theta[1]];
+    terms[ti_r].at_bound = at_bound.to_vec();
     let cols = design(&st3, &terms);
     let (coefs, residual) = solve_blocks(&st3, &fs.target, &cols, sigma).ok()?;
     if weighted_ss(&residual, w) >= weighted_ss(&fs.residual, w) {
@@ -779,12 +804,13 @@ pub(crate) fn refit_coupled<'a>(
         }
     }
     let out = FitState { terms, cols, coefs, residual, n_offsets: fs.n_offsets, target: fs.target.clone(), shapes };
-    Some((st3, out, Coupled { frequency: theta[0], damping: theta[1] }))
+    Some((st3, out, Coupled { frequency: theta[0], damping: theta[1], at_bound }))
 }
 
 /// A diagnosed mode (`params`: its frequency and damping from the candidate's search over the fit
 /// `base` on stack `st`, `st_mode` with the excitation of `base`'s shapes) refitted jointly with the
-/// shapes ([`refit_coupled`]): (frequency, Hz; damping ratio; the gains by their `params` keys).
+/// shapes ([`refit_coupled`]): the joint optimum (frequency, Hz; damping ratio; which ended at a
+/// limit of the search) and the gains by their `params` keys.
 /// None when the joint fit does not apply or does not lower the residual.
 pub(crate) fn joint_mode(
     st: &Stack,
@@ -793,7 +819,7 @@ pub(crate) fn joint_mode(
     params: &BTreeMap<String, f64>,
     sigma: &Sigma,
     w: &[f64],
-) -> Option<(f64, f64, BTreeMap<String, f64>)> {
+) -> Option<(Coupled, BTreeMap<String, f64>)> {
     let (fq, dz) = (*params.get("frequency")?, *params.get("damping")?);
     let mut terms = base.terms.clone();
     // Not a model effect: `index` is never read for it.
@@ -804,6 +830,7 @@ pub(crate) fn joint_mode(
         shape,
         hyper: vec![fq, dz],
         searched: vec![true; 2],
+        at_bound: vec![false; 2],
     });
     let cols = design(st_mode, &terms);
     let (coefs, residual) = solve_blocks(st_mode, &base.target, &cols, sigma).ok()?;
@@ -826,7 +853,7 @@ pub(crate) fn joint_mode(
         .filter(|(k, _)| k.starts_with("gain_"))
         .map(|(k, v)| (k.clone(), *v))
         .collect();
-    Some((c.frequency, c.damping, gains))
+    Some((c, gains))
 }
 
 /// Σ a_i·b_i.
@@ -837,6 +864,21 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The joint fit's limits: ζ = 0.0010 (last stop's draw 5) and 0.00105 are at the lower
+    /// limit of 0.1–30 % (1 % of its log-width is a factor 1.059: ≤ 0.00106, ≥ 0.283), 0.0011 and 0.28
+    /// are not, 0.29 is;
+    /// a frequency 3.99 % above its start is at the ±4 % box's end, 3.5 % is not.
+    #[test]
+    fn values_at_the_ends_of_the_joint_box_are_bounds() {
+        assert_eq!(box_limits(50.0, &[50.0, 0.0010]), [false, true]);
+        assert_eq!(box_limits(50.0, &[50.0, 0.00105]), [false, true]);
+        assert_eq!(box_limits(50.0, &[50.0, 0.0011]), [false, false]);
+        assert_eq!(box_limits(50.0, &[50.0, 0.28]), [false, false]);
+        assert_eq!(box_limits(50.0, &[50.0, 0.29]), [false, true]);
+        assert_eq!(box_limits(50.0, &[50.0 * 1.0399, 0.02]), [true, false]);
+        assert_eq!(box_limits(50.0, &[50.0 * 1.035, 0.02]), [false, false]);
+    }
 
     /// The closed-form steady response of a cosine-series column (module doc) against the
     /// numerical forced response from rest ([`mode_response`] over [`Excitation::of_fitted`] of the

@@ -15,6 +15,10 @@ pub(crate) struct FitTerm {
     /// Hyper-parameter values and whether each is searched (not given).
     pub(crate) hyper: Vec<f64>,
     pub(crate) searched: Vec<bool>,
+    /// Per hyper-parameter: a searched value that ends at a limit of its range (within 1 % of the
+    /// step to the grid's next value, `at_grid_end`; the joint mode fit's box, coupled.rs): the
+    /// criterion still improves beyond it, so it is a bound of the search, not an estimate.
+    pub(crate) at_bound: Vec<bool>,
 }
 
 /// The result of fitting a model to the channels.
@@ -225,6 +229,10 @@ pub(crate) fn requested_basis(me: &ModelEffect) -> Option<ShapeBasis> {
     }
 }
 
+/// First block of orders of a nested series search ([`order_curve`]): the block doubles while BIC's
+/// best order lies in its second half.
+pub(crate) const ORDER_BLOCK: u32 = 64;
+
 /// Largest number of B-splines searched by BIC (each number is a separate fit, O(n·N²)).
 pub(crate) const BSPLINE_SEARCH_MAX: u32 = 100;
 
@@ -274,7 +282,25 @@ pub(crate) fn order_curve(
             .collect())
     };
     match basis {
-        ShapeBasis::Legendre | ShapeBasis::Cosine => nested(top),
+        // Orders in doubling blocks (64, 128, …, `top`), one QR each: the search stops at a block
+        // where BIC's best order lies in its first half (the orders after it, at least half the
+        // block, each cost ln n and none brought BIC back below). On an encoder log every sample
+        // is a distinct position, so `top` = m − 1 is thousands of orders: one QR of all of them
+        // (n × m) took minutes and gigabytes, where BIC's choice sits at tens.
+        ShapeBasis::Legendre | ShapeBasis::Cosine => {
+            let mut k = ORDER_BLOCK.min(top);
+            loop {
+                let curve = nested(k)?;
+                let bic = |c: &(u32, f64, usize)| bic_unknown_sigma(c.1, st.n, c.2);
+                let best = curve.iter().min_by(|a, b| bic(a).total_cmp(&bic(b))).map_or(1, |c| c.0);
+                // Done at `top`, where the nesting stopped on a dependent column, or when the best
+                // order is in the block's first half.
+                if k >= top || curve.last().is_some_and(|c| c.0 < k) || 2 * best <= k {
+                    return Ok(curve);
+                }
+                k = (2 * k).min(top);
+            }
+        }
         ShapeBasis::Harmonics => nested((top.saturating_sub(1) / 2).max(1)),
         ShapeBasis::Bspline | ShapeBasis::Table => {
             let orders: Vec<u32> = match basis {
@@ -805,7 +831,8 @@ pub(crate) fn fit_model_fixed(
             // A given period or Stribeck shape exponent is held (the diagnosis searched it).
             searched.push(!(given && matches!(*h, "period" | "shape")) && resolvable);
         }
-        terms.push(FitTerm { index, name: me.effect.name, shape: sh, hyper, searched });
+        let at_bound = vec![false; hyper.len()];
+        terms.push(FitTerm { index, name: me.effect.name, shape: sh, hyper, searched, at_bound });
     }
     let y = st.y();
     let r0: Vec<f64> = y.iter().zip(&known).map(|(a, b)| a - b).collect();
@@ -907,6 +934,11 @@ pub(crate) fn fit_model_fixed(
     }
     if st.chans.iter().any(|c| c.is_accel()) {
         refine_jointly(st, &mut terms, &grids, &r0, sigma, w, fixed_base.as_ref());
+    }
+    // A searched, refined value at an end of its grid is a bound, not an estimate.
+    for (t, g) in terms.iter_mut().zip(&grids) {
+        t.at_bound =
+            (0..t.hyper.len()).map(|hi| t.searched[hi] && g[hi].1 && at_grid_end(&g[hi].0, t.hyper[hi])).collect();
     }
     let cols = design(st, &terms);
     let (coefs, residual) = solve_blocks(st, &r0, &cols, sigma)?;

@@ -126,6 +126,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::f64::consts::TAU as TWO_PI;
 use std::path::{Path, PathBuf};
+use vmt_estimators::modelcheck::diagnose::at_grid_end;
 use vmt_estimators::modelcheck::{
     autocorrelation, bin_by_edges, bin_by_label, estimate_noise_sigma, fit_percent, fit_signature, frequency_grid,
     golden_max, greedy_rss, ljung_box, ls_periodogram, lstsq_qr, nested_rss, rank_candidates, refine_projected,

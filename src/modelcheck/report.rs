@@ -83,6 +83,31 @@ pub struct CompareReport {
     /// The stated σ checked against the repeated readings (FORMAT.md §4 `sigma`, optional).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma: Option<SigmaCheck>,
+    /// Per fitted effect, its searched hyper-parameters whose value ended at a limit of the range
+    /// searched (optional `at_bound`, docs/formats.md): bounds of the search, not estimates.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub at_bound: BTreeMap<String, Vec<String>>,
+}
+
+/// The note of hyper-parameters `names` at a limit of the range searched: bounds, not estimates.
+pub(crate) fn bound_note(names: &[String]) -> String {
+    format!(
+        "{} ended at a limit of the range searched: the fit still improves towards it, so the value is a bound of the \
+         search, not an estimate (no standard error)",
+        names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(" and ")
+    )
+}
+
+/// Per fitted term of `fs`, the names of its hyper-parameters at a limit of their search.
+pub(crate) fn fit_at_bound(fs: &FitState) -> BTreeMap<String, Vec<String>> {
+    fs.terms
+        .iter()
+        .filter_map(|t| {
+            let names: Vec<String> =
+                t.shape.hypers.iter().zip(&t.at_bound).filter(|(_, b)| **b).map(|(h, _)| h.to_string()).collect();
+            (!names.is_empty()).then(|| (t.name.as_str().to_string(), names))
+        })
+        .collect()
 }
 
 /// How a fitted error motion's shape was set (FORMAT.md §4 `shapes`).
@@ -582,6 +607,10 @@ pub fn compare(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Compa
         out.push(channel_report(c, r, p, s, f.est[j], f.fs.coefs[f.st.group[j]]));
     }
     let n = f.st.n;
+    let at_bound = fit_at_bound(&f.fs);
+    for (e, names) in &at_bound {
+        notes.push(format!("fitted `{e}`: {}", bound_note(names)));
+    }
     Ok(CompareReport {
         model: model.source.display().to_string(),
         data: data.display().to_string(),
@@ -594,6 +623,7 @@ pub fn compare(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Compa
         history: read_history(&history_path(&model.source)).unwrap_or_default(),
         shapes: shape_reports(&f.fs),
         sigma: f.sigma,
+        at_bound,
     })
 }
 
@@ -895,15 +925,27 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         &st_mode,
         ranking.iter_mut().find(|r| r.effect == EffectName::Resonance.as_str() && r.verdict == Verdict::Significant),
     ) {
-        if let Some((fq, dz, gains)) = joint_mode(st, sm, &f.fs, &r.params, &fit_sigma, &w) {
-            r.note = Some(format!(
+        if let Some((c, gains)) = joint_mode(st, sm, &f.fs, &r.params, &fit_sigma, &w) {
+            let (fq, dz) = (c.frequency, c.damping);
+            let mut note = format!(
                 "frequency and damping refitted jointly with the shapes that drive the mode: {} Hz → {} Hz, \
                  damping {} → {}",
                 fmt_num(r.params.get("frequency").copied().unwrap_or(f64::NAN)),
                 fmt_num(fq),
                 fmt_num(r.params.get("damping").copied().unwrap_or(f64::NAN)),
                 fmt_num(dz)
-            ));
+            );
+            // The joint fit's own limits replace the candidate grid's.
+            r.at_bound = ["frequency", "damping"]
+                .iter()
+                .zip(c.at_bound)
+                .filter(|(_, b)| *b)
+                .map(|(k, _)| k.to_string())
+                .collect();
+            if !r.at_bound.is_empty() {
+                note += &format!("; {}", bound_note(&r.at_bound));
+            }
+            r.note = Some(note);
             r.params.insert("frequency".into(), fq);
             r.params.insert("damping".into(), dz);
             r.params.extend(gains);

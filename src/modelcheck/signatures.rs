@@ -7,6 +7,7 @@ use super::*;
 
 // 1 − exp(−t/τ) for t > 0 (a step for τ = 0), 0 before t = 0: the simulator's thermal rise.
 use vmt_sim::effects::rise;
+use vmt_sim::friction::stribeck_weight;
 
 /// The stacked samples of all channels, with per-sample sensitivities.
 pub(crate) struct Stack<'a> {
@@ -959,8 +960,7 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             // F = Fc·sgn v + (Fs − Fc)·sgn v·exp(−|v/vs|^δ): vs = h[0] (m/s), δ = h[1] (the shape
             // exponent, 2 when absent).
             let (vs, delta) = (h[0], h.get(1).copied().unwrap_or(2.0));
-            let mut cols =
-                vec![st.col(|c, i| c.s_force() * c.v[i].signum() * (-(c.v[i] / vs).abs().powf(delta)).exp())];
+            let mut cols = vec![st.col(|c, i| c.s_force() * c.v[i].signum() * stribeck_weight(c.v[i], vs, delta))];
             if sh.with_fc {
                 cols.push(st.col(|c, i| c.s_force() * c.v[i].signum()));
             }
@@ -1183,11 +1183,8 @@ fn open_loop_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
             // The Coulomb part belongs to the `coulomb` effect unless `fc` is given here.
             let fc = f.fc.unwrap_or(0.0);
             st.col(|c, i| {
-                let v = c.v[i];
-                c.s_force()
-                    * v.signum()
-                    * (fc * (1.0 - (-(v / f.vs).abs().powf(f.shape)).exp())
-                        + f.fs * (-(v / f.vs).abs().powf(f.shape)).exp())
+                let (v, w) = (c.v[i], stribeck_weight(c.v[i], f.vs, f.shape));
+                c.s_force() * v.signum() * (fc * (1.0 - w) + f.fs * w)
             })
         }
         _ => vec![0.0; st.n],

@@ -168,8 +168,8 @@ impl Estimator for LaserLines {
     }
 
     fn estimate(&self, set: &MeasurementSet, _work: &Path) -> Result<ProfileTable, VmtError> {
-        let (_, _, id, _) =
-            identify_set(set, None).map_err(|m| VmtError::bad(Path::new("<measurement set>"), "runs", m))?;
+        let (_, _, id, _) = identify_set(set, None)
+            .map_err(|e| VmtError::bad(Path::new("<measurement set>"), "runs", e.to_string()))?;
         Ok(profiles_of(&id))
     }
 }

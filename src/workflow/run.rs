@@ -38,13 +38,20 @@ pub fn run_estimators(
 /// The 21-error identification of the chain procedure `procedure`'s laser lines in the simulated runs
 /// `runs` of a multi-axis scenario, as `vmt run`'s 3D check makes it (the axes in chain order, a line of
 /// σ = 0 weighted as 1e-12 m).
-pub fn identify_chain_lines(sc: &Scenario, runs: &[RunRecord], procedure: &str) -> Result<ChainIdentification, String> {
-    let chain = sc.chain.as_ref().ok_or("laser_lines_3d needs a multi-axis scenario (axes = [...])")?;
-    let set = to_measurement_set(sc, runs).map_err(|e| e.to_string())?;
+pub fn identify_chain_lines(
+    sc: &Scenario,
+    runs: &[RunRecord],
+    procedure: &str,
+) -> Result<ChainIdentification, VmtError> {
+    let bad = |m: String| VmtError::bad(&sc.source, format!("chain procedure `{procedure}`"), m);
+    let chain = sc.chain.as_ref().ok_or_else(|| bad("needs a multi-axis scenario (axes = [...])".into()))?;
+    let set = to_measurement_set(sc, runs)?;
     let names = procedure_run_names(sc, &sc.axis).remove(procedure).unwrap_or_default();
     let lines: Vec<_> = set.runs.iter().filter(|r| names.contains(&r.name)).collect();
     if lines.is_empty() {
-        return Err(format!("no laser-line runs of chain procedure `{procedure}`"));
+        return Err(bad("no laser-line runs".into()));
     }
-    identify_chain_runs(&set, lines, &chain.letters(), LineSigma::AtLeast(1e-12)).map(|(_, ci)| ci)
+    identify_chain_runs(&set, lines, &chain.axis_names(), LineSigma::AtLeast(1e-12))
+        .map(|(_, ci)| ci)
+        .map_err(|e| bad(e.to_string()))
 }

@@ -80,7 +80,7 @@ pub fn truth_view<'a>(sc: &'a Scenario, ph: &'a Physics, truths: &'a SessionTrut
         })
         .collect();
     let chain = sc.chain.as_ref().map(|c| ChainTruth {
-        axes: c.axes.iter().map(|a| (a.letter, &a.motions)).collect(),
+        axes: c.axes.iter().map(|a| (a.axis, &a.motions)).collect(),
         squareness: c.squareness.to_array(),
         effective_squareness: Box::new(move |positions: &[Vec<f64>]| c.effective_squareness(positions).to_array()),
     });
@@ -111,7 +111,7 @@ pub fn procedure_run_names(sc: &Scenario, model: &AxisModel) -> BTreeMap<String,
     }
     for c in &sc.chain_procedures {
         let ChainProcedureSpec::LaserLines(l) = c;
-        out.insert(l.name.clone(), l.lines.iter().map(|line| format!("{}_{}", l.name, line.name)).collect());
+        out.insert(l.name.clone(), l.lines.iter().map(|line| l.run_name(line)).collect());
     }
     out
 }
@@ -231,9 +231,7 @@ pub fn read_chain(sc: &Scenario, truths: &[(usize, LineTruth)], seed: u64) -> Ve
 /// The chain line of a run name `{procedure}_{line}`: (procedure spec, line).
 pub fn chain_line<'a>(sc: &'a Scenario, run: &str) -> Option<(&'a LaserLinesSpec, &'a LaserLineSpec)> {
     sc.chain_procedures.iter().find_map(|p| match p {
-        ChainProcedureSpec::LaserLines(l) => {
-            l.lines.iter().find(|line| format!("{}_{}", l.name, line.name) == run).map(|line| (l, line))
-        }
+        ChainProcedureSpec::LaserLines(l) => l.lines.iter().find(|line| l.run_name(line) == run).map(|line| (l, line)),
     })
 }
 
@@ -270,7 +268,7 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
     }
     if let Some(chain) = &sc.chain {
         // Each chain line's laser: reflector on the last body at the line's point, beam along it.
-        let last = chain.letters().last().copied().unwrap_or('z');
+        let last = chain.axes.last().map_or_else(|| axis_letter(&sc.axis.joint), |a| a.axis.letter());
         for r in runs {
             if let Some((spec, line)) = chain_line(sc, &r.name) {
                 sensors.push(Sensor {
@@ -305,7 +303,9 @@ fn run_of(sc: &Scenario, r: &RunRecord) -> Run {
         file: format!("{}.csv", r.name),
         procedure: r.procedure,
         axis: match (&sc.chain, chain_line(sc, &r.name)) {
-            (Some(chain), Some((_, line))) => dominant_axis(chain, line),
+            (Some(chain), Some((_, line))) => {
+                dominant_axis(chain, line).map_or_else(|| axis_letter(&sc.axis.joint), |a| a.letter())
+            }
             _ => axis_letter(&sc.axis.joint),
         },
         start_time: Some(r.start_time),
@@ -353,7 +353,7 @@ pub fn truth_profiles(sc: &Scenario, ph: &Physics) -> Result<ProfileTable, VmtEr
         for a in &chain.axes {
             for (i, &effect) in EffectName::ERROR_MOTIONS.iter().enumerate() {
                 columns.push(ProfileColumn {
-                    axis: Some(a.letter),
+                    axis: Some(a.axis.letter()),
                     effect,
                     values: position.iter().map(|&x| a.motions.by_index(i).value(x)).collect(),
                     sigma: None,

@@ -6,6 +6,7 @@
 use crate::measurement::{MeasurementSet, Run};
 use std::collections::BTreeMap;
 use vmt_sim::geometry::ErrorMotions;
+use vmt_sim::Axis;
 
 /// What the estimate workflow may know of the truth of a recording.
 pub struct TruthView<'a> {
@@ -65,8 +66,8 @@ pub type SquarenessOf<'a> = Box<dyn Fn(&[Vec<f64>]) -> [f64; 3] + Sync + 'a>;
 
 /// The injected truth of a serial chain (DESIGN.md §3, `vmc_3axis`), as the 3D laser-line check compares.
 pub struct ChainTruth<'a> {
-    /// The axes in chain order (bed first): letter and injected error motions.
-    pub axes: Vec<(char, &'a ErrorMotions)>,
+    /// The axes in chain order (bed first) and their injected error motions.
+    pub axes: Vec<(Axis, &'a ErrorMotions)>,
     /// The injected squareness values [EC0Y (xy), EB0Z (xz), EA0Z (yz)], rad.
     pub squareness: [f64; 3],
     /// The squareness as laser line sets see it over the node positions of each axis (m, chain order):
@@ -76,8 +77,8 @@ pub struct ChainTruth<'a> {
 }
 
 impl ChainTruth<'_> {
-    /// The axis letters in chain order.
-    pub fn letters(&self) -> Vec<char> {
+    /// The axes in chain order.
+    pub fn axis_names(&self) -> Vec<Axis> {
         self.axes.iter().map(|a| a.0).collect()
     }
 }

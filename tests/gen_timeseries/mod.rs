@@ -474,6 +474,14 @@ pub struct EncoderTruth {
 
 /// One encoder draw, written to `dir` (manifest.toml, runs, model.toml).
 pub fn encoder_set(dir: &Path, seed: u64, hidden: EncoderHidden) -> EncoderTruth {
+    encoder_set_sized(dir, seed, hidden, None)
+}
+
+/// [`encoder_set`] with each of the two passes logged at about `samples`/5 rows when given (the two
+/// passes' two channels then hold ≈ 80 % of the samples; the crawls and the reversal keep their
+/// drawn log rate), instead of its draw of 1500–3000 rows (the benchmark's sizes). A pass cannot
+/// log more rows than its cruise has servo ticks.
+pub fn encoder_set_sized(dir: &Path, seed: u64, hidden: EncoderHidden, samples: Option<usize>) -> EncoderTruth {
     let mut d = Draw::new(seed ^ 0x9e37_79b9_7f4a_7c15);
     let feedback = if d.chance(0.5) { Loop::SemiClosed } else { Loop::Closed };
     let kv = d.uniform(15.0, 60.0);
@@ -547,6 +555,7 @@ pub fn encoder_set(dir: &Path, seed: u64, hidden: EncoderHidden) -> EncoderTruth
         (c, from, to.max(from + 1))
     };
     let pass_samples = d.uniform(1500.0, 3000.0);
+    let pass_samples = samples.map_or(pass_samples, |n| n as f64 / 5.0);
     let first_dir = d.sign();
     for (k, dirn) in [first_dir, -first_dir].into_iter().enumerate() {
         let (a, bb) = if dirn > 0.0 { (x_lo, x_lo + travel) } else { (x_lo + travel, x_lo) };

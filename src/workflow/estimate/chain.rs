@@ -1,7 +1,7 @@
 //! The 21-error identification of a chain from laser line sets (seed 001, `vmt_estimators::laser_ls`
 //! with squareness): the adapter of `vmt run`'s 3D check and the glue of `vmt identify` on a multi-axis set.
 
-use super::{display, profile_figure, Check, Quantity, TruthView};
+use super::{display, profile_figure, Check, LineSetError, Quantity, Statistic, TruthView};
 use crate::error::VmtError;
 use crate::measurement::{MeasurementSet, Run, RunData};
 use serde::Serialize;
@@ -9,6 +9,7 @@ use std::path::Path;
 use vmt_estimators::laser_ls::Reading;
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
 use vmt_sim::effects::EffectName;
+use vmt_sim::Axis;
 
 /// The result of [`crate::workflow::run::identify_chain_lines`]: the identification, the model it used and the node
 /// positions of each axis (m, chain order).
@@ -42,14 +43,14 @@ pub enum LineSigma {
 pub fn identify_chain_runs<'a>(
     set: &MeasurementSet,
     runs: impl IntoIterator<Item = &'a Run>,
-    letters: &[char],
+    letters: &[Axis],
     sigma: LineSigma,
-) -> Result<(usize, ChainIdentification), String> {
+) -> Result<(usize, ChainIdentification), LineSetError> {
     let mut readings = Vec::new();
     let mut n_lines = 0;
     for r in runs {
         let RunData::PointTable { columns, .. } = &r.data else {
-            return Err(format!("run `{}` is not a point table", r.name));
+            return Err(LineSetError::NotPointTable(r.name.clone()));
         };
         let qs = axis_commands(&r.name, columns, letters)?;
         for (name, values) in columns {
@@ -57,9 +58,9 @@ pub fn identify_chain_runs<'a>(
                 continue;
             };
             let sigma = match sigma {
-                LineSigma::Required => s.sigma.filter(|v| *v > 0.0).ok_or_else(|| {
-                    format!("sensor `{name}`: the 21-error identification needs the laser's `sigma` in the manifest")
-                })?,
+                LineSigma::Required => {
+                    s.sigma.filter(|v| *v > 0.0).ok_or_else(|| LineSetError::NoSigma(name.clone()))?
+                }
                 LineSigma::AtLeast(floor) => s.sigma.unwrap_or(0.0).max(floor),
             };
             for (i, &v) in values.iter().enumerate() {
@@ -76,7 +77,7 @@ pub fn identify_chain_runs<'a>(
         }
     }
     if readings.is_empty() {
-        return Err("no laser-line readings in the runs".into());
+        return Err(LineSetError::NoReadings);
     }
     identify_axis_readings(readings, letters).map(|id| (n_lines, id))
 }
@@ -86,9 +87,9 @@ pub fn identify_chain_runs<'a>(
 /// least two axes (`x_cmd`, `y_cmd`, `z_cmd` columns), identified by [`identify_chain_runs`] with the axes
 /// in x, y, z order. Returns None when the set has no such run, else (number of lines, the 21-error
 /// identification with squareness). Every laser needs its `sigma`.
-pub fn identify_axes_set(set: &MeasurementSet) -> Result<Option<(usize, ChainIdentification)>, String> {
-    let has = |r: &Run, l: char| r.data.column(&format!("{l}_cmd")).is_some();
-    let letters: Vec<char> = ['x', 'y', 'z'].into_iter().filter(|&l| set.runs.iter().any(|r| has(r, l))).collect();
+pub fn identify_axes_set(set: &MeasurementSet) -> Result<Option<(usize, ChainIdentification)>, LineSetError> {
+    let has = |r: &Run, l: Axis| r.data.column(&format!("{l}_cmd")).is_some();
+    let letters: Vec<Axis> = Axis::ALL.into_iter().filter(|&l| set.runs.iter().any(|r| has(r, l))).collect();
     let multi =
         |r: &&Run| matches!(r.data, RunData::PointTable { .. }) && letters.iter().filter(|&&l| has(r, l)).count() >= 2;
     if letters.len() < 2 || !set.runs.iter().any(|r| multi(&r)) {
@@ -98,16 +99,20 @@ pub fn identify_axes_set(set: &MeasurementSet) -> Result<Option<(usize, ChainIde
 }
 
 /// Column `name` of run `run`'s point table.
-fn column_of<'a>(run: &str, columns: &'a [(String, Vec<f64>)], name: &str) -> Result<&'a Vec<f64>, String> {
-    columns.iter().find(|(c, _)| c == name).map(|(_, v)| v).ok_or_else(|| format!("run `{run}` has no column `{name}`"))
+fn column_of<'a>(run: &str, columns: &'a [(String, Vec<f64>)], name: &str) -> Result<&'a Vec<f64>, LineSetError> {
+    columns
+        .iter()
+        .find(|(c, _)| c == name)
+        .map(|(_, v)| v)
+        .ok_or_else(|| LineSetError::NoColumn { run: run.to_string(), column: name.to_string() })
 }
 
 /// The commanded joint positions of a multi-axis point table, one column `{l}_cmd` per axis letter.
 pub fn axis_commands<'a>(
     run: &str,
     columns: &'a [(String, Vec<f64>)],
-    letters: &[char],
-) -> Result<Vec<&'a Vec<f64>>, String> {
+    letters: &[Axis],
+) -> Result<Vec<&'a Vec<f64>>, LineSetError> {
     letters.iter().map(|l| column_of(run, columns, &format!("{l}_cmd"))).collect()
 }
 
@@ -116,9 +121,9 @@ pub fn axis_commands<'a>(
 /// at the distinct positions of its axis (piecewise linear), the reference position being the lowest.
 pub fn identify_axis_readings(
     mut readings: Vec<vmt_estimators::laser_ls::Reading>,
-    letters: &[char],
-) -> Result<ChainIdentification, String> {
-    use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, IdOptions, Model};
+    letters: &[Axis],
+) -> Result<ChainIdentification, LineSetError> {
+    use vmt_estimators::laser_ls::{identify, AxisModel, IdOptions, Model};
     let mut positions = Vec::new();
     let mut axes = Vec::new();
     for (j, l) in letters.iter().enumerate() {
@@ -127,10 +132,9 @@ pub fn identify_axis_readings(
         // Stops computed as from + (to − from)·k/(n − 1) differ by float rounding: one node per 1 nm.
         p.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
         if p.len() < 2 {
-            return Err(format!("the lines stop at only one position of axis {l}: at least two are needed"));
+            return Err(LineSetError::OnePosition(*l));
         }
-        let name = AxisName::from_letter(*l).ok_or_else(|| format!("expected axis letters x, y or z, got `{l}`"))?;
-        axes.push(AxisModel::with_nodes(name, &p));
+        axes.push(AxisModel::with_nodes(*l, &p));
         positions.push(p);
     }
     // Snap each reading's q onto its node (float rounding of the stops) so the basis is exact there.
@@ -142,7 +146,7 @@ pub fn identify_axis_readings(
         }
     }
     let model = Model { axes, squareness: true };
-    let identification = identify(&readings, &model, &IdOptions::default()).map_err(|e| e.to_string())?;
+    let identification = identify(&readings, &model, &IdOptions::default())?;
     Ok(ChainIdentification { identification, model, positions })
 }
 
@@ -171,21 +175,22 @@ pub(super) fn laser_lines_3d_checks(
         )));
     }
     let chain = truth.chain.as_ref().ok_or_else(|| bad("needs a multi-axis scenario (axes = [...])".into()))?;
-    let letters = chain.letters();
+    let letters = chain.axis_names();
     let lines = truth.runs_of(set, procedure);
     if lines.is_empty() {
         return Err(bad(format!("no laser-line runs of chain procedure `{procedure}`")));
     }
     // σ = 0 weighs as 1e-12 m (the scenario allows a noise-free line; the identifier needs a weight).
-    let (_, ci) = identify_chain_runs(set, lines, &letters, LineSigma::AtLeast(1e-12)).map_err(bad)?;
+    let (_, ci) =
+        identify_chain_runs(set, lines, &letters, LineSigma::AtLeast(1e-12)).map_err(|e| bad(e.to_string()))?;
     let injected = (chain.effective_squareness)(&ci.positions);
     let mut checks = Vec::new();
     let (mut names, mut inj, mut rec, mut raw) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut sig: Vec<f64> = Vec::new();
     for (k, (effect, iso, (a, b))) in [
-        ("squareness_xy", "EC0Y", ('x', 'y')),
-        ("squareness_xz", "EB0Z", ('x', 'z')),
-        ("squareness_yz", "EA0Z", ('y', 'z')),
+        ("squareness_xy", "EC0Y", (Axis::X, Axis::Y)),
+        ("squareness_xz", "EB0Z", (Axis::X, Axis::Z)),
+        ("squareness_yz", "EA0Z", (Axis::Y, Axis::Z)),
     ]
     .into_iter()
     .enumerate()
@@ -214,7 +219,7 @@ pub(super) fn laser_lines_3d_checks(
                 k_sigma * sigma + bias,
             )
             .with_id(format!("laser_lines_3d.{procedure}.{effect}"))
-            .with_statistic("ISO 230-1 squareness")
+            .with_statistic(Statistic::Iso230_1Squareness)
             .with_note(format!(
                 "ISO 230-1 squareness is the angle between the least-squares lines of the axes' paths: the injected \
                  squareness value {} plus {} from the straightness error motions' linear trends = `injected` {}",

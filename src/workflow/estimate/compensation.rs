@@ -3,7 +3,7 @@
 //! on is the caller's ([`super::Remeasure`]).
 
 use super::iso::point_table_deviations;
-use super::{display, profile_figure, Check, Quantity, Remeasure};
+use super::{display, profile_figure, Check, Iso230_2Parameter, Quantity, Remeasure, Statistic};
 use crate::error::VmtError;
 use crate::measurement::{MeasurementSet, Run};
 use std::path::Path;
@@ -76,7 +76,7 @@ pub(super) fn compensation_checks(
                 after.e,
                 max_ratio * before.e,
             )
-            .with_statistic("ISO 230-2 E")
+            .with_statistic(Statistic::Iso230_2(Iso230_2Parameter::E))
             .with_note(format!(
                 "re-measured at other targets after compensation; `injected` shows E before compensation \
                  ({}), the tolerance is {max_ratio} × that",
@@ -90,7 +90,7 @@ pub(super) fn compensation_checks(
                 after.a,
                 max_ratio * before.a,
             )
-            .with_statistic("ISO 230-2 A")
+            .with_statistic(Statistic::Iso230_2(Iso230_2Parameter::A))
             .with_note(format!(
                 "`injected` shows A before compensation ({}), the tolerance is {max_ratio} × that",
                 display(Quantity::Length, before.a)

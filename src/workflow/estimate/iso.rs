@@ -4,7 +4,7 @@
 //! and A, B, E, M, R beside it; the table with s↑ and s↓; the uncertainty statement (ISO 230-2:2014
 //! §8 asks the report to state the measurement uncertainty, ISO/TR 230-9 with coverage factor k = 2).
 
-use super::{Check, Estimates, Quantity, TruthView};
+use super::{Check, Estimates, Iso230_2Parameter, Quantity, Statistic, TruthView};
 use crate::error::VmtError;
 use crate::measurement::{MeasurementSet, Run, RunData};
 use std::path::Path;
@@ -75,15 +75,19 @@ pub(super) fn iso_check(
     let noise_free = (truth.noise_free)(run, sensor)
         .ok_or_else(|| bad(format!("the simulation has no noise-free table of `{sensor}` in run `{run}`")))?;
     let expected = iso_truth(rec, &noise_free)?;
-    let checks =
-        [("E", "e", expected.e, est.e), ("M", "m", expected.m, est.m), ("B̄", "b_mean", expected.b_mean, est.b_mean)]
-            .into_iter()
-            .map(|(label, id, t, e)| {
-                Check::new(format!("ISO 230-2 {label} ({sensor})"), Quantity::Length, t, e, tolerance)
-                    .with_id(format!("iso230_2.{sensor}.{id}"))
-                    .with_statistic(format!("ISO 230-2 {label}"))
-            })
-            .collect();
+    let checks = [
+        (Iso230_2Parameter::E, "e", expected.e, est.e),
+        (Iso230_2Parameter::M, "m", expected.m, est.m),
+        (Iso230_2Parameter::BMean, "b_mean", expected.b_mean, est.b_mean),
+    ]
+    .into_iter()
+    .map(|(parameter, id, t, e)| {
+        let statistic = Statistic::Iso230_2(parameter);
+        Check::new(format!("{} ({sensor})", statistic.as_str()), Quantity::Length, t, e, tolerance)
+            .with_id(format!("iso230_2.{sensor}.{id}"))
+            .with_statistic(statistic)
+    })
+    .collect();
     let injected: Vec<f64> = expected.targets.iter().map(|t| t.mean_bidirectional).collect();
     let fig = iso_figure(sensor, &targets, &up, &down, &est, Some(&injected));
     out.push(checks, fig);

@@ -1,7 +1,7 @@
 //! The laser line-set identifier of one axis (seeds 001/003, `vmt_estimators::laser_ls`): the adapter of
 //! `vmt run`'s laser-lines check and the glue of `vmt identify` on a single-axis set.
 
-use super::{profile_figure, Check, Quantity};
+use super::{profile_figure, Check, LineSetError, Quantity};
 use crate::error::VmtError;
 use crate::measurement::{MeasurementSet, Run, RunData, SensorKind};
 use std::path::Path;
@@ -28,11 +28,12 @@ pub fn identify_laser_lines(
     target: &[f64],
     columns: &[(String, Vec<f64>)],
     lines: &[LaserLine],
-) -> Result<(vmt_estimators::laser_ls::Identification, vmt_estimators::laser_ls::Model), String> {
-    use vmt_estimators::laser_ls::{identify, AxisModel, AxisName, IdOptions, Model, Reading};
+) -> Result<(vmt_estimators::laser_ls::Identification, vmt_estimators::laser_ls::Model), LineSetError> {
+    use vmt_estimators::laser_ls::{identify, Axis, AxisModel, IdOptions, Model, Reading};
     let mut readings = Vec::new();
     for (line, l) in lines.iter().enumerate() {
-        let values = &columns.iter().find(|(n, _)| *n == l.name).ok_or_else(|| format!("no column `{}`", l.name))?.1;
+        let values =
+            &columns.iter().find(|(n, _)| *n == l.name).ok_or_else(|| LineSetError::NoLineColumn(l.name.clone()))?.1;
         for (&x, &v) in target.iter().zip(values) {
             readings.push(Reading {
                 q: vec![x],
@@ -47,8 +48,8 @@ pub fn identify_laser_lines(
     let mut nodes = target.to_vec();
     nodes.sort_by(f64::total_cmp);
     nodes.dedup();
-    let model = Model { axes: vec![AxisModel::with_nodes(AxisName::X, &nodes)], squareness: false };
-    let id = identify(&readings, &model, &IdOptions::default()).map_err(|e| e.to_string())?;
+    let model = Model { axes: vec![AxisModel::with_nodes(Axis::X, &nodes)], squareness: false };
+    let id = identify(&readings, &model, &IdOptions::default())?;
     Ok((id, model))
 }
 
@@ -59,11 +60,11 @@ pub fn identify_laser_lines(
 pub fn manifest_lines<'a>(
     set: &MeasurementSet,
     names: impl IntoIterator<Item = &'a str>,
-) -> Result<Vec<LaserLine>, String> {
+) -> Result<Vec<LaserLine>, LineSetError> {
     names
         .into_iter()
         .map(|name| {
-            let s = set.sensor(name).ok_or_else(|| format!("sensor `{name}` is not declared"))?;
+            let s = set.sensor(name).ok_or_else(|| LineSetError::UndeclaredSensor(name.to_string()))?;
             Ok(LaserLine {
                 name: s.name.clone(),
                 point: s.position,
@@ -88,7 +89,7 @@ pub const MIN_REPEAT_DOF_IDENTIFY: usize = 10;
 pub fn identify_set(
     set: &MeasurementSet,
     run: Option<&str>,
-) -> Result<(String, usize, vmt_estimators::laser_ls::Identification, Vec<String>), String> {
+) -> Result<(String, usize, vmt_estimators::laser_ls::Identification, Vec<String>), LineSetError> {
     let line_names = |r: &Run| -> Vec<&str> {
         set.sensors
             .iter()
@@ -99,15 +100,15 @@ pub fn identify_set(
             .collect()
     };
     let r = match run {
-        Some(n) => set.run(n).ok_or_else(|| format!("no run named `{n}`"))?,
+        Some(n) => set.run(n).ok_or_else(|| LineSetError::NoRun(n.to_string()))?,
         None => set
             .runs
             .iter()
             .find(|r| matches!(r.data, RunData::PointTable { .. }) && line_names(r).len() >= 2)
-            .ok_or("expected a point-table run with at least two laser lines")?,
+            .ok_or(LineSetError::NoLineSetRun)?,
     };
     let RunData::PointTable { target, run: run_no, direction, columns, .. } = &r.data else {
-        return Err(format!("run {} is not a point table", r.name));
+        return Err(LineSetError::NotPointTable(r.name.clone()));
     };
     let mut lines = manifest_lines(set, line_names(r))?;
     let mut notes = Vec::new();
@@ -115,7 +116,7 @@ pub fn identify_set(
         if set.sensor(&line.name).and_then(|s| s.sigma).is_some() {
             continue;
         }
-        let values = r.data.column(&line.name).ok_or_else(|| format!("no column `{}`", line.name))?;
+        let values = r.data.column(&line.name).ok_or_else(|| LineSetError::NoLineColumn(line.name.clone()))?;
         let keyed = target.iter().zip(direction).zip(values).map(|((x, d), v)| ((x.to_bits(), *d), *v));
         match vmt_estimators::modelcheck::pooled_group_scatter(keyed) {
             Some((ss, dof)) if dof >= MIN_REPEAT_DOF_IDENTIFY && ss > 0.0 => {
@@ -128,17 +129,17 @@ pub fn identify_set(
             }
             other => {
                 let runs = run_no.iter().collect::<std::collections::BTreeSet<_>>().len();
-                return Err(format!(
-                    "laser line `{}` has no sigma in the manifest and its readings ({runs} run(s)) give {} degrees of \
-                     freedom of repeats, fewer than the {MIN_REPEAT_DOF_IDENTIFY} needed to estimate it: give `sigma` \
-                     for the sensor (the weights and every standard error depend on it)",
-                    line.name,
-                    other.map_or(0, |(_, d)| d)
-                ));
+                return Err(LineSetError::TooFewRepeats {
+                    line: line.name.clone(),
+                    runs,
+                    dof: other.map_or(0, |(_, d)| d),
+                    needed: MIN_REPEAT_DOF_IDENTIFY,
+                });
             }
         }
     }
-    let (id, _) = identify_laser_lines(target, columns, &lines).map_err(|m| format!("run {}: {m}", r.name))?;
+    let (id, _) = identify_laser_lines(target, columns, &lines)
+        .map_err(|e| LineSetError::InRun { run: r.name.clone(), source: Box::new(e) })?;
     Ok((r.name.clone(), lines.len(), id, notes))
 }
 
@@ -158,8 +159,8 @@ pub(super) fn laser_lines_checks(
     let RunData::PointTable { target, columns, .. } = &rec.data else {
         return Err(bad("expected a point table".into()));
     };
-    let lines = manifest_lines(set, sensors.iter().map(String::as_str)).map_err(bad)?;
-    let (id, model) = identify_laser_lines(target, columns, &lines).map_err(bad)?;
+    let lines = manifest_lines(set, sensors.iter().map(String::as_str)).map_err(|e| bad(e.to_string()))?;
+    let (id, model) = identify_laser_lines(target, columns, &lines).map_err(|e| bad(e.to_string()))?;
     let mut checks = Vec::new();
     for (i, sym) in ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"].iter().enumerate() {
         let p = id.profile(sym).ok_or_else(|| bad(format!("identifier returned no {sym}")))?;

@@ -21,6 +21,7 @@ use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
 
 pub mod chain;
 pub mod compensation;
+pub mod error;
 pub mod iso;
 pub mod laser_lines;
 pub mod model_check;
@@ -28,6 +29,7 @@ pub mod ssi;
 pub mod straightness;
 
 pub use chain::{axis_commands, identify_axis_readings, ChainIdentification};
+pub use error::LineSetError;
 pub use iso::{iso_table, point_table_deviations};
 pub use laser_lines::{identify_laser_lines, LaserLine};
 
@@ -72,6 +74,99 @@ impl Rule {
     }
 }
 
+/// An ISO 230-2:2014 positioning parameter a check compares.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Iso230_2Parameter {
+    /// Bidirectional systematic positioning error E (§3.3.6).
+    E,
+    /// Bidirectional accuracy of positioning A (§3.3.10).
+    A,
+    /// Range of the mean bidirectional positional deviation M (§3.3.9).
+    M,
+    /// Mean reversal value B̄ (§3.3.4).
+    BMean,
+}
+
+impl Iso230_2Parameter {
+    /// The parameter's symbol as the table shows it (`E`, `A`, `M`, `B̄`).
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Iso230_2Parameter::E => "E",
+            Iso230_2Parameter::A => "A",
+            Iso230_2Parameter::M => "M",
+            Iso230_2Parameter::BMean => "B̄",
+        }
+    }
+}
+
+/// What a check's `injected` and `recovered` values are (the table's `statistic` column).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Statistic {
+    /// A value against its truth, no statistic named (an empty cell).
+    #[default]
+    Value,
+    /// Whether an expected effect was found (`found (yes/no)`).
+    Found,
+    /// RMS of an error-motion profile over the positions (`RMS of profile`).
+    ProfileRms,
+    /// An ISO 230-2 positioning parameter (`ISO 230-2 E`).
+    Iso230_2(Iso230_2Parameter),
+    /// An ISO 230-1 squareness angle (`ISO 230-1 squareness`).
+    Iso230_1Squareness,
+    /// The stick-slip index (`stick-slip index`).
+    StickSlipIndex,
+    /// A model check's normalised RMS residual (`normalised RMS`).
+    NormalisedRms,
+}
+
+impl Statistic {
+    /// Every statistic (for parsing).
+    pub const ALL: [Statistic; 10] = [
+        Statistic::Value,
+        Statistic::Found,
+        Statistic::ProfileRms,
+        Statistic::Iso230_2(Iso230_2Parameter::E),
+        Statistic::Iso230_2(Iso230_2Parameter::A),
+        Statistic::Iso230_2(Iso230_2Parameter::M),
+        Statistic::Iso230_2(Iso230_2Parameter::BMean),
+        Statistic::Iso230_1Squareness,
+        Statistic::StickSlipIndex,
+        Statistic::NormalisedRms,
+    ];
+
+    /// The words the table and the JSON write.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Statistic::Value => "",
+            Statistic::Found => "found (yes/no)",
+            Statistic::ProfileRms => "RMS of profile",
+            Statistic::Iso230_2(Iso230_2Parameter::E) => "ISO 230-2 E",
+            Statistic::Iso230_2(Iso230_2Parameter::A) => "ISO 230-2 A",
+            Statistic::Iso230_2(Iso230_2Parameter::M) => "ISO 230-2 M",
+            Statistic::Iso230_2(Iso230_2Parameter::BMean) => "ISO 230-2 B̄",
+            Statistic::Iso230_1Squareness => "ISO 230-1 squareness",
+            Statistic::StickSlipIndex => "stick-slip index",
+            Statistic::NormalisedRms => "normalised RMS",
+        }
+    }
+}
+
+impl Serialize for Statistic {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.as_str())
+    }
+}
+
+impl<'de> Deserialize<'de> for Statistic {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Statistic, D::Error> {
+        let text = String::deserialize(d)?;
+        Statistic::ALL.into_iter().find(|s| s.as_str() == text).ok_or_else(|| {
+            let known: Vec<String> = Statistic::ALL.iter().map(|s| format!("{:?}", s.as_str())).collect();
+            serde::de::Error::custom(format!("unknown statistic {text:?}; expected one of {}", known.join(", ")))
+        })
+    }
+}
+
 /// One row of the result table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Check {
@@ -83,7 +178,7 @@ pub struct Check {
     pub error: String,
     /// What `injected` and `recovered` are (e.g. `ISO 230-2 E`, `RMS of profile`, `SSI`).
     #[serde(default)]
-    pub statistic: String,
+    pub statistic: Statistic,
     /// A sentence printed under the table for this row (where the columns need one).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
@@ -146,7 +241,7 @@ impl Check {
     pub fn found(id: impl Into<String>, error: impl Into<String>, found: bool) -> Check {
         Check {
             rule: Rule::Found,
-            statistic: "found (yes/no)".into(),
+            statistic: Statistic::Found,
             difference: f64::NAN,
             tolerance: f64::NAN,
             pass: found,
@@ -169,7 +264,7 @@ impl Check {
         };
         let difference = rms(&mut truth.iter().zip(estimate).map(|(a, b)| b - a));
         Check {
-            statistic: "RMS of profile".into(),
+            statistic: Statistic::ProfileRms,
             rule: Rule::RmsDifference,
             injected: rms(&mut truth.iter().copied()),
             recovered: rms(&mut estimate.iter().copied()),
@@ -187,7 +282,7 @@ impl Check {
         Check {
             id: slug(&error),
             error,
-            statistic: String::new(),
+            statistic: Statistic::Value,
             note: None,
             figure: None,
             bound: None,
@@ -206,9 +301,9 @@ impl Check {
         Check { id: id.into(), ..self }
     }
 
-    /// The check with what its values are (e.g. `RMS of profile`).
-    pub fn with_statistic(self, statistic: impl Into<String>) -> Check {
-        Check { statistic: statistic.into(), ..self }
+    /// The check with what its values are (e.g. [`Statistic::ProfileRms`]).
+    pub fn with_statistic(self, statistic: Statistic) -> Check {
+        Check { statistic, ..self }
     }
 
     /// The check with a sentence to print under the table.
@@ -237,7 +332,7 @@ impl Check {
         };
         [
             self.error.clone(),
-            self.statistic.clone(),
+            self.statistic.as_str().to_string(),
             injected,
             recovered,
             difference,
@@ -427,4 +522,22 @@ pub fn estimate_recording(
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The `statistic` column and JSON key keep the words they had as strings, and read back.
+    #[test]
+    fn statistics_serialise_as_their_words_and_read_back() {
+        for s in Statistic::ALL {
+            let json = serde_json::to_string(&s).unwrap();
+            assert_eq!(json, serde_json::to_string(s.as_str()).unwrap());
+            assert_eq!(serde_json::from_str::<Statistic>(&json).unwrap(), s);
+        }
+        assert_eq!(Statistic::Iso230_2(Iso230_2Parameter::BMean).as_str(), "ISO 230-2 B̄");
+        let e = serde_json::from_str::<Statistic>("\"median\"").unwrap_err().to_string();
+        assert!(e.contains("unknown statistic \"median\"") && e.contains("RMS of profile"), "{e}");
+    }
 }

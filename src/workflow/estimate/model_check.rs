@@ -1,7 +1,7 @@
 //! The model-check loop (DESIGN.md §8) run to its end on a recording, as `vmt run`'s check: the adapter
 //! from a scenario's `model_check` estimator to `crate::modelcheck`'s compare, diagnose and add.
 
-use super::{Check, Quantity};
+use super::{Check, Quantity, Statistic};
 use crate::error::VmtError;
 use crate::measurement::MeasurementSet;
 use std::path::Path;
@@ -55,7 +55,7 @@ pub(super) fn model_check_loop(
             last,
             tolerance,
         )
-        .with_statistic("normalised RMS")
+        .with_statistic(Statistic::NormalisedRms)
         .with_note(format!(
             "residual RMS / noise σ (1 = noise level); `injected` shows it for the starting model ({:.3})",
             history[0]

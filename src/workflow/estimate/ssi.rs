@@ -1,7 +1,7 @@
 //! Seed 002's stick-slip index (DESIGN.md §7): SSI = (v_max − v_min)/v_mean of the differentiated encoder.
 //! The adapter of `vmt run`'s crawl check and the glue `vmt ssi` shares ([`run_ssi`]).
 
-use super::{Check, Quantity, TruthView};
+use super::{Check, Quantity, Statistic, TruthView};
 use crate::error::VmtError;
 use crate::measurement::{uniform_interval, MeasurementSet, RunData};
 use std::path::Path;
@@ -106,7 +106,7 @@ pub(super) fn ssi_checks(
         } else {
             Check::new(label, Quantity::Ratio, *e, res.ssi, *tol).with_id(id)
         };
-        let check = check.with_statistic("stick-slip index").with_note(format!(
+        let check = check.with_statistic(Statistic::StickSlipIndex).with_note(format!(
             "`injected` is the patent's example SSI at this feed ({e:.2}); SSI ≥ 1 means crawling (SSI {:.3}: {})",
             res.ssi,
             if res.ssi >= 1.0 { "crawling" } else { "smooth" }
