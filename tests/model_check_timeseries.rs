@@ -406,6 +406,26 @@ fn accel_diagnose_wall_time() {
     );
 }
 
+/// Writes one encoder draw to `VMT_OUT` (seed `VMT_SEED`, hidden effect `VMT_HIDDEN` =
+/// none|interp|cyclic|backlash|lag|cyclic+backlash) and prints its truth: a tool for looking at one
+/// draw with `vmt compare`/`diagnose` by hand.
+#[test]
+#[ignore = "tool: writes one encoder draw (see the doc comment)"]
+fn write_encoder_draw() {
+    let out = PathBuf::from(std::env::var("VMT_OUT").expect("VMT_OUT"));
+    let seed: u64 = std::env::var("VMT_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(2000);
+    let hidden = match std::env::var("VMT_HIDDEN").as_deref().unwrap_or("none") {
+        "interp" => EncoderHidden::InterpolationError,
+        "cyclic" => EncoderHidden::CyclicLead,
+        "backlash" => EncoderHidden::Backlash,
+        "lag" => EncoderHidden::ServoLag,
+        "cyclic+backlash" => EncoderHidden::CyclicLeadAndBacklash,
+        _ => EncoderHidden::None,
+    };
+    let t = encoder_set(&out, seed, hidden);
+    eprintln!("{t:?}");
+}
+
 /// The benchmark's sets written to `VMT_OUT` (a directory) for timing and profiling `vmt diagnose`
 /// and `compare` by hand (`perf record`): accelerometer sets complete (`acc_none_N`) and with a
 /// hidden mode (`acc_res_N`, its model also as `model_res.toml` with `resonance` fitted from 25 % off),

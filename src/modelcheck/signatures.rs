@@ -23,6 +23,9 @@ pub(crate) struct Stack<'a> {
     /// [`Excitation`]: the given translations' projection on the sensor (one input), or each
     /// fitted translation after a first fit ([`Stack::with_excitation`]).
     pub(crate) excitation: Vec<Vec<Excitation>>,
+    /// Position-loop gain kv (1/s) through which a closed loop's transmission reaches its
+    /// following channels ([`close_loop`]); ∞ (the identity) when the model has no servo_lag.
+    pub(crate) loop_kv: f64,
 }
 
 /// Time step of the mode integration, s: at most this long (and at least 4 steps per sample
@@ -280,12 +283,22 @@ impl<'a> Stack<'a> {
     pub(crate) fn with_model(chans: &'a [Channel], model: &Model) -> Stack<'a> {
         let mut st = Stack::new(chans);
         st.excitation = chans.iter().map(|c| Excitation::of(c, model).into_iter().collect()).collect();
+        // The model's servo_lag gain (given, or the start of its search) until a fit sets it.
+        st.loop_kv = match model.get(EffectName::ServoLag, model.axis).map(|m| &m.effect.params) {
+            Some(EffectParams::ServoLag(s)) if s.kv > 0.0 => s.kv,
+            _ => f64::INFINITY,
+        };
         st
     }
 
     /// The same stack with these mode excitations (one list per channel).
     pub(crate) fn with_excitation(&self, excitation: Vec<Vec<Excitation>>) -> Stack<'a> {
-        Stack { chans: self.chans, n: self.n, group: self.group.clone(), n_groups: self.n_groups, excitation }
+        Stack { excitation, group: self.group.clone(), ..*self }
+    }
+
+    /// The same stack with the position-loop gain `kv` (1/s, [`Stack::loop_kv`]).
+    pub(crate) fn with_loop_kv(&self, kv: f64) -> Stack<'a> {
+        Stack { loop_kv: kv, group: self.group.clone(), excitation: self.excitation.clone(), ..*self }
     }
 
     pub(crate) fn new(chans: &'a [Channel]) -> Stack<'a> {
@@ -313,6 +326,7 @@ impl<'a> Stack<'a> {
             group,
             n_groups: keys.len(),
             excitation: vec![Vec::new(); chans.len()],
+            loop_kv: f64::INFINITY,
         }
     }
 
@@ -863,8 +877,18 @@ pub(crate) fn legendre_to_monomials(first: u32, c: &[f64], range: (f64, f64)) ->
     out
 }
 
-/// Design columns of effect `name` at hyper-parameters `h` (in the order of [`shape`]).
+/// Design columns of effect `name` at hyper-parameters `h` (in the order of [`shape`]), each
+/// passed through a closed position loop onto its following channels ([`close_loop`]).
 pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>> {
+    let mut cols = open_loop_columns(st, name, sh, h);
+    if has_closed_loop(st.chans) {
+        cols.iter_mut().for_each(|c| close_loop(st, c));
+    }
+    cols
+}
+
+/// The columns of [`columns`] on each channel alone, before the loop couples them.
+fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>> {
     match name {
         n if n.is_error_motion() => {
             // c_k·P_k(u(x)): the same coefficient for lasers (P_k) and accelerometers (its slope
@@ -1115,8 +1139,18 @@ pub(crate) fn shortest_resolvable_period(st: &Stack) -> Option<f64> {
     gaps.into_iter().map(|g| 2.0 * g).find(|p| resolvable_on(&xs, *p))
 }
 
-/// The prediction of a known (not fitted) effect at every sample.
+/// The prediction of a known (not fitted) effect at every sample, passed through a closed
+/// position loop onto its following channels ([`close_loop`]).
 pub(crate) fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
+    let mut col = open_loop_prediction(st, e);
+    if has_closed_loop(st.chans) {
+        close_loop(st, &mut col);
+    }
+    col
+}
+
+/// The prediction of [`known_prediction`] on each channel alone.
+fn open_loop_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
     match (&e.params, e.name) {
         (EffectParams::ErrorMotion(prof), n) => {
             st.col(|c, i| c.motion_response(i, n, |x| prof.value(x), |x| prof.eval3(x)[1]))
