@@ -371,20 +371,7 @@ impl StepProfiles {
 
     /// The six error motions and their slopes at x ([`ErrorMotions::at`]).
     fn motions_at(&self, m: &ErrorMotions, x: f64) -> MotionsAt {
-        let [px, py, pz, rx, ry, rz] = [
-            self.eval2(0, &m.positioning, x),
-            self.eval2(1, &m.straightness_y, x),
-            self.eval2(2, &m.straightness_z, x),
-            self.eval2(3, &m.roll, x),
-            self.eval2(4, &m.pitch, x),
-            self.eval2(5, &m.yaw, x),
-        ];
-        MotionsAt {
-            translation: DVec3::new(px[0], py[0], pz[0]),
-            rotation: DVec3::new(rx[0], ry[0], rz[0]),
-            translation_slope: DVec3::new(px[1], py[1], pz[1]),
-            rotation_slope: DVec3::new(rx[1], ry[1], rz[1]),
-        }
+        m.at_with(|i, exact| self.eval2(i, exact, x))
     }
 }
 

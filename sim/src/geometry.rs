@@ -74,15 +74,17 @@ impl ErrorMotions {
     /// Value and slope of all six error motions at x, each profile evaluated once: what one physics
     /// step needs (the guideway rest pose and its velocity, DESIGN.md §4).
     pub fn at(&self, x: f64) -> MotionsAt {
-        let ev = |p: &Profile| p.eval3(x);
-        let [px, py, pz, rx, ry, rz] = [
-            ev(&self.positioning),
-            ev(&self.straightness_y),
-            ev(&self.straightness_z),
-            ev(&self.roll),
-            ev(&self.pitch),
-            ev(&self.yaw),
-        ];
+        self.at_with(|_, p| {
+            let e = p.eval3(x);
+            [e[0], e[1]]
+        })
+    }
+
+    /// The six error motions and their slopes as `value_slope(i, profile)` gives them for the motion of
+    /// ISO index i (0..6: EXX, EYX, EZX, EAX, EBX, ECX) — exactly, or from a table of the profile.
+    pub fn at_with(&self, value_slope: impl Fn(usize, &Profile) -> [f64; 2]) -> MotionsAt {
+        let ev = |i: usize| value_slope(i, self.by_index(i));
+        let [px, py, pz, rx, ry, rz] = [ev(0), ev(1), ev(2), ev(3), ev(4), ev(5)];
         MotionsAt {
             translation: DVec3::new(px[0], py[0], pz[0]),
             rotation: DVec3::new(rx[0], ry[0], rz[0]),

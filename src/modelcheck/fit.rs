@@ -35,6 +35,25 @@ pub(crate) struct FitState {
     pub(crate) shapes: Vec<ShapeChoice>,
 }
 
+/// The setup of an order search for the fitted motion `terms[ti]`: its model entry, the basis it asks
+/// for (Legendre unless given), the span of its shape's range (m), and the design columns of every other
+/// term (held while this motion's order is searched).
+fn order_search_setup<'m>(
+    st: &Stack,
+    model: &'m Model,
+    terms: &[FitTerm],
+    ti: usize,
+) -> (&'m ModelEffect, ShapeBasis, f64, Vec<Vec<f64>>) {
+    let me = &model.effects[terms[ti].index];
+    let basis = requested_basis(me).unwrap_or(ShapeBasis::Legendre);
+    let span = {
+        let r = shape(st, terms[ti].name, 1, 1, false).range;
+        r.1 - r.0
+    };
+    let others: Vec<FitTerm> = terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
+    (me, basis, span, design(st, &others))
+}
+
 pub(crate) fn design(st: &Stack, terms: &[FitTerm]) -> Vec<Vec<f64>> {
     let mut cols = st.offsets();
     for t in terms {
@@ -355,16 +374,8 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
     for _ in 0..sweeps {
         for &ti in &motions {
             let name = terms[ti].name;
-            let me = &model.effects[terms[ti].index];
-            let basis = requested_basis(me).unwrap_or(ShapeBasis::Legendre);
-            let span = {
-                let r = shape(st, name, 1, 1, false).range;
-                r.1 - r.0
-            };
-            let others: Vec<FitTerm> =
-                terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
-            let fixed: Vec<Vec<f64>> =
-                design(st, &others).into_iter().filter(|c| c.iter().any(|v| *v != 0.0)).collect();
+            let (me, basis, span, mut fixed) = order_search_setup(st, model, &terms, ti);
+            fixed.retain(|c| c.iter().any(|v| *v != 0.0));
             let base = OrthoBase::new(&fixed, w).map_err(|e| e.to_string())?;
             // (user order, weighted RSS, linear parameters) of every order BIC may choose.
             let curve = order_curve(st, name, basis, top, &first.target, w, &base)?;
@@ -459,15 +470,7 @@ pub(crate) fn rechoose_orders(
         for slot in 0..orders.len() {
             let name = orders[slot].0;
             let Some(ti) = terms.iter().position(|t| t.name == name) else { continue };
-            let me = &model.effects[terms[ti].index];
-            let basis = requested_basis(me).unwrap_or(ShapeBasis::Legendre);
-            let span = {
-                let r = shape(st, name, 1, 1, false).range;
-                r.1 - r.0
-            };
-            let others: Vec<FitTerm> =
-                terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
-            let mut fixed: Vec<Vec<f64>> = design(st, &others);
+            let (me, basis, span, mut fixed) = order_search_setup(st, model, &terms, ti);
             fixed.extend(extra.iter().cloned());
             fixed.retain(|c| c.iter().any(|v| *v != 0.0));
             let base = OrthoBase::new(&fixed, w).map_err(|e| e.to_string())?;
