@@ -400,6 +400,8 @@ pub(crate) const COUPLED_SCAN_DAMPING: f64 = 0.02;
 /// Rounds of the joint frequency scan, each followed by the shapes re-chosen at its optimum: the
 /// first scans with the shapes of the fit without the mode, which miss the terms that drive it.
 pub(crate) const COUPLED_ROUNDS: usize = 2;
+/// Alternations of shapes and gains that fit a held mode's gains ([`refit_coupled`]).
+pub(crate) const HELD_GAIN_ROUNDS: usize = 4;
 /// Starts refined after the joint frequency scan: its best points at least a box apart.
 pub(crate) const COUPLED_STARTS: usize = 3;
 
@@ -542,8 +544,14 @@ impl Problem<'_> {
     /// The gains at (f, ζ) of the sequential fit with the excitation held at the shapes `c`, twice
     /// (the second with the shapes the first fitted): the starting gains of a joint refinement.
     fn sequential_gains(&self, fz: (f64, f64), c: &[Vec<f64>], g: &[f64]) -> Vec<f64> {
+        self.alternating_gains(fz, c, g, 2)
+    }
+
+    /// The gains at (f, ζ) by `rounds` alternations of the shapes (gains held) and the gains (shapes held):
+    /// the least squares of the gains with the mode's frequency and damping fixed.
+    fn alternating_gains(&self, fz: (f64, f64), c: &[Vec<f64>], g: &[f64], rounds: usize) -> Vec<f64> {
         let (mut c, mut g) = (c.to_vec(), g.to_vec());
-        for _ in 0..2 {
+        for _ in 0..rounds {
             let mix: Vec<(Vec<f64>, usize)> = self.chans.iter().map(|ch| self.mixing(ch, fz, &g, Some(&c))).collect();
             let Ok((beta, _)) = self.solve(fz, &mix) else { break };
             g = beta[self.n_shape()..self.n_shape() + self.n_gains].to_vec();
@@ -737,12 +745,17 @@ fn input_coefs(pb: &Problem, fs: &FitState) -> Vec<Vec<f64>> {
 /// the joint shapes and the model refitted at the joint (f, ζ), its linear parameters (shapes,
 /// gains, free vibration, offsets, other terms) by least squares. Returns the new stack, fit and
 /// joint optimum when that lowers the weighted residual sum of squares.
+///
+/// A `held` mode (a given resonance, its frequency and damping stated by the model) is not scanned
+/// or refined: only its gains (by [`HELD_GAIN_ROUNDS`] alternations with the shapes) and the shapes'
+/// selections are fitted.
 pub(crate) fn refit_coupled<'a>(
     st: &Stack<'a>,
     st_mode: &Stack<'a>,
     fs: &FitState,
     sigma: &Sigma,
     w: &[f64],
+    held: bool,
 ) -> Option<(Stack<'a>, FitState, Coupled)> {
     let ti_r = fs.terms.iter().position(|t| t.name == EffectName::Resonance)?;
     let hi = accel_min_rate(st).map_or(200.0, |f| (0.4 * f).min(200.0)).max(6.0);
@@ -754,9 +767,15 @@ pub(crate) fn refit_coupled<'a>(
         .iter()
         .map(|(_, _, name)| fs.terms[ti_r].shape.coefs.iter().position(|c| c == name).map_or(0.0, |i| res_coefs[i]))
         .collect();
-    let mut own = vec![fs.terms[ti_r].hyper[0], fs.terms[ti_r].hyper[1]];
+    let fz = (fs.terms[ti_r].hyper[0], fs.terms[ti_r].hyper[1]);
+    let held_theta = |pb: &Problem, c: &[Vec<f64>], g: &[f64]| -> Vec<f64> {
+        let mut th = vec![fz.0, fz.1];
+        th.extend(pb.alternating_gains(fz, c, g, HELD_GAIN_ROUNDS));
+        th
+    };
+    let mut own = vec![fz.0, fz.1];
     own.extend(&g0);
-    let (mut theta1, _) = pb1.search(&grid, &c0, &g0, &[own])?;
+    let mut theta1 = if held { held_theta(&pb1, &c0, &g0) } else { pb1.search(&grid, &c0, &g0, &[own])?.0 };
     let mut terms2 = reselect(st_mode, &pb1, &fs.terms, &theta1, &fs.target)?;
     // Further rounds: the scan again with the re-chosen shapes (their coefficients and gains at
     // the last optimum), then the shapes re-chosen at its optimum.
@@ -764,12 +783,18 @@ pub(crate) fn refit_coupled<'a>(
         let pb = problem(st_mode, &terms2, &fs.target, w)?;
         let (beta, _) = pb.coupled(&theta1).ok()?;
         let (c, g) = (pb.shape_coefs(&beta), theta1[2..].to_vec());
-        (theta1, _) = pb.search(&grid, &c, &g, &[theta1.clone()])?;
+        theta1 = if held { held_theta(&pb, &c, &g) } else { pb.search(&grid, &c, &g, &[theta1.clone()])?.0 };
         terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target)?;
     }
     let pb2 = problem(st_mode, &terms2, &fs.target, w)?;
-    let (theta, _) = pb2.search(&[], &[], &[], &[theta1.clone()])?;
-    let at_bound = box_limits(theta1[0], &theta);
+    let (theta, at_bound) = if held {
+        let (beta, _) = pb2.coupled(&theta1).ok()?;
+        (held_theta(&pb2, &pb2.shape_coefs(&beta), &theta1[2..]), [false; 2])
+    } else {
+        let (theta, _) = pb2.search(&[], &[], &[], &[theta1.clone()])?;
+        let at_bound = box_limits(theta1[0], &theta);
+        (theta, at_bound)
+    };
     let (beta, _) = pb2.coupled(&theta).ok()?;
     // The coefficient vector of a fit over `terms2` with the joint shapes in their slots (the
     // excitation reads only those).
@@ -843,7 +868,7 @@ pub(crate) fn joint_mode(
         target: base.target.clone(),
         shapes: vec![],
     };
-    let (_, fit, c) = refit_coupled(st, st_mode, &seq, sigma, w)?;
+    let (_, fit, c) = refit_coupled(st, st_mode, &seq, sigma, w, false)?;
     let ti = fit.terms.len() - 1;
     let gains = fit.terms[ti]
         .shape

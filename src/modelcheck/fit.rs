@@ -793,7 +793,11 @@ pub(crate) fn fit_model_fixed(
         if me.effect.axis != model.axis || !predicts(me.effect.name) {
             continue;
         }
-        if !me.fit {
+        // A given resonance or gravity_tilt: a model states a mode's frequency and damping (a tilt has
+        // no parameter of its own), never its linear parts (the mode shape at each sensor, its free
+        // vibration, a sensor's tilt polynomial). Those are fitted with the stated values held.
+        let linear_parts_fitted = matches!(me.effect.name, EffectName::Resonance | EffectName::GravityTilt);
+        if !me.fit && !linear_parts_fitted {
             // The simulator's friction law (`vmt_sim::effects::Model::friction`): a given Stribeck
             // law carries the Coulomb level (its `fc`, unset: the coulomb effect's), so a given
             // coulomb beside a given stribeck adds nothing of its own (it would count Fc twice).
@@ -825,14 +829,15 @@ pub(crate) fn fit_model_fixed(
         let mut hyper = Vec::new();
         let mut searched = Vec::new();
         for h in &sh.hypers {
-            let given = me.given.iter().any(|g| g == h);
+            let given = !me.fit || me.given.iter().any(|g| g == h);
             let start = me.effect.params.get(h).unwrap_or(1.0);
             // A given period (screw lead, signal period) is held; a given τ is a starting value.
-            // A damping that these data cannot resolve (no predicted excitation) is held.
+            // A damping that these data cannot resolve (no predicted excitation) is held. Every
+            // hyper-parameter of an effect with `fit = false` is held.
             let resolvable = *h != "damping" || hyper_grid(st, me.effect.name, h).1;
             hyper.push(if given || !resolvable { start } else { f64::NAN });
             // A given period or Stribeck shape exponent is held (the diagnosis searched it).
-            searched.push(!(given && matches!(*h, "period" | "shape")) && resolvable);
+            searched.push(me.fit && !(given && matches!(*h, "period" | "shape")) && resolvable);
         }
         let at_bound = vec![false; hyper.len()];
         terms.push(FitTerm { index, name: me.effect.name, shape: sh, hyper, searched, at_bound });

@@ -239,9 +239,29 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
     let est: Vec<bool> = sig.iter().map(|s| s.is_nan()).collect();
     // A fitted resonance over fitted translations (accelerometers) is driven by the guideway a
     // first fit without it shows (`fitted_excitation`); the model is then refitted with those inputs.
+    // A given resonance (fit = false) is driven the same way, its frequency and damping held (no joint refit).
+    let resonance =
+        model.effects.iter().find(|m| m.effect.axis == model.axis && m.effect.name == EffectName::Resonance);
     let mode_over_shapes = chans.iter().any(|c| c.is_accel())
-        && model.effects.iter().any(|m| m.fit && m.effect.name == EffectName::Resonance)
+        && resonance.is_some()
         && model.effects.iter().any(|m| m.fit && m.effect.name.is_error_motion());
+    let mode_fitted = resonance.is_some_and(|m| m.fit);
+    for me in model.effects.iter().filter(|m| !m.fit && m.effect.axis == model.axis) {
+        match me.effect.name {
+            EffectName::Resonance => notes.push(
+                "`resonance` is given (fit = false): its frequency and damping are held at the model's values; the \
+                 mode shape at each sensor, its free vibration and its narrow-band amplitudes are linear parameters a \
+                 model does not state, so they are fitted"
+                    .into(),
+            ),
+            EffectName::GravityTilt => notes.push(
+                "`gravity_tilt` is given (fit = false) but has no parameter a model states: each accelerometer's \
+                 tilt polynomial is fitted as with fit = true"
+                    .into(),
+            ),
+            _ => {}
+        }
+    }
     let mut bare = model.clone();
     if mode_over_shapes {
         bare.effects.retain(|m| m.effect.name != EffectName::Resonance);
@@ -304,8 +324,9 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                 None => st.with_excitation(st.excitation.clone()),
             };
             let fs2 = fit_model_on(&st2, model, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
-            // The mode refitted jointly with the shapes that drive it (`refit_coupled`).
-            match refit_coupled(&st, &st2, &fs2, &sigma, &w) {
+            // The mode refitted jointly with the shapes that drive it (`refit_coupled`); a given
+            // mode keeps its frequency and damping.
+            match refit_coupled(&st, &st2, &fs2, &sigma, &w, !mode_fitted) {
                 Some((st3, fs3, _)) => (st3, fs3),
                 None => (st2, fs2),
             }

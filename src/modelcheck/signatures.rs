@@ -1188,9 +1188,9 @@ fn open_loop_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
             })
         }
         // No known-value column: a squareness needs a chain and LuGre, accel_bias_drift are not among the
-        // effects `predicts` lets through. A given (fit = false) resonance or gravity_tilt does pass
-        // `predicts` and is silently predicted as zero here — a gap left open (issue 19), not a choice.
-        // Listed by name so that the compiler names this place for a new effect (issue 12).
+        // effects `predicts` lets through; a given resonance or gravity_tilt has linear parts no model
+        // states, so `fit_model_fixed` fits them and never asks here. Listed by name so that the
+        // compiler names this place for a new effect (issue 12).
         (
             EffectParams::Squareness(_)
             | EffectParams::Lugre(_)
