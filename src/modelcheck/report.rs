@@ -537,6 +537,12 @@ pub(crate) fn visible(st: &Stack, name: EffectName, sh: &Shape, fixed: Option<f6
     }
     let grid: Vec<f64> = match (fixed, sh.hypers.first()) {
         (Some(v), _) => vec![v],
+        // Where these columns are zero does not depend on the value: 1 − exp(−t/τ) is non-zero
+        // for every τ at t > 0 (tau); a following channel's start column e^{−kv·(t − t₀)} is 1 at
+        // t₀ for every kv (kv). So one grid value answers for the grid. (A period's columns are
+        // zeroed where the positions do not resolve it, a Stribeck weight exp(−|v/vs|^δ) can
+        // underflow at one vs and not another: their grids are scanned.)
+        (None, Some(&h)) if matches!(h, "tau" | "kv") => hyper_grid(st, name, h).0.into_iter().take(1).collect(),
         (None, Some(h)) => hyper_grid(st, name, h).0,
         (None, None) => vec![1.0],
     };
