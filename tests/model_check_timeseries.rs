@@ -389,10 +389,13 @@ fn hidden_encoder(h: EncoderHidden, expect: &str) {
     assert!(rate(named, n as usize) >= 95.0 && rate(low, n as usize) >= 95.0 && rate(within, n as usize) >= 95.0);
 }
 
+/// Two rounds of the loop: the effects added in order, the normalised RMS at the end, the final
+/// compare's `fitted`, and an error.
+type TwoRounds = (Vec<String>, Option<f64>, Option<serde_json::Value>, Option<String>);
+
 /// Two hidden effects through the loop twice (diagnose → add the first significant candidate →
-/// diagnose again → add → compare): the effects added in order, the normalised RMS at the end, and
-/// the final compare's `fitted`.
-fn run_loop_twice(dir: &Path) -> (Vec<String>, Option<f64>, Option<serde_json::Value>, Option<String>) {
+/// diagnose again → add → compare).
+fn run_loop_twice(dir: &Path) -> TwoRounds {
     let mut model = dir.join("model.toml");
     let mut added: Vec<String> = Vec::new();
     for step in 0..2 {
@@ -431,7 +434,7 @@ fn hidden_pair<T: Send>(
     what: &str,
 ) -> Vec<(T, bool)> {
     let root = workdir(what);
-    let r: Vec<(T, (Vec<String>, Option<f64>, Option<serde_json::Value>, Option<String>))> = (0..n)
+    let r: Vec<(T, TwoRounds)> = (0..n)
         .into_par_iter()
         .map(|seed| {
             let dir = root.join(format!("d{seed}"));
