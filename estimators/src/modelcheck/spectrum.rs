@@ -71,6 +71,10 @@ pub struct Periodogram {
     pub power: Vec<f64>,
 }
 
+/// Frequencies of an evenly spaced grid between fresh evaluations of the sines and cosines in
+/// [`ls_periodogram`] (the others by rotation).
+const RESEED: usize = 64;
+
 /// Generalised Lomb–Scargle periodogram (Zechmeister & Kürster 2009): at each trial frequency f
 /// fit r_i ≈ c + a·cos(2πf x_i) + b·sin(2πf x_i) by weighted least squares (weights 1/σ_i²) and
 /// report the amplitude √(a² + b²) and the power p(f) = 1 − χ²(f)/χ²₀, χ²₀ = Σ ((r_i − r̄_w)/σ_i)².
@@ -105,12 +109,38 @@ pub fn ls_periodogram(
     let mut power = Vec::with_capacity(frequencies.len());
     let mut c = vec![0.0; n];
     let mut s = vec![0.0; n];
-    for &f in frequencies {
-        let om = 2.0 * std::f64::consts::PI * f;
-        for i in 0..n {
-            let (si, ci) = (om * x[i]).sin_cos();
-            c[i] = ci;
-            s[i] = si;
+    // On an evenly spaced grid (as [`frequency_grid`] makes) each sample's cos/sin at the next
+    // frequency is a rotation of the last by Δω·x_i (angle addition), evaluated afresh every
+    // [`RESEED`] frequencies so that the rounding (≈ k·ε after k rotations) stays below 1e-13.
+    let tau = 2.0 * std::f64::consts::PI;
+    let step = match frequencies {
+        [f0, f1, ..]
+            if frequencies
+                .iter()
+                .enumerate()
+                .all(|(k, f)| (f - (f0 + k as f64 * (f1 - f0))).abs() <= 1e-12 * f.abs()) =>
+        {
+            Some(f1 - f0)
+        }
+        _ => None,
+    };
+    let rot: Vec<(f64, f64)> = match step {
+        Some(df) => x.iter().map(|xi| (tau * df * xi).sin_cos()).collect(),
+        None => Vec::new(),
+    };
+    for (k, &f) in frequencies.iter().enumerate() {
+        if step.is_none() || k % RESEED == 0 {
+            let om = tau * f;
+            for i in 0..n {
+                let (si, ci) = (om * x[i]).sin_cos();
+                c[i] = ci;
+                s[i] = si;
+            }
+        } else {
+            for i in 0..n {
+                let (sd, cd) = rot[i];
+                (s[i], c[i]) = (s[i] * cd + c[i] * sd, c[i] * cd - s[i] * sd);
+            }
         }
         let (beta, chi) = small_lstsq(&[ones.as_slice(), c.as_slice(), s.as_slice()], residual, &w);
         amplitude.push(beta[1].hypot(beta[2]));
