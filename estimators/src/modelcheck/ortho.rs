@@ -109,7 +109,7 @@ impl OrthoBase {
     /// Each product runs over a column's non-zero rows only (a mode's segments live on a fraction of
     /// the samples), so an evaluation costs rank × (non-zeros) + k² × (overlaps + rank) flops instead
     /// of the n × rank × k of projecting the columns. G is scaled by the columns' own weighted norms
-    /// and factored by [`cholesky_with_dropping`]: a column with less than 1e-5 of its weighted norm
+    /// and factored by a Cholesky that drops dependent columns: a column with less than 1e-5 of its weighted norm
     /// outside the span and the columns before it (pivot ≤ 1e-10) is dependent and left out (the
     /// normal equations resolve no finer). Returns (explained weighted sum of squares, the residual
     /// when `want_residual`).
