@@ -708,7 +708,7 @@ pub fn compensate(path: &Path, out: &Path, opts: &CompensateOptions) -> Result<i
     let targets: Vec<f64> = iso.targets.iter().map(|x| x.target).collect();
     let dev: Vec<f64> = iso.targets.iter().map(|x| x.mean_bidirectional).collect();
     let bad = |e: String| VmtError::bad(path, format!("run {}", run.name), e);
-    let axis = opts.axis.clone().unwrap_or_else(|| format!("{}1", run.axis.to_ascii_uppercase()));
+    let axis = opts.axis.clone().unwrap_or_else(|| format!("{}1", run.axis.iso_letter()));
     let (table, text) = if let Some(n) = opts.equidistant {
         if n > MAX_TABLE_NODES {
             return Err(VmtError::Usage(format!(

@@ -11,6 +11,7 @@ use crate::friction::LugreParams;
 use crate::geometry::ErrorMotions;
 use crate::machine::AxisModel;
 use crate::profile::{Harmonic, Profile, Term};
+use crate::Axis;
 
 /// What a truth does to one axis beyond `AxisTruth`: changes to the machine model and to sensors.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -23,7 +24,7 @@ pub struct Adjustments {
 
 /// Builds the physics of axis `axis` from an effect set. `model` gives the moving body's height for
 /// the resonance mode shape. Errors name the effect that cannot act on this machine.
-pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(AxisTruth, Adjustments), String> {
+pub fn axis_physics(set: &EffectSet, axis: Axis, model: &AxisModel) -> Result<(AxisTruth, Adjustments), String> {
     let motion = |n: EffectName| set.error_motion(n, axis).cloned().unwrap_or_default();
     let mut truth = AxisTruth {
         motions: ErrorMotions {

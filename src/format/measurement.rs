@@ -51,8 +51,9 @@ pub struct Sensor {
     pub name: String,
     /// What it measures.
     pub kind: SensorKind,
-    /// The prismatic joint it observes (`x`, `y` or `z`).
-    pub axis: char,
+    /// The prismatic joint it observes (manifest `axis = "x"`, `"y"` or `"z"`).
+    #[serde(with = "vmt_core::axis::letter")]
+    pub axis: Axis,
     /// Measuring point on the moving body, axis reference frame, m (default 0, 0, 0).
     pub position: [f64; 3],
     /// Sensitive direction, machine frame (default: along the axis).
@@ -82,8 +83,9 @@ pub struct Run {
     pub file: String,
     /// Measurement procedure.
     pub procedure: Procedure,
-    /// The axis moved.
-    pub axis: char,
+    /// The axis moved (manifest `axis = "x"`, `"y"` or `"z"`).
+    #[serde(with = "vmt_core::axis::letter")]
+    pub axis: Axis,
     /// Start, s since the start of the measurement session.
     pub start_time: Option<f64>,
     /// Feed, m/s (constant_velocity, crawl).
@@ -522,16 +524,6 @@ fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
 // ------------------------------------------------------------------------------------------
 // Manifest.
 
-fn axis_of(r: &TomlReader<'_>, key: &str) -> Result<Option<Axis>, VmtError> {
-    match r.opt_str(key, "an axis \"x\", \"y\" or \"z\"")? {
-        None => Ok(None),
-        Some("x") => Ok(Some(Axis::X)),
-        Some("y") => Ok(Some(Axis::Y)),
-        Some("z") => Ok(Some(Axis::Z)),
-        Some(s) => Err(r.bad(key, format!("expected an axis \"x\", \"y\" or \"z\", got {s:?}"))),
-    }
-}
-
 fn vec3(r: &TomlReader<'_>, key: &str, what: &str) -> Result<Option<[f64; 3]>, VmtError> {
     match r.opt_f64_array(key, what)? {
         None => Ok(None),
@@ -547,11 +539,11 @@ fn parse_sensor(r: &TomlReader<'_>) -> Result<Sensor, VmtError> {
         let known: Vec<&str> = SensorKind::ALL.iter().map(|k| k.as_str()).collect();
         r.bad("kind", format!("unknown sensor kind {kind_s:?}; expected one of {}", known.join(", ")))
     })?;
-    let axis = axis_of(r, "axis")?
+    let axis = r
+        .opt_axis("axis")?
         .ok_or_else(|| r.bad("axis", "missing key: expected the axis observed, \"x\", \"y\" or \"z\""))?;
     let position = vec3(r, "position", "a measuring point in metres")?.unwrap_or([0.0, 0.0, 0.0]);
     let direction = vec3(r, "direction", "a sensitive direction")?.unwrap_or_else(|| axis.unit());
-    let axis = axis.letter();
     let sigma = r.opt_f64("sigma", "a 1-sigma noise in SI units of the channel")?;
     let closes_loop = r.opt_bool("closes_loop")?.unwrap_or(false);
     if closes_loop && !matches!(kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) {
@@ -572,9 +564,9 @@ fn parse_run_entry(r: &TomlReader<'_>) -> Result<(Run, String), VmtError> {
         let known: Vec<&str> = Procedure::ALL.iter().map(|p| p.as_str()).collect();
         r.bad("procedure", format!("unknown procedure {ps:?}; expected one of {}", known.join(", ")))
     })?;
-    let axis = axis_of(r, "axis")?
-        .ok_or_else(|| r.bad("axis", "missing key: expected the axis moved, \"x\", \"y\" or \"z\""))?
-        .letter();
+    let axis = r
+        .opt_axis("axis")?
+        .ok_or_else(|| r.bad("axis", "missing key: expected the axis moved, \"x\", \"y\" or \"z\""))?;
     let start_time = r.opt_f64("start_time", "a time in seconds")?;
     let feed = r.opt_f64("feed", "a feed in m/s")?;
     let direction = match r.opt_i64("direction", "+1 or -1")? {
@@ -695,7 +687,7 @@ pub fn from_iso230_2_dat(dat: &vmt_estimators::iso230_2::dat::DatFile) -> Measur
         sensors: vec![Sensor {
             name: "ref".into(),
             kind: SensorKind::LaserLinear,
-            axis: 'x',
+            axis: Axis::X,
             position: [0.0; 3],
             direction: [1.0, 0.0, 0.0],
             sigma: None,
@@ -707,7 +699,7 @@ pub fn from_iso230_2_dat(dat: &vmt_estimators::iso230_2::dat::DatFile) -> Measur
             name: "iso".into(),
             file: "iso.csv".into(),
             procedure: Procedure::Positioning,
-            axis: 'x',
+            axis: Axis::X,
             start_time: None,
             feed: None,
             direction: None,
@@ -801,9 +793,6 @@ pub fn validate_manifest(set: &MeasurementSet, file: &Path) -> Result<(), VmtErr
         if set.sensors[..i].iter().any(|o| o.name == s.name) {
             return bad(format!("sensors[{i}].name"), format!("sensor `{}` is declared twice", s.name));
         }
-        if !matches!(s.axis, 'x' | 'y' | 'z') {
-            return bad(format!("sensors[{i}].axis"), format!("expected \"x\", \"y\" or \"z\", got {:?}", s.axis));
-        }
         if s.position.iter().any(|v| !v.is_finite()) {
             return bad(format!("sensors[{i}].position"), "expected 3 finite numbers (m)".to_string());
         }
@@ -861,9 +850,6 @@ pub fn validate_manifest(set: &MeasurementSet, file: &Path) -> Result<(), VmtErr
         }
         if set.runs[..i].iter().any(|o| o.file == r.file) {
             return bad(format!("runs[{i}].file"), format!("file {:?} is used by two runs", r.file));
-        }
-        if !matches!(r.axis, 'x' | 'y' | 'z') {
-            return bad(format!("runs[{i}].axis"), format!("expected \"x\", \"y\" or \"z\", got {:?}", r.axis));
         }
         if let Some(t0) = r.start_time {
             if !t0.is_finite() {
@@ -1210,10 +1196,10 @@ pub fn put_files(dir: &Path, files: &[(String, Vec<u8>)]) -> Result<(), VmtError
 // Error-motion profiles (FORMAT.md §5).
 
 /// One error-motion column of a profile CSV: `pitch` or `y.pitch`, with optional `pitch_sigma`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ProfileColumn {
-    /// Axis prefix (`y.pitch` → `y`); `None` for an unprefixed column (the file's one axis).
-    pub axis: Option<char>,
+    /// Axis prefix (`y.pitch` → Y); `None` for an unprefixed column (the file's one axis).
+    pub axis: Option<Axis>,
     /// Which error motion (positioning, straightness_y, straightness_z, roll, pitch, yaw).
     pub effect: EffectName,
     /// Values at the positions, m or rad.
@@ -1233,7 +1219,7 @@ impl ProfileColumn {
 }
 
 /// A truth or estimate of error motions over positions (FORMAT.md §5): `truth_profiles.csv`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct ProfileTable {
     /// Axis positions, m, strictly increasing.
     pub position: Vec<f64>,
@@ -1243,7 +1229,7 @@ pub struct ProfileTable {
 
 impl ProfileTable {
     /// The column of `effect` on `axis`: an exact axis match first, then an unprefixed column.
-    pub fn get(&self, effect: EffectName, axis: char) -> Option<&ProfileColumn> {
+    pub fn get(&self, effect: EffectName, axis: Axis) -> Option<&ProfileColumn> {
         self.columns
             .iter()
             .find(|c| c.effect == effect && c.axis == Some(axis))
@@ -1252,7 +1238,7 @@ impl ProfileTable {
 }
 
 /// Splits a profile column name into (axis, effect, is_sigma).
-fn parse_profile_column(name: &str) -> Result<(Option<char>, EffectName, bool), String> {
+fn parse_profile_column(name: &str) -> Result<(Option<Axis>, EffectName, bool), String> {
     let expected = "expected an error-motion column: positioning, straightness_y, \
                     straightness_z, roll, pitch or yaw, optionally prefixed by the axis (`y.pitch`) \
                     and suffixed `_sigma`";
@@ -1261,7 +1247,9 @@ fn parse_profile_column(name: &str) -> Result<(Option<char>, EffectName, bool), 
         None => (name, false),
     };
     let (axis, ename) = match base.split_once('.') {
-        Some((a, e)) if matches!(a, "x" | "y" | "z") => (a.chars().next(), e),
+        Some(("x", e)) => (Some(Axis::X), e),
+        Some(("y", e)) => (Some(Axis::Y), e),
+        Some(("z", e)) => (Some(Axis::Z), e),
         Some(_) => return Err(format!("column `{name}`: bad axis prefix; {expected}")),
         None => (None, base),
     };
@@ -1282,7 +1270,7 @@ pub fn read_profiles(path: &Path) -> Result<ProfileTable, VmtError> {
     let position = csv.numbers(path, pi, Dimension::Length)?;
     check_increasing(&csv, path, &position, "position")?;
     let mut columns: Vec<ProfileColumn> = Vec::new();
-    let mut sigmas: Vec<(usize, Option<char>, EffectName)> = Vec::new();
+    let mut sigmas: Vec<(usize, Option<Axis>, EffectName)> = Vec::new();
     for (i, (name, _)) in csv.header.iter().enumerate() {
         if i == pi {
             continue;
@@ -1460,8 +1448,25 @@ mod tests {
     }
 
     #[test]
+    fn json_writes_and_reads_an_axis_as_its_letter() {
+        let set = from_iso230_2_dat(&vmt_estimators::iso230_2::dat::DatFile {
+            targets: vec![0.0, 0.1],
+            up: vec![vec![1e-6], vec![2e-6]],
+            down: vec![vec![1e-6], vec![2e-6]],
+            unit: "mm".into(),
+            metadata: Default::default(),
+        });
+        let json = serde_json::to_string(&set.sensors[0]).unwrap();
+        assert!(json.contains("\"axis\":\"x\""), "{json}");
+        assert_eq!(serde_json::from_str::<Sensor>(&json).unwrap(), set.sensors[0]);
+        let bad = json.replace("\"axis\":\"x\"", "\"axis\":\"w\"");
+        let e = serde_json::from_str::<Sensor>(&bad).unwrap_err().to_string();
+        assert!(e.contains("expected an axis \"x\", \"y\" or \"z\", got 'w'"), "{e}");
+    }
+
+    #[test]
     fn profile_column_names_parse_with_axis_and_sigma() {
-        assert_eq!(parse_profile_column("y.pitch_sigma").unwrap(), (Some('y'), EffectName::Pitch, true));
+        assert_eq!(parse_profile_column("y.pitch_sigma").unwrap(), (Some(Axis::Y), EffectName::Pitch, true));
         assert_eq!(parse_profile_column("straightness_y").unwrap(), (None, EffectName::StraightnessY, false));
         assert!(parse_profile_column("backlash").is_err());
         assert!(parse_profile_column("q.pitch").is_err());
