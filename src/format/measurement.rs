@@ -268,8 +268,8 @@ fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
                 }
                 let mut cols: Vec<(String, Option<String>)> = Vec::new();
                 for cell in rec.iter() {
-                    let (name, unit) =
-                        parse_header_cell(cell).map_err(|m| VmtError::bad(path, format!("line {line} (header)"), m))?;
+                    let (name, unit) = parse_header_cell(cell)
+                        .map_err(|m| VmtError::bad(path, format!("line {line} (header)"), m.to_string()))?;
                     if cols.iter().any(|(n, _)| *n == name) {
                         return Err(VmtError::bad(
                             path,
@@ -309,14 +309,14 @@ impl CsvText {
     /// which must have dimension `dim`.
     fn numbers(&self, path: &Path, i: usize, dim: Dimension) -> Result<Vec<f64>, VmtError> {
         let (name, unit) = &self.header[i];
-        let u: Unit =
-            resolve_unit(unit.as_deref(), dim).map_err(|m| VmtError::bad(path, format!("column {name}"), m))?;
+        let u: Unit = resolve_unit(unit.as_deref(), dim)
+            .map_err(|m| VmtError::bad(path, format!("column {name}"), m.to_string()))?;
         self.rows
             .iter()
             .map(|(line, cells)| {
                 parse_number(&cells[i])
                     .map(|v| u.to_si(v))
-                    .map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m))
+                    .map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m.to_string()))
             })
             .collect()
     }
@@ -334,7 +334,8 @@ impl CsvText {
         self.rows
             .iter()
             .map(|(line, cells)| {
-                parse_number(&cells[i]).map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m))
+                parse_number(&cells[i])
+                    .map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m.to_string()))
             })
             .collect()
     }
@@ -344,15 +345,26 @@ impl CsvText {
     }
 }
 
+/// Why a CSV cell is not a number (the caller adds the file, line and column).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+enum CellError {
+    #[error("expected a number, got an empty cell")]
+    Empty,
+    #[error("expected a finite number, got `{0}`")]
+    NotFinite(String),
+    #[error("expected a number, got `{0}`")]
+    NotANumber(String),
+}
+
 /// Parses one CSV cell as a finite number.
-fn parse_number(cell: &str) -> Result<f64, String> {
+fn parse_number(cell: &str) -> Result<f64, CellError> {
     if cell.is_empty() {
-        return Err("expected a number, got an empty cell".to_string());
+        return Err(CellError::Empty);
     }
     match cell.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(format!("expected a finite number, got `{cell}`")),
-        Err(_) => Err(format!("expected a number, got `{cell}`")),
+        Ok(_) => Err(CellError::NotFinite(cell.to_string())),
+        Err(_) => Err(CellError::NotANumber(cell.to_string())),
     }
 }
 
@@ -386,26 +398,55 @@ pub fn check_point_rows(target: &[f64], run: &[u32], direction: &[i8]) -> Result
     Ok(())
 }
 
+/// Why a time column has no one sample interval (the caller adds the file and run).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SampleIntervalError {
+    /// Fewer than two samples.
+    #[error("expected at least two samples of `t` to have a sample interval, got {samples}")]
+    TooFew {
+        /// Samples in the column.
+        samples: usize,
+    },
+    /// The last time is not after the first (or not finite).
+    #[error("expected `t` increasing, got {} to {}", fmt_num(*.first), fmt_num(*.last))]
+    NotIncreasing {
+        /// First time, s.
+        first: f64,
+        /// Last time, s.
+        last: f64,
+    },
+    /// A step deviates from the mean step by more than 1e-3 of it.
+    #[error(
+        "expected uniformly sampled `t` (step {} s), got a step of {} s at row {row}: this estimator needs a \
+         constant sample rate",
+        fmt_num(*.interval),
+        fmt_num(*.step)
+    )]
+    NonUniform {
+        /// The mean step (t_last − t_0)/(n − 1), s.
+        interval: f64,
+        /// The deviating step, s.
+        step: f64,
+        /// The data row (1-based, after the header) the step ends on.
+        row: usize,
+    },
+}
+
 /// The sample interval of a uniformly sampled time column, s: Δt = (t_last − t_0)/(n − 1), checked
 /// against every step t_k+1 − t_k (relative deviation ≤ 1e-3: CSV rounding, not a missing sample).
 /// For estimators that take one rate (SSI, accelerometer straightness). Errors on fewer than two
 /// samples or a non-uniform step, naming the row.
-pub fn uniform_interval(t: &[f64]) -> Result<f64, String> {
+pub fn uniform_interval(t: &[f64]) -> Result<f64, SampleIntervalError> {
     let n = t.len();
     if n < 2 {
-        return Err(format!("expected at least two samples of `t` to have a sample interval, got {n}"));
+        return Err(SampleIntervalError::TooFew { samples: n });
     }
     let dt = (t[n - 1] - t[0]) / (n - 1) as f64;
     if !(dt > 0.0 && dt.is_finite()) {
-        return Err(format!("expected `t` increasing, got {} to {}", fmt_num(t[0]), fmt_num(t[n - 1])));
+        return Err(SampleIntervalError::NotIncreasing { first: t[0], last: t[n - 1] });
     }
     if let Some(k) = t.windows(2).position(|w| ((w[1] - w[0]) - dt).abs() > 1e-3 * dt) {
-        return Err(format!(
-            "expected uniformly sampled `t` (step {} s), got a step of {} s at row {}: this estimator needs a constant sample rate",
-            fmt_num(dt),
-            fmt_num(t[k + 1] - t[k]),
-            k + 2
-        ));
+        return Err(SampleIntervalError::NonUniform { interval: dt, step: t[k + 1] - t[k], row: k + 2 });
     }
     Ok(dt)
 }
@@ -993,7 +1034,17 @@ fn shortest_round_trip(x: f64, back: impl Fn(f64) -> f64, si: f64) -> f64 {
     (1..=17usize).filter_map(|p| format!("{:.*e}", p - 1, x).parse::<f64>().ok()).find(|&r| back(r) == si).unwrap_or(x)
 }
 
-fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, String> {
+/// A value that overflows when written in the unit chosen (the caller adds the file).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("column {column}, row {row}: {} (SI) overflows when written in {unit}; write in SI units", fmt_num(*.value))]
+struct UnitOverflow {
+    column: String,
+    row: usize,
+    value: f64,
+    unit: &'static str,
+}
+
+fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, UnitOverflow> {
     let mut out = String::with_capacity(16 * (n + 1) * header.len().max(1));
     out.push_str(&header.join(","));
     out.push('\n');
@@ -1006,14 +1057,12 @@ fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, Str
                 Col::Num(u, v) => {
                     let x = u.from_si(v[i]);
                     if !x.is_finite() {
-                        return Err(format!(
-                            "column {}, row {}: {} (SI) overflows when written in {}; write \
-                             in SI units",
-                            header[j],
-                            i + 1,
-                            fmt_num(v[i]),
-                            u.symbol
-                        ));
+                        return Err(UnitOverflow {
+                            column: header[j].clone(),
+                            row: i + 1,
+                            value: v[i],
+                            unit: u.symbol,
+                        });
                     }
                     // A value converted out of SI (m → mm) carries the conversion's rounding noise
                     // (0.33595 m → 335.95000000000005 mm): written with the fewest significant digits
@@ -1030,7 +1079,7 @@ fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, Str
 }
 
 /// The CSV text of one run.
-fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> Result<String, String> {
+fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> Result<String, UnitOverflow> {
     let mut header: Vec<String> = Vec::new();
     let mut cols: Vec<Col<'_>> = Vec::new();
     let time_u = write_unit(Dimension::Time, true, units);
@@ -1171,7 +1220,7 @@ pub fn set_files(
         .map(|r| {
             run_csv(set, r, units)
                 .map(|text| (r.file.clone(), text.into_bytes()))
-                .map_err(|m| VmtError::bad(&dir.join(&r.file), "", m))
+                .map_err(|m| VmtError::bad(&dir.join(&r.file), "", m.to_string()))
         })
         .collect::<Result<Vec<_>, VmtError>>()?;
     files.extend(extras.iter().cloned());
@@ -1237,11 +1286,21 @@ impl ProfileTable {
     }
 }
 
+/// Why a profile CSV column name is refused (the caller adds the file and column).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+enum ProfileColumnError {
+    #[error("column `{}`: bad axis prefix; {}", .0, PROFILE_COLUMN_EXPECTED)]
+    AxisPrefix(String),
+    #[error("unknown column `{}`: {}", .0, PROFILE_COLUMN_EXPECTED)]
+    Unknown(String),
+}
+
+const PROFILE_COLUMN_EXPECTED: &str = "expected an error-motion column: positioning, straightness_y, \
+                                       straightness_z, roll, pitch or yaw, optionally prefixed by the axis \
+                                       (`y.pitch`) and suffixed `_sigma`";
+
 /// Splits a profile column name into (axis, effect, is_sigma).
-fn parse_profile_column(name: &str) -> Result<(Option<Axis>, EffectName, bool), String> {
-    let expected = "expected an error-motion column: positioning, straightness_y, \
-                    straightness_z, roll, pitch or yaw, optionally prefixed by the axis (`y.pitch`) \
-                    and suffixed `_sigma`";
+fn parse_profile_column(name: &str) -> Result<(Option<Axis>, EffectName, bool), ProfileColumnError> {
     let (base, sigma) = match name.strip_suffix("_sigma") {
         Some(b) => (b, true),
         None => (name, false),
@@ -1250,12 +1309,12 @@ fn parse_profile_column(name: &str) -> Result<(Option<Axis>, EffectName, bool), 
         Some(("x", e)) => (Some(Axis::X), e),
         Some(("y", e)) => (Some(Axis::Y), e),
         Some(("z", e)) => (Some(Axis::Z), e),
-        Some(_) => return Err(format!("column `{name}`: bad axis prefix; {expected}")),
+        Some(_) => return Err(ProfileColumnError::AxisPrefix(name.to_string())),
         None => (None, base),
     };
     match ename.parse::<EffectName>() {
         Ok(e) if e.is_error_motion() => Ok((axis, e, sigma)),
-        _ => Err(format!("unknown column `{name}`: {expected}")),
+        _ => Err(ProfileColumnError::Unknown(name.to_string())),
     }
 }
 
@@ -1276,7 +1335,7 @@ pub fn read_profiles(path: &Path) -> Result<ProfileTable, VmtError> {
             continue;
         }
         let (axis, effect, is_sigma) =
-            parse_profile_column(name).map_err(|m| VmtError::bad(path, format!("column {name}"), m))?;
+            parse_profile_column(name).map_err(|m| VmtError::bad(path, format!("column {name}"), m.to_string()))?;
         if is_sigma {
             sigmas.push((i, axis, effect));
             continue;
@@ -1371,7 +1430,7 @@ pub fn profiles_csv(table: &ProfileTable, path: &Path, units: UnitChoice) -> Res
             cols.push(Col::Num(u, s));
         }
     }
-    csv_text(&header, &cols, table.position.len()).map_err(|m| VmtError::bad(path, "", m))
+    csv_text(&header, &cols, table.position.len()).map_err(|m| VmtError::bad(path, "", m.to_string()))
 }
 
 /// Reads a two-column table CSV (`position`, then `value` or `value_name`) as used by a model's

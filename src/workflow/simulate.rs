@@ -43,7 +43,7 @@ pub struct Physics {
 pub fn physics(sc: &Scenario) -> Result<Physics, VmtError> {
     let mut model = sc.axis.clone();
     let (truth, adj) = axis_physics(&sc.truth.effect_set(), sc.axis_name, &model)
-        .map_err(|m| VmtError::bad(&sc.source, "truth", m))?;
+        .map_err(|m| VmtError::bad(&sc.source, "truth", m.to_string()))?;
     adj.apply(&mut model);
     let sensors = sc
         .sensors
