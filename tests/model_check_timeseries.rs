@@ -349,16 +349,129 @@ fn encoder_complete_model_false_alarms() {
     assert!(rate(fa, n as usize) <= 2.0);
 }
 
+/// The value an encoder draw's hidden effect must be fitted to after `add` + `compare`, and the
+/// relative error allowed (the issue's thresholds: periods within 1 %, backlash within 10 %): (key
+/// in `fitted`, true value, tolerance). None where the issue sets none (servo lag).
+fn encoder_truth_value(t: &EncoderTruth, effect: &str) -> Option<(&'static str, f64, f64)> {
+    match effect {
+        "cyclic_lead" => Some(("period", t.lead, 0.01)),
+        "interpolation_error" => Some(("period", t.interp_period, 0.01)),
+        "backlash" => Some(("value", t.backlash, 0.10)),
+        _ => None,
+    }
+}
+
 fn hidden_encoder(h: EncoderHidden, expect: &str) {
     let n = draws(30);
     let r = encoder_rates(h, n, true);
     let errors = r.iter().filter(|x| x.1.error.is_some()).count();
     let named = r.iter().filter(|x| x.1.first.as_ref().is_some_and(|f| f.0 == expect && f.1 == "significant")).count();
     let low = r.iter().filter(|x| x.1.nrms_after.is_some_and(|v| v <= 1.3)).count();
+    // The added effect's value against the generator's.
+    let within = r
+        .iter()
+        .filter(|(t, o)| match encoder_truth_value(t, expect) {
+            None => true,
+            Some((key, truth, tol)) => {
+                let got = o.fitted_after.as_ref().and_then(|v| v[key].as_f64()).unwrap_or(f64::NAN);
+                eprintln!(
+                    "  {expect} {key}: true {truth:.6e}, fitted {got:.6e} ({:+.2} %)",
+                    100.0 * (got / truth - 1.0)
+                );
+                (got / truth - 1.0).abs() <= tol
+            }
+        })
+        .count();
     eprintln!(
-        "encoder {h:?}: `{expect}` first & significant {named}/{n}, nrms ≤ 1.3 after add {low}/{n}, {errors} errors"
+        "encoder {h:?}: `{expect}` first & significant {named}/{n}, nrms ≤ 1.3 after add {low}/{n}, value within its \
+         tolerance {within}/{n}, {errors} errors"
     );
+    assert!(rate(named, n as usize) >= 95.0 && rate(low, n as usize) >= 95.0 && rate(within, n as usize) >= 95.0);
+}
+
+/// Two rounds of the loop: the effects added in order, the normalised RMS at the end, the final
+/// compare's `fitted`, and an error.
+type TwoRounds = (Vec<String>, Option<f64>, Option<serde_json::Value>, Option<String>);
+
+/// Two hidden effects through the loop twice (diagnose → add the first significant candidate →
+/// diagnose again → add → compare).
+fn run_loop_twice(dir: &Path) -> TwoRounds {
+    let mut model = dir.join("model.toml");
+    let mut added: Vec<String> = Vec::new();
+    for step in 0..2 {
+        let d = match vmt(&["diagnose", "--model", s(&model), "--data", s(dir), "--json"]) {
+            Ok(d) => d,
+            Err(e) => return (added, None, None, Some(e)),
+        };
+        let first = d["ranking"].as_array().and_then(|a| a.first().cloned());
+        let Some(first) = first.filter(|f| f["verdict"] == "significant") else { break };
+        let eff = first["effect"].as_str().unwrap_or("").to_string();
+        let next = dir.with_extension("models").join(format!("model{}.toml", step + 2));
+        std::fs::create_dir_all(next.parent().unwrap()).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_vmt"))
+            .args(["add", "--model", s(&model), "--effect", &eff, "--from-diagnosis", "--data", s(dir)])
+            .args(["-o", s(&next)])
+            .output()
+            .unwrap();
+        if !out.status.success() {
+            return (added, None, None, Some(String::from_utf8_lossy(&out.stderr).to_string()));
+        }
+        added.push(eff);
+        model = next;
+    }
+    match vmt(&["compare", "--model", s(&model), "--data", s(dir), "--json"]) {
+        Ok(c) => (added, c["normalized_rms"].as_f64(), Some(c["fitted"].clone()), None),
+        Err(e) => (added, None, None, Some(e)),
+    }
+}
+
+/// Two hidden effects together: both named, one per round of the loop (in either order), and
+/// normalised RMS ≤ 1.3 after both are added, each in ≥ 95 % of the draws (the issue's rates).
+fn hidden_pair<T: Send>(
+    n: u64,
+    make: impl Fn(&Path, u64) -> T + Sync,
+    expect: [&str; 2],
+    what: &str,
+) -> Vec<(T, bool)> {
+    let root = workdir(what);
+    let r: Vec<(T, TwoRounds)> = (0..n)
+        .into_par_iter()
+        .map(|seed| {
+            let dir = root.join(format!("d{seed}"));
+            let t = make(&dir, seed);
+            let o = run_loop_twice(&dir);
+            eprintln!("{what} draw {seed}: added {:?}, nrms after {:?} {}", o.0, o.1, o.3.clone().unwrap_or_default());
+            (t, o)
+        })
+        .collect();
+    let both = |a: &[String]| a.len() == 2 && expect.iter().all(|e| a.iter().any(|x| x == e));
+    let named = r.iter().filter(|x| both(&x.1 .0)).count();
+    let low = r.iter().filter(|x| both(&x.1 .0) && x.1 .1.is_some_and(|v| v <= 1.3)).count();
+    eprintln!("{what}: both named, one per round, {named}/{n}; nrms ≤ 1.3 after both {low}/{n}");
     assert!(rate(named, n as usize) >= 95.0 && rate(low, n as usize) >= 95.0);
+    r.into_iter().map(|(t, o)| (t, both(&o.0))).collect()
+}
+
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn accel_hidden_resonance_and_roll() {
+    hidden_pair(
+        draws(30),
+        |dir, seed| accel_set(dir, 1000 + seed, AccelHidden::ResonanceAndRoll, 200.0),
+        ["resonance", "gravity_tilt"],
+        "accel_resonance_and_roll",
+    );
+}
+
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn encoder_hidden_cyclic_lead_and_backlash() {
+    hidden_pair(
+        draws(30),
+        |dir, seed| encoder_set(dir, 2000 + seed, EncoderHidden::CyclicLeadAndBacklash),
+        ["cyclic_lead", "backlash"],
+        "encoder_cyclic_lead_and_backlash",
+    );
 }
 
 #[test]

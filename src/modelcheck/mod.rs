@@ -167,6 +167,23 @@ pub fn is_positioning(p: Procedure) -> bool {
 
 #[cfg(test)]
 pub(crate) mod tests {
+    /// The advice for two effects the data cannot tell apart names a measurement of the recording's
+    /// own kind: another speed or a second accelerometer for accelerometer passes, a reversal or a
+    /// longer travel for encoder logs, a second laser offset for point tables (last stop an
+    /// accelerometer user was told to mount a second laser).
+    #[test]
+    fn separating_advice_fits_the_recording() {
+        use super::report::{separating_measurement as sep, Recording};
+        assert!(sep("gravity_tilt", "roll", Recording::Accelerometer).contains("two or more speeds"));
+        assert!(sep("resonance", "straightness_y", Recording::Accelerometer).contains("another speed"));
+        assert!(sep("roll", "straightness_y", Recording::Accelerometer).contains("second accelerometer"));
+        assert!(sep("roll", "straightness_y", Recording::PointTable).contains("second laser"));
+        assert!(sep("backlash", "positioning", Recording::EncoderLog).contains("slow reversal"));
+        assert!(sep("cyclic_lead", "positioning", Recording::EncoderLog).contains("longer travel"));
+        assert!(sep("cyclic_lead", "positioning", Recording::PointTable).contains("dense runs"));
+        assert!(!sep("roll", "yaw", Recording::Accelerometer).contains("laser"), "a laser advised for accelerometers");
+    }
+
     use super::*;
 
     /// An accelerometer channel of `m` samples at 100 Hz from t = 0, x = 0.1·t.

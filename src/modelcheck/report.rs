@@ -537,6 +537,12 @@ pub(crate) fn visible(st: &Stack, name: EffectName, sh: &Shape, fixed: Option<f6
     }
     let grid: Vec<f64> = match (fixed, sh.hypers.first()) {
         (Some(v), _) => vec![v],
+        // Where these columns are zero does not depend on the value: 1 − exp(−t/τ) is non-zero
+        // for every τ at t > 0 (tau); a following channel's start column e^{−kv·(t − t₀)} is 1 at
+        // t₀ for every kv (kv). So one grid value answers for the grid. (A period's columns are
+        // zeroed where the positions do not resolve it, a Stribeck weight exp(−|v/vs|^δ) can
+        // underflow at one vs and not another: their grids are scanned.)
+        (None, Some(&h)) if matches!(h, "tau" | "kv") => hyper_grid(st, name, h).0.into_iter().take(1).collect(),
         (None, Some(h)) => hyper_grid(st, name, h).0,
         (None, None) => vec![1.0],
     };
@@ -1083,7 +1089,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
                 .map(|b| format!("{n} needs more flexibility: order {} → {b} (BIC)", s.order))
         })
         .collect();
-    let mut advice = advice(&ranking, nrms);
+    let mut advice = advice(&ranking, nrms, Recording::of(st.chans));
     if !stiff.is_empty() {
         advice = format!(
             "{}; raise `order` (or remove it to let BIC choose) before adding effects. {advice}",
@@ -1288,11 +1294,57 @@ pub(crate) fn unresolved_period_note(st: &Stack, name: EffectName) -> String {
     )
 }
 
-/// What measurement separates two effects that fit the same signature on these data.
-pub fn separating_measurement(a: &str, b: &str) -> String {
+/// What measurement separates two effects that fit the same signature on these data, on the kind
+/// of recording `rec` they were diagnosed from (a second laser for point tables; another speed, a
+/// second sensor or a reversal for time series).
+pub fn separating_measurement(a: &str, b: &str, rec: Recording) -> String {
     let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
+    let one = |x: &str| a == x || b == x;
     let angular = |e: &str| matches!(e, "roll" | "pitch" | "yaw");
     let linear = |e: &str| matches!(e, "positioning" | "straightness_y" | "straightness_z" | "scale_error");
+    let motion = |e: &str| e.parse::<EffectName>().is_ok_and(|e| e.is_error_motion());
+    // Time series: what separates two effects is another speed, a second sensor or a reversal.
+    match rec {
+        Recording::Accelerometer if one("gravity_tilt") => {
+            return "record constant-velocity passes at two or more speeds: a guideway's shape reaches an \
+                    accelerometer as v²·E″(x), growing with the square of the speed, gravity through a tilt as \
+                    g·tilt(x) at every speed"
+                .into();
+        }
+        Recording::Accelerometer if one("resonance") => {
+            return "record passes at another speed: a structural mode rings at its own frequency in time whatever \
+                    the speed, a guideway's wave at a fixed wavelength in position (its frequency moves with v)"
+                .into();
+        }
+        Recording::Accelerometer if angular(a) || angular(b) => {
+            return "mount a second accelerometer at another height or lateral offset: an angular error motion \
+                    moves it in proportion to the offset, a translation does not"
+                .into();
+        }
+        Recording::EncoderLog if one("backlash") => {
+            return "log a slow reversal with the linear scale and the motor encoder together: the table stands \
+                    while the motor takes up the clearance"
+                .into();
+        }
+        Recording::EncoderLog if pair("cyclic_lead", "interpolation_error") => {
+            return "log the linear scale against the motor encoder at two speeds: a cyclic lead is in the \
+                    transmission (scale − motor) at the screw's lead, an interpolation error in the scale alone at \
+                    its signal period"
+                .into();
+        }
+        Recording::EncoderLog if (one("cyclic_lead") || one("interpolation_error")) && (motion(a) || motion(b)) => {
+            return "log passes over a longer travel, or give the screw's lead (or the scale's signal period) as \
+                    `period`: a periodic error repeats with the same period and phase along the whole travel, a \
+                    shape's waves do not"
+                .into();
+        }
+        Recording::EncoderLog if one("servo_lag") => {
+            return "log passes at two or more speeds and both directions: a following error grows with the \
+                    speed and changes sign with the direction, a position error does neither"
+                .into();
+        }
+        Recording::PointTable | Recording::Accelerometer | Recording::EncoderLog => {}
+    }
     if pair("thermal_expansion", "scale_error") || pair("thermal_expansion", "positioning") {
         "repeat the positioning test later, when the machine is warm (runs at different times): thermal expansion \
          grows with time, a scale error does not"
@@ -1321,8 +1373,33 @@ pub fn separating_measurement(a: &str, b: &str) -> String {
     }
 }
 
+/// What a diagnosis's channels are, for the advice on a measurement that separates two effects
+/// ([`separating_measurement`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Recording {
+    /// Point tables (lasers, encoders at targets) and friction sweeps.
+    PointTable,
+    /// Accelerometer channels in constant-velocity passes.
+    Accelerometer,
+    /// Encoder time series (scale, motor encoder against the command).
+    EncoderLog,
+}
+
+impl Recording {
+    /// The recording of channels `chans`: accelerometers first, then encoder logs.
+    pub(crate) fn of(chans: &[Channel]) -> Recording {
+        if chans.iter().any(|c| c.is_accel()) {
+            Recording::Accelerometer
+        } else if chans.iter().any(|c| c.encoder.is_some()) {
+            Recording::EncoderLog
+        } else {
+            Recording::PointTable
+        }
+    }
+}
+
 /// The advice text of a diagnosis.
-pub(crate) fn advice(ranking: &[RankingEntry], nrms: f64) -> String {
+pub(crate) fn advice(ranking: &[RankingEntry], nrms: f64, rec: Recording) -> String {
     let mut parts: Vec<String> = Vec::new();
     let sig: Vec<&RankingEntry> = ranking.iter().filter(|r| r.verdict == Verdict::Significant).collect();
     for r in &sig {
@@ -1346,7 +1423,7 @@ pub(crate) fn advice(ranking: &[RankingEntry], nrms: f64) -> String {
                 "`{}` and `{}` explain the residual equally well on these data and cannot be told apart: {}.",
                 key.0,
                 key.1,
-                separating_measurement(&key.0, &key.1)
+                separating_measurement(&key.0, &key.1, rec)
             ));
             seen.push(key);
         }

@@ -37,7 +37,7 @@
 //! closer than 10; `noise` otherwise.
 
 use super::lsq::{fit_signature, Basis};
-use super::ortho::OrthoBase;
+use super::ortho::{cholesky_with_dropping, nonzero_rows, OrthoBase};
 use super::{check_finite, check_len, ModelCheckError, Sigma};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -395,13 +395,7 @@ fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<
 /// weighted RSS).
 fn projected_residual(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<Vec<f64>, String> {
     let cols = checked_columns(p, cand, h)?;
-    let b = candidate_basis(p, &cols);
-    let mut r = p.r_t.clone();
-    for q in &b.q {
-        let dot: f64 = q.iter().zip(&p.r_t).map(|(a, b)| a * b).sum();
-        r.iter_mut().zip(q).for_each(|(r, q)| *r -= dot * q);
-    }
-    Ok(r)
+    Ok(p.base.projected_fit(&p.r_t, &cols, &p.w, true).1.unwrap_or_else(|| p.r_t.clone()))
 }
 
 /// The screening score of a candidate at `h` ([`Candidate::with_screen`]): ‖projection of the
@@ -424,14 +418,7 @@ fn screen_score(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<f64, String
 /// sensor), so it costs far less than orthogonalising the columns.
 fn span_projection(cols: &[Vec<f64>], w: &[f64], r: &[f64]) -> f64 {
     let q = cols.len();
-    let range: Vec<(usize, usize)> = cols
-        .iter()
-        .map(|c| {
-            let lo = c.iter().position(|x| *x != 0.0).unwrap_or(c.len());
-            let hi = c.iter().rposition(|x| *x != 0.0).map_or(lo, |i| i + 1);
-            (lo, hi.max(lo))
-        })
-        .collect();
+    let range: Vec<(usize, usize)> = cols.iter().map(|c| nonzero_rows(c)).collect();
     let wc: Vec<Vec<f64>> = cols.iter().map(|c| c.iter().zip(w).map(|(x, w)| x * w).collect()).collect();
     let mut g = vec![vec![0.0; q]; q];
     let mut b = vec![0.0; q];
@@ -447,43 +434,22 @@ fn span_projection(cols: &[Vec<f64>], w: &[f64], r: &[f64]) -> f64 {
     }
     // Unit diagonal, then Cholesky G = LLᵀ with dropping; score = ‖L⁻¹b‖² over the kept pivots.
     let d: Vec<f64> = (0..q).map(|i| g[i][i].sqrt()).collect();
-    let mut l = vec![vec![0.0; q]; q];
-    let mut z = vec![0.0; q];
-    let mut score = 0.0;
     for i in 0..q {
-        if d[i] <= 0.0 {
-            continue;
+        for j in 0..q {
+            g[i][j] = if d[i] > 0.0 && d[j] > 0.0 { g[i][j] / (d[i] * d[j]) } else { 0.0 };
         }
-        for j in 0..=i {
-            if d[j] <= 0.0 || (j < i && l[j][j] == 0.0) {
-                continue;
-            }
-            let s: f64 = g[i][j] / (d[i] * d[j]) - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
-            if j == i {
-                if s > 1e-10 {
-                    l[i][i] = s.sqrt();
-                }
-            } else {
-                l[i][j] = s / l[j][j];
-            }
-        }
-        if l[i][i] > 0.0 {
-            let zi = (b[i] / d[i] - (0..i).map(|k| l[i][k] * z[k]).sum::<f64>()) / l[i][i];
-            z[i] = zi;
-            score += zi * zi;
-        } else {
-            // A dropped column: no part of its own; zero its row so later columns ignore it.
-            l[i].iter_mut().for_each(|v| *v = 0.0);
-        }
+        b[i] = if d[i] > 0.0 { b[i] / d[i] } else { 0.0 };
     }
-    score
+    cholesky_with_dropping(&g, &b).score
 }
 
 /// The χ² (or RSS) reduction of adding `cols` to the prepared base (variable projection: the base
 /// is factored once in [`prepare`]).
+///
+/// In Gram form ([`OrthoBase::projected_fit`]): the search's evaluations. The candidate's reported
+/// fit at its best values is the exact one (projected columns, orthogonalised, SVD).
 fn reduction_of(p: &Prepared, cols: &[Vec<f64>]) -> f64 {
-    let b = candidate_basis(p, cols);
-    b.q.iter().map(|q| q.iter().zip(&p.r_t).map(|(a, b)| a * b).sum::<f64>().powi(2)).sum()
+    p.base.projected_fit(&p.r_t, cols, &p.w, false).0
 }
 
 /// Fits one candidate: grid search of its hyper-parameters, joint refinement, weighted

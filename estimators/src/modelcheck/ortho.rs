@@ -10,13 +10,13 @@
 //!   (Golub & Van Loan, Matrix Computations, 4th ed., §5.3: the last column of R of [A | y] holds
 //!   Qᵀy), which is what an information criterion needs to choose a series' order.
 
-use super::lsq::Basis;
 use super::{check_finite, check_len, ModelCheckError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::householder;
 use faer::linalg::matmul::matmul;
 use faer::linalg::qr;
 use faer::{Accum, Conj, Mat, Par};
+use rayon::prelude::*;
 
 /// Relative size of a pivot of the column-pivoted QR below which a (unit-norm) column counts as
 /// dependent on the others.
@@ -91,15 +91,104 @@ impl OrthoBase {
     }
 
     /// The weighted sum of squares that `cols` explain beyond the span: ‖P_C·r‖² with r =
-    /// `target` (weighted, already projected off the span) and C the projected weighted columns
-    /// ([`OrthoBase::project_columns`], orthonormalised by modified Gram–Schmidt). The RSS of the
-    /// joint fit is ‖r‖² minus this.
+    /// `target` (weighted, already projected off the span) and C the projected weighted columns,
+    /// in Gram form ([`OrthoBase::projected_fit`]). The RSS of the joint fit is ‖r‖² minus this.
     pub fn explained(&self, target: &[f64], cols: &[Vec<f64>], w: &[f64]) -> f64 {
-        let mut b = Basis::default();
-        for v in self.project_columns(cols, w).into_iter().filter(|v| v.iter().any(|x| *x != 0.0)) {
-            b.push(v);
+        self.projected_fit(target, cols, w, false).0
+    }
+
+    /// The least squares of `target` (weighted, already projected off the span) on the weighted
+    /// columns W·`cols` with their part in the span removed, in Gram form (variable projection
+    /// without forming the projected columns):
+    ///
+    /// ```text
+    /// M = Qᵀ(WC)        G = (WC)ᵀ(WC) − MᵀM = (PWC)ᵀ(PWC)        b = (WC)ᵀ·target
+    /// explained = bᵀG⁺b                residual = target − (WC·β − Q·Mβ),  Gβ = b
+    /// ```
+    ///
+    /// Each product runs over a column's non-zero rows only (a mode's segments live on a fraction of
+    /// the samples), so an evaluation costs rank × (non-zeros) + k² × (overlaps + rank) flops instead
+    /// of the n × rank × k of projecting the columns. G is scaled by the columns' own weighted norms
+    /// and factored by [`cholesky_with_dropping`]: a column with less than 1e-5 of its weighted norm
+    /// outside the span and the columns before it (pivot ≤ 1e-10) is dependent and left out (the
+    /// normal equations resolve no finer). Returns (explained weighted sum of squares, the residual
+    /// when `want_residual`).
+    pub fn projected_fit(
+        &self,
+        target: &[f64],
+        cols: &[Vec<f64>],
+        w: &[f64],
+        want_residual: bool,
+    ) -> (f64, Option<Vec<f64>>) {
+        let (k, rank) = (cols.len(), self.rank());
+        let support: Vec<(usize, usize)> = cols.iter().map(|c| nonzero_rows(c)).collect();
+        let wc: Vec<Vec<f64>> =
+            cols.iter().zip(&support).map(|(c, &(lo, hi))| (lo..hi).map(|i| c[i] * w[i]).collect()).collect();
+        let norm: Vec<f64> = wc.iter().map(|v| dot(v, v).sqrt()).collect();
+        let mut m = vec![vec![0.0; rank]; k];
+        for j in 0..k {
+            let (lo, hi) = support[j];
+            if norm[j] == 0.0 || rank == 0 {
+                continue;
+            }
+            let mut out = Mat::<f64>::zeros(rank, 1);
+            let v = faer::MatRef::from_column_major_slice(&wc[j], hi - lo, 1);
+            matmul(out.as_mut(), Accum::Replace, self.q.as_ref().subrows(lo, hi - lo).transpose(), v, 1.0, Par::Seq);
+            m[j] = (0..rank).map(|a| out[(a, 0)]).collect();
         }
-        b.q.iter().map(|q| q.iter().zip(target).map(|(a, b)| a * b).sum::<f64>().powi(2)).sum()
+        let mut g = vec![vec![0.0; k]; k];
+        let mut b = vec![0.0; k];
+        for i in 0..k {
+            if norm[i] == 0.0 {
+                continue;
+            }
+            let (lo, hi) = support[i];
+            b[i] = dot(&wc[i], &target[lo..hi]) / norm[i];
+            for j in 0..=i {
+                if norm[j] == 0.0 {
+                    continue;
+                }
+                let (l2, h2) = (lo.max(support[j].0), hi.min(support[j].1));
+                let own = if l2 < h2 {
+                    dot(&wc[i][l2 - lo..h2 - lo], &wc[j][l2 - support[j].0..h2 - support[j].0])
+                } else {
+                    0.0
+                };
+                let v = (own - dot(&m[i], &m[j])) / (norm[i] * norm[j]);
+                g[i][j] = v;
+                g[j][i] = v;
+            }
+        }
+        let chol = cholesky_with_dropping(&g, &b);
+        if !want_residual {
+            return (chol.score, None);
+        }
+        // β: Lᵀβ̃ = z over the kept pivots, β_j = β̃_j/‖Wc_j‖.
+        let mut beta = vec![0.0; k];
+        for i in (0..k).rev() {
+            if chol.l[i][i] > 0.0 {
+                let s: f64 = chol.z[i] - (i + 1..k).map(|r| chol.l[r][i] * beta[r]).sum::<f64>();
+                beta[i] = s / chol.l[i][i];
+            }
+        }
+        let mut residual = target.to_vec();
+        let mut mb = vec![0.0; rank];
+        for j in (0..k).filter(|&j| beta[j] != 0.0) {
+            let bj = beta[j] / norm[j];
+            let lo = support[j].0;
+            for (t, v) in wc[j].iter().enumerate() {
+                residual[lo + t] -= bj * v;
+            }
+            for (acc, mj) in mb.iter_mut().zip(&m[j]) {
+                *acc += bj * mj;
+            }
+        }
+        for (a, mba) in mb.iter().enumerate() {
+            for (r, q) in residual.iter_mut().zip(self.q.col_as_slice(a)) {
+                *r += mba * q;
+            }
+        }
+        (chol.score, Some(residual))
     }
 
     /// A vector (n values, times `w`) with its part in the span removed.
@@ -107,6 +196,88 @@ impl OrthoBase {
         let m = self.projected(&[y.to_vec()], w);
         (0..w.len()).map(|i| m[(i, 0)]).collect()
     }
+}
+
+/// The part of a unit column left outside the columns taken below which [`greedy_rss`] no longer
+/// takes it (1e-4 of its norm): the steps run in Gram form (classical Gram–Schmidt in coefficient
+/// space), whose loss of orthogonality grows as ε·κ², so κ stays below 1e4.
+pub const GREEDY_LEFT: f64 = 1e-8;
+
+/// aⱼᵀv for every column j of `a` (n × k), the columns shared out over threads (rayon), each
+/// product by [`dot`] on one thread: the same bits on any number of threads.
+fn columns_dot(a: &Mat<f64>, v: &[f64]) -> Vec<f64> {
+    (0..a.ncols()).into_par_iter().with_min_len(16).map(|j| dot(a.col_as_slice(j), v)).collect()
+}
+
+/// The rows [lo, hi) outside which a column is zero (lo = hi for an all-zero column).
+pub(crate) fn nonzero_rows(c: &[f64]) -> (usize, usize) {
+    let lo = c.iter().position(|x| *x != 0.0).unwrap_or(c.len());
+    let hi = c.iter().rposition(|x| *x != 0.0).map_or(lo, |i| i + 1);
+    (lo, hi.max(lo))
+}
+
+/// Σ aᵢbᵢ in four interleaved partial sums (vectorisable; the same order, so the same bits, on
+/// every call).
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let mut acc = [0.0; 4];
+    let (ca, cb) = (a[..n].chunks_exact(4), b[..n].chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for t in 0..4 {
+            acc[t] += x[t] * y[t];
+        }
+    }
+    let tail: f64 = ra.iter().zip(rb).map(|(x, y)| x * y).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+/// A Cholesky factorisation G = LLᵀ of a scaled Gram matrix with dependent columns left out, and
+/// the explained sum of squares of its right-hand side ([`cholesky_with_dropping`]).
+pub(crate) struct DroppingCholesky {
+    /// Lower triangle; a dropped column's row and diagonal are zero.
+    pub(crate) l: Vec<Vec<f64>>,
+    /// z = L⁻¹b over the kept pivots (0 at a dropped one).
+    pub(crate) z: Vec<f64>,
+    /// ‖z‖² = bᵀG⁺b over the kept columns.
+    pub(crate) score: f64,
+}
+
+/// Cholesky of `g` (symmetric, each column scaled by its own norm so that a pivot is the share of
+/// the column's squared norm left after the columns before it) with column i dropped when its
+/// pivot is ≤ 1e-10 (dependent on the ones before it; a zero column always), and z = L⁻¹`b`.
+pub(crate) fn cholesky_with_dropping(g: &[Vec<f64>], b: &[f64]) -> DroppingCholesky {
+    let q = g.len();
+    let mut l = vec![vec![0.0; q]; q];
+    let mut z = vec![0.0; q];
+    let mut score = 0.0;
+    for i in 0..q {
+        if g[i][i] <= 0.0 {
+            continue;
+        }
+        for j in 0..=i {
+            if j < i && l[j][j] == 0.0 {
+                continue;
+            }
+            let s: f64 = g[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
+            if j == i {
+                if s > 1e-10 {
+                    l[i][i] = s.sqrt();
+                }
+            } else {
+                l[i][j] = s / l[j][j];
+            }
+        }
+        if l[i][i] > 0.0 {
+            let zi = (b[i] - (0..i).map(|k| l[i][k] * z[k]).sum::<f64>()) / l[i][i];
+            z[i] = zi;
+            score += zi * zi;
+        } else {
+            // A dropped column: no part of its own; zero its row so later columns ignore it.
+            l[i].iter_mut().for_each(|v| *v = 0.0);
+        }
+    }
+    DroppingCholesky { l, z, score }
 }
 
 /// Weighted linear least squares for designs with many columns: β̂ = argmin Σ_i (w_i·(y_i −
@@ -315,9 +486,10 @@ pub fn nested_rss(y: &[f64], w: &[f64], base: &OrthoBase, series: &[Vec<f64>]) -
 /// [`NestedRss`] (`used` in the order taken, `rss[m]` after the first m). For series whose signal
 /// sits in a few terms anywhere in the series (rail waviness in a cosine series of the
 /// accelerations), where nesting by degree would charge every term below it. The path stops when
-/// no column is left with more than 1e-9 of its weighted norm outside the span, or when the best
-/// column explains less than `stop` × the current mean square (rss/n) for 20 steps in a row.
-/// Sequential: the same bits on any number of threads.
+/// no column has a part left above [`GREEDY_LEFT`] (of its unit weighted norm, outside the base and
+/// the columns taken), or when the best column explains less than `stop` × the current mean square
+/// (rss/n) for 20 steps in a row. The steps run on the Gram matrix of the projected columns (one
+/// sequential level-3 product): the same bits on any number of threads.
 pub fn greedy_rss(
     y: &[f64],
     w: &[f64],
@@ -343,62 +515,63 @@ pub fn greedy_rss(
             left[j] = 0.0;
         }
     }
-    let mut r = base.project_vector(y, w);
+    let r = base.project_vector(y, w);
     let mut rss: f64 = r.iter().map(|v| v * v).sum();
     let mut out = NestedRss { rss: vec![rss], used: Vec::new() };
     // c_j = a_jᵀr (r stays orthogonal to the columns taken, so this is the part left's product).
-    let mut corr = Mat::<f64>::zeros(k, 1);
-    let rm = Mat::<f64>::from_fn(n, 1, |i, _| r[i]);
-    matmul(corr.as_mut(), Accum::Replace, a.transpose(), rm.as_ref(), 1.0, Par::Seq);
+    let mut corr = columns_dot(&a, &r);
+    // The Gram matrix G = AᵀA of the projected unit columns, one level-3 product (compute-bound),
+    // where each step's Aᵀv would read all of A again (memory-bound); the steps then run in the
+    // coefficients of the columns taken.
+    let mut g = Mat::<f64>::zeros(k, k);
+    matmul(g.as_mut(), Accum::Replace, a.transpose(), a.as_ref(), 1.0, Par::Seq);
     let mut taken = vec![false; k];
-    let mut q: Vec<Vec<f64>> = Vec::new();
+    // Step s's unit vector v_s = Σ_t coef[s][t]·a_{used[t]} and its products d_s = Aᵀv_s.
+    let mut coef: Vec<Vec<f64>> = Vec::new();
+    let mut prods: Vec<Vec<f64>> = Vec::new();
     let mut weak = 0;
-    let mut d = Mat::<f64>::zeros(k, 1);
     while out.used.len() < k.min(n) {
         let mut best: Option<(usize, f64)> = None;
         for j in 0..k {
-            if taken[j] || left[j] <= 1e-12 {
+            if taken[j] || left[j] <= GREEDY_LEFT {
                 continue;
             }
-            let sc = corr[(j, 0)].powi(2) / left[j];
+            let sc = corr[j].powi(2) / left[j];
             if best.is_none_or(|(_, b)| sc > b) {
                 best = Some((j, sc));
             }
         }
         let Some((j, _)) = best else { break };
         taken[j] = true;
-        // The part of column j outside the columns taken (twice, for orthogonality to rounding).
-        let mut v: Vec<f64> = (0..n).map(|i| a[(i, j)]).collect();
-        for _ in 0..2 {
-            for qk in &q {
-                let dot: f64 = qk.iter().zip(&v).map(|(x, y)| x * y).sum();
-                for (vi, qi) in v.iter_mut().zip(qk) {
-                    *vi -= dot * qi;
-                }
+        // v = (a_j − Σ_t (a_jᵀv_t)·v_t)/‖·‖, the norm being √(part left).
+        let norm = left[j].sqrt();
+        let s = out.used.len();
+        let mut c = vec![0.0; s + 1];
+        c[s] = 1.0;
+        for (ct, dt) in coef.iter().zip(&prods) {
+            for (u, x) in c.iter_mut().zip(ct) {
+                *u -= dt[j] * x;
             }
         }
-        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if norm <= 1e-9 {
-            left[j] = 0.0;
-            continue;
-        }
-        v.iter_mut().for_each(|x| *x /= norm);
-        let qr_: f64 = v.iter().zip(&r).map(|(x, y)| x * y).sum();
-        for (ri, vi) in r.iter_mut().zip(&v) {
-            *ri -= qr_ * vi;
-        }
+        c.iter_mut().for_each(|x| *x /= norm);
+        let qr_ = corr[j] / norm;
         let mean_sq = rss / n as f64;
         rss = (rss - qr_ * qr_).max(0.0);
         out.rss.push(rss);
         out.used.push(j);
-        // Update every column's part left and its product with the residual: d_j = a_jᵀv.
-        let vm = Mat::<f64>::from_fn(n, 1, |i, _| v[i]);
-        matmul(d.as_mut(), Accum::Replace, a.transpose(), vm.as_ref(), 1.0, Par::Seq);
-        for jj in 0..k {
-            left[jj] = (left[jj] - d[(jj, 0)].powi(2)).max(0.0);
-            corr[(jj, 0)] -= d[(jj, 0)] * qr_;
+        // Every column's part left and product with the residual: d = Aᵀv = Σ_t c_t·G[:, used_t].
+        let mut d = vec![0.0; k];
+        for (ct, &col) in c.iter().zip(&out.used) {
+            for (dd, gv) in d.iter_mut().zip(g.col_as_slice(col)) {
+                *dd += ct * gv;
+            }
         }
-        q.push(v);
+        for jj in 0..k {
+            left[jj] = (left[jj] - d[jj].powi(2)).max(0.0);
+            corr[jj] -= d[jj] * qr_;
+        }
+        coef.push(c);
+        prods.push(d);
         weak = if qr_ * qr_ < stop * mean_sq { weak + 1 } else { 0 };
         if weak >= 20 {
             break;
@@ -409,7 +582,49 @@ pub fn greedy_rss(
 
 #[cfg(test)]
 mod tests {
+    use super::super::lsq::Basis;
     use super::*;
+
+    /// The Gram form of a projected fit ([`OrthoBase::projected_fit`]) against the explicit one
+    /// (columns projected off the base, orthonormalised by twice-applied Gram–Schmidt, the target's
+    /// components removed): on 400 weighted samples, a polynomial base of rank 4, candidate columns
+    /// dense and supported on a few rows (segments, as a mode's), one a combination of others, the
+    /// explained sum of squares and the residual agree to 1e-9 of the target's norm.
+    #[test]
+    fn projected_fit_in_gram_form_matches_the_explicit_projection() {
+        let n = 400;
+        let x: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
+        let w: Vec<f64> = (0..n).map(|i| 1.0 + 0.5 * (i as f64 * 0.37).sin()).collect();
+        let pw = |k: i32| x.iter().map(|v| v.powi(k)).collect::<Vec<f64>>();
+        let base = OrthoBase::new(&[pw(0), pw(1), pw(2), pw(3)], &w).unwrap();
+        let seg = |a: usize, b: usize, f: f64| -> Vec<f64> {
+            (0..n).map(|i| if i >= a && i < b { (f * x[i]).sin() + 0.3 } else { 0.0 }).collect()
+        };
+        let dense: Vec<f64> = x.iter().map(|v| (9.0 * v).cos() * v).collect();
+        let (s1, s2) = (seg(10, 60, 40.0), seg(50, 130, 55.0));
+        let comb: Vec<f64> = (0..n).map(|i| 2.0 * s1[i] - dense[i]).collect();
+        let cols = vec![dense.clone(), s1, s2, comb, seg(300, 320, 70.0), vec![0.0; n]];
+        let y: Vec<f64> = (0..n).map(|i| (23.0 * x[i]).sin() + 0.1 * (i as f64 * 1.7).cos() + cols[2][i]).collect();
+        let target = base.project_vector(&y, &w);
+        let (explained, residual) = base.projected_fit(&target, &cols, &w, true);
+        let residual = residual.unwrap();
+        let mut b = Basis::default();
+        for v in base.project_columns(&cols, &w).into_iter().filter(|v| v.iter().any(|x| *x != 0.0)) {
+            b.push(v);
+        }
+        let mut r = target.clone();
+        let mut want = 0.0;
+        for q in &b.q {
+            let d: f64 = q.iter().zip(&target).map(|(a, b)| a * b).sum();
+            want += d * d;
+            r.iter_mut().zip(q).for_each(|(r, q)| *r -= d * q);
+        }
+        let scale: f64 = target.iter().map(|v| v * v).sum();
+        assert!(b.q.len() == 4, "independent columns {}", b.q.len());
+        assert!((explained - want).abs() <= 1e-9 * scale, "explained {explained} against {want}");
+        let dr = residual.iter().zip(&r).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+        assert!(dr <= 1e-9 * scale.sqrt(), "residual differs by {dr}");
+    }
 
     /// The span of (1, x, 2x + 1) on 6 points has rank 2; projecting x² off it leaves x² minus its
     /// least-squares line, and nested RSS of y = 1 + x + 3x² − x³ on the base {1, x} with the series
