@@ -367,68 +367,92 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
     }
     let lead = lead_period(st, model, &first);
     let n = st.n;
-    let mut terms = first.terms.clone();
-    // Per motion: (order BIC prefers within the searched range, highest searched, lead cap).
-    let mut best: BTreeMap<usize, (u32, u32, Option<LeadCap>)> = BTreeMap::new();
-    let sweeps = if motions.len() > 1 { 2 } else { 1 };
-    for _ in 0..sweeps {
-        for &ti in &motions {
-            let name = terms[ti].name;
-            let (me, basis, span, mut fixed) = order_search_setup(st, model, &terms, ti);
-            fixed.retain(|c| c.iter().any(|v| *v != 0.0));
-            let base = OrthoBase::new(&fixed, w).map_err(|e| e.to_string())?;
-            // (user order, weighted RSS, linear parameters) of every order BIC may choose.
-            let curve = order_curve(st, name, basis, top, &first.target, w, &base)?;
-            let bic = |k: usize| bic_unknown_sigma(curve[k].1, n, curve[k].2);
-            let argmin = |upto: u32| {
-                (0..curve.len()).filter(|&k| curve[k].0 <= upto).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0)
-            };
-            let searched = curve.last().map_or(1, |c| c.0);
-            let k_free = argmin(u32::MAX);
-            // A table represents any shape at its positions: no order separates it from a lead.
-            let cap = lead.filter(|_| basis != ShapeBasis::Table).map(|(p, in_model)| {
-                let order = (1..=searched).take_while(|&o| basis.shortest_wavelength(span, o) > p).last().unwrap_or(1);
-                let k_cap = argmin(order);
-                LeadCap {
-                    period: p,
-                    in_model,
-                    order,
-                    capped_best: curve[k_cap].0,
-                    free_best: curve[k_free].0,
-                    free_gain: bic(k_free) - bic(k_cap),
-                    basis,
-                    span,
-                }
-            });
-            let chosen = match cap {
-                Some(c) if c.in_model => c.capped_best,
-                _ => curve[k_free].0,
-            };
-            let max = match cap {
-                Some(c) if c.in_model => c.order.min(searched),
-                _ => searched,
-            };
-            best.insert(ti, (chosen, max, cap));
-            let order = me.order.unwrap_or(chosen);
-            terms[ti].shape = match requested_basis(me) {
-                Some(b) => shape(st, name, 1, order, false).in_basis(st, b, order),
-                None => shape(st, name, 1, order, false),
-            };
+    // The other terms' searched values (a servo loop's kv, a time constant) are those of a fit at
+    // the default orders, which a stiff shape biases: the orders are chosen again once against the
+    // fit at the chosen orders, and the model refitted if they move (a closed loop's coupling
+    // through a biased kv made BIC take hundreds of orders that the refitted model rejected).
+    let mut round_fit = first;
+    let mut last: Option<BTreeMap<usize, u32>> = None;
+    for _round in 0..2 {
+        let mut terms = round_fit.terms.clone();
+        // Per motion: (order BIC prefers within the searched range, highest searched, lead cap).
+        let mut best: BTreeMap<usize, (u32, u32, Option<LeadCap>)> = BTreeMap::new();
+        let sweeps = if motions.len() > 1 { 2 } else { 1 };
+        for _ in 0..sweeps {
+            for &ti in &motions {
+                let name = terms[ti].name;
+                let (me, basis, span, mut fixed) = order_search_setup(st, model, &terms, ti);
+                fixed.retain(|c| c.iter().any(|v| *v != 0.0));
+                let base = OrthoBase::new(&fixed, w).map_err(|e| e.to_string())?;
+                // (user order, weighted RSS, linear parameters) of every order BIC may choose.
+                let curve = order_curve(st, name, basis, top, &round_fit.target, w, &base)?;
+                let bic = |k: usize| bic_unknown_sigma(curve[k].1, n, curve[k].2);
+                let argmin = |upto: u32| {
+                    (0..curve.len())
+                        .filter(|&k| curve[k].0 <= upto)
+                        .min_by(|a, b| bic(*a).total_cmp(&bic(*b)))
+                        .unwrap_or(0)
+                };
+                let searched = curve.last().map_or(1, |c| c.0);
+                let k_free = argmin(u32::MAX);
+                // A table represents any shape at its positions: no order separates it from a lead.
+                let cap = lead.filter(|_| basis != ShapeBasis::Table).map(|(p, in_model)| {
+                    let order =
+                        (1..=searched).take_while(|&o| basis.shortest_wavelength(span, o) > p).last().unwrap_or(1);
+                    let k_cap = argmin(order);
+                    LeadCap {
+                        period: p,
+                        in_model,
+                        order,
+                        capped_best: curve[k_cap].0,
+                        free_best: curve[k_free].0,
+                        free_gain: bic(k_free) - bic(k_cap),
+                        basis,
+                        span,
+                    }
+                });
+                let chosen = match cap {
+                    Some(c) if c.in_model => c.capped_best,
+                    _ => curve[k_free].0,
+                };
+                let max = match cap {
+                    Some(c) if c.in_model => c.order.min(searched),
+                    _ => searched,
+                };
+                best.insert(ti, (chosen, max, cap));
+                let order = me.order.unwrap_or(chosen);
+                terms[ti].shape = match requested_basis(me) {
+                    Some(b) => shape(st, name, 1, order, false).in_basis(st, b, order),
+                    None => shape(st, name, 1, order, false),
+                };
+            }
         }
-    }
-    let chosen: BTreeMap<usize, u32> =
-        motions.iter().map(|&ti| (terms[ti].index, terms[ti].shape.basis.user_order(terms[ti].shape.order))).collect();
-    let mut fs = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| {
-        (chosen.get(&index).copied().unwrap_or(default(me)), None)
-    })?;
-    for c in fs.shapes.iter_mut() {
-        if let Some(&(b, mx, cap)) = motions.iter().find(|&&ti| terms[ti].name == c.name).map(|ti| &best[ti]) {
-            c.best = b;
-            c.max = Some(mx);
-            c.lead_cap = cap;
+        let chosen: BTreeMap<usize, u32> = motions
+            .iter()
+            .map(|&ti| (terms[ti].index, terms[ti].shape.basis.user_order(terms[ti].shape.order)))
+            .collect();
+        let unchanged = last.as_ref() == Some(&chosen);
+        if !unchanged {
+            round_fit = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| {
+                (chosen.get(&index).copied().unwrap_or(default(me)), None)
+            })?;
         }
+        for c in round_fit.shapes.iter_mut() {
+            if let Some(&(b, mx, cap)) = motions.iter().find(|&&ti| terms[ti].name == c.name).map(|ti| &best[ti]) {
+                c.best = b;
+                c.max = Some(mx);
+                c.lead_cap = cap;
+            }
+        }
+        // Nothing else searched: the other terms do not move with the orders.
+        let others_searched =
+            round_fit.terms.iter().any(|t| !t.name.is_error_motion() && t.searched.iter().any(|s| *s));
+        if unchanged || !others_searched {
+            break;
+        }
+        last = Some(chosen);
     }
-    Ok(fs)
+    Ok(round_fit)
 }
 
 /// The orders of a model's fitted error motions re-chosen by BIC with a diagnose candidate in the

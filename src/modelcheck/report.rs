@@ -1001,6 +1001,23 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             })?;
         }
     }
+    // Detectable but negligible: say why such an entry is `noise` (with very many samples a tiny
+    // misfit passes ΔBIC and the search-corrected p).
+    for r in ranking.iter_mut().filter(|r| r.verdict == Verdict::Noise && r.note.is_none()) {
+        if r.delta_bic < config.significance_threshold
+            && r.p_value.is_some_and(|p| p <= config.family_alpha)
+            && r.explained < config.explained_floor
+        {
+            r.note = Some(format!(
+                "detectable (ΔBIC {:.1}, p {:.1e}) but it explains {:.2} % of the residual, below the {:.0} % worth \
+                 adding: not significant",
+                r.delta_bic,
+                r.p_value.unwrap_or(f64::NAN),
+                100.0 * r.explained,
+                100.0 * config.explained_floor
+            ));
+        }
+    }
     ranking.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic).then_with(|| a.effect.cmp(&b.effect)));
     // A fitted period at an end of the range searched is a bound, not an estimate: the criterion
     // still improves beyond it, so the signal is not this candidate's in the range searched.

@@ -126,9 +126,40 @@ impl OrthoBase {
             cols.iter().zip(&support).map(|(c, &(lo, hi))| (lo..hi).map(|i| c[i] * w[i]).collect()).collect();
         let norm: Vec<f64> = wc.iter().map(|v| dot(v, v).sqrt()).collect();
         let mut m = vec![vec![0.0; rank]; k];
+        // M = Qᵀ(WC): a column on a few rows by its own product with those rows of Q; the columns
+        // on more than an eighth of the rows together, by one product over the rows they span
+        // (Q read once for all of them).
+        let n = w.len();
+        let wide: Vec<usize> =
+            (0..k).filter(|&j| norm[j] > 0.0 && rank > 0 && 8 * (support[j].1 - support[j].0) > n).collect();
+        if !wide.is_empty() {
+            let lo = wide.iter().map(|&j| support[j].0).min().unwrap_or(0);
+            let hi = wide.iter().map(|&j| support[j].1).max().unwrap_or(lo);
+            let block = Mat::<f64>::from_fn(hi - lo, wide.len(), |i, c| {
+                let (a, b) = support[wide[c]];
+                let row = lo + i;
+                if row >= a && row < b {
+                    wc[wide[c]][row - a]
+                } else {
+                    0.0
+                }
+            });
+            let mut out = Mat::<f64>::zeros(rank, wide.len());
+            matmul(
+                out.as_mut(),
+                Accum::Replace,
+                self.q.as_ref().subrows(lo, hi - lo).transpose(),
+                block.as_ref(),
+                1.0,
+                Par::Seq,
+            );
+            for (c, &j) in wide.iter().enumerate() {
+                m[j] = (0..rank).map(|a| out[(a, c)]).collect();
+            }
+        }
         for j in 0..k {
             let (lo, hi) = support[j];
-            if norm[j] == 0.0 || rank == 0 {
+            if norm[j] == 0.0 || rank == 0 || wide.contains(&j) {
                 continue;
             }
             let mut out = Mat::<f64>::zeros(rank, 1);
