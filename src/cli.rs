@@ -563,8 +563,8 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
         if t.len() < 3 {
             continue;
         }
-        let (_, res) =
-            crate::estimate::ssi::run_ssi(t, x, None).map_err(|m| VmtError::bad(path, format!("run {}", r.name), m))?;
+        let (_, res) = crate::estimate::ssi::run_ssi(t, x, None)
+            .map_err(|m| VmtError::bad(path, format!("run {}", r.name), m.to_string()))?;
         results
             .push(serde_json::json!({"run": r.name, "sensor": s.name, "feed": r.feed, "ssi": res.ssi, "result": res}));
     }
@@ -664,7 +664,7 @@ pub fn compensate(path: &Path, out: &Path, opts: &CompensateOptions) -> Result<i
         equidistant_table, export_controller_table, fit_table_on_nodes, variable_step_table, VariableStepParams,
     };
     use vmt_estimators::iso230_2::evaluate_bidirectional;
-    let format = opts.format.as_deref().map(ControllerFormat::parse).transpose().map_err(VmtError::Usage)?;
+    let format = opts.format.as_deref().map(ControllerFormat::parse).transpose()?;
     if opts.equidistant.is_some() && (format.is_some() || opts.points.is_some()) {
         return Err(VmtError::Usage("--equidistant: give either it or --format/--points, not both".into()));
     }
@@ -708,7 +708,7 @@ pub fn compensate(path: &Path, out: &Path, opts: &CompensateOptions) -> Result<i
     let targets: Vec<f64> = iso.targets.iter().map(|x| x.target).collect();
     let dev: Vec<f64> = iso.targets.iter().map(|x| x.mean_bidirectional).collect();
     let bad = |e: String| VmtError::bad(path, format!("run {}", run.name), e);
-    let axis = opts.axis.clone().unwrap_or_else(|| format!("{}1", run.axis.to_ascii_uppercase()));
+    let axis = opts.axis.clone().unwrap_or_else(|| format!("{}1", run.axis.iso_letter()));
     let (table, text) = if let Some(n) = opts.equidistant {
         if n > MAX_TABLE_NODES {
             return Err(VmtError::Usage(format!(
@@ -747,7 +747,7 @@ pub fn compensate(path: &Path, out: &Path, opts: &CompensateOptions) -> Result<i
             }
         };
         let about = format!("from run {} sensor {col} of {}", run.name, path.display());
-        let (text, notes) = table_text(format, &table, &axis, &about).map_err(bad)?;
+        let (text, notes) = table_text(format, &table, &axis, &about).map_err(|e| bad(e.to_string()))?;
         for n in notes {
             eprintln!("note: {n}");
         }

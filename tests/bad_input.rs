@@ -549,6 +549,27 @@ fn urdf_cases() -> Vec<Case> {
     // A travel of 1e9 m (issue 14: truth profiles sampled every mm over it would take terabytes).
     let far = base.replacen("upper=\"1.0\"", "upper=\"1e9\"", 1);
     assert_ne!(far, base);
+    // A single axis on a joint not named for its axis: vmt cannot tell which axis the truth's effects
+    // and the recording's `axis` are on (it used to take the name's last letter, `e`, and drop them).
+    let carriage =
+        base.replacen("<joint name=\"x\" type=\"prismatic\">", "<joint name=\"carriage\" type=\"prismatic\">", 1);
+    assert_ne!(carriage, base);
+    cases.push(Case {
+        label: "single axis on a joint not named x, y or z".into(),
+        files: vec![
+            ("m.urdf".into(), carriage.into_bytes()),
+            (
+                "s.toml".into(),
+                scenario_text(&[
+                    ("machine", Some(toml::Value::String("m.urdf".into()))),
+                    ("axis.joint", Some(toml::Value::String("carriage".into()))),
+                ]),
+            ),
+        ],
+        args: args(&["simulate", "{dir}/s.toml", "-o", "{dir}/out"]),
+        blamed: "s.toml".into(),
+        place: "axis.joint".into(),
+    });
     for (label, urdf, blamed, place) in [
         ("URDF nested 20000 deep", deep.into_bytes(), "m.urdf", "line"),
         ("URDF not UTF-8", b"<robot name=\"\xff\"></robot>".to_vec(), "m.urdf", "UTF-8"),

@@ -14,12 +14,13 @@ use vmt_sim::effects::{
     Lugre, Resonance, ScaleError, ServoLag, Squareness, Stribeck, ThermalDrift, ThermalExpansion, Viscous,
 };
 use vmt_sim::profile::{Harmonic, Profile, RandomProfile, Term};
+use vmt_sim::Axis;
 
 fn sensor(name: &str, kind: SensorKind, sigma: Option<f64>) -> Sensor {
     Sensor {
         name: name.to_string(),
         kind,
-        axis: 'x',
+        axis: Axis::X,
         position: [0.0, 0.25, 1.1],
         direction: [1.0, 0.0, 0.0],
         sigma,
@@ -86,7 +87,7 @@ fn sample_set(seed: u64) -> MeasurementSet {
                 name: "cv_fast".to_string(),
                 file: "cv_fast.csv".to_string(),
                 procedure: Procedure::ConstantVelocity,
-                axis: 'x',
+                axis: Axis::X,
                 start_time: Some(12.5),
                 feed: Some(0.05),
                 direction: Some(1),
@@ -103,7 +104,7 @@ fn sample_set(seed: u64) -> MeasurementSet {
                 name: "iso".to_string(),
                 file: "iso.csv".to_string(),
                 procedure: Procedure::Positioning,
-                axis: 'x',
+                axis: Axis::X,
                 start_time: None,
                 feed: None,
                 direction: None,
@@ -432,7 +433,7 @@ fn profile_csv_round_trips_with_axis_prefix_sigma_and_units() {
     let tmp = tempfile::tempdir().unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let position: Vec<f64> = (0..41).map(|i| i as f64 * 0.025).collect();
-    let mut col = |axis: Option<char>, effect: EffectName, scale: f64, sigma: bool| ProfileColumn {
+    let mut col = |axis: Option<Axis>, effect: EffectName, scale: f64, sigma: bool| ProfileColumn {
         axis,
         effect,
         values: (0..41).map(|_| scale * rng.gen_range(-1.0..1.0)).collect(),
@@ -443,7 +444,7 @@ fn profile_csv_round_trips_with_axis_prefix_sigma_and_units() {
         columns: vec![
             col(None, EffectName::Positioning, 1e-5, true),
             col(None, EffectName::StraightnessY, 3e-6, false),
-            col(Some('y'), EffectName::Pitch, 2e-5, true),
+            col(Some(Axis::Y), EffectName::Pitch, 2e-5, true),
         ],
     };
     let p = tmp.path().join("truth_profiles.csv");
@@ -460,7 +461,7 @@ fn profile_csv_round_trips_with_axis_prefix_sigma_and_units() {
     assert!(head.starts_with("position[mm],positioning[um],positioning_sigma[um],"));
     assert!(head.contains("y.pitch[urad]"));
     let back = measurement::read_profiles(&q).unwrap();
-    let c = back.get(EffectName::Pitch, 'y').unwrap();
+    let c = back.get(EffectName::Pitch, Axis::Y).unwrap();
     // urad: ×1e6 when writing, ÷1e6 when reading: ≤ 2 ulp.
     for (a, b) in c.values.iter().zip(&table.columns[2].values) {
         assert!((a - b).abs() <= 2.0 * f64::EPSILON * b.abs());
@@ -478,7 +479,7 @@ fn profile_csv_round_trips_with_axis_prefix_sigma_and_units() {
 // Models (§2).
 
 fn scalar(name: EffectName, params: EffectParams) -> ModelEffect {
-    ModelEffect::new(Effect { name, axis: 'x', params }, false)
+    ModelEffect::new(Effect { name, axis: Axis::X, params }, false)
 }
 
 /// A model holding every effect of the catalogue with non-default values, error motions with
@@ -500,10 +501,10 @@ fn every_effect_model() -> Model {
                 table.clone(),
             ],
         };
-        effects.push(ModelEffect::new(Effect::error_motion(*name, 'x', profile), false));
+        effects.push(ModelEffect::new(Effect::error_motion(*name, Axis::X, profile), false));
     }
     // A fitted error motion with a basis, no profile given.
-    let mut pitch_y = ModelEffect::new(Effect::error_motion(EffectName::Pitch, 'y', Profile::zero()), true);
+    let mut pitch_y = ModelEffect::new(Effect::error_motion(EffectName::Pitch, Axis::Y, Profile::zero()), true);
     pitch_y.basis = Some(Basis::Bspline);
     pitch_y.order = Some(8);
     effects.push(pitch_y);
@@ -557,7 +558,7 @@ fn every_effect_model() -> Model {
     let mut res = ModelEffect::new(
         Effect {
             name: EffectName::Resonance,
-            axis: 'x',
+            axis: Axis::X,
             params: EffectParams::Resonance(Resonance { frequency: 180.0, damping: 0.02 }),
         },
         true,
@@ -565,15 +566,15 @@ fn every_effect_model() -> Model {
     res.given = vec!["frequency".to_string()];
     effects.push(res);
     effects.push(ModelEffect::new(
-        Effect { name: EffectName::GravityTilt, axis: 'x', params: EffectParams::GravityTilt },
+        Effect { name: EffectName::GravityTilt, axis: Axis::X, params: EffectParams::GravityTilt },
         false,
     ));
     effects.push(scalar(EffectName::AccelBiasDrift, EffectParams::AccelBiasDrift(AccelBiasDrift { rate: 1e-5 })));
     // Backlash on a second axis: written as [[effects.backlash]].
     let mut bl_y = scalar(EffectName::Backlash, EffectParams::Backlash(Backlash { value: 2e-6 }));
-    bl_y.effect.axis = 'y';
+    bl_y.effect.axis = Axis::Y;
     effects.push(bl_y);
-    let mut m = Model { machine: Some("slide_column".to_string()), axis: 'x', effects, source: PathBuf::new() };
+    let mut m = Model { machine: Some("slide_column".to_string()), axis: Axis::X, effects, source: PathBuf::new() };
     m.sort();
     m
 }
@@ -631,9 +632,9 @@ phase = 0.0                        # rad
     );
     let m = model::read_model(&p).unwrap();
     assert_eq!(m.effects.len(), 4);
-    let pos = m.get(EffectName::Positioning, 'x').unwrap();
+    let pos = m.get(EffectName::Positioning, Axis::X).unwrap();
     assert!(pos.fit && pos.given.is_empty());
-    let bl = m.get(EffectName::Backlash, 'x').unwrap();
+    let bl = m.get(EffectName::Backlash, Axis::X).unwrap();
     assert_eq!(bl.effect.params.get("value"), Some(4e-6));
     assert!(!bl.fit);
     let set = m.effect_set();
@@ -709,11 +710,11 @@ value = 4e-6
     let table = vmt::error::parse_toml(&file, text).unwrap();
     let truth = table["truth"].as_table().unwrap();
     let m = model::parse_model(truth, &file, tmp.path(), "truth").unwrap();
-    let eyx = m.effect_set().error_motion(EffectName::StraightnessY, 'x').unwrap().clone();
+    let eyx = m.effect_set().error_motion(EffectName::StraightnessY, Axis::X).unwrap().clone();
     // 1.5 um at 0.5 m, linear in between: 0.75 um at 0.25 m (to rounding of the unit division).
     assert!((eyx.value(0.25) - 0.75e-6).abs() < 1e-21);
     assert!((eyx.value(1.0) + 0.5e-6).abs() < 1e-21);
-    let exx = m.effect_set().error_motion(EffectName::Positioning, 'x').unwrap().clone();
+    let exx = m.effect_set().error_motion(EffectName::Positioning, Axis::X).unwrap().clone();
     let want = 2.8e-5 * 0.5 - 2.4e-5 * 0.25 + 2.5e-6 * (std::f64::consts::TAU * 0.5 / 0.32 + 0.7).sin();
     assert!((exx.value(0.5) - want).abs() < 1e-18);
     let bad = text.replace("value = 4e-6", "value = -4e-6");

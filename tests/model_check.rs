@@ -16,6 +16,7 @@ use vmt::scenario::Scenario;
 use vmt::simulate::{physics, read_all, simulate_truth, to_measurement_set};
 use vmt_estimators::modelcheck::Verdict;
 use vmt_sim::effects::{Effect, EffectName, EffectParams};
+use vmt_sim::Axis;
 
 use crate::util::realdata;
 
@@ -61,11 +62,11 @@ fn sets(sc: &Scenario, seeds: &[u64]) -> Vec<MeasurementSet> {
 fn model_fitting(names: &[EffectName]) -> Model {
     Model {
         machine: None,
-        axis: 'x',
+        axis: Axis::X,
         effects: names
             .iter()
             .map(|&n| ModelEffect {
-                effect: Effect { name: n, axis: 'x', params: EffectParams::default_for(n) },
+                effect: Effect { name: n, axis: Axis::X, params: EffectParams::default_for(n) },
                 fit: true,
                 basis: None,
                 order: None,

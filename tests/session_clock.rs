@@ -10,6 +10,7 @@ use vmt::modelcheck::diagnose;
 use vmt::scenario::Scenario;
 use vmt::simulate::{physics, read_all, session_plan, simulate_truth, to_measurement_set};
 use vmt_estimators::modelcheck::Verdict;
+use vmt_sim::Axis;
 
 /// The backlash lesson's machine (semi-closed ball screw) with a hidden thermal expansion
 /// (α 11.5e-6 1/K, ΔT∞ 2 K, τ 600 s), a laser along X at the head (σ 50 nm), and two short ISO 230-2
@@ -37,7 +38,7 @@ fn scenario(between: &str) -> Scenario {
 
 /// An empty model of axis x (every effect is missing).
 fn empty_model() -> Model {
-    Model { machine: None, axis: 'x', effects: Vec::<ModelEffect>::new(), source: "empty_model.toml".into() }
+    Model { machine: None, axis: Axis::X, effects: Vec::<ModelEffect>::new(), source: "empty_model.toml".into() }
 }
 
 #[test]

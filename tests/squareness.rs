@@ -11,6 +11,7 @@ use vmt::simulate::{to_measurement_set, truth_extras};
 use vmt::workflow::run::identify_chain_lines;
 use vmt_sim::chain::{LineTruth, SquarenessAngles};
 use vmt_sim::procedures::RunData;
+use vmt_sim::Axis;
 
 /// `vmt simulate`'s output for the scenario: the set is written with truth.toml (carrying the three
 /// squareness values) and truth_profiles.csv (x., y., z. columns), and reads back unchanged.
@@ -29,7 +30,7 @@ fn written_set_reads_back(sc: &Scenario, truths: &[(usize, LineTruth)]) {
     let back = measurement::read(&out).unwrap();
     assert_eq!(back.runs.len(), 16);
     let fxy = back.runs.iter().find(|r| r.name == "lines_fxy").unwrap();
-    assert_eq!(fxy.axis, 'x');
+    assert_eq!(fxy.axis, Axis::X);
     let RunData::PointTable { target, .. } = &fxy.data else { panic!("fxy is not a point table") };
     // 6 stops every 100 mm of x and y: the line coordinate of the last is 0.5·√2 m.
     assert_eq!(target.len(), 6);
@@ -38,7 +39,7 @@ fn written_set_reads_back(sc: &Scenario, truths: &[(usize, LineTruth)]) {
     // Round trip of the laser column: the CSV prints the shortest round-trip digits.
     assert_eq!(fxy.data.column("fxy"), orig.data.column("fxy"));
     let laser = back.sensor("fxy").unwrap();
-    assert!((laser.direction[0] - 0.5f64.sqrt()).abs() < 1e-15 && laser.axis == 'z');
+    assert!((laser.direction[0] - 0.5f64.sqrt()).abs() < 1e-15 && laser.axis == Axis::Z);
     let truth = std::fs::read_to_string(out.join("truth.toml")).unwrap();
     for v in [
         "[effects.squareness_xy]\nvalue = 2e-5",

@@ -26,6 +26,7 @@ use vmt_estimators::accel_straightness::{
     STANDARD_GRAVITY,
 };
 use vmt_estimators::line::remove_line;
+use vmt_sim::Axis;
 
 /// A sum of random Fourier features `f(x) = Σ a_j·cos(k_j·x + φ_j)`, with value, slope, curvature and
 /// antiderivative in closed form.
@@ -171,7 +172,7 @@ fn sensor(with_tilt: bool, rho: Option<f64>) -> Sensor {
     Sensor {
         name: if with_tilt { "acc_y".into() } else { "acc_z".into() },
         kind: SensorKind::Accelerometer,
-        axis: 'x',
+        axis: Axis::X,
         position: [0.0, 0.0, 0.0],
         direction: if with_tilt { [0.0, 1.0, 0.0] } else { [0.0, 0.0, 1.0] },
         sigma: None,
@@ -363,7 +364,7 @@ fn write_set(d: &Draw, dir: &Path, stated: bool) {
             name: format!("pass{i}"),
             file: format!("pass{i}.csv"),
             procedure: Procedure::ConstantVelocity,
-            axis: 'x',
+            axis: Axis::X,
             start_time: None,
             feed: Some(r.speed),
             direction: Some(r.direction as i8),

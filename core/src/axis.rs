@@ -64,6 +64,12 @@ impl Axis {
         }
     }
 
+    /// The axis a prismatic joint moves, by its name's last letter (`x`, `y`, `z`, either case: vmt's
+    /// machines name their joints so, e.g. `x` or `column_Z`); `None` for a joint named otherwise.
+    pub fn of_joint(joint: &str) -> Option<Axis> {
+        joint.chars().last().and_then(Axis::from_letter)
+    }
+
     /// The unit vector of the axis in the machine frame (dimensionless).
     pub fn unit(self) -> [f64; 3] {
         let mut e = [0.0; 3];
@@ -86,6 +92,25 @@ impl Axis {
 impl fmt::Display for Axis {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}", self.letter())
+    }
+}
+
+/// Serde as files write an axis, its lower-case letter (`"x"`), for fields of vmt's file and JSON types:
+/// `#[serde(with = "vmt_core::axis::letter")]`. (The derived form of [`Axis`] is its variant name, `"X"`.)
+pub mod letter {
+    use super::Axis;
+    use serde::{de::Error, Deserialize, Deserializer, Serializer};
+
+    /// Writes `Axis::X` as `"x"`.
+    pub fn serialize<S: Serializer>(axis: &Axis, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_char(axis.letter())
+    }
+
+    /// Reads `"x"`, `"y"` or `"z"` (either case); anything else is an error naming the letters expected.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Axis, D::Error> {
+        let c = char::deserialize(d)?;
+        Axis::from_letter(c)
+            .ok_or_else(|| D::Error::custom(format!("expected an axis \"x\", \"y\" or \"z\", got {c:?}")))
     }
 }
 

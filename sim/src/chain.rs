@@ -269,7 +269,7 @@ impl ChainModel {
         }
         let mut letters: Vec<Axis> = Vec::new();
         for ax in &joints {
-            let Some(l) = ax.joint.chars().last().and_then(Axis::from_letter) else {
+            let Some(l) = Axis::of_joint(&ax.joint) else {
                 return invalid(format!("joint `{}`: expected a name ending in x, y or z", ax.joint));
             };
             letters.push(l);
@@ -350,7 +350,7 @@ impl ChainModel {
             let mut model = AxisModel::build_on_parent(&s, cfg)?;
             let letter = letters[j];
             let (truth, adj): (AxisTruth, Adjustments) =
-                axis_physics(set, letter.letter(), &model).map_err(ChainError::Invalid)?;
+                axis_physics(set, letter, &model).map_err(|e| ChainError::Invalid(e.to_string()))?;
             adj.apply(&mut model);
             let motions = truth.motions.clone();
             let truth = AxisTruth { motions: to_axis_frame(&motions, letter, model.axis_rotation), ..truth };

@@ -8,6 +8,7 @@
 
 use crate::friction::StribeckLaw;
 use crate::profile::{Profile, Term};
+use crate::Axis;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
@@ -128,7 +129,7 @@ impl EffectName {
     /// `pitch`/`yaw` the rotations about those same two directions; `roll` is about the axis.
     /// So for Y: EYY, EXY, EZY, EBY, EAY, ECY; for Z: EZZ, EXZ, EYZ, ECZ, EAZ, EBZ.
     /// `None` for effects that are not error motions.
-    pub fn iso230_symbol(self, a: crate::Axis) -> Option<String> {
+    pub fn iso230_symbol(self, a: Axis) -> Option<String> {
         let [t1, t2] = a.transverse();
         let component = match self {
             EffectName::Positioning => a.iso_letter(),
@@ -899,31 +900,28 @@ pub fn fmt_num(x: f64) -> String {
 pub struct Effect {
     /// Which effect.
     pub name: EffectName,
-    /// The axis it acts on (`x`, `y` or `z`).
-    pub axis: char,
+    /// The axis it acts on (files write `x`, `y` or `z`).
+    pub axis: Axis,
     /// Its parameters (variant matching `name`).
     pub params: EffectParams,
 }
 
 impl Effect {
     /// The effect `name` on `axis` with the starting values of [`EffectParams::default_for`].
-    pub fn default_for(name: EffectName, axis: char) -> Effect {
+    pub fn default_for(name: EffectName, axis: Axis) -> Effect {
         Effect { name, axis, params: EffectParams::default_for(name) }
     }
 
     /// An error motion (positioning … yaw) with the given profile.
-    pub fn error_motion(name: EffectName, axis: char, profile: Profile) -> Effect {
+    pub fn error_motion(name: EffectName, axis: Axis, profile: Profile) -> Effect {
         Effect { name, axis, params: EffectParams::ErrorMotion(profile) }
     }
 
-    /// Checks every parameter against its admissible range (and the axis, and that the
+    /// Checks every parameter against its admissible range (and that the
     /// parameter variant matches the name). Keys are relative to the effect's table.
     pub fn validate(&self) -> Vec<Problem> {
         let mut out: Vec<Problem> = Vec::new();
         let mut bad = |key: String, message: String| out.push(Problem { key, message });
-        if !matches!(self.axis, 'x' | 'y' | 'z') {
-            bad("axis".into(), format!("expected an axis \"x\", \"y\" or \"z\", got {:?}", self.axis));
-        }
         if !self.params.fits(self.name) {
             bad(String::new(), format!("internal: parameters of another effect given for `{}`", self.name));
             return out;
@@ -1147,17 +1145,17 @@ pub struct EffectSet {
 
 impl EffectSet {
     /// The effect `name` on `axis`, if switched on.
-    pub fn get(&self, name: EffectName, axis: char) -> Option<&Effect> {
+    pub fn get(&self, name: EffectName, axis: Axis) -> Option<&Effect> {
         self.effects.iter().find(|e| e.name == name && e.axis == axis)
     }
 
     /// Mutable access to the effect `name` on `axis`.
-    pub fn get_mut(&mut self, name: EffectName, axis: char) -> Option<&mut Effect> {
+    pub fn get_mut(&mut self, name: EffectName, axis: Axis) -> Option<&mut Effect> {
         self.effects.iter_mut().find(|e| e.name == name && e.axis == axis)
     }
 
     /// The profile of the error motion `name` on `axis`, if switched on.
-    pub fn error_motion(&self, name: EffectName, axis: char) -> Option<&Profile> {
+    pub fn error_motion(&self, name: EffectName, axis: Axis) -> Option<&Profile> {
         self.get(name, axis).and_then(|e| e.params.profile())
     }
 
@@ -1173,7 +1171,7 @@ impl EffectSet {
     }
 
     /// Removes and returns the effect `name` on `axis`.
-    pub fn remove(&mut self, name: EffectName, axis: char) -> Option<Effect> {
+    pub fn remove(&mut self, name: EffectName, axis: Axis) -> Option<Effect> {
         let i = self.effects.iter().position(|e| e.name == name && e.axis == axis)?;
         Some(self.effects.remove(i))
     }
@@ -1213,7 +1211,7 @@ impl EffectSet {
 
     /// The friction law of `axis` from its friction effects, `None` if it has none.
     /// `stribeck.fc` unset takes `coulomb.fc`; a `lugre` effect supplies Fc, Fs, vs, δ itself.
-    pub fn friction(&self, axis: char) -> Option<FrictionLaw> {
+    pub fn friction(&self, axis: Axis) -> Option<FrictionLaw> {
         let coulomb = self.get(EffectName::Coulomb, axis);
         let viscous = self.get(EffectName::Viscous, axis);
         let stribeck = self.get(EffectName::Stribeck, axis);
@@ -1283,16 +1281,15 @@ mod tests {
 
     #[test]
     fn iso_symbols_of_the_x_axis_are_those_of_iso_230_1() {
-        let s: Vec<String> =
-            EffectName::ERROR_MOTIONS.iter().map(|n| n.iso230_symbol(crate::Axis::X).unwrap()).collect();
+        let s: Vec<String> = EffectName::ERROR_MOTIONS.iter().map(|n| n.iso230_symbol(Axis::X).unwrap()).collect();
         assert_eq!(s, ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX"]);
-        assert_eq!(EffectName::Backlash.iso230_symbol(crate::Axis::X), None);
+        assert_eq!(EffectName::Backlash.iso230_symbol(Axis::X), None);
     }
 
     #[test]
     fn defaults_are_valid_and_every_default_matches_its_name() {
         for n in EffectName::ALL {
-            let e = Effect::default_for(n, 'x');
+            let e = Effect::default_for(n, Axis::X);
             assert!(e.params.fits(n), "{n}");
             assert!(e.validate().is_empty(), "{n}: {:?}", e.validate());
         }
@@ -1303,17 +1300,17 @@ mod tests {
         let mut set = EffectSet::default();
         set.insert(Effect {
             name: EffectName::Backlash,
-            axis: 'x',
+            axis: Axis::X,
             params: EffectParams::Backlash(Backlash { value: -4e-6 }),
         });
         set.insert(Effect {
             name: EffectName::Resonance,
-            axis: 'x',
+            axis: Axis::X,
             params: EffectParams::Resonance(Resonance { frequency: 120.0, damping: 1.0 }),
         });
         set.insert(Effect {
             name: EffectName::CyclicLead,
-            axis: 'y',
+            axis: Axis::Y,
             params: EffectParams::CyclicLead(CyclicLead {
                 period: 0.0,
                 amplitude: 1e-6,
@@ -1334,10 +1331,10 @@ mod tests {
     #[test]
     fn duplicate_name_and_axis_is_a_problem_but_other_axes_are_not() {
         let mut set = EffectSet::default();
-        set.effects.push(Effect::default_for(EffectName::Backlash, 'x'));
-        set.effects.push(Effect::default_for(EffectName::Backlash, 'y'));
+        set.effects.push(Effect::default_for(EffectName::Backlash, Axis::X));
+        set.effects.push(Effect::default_for(EffectName::Backlash, Axis::Y));
         assert!(set.validate().is_empty());
-        set.effects.push(Effect::default_for(EffectName::Backlash, 'x'));
+        set.effects.push(Effect::default_for(EffectName::Backlash, Axis::X));
         let p = set.validate();
         assert_eq!(p.len(), 1);
         assert_eq!(p[0].key, "effects.backlash[2]");
@@ -1361,18 +1358,26 @@ mod tests {
         assert!((cl.value(0.0025) - 1.5e-6).abs() < 1e-18);
         // Stribeck: at v = vs, Fc + (Fs − Fc)/e, plus Fv·v.
         let mut set = EffectSet::default();
-        set.insert(Effect { name: EffectName::Coulomb, axis: 'x', params: EffectParams::Coulomb(Coulomb { fc: 1.0 }) });
+        set.insert(Effect {
+            name: EffectName::Coulomb,
+            axis: Axis::X,
+            params: EffectParams::Coulomb(Coulomb { fc: 1.0 }),
+        });
         set.insert(Effect {
             name: EffectName::Stribeck,
-            axis: 'x',
+            axis: Axis::X,
             params: EffectParams::Stribeck(Stribeck { fc: None, fs: 1.5, vs: 1e-3, shape: 2.0 }),
         });
-        set.insert(Effect { name: EffectName::Viscous, axis: 'x', params: EffectParams::Viscous(Viscous { fv: 0.4 }) });
-        let law = set.friction('x').unwrap();
+        set.insert(Effect {
+            name: EffectName::Viscous,
+            axis: Axis::X,
+            params: EffectParams::Viscous(Viscous { fv: 0.4 }),
+        });
+        let law = set.friction(Axis::X).unwrap();
         let f = law.steady.force(-1e-3);
         let want = -(1.0 + 0.5 / std::f64::consts::E) - 0.4e-3;
         assert!((f - want).abs() < 1e-15, "{f} vs {want}");
-        assert!(set.friction('y').is_none());
+        assert!(set.friction(Axis::Y).is_none());
     }
 
     #[test]

@@ -11,6 +11,7 @@ use crate::friction::LugreParams;
 use crate::geometry::ErrorMotions;
 use crate::machine::AxisModel;
 use crate::profile::{Harmonic, Profile, Term};
+use crate::Axis;
 
 /// What a truth does to one axis beyond `AxisTruth`: changes to the machine model and to sensors.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -21,9 +22,39 @@ pub struct Adjustments {
     pub accel_bias_drift: Option<f64>,
 }
 
+/// Why a truth cannot act on an axis (the caller adds the file and key).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TruthError {
+    /// A screw effect on an axis without a ball screw.
+    #[error("effect `{effect}` on axis {axis} needs a ball-screw drive ([axis.drive] kind = \"ball_screw\")")]
+    NeedsBallScrew {
+        /// The effect (`cyclic_lead`, `backlash`).
+        effect: EffectName,
+        /// The axis.
+        axis: Axis,
+    },
+    /// A Stribeck curve rising from rest: Fs < Fc (refused, not raised to Fc).
+    #[error(
+        "friction on axis {axis} ({}): static friction fs = {} N is below the Coulomb level fc = {} N; expected fs ≥ fc",
+        if *.lugre { "lugre" } else { "stribeck (fc from coulomb unless given)" },
+        crate::effects::fmt_num(*.fs),
+        crate::effects::fmt_num(*.fc)
+    )]
+    StaticBelowCoulomb {
+        /// The axis.
+        axis: Axis,
+        /// True when the law comes from a `lugre` effect, false from `stribeck`/`coulomb`.
+        lugre: bool,
+        /// Static friction Fs, N.
+        fs: f64,
+        /// Coulomb friction Fc, N.
+        fc: f64,
+    },
+}
+
 /// Builds the physics of axis `axis` from an effect set. `model` gives the moving body's height for
 /// the resonance mode shape. Errors name the effect that cannot act on this machine.
-pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(AxisTruth, Adjustments), String> {
+pub fn axis_physics(set: &EffectSet, axis: Axis, model: &AxisModel) -> Result<(AxisTruth, Adjustments), TruthError> {
     let motion = |n: EffectName| set.error_motion(n, axis).cloned().unwrap_or_default();
     let mut truth = AxisTruth {
         motions: ErrorMotions {
@@ -40,13 +71,11 @@ pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(A
     let is_screw = matches!(model.drive, crate::drive::DriveConfig::BallScrew(_));
     let mut along: Vec<Term> = Vec::new();
     for e in set.effects.iter().filter(|e| e.axis == axis) {
-        let need_screw = |what: &str| {
+        let need_screw = |effect: EffectName| {
             if is_screw {
                 Ok(())
             } else {
-                Err(format!(
-                    "effect `{what}` on axis {axis} needs a ball-screw drive ([axis.drive] kind = \"ball_screw\")"
-                ))
+                Err(TruthError::NeedsBallScrew { effect, axis })
             }
         };
         match &e.params {
@@ -59,7 +88,7 @@ pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(A
             EffectParams::ThermalExpansion(t) => truth.feedback.thermal_expansion = Some(t.clone()),
             EffectParams::ThermalDrift(d) => truth.feedback.thermal_drift = Some(d.clone()),
             EffectParams::CyclicLead(c) => {
-                need_screw("cyclic_lead")?;
+                need_screw(EffectName::CyclicLead)?;
                 let mut h = vec![Harmonic { amplitude: c.amplitude, wavelength: c.period, phase: c.phase }];
                 h.extend(c.harmonics.iter().map(|k| Harmonic {
                     amplitude: k.amplitude,
@@ -69,7 +98,7 @@ pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(A
                 truth.lead_error = Profile::harmonics(h);
             }
             EffectParams::Backlash(b) => {
-                need_screw("backlash")?;
+                need_screw(EffectName::Backlash)?;
                 truth.backlash = b.value;
             }
             EffectParams::Resonance(r) => {
@@ -99,13 +128,7 @@ pub fn axis_physics(set: &EffectSet, axis: char, model: &AxisModel) -> Result<(A
         // The Stribeck curve falls from Fs at rest to Fc in sliding: Fs < Fc is no friction law (refused,
         // not raised to Fc behind the user's back).
         Some(FrictionLaw { steady: law, lugre }) if law.fs < law.fc => {
-            let from = if lugre.is_some() { "lugre" } else { "stribeck (fc from coulomb unless given)" };
-            return Err(format!(
-                "friction on axis {axis} ({from}): static friction fs = {} N is below the Coulomb level fc = {} N; \
-                 expected fs ≥ fc",
-                crate::effects::fmt_num(law.fs),
-                crate::effects::fmt_num(law.fc)
-            ));
+            return Err(TruthError::StaticBelowCoulomb { axis, lugre: lugre.is_some(), fs: law.fs, fc: law.fc });
         }
         Some(FrictionLaw { steady: law, lugre }) => match lugre {
             Some([sigma0, sigma1]) => GuideFriction::LuGre(LugreParams {

@@ -11,6 +11,7 @@ use vmt_sim::effects::{Effect, EffectName, EffectParams, EffectSet, Squareness};
 use vmt_sim::machine::AxisConfig;
 use vmt_sim::profile::{Harmonic, Profile};
 use vmt_sim::urdf::{parse_urdf, MachineStructure};
+use vmt_sim::Axis;
 
 fn machine() -> MachineStructure {
     let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../urdf/vmc_3axis.urdf")).unwrap();
@@ -24,27 +25,27 @@ fn configs() -> Vec<AxisConfig> {
 const SQ: [f64; 3] = [20e-6, -15e-6, 10e-6]; // EC0Y, EB0Z, EA0Z
 
 /// Error motions of the test, by (axis, FORMAT.md name): (EffectName, axis, profile).
-fn motions() -> Vec<(EffectName, char, Profile)> {
+fn motions() -> Vec<(EffectName, Axis, Profile)> {
     let h = |a: f64, w: f64, p: f64| Profile::harmonics(vec![Harmonic { amplitude: a, wavelength: w, phase: p }]);
     vec![
-        (EffectName::Positioning, 'x', Profile::poly(vec![0.0, 12e-6])),
-        (EffectName::StraightnessY, 'x', h(2e-6, 0.9, 0.3)),
-        (EffectName::StraightnessZ, 'x', h(3e-6, 1.2, 1.0)),
-        (EffectName::Roll, 'x', h(10e-6, 0.8, 0.2)),
-        (EffectName::Pitch, 'x', Profile::poly(vec![4e-6, -15e-6])),
-        (EffectName::Yaw, 'x', h(12e-6, 0.7, 1.5)),
-        (EffectName::Positioning, 'y', Profile::poly(vec![0.0, -8e-6])),
-        (EffectName::StraightnessY, 'y', h(1.5e-6, 0.6, 0.4)), // EXY
-        (EffectName::StraightnessZ, 'y', h(2.5e-6, 0.5, 2.0)), // EZY
-        (EffectName::Roll, 'y', h(8e-6, 0.7, 0.1)),            // EBY
-        (EffectName::Pitch, 'y', Profile::poly(vec![-3e-6, 10e-6])), // EAY
-        (EffectName::Yaw, 'y', h(9e-6, 0.9, 2.5)),             // ECY
-        (EffectName::Positioning, 'z', Profile::poly(vec![0.0, 6e-6])),
-        (EffectName::StraightnessY, 'z', h(1.8e-6, 0.45, 0.7)), // EXZ
-        (EffectName::StraightnessZ, 'z', h(2.2e-6, 0.55, 1.1)), // EYZ
-        (EffectName::Roll, 'z', h(7e-6, 0.6, 0.9)),             // ECZ
-        (EffectName::Pitch, 'z', Profile::poly(vec![5e-6, -12e-6])), // EAZ
-        (EffectName::Yaw, 'z', h(11e-6, 0.8, 0.3)),             // EBZ
+        (EffectName::Positioning, Axis::X, Profile::poly(vec![0.0, 12e-6])),
+        (EffectName::StraightnessY, Axis::X, h(2e-6, 0.9, 0.3)),
+        (EffectName::StraightnessZ, Axis::X, h(3e-6, 1.2, 1.0)),
+        (EffectName::Roll, Axis::X, h(10e-6, 0.8, 0.2)),
+        (EffectName::Pitch, Axis::X, Profile::poly(vec![4e-6, -15e-6])),
+        (EffectName::Yaw, Axis::X, h(12e-6, 0.7, 1.5)),
+        (EffectName::Positioning, Axis::Y, Profile::poly(vec![0.0, -8e-6])),
+        (EffectName::StraightnessY, Axis::Y, h(1.5e-6, 0.6, 0.4)), // EXY
+        (EffectName::StraightnessZ, Axis::Y, h(2.5e-6, 0.5, 2.0)), // EZY
+        (EffectName::Roll, Axis::Y, h(8e-6, 0.7, 0.1)),            // EBY
+        (EffectName::Pitch, Axis::Y, Profile::poly(vec![-3e-6, 10e-6])), // EAY
+        (EffectName::Yaw, Axis::Y, h(9e-6, 0.9, 2.5)),             // ECY
+        (EffectName::Positioning, Axis::Z, Profile::poly(vec![0.0, 6e-6])),
+        (EffectName::StraightnessY, Axis::Z, h(1.8e-6, 0.45, 0.7)), // EXZ
+        (EffectName::StraightnessZ, Axis::Z, h(2.2e-6, 0.55, 1.1)), // EYZ
+        (EffectName::Roll, Axis::Z, h(7e-6, 0.6, 0.9)),             // ECZ
+        (EffectName::Pitch, Axis::Z, Profile::poly(vec![5e-6, -12e-6])), // EAZ
+        (EffectName::Yaw, Axis::Z, h(11e-6, 0.8, 0.3)),             // EBZ
     ]
 }
 
@@ -55,14 +56,14 @@ fn effect_set(with_squareness: bool) -> EffectSet {
     }
     if with_squareness {
         for (n, v) in [EffectName::SquarenessXy, EffectName::SquarenessXz, EffectName::SquarenessYz].iter().zip(SQ) {
-            set.insert(Effect { name: *n, axis: 'x', params: EffectParams::Squareness(Squareness { value: v }) });
+            set.insert(Effect { name: *n, axis: Axis::X, params: EffectParams::Squareness(Squareness { value: v }) });
         }
     }
     set
 }
 
 /// Value of the injected error motion (name, axis) at q.
-fn value(name: EffectName, axis: char, q: f64) -> f64 {
+fn value(name: EffectName, axis: Axis, q: f64) -> f64 {
     motions().iter().find(|(n, a, _)| *n == name && *a == axis).map_or(0.0, |(_, _, p)| p.value(q))
 }
 
@@ -79,12 +80,15 @@ fn first_order(q: [f64; 3], r: DVec3, sq: [f64; 3]) -> DVec3 {
     let ox = DVec3::new(x, 0.0, 0.0);
     let oy = DVec3::new(x, y, 0.16);
     let oz = DVec3::new(x, y, 0.36 + z);
-    let ex = DVec3::new(value(Positioning, 'x', x), value(StraightnessY, 'x', x), value(StraightnessZ, 'x', x));
-    let epx = DVec3::new(value(Roll, 'x', x), value(Pitch, 'x', x), value(Yaw, 'x', x));
-    let ey = DVec3::new(value(StraightnessY, 'y', y), value(Positioning, 'y', y), value(StraightnessZ, 'y', y));
-    let epy = DVec3::new(value(Pitch, 'y', y), value(Roll, 'y', y), value(Yaw, 'y', y));
-    let ez = DVec3::new(value(StraightnessY, 'z', z), value(StraightnessZ, 'z', z), value(Positioning, 'z', z));
-    let epz = DVec3::new(value(Pitch, 'z', z), value(Yaw, 'z', z), value(Roll, 'z', z));
+    let ex =
+        DVec3::new(value(Positioning, Axis::X, x), value(StraightnessY, Axis::X, x), value(StraightnessZ, Axis::X, x));
+    let epx = DVec3::new(value(Roll, Axis::X, x), value(Pitch, Axis::X, x), value(Yaw, Axis::X, x));
+    let ey =
+        DVec3::new(value(StraightnessY, Axis::Y, y), value(Positioning, Axis::Y, y), value(StraightnessZ, Axis::Y, y));
+    let epy = DVec3::new(value(Pitch, Axis::Y, y), value(Roll, Axis::Y, y), value(Yaw, Axis::Y, y));
+    let ez =
+        DVec3::new(value(StraightnessY, Axis::Z, z), value(StraightnessZ, Axis::Z, z), value(Positioning, Axis::Z, z));
+    let epz = DVec3::new(value(Pitch, Axis::Z, z), value(Yaw, Axis::Z, z), value(Roll, Axis::Z, z));
     let [c0y, b0z, a0z] = sq;
     ex + epx.cross(p - ox)
         + ey
@@ -163,7 +167,7 @@ fn squareness_sign_by_hand() {
     .enumerate()
     {
         let mut set = EffectSet::default();
-        set.insert(Effect { name, axis: 'x', params: EffectParams::Squareness(Squareness { value: SQ[k] }) });
+        set.insert(Effect { name, axis: Axis::X, params: EffectParams::Squareness(Squareness { value: SQ[k] }) });
         let chain = ChainModel::build(&m, &configs(), &set, "tool").unwrap();
         let zero = ChainModel::build(&m, &configs(), &EffectSet::default(), "tool").unwrap();
         let q = [0.2, 0.5, 0.4];
@@ -192,7 +196,7 @@ fn bad_chains_are_refused_with_a_reason() {
     let mut set = EffectSet::default();
     set.insert(Effect {
         name: EffectName::SquarenessYz,
-        axis: 'x',
+        axis: Axis::X,
         params: EffectParams::Squareness(Squareness { value: 1e-5 }),
     });
     let c2 = vec![configs()[0].clone()];

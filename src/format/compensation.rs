@@ -44,13 +44,13 @@ pub const FANUC_UNIT: f64 = 1e-7;
 pub const SPACING_QUANTUM: f64 = 1e-7;
 
 impl ControllerFormat {
-    /// Parses a `--format` value: `csv`, `siemens` or `fanuc`.
-    pub fn parse(s: &str) -> Result<Self, String> {
+    /// Parses a `--format` value: `csv`, `siemens` or `fanuc` (another is a usage error).
+    pub fn parse(s: &str) -> Result<Self, VmtError> {
         match s {
             "csv" => Ok(Self::Csv),
             "siemens" => Ok(Self::Siemens),
             "fanuc" => Ok(Self::Fanuc),
-            other => Err(format!("--format: expected `csv`, `siemens` or `fanuc`, got `{other}`")),
+            other => Err(VmtError::Usage(format!("--format: expected `csv`, `siemens` or `fanuc`, got `{other}`"))),
         }
     }
 
@@ -112,6 +112,46 @@ pub fn equidistant_nodes(lo: f64, hi: f64, n: usize) -> Vec<f64> {
     (0..n).map(|k| round_significant(lo + k as f64 * step, 12)).collect()
 }
 
+/// Why a compensation table does not fit a controller format (the caller names the table's source).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TableFitError {
+    /// More points than the format holds.
+    #[error(
+        "the table has {points} points; a {} table holds at most {} (choose fewer with --points)",
+        .format.name(),
+        .format.max_points()
+    )]
+    TooManyPoints {
+        /// The format.
+        format: ControllerFormat,
+        /// Points in the table.
+        points: usize,
+    },
+    /// An equidistant format and unequal spacing.
+    #[error(
+        "a {} table needs equidistant points; interval {interval} is {interval_mm} mm, the first {first_mm} mm",
+        .format.name()
+    )]
+    NotEquidistant {
+        /// The format.
+        format: ControllerFormat,
+        /// The interval (1-based) that differs from the first.
+        interval: usize,
+        /// Its length, mm (12 significant digits).
+        interval_mm: f64,
+        /// The first interval's length, mm (12 significant digits).
+        first_mm: f64,
+    },
+    /// A FANUC increment beyond [`FANUC_MAX_INCREMENT`] even at the largest magnification.
+    #[error(
+        "a change of the correction between two points exceeds {} × 0.1 µm × {} (the largest \
+         magnification): use more --points or another format",
+        FANUC_MAX_INCREMENT,
+        FANUC_MAX_MAGNIFICATION
+    )]
+    IncrementTooLarge,
+}
+
 /// A table's text in `format` (with comment lines naming its provenance `about` and its sign) and notes
 /// for the user (a FANUC magnification above 1 coarsens the table's resolution), or why it does not fit
 /// the format: too many points, unequal spacing, a FANUC increment beyond [`FANUC_MAX_INCREMENT`] even at
@@ -121,14 +161,10 @@ pub fn table_text(
     table: &CompensationTable,
     axis: &str,
     about: &str,
-) -> Result<(String, Vec<String>), String> {
+) -> Result<(String, Vec<String>), TableFitError> {
     let n = table.positions.len();
     if n > format.max_points() {
-        return Err(format!(
-            "the table has {n} points; a {} table holds at most {} (choose fewer with --points)",
-            format.name(),
-            format.max_points()
-        ));
+        return Err(TableFitError::TooManyPoints { format, points: n });
     }
     let r = |x: f64| round_significant(x, 12);
     let step = if n > 1 { table.positions[1] - table.positions[0] } else { 0.0 };
@@ -136,12 +172,12 @@ pub fn table_text(
         for k in 1..n {
             let d = table.positions[k] - table.positions[k - 1];
             if (d - step).abs() > 1e-9 * step.abs().max(1e-9) {
-                return Err(format!(
-                    "a {} table needs equidistant points; interval {k} is {} mm, the first {} mm",
-                    format.name(),
-                    r(d * 1e3),
-                    r(step * 1e3)
-                ));
+                return Err(TableFitError::NotEquidistant {
+                    format,
+                    interval: k,
+                    interval_mm: r(d * 1e3),
+                    first_mm: r(step * 1e3),
+                });
             }
         }
     }
@@ -204,7 +240,7 @@ pub fn table_text(
 /// FANUC-style incremental values of deviations `c` (m): the correction −(c_k − c_0) rounded cumulatively
 /// (no drift) to units of [`FANUC_UNIT`] × M, differenced; M the smallest magnification (1..=100) with
 /// every |increment| ≤ [`FANUC_MAX_INCREMENT`]. Returns (M, increments).
-fn fanuc_increments(c: &[f64]) -> Result<(i64, Vec<i64>), String> {
+fn fanuc_increments(c: &[f64]) -> Result<(i64, Vec<i64>), TableFitError> {
     for m in 1..=FANUC_MAX_MAGNIFICATION {
         let q = FANUC_UNIT * m as f64;
         let total: Vec<i64> = c.iter().map(|&ck| (-(ck - c[0]) / q).round() as i64).collect();
@@ -213,10 +249,7 @@ fn fanuc_increments(c: &[f64]) -> Result<(i64, Vec<i64>), String> {
             return Ok((m, inc));
         }
     }
-    Err(format!(
-        "a change of the correction between two points exceeds {FANUC_MAX_INCREMENT} × 0.1 µm × {FANUC_MAX_MAGNIFICATION} \
-         (the largest magnification): use more --points or another format"
-    ))
+    Err(TableFitError::IncrementTooLarge)
 }
 
 /// Reads a compensation table in any of the three formats (recognised by its content: `$AA_ENC_COMP`
@@ -451,13 +484,16 @@ mod tests {
     fn tables_beyond_a_formats_limits_are_refused() {
         let x = equidistant_nodes(0.0, 1.0, 129);
         let t = CompensationTable::new(x.clone(), vec![0.0; 129]).unwrap();
-        assert!(table_text(ControllerFormat::Fanuc, &t, "X", "").unwrap_err().contains("at most 128"));
+        assert!(table_text(ControllerFormat::Fanuc, &t, "X", "").unwrap_err().to_string().contains("at most 128"));
         assert!(table_text(ControllerFormat::Siemens, &t, "X", "").is_ok());
         let uneven = CompensationTable::new(vec![0.0, 0.1, 0.3], vec![0.0; 3]).unwrap();
-        assert!(table_text(ControllerFormat::Siemens, &uneven, "X", "").unwrap_err().contains("equidistant"));
+        assert!(table_text(ControllerFormat::Siemens, &uneven, "X", "")
+            .unwrap_err()
+            .to_string()
+            .contains("equidistant"));
         assert!(table_text(ControllerFormat::Csv, &uneven, "X", "").is_ok());
         let jump = CompensationTable::new(vec![0.0, 0.1, 0.2], vec![0.0, 2e-3, 0.0]).unwrap();
-        assert!(table_text(ControllerFormat::Fanuc, &jump, "X", "").unwrap_err().contains("magnification"));
+        assert!(table_text(ControllerFormat::Fanuc, &jump, "X", "").unwrap_err().to_string().contains("magnification"));
         // The smallest magnification that fits is chosen: a 20 µm step needs M = 2 (200 units > 127).
         let step = CompensationTable::new(vec![0.0, 0.1], vec![0.0, 2e-5]).unwrap();
         let (text, notes) = table_text(ControllerFormat::Fanuc, &step, "X", "").unwrap();

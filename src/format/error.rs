@@ -8,6 +8,7 @@ use std::cell::RefCell;
 use std::collections::BTreeSet;
 use std::fmt;
 use std::path::{Path, PathBuf};
+use vmt_sim::Axis;
 
 /// Everything that can go wrong in vmt's file formats and workflows.
 #[derive(Debug, thiserror::Error)]
@@ -218,6 +219,18 @@ impl<'a> TomlReader<'a> {
             None => Ok(None),
             Some(toml::Value::String(s)) => Ok(Some(s.as_str())),
             Some(v) => Err(self.bad(key, format!("expected {what}, got {}", describe_value(v)))),
+        }
+    }
+
+    /// An optional axis, written as its lower-case letter (`axis = "x"`, FORMAT.md); any other string is
+    /// refused with the letters expected.
+    pub fn opt_axis(&self, key: &str) -> Result<Option<Axis>, VmtError> {
+        match self.opt_str(key, "an axis \"x\", \"y\" or \"z\"")? {
+            None => Ok(None),
+            Some("x") => Ok(Some(Axis::X)),
+            Some("y") => Ok(Some(Axis::Y)),
+            Some("z") => Ok(Some(Axis::Z)),
+            Some(s) => Err(self.bad(key, format!("expected an axis \"x\", \"y\" or \"z\", got {s:?}"))),
         }
     }
 

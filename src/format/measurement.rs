@@ -51,8 +51,9 @@ pub struct Sensor {
     pub name: String,
     /// What it measures.
     pub kind: SensorKind,
-    /// The prismatic joint it observes (`x`, `y` or `z`).
-    pub axis: char,
+    /// The prismatic joint it observes (manifest `axis = "x"`, `"y"` or `"z"`).
+    #[serde(with = "vmt_core::axis::letter")]
+    pub axis: Axis,
     /// Measuring point on the moving body, axis reference frame, m (default 0, 0, 0).
     pub position: [f64; 3],
     /// Sensitive direction, machine frame (default: along the axis).
@@ -82,8 +83,9 @@ pub struct Run {
     pub file: String,
     /// Measurement procedure.
     pub procedure: Procedure,
-    /// The axis moved.
-    pub axis: char,
+    /// The axis moved (manifest `axis = "x"`, `"y"` or `"z"`).
+    #[serde(with = "vmt_core::axis::letter")]
+    pub axis: Axis,
     /// Start, s since the start of the measurement session.
     pub start_time: Option<f64>,
     /// Feed, m/s (constant_velocity, crawl).
@@ -266,8 +268,8 @@ fn read_csv_text(path: &Path) -> Result<CsvText, VmtError> {
                 }
                 let mut cols: Vec<(String, Option<String>)> = Vec::new();
                 for cell in rec.iter() {
-                    let (name, unit) =
-                        parse_header_cell(cell).map_err(|m| VmtError::bad(path, format!("line {line} (header)"), m))?;
+                    let (name, unit) = parse_header_cell(cell)
+                        .map_err(|m| VmtError::bad(path, format!("line {line} (header)"), m.to_string()))?;
                     if cols.iter().any(|(n, _)| *n == name) {
                         return Err(VmtError::bad(
                             path,
@@ -307,14 +309,14 @@ impl CsvText {
     /// which must have dimension `dim`.
     fn numbers(&self, path: &Path, i: usize, dim: Dimension) -> Result<Vec<f64>, VmtError> {
         let (name, unit) = &self.header[i];
-        let u: Unit =
-            resolve_unit(unit.as_deref(), dim).map_err(|m| VmtError::bad(path, format!("column {name}"), m))?;
+        let u: Unit = resolve_unit(unit.as_deref(), dim)
+            .map_err(|m| VmtError::bad(path, format!("column {name}"), m.to_string()))?;
         self.rows
             .iter()
             .map(|(line, cells)| {
                 parse_number(&cells[i])
                     .map(|v| u.to_si(v))
-                    .map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m))
+                    .map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m.to_string()))
             })
             .collect()
     }
@@ -332,7 +334,8 @@ impl CsvText {
         self.rows
             .iter()
             .map(|(line, cells)| {
-                parse_number(&cells[i]).map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m))
+                parse_number(&cells[i])
+                    .map_err(|m| VmtError::bad(path, format!("line {line}, column {name}"), m.to_string()))
             })
             .collect()
     }
@@ -342,15 +345,26 @@ impl CsvText {
     }
 }
 
+/// Why a CSV cell is not a number (the caller adds the file, line and column).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+enum CellError {
+    #[error("expected a number, got an empty cell")]
+    Empty,
+    #[error("expected a finite number, got `{0}`")]
+    NotFinite(String),
+    #[error("expected a number, got `{0}`")]
+    NotANumber(String),
+}
+
 /// Parses one CSV cell as a finite number.
-fn parse_number(cell: &str) -> Result<f64, String> {
+fn parse_number(cell: &str) -> Result<f64, CellError> {
     if cell.is_empty() {
-        return Err("expected a number, got an empty cell".to_string());
+        return Err(CellError::Empty);
     }
     match cell.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(format!("expected a finite number, got `{cell}`")),
-        Err(_) => Err(format!("expected a number, got `{cell}`")),
+        Ok(_) => Err(CellError::NotFinite(cell.to_string())),
+        Err(_) => Err(CellError::NotANumber(cell.to_string())),
     }
 }
 
@@ -384,26 +398,55 @@ pub fn check_point_rows(target: &[f64], run: &[u32], direction: &[i8]) -> Result
     Ok(())
 }
 
+/// Why a time column has no one sample interval (the caller adds the file and run).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SampleIntervalError {
+    /// Fewer than two samples.
+    #[error("expected at least two samples of `t` to have a sample interval, got {samples}")]
+    TooFew {
+        /// Samples in the column.
+        samples: usize,
+    },
+    /// The last time is not after the first (or not finite).
+    #[error("expected `t` increasing, got {} to {}", fmt_num(*.first), fmt_num(*.last))]
+    NotIncreasing {
+        /// First time, s.
+        first: f64,
+        /// Last time, s.
+        last: f64,
+    },
+    /// A step deviates from the mean step by more than 1e-3 of it.
+    #[error(
+        "expected uniformly sampled `t` (step {} s), got a step of {} s at row {row}: this estimator needs a \
+         constant sample rate",
+        fmt_num(*.interval),
+        fmt_num(*.step)
+    )]
+    NonUniform {
+        /// The mean step (t_last − t_0)/(n − 1), s.
+        interval: f64,
+        /// The deviating step, s.
+        step: f64,
+        /// The data row (1-based, after the header) the step ends on.
+        row: usize,
+    },
+}
+
 /// The sample interval of a uniformly sampled time column, s: Δt = (t_last − t_0)/(n − 1), checked
 /// against every step t_k+1 − t_k (relative deviation ≤ 1e-3: CSV rounding, not a missing sample).
 /// For estimators that take one rate (SSI, accelerometer straightness). Errors on fewer than two
 /// samples or a non-uniform step, naming the row.
-pub fn uniform_interval(t: &[f64]) -> Result<f64, String> {
+pub fn uniform_interval(t: &[f64]) -> Result<f64, SampleIntervalError> {
     let n = t.len();
     if n < 2 {
-        return Err(format!("expected at least two samples of `t` to have a sample interval, got {n}"));
+        return Err(SampleIntervalError::TooFew { samples: n });
     }
     let dt = (t[n - 1] - t[0]) / (n - 1) as f64;
     if !(dt > 0.0 && dt.is_finite()) {
-        return Err(format!("expected `t` increasing, got {} to {}", fmt_num(t[0]), fmt_num(t[n - 1])));
+        return Err(SampleIntervalError::NotIncreasing { first: t[0], last: t[n - 1] });
     }
     if let Some(k) = t.windows(2).position(|w| ((w[1] - w[0]) - dt).abs() > 1e-3 * dt) {
-        return Err(format!(
-            "expected uniformly sampled `t` (step {} s), got a step of {} s at row {}: this estimator needs a constant sample rate",
-            fmt_num(dt),
-            fmt_num(t[k + 1] - t[k]),
-            k + 2
-        ));
+        return Err(SampleIntervalError::NonUniform { interval: dt, step: t[k + 1] - t[k], row: k + 2 });
     }
     Ok(dt)
 }
@@ -522,16 +565,6 @@ fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
 // ------------------------------------------------------------------------------------------
 // Manifest.
 
-fn axis_of(r: &TomlReader<'_>, key: &str) -> Result<Option<Axis>, VmtError> {
-    match r.opt_str(key, "an axis \"x\", \"y\" or \"z\"")? {
-        None => Ok(None),
-        Some("x") => Ok(Some(Axis::X)),
-        Some("y") => Ok(Some(Axis::Y)),
-        Some("z") => Ok(Some(Axis::Z)),
-        Some(s) => Err(r.bad(key, format!("expected an axis \"x\", \"y\" or \"z\", got {s:?}"))),
-    }
-}
-
 fn vec3(r: &TomlReader<'_>, key: &str, what: &str) -> Result<Option<[f64; 3]>, VmtError> {
     match r.opt_f64_array(key, what)? {
         None => Ok(None),
@@ -547,11 +580,11 @@ fn parse_sensor(r: &TomlReader<'_>) -> Result<Sensor, VmtError> {
         let known: Vec<&str> = SensorKind::ALL.iter().map(|k| k.as_str()).collect();
         r.bad("kind", format!("unknown sensor kind {kind_s:?}; expected one of {}", known.join(", ")))
     })?;
-    let axis = axis_of(r, "axis")?
+    let axis = r
+        .opt_axis("axis")?
         .ok_or_else(|| r.bad("axis", "missing key: expected the axis observed, \"x\", \"y\" or \"z\""))?;
     let position = vec3(r, "position", "a measuring point in metres")?.unwrap_or([0.0, 0.0, 0.0]);
     let direction = vec3(r, "direction", "a sensitive direction")?.unwrap_or_else(|| axis.unit());
-    let axis = axis.letter();
     let sigma = r.opt_f64("sigma", "a 1-sigma noise in SI units of the channel")?;
     let closes_loop = r.opt_bool("closes_loop")?.unwrap_or(false);
     if closes_loop && !matches!(kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) {
@@ -572,9 +605,9 @@ fn parse_run_entry(r: &TomlReader<'_>) -> Result<(Run, String), VmtError> {
         let known: Vec<&str> = Procedure::ALL.iter().map(|p| p.as_str()).collect();
         r.bad("procedure", format!("unknown procedure {ps:?}; expected one of {}", known.join(", ")))
     })?;
-    let axis = axis_of(r, "axis")?
-        .ok_or_else(|| r.bad("axis", "missing key: expected the axis moved, \"x\", \"y\" or \"z\""))?
-        .letter();
+    let axis = r
+        .opt_axis("axis")?
+        .ok_or_else(|| r.bad("axis", "missing key: expected the axis moved, \"x\", \"y\" or \"z\""))?;
     let start_time = r.opt_f64("start_time", "a time in seconds")?;
     let feed = r.opt_f64("feed", "a feed in m/s")?;
     let direction = match r.opt_i64("direction", "+1 or -1")? {
@@ -695,7 +728,7 @@ pub fn from_iso230_2_dat(dat: &vmt_estimators::iso230_2::dat::DatFile) -> Measur
         sensors: vec![Sensor {
             name: "ref".into(),
             kind: SensorKind::LaserLinear,
-            axis: 'x',
+            axis: Axis::X,
             position: [0.0; 3],
             direction: [1.0, 0.0, 0.0],
             sigma: None,
@@ -707,7 +740,7 @@ pub fn from_iso230_2_dat(dat: &vmt_estimators::iso230_2::dat::DatFile) -> Measur
             name: "iso".into(),
             file: "iso.csv".into(),
             procedure: Procedure::Positioning,
-            axis: 'x',
+            axis: Axis::X,
             start_time: None,
             feed: None,
             direction: None,
@@ -801,9 +834,6 @@ pub fn validate_manifest(set: &MeasurementSet, file: &Path) -> Result<(), VmtErr
         if set.sensors[..i].iter().any(|o| o.name == s.name) {
             return bad(format!("sensors[{i}].name"), format!("sensor `{}` is declared twice", s.name));
         }
-        if !matches!(s.axis, 'x' | 'y' | 'z') {
-            return bad(format!("sensors[{i}].axis"), format!("expected \"x\", \"y\" or \"z\", got {:?}", s.axis));
-        }
         if s.position.iter().any(|v| !v.is_finite()) {
             return bad(format!("sensors[{i}].position"), "expected 3 finite numbers (m)".to_string());
         }
@@ -861,9 +891,6 @@ pub fn validate_manifest(set: &MeasurementSet, file: &Path) -> Result<(), VmtErr
         }
         if set.runs[..i].iter().any(|o| o.file == r.file) {
             return bad(format!("runs[{i}].file"), format!("file {:?} is used by two runs", r.file));
-        }
-        if !matches!(r.axis, 'x' | 'y' | 'z') {
-            return bad(format!("runs[{i}].axis"), format!("expected \"x\", \"y\" or \"z\", got {:?}", r.axis));
         }
         if let Some(t0) = r.start_time {
             if !t0.is_finite() {
@@ -1007,7 +1034,17 @@ fn shortest_round_trip(x: f64, back: impl Fn(f64) -> f64, si: f64) -> f64 {
     (1..=17usize).filter_map(|p| format!("{:.*e}", p - 1, x).parse::<f64>().ok()).find(|&r| back(r) == si).unwrap_or(x)
 }
 
-fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, String> {
+/// A value that overflows when written in the unit chosen (the caller adds the file).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("column {column}, row {row}: {} (SI) overflows when written in {unit}; write in SI units", fmt_num(*.value))]
+struct UnitOverflow {
+    column: String,
+    row: usize,
+    value: f64,
+    unit: &'static str,
+}
+
+fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, UnitOverflow> {
     let mut out = String::with_capacity(16 * (n + 1) * header.len().max(1));
     out.push_str(&header.join(","));
     out.push('\n');
@@ -1020,14 +1057,12 @@ fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, Str
                 Col::Num(u, v) => {
                     let x = u.from_si(v[i]);
                     if !x.is_finite() {
-                        return Err(format!(
-                            "column {}, row {}: {} (SI) overflows when written in {}; write \
-                             in SI units",
-                            header[j],
-                            i + 1,
-                            fmt_num(v[i]),
-                            u.symbol
-                        ));
+                        return Err(UnitOverflow {
+                            column: header[j].clone(),
+                            row: i + 1,
+                            value: v[i],
+                            unit: u.symbol,
+                        });
                     }
                     // A value converted out of SI (m → mm) carries the conversion's rounding noise
                     // (0.33595 m → 335.95000000000005 mm): written with the fewest significant digits
@@ -1044,7 +1079,7 @@ fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, Str
 }
 
 /// The CSV text of one run.
-fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> Result<String, String> {
+fn run_csv(set: &MeasurementSet, run: &Run, units: UnitChoice) -> Result<String, UnitOverflow> {
     let mut header: Vec<String> = Vec::new();
     let mut cols: Vec<Col<'_>> = Vec::new();
     let time_u = write_unit(Dimension::Time, true, units);
@@ -1185,7 +1220,7 @@ pub fn set_files(
         .map(|r| {
             run_csv(set, r, units)
                 .map(|text| (r.file.clone(), text.into_bytes()))
-                .map_err(|m| VmtError::bad(&dir.join(&r.file), "", m))
+                .map_err(|m| VmtError::bad(&dir.join(&r.file), "", m.to_string()))
         })
         .collect::<Result<Vec<_>, VmtError>>()?;
     files.extend(extras.iter().cloned());
@@ -1210,10 +1245,10 @@ pub fn put_files(dir: &Path, files: &[(String, Vec<u8>)]) -> Result<(), VmtError
 // Error-motion profiles (FORMAT.md §5).
 
 /// One error-motion column of a profile CSV: `pitch` or `y.pitch`, with optional `pitch_sigma`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ProfileColumn {
-    /// Axis prefix (`y.pitch` → `y`); `None` for an unprefixed column (the file's one axis).
-    pub axis: Option<char>,
+    /// Axis prefix (`y.pitch` → Y); `None` for an unprefixed column (the file's one axis).
+    pub axis: Option<Axis>,
     /// Which error motion (positioning, straightness_y, straightness_z, roll, pitch, yaw).
     pub effect: EffectName,
     /// Values at the positions, m or rad.
@@ -1233,7 +1268,7 @@ impl ProfileColumn {
 }
 
 /// A truth or estimate of error motions over positions (FORMAT.md §5): `truth_profiles.csv`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct ProfileTable {
     /// Axis positions, m, strictly increasing.
     pub position: Vec<f64>,
@@ -1243,7 +1278,7 @@ pub struct ProfileTable {
 
 impl ProfileTable {
     /// The column of `effect` on `axis`: an exact axis match first, then an unprefixed column.
-    pub fn get(&self, effect: EffectName, axis: char) -> Option<&ProfileColumn> {
+    pub fn get(&self, effect: EffectName, axis: Axis) -> Option<&ProfileColumn> {
         self.columns
             .iter()
             .find(|c| c.effect == effect && c.axis == Some(axis))
@@ -1251,23 +1286,35 @@ impl ProfileTable {
     }
 }
 
+/// Why a profile CSV column name is refused (the caller adds the file and column).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+enum ProfileColumnError {
+    #[error("column `{}`: bad axis prefix; {}", .0, PROFILE_COLUMN_EXPECTED)]
+    AxisPrefix(String),
+    #[error("unknown column `{}`: {}", .0, PROFILE_COLUMN_EXPECTED)]
+    Unknown(String),
+}
+
+const PROFILE_COLUMN_EXPECTED: &str = "expected an error-motion column: positioning, straightness_y, \
+                                       straightness_z, roll, pitch or yaw, optionally prefixed by the axis \
+                                       (`y.pitch`) and suffixed `_sigma`";
+
 /// Splits a profile column name into (axis, effect, is_sigma).
-fn parse_profile_column(name: &str) -> Result<(Option<char>, EffectName, bool), String> {
-    let expected = "expected an error-motion column: positioning, straightness_y, \
-                    straightness_z, roll, pitch or yaw, optionally prefixed by the axis (`y.pitch`) \
-                    and suffixed `_sigma`";
+fn parse_profile_column(name: &str) -> Result<(Option<Axis>, EffectName, bool), ProfileColumnError> {
     let (base, sigma) = match name.strip_suffix("_sigma") {
         Some(b) => (b, true),
         None => (name, false),
     };
     let (axis, ename) = match base.split_once('.') {
-        Some((a, e)) if matches!(a, "x" | "y" | "z") => (a.chars().next(), e),
-        Some(_) => return Err(format!("column `{name}`: bad axis prefix; {expected}")),
+        Some(("x", e)) => (Some(Axis::X), e),
+        Some(("y", e)) => (Some(Axis::Y), e),
+        Some(("z", e)) => (Some(Axis::Z), e),
+        Some(_) => return Err(ProfileColumnError::AxisPrefix(name.to_string())),
         None => (None, base),
     };
     match ename.parse::<EffectName>() {
         Ok(e) if e.is_error_motion() => Ok((axis, e, sigma)),
-        _ => Err(format!("unknown column `{name}`: {expected}")),
+        _ => Err(ProfileColumnError::Unknown(name.to_string())),
     }
 }
 
@@ -1282,13 +1329,13 @@ pub fn read_profiles(path: &Path) -> Result<ProfileTable, VmtError> {
     let position = csv.numbers(path, pi, Dimension::Length)?;
     check_increasing(&csv, path, &position, "position")?;
     let mut columns: Vec<ProfileColumn> = Vec::new();
-    let mut sigmas: Vec<(usize, Option<char>, EffectName)> = Vec::new();
+    let mut sigmas: Vec<(usize, Option<Axis>, EffectName)> = Vec::new();
     for (i, (name, _)) in csv.header.iter().enumerate() {
         if i == pi {
             continue;
         }
         let (axis, effect, is_sigma) =
-            parse_profile_column(name).map_err(|m| VmtError::bad(path, format!("column {name}"), m))?;
+            parse_profile_column(name).map_err(|m| VmtError::bad(path, format!("column {name}"), m.to_string()))?;
         if is_sigma {
             sigmas.push((i, axis, effect));
             continue;
@@ -1383,7 +1430,7 @@ pub fn profiles_csv(table: &ProfileTable, path: &Path, units: UnitChoice) -> Res
             cols.push(Col::Num(u, s));
         }
     }
-    csv_text(&header, &cols, table.position.len()).map_err(|m| VmtError::bad(path, "", m))
+    csv_text(&header, &cols, table.position.len()).map_err(|m| VmtError::bad(path, "", m.to_string()))
 }
 
 /// Reads a two-column table CSV (`position`, then `value` or `value_name`) as used by a model's
@@ -1460,8 +1507,25 @@ mod tests {
     }
 
     #[test]
+    fn json_writes_and_reads_an_axis_as_its_letter() {
+        let set = from_iso230_2_dat(&vmt_estimators::iso230_2::dat::DatFile {
+            targets: vec![0.0, 0.1],
+            up: vec![vec![1e-6], vec![2e-6]],
+            down: vec![vec![1e-6], vec![2e-6]],
+            unit: "mm".into(),
+            metadata: Default::default(),
+        });
+        let json = serde_json::to_string(&set.sensors[0]).unwrap();
+        assert!(json.contains("\"axis\":\"x\""), "{json}");
+        assert_eq!(serde_json::from_str::<Sensor>(&json).unwrap(), set.sensors[0]);
+        let bad = json.replace("\"axis\":\"x\"", "\"axis\":\"w\"");
+        let e = serde_json::from_str::<Sensor>(&bad).unwrap_err().to_string();
+        assert!(e.contains("expected an axis \"x\", \"y\" or \"z\", got 'w'"), "{e}");
+    }
+
+    #[test]
     fn profile_column_names_parse_with_axis_and_sigma() {
-        assert_eq!(parse_profile_column("y.pitch_sigma").unwrap(), (Some('y'), EffectName::Pitch, true));
+        assert_eq!(parse_profile_column("y.pitch_sigma").unwrap(), (Some(Axis::Y), EffectName::Pitch, true));
         assert_eq!(parse_profile_column("straightness_y").unwrap(), (None, EffectName::StraightnessY, false));
         assert!(parse_profile_column("backlash").is_err());
         assert!(parse_profile_column("q.pitch").is_err());

@@ -129,8 +129,8 @@ impl ModelEffect {
 pub struct Model {
     /// Bundled machine name or URDF path relative to the model file.
     pub machine: Option<String>,
-    /// Default axis of the effects.
-    pub axis: char,
+    /// Default axis of the effects (file key `axis`, default `"x"`).
+    pub axis: Axis,
     /// The effects, sorted by catalogue order then axis.
     pub effects: Vec<ModelEffect>,
     /// The file it was read from (the scenario file for an inline `[truth]`).
@@ -145,7 +145,7 @@ impl Model {
     }
 
     /// The effect `name` on `axis`.
-    pub fn get(&self, name: EffectName, axis: char) -> Option<&ModelEffect> {
+    pub fn get(&self, name: EffectName, axis: Axis) -> Option<&ModelEffect> {
         self.effects.iter().find(|m| m.effect.name == name && m.effect.axis == axis)
     }
 
@@ -198,7 +198,7 @@ pub fn parse_model(table: &toml::Table, file: &Path, base_dir: &Path, prefix: &s
         }
     }
     let machine = r.opt_str("machine", "a bundled machine name or URDF path")?.map(str::to_string);
-    let axis = axis_of(&r, "axis")?.unwrap_or('x');
+    let axis = r.opt_axis("axis")?.unwrap_or(Axis::X);
     let mut effects: Vec<(ModelEffect, String)> = Vec::new();
     if let Some(er) = r.opt_table("effects")? {
         for (key, value) in er.table() {
@@ -241,22 +241,14 @@ pub fn parse_model(table: &toml::Table, file: &Path, base_dir: &Path, prefix: &s
     Ok(Model { machine, axis, effects: effects.into_iter().map(|(m, _)| m).collect(), source: file.to_path_buf() })
 }
 
-fn axis_of(r: &TomlReader<'_>, key: &str) -> Result<Option<char>, VmtError> {
-    match r.opt_str(key, "an axis \"x\", \"y\" or \"z\"")? {
-        None => Ok(None),
-        Some(s) if matches!(s, "x" | "y" | "z") => Ok(s.chars().next()),
-        Some(s) => Err(r.bad(key, format!("expected an axis \"x\", \"y\" or \"z\", got {s:?}"))),
-    }
-}
-
 /// Parses one `[effects.NAME]` table.
 fn parse_effect(
     r: &TomlReader<'_>,
     name: EffectName,
-    default_axis: char,
+    default_axis: Axis,
     base_dir: &Path,
 ) -> Result<ModelEffect, VmtError> {
-    let axis = axis_of(r, "axis")?.unwrap_or(default_axis);
+    let axis = r.opt_axis("axis")?.unwrap_or(default_axis);
     let fit = r.opt_bool("fit")?.unwrap_or(false);
     let mut given: Vec<String> = Vec::new();
     let mut basis: Option<Basis> = None;
@@ -499,7 +491,7 @@ pub fn model_to_toml(model: &Model, stem: &str) -> Result<(String, Vec<(String, 
         } else {
             out.push_str(&format!("\n[effects.{}]\n", e.name));
         }
-        if let Some(sym) = Axis::from_letter(e.axis).and_then(|a| e.name.iso230_symbol(a)) {
+        if let Some(sym) = e.name.iso230_symbol(e.axis) {
             out.pop();
             out.push_str(&format!("{}# {sym}\n", " ".repeat(2)));
         }

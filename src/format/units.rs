@@ -150,43 +150,92 @@ impl Unit {
     }
 }
 
+/// Why a CSV header cell or its unit is refused; the message names the cell or unit and what was
+/// expected, the caller adds the file and the place.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum UnitError {
+    /// `name[unit` without its `]`.
+    #[error("header cell `{cell}`: expected `name[unit]`, the `]` is missing")]
+    MissingBracket {
+        /// The cell, trimmed.
+        cell: String,
+    },
+    /// `name[unit]text`.
+    #[error("header cell `{cell}`: expected `name[unit]`, found text after `]`")]
+    TextAfterBracket {
+        /// The cell, trimmed.
+        cell: String,
+    },
+    /// `[unit]` with no name.
+    #[error("header cell `{cell}`: the column name is empty")]
+    EmptyName {
+        /// The cell, trimmed.
+        cell: String,
+    },
+    /// `name[]`.
+    #[error("header cell `{cell}`: empty unit `[]` (leave the brackets out for SI)")]
+    EmptyUnit {
+        /// The cell, trimmed.
+        cell: String,
+    },
+    /// A symbol vmt does not know.
+    #[error("unknown unit `{symbol}`: expected {}", expected.describe())]
+    Unknown {
+        /// The symbol as written.
+        symbol: String,
+        /// The dimension the column must have.
+        expected: Dimension,
+    },
+    /// A known unit of another dimension (`mm` for an angle).
+    #[error("unit `{symbol}` is {}, expected {}", found.describe(), expected.describe())]
+    WrongDimension {
+        /// The symbol as written.
+        symbol: String,
+        /// Its dimension.
+        found: Dimension,
+        /// The dimension the column must have.
+        expected: Dimension,
+    },
+}
+
 /// Splits a header cell `name[unit]` into its name and optional unit symbol (both trimmed).
-/// Errors (as a message) on an empty name, a missing `]`, or text after it.
-pub fn parse_header_cell(cell: &str) -> Result<(String, Option<String>), String> {
+/// Errors on an empty name, a missing `]`, text after it or an empty unit.
+pub fn parse_header_cell(cell: &str) -> Result<(String, Option<String>), UnitError> {
     let cell = cell.trim();
+    let owned = || cell.to_string();
     let (name, unit) = match cell.find('[') {
         None => (cell, None),
         Some(i) => {
             let rest = &cell[i + 1..];
             let Some(j) = rest.find(']') else {
-                return Err(format!("header cell `{cell}`: expected `name[unit]`, the `]` is missing"));
+                return Err(UnitError::MissingBracket { cell: owned() });
             };
             if !rest[j + 1..].trim().is_empty() {
-                return Err(format!("header cell `{cell}`: expected `name[unit]`, found text after `]`"));
+                return Err(UnitError::TextAfterBracket { cell: owned() });
             }
             (cell[..i].trim(), Some(rest[..j].trim().to_string()))
         }
     };
     if name.is_empty() {
-        return Err(format!("header cell `{cell}`: the column name is empty"));
+        return Err(UnitError::EmptyName { cell: owned() });
     }
     if unit.as_deref() == Some("") {
-        return Err(format!("header cell `{cell}`: empty unit `[]` (leave the brackets out for SI)"));
+        return Err(UnitError::EmptyUnit { cell: owned() });
     }
     Ok((name.to_string(), unit))
 }
 
 /// Resolves the unit of a column whose values must have dimension `expected`: no unit → SI;
-/// an unknown unit or one of another dimension → a message naming the unit and what was
+/// an unknown unit or one of another dimension → an error naming the unit and what was
 /// expected (the caller adds the file and column).
-pub fn resolve_unit(symbol: Option<&str>, expected: Dimension) -> Result<Unit, String> {
+pub fn resolve_unit(symbol: Option<&str>, expected: Dimension) -> Result<Unit, UnitError> {
     let Some(sym) = symbol else {
         return Ok(expected.si());
     };
     match unit(sym) {
-        None => Err(format!("unknown unit `{sym}`: expected {}", expected.describe())),
+        None => Err(UnitError::Unknown { symbol: sym.to_string(), expected }),
         Some(u) if u.dimension != expected => {
-            Err(format!("unit `{sym}` is {}, expected {}", u.dimension.describe(), expected.describe()))
+            Err(UnitError::WrongDimension { symbol: sym.to_string(), found: u.dimension, expected })
         }
         Some(u) => Ok(u),
     }
@@ -200,10 +249,10 @@ mod tests {
     fn header_cells_split_into_name_and_unit() {
         assert_eq!(parse_header_cell(" laser_p1[um] ").unwrap(), ("laser_p1".to_string(), Some("um".to_string())));
         assert_eq!(parse_header_cell("t").unwrap(), ("t".to_string(), None));
-        assert!(parse_header_cell("x[mm").is_err());
-        assert!(parse_header_cell("[mm]").is_err());
-        assert!(parse_header_cell("x[]").is_err());
-        assert!(parse_header_cell("x[mm]y").is_err());
+        assert_eq!(parse_header_cell("x[mm"), Err(UnitError::MissingBracket { cell: "x[mm".into() }));
+        assert_eq!(parse_header_cell("[mm]"), Err(UnitError::EmptyName { cell: "[mm]".into() }));
+        assert_eq!(parse_header_cell("x[]"), Err(UnitError::EmptyUnit { cell: "x[]".into() }));
+        assert_eq!(parse_header_cell("x[mm]y"), Err(UnitError::TextAfterBracket { cell: "x[mm]y".into() }));
     }
 
     #[test]
@@ -236,9 +285,9 @@ mod tests {
 
     #[test]
     fn wrong_or_unknown_units_are_rejected_with_the_expected_dimension() {
-        let e = resolve_unit(Some("mm"), Dimension::Angle).unwrap_err();
+        let e = resolve_unit(Some("mm"), Dimension::Angle).unwrap_err().to_string();
         assert!(e.contains("`mm` is a length") && e.contains("expected an angle"), "{e}");
-        let e = resolve_unit(Some("furlong"), Dimension::Length).unwrap_err();
+        let e = resolve_unit(Some("furlong"), Dimension::Length).unwrap_err().to_string();
         assert!(e.contains("unknown unit `furlong`") && e.contains("um"), "{e}");
         assert_eq!(resolve_unit(None, Dimension::Length).unwrap().symbol, "m");
         assert_eq!(Dimension::Ratio.si().symbol, "1");

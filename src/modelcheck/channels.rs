@@ -1,6 +1,7 @@
 //! Channels: the measurement set as stacked channels with per-sample sensitivities.
 
 use super::*;
+use vmt_sim::Axis;
 
 // ------------------------------------------------------------------------------------------
 // Channels.
@@ -168,18 +169,18 @@ impl Channel {
 
 /// A machine-frame direction in the axis frame of axis `axis` (the inverse of the simulator's
 /// rotation taking X onto the axis: y → (u_y, −u_x, u_z), z → (u_z, u_y, −u_x)).
-pub(crate) fn to_axis_frame(u: [f64; 3], axis: char) -> [f64; 3] {
+pub(crate) fn to_axis_frame(u: [f64; 3], axis: Axis) -> [f64; 3] {
     match axis {
-        'y' => [u[1], -u[0], u[2]],
-        'z' => [u[2], u[1], -u[0]],
-        _ => u,
+        Axis::X => u,
+        Axis::Y => [u[1], -u[0], u[2]],
+        Axis::Z => [u[2], u[1], -u[0]],
     }
 }
 
 /// The channels of `set` that phase 1 predicts for axis `axis`: every deviation column of every
 /// positioning point table of that axis whose sensor is a laser (linear, straightness, vector) or
 /// an encoder. Returns the channels and notes on what was skipped.
-pub fn channels(set: &MeasurementSet, axis: char) -> (Vec<Channel>, Vec<String>) {
+pub fn channels(set: &MeasurementSet, axis: Axis) -> (Vec<Channel>, Vec<String>) {
     let mut out: Vec<Channel> = Vec::new();
     let mut notes: Vec<String> = Vec::new();
     for run in &set.runs {

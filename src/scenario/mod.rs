@@ -16,6 +16,7 @@ use vmt_sim::machine::{AxisConfig, AxisModel, Fidelity, MachineError};
 use vmt_sim::procedures::{ProcedureSpec, MAX_SAMPLES, MAX_STEPS};
 use vmt_sim::sensors::{SensorKind, SensorSpec};
 use vmt_sim::urdf::{parse_urdf, MachineStructure, UrdfError};
+use vmt_sim::Axis;
 
 /// The scenario file as written (before the truth is parsed and the machine loaded).
 #[derive(Debug, Deserialize)]
@@ -65,6 +66,9 @@ pub struct Scenario {
     pub machine: MachineStructure,
     /// The simulated axis: masses, drive, servo and guideway settings (SI units).
     pub axis: AxisModel,
+    /// Which axis that is: the last letter of its joint's name (`x` → X), the axis its effects and
+    /// recordings are on.
+    pub axis_name: Axis,
     /// The injected truth: the effects switched on and their parameters.
     pub truth: Model,
     /// The sensors, in the order of the scenario file.
@@ -128,6 +132,16 @@ impl Scenario {
         }
         validate_procedures(&raw.procedures, &raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
         let chain = build_chain(&raw, &machine, &truth).map_err(|(p, m)| bad(&p, m))?;
+        // A chain's joints are checked above (`axes[i]`); a single axis's joint here.
+        let axis_name = Axis::of_joint(&axis_cfg.joint).ok_or_else(|| {
+            bad(
+                "axis.joint",
+                format!(
+                    "expected a prismatic joint named for its axis x, y or z (its name's last letter), got `{}`",
+                    axis_cfg.joint
+                ),
+            )
+        })?;
         Ok(Scenario {
             source: source.to_path_buf(),
             description: raw.description,
@@ -135,6 +149,7 @@ impl Scenario {
             machine_name: raw.machine,
             machine,
             axis,
+            axis_name,
             truth,
             sensors: raw.sensors,
             procedures: raw.procedures,
@@ -180,8 +195,7 @@ fn build_chain(
         return Err(("axes".into(), format!("expected 1 to 3 axes, e.g. [\"x\", \"y\", \"z\"], got {}", axes.len())));
     }
     for (i, a) in axes.iter().enumerate() {
-        let letter = a.chars().last().map(|c| c.to_ascii_lowercase());
-        if !matches!(letter, Some('x' | 'y' | 'z')) || machine.axis_by_joint(a).is_none() {
+        if Axis::of_joint(a).is_none() || machine.axis_by_joint(a).is_none() {
             let known: Vec<&str> = machine.axes.iter().map(|j| j.joint.as_str()).collect();
             return Err((
                 format!("axes[{i}]"),
@@ -192,7 +206,7 @@ fn build_chain(
             ));
         }
     }
-    let letters: Vec<char> = axes.iter().filter_map(|a| a.chars().last().map(|c| c.to_ascii_lowercase())).collect();
+    let letters: Vec<Axis> = axes.iter().filter_map(|a| Axis::of_joint(a)).collect();
     if let Some(e) = set.effects.iter().find(|e| {
         !matches!(e.name, EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz)
             && !letters.contains(&e.axis)

@@ -27,11 +27,6 @@ use vmt_sim::profile::{Profile, Term};
 use vmt_sim::sensors::SensorSpec;
 use vmt_sim::truth::axis_physics;
 
-/// The axis letter of a joint, for matching effects (`axis = "x"`): the joint name's last letter.
-pub fn axis_letter(joint: &str) -> char {
-    joint.chars().last().unwrap_or('x').to_ascii_lowercase()
-}
-
 /// The machine, truth and sensors as the physics sees them: the scenario's axis model with the truth's
 /// servo changes, the injected effects, and the sensors with the truth's sensor effects.
 #[derive(Clone, Debug)]
@@ -46,10 +41,9 @@ pub struct Physics {
 
 /// Builds the physics of a scenario from its truth.
 pub fn physics(sc: &Scenario) -> Result<Physics, VmtError> {
-    let axis = axis_letter(&sc.axis.joint);
     let mut model = sc.axis.clone();
-    let (truth, adj) =
-        axis_physics(&sc.truth.effect_set(), axis, &model).map_err(|m| VmtError::bad(&sc.source, "truth", m))?;
+    let (truth, adj) = axis_physics(&sc.truth.effect_set(), sc.axis_name, &model)
+        .map_err(|m| VmtError::bad(&sc.source, "truth", m.to_string()))?;
     adj.apply(&mut model);
     let sensors = sc
         .sensors
@@ -250,7 +244,7 @@ fn accel_spec(s: &SensorSpec) -> Option<SensorSpec> {
 
 /// The measurement set (FORMAT.md §1) of a recording.
 pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<MeasurementSet, VmtError> {
-    let axis = axis_letter(&sc.axis.joint);
+    let axis = sc.axis_name;
     let used = |name: &str| runs.iter().any(|r| r.data.column(name).is_some());
     let mut sensors = Vec::new();
     for s in sc.sensors.iter().filter(|s| s.kind != SensorKind::Command && used(&s.name)) {
@@ -268,7 +262,7 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
     }
     if let Some(chain) = &sc.chain {
         // Each chain line's laser: reflector on the last body at the line's point, beam along it.
-        let last = chain.axes.last().map_or_else(|| axis_letter(&sc.axis.joint), |a| a.axis.letter());
+        let last = chain.axes.last().map_or(sc.axis_name, |a| a.axis);
         for r in runs {
             if let Some((spec, line)) = chain_line(sc, &r.name) {
                 sensors.push(Sensor {
@@ -303,10 +297,8 @@ fn run_of(sc: &Scenario, r: &RunRecord) -> Run {
         file: format!("{}.csv", r.name),
         procedure: r.procedure,
         axis: match (&sc.chain, chain_line(sc, &r.name)) {
-            (Some(chain), Some((_, line))) => {
-                dominant_axis(chain, line).map_or_else(|| axis_letter(&sc.axis.joint), |a| a.letter())
-            }
-            _ => axis_letter(&sc.axis.joint),
+            (Some(chain), Some((_, line))) => dominant_axis(chain, line).unwrap_or(sc.axis_name),
+            _ => sc.axis_name,
         },
         start_time: Some(r.start_time),
         feed: r.feed,
@@ -353,7 +345,7 @@ pub fn truth_profiles(sc: &Scenario, ph: &Physics) -> Result<ProfileTable, VmtEr
         for a in &chain.axes {
             for (i, &effect) in EffectName::ERROR_MOTIONS.iter().enumerate() {
                 columns.push(ProfileColumn {
-                    axis: Some(a.axis.letter()),
+                    axis: Some(a.axis),
                     effect,
                     values: position.iter().map(|&x| a.motions.by_index(i).value(x)).collect(),
                     sigma: None,

@@ -3,9 +3,9 @@
 
 use super::{Check, Quantity, Statistic, TruthView};
 use crate::error::VmtError;
-use crate::measurement::{uniform_interval, MeasurementSet, RunData};
+use crate::measurement::{uniform_interval, MeasurementSet, RunData, SampleIntervalError};
 use std::path::Path;
-use vmt_estimators::ssi::{stick_slip_index, SsiResult};
+use vmt_estimators::ssi::{stick_slip_index, SsiError, SsiResult};
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
 
 /// The stick-slip index of a position record `x` (m) sampled at the time stamps `t` (s, uniform), with
@@ -13,10 +13,21 @@ use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
 /// sample interval Ts (s) and the result. The one path from a time series to the estimator, for `vmt run`
 /// and `vmt ssi`; errors (a non-uniform or too short `t`, a record the index is not defined on) are the
 /// caller's to place.
-pub fn run_ssi(t: &[f64], x: &[f64], resolution: Option<f64>) -> Result<(f64, SsiResult), String> {
+pub fn run_ssi(t: &[f64], x: &[f64], resolution: Option<f64>) -> Result<(f64, SsiResult), RunSsiError> {
     let dt = uniform_interval(t)?;
-    let res = stick_slip_index(x, dt, resolution).map_err(|e| e.to_string())?;
+    let res = stick_slip_index(x, dt, resolution)?;
     Ok((dt, res))
+}
+
+/// Why [`run_ssi`] has no index: the time column, or the record itself.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum RunSsiError {
+    /// `t` is too short or not uniformly sampled.
+    #[error(transparent)]
+    Interval(#[from] SampleIntervalError),
+    /// The index is not defined on the record.
+    #[error(transparent)]
+    Index(#[from] SsiError),
 }
 
 /// The crawl check: the SSI of `sensor` in every run of `procedure` (named `{procedure}_*`, one per feed)

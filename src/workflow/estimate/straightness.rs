@@ -27,6 +27,7 @@ use vmt_estimators::accel_straightness::{
 };
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
 use vmt_sim::effects::EffectName;
+use vmt_sim::Axis;
 
 /// Relative tolerance on the uniformity of the time stamps of a pass.
 const TIME_STEP_TOLERANCE: f64 = 0.01;
@@ -60,15 +61,6 @@ pub enum PassSelection<'a> {
         /// The names of its runs.
         runs: &'a [String],
     },
-}
-
-/// A unit vector of an axis letter (validated manifests hold x, y or z only).
-fn axis_unit(axis: char) -> [f64; 3] {
-    match axis {
-        'y' => [0.0, 1.0, 0.0],
-        'z' => [0.0, 0.0, 1.0],
-        _ => [1.0, 0.0, 0.0],
-    }
 }
 
 fn unit(d: [f64; 3]) -> [f64; 3] {
@@ -184,7 +176,7 @@ fn distinct_speeds(passes: &[(String, AccelRun)]) -> usize {
 /// horizontal and across the motion (|d_z| < 0.5, |d·axis| < 0.5: a Y sensor on an X axis reads g·EAX).
 pub fn accel_config(sensor: &Sensor, method: FusionMethod) -> StraightnessConfig {
     let d = unit(sensor.direction);
-    let across_horizontal = d[2].abs() < 0.5 && dot(d, axis_unit(sensor.axis)).abs() < 0.5;
+    let across_horizontal = d[2].abs() < 0.5 && dot(d, sensor.axis.unit()).abs() < 0.5;
     StraightnessConfig {
         method,
         noise_density: sensor.noise_density,
@@ -217,8 +209,9 @@ pub struct PassReport {
 pub struct SensorStraightness {
     /// The accelerometer's name.
     pub sensor: String,
-    /// The axis moved (`x`, `y` or `z`).
-    pub axis: char,
+    /// The axis moved (JSON `"x"`, `"y"` or `"z"`).
+    #[serde(with = "vmt_core::axis::letter")]
+    pub axis: Axis,
     /// The error motion the sensor's direction reads (`straightness_y`/`straightness_z`: the first/second
     /// transverse direction of the axis), at the sensor's mounting point (Abbe terms ε×r included).
     pub effect: EffectName,
@@ -257,7 +250,7 @@ pub fn sensor_straightness(
         return Err(VmtError::bad(file, place, format!("expected an accelerometer, got kind `{}`", s.kind.as_str())));
     }
     let d = unit(s.direction);
-    let others: Vec<usize> = (0..3).filter(|&c| axis_unit(s.axis)[c] == 0.0).collect();
+    let others: Vec<usize> = (0..3).filter(|&c| s.axis.unit()[c] == 0.0).collect();
     let (slot, comp) = if d[others[0]].abs() >= d[others[1]].abs() { (0, others[0]) } else { (1, others[1]) };
     if d[comp].abs() < 0.9 {
         return Err(VmtError::bad(
@@ -292,7 +285,7 @@ pub fn sensor_straightness(
     let bounds = estimate.in_band_bounds().map_err(|e| VmtError::bad(file, "runs", e.to_string()))?;
     // τ = ε·(d × ẑ): roll when d × ẑ lies along the axis.
     let dz = [d[1], -d[0], 0.0];
-    let along = dot(dz, axis_unit(s.axis));
+    let along = dot(dz, s.axis.unit());
     let tilt_effect = (estimate.tilt.is_some() && along.abs() >= 0.9).then(|| (EffectName::Roll, along.signum()));
     let passes = passes
         .iter()
