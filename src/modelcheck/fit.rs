@@ -539,6 +539,9 @@ pub(crate) struct LeadScan {
     pub(crate) scanned: usize,
 }
 
+/// Local minima of the lead scan's grid refined ([`lead_shape_scan`]).
+pub(crate) const LEAD_SCAN_MINIMA: usize = 8;
+
 /// Periods per e-fold of the lead scan ([`lead_shape_scan`]): steps of 0.25 %, so that a lead
 /// over 25 periods drifts by at most 25·2π·0.00125 ≈ 0.2 rad between a grid point and the truth.
 pub(crate) const LEAD_SCAN_PER_E: f64 = 400.0;
@@ -615,14 +618,18 @@ pub(crate) fn lead_shape_scan(
         .fold(f64::INFINITY, f64::min);
     let lead_shape = shape(st, EffectName::CyclicLead, 1, DEFAULT_ORDER, false);
     let t_dot = |a: &[f64]| a.iter().zip(&t).map(|(x, y)| x * y).sum::<f64>();
-    // (BIC, K) of the lead at period p with the best order K below its cap.
-    let joint = |p: f64| -> (f64, usize) {
+    // The order below the cap at the longest period: a base every period shares.
+    let k_long = (0..rss.len()).filter(|&k| order_of(k) <= cap0.order_below(p_hi)).last().unwrap_or(0);
+    // (BIC, K) of the lead at period p with the best order K below its cap, and the weighted sum of
+    // squares the lead explains over the orders up to `k_long` (a periodogram with these columns).
+    let joint_and_power = |p: f64| -> ((f64, usize), f64) {
         let cp = base.project_columns(&columns(st, EffectName::CyclicLead, &lead_shape, &[p]), w);
         let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
         let (mut g00, mut g01, mut g11) = (dot(&cp[0], &cp[0]), dot(&cp[0], &cp[1]), dot(&cp[1], &cp[1]));
         let (mut b0, mut b1) = (t_dot(&cp[0]), t_dot(&cp[1]));
         let limit = cap0.order_below(p);
         let mut best = (f64::INFINITY, 0);
+        let mut power = 0.0;
         for k in 0..rss.len() {
             if k > 0 {
                 let (c0, c1) = (dot(&q[k - 1], &cp[0]), dot(&q[k - 1], &cp[1]));
@@ -632,11 +639,8 @@ pub(crate) fn lead_shape_scan(
                 b0 -= c0 * qt[k - 1];
                 b1 -= c1 * qt[k - 1];
             }
-            if order_of(k) > limit {
+            if order_of(k) > limit && k > k_long {
                 break;
-            }
-            if !complete(k) {
-                continue;
             }
             let det = g00 * g11 - g01 * g01;
             let explained = if det > 1e-12 * (g00 * g11).max(1e-300) {
@@ -644,20 +648,63 @@ pub(crate) fn lead_shape_scan(
             } else {
                 0.0
             };
+            if k == k_long {
+                power = explained;
+            }
+            if order_of(k) > limit || !complete(k) {
+                continue;
+            }
             let b = bic_unknown_sigma((rss[k] - explained).max(0.0), n, rb + k + 3);
             if b < best.0 {
                 best = (b, k);
             }
         }
-        best
+        (best, power)
     };
+    let joint = |p: f64| joint_and_power(p).0;
     let count = (((p_hi / p_lo).ln() * LEAD_SCAN_PER_E).ceil() as usize).max(2);
     let grid = log_grid(p_lo, p_hi, count);
-    let scores: Vec<(f64, usize)> = grid.par_iter().map(|&p| joint(p)).collect();
-    let Some(i) = (0..grid.len()).min_by(|a, b| scores[*a].0.total_cmp(&scores[*b].0)) else { return Ok(None) };
-    let (a, b) = (grid[i.saturating_sub(1)], grid[(i + 1).min(grid.len() - 1)]);
-    let p = golden(a, b, 30, &mut |p| joint(p).0);
-    let (p, (bic, k)) = if joint(p).0 < scores[i].0 { (p, joint(p)) } else { (grid[i], scores[i]) };
+    let scored: Vec<((f64, usize), f64)> = grid.par_iter().map(|&p| joint_and_power(p)).collect();
+    let scores: Vec<(f64, usize)> = scored.iter().map(|s| s.0).collect();
+    let power: Vec<f64> = scored.iter().map(|s| s.1).collect();
+    // The grid's lowest local minima, each refined by golden-section search between its neighbours: a
+    // strong lead's dip is narrower than a grid step at high signal-to-noise (its phase drifts by
+    // 2π·(L/P)·δP/P over the travel), so its grid point can score worse than a distant minimum until
+    // refined.
+    let mut minima: Vec<usize> = (0..grid.len())
+        .filter(|&i| {
+            let s = scores[i].0;
+            (i == 0 || s <= scores[i - 1].0) && (i + 1 == grid.len() || s <= scores[i + 1].0)
+        })
+        .collect();
+    minima.sort_by(|a, b| scores[*a].0.total_cmp(&scores[*b].0).then(a.cmp(b)));
+    minima.truncate(LEAD_SCAN_MINIMA);
+    // And the periods where a lead explains most over the shapes of the longest period's cap (the
+    // periodogram's peaks): a strong lead there scores badly on the grid (its dip is narrower than a
+    // step) but its main lobe, 1/(periods over the travel) wide, holds grid points.
+    let mut peaks: Vec<usize> = (0..grid.len())
+        .filter(|&i| (i == 0 || power[i] >= power[i - 1]) && (i + 1 == grid.len() || power[i] >= power[i + 1]))
+        .collect();
+    peaks.sort_by(|a, b| power[*b].total_cmp(&power[*a]).then(a.cmp(b)));
+    for i in peaks.into_iter().take(LEAD_SCAN_MINIMA / 2) {
+        if !minima.contains(&i) {
+            minima.push(i);
+        }
+    }
+    let refined: Vec<(f64, (f64, usize))> = minima
+        .par_iter()
+        .map(|&i| {
+            let (a, b) = (grid[i.saturating_sub(1)], grid[(i + 1).min(grid.len() - 1)]);
+            let p = golden(a, b, 30, &mut |p| joint(p).0);
+            let jp = joint(p);
+            if jp.0 < scores[i].0 {
+                (p, jp)
+            } else {
+                (grid[i], scores[i])
+            }
+        })
+        .collect();
+    let Some(&(p, (bic, k))) = refined.iter().min_by(|a, b| a.1 .0.total_cmp(&b.1 .0)) else { return Ok(None) };
     let mut orders = vec![(m0, order_of(k))];
     orders.extend(held);
     Ok(Some(LeadScan { period: p, orders, delta_bic: bic - free, scanned: grid.len() }))
