@@ -619,7 +619,7 @@ pub(crate) fn lead_shape_scan(
     let lead_shape = shape(st, EffectName::CyclicLead, 1, DEFAULT_ORDER, false);
     let t_dot = |a: &[f64]| a.iter().zip(&t).map(|(x, y)| x * y).sum::<f64>();
     // The order below the cap at the longest period: a base every period shares.
-    let k_long = (0..rss.len()).filter(|&k| order_of(k) <= cap0.order_below(p_hi)).last().unwrap_or(0);
+    let k_long = (0..rss.len()).rev().find(|&k| order_of(k) <= cap0.order_below(p_hi)).unwrap_or(0);
     // (BIC, K) of the lead at period p with the best order K below its cap, and the weighted sum of
     // squares the lead explains over the orders up to `k_long` (a periodogram with these columns).
     let joint_and_power = |p: f64| -> ((f64, usize), f64) {
