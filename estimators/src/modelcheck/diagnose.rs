@@ -37,7 +37,7 @@
 //! closer than 10; `noise` otherwise.
 
 use super::lsq::{fit_signature, Basis};
-use super::ortho::{cholesky_with_dropping, nonzero_rows, OrthoBase};
+use super::ortho::OrthoBase;
 use super::{check_finite, check_len, ModelCheckError, Sigma};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -411,36 +411,13 @@ fn screen_score(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<f64, String
     Ok(span_projection(&cols, &p.w, &p.r_t))
 }
 
-/// ‖P_C·r‖² for the weighted columns C = W·`cols` (r already weighted), from the Gram matrix:
-/// bᵀG⁺b with G = CᵀC, b = Cᵀr, by a Cholesky factorisation of the unit-diagonal G that drops a
-/// column whose pivot is below 1e-10 (dependent on the ones before it). Each product runs only
-/// over the rows where both columns are non-zero (a mode's columns live on one channel or one
-/// sensor), so it costs far less than orthogonalising the columns.
+/// ‖P_C·r‖² for the weighted columns C = W·`cols` (r already weighted): [`OrthoBase::projected_fit`]
+/// over an empty span (G = CᵀC, b = Cᵀr over each column's non-zero rows, dependent columns dropped).
 fn span_projection(cols: &[Vec<f64>], w: &[f64], r: &[f64]) -> f64 {
-    let q = cols.len();
-    let range: Vec<(usize, usize)> = cols.iter().map(|c| nonzero_rows(c)).collect();
-    let wc: Vec<Vec<f64>> = cols.iter().map(|c| c.iter().zip(w).map(|(x, w)| x * w).collect()).collect();
-    let mut g = vec![vec![0.0; q]; q];
-    let mut b = vec![0.0; q];
-    for i in 0..q {
-        let (lo, hi) = range[i];
-        b[i] = wc[i][lo..hi].iter().zip(&r[lo..hi]).map(|(x, y)| x * y).sum();
-        for j in 0..=i {
-            let (l2, h2) = (lo.max(range[j].0), hi.min(range[j].1));
-            let v: f64 = if l2 < h2 { wc[i][l2..h2].iter().zip(&wc[j][l2..h2]).map(|(x, y)| x * y).sum() } else { 0.0 };
-            g[i][j] = v;
-            g[j][i] = v;
-        }
+    match OrthoBase::new(&[], w) {
+        Ok(empty) => empty.projected_fit(r, cols, w, false).0,
+        Err(_) => f64::NEG_INFINITY,
     }
-    // Unit diagonal, then Cholesky G = LLᵀ with dropping; score = ‖L⁻¹b‖² over the kept pivots.
-    let d: Vec<f64> = (0..q).map(|i| g[i][i].sqrt()).collect();
-    for i in 0..q {
-        for j in 0..q {
-            g[i][j] = if d[i] > 0.0 && d[j] > 0.0 { g[i][j] / (d[i] * d[j]) } else { 0.0 };
-        }
-        b[i] = if d[i] > 0.0 { b[i] / d[i] } else { 0.0 };
-    }
-    cholesky_with_dropping(&g, &b).score
 }
 
 /// The χ² (or RSS) reduction of adding `cols` to the prepared base (variable projection: the base

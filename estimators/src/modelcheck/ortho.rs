@@ -241,7 +241,7 @@ fn columns_dot(a: &Mat<f64>, v: &[f64]) -> Vec<f64> {
 }
 
 /// The rows [lo, hi) outside which a column is zero (lo = hi for an all-zero column).
-pub(crate) fn nonzero_rows(c: &[f64]) -> (usize, usize) {
+fn nonzero_rows(c: &[f64]) -> (usize, usize) {
     let lo = c.iter().position(|x| *x != 0.0).unwrap_or(c.len());
     let hi = c.iter().rposition(|x| *x != 0.0).map_or(lo, |i| i + 1);
     (lo, hi.max(lo))
@@ -265,19 +265,19 @@ pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
 
 /// A Cholesky factorisation G = LLᵀ of a scaled Gram matrix with dependent columns left out, and
 /// the explained sum of squares of its right-hand side ([`cholesky_with_dropping`]).
-pub(crate) struct DroppingCholesky {
+struct DroppingCholesky {
     /// Lower triangle; a dropped column's row and diagonal are zero.
-    pub(crate) l: Vec<Vec<f64>>,
+    l: Vec<Vec<f64>>,
     /// z = L⁻¹b over the kept pivots (0 at a dropped one).
-    pub(crate) z: Vec<f64>,
+    z: Vec<f64>,
     /// ‖z‖² = bᵀG⁺b over the kept columns.
-    pub(crate) score: f64,
+    score: f64,
 }
 
 /// Cholesky of `g` (symmetric, each column scaled by its own norm so that a pivot is the share of
 /// the column's squared norm left after the columns before it) with column i dropped when its
 /// pivot is ≤ 1e-10 (dependent on the ones before it; a zero column always), and z = L⁻¹`b`.
-pub(crate) fn cholesky_with_dropping(g: &[Vec<f64>], b: &[f64]) -> DroppingCholesky {
+fn cholesky_with_dropping(g: &[Vec<f64>], b: &[f64]) -> DroppingCholesky {
     let q = g.len();
     let mut l = vec![vec![0.0; q]; q];
     let mut z = vec![0.0; q];
