@@ -243,11 +243,22 @@ pub fn first_order_lag(t: &[f64], u: &[f64], kv: f64) -> Vec<f64> {
     let s0 = if n > 1 && t[1] > t[0] { (u[1] - u[0]) / (t[1] - t[0]) } else { 0.0 };
     let mut x = u[0] - s0 / kv;
     out.push(x);
+    // e^{−kv·h} at a reference interval h_r, reused while |kv·(h − h_r)| < 1e-8 as
+    // e^{−kv·h_r}·(1 − kv·(h − h_r)) (error below 1e-16, the rounding of an exp): a log sampled at
+    // a fixed rate has one h up to the rounding of its time stamps, so one exp serves every sample.
+    let mut reference = (f64::NAN, 0.0);
     for i in 1..n {
         let h = t[i] - t[i - 1];
         if h > 0.0 {
+            let dh = kv * (h - reference.0);
+            let decay = if dh.abs() < 1e-8 {
+                reference.1 * (1.0 - dh)
+            } else {
+                reference = (h, (-kv * h).exp());
+                reference.1
+            };
             let s = (u[i] - u[i - 1]) / h;
-            x = u[i] - s / kv + (x - u[i - 1] + s / kv) * (-kv * h).exp();
+            x = u[i] - s / kv + (x - u[i - 1] + s / kv) * decay;
         }
         out.push(x);
     }

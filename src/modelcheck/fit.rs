@@ -63,15 +63,15 @@ pub(crate) fn design(st: &Stack, terms: &[FitTerm]) -> Vec<Vec<f64>> {
 }
 
 /// Drops columns that are all zero (an effect no channel sees) so the solver sees a clean design;
-/// returns the kept indices. A design of more than [`LARGE_DESIGN`] columns (flexible shapes on
-/// time series) is solved by pivoted QR (`lstsq_qr`, ≈ 2np² flops) instead of the SVD.
+/// returns the kept indices. A large design ([`large_design`]: flexible shapes or time series) is
+/// solved by pivoted QR (`lstsq_qr`, ≈ 2np² flops) instead of the SVD.
 pub(crate) fn solve(r: &[f64], cols: &[Vec<f64>], sigma: &Sigma) -> Result<(Vec<f64>, Vec<f64>), String> {
     let keep: Vec<usize> = (0..cols.len()).filter(|&j| cols[j].iter().any(|v| *v != 0.0)).collect();
     let sub: Vec<Vec<f64>> = keep.iter().map(|&j| cols[j].clone()).collect();
     if sub.is_empty() {
         return Ok((vec![0.0; cols.len()], r.to_vec()));
     }
-    let (coefficients, residual) = if sub.len() > LARGE_DESIGN {
+    let (coefficients, residual) = if large_design(r.len(), sub.len()) {
         let w = sigma.weights(r.len()).map_err(|e| e.to_string())?;
         lstsq_qr(r, &sub, &w).map_err(|e| e.to_string())?
     } else {
@@ -119,7 +119,7 @@ pub(crate) fn solve_blocks(
     let mut blocks: Vec<usize> = roots.clone();
     blocks.sort_unstable();
     blocks.dedup();
-    if blocks.len() <= 1 || cols.len() <= LARGE_DESIGN {
+    if blocks.len() <= 1 || !large_design(r.len(), cols.len()) {
         return solve(r, cols, sigma);
     }
     let per = sigma.weights(r.len()).map_err(|e| e.to_string())?;
@@ -146,6 +146,18 @@ pub(crate) fn solve_blocks(
 /// Number of design columns above which fits use QR and the hyper-parameter searches factor the
 /// columns that do not change once (variable projection); the point tables stay below it.
 pub(crate) const LARGE_DESIGN: usize = 100;
+
+/// Number of samples above which a design of any width is treated as large: a time series of
+/// 20 000 samples with 20 columns costs an SVD per evaluation of a hyper-parameter (≈ 40 per
+/// golden-section search) where one QR of the fixed columns serves all; point tables (a few
+/// hundred rows) stay below it.
+pub(crate) const LARGE_SAMPLES: usize = 4000;
+
+/// Whether a design of `rows` samples and `cols` columns is solved by QR and searched by
+/// variable projection ([`LARGE_DESIGN`], [`LARGE_SAMPLES`]).
+pub(crate) fn large_design(rows: usize, cols: usize) -> bool {
+    cols > LARGE_DESIGN || rows > LARGE_SAMPLES
+}
 
 pub(crate) fn weighted_ss(r: &[f64], w: &[f64]) -> f64 {
     r.iter().zip(w).map(|(a, b)| (a * b).powi(2)).sum()
@@ -950,7 +962,7 @@ pub(crate) fn fit_model_fixed(
     // shapes, terms without a searched hyper-parameter) are factored once, and each evaluation
     // projects only the searched terms' columns (variable projection, `OrthoBase`).
     let moving = |t: &FitTerm| t.searched.iter().any(|s| *s);
-    let fixed_base = if n_searched > 0 && design(st, &terms).len() > LARGE_DESIGN {
+    let fixed_base = if n_searched > 0 && large_design(st.n, design(st, &terms).len()) {
         let fixed: Vec<FitTerm> = terms.iter().filter(|t| !moving(t)).cloned().collect();
         let base = OrthoBase::new(&design(st, &fixed), w).map_err(|e| e.to_string())?;
         let target = base.project_vector(&r0, w);

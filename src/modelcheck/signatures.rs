@@ -26,6 +26,9 @@ pub(crate) struct Stack<'a> {
     /// Position-loop gain kv (1/s) through which a closed loop's transmission reaches its
     /// following channels ([`close_loop`]); ∞ (the identity) when the model has no servo_lag.
     pub(crate) loop_kv: f64,
+    /// The distinct sample positions of all channels, sorted (m): computed on first use and
+    /// shared by the stacks derived from this one (their channels are the same).
+    distinct: std::sync::Arc<std::sync::OnceLock<Vec<f64>>>,
 }
 
 /// Time step of the mode integration, s: at most this long (and at least 4 steps per sample
@@ -293,12 +296,18 @@ impl<'a> Stack<'a> {
 
     /// The same stack with these mode excitations (one list per channel).
     pub(crate) fn with_excitation(&self, excitation: Vec<Vec<Excitation>>) -> Stack<'a> {
-        Stack { excitation, group: self.group.clone(), ..*self }
+        Stack { excitation, group: self.group.clone(), distinct: self.distinct.clone(), ..*self }
     }
 
     /// The same stack with the position-loop gain `kv` (1/s, [`Stack::loop_kv`]).
     pub(crate) fn with_loop_kv(&self, kv: f64) -> Stack<'a> {
-        Stack { loop_kv: kv, group: self.group.clone(), excitation: self.excitation.clone(), ..*self }
+        Stack {
+            loop_kv: kv,
+            group: self.group.clone(),
+            excitation: self.excitation.clone(),
+            distinct: self.distinct.clone(),
+            ..*self
+        }
     }
 
     pub(crate) fn new(chans: &'a [Channel]) -> Stack<'a> {
@@ -327,6 +336,7 @@ impl<'a> Stack<'a> {
             n_groups: keys.len(),
             excitation: vec![Vec::new(); chans.len()],
             loop_kv: f64::INFINITY,
+            distinct: Default::default(),
         }
     }
 
@@ -339,6 +349,20 @@ impl<'a> Stack<'a> {
             }
         }
         v
+    }
+
+    /// Two columns from one pass: f(channel, sample index) = (first, second) over all samples
+    /// (a sine and a cosine from one `sin_cos`).
+    pub(crate) fn col_pair(&self, f: impl Fn(&Channel, usize) -> (f64, f64)) -> (Vec<f64>, Vec<f64>) {
+        let (mut a, mut b) = (Vec::with_capacity(self.n), Vec::with_capacity(self.n));
+        for c in self.chans {
+            for i in 0..c.y.len() {
+                let (u, v) = f(c, i);
+                a.push(u);
+                b.push(v);
+            }
+        }
+        (a, b)
     }
 
     /// One column: f(channel, sample index, channel index) over all samples.
@@ -633,7 +657,7 @@ impl Shape {
             ShapeBasis::Table => {
                 let xs = distinct_positions(st);
                 if xs.len() == order as usize {
-                    xs
+                    xs.to_vec()
                 } else {
                     (0..order).map(|k| a + (b - a) * k as f64 / (order.max(2) - 1) as f64).collect()
                 }
@@ -950,7 +974,11 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             }
             let drive = name == EffectName::CyclicLead;
             let s = move |c: &Channel| if drive { c.s_drive() } else { c.s_chain() };
-            vec![st.col(|c, i| s(c) * (TWO_PI * c.x[i] / p).sin()), st.col(|c, i| s(c) * (TWO_PI * c.x[i] / p).cos())]
+            let (sin, cos) = st.col_pair(|c, i| {
+                let (a, b) = (TWO_PI * c.x[i] / p).sin_cos();
+                (s(c) * a, s(c) * b)
+            });
+            vec![sin, cos]
         }
         EffectName::ThermalExpansion => vec![st.col(|c, i| c.s_chain() * c.x[i] * rise(c.t[i], h[0]))],
         EffectName::ThermalDrift => vec![st.col(|c, i| c.s_chain() * rise(c.t[i], h[0]))],
@@ -1036,25 +1064,27 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
 /// length R = |mean e^{iθ}| ≤ 0.5, and 0.1 ≤ mean sin²θ ≤ 0.9 so both quadratures vary), so that a sinusoid of period p is distinguishable from a
 /// constant on these targets; false at an alias (targets a whole number of periods apart).
 pub(crate) fn phases_spread(st: &Stack, p: f64) -> bool {
-    let mut xs: Vec<f64> = st.chans.iter().flat_map(|c| c.x.iter().copied()).collect();
-    xs.sort_by(f64::total_cmp);
-    xs.dedup();
+    let xs = distinct_positions(st);
     if xs.len() < 3 || !(p > 0.0) {
         return false;
     }
     let m = xs.len() as f64;
-    let (sc, cc) = xs.iter().fold((0.0, 0.0), |(a, b), x| (a + (TWO_PI * x / p).sin(), b + (TWO_PI * x / p).cos()));
     // Both quadratures must vary: at p = 2 µm on targets rounded to 1 µm the sine vanishes.
-    let s2: f64 = xs.iter().map(|x| (TWO_PI * x / p).sin().powi(2)).sum::<f64>() / m;
-    (sc * sc + cc * cc).sqrt() / m <= 0.5 && (0.1..=0.9).contains(&s2)
+    let (sc, cc, s2) = xs.iter().fold((0.0, 0.0, 0.0), |(a, b, q), x| {
+        let (s, c) = (TWO_PI * x / p).sin_cos();
+        (a + s, b + c, q + s * s)
+    });
+    (sc * sc + cc * cc).sqrt() / m <= 0.5 && (0.1..=0.9).contains(&(s2 / m))
 }
 
 /// The distinct sample positions of all channels, sorted (m).
-pub(crate) fn distinct_positions(st: &Stack) -> Vec<f64> {
-    let mut xs: Vec<f64> = st.chans.iter().flat_map(|c| c.x.iter().copied()).collect();
-    xs.sort_by(f64::total_cmp);
-    xs.dedup();
-    xs
+pub(crate) fn distinct_positions<'s>(st: &'s Stack) -> &'s [f64] {
+    st.distinct.get_or_init(|| {
+        let mut xs: Vec<f64> = st.chans.iter().flat_map(|c| c.x.iter().copied()).collect();
+        xs.sort_by(f64::total_cmp);
+        xs.dedup();
+        xs
+    })
 }
 
 /// True when the sample positions can resolve a wave of period `p` (m) rather than one of its
@@ -1065,7 +1095,7 @@ pub(crate) fn distinct_positions(st: &Stack) -> Vec<f64> {
 /// targets equally well; on an irregular layout without such a dense stretch the phase at each
 /// target is unrelated to its neighbours' and the search would fit per-target misfit.
 pub(crate) fn period_resolvable(st: &Stack, p: f64) -> bool {
-    resolvable_on(&distinct_positions(st), p)
+    resolvable_on(distinct_positions(st), p)
 }
 
 fn resolvable_on(xs: &[f64], p: f64) -> bool {
