@@ -870,6 +870,34 @@ pub(crate) fn fit_model_fixed(
     w: &[f64],
     order_of: &dyn Fn(usize, &ModelEffect) -> (u32, Option<Vec<u32>>),
 ) -> Result<FitState, String> {
+    fit_model_orders(st, model, sigma, w, order_of, None)
+}
+
+/// [`fit_model_fixed`] with the hyper-parameters of every term that is not an error motion held
+/// at their values in `held` (a fit of the same model): the model's shapes refitted at other
+/// orders, for a candidate to be ranked against (`diagnose`). Refitted without the candidate, a
+/// loop gain kv absorbs part of what the candidate explains (a strong cyclic lead seen through a
+/// closed loop biased kv, and then the lead's period, by 1e-4), which the candidate's linear
+/// columns cannot undo.
+pub(crate) fn fit_model_held(
+    st: &Stack,
+    model: &Model,
+    sigma: &Sigma,
+    w: &[f64],
+    order_of: &dyn Fn(usize, &ModelEffect) -> (u32, Option<Vec<u32>>),
+    held: &FitState,
+) -> Result<FitState, String> {
+    fit_model_orders(st, model, sigma, w, order_of, Some(held))
+}
+
+fn fit_model_orders(
+    st: &Stack,
+    model: &Model,
+    sigma: &Sigma,
+    w: &[f64],
+    order_of: &dyn Fn(usize, &ModelEffect) -> (u32, Option<Vec<u32>>),
+    held: Option<&FitState>,
+) -> Result<FitState, String> {
     let mut known = vec![0.0; st.n];
     let mut terms: Vec<FitTerm> = Vec::new();
     for (index, me) in model.effects.iter().enumerate() {
@@ -921,6 +949,12 @@ pub(crate) fn fit_model_fixed(
             hyper.push(if given || !resolvable { start } else { f64::NAN });
             // A given period or Stribeck shape exponent is held (the diagnosis searched it).
             searched.push(me.fit && !(given && matches!(*h, "period" | "shape")) && resolvable);
+        }
+        if let Some(h) = held.and_then(|h| h.terms.iter().find(|t| t.index == index && !t.name.is_error_motion())) {
+            if h.hyper.len() == hyper.len() {
+                hyper.clone_from(&h.hyper);
+                searched.iter_mut().for_each(|s| *s = false);
+            }
         }
         let at_bound = vec![false; hyper.len()];
         terms.push(FitTerm { index, name: me.effect.name, shape: sh, hyper, searched, at_bound });
