@@ -1166,7 +1166,7 @@ pub(crate) fn shortest_resolvable_period(st: &Stack) -> Option<f64> {
     // smallest such p over all stretches is found by trying p = 2·gap for every gap (sorted).
     let mut gaps: Vec<f64> = xs.windows(2).map(|w| w[1] - w[0]).filter(|g| *g > 0.0).collect();
     gaps.sort_by(f64::total_cmp);
-    gaps.into_iter().map(|g| 2.0 * g).find(|p| resolvable_on(&xs, *p))
+    gaps.into_iter().map(|g| 2.0 * g).find(|p| resolvable_on(xs, *p))
 }
 
 /// The prediction of a known (not fitted) effect at every sample, passed through a closed
@@ -1337,7 +1337,7 @@ pub(crate) fn period_range(name: EffectName) -> Option<(f64, f64)> {
 /// The periods of `grid` that the sample positions resolve (never search an alias).
 fn resolvable_only(st: &Stack, grid: Vec<f64>) -> Vec<f64> {
     let xs = distinct_positions(st);
-    grid.into_iter().filter(|p| resolvable_on(&xs, *p)).collect()
+    grid.into_iter().filter(|p| resolvable_on(xs, *p)).collect()
 }
 
 #[cfg(test)]
