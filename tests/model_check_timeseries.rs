@@ -300,28 +300,43 @@ fn hidden_accel(h: AccelHidden, expect: &str) {
     let named = r.iter().filter(|x| x.1.first.as_ref().is_some_and(|f| f.0 == expect && f.1 == "significant")).count();
     let low = r.iter().filter(|x| x.1.nrms_after.is_some_and(|v| v <= 1.3)).count();
     // The mode fitted after `add` (compare's refined values) against the generator's: frequency
-    // within 1 %, damping within 10 % (the issue's thresholds); draws without a mode count as met.
-    let mode_ok = |t: &AccelTruth, o: &Outcome| -> bool {
+    // within 1 %, damping within 10 % (the issue's thresholds). These are met only where the data
+    // determine the mode that well: a draw is *resolvable* when 3× its Cramér–Rao bound
+    // (`AccelTruth::mode_crb`, a lower bound: the shapes fitted beside the mode are not profiled
+    // out) is inside both thresholds. The assertion is on the resolvable draws; the rate over all
+    // draws and each error in units of its bound are printed.
+    let got = |o: &Outcome, k: &str| o.fitted_after.as_ref().and_then(|v| v[k].as_f64()).unwrap_or(f64::NAN);
+    let within = |t: &AccelTruth, o: &Outcome| -> bool {
         let Some((f, z)) = t.mode else { return true };
-        let got = |k: &str| o.fitted_after.as_ref().and_then(|v| v[k].as_f64());
-        match (got("frequency"), got("damping")) {
-            (Some(fa), Some(za)) => (fa / f - 1.0).abs() <= 0.01 && (za / z - 1.0).abs() <= 0.10,
-            _ => false,
-        }
+        (got(o, "frequency") / f - 1.0).abs() <= 0.01 && (got(o, "damping") / z - 1.0).abs() <= 0.10
     };
-    let fitted = r.iter().filter(|x| mode_ok(&x.0, &x.1)).count();
+    let resolvable = |t: &AccelTruth| match (t.mode, t.mode_crb) {
+        (Some((f, z)), Some((sf, sz))) => 3.0 * sf <= 0.01 * f && 3.0 * sz <= 0.10 * z,
+        _ => true,
+    };
+    let fitted = r.iter().filter(|x| within(&x.0, &x.1)).count();
+    let n_res = r.iter().filter(|x| resolvable(&x.0)).count();
+    let fitted_res = r.iter().filter(|x| resolvable(&x.0) && within(&x.0, &x.1)).count();
     for (t, o) in &r {
-        if let Some((f, z)) = t.mode {
-            let got = |k: &str| o.fitted_after.as_ref().and_then(|v| v[k].as_f64()).unwrap_or(f64::NAN);
-            eprintln!("  mode {f:.2} Hz, ζ {z:.4}: fitted {:.2} Hz, ζ {:.4}", got("frequency"), got("damping"));
+        if let (Some((f, z)), Some((sf, sz))) = (t.mode, t.mode_crb) {
+            let (fa, za) = (got(o, "frequency"), got(o, "damping"));
+            eprintln!(
+                "  mode {f:.2} Hz, ζ {z:.4} (CRB σ_f {:.3} %, σ_ζ {:.1} %{}): fitted {fa:.2} Hz, ζ {za:.4}; \
+                 error {:+.2} σ_f, {:+.2} σ_ζ",
+                100.0 * sf / f,
+                100.0 * sz / z,
+                if resolvable(t) { "" } else { ", not resolvable to 1 % / 10 %" },
+                (fa - f) / sf,
+                (za - z) / sz
+            );
         }
     }
     eprintln!(
         "accelerometer {h:?}: `{expect}` first & significant {named}/{n} ({:.0} %), nrms ≤ 1.3 after add {low}/{n}, \
-         mode within 1 % / 10 % {fitted}/{n}",
+         mode within 1 % / 10 % {fitted}/{n} (of the {n_res} resolvable draws: {fitted_res})",
         rate(named, n as usize)
     );
-    assert!(rate(named, n as usize) >= 95.0 && rate(low, n as usize) >= 95.0 && rate(fitted, n as usize) >= 95.0);
+    assert!(rate(named, n as usize) >= 95.0 && rate(low, n as usize) >= 95.0 && rate(fitted_res, n_res) >= 95.0);
 }
 
 #[test]

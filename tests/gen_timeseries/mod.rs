@@ -234,6 +234,12 @@ pub struct AccelTruth {
     pub samples: usize,
     /// χ² of the hidden effects' contribution (Σ((h − mean h)/σ)² over all samples).
     pub hidden_chi2: f64,
+    /// Cramér–Rao bound (σ_f Hz, σ_ζ) of the mode's frequency and damping from these samples
+    /// (when a mode is present): (JᵀJ/σ²)⁻¹ with J = ∂(mode response)/∂(f, ζ) by central
+    /// differences, the mode's gain per channel and each pass's offset per channel profiled out.
+    /// The straightness shapes a model fits beside it are not profiled out, so the bound of a
+    /// real fit is larger: an error of a few of these is the best any estimator can do.
+    pub mode_crb: Option<(f64, f64)>,
 }
 
 /// Exact one-step map of q̈ + 2ζω q̇ + ω² q = −a (a constant over the step h): state (q, q̇).
@@ -268,6 +274,101 @@ impl Oscillator {
 /// One accelerometer draw, written to `dir` (manifest.toml, pass_k.csv, model.toml). Hidden effects
 /// are drawn large enough to be seen: the χ² of their contribution (mean removed per channel) is at
 /// least `min_chi2`, redrawn otherwise (an effect below the noise cannot be diagnosed by anyone).
+/// The interval-mean mode acceleration q̈̄ at each sample of one pass (the generator's own
+/// integration: 40 exact sub-steps per sample, the base acceleration `a(τ)` from 1 s before the
+/// first sample), for a mode of frequency `f` (Hz) and damping `z`.
+fn mode_series(f: f64, z: f64, dt: f64, n: usize, a: &dyn Fn(f64) -> f64) -> Vec<f64> {
+    let sub = 40usize;
+    let h = dt / sub as f64;
+    let o = Oscillator::new(f, z, h);
+    let lead = (1.0 / dt).ceil() as usize;
+    let mut q = [0.0, 0.0];
+    let mut qd_prev = 0.0;
+    let mut out = Vec::with_capacity(n);
+    for i in 0..(lead + n) as i64 {
+        let ti = (i - lead as i64) as f64 * dt;
+        for s in 0..sub {
+            q = o.step(q, a(ti - dt + (s as f64 + 0.5) * h));
+        }
+        let qdd_mean = (q[1] - qd_prev) / dt;
+        qd_prev = q[1];
+        if i >= lead as i64 {
+            out.push(qdd_mean);
+        }
+    }
+    out
+}
+
+/// Cramér–Rao bound of (f, ζ) ([`AccelTruth::mode_crb`]) for passes `(dt, n, a)` seen by two
+/// channels with mode-shape components `shape` (y, z) and noise σ `sigma`.
+fn mode_crb(
+    f: f64,
+    z: f64,
+    passes: &[(f64, usize, Box<dyn Fn(f64) -> f64 + '_>)],
+    shape: [f64; 2],
+    sigma: f64,
+) -> (f64, f64) {
+    // Columns over all samples (pass by pass, y then z): ∂/∂f, ∂/∂ζ of the response, and the
+    // nuisance: the response per channel (its gain) and a constant per (pass, channel).
+    let (df, dz) = (f * 1e-4, z * 1e-3);
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); 4];
+    // (first sample, count) of each (pass, channel): its offset column is 1 there.
+    let mut offsets: Vec<(usize, usize)> = Vec::new();
+    let mut total = 0;
+    for (dt, n, a) in passes {
+        let m0 = mode_series(f, z, *dt, *n, a.as_ref());
+        let fp = mode_series(f + df, z, *dt, *n, a.as_ref());
+        let fm = mode_series(f - df, z, *dt, *n, a.as_ref());
+        let zp = mode_series(f, z + dz, *dt, *n, a.as_ref());
+        let zm = mode_series(f, z - dz, *dt, *n, a.as_ref());
+        for (c, g) in shape.iter().enumerate() {
+            for i in 0..*n {
+                cols[0].push(g * (fp[i] - fm[i]) / (2.0 * df));
+                cols[1].push(g * (zp[i] - zm[i]) / (2.0 * dz));
+                cols[2].push(if c == 0 { m0[i] } else { 0.0 });
+                cols[3].push(if c == 1 { m0[i] } else { 0.0 });
+            }
+            offsets.push((total, *n));
+            total += n;
+        }
+    }
+    // Profile out the nuisance by Gram–Schmidt: the offset columns, then the gain columns, then
+    // the 2 × 2 information of what the derivatives have left (the Schur complement).
+    let mut basis: Vec<Vec<f64>> = offsets
+        .iter()
+        .map(|&(start, n)| (0..total).map(|i| if (start..start + n).contains(&i) { 1.0 } else { 0.0 }).collect())
+        .collect();
+    basis.extend([cols[2].clone(), cols[3].clone()]);
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut ortho: Vec<Vec<f64>> = Vec::new();
+    for mut v in basis {
+        for q in &ortho {
+            let c = dot(&v, q);
+            v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
+        }
+        let norm = dot(&v, &v).sqrt();
+        if norm > 0.0 {
+            v.iter_mut().for_each(|x| *x /= norm);
+            ortho.push(v);
+        }
+    }
+    let mut d = [cols[0].clone(), cols[1].clone()];
+    for v in d.iter_mut() {
+        for q in &ortho {
+            let c = dot(v, q);
+            v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
+        }
+    }
+    let s2 = sigma * sigma;
+    let (a, b, c) = (dot(&d[0], &d[0]) / s2, dot(&d[0], &d[1]) / s2, dot(&d[1], &d[1]) / s2);
+    let det = a * c - b * b;
+    if det > 0.0 {
+        ((c / det).sqrt(), (a / det).sqrt())
+    } else {
+        (f64::INFINITY, f64::INFINITY)
+    }
+}
+
 pub fn accel_set(dir: &Path, seed: u64, hidden: AccelHidden, min_chi2: f64) -> AccelTruth {
     accel_set_sized(dir, seed, hidden, min_chi2, None)
 }
@@ -347,11 +448,13 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
     let mut samples = 0;
     let mut chi2 = 0.0;
     let mut t0 = 0.0;
+    let mut layout: Vec<(f64, f64, f64, f64, usize)> = Vec::new();
     for (k, &v) in speeds.iter().enumerate() {
         let dt = 1.0 / rate;
         let dirn = if d.chance(0.5) { 1.0 } else { -1.0 };
         let n = (travel / v * rate).floor() as usize;
         let x0 = if dirn > 0.0 { x_lo } else { x_lo + travel };
+        layout.push((v, dirn, x0, dt, n));
         // Mode state integrated from well before the first sample (a settled cruise: the transient
         // from the start of motion has decayed, 1 s lead-in).
         let sub = 40usize;
@@ -423,11 +526,36 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
         sigmas.push(sigma);
         rates.push(rate);
     }
+    let mode_crb = mode.map(|(f, z)| {
+        let passes: Vec<(f64, usize, Box<dyn Fn(f64) -> f64 + '_>)> = layout
+            .iter()
+            .map(|&(v, dirn, x0, dt, n)| {
+                let st = &straight;
+                let a: Box<dyn Fn(f64) -> f64 + '_> = Box::new(move |tm: f64| {
+                    let x = x0 + dirn * v * tm;
+                    m_shape[1] * v * v * st[0].d2(x) + m_shape[2] * v * v * st[1].d2(x)
+                });
+                (dt, n, a)
+            })
+            .collect();
+        mode_crb(f, z, &passes, [m_shape[1], m_shape[2]], sigma)
+    });
     let sensors: Vec<SensorSpec> = sensors.into_iter().map(|s| SensorSpec { sigma, ..s }).collect();
     let _ = std::fs::remove_dir_all(dir);
     write_set(dir, "independent accelerometer passes (issue 19 generator)", &sensors, &runs);
     write_model(&dir.join("model.toml"), &["straightness_y", "straightness_z"]);
-    AccelTruth { hidden, mode, roll, density, sigmas, speeds: speeds.to_vec(), rates, samples, hidden_chi2: chi2 }
+    AccelTruth {
+        hidden,
+        mode,
+        roll,
+        density,
+        sigmas,
+        speeds: speeds.to_vec(),
+        rates,
+        samples,
+        hidden_chi2: chi2,
+        mode_crb,
+    }
 }
 
 // ------------------------------------------------------------------------------------------
