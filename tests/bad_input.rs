@@ -737,13 +737,10 @@ fn check(c: &Case) -> Option<String> {
     let before: Vec<String> = walk(dir);
     let d = dir.to_string_lossy();
     let argv: Vec<String> = c.args.iter().map(|a| a.replace("{dir}", &d)).collect();
-    let t0 = std::time::Instant::now();
-    let out = vmt().args(&argv).env("RAYON_NUM_THREADS", "1").output().unwrap();
-    let secs = t0.elapsed().as_secs_f64();
-    let err = String::from_utf8_lossy(&out.stderr);
+    let (code, err, cpu) = run_with_cpu(vmt().args(&argv).env("RAYON_NUM_THREADS", "1"));
     let mut problems = Vec::new();
-    if out.status.code() != Some(2) {
-        problems.push(format!("exit {:?} (expected 2)", out.status.code()));
+    if code != Some(2) {
+        problems.push(format!("exit {code:?} (expected 2)"));
     }
     if !c.blamed.is_empty() && !err.contains(&c.blamed) {
         problems.push(format!("message does not name `{}`", c.blamed));
@@ -759,11 +756,39 @@ fn check(c: &Case) -> Option<String> {
     if after != before {
         problems.push(format!("wrote {:?}", after.iter().filter(|f| !before.contains(f)).collect::<Vec<_>>()));
     }
-    // Every check happens before any simulation: a bad input fails fast.
-    if secs > 10.0 {
-        problems.push(format!("took {secs:.1} s"));
+    // Every check happens before any simulation: a bad input fails fast. CPU time of the child
+    // (user + system), not wall time: the slowest case takes 0.7 s alone, and 24 s of wall time on
+    // two cores shared with other work; a check that hangs (the pairwise sensor-name check did,
+    // quadratic in 100 000 names) takes minutes of CPU.
+    if cpu > 10.0 {
+        problems.push(format!("took {cpu:.1} s of CPU"));
     }
     (!problems.is_empty()).then(|| format!("{}: {} — stderr: {}", c.label, problems.join("; "), err.trim()))
+}
+
+/// Runs `cmd` to the end and returns its exit code, its standard error and the CPU seconds (user +
+/// system) it used, from `wait4` on that child alone (other tests' children run at the same time).
+fn run_with_cpu(cmd: &mut std::process::Command) -> (Option<i32>, String, f64) {
+    use std::io::Read;
+    use std::process::Stdio;
+    let mut child = cmd.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let mut stdout = child.stdout.take().unwrap();
+    let drain = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        let _ = stdout.read_to_end(&mut v);
+    });
+    let mut err = Vec::new();
+    child.stderr.take().unwrap().read_to_end(&mut err).unwrap();
+    drain.join().unwrap();
+    let mut status = 0;
+    // SAFETY: a zeroed rusage is a valid value of this plain C struct, and wait4 reaps this child
+    // (its pid, owned by `child`, whose Drop neither waits nor kills).
+    let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
+    let pid = unsafe { libc::wait4(child.id() as libc::pid_t, &mut status, 0, &mut ru) };
+    assert_eq!(pid, child.id() as libc::pid_t, "wait4 failed");
+    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    let code = libc::WIFEXITED(status).then(|| libc::WEXITSTATUS(status));
+    (code, String::from_utf8_lossy(&err).into_owned(), secs(ru.ru_utime) + secs(ru.ru_stime))
 }
 
 fn walk(dir: &Path) -> Vec<String> {
