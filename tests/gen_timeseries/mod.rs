@@ -299,15 +299,13 @@ fn mode_series(f: f64, z: f64, dt: f64, n: usize, a: &dyn Fn(f64) -> f64) -> Vec
     out
 }
 
+/// One pass for [`mode_crb`]: sample interval (s), number of samples, and the base acceleration
+/// a(τ) that drives the mode (m/s², τ in s from the first sample).
+type ModePass<'a> = (f64, usize, Box<dyn Fn(f64) -> f64 + 'a>);
+
 /// Cramér–Rao bound of (f, ζ) ([`AccelTruth::mode_crb`]) for passes `(dt, n, a)` seen by two
 /// channels with mode-shape components `shape` (y, z) and noise σ `sigma`.
-fn mode_crb(
-    f: f64,
-    z: f64,
-    passes: &[(f64, usize, Box<dyn Fn(f64) -> f64 + '_>)],
-    shape: [f64; 2],
-    sigma: f64,
-) -> (f64, f64) {
+fn mode_crb(f: f64, z: f64, passes: &[ModePass<'_>], shape: [f64; 2], sigma: f64) -> (f64, f64) {
     // Columns over all samples (pass by pass, y then z): ∂/∂f, ∂/∂ζ of the response, and the
     // nuisance: the response per channel (its gain) and a constant per (pass, channel).
     let (df, dz) = (f * 1e-4, z * 1e-3);
@@ -527,7 +525,7 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
         rates.push(rate);
     }
     let mode_crb = mode.map(|(f, z)| {
-        let passes: Vec<(f64, usize, Box<dyn Fn(f64) -> f64 + '_>)> = layout
+        let passes: Vec<ModePass<'_>> = layout
             .iter()
             .map(|&(v, dirn, x0, dt, n)| {
                 let st = &straight;
