@@ -768,6 +768,7 @@ fn check(c: &Case) -> Option<String> {
 
 /// Runs `cmd` to the end and returns its exit code, its standard error and the CPU seconds (user +
 /// system) it used, from `wait4` on that child alone (other tests' children run at the same time).
+#[allow(clippy::zombie_processes)] // reaped by wait4, which std's `wait` cannot report usage from
 fn run_with_cpu(cmd: &mut std::process::Command) -> (Option<i32>, String, f64) {
     use std::io::Read;
     use std::process::Stdio;
