@@ -1153,6 +1153,10 @@ fn bonferroni(r: &mut RankingEntry, scale: f64, alpha: f64) {
     }
 }
 
+/// Relative change below which a re-searched period counts as held ([`Reshape::apply`]): it
+/// drifts by < 1e-3 rad over a thousand periods.
+pub(crate) const PERIOD_HOLD: f64 = 1e-7;
+
 /// Most rounds of re-choosing the shapes with a periodic candidate whose period moves when it is
 /// searched again at the re-chosen shapes ([`Reshape::apply`]).
 pub(crate) const RESHAPE_ROUNDS: usize = 3;
@@ -1174,6 +1178,20 @@ struct Reshape<'s, 'a> {
 }
 
 impl Reshape<'_, '_> {
+    /// The candidate ranked against the fit `fs` (its non-zero columns as the base, σ of the
+    /// significance).
+    fn rank_against(
+        &self,
+        fs: &FitState,
+        cand: &Candidate,
+    ) -> Result<vmt_estimators::modelcheck::Diagnosis, vmt_estimators::modelcheck::ModelCheckError> {
+        let base: Vec<Vec<f64>> = fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
+        let sigma = Sigma::PerSample(self.sig.to_vec());
+        let input =
+            vmt_estimators::modelcheck::ResidualInput { residual: &fs.residual, sigma: &sigma, base_columns: &base };
+        rank_candidates(&input, std::slice::from_ref(cand), self.config)
+    }
+
     /// Shapes re-chosen for one candidate model: the orders of the model's fitted error motions
     /// re-chosen by BIC with the candidate's columns (at its fitted hyper-parameters) in the model
     /// ([`rechoose_orders`], capped below a periodic candidate's period), recorded in
@@ -1230,23 +1248,15 @@ impl Reshape<'_, '_> {
                 (o, None)
             };
             let fs_c = fit_model_held(st, self.model, self.fit_sigma, w, &order_of, &f.fs)?;
-            let base: Vec<Vec<f64>> = fs_c.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
-            let sigma = Sigma::PerSample(self.sig.to_vec());
-            let input = vmt_estimators::modelcheck::ResidualInput {
-                residual: &fs_c.residual,
-                sigma: &sigma,
-                base_columns: &base,
-            };
-            let d = match rank_candidates(&input, std::slice::from_ref(&cand), self.config) {
+            let d = match self.rank_against(&fs_c, &cand) {
                 Ok(d) => d,
                 Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) if best.is_none() => return Ok(()),
                 Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) => break,
                 Err(e) => return Err(e.to_string()),
             };
             let (Some(r2), Some(fit)) = (d.ranking.into_iter().next(), d.fits.into_iter().next()) else { break };
-            // A period held to 1e-7 drifts by < 1e-3 rad over a thousand periods.
             let moved = match (r2.params.get("period"), period) {
-                (Some(a), Some(b)) => (a / b - 1.0).abs() > 1e-7,
+                (Some(a), Some(b)) => (a / b - 1.0).abs() > PERIOD_HOLD,
                 _ => false,
             };
             let next_period = r2.params.get("period").copied();
@@ -1264,20 +1274,13 @@ impl Reshape<'_, '_> {
         // The entry at the period whose columns chose these orders (its search against the
         // re-chosen shapes can stop beside it: the dip of a strong lead is narrow).
         if let (Some(p), Some(got)) = (used, r2.params.get("period").copied()) {
-            if (got / p - 1.0).abs() > 1e-7 {
+            if (got / p - 1.0).abs() > PERIOD_HOLD {
                 let mut held = cand;
                 for h in held.hyper_parameters.iter_mut().filter(|h| h.name == "period") {
                     h.grid = vec![p];
                     h.refine = false;
                 }
-                let base: Vec<Vec<f64>> = fs_c.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
-                let sigma = Sigma::PerSample(self.sig.to_vec());
-                let input = vmt_estimators::modelcheck::ResidualInput {
-                    residual: &fs_c.residual,
-                    sigma: &sigma,
-                    base_columns: &base,
-                };
-                if let Ok(d) = rank_candidates(&input, std::slice::from_ref(&held), self.config) {
+                if let Ok(d) = self.rank_against(&fs_c, &held) {
                     if let Some(e) = d.ranking.into_iter().next() {
                         r2 = e;
                     }
