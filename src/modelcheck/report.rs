@@ -1153,14 +1153,6 @@ fn bonferroni(r: &mut RankingEntry, scale: f64, alpha: f64) {
     }
 }
 
-/// Relative change below which a re-searched period counts as held ([`Reshape::apply`]): it
-/// drifts by < 1e-3 rad over a thousand periods.
-pub(crate) const PERIOD_HOLD: f64 = 1e-7;
-
-/// Most rounds of re-choosing the shapes with a periodic candidate whose period moves when it is
-/// searched again at the re-chosen shapes ([`Reshape::apply`]).
-pub(crate) const RESHAPE_ROUNDS: usize = 3;
-
 /// What `diagnose` needs to re-choose the shapes with one candidate in the model.
 struct Reshape<'s, 'a> {
     st: &'s Stack<'a>,
@@ -1222,72 +1214,26 @@ impl Reshape<'_, '_> {
             }
             _ => free.clone(),
         };
-        // The candidate's hyper-parameters were found against the model as ranked (for a lead: the
-        // capped shapes, which bias its period when they cannot follow the positioning error); at
-        // re-chosen shapes the candidate is searched again, and the orders re-chosen with its new
-        // columns until its hyper-parameters hold (at most RESHAPE_ROUNDS).
-        let mut extra = cols.to_vec();
-        let mut period = period_range(name).and(r.params.get("period").copied());
-        let mut from = start.clone();
-        // The round of the lowest BIC (σ unknown) of candidate + re-chosen shapes, with the
-        // period its columns had.
-        let mut best: Option<(Vec<(EffectName, u32)>, f64, FitState, RankingEntry, Option<f64>)> = None;
-        for round in 0..RESHAPE_ROUNDS {
-            let (orders, bic_c) = rechoose_orders(st, self.model, &f.fs, w, &extra, k_hyper, period, &from)?;
-            if round == 0 {
-                r.shape_orders = orders.iter().map(|(m, o)| (m.as_str().to_string(), *o)).collect();
-                if orders == start {
-                    return Ok(());
-                }
-            }
-            let order_of = |_: usize, me: &ModelEffect| {
-                let n = me.effect.name;
-                let o = orders.iter().find(|(m, _)| *m == n).map(|(_, o)| *o).unwrap_or_else(|| {
-                    f.fs.shapes.iter().find(|c| c.name == n).map_or(me.order.unwrap_or(DEFAULT_ORDER), |c| c.order)
-                });
-                (o, None)
-            };
-            let fs_c = fit_model_held(st, self.model, self.fit_sigma, w, &order_of, &f.fs)?;
-            let d = match self.rank_against(&fs_c, &cand) {
-                Ok(d) => d,
-                Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) if best.is_none() => return Ok(()),
-                Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) => break,
-                Err(e) => return Err(e.to_string()),
-            };
-            let (Some(r2), Some(fit)) = (d.ranking.into_iter().next(), d.fits.into_iter().next()) else { break };
-            let moved = match (r2.params.get("period"), period) {
-                (Some(a), Some(b)) => (a / b - 1.0).abs() > PERIOD_HOLD,
-                _ => false,
-            };
-            let next_period = r2.params.get("period").copied();
-            if best.as_ref().is_none_or(|b| bic_c < b.1) {
-                best = Some((orders.clone(), bic_c, fs_c, r2, period));
-            }
-            if !moved {
-                break;
-            }
-            extra = fit.columns;
-            period = next_period;
-            from = orders;
-        }
-        let Some((orders, bic_c, fs_c, mut r2, used)) = best else { return Ok(()) };
-        // The entry at the period whose columns chose these orders (its search against the
-        // re-chosen shapes can stop beside it: the dip of a strong lead is narrow).
-        if let (Some(p), Some(got)) = (used, r2.params.get("period").copied()) {
-            if (got / p - 1.0).abs() > PERIOD_HOLD {
-                let mut held = cand;
-                for h in held.hyper_parameters.iter_mut().filter(|h| h.name == "period") {
-                    h.grid = vec![p];
-                    h.refine = false;
-                }
-                if let Ok(d) = self.rank_against(&fs_c, &held) {
-                    if let Some(e) = d.ranking.into_iter().next() {
-                        r2 = e;
-                    }
-                }
-            }
-        }
+        let period = period_range(name).and(r.params.get("period").copied());
+        let (orders, bic_c) = rechoose_orders(st, self.model, &f.fs, w, cols, k_hyper, period, &start)?;
         r.shape_orders = orders.iter().map(|(m, o)| (m.as_str().to_string(), *o)).collect();
+        if orders == start {
+            return Ok(());
+        }
+        let order_of = |_: usize, me: &ModelEffect| {
+            let n = me.effect.name;
+            let o = orders.iter().find(|(m, _)| *m == n).map(|(_, o)| *o).unwrap_or_else(|| {
+                f.fs.shapes.iter().find(|c| c.name == n).map_or(me.order.unwrap_or(DEFAULT_ORDER), |c| c.order)
+            });
+            (o, None)
+        };
+        let fs_c = fit_model_held(st, self.model, self.fit_sigma, w, &order_of, &f.fs)?;
+        let d = match self.rank_against(&fs_c, &cand) {
+            Ok(d) => d,
+            Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) => return Ok(()),
+            Err(e) => return Err(e.to_string()),
+        };
+        let Some(mut r2) = d.ranking.into_iter().next() else { return Ok(()) };
         let nonzero = |fs: &FitState| fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
         bonferroni(&mut r2, self.total as f64, self.config.family_alpha);
         // What the first ranking found among the candidates stands: explained away by a better one,
