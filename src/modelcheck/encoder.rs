@@ -93,6 +93,52 @@ pub(crate) fn close_loop(st: &Stack, col: &mut [f64]) {
     }
 }
 
+/// [`close_loop`] for a wave of period `p` (m) in the scale's reading — the sine and cosine
+/// columns (`sin`, `cos`) of an interpolation error, s·sin θ and s·cos θ with θ = 2πx/p — whose
+/// frequency in time, ω = 2πv/p, a log at speed samples far below its Nyquist rate (a 20 µm
+/// period at 0.1 m/s is 5 kHz), so that [`first_order_lag`] of the logged samples would lag an
+/// alias. The loop's response is taken in the steady state of the local speed v (the central
+/// difference of the transmission channel's reading):
+///
+/// ```text
+/// L_kv[e^{iθ}] = H·e^{iθ},  H = kv/(kv + iω)
+/// L[sin θ] = a·sin θ + b·cos θ,  L[cos θ] = a·cos θ − b·sin θ,  a = kv²/(kv² + ω²), b = −kv·ω/(kv² + ω²)
+/// ```
+///
+/// and subtracted on every following channel closed by the scale (kv = [`Stack::loop_kv`]; ∞:
+/// the identity, as [`close_loop`]). Exact for a constant speed in continuous time; a servo that
+/// samples the scale at its own rate aliases such a wave too, which no log column can show.
+pub(crate) fn close_loop_wave(st: &Stack, p: f64, sin: &mut [f64], cos: &mut [f64]) {
+    let starts: Vec<usize> = st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect();
+    let kv = st.loop_kv;
+    for (j, c) in st.chans.iter().enumerate() {
+        if !matches!(c.encoder, Some(EncoderRole::Following { closed: true, .. })) {
+            continue;
+        }
+        let partner = st.chans.iter().position(|q| {
+            q.run == c.run && matches!(q.encoder, Some(EncoderRole::Transmission { .. })) && q.y.len() == c.y.len()
+        });
+        let Some(k) = partner else { continue };
+        let (tk, xk) = (&st.chans[k].t, &st.chans[k].x);
+        let m = c.y.len();
+        for i in 0..m {
+            let (s, co) = (sin[starts[k] + i], cos[starts[k] + i]);
+            let (a, b) = if kv.is_finite() && m > 1 {
+                let (i0, i1) = (i.saturating_sub(1), (i + 1).min(m - 1));
+                let dt = tk[i1] - tk[i0];
+                let v = if dt > 0.0 { (xk[i1] - xk[i0]) / dt } else { 0.0 };
+                let om = TWO_PI * v / p;
+                let d = kv * kv + om * om;
+                (kv * kv / d, -kv * om / d)
+            } else {
+                (1.0, 0.0)
+            };
+            sin[starts[j] + i] -= a * s + b * co;
+            cos[starts[j] + i] -= a * co - b * s;
+        }
+    }
+}
+
 /// Whether any channel of `chans` is a following channel closed by the scale ([`close_loop`]).
 pub(crate) fn has_closed_loop(chans: &[Channel]) -> bool {
     chans.iter().any(|c| matches!(c.encoder, Some(EncoderRole::Following { closed: true, .. })))

@@ -974,6 +974,11 @@ fn fit_model_orders(
                         ((0..41).map(|k| v * (0.95 + 0.0025 * k as f64)).collect(), true)
                     } else if v.is_finite() {
                         (log_grid(v / 10.0, v * 10.0, 21), true)
+                    } else if t.name == EffectName::InterpolationError {
+                        // A signal period not stated: chosen from the data (`interpolation_periods`).
+                        interpolation_periods(st, &r0, w)
+                            .map(|(g, _)| (g, true))
+                            .unwrap_or_else(|| hyper_grid(st, t.name, t.shape.hypers[hi]))
                     } else {
                         hyper_grid(st, t.name, t.shape.hypers[hi])
                     }

@@ -811,6 +811,11 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     let st = &f.st;
     // A resonance over fitted translations is driven by the guideway the base fit shows.
     let st_mode = fitted_excitation(st, &f.fs).map(|ex| st.with_excitation(ex));
+    let w_sig: Vec<f64> = per.iter().map(|s| 1.0 / s).collect();
+    let interp_scan = names
+        .contains(&EffectName::InterpolationError)
+        .then(|| interpolation_periods(st, &f.fs.residual, &w_sig))
+        .flatten();
     let make = |n: EffectName| -> Candidate {
         {
             let st = match (&st_mode, n == EffectName::Resonance) {
@@ -832,6 +837,18 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
                 let (grid, refine) = hyper_grid(st, n, hname);
                 c.hyper_parameters.push(HyperParameter { name: hname.to_string(), grid, refine });
             }
+            // An interpolation error's period is chosen from the residual (the catalogue's periods
+            // miss a real scale's by more than its likelihood peak is wide).
+            let c = match (n, &interp_scan) {
+                (EffectName::InterpolationError, Some((periods, independent))) => {
+                    for h in c.hyper_parameters.iter_mut() {
+                        h.grid.clone_from(periods);
+                        h.refine = true;
+                    }
+                    c.chosen_from(*independent)
+                }
+                _ => c,
+            };
             let sh3 = sh.clone();
             let mut start = EffectParams::default_for(n);
             if n == EffectName::Stribeck {

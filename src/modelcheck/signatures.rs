@@ -906,7 +906,11 @@ pub(crate) fn legendre_to_monomials(first: u32, c: &[f64], range: (f64, f64)) ->
 pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>> {
     let mut cols = open_loop_columns(st, name, sh, h);
     if has_closed_loop(st.chans) {
-        cols.iter_mut().for_each(|c| close_loop(st, c));
+        match (name, cols.as_mut_slice()) {
+            // A wave in the scale's reading, faster than the log samples it (`close_loop_wave`).
+            (EffectName::InterpolationError, [sin, cos]) => close_loop_wave(st, h[0], sin, cos),
+            _ => cols.iter_mut().for_each(|c| close_loop(st, c)),
+        }
     }
     cols
 }
@@ -1158,6 +1162,35 @@ pub(crate) fn period_aliases(st: &Stack, p: f64, range: (f64, f64)) -> Vec<f64> 
     out
 }
 
+/// The signal periods (m) at which `diagnose` evaluates an interpolation-error candidate, chosen
+/// from the weighted residual `r` (weights `w` = 1/σ) of the channels that see it, with the number
+/// of independent periods of the catalogue range they were chosen from (the look-elsewhere count).
+/// At speed a log samples a 2–200 µm signal period far below its Nyquist rate, so a fixed grid of
+/// catalogue periods cannot hit its likelihood peak (about p/(travel) wide: 1/40 000 for 10 µm on
+/// 0.4 m): the period is found where crawls and reversals sample it densely, then refined over
+/// every sample (`vmt_estimators::modelcheck::sparse_frequency_scan`), at the scale's reading. None
+/// when no stretch of the data samples any period of the range densely.
+pub(crate) fn interpolation_periods(st: &Stack, r: &[f64], w: &[f64]) -> Option<(Vec<f64>, usize)> {
+    let (lo, hi) = period_range(EffectName::InterpolationError)?;
+    let (mut x, mut rs, mut ws, mut segments) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut k = 0;
+    for c in st.chans {
+        let n = c.y.len();
+        if c.s_chain() != 0.0 && k + n <= r.len() && k + n <= w.len() {
+            let a = x.len();
+            x.extend_from_slice(&c.x);
+            rs.extend_from_slice(&r[k..k + n]);
+            ws.extend_from_slice(&w[k..k + n]);
+            segments.push((a, x.len()));
+        }
+        k += n;
+    }
+    let scan = sparse_frequency_scan(&x, &rs, &ws, &segments, (1.0 / hi, 1.0 / lo))?;
+    let mut periods: Vec<f64> = scan.frequencies.iter().map(|f| 1.0 / f).collect();
+    periods.sort_by(f64::total_cmp);
+    (!periods.is_empty()).then_some((periods, scan.independent))
+}
+
 /// The shortest period (m) these positions resolve ([`period_resolvable`]), to name in a note and
 /// in the advice; None when no stretch holds three positions.
 pub(crate) fn shortest_resolvable_period(st: &Stack) -> Option<f64> {
@@ -1172,6 +1205,16 @@ pub(crate) fn shortest_resolvable_period(st: &Stack) -> Option<f64> {
 /// The prediction of a known (not fitted) effect at every sample, passed through a closed
 /// position loop onto its following channels ([`close_loop`]).
 pub(crate) fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
+    if let (EffectParams::InterpolationError(ie), true) = (&e.params, has_closed_loop(st.chans)) {
+        // A·sin(θ + φ) = A·cos φ·sin θ + A·sin φ·cos θ, through the loop as a wave (`close_loop_wave`).
+        let (mut sin, mut cos) = st.col_pair(|c, i| {
+            let (a, b) = (TWO_PI * c.x[i] / ie.period).sin_cos();
+            (c.s_chain() * a, c.s_chain() * b)
+        });
+        close_loop_wave(st, ie.period, &mut sin, &mut cos);
+        let (sp, cp) = ie.phase.sin_cos();
+        return sin.iter().zip(&cos).map(|(a, b)| ie.amplitude * (cp * a + sp * b)).collect();
+    }
     let mut col = open_loop_prediction(st, e);
     if has_closed_loop(st.chans) {
         close_loop(st, &mut col);

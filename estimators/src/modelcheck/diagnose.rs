@@ -79,6 +79,10 @@ pub struct Candidate<'a> {
     pub describe: Option<Box<DescribeFn<'a>>>,
     /// Screened search ([`Candidate::with_screen`]): the number of grid points evaluated exactly.
     pub screen: Option<usize>,
+    /// A grid chosen from the data ([`Candidate::chosen_from`]): the number of independent
+    /// hyper-parameter values it was chosen from, counted instead of the grid's size in the
+    /// look-elsewhere correction of [`CandidateFit::p_value`].
+    pub chosen_from: Option<usize>,
 }
 
 impl<'a> Candidate<'a> {
@@ -95,6 +99,7 @@ impl<'a> Candidate<'a> {
             signature: Box::new(signature),
             describe: None,
             screen: None,
+            chosen_from: None,
         }
     }
 
@@ -120,9 +125,19 @@ impl<'a> Candidate<'a> {
         self
     }
 
-    /// Number of searched hyper-parameters (grids with more than one value).
+    /// The grid was chosen from the data out of `independent` independent values (a period found
+    /// by a periodogram over a wide range, then evaluated exactly at its best peaks): the p-value
+    /// counts `independent` searched values, not the grid's few (the look-elsewhere effect of the
+    /// search that chose them).
+    pub fn chosen_from(mut self, independent: usize) -> Self {
+        self.chosen_from = Some(independent.max(1));
+        self
+    }
+
+    /// Number of searched hyper-parameters (grids with more than one value; every one of a grid
+    /// chosen from the data).
     fn searched(&self) -> usize {
-        self.hyper_parameters.iter().filter(|h| h.grid.len() > 1).count()
+        self.hyper_parameters.iter().filter(|h| h.grid.len() > 1 || self.chosen_from.is_some()).count()
     }
 }
 
@@ -582,7 +597,10 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
     let stat_new: f64 = fit.residual.iter().map(|r| r * r).sum();
     let fitted_change: Vec<f64> = p.r_t.iter().zip(&fit.residual).map(|(rt, r)| rt - r).collect();
     let k = cand.coefficient_names.len() + cand.searched();
-    let searched: usize = cand.hyper_parameters.iter().filter(|h| h.grid.len() > 1).map(|h| h.grid.len()).product();
+    let searched: usize = match cand.chosen_from {
+        Some(m) => m,
+        None => cand.hyper_parameters.iter().filter(|h| h.grid.len() > 1).map(|h| h.grid.len()).product(),
+    };
     let p_value = search_p_value(p, stat_new, candidate_basis(p, &cols).q.len(), p.base.rank(), searched);
     let coefs = &fit.coefficients[..];
     let coefficients: BTreeMap<String, f64> =

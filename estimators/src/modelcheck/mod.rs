@@ -35,7 +35,10 @@ pub use diagnose::{
 pub use lsq::{fit_signature, solve_normal, LinearFit};
 pub use ortho::{greedy_rss, lstsq_qr, nested_rss, NestedRss, OrthoBase};
 pub use refine::{refine_projected, ProjectedResidualFn, Refined};
-pub use spectrum::{amplitude_spectrum, frequency_grid, ls_periodogram, AmplitudeSpectrum, Periodogram};
+pub use spectrum::{
+    amplitude_spectrum, frequency_grid, ls_periodogram, sinusoid_reductions, sparse_frequency_scan, AmplitudeSpectrum,
+    FrequencyScan, Periodogram,
+};
 pub use stats::{
     autocorrelation, bin_by_edges, bin_by_label, chi_square_isf, chi_square_sf, estimate_noise_sigma, fit_percent,
     ljung_box, normalized_rms, pooled_group_scatter, rms, uniform_edges, Autocorrelation, BinnedResidual, LabelBin,
