@@ -474,12 +474,7 @@ fn build_layout(model: &Model, readings: &[Reading]) -> Layout {
 }
 
 /// Unweighted observation row of one reading (length `layout.n`).
-fn observation_row(
-    model: &Model,
-    layout: &Layout,
-    r: &Reading,
-    buf: &mut Vec<f64>,
-) -> Result<Vec<f64>, OutsideMotion> {
+fn observation_row(model: &Model, layout: &Layout, r: &Reading, buf: &mut Vec<f64>) -> Result<Vec<f64>, OutsideMotion> {
     let mut row = vec![0.0; layout.n];
     let na = model.axes.len();
     for j in 0..na {
@@ -494,13 +489,11 @@ fn observation_row(
             if len == 0 {
                 continue;
             }
-            model.axes[j].motions[k]
-                .eval(r.q[j], buf)
-                .map_err(|source| OutsideMotion {
-                    axis: model.axes[j].name,
-                    motion: motion_name(model.axes[j].name, k),
-                    source,
-                })?;
+            model.axes[j].motions[k].eval(r.q[j], buf).map_err(|source| OutsideMotion {
+                axis: model.axes[j].name,
+                motion: motion_name(model.axes[j].name, k),
+                source,
+            })?;
             // translation: u_k; rotation: (ê_k × ρ)·u = ê_k·(ρ × u)
             let s = if k < 3 { r.direction[k] } else { rxu[k - 3] };
             for (t, v) in buf.iter().enumerate() {

@@ -896,9 +896,11 @@ pub fn plan_procedure(model: &AxisModel, spec: &ProcedureSpec, seed: u64) -> Vec
                 .collect()
         }
         ProcedureSpec::Positioning(p) => {
-            let targets = p.targets.clone().unwrap_or_else(|| irregular_targets(p.start, p.end, p.n_targets, seed, &p.name));
+            let targets =
+                p.targets.clone().unwrap_or_else(|| irregular_targets(p.start, p.end, p.n_targets, seed, &p.name));
             let a = p.accel.unwrap_or(model.max_accel);
-            let cycle = Cycle { runs: p.runs, feed: p.feed, accel: a, dwell: p.dwell, average: p.average, rate: p.rate };
+            let cycle =
+                Cycle { runs: p.runs, feed: p.feed, accel: a, dwell: p.dwell, average: p.average, rate: p.rate };
             vec![positioning_cycle(&p.name, &targets, &cycle, p.overrun, &p.sensors)]
         }
         ProcedureSpec::Crawl { name, feeds, start, duration, rate, settle, direction, .. } => feeds
@@ -1163,7 +1165,10 @@ mod tests {
         // minus 1 s settle leaves 0.35 s.
         assert_eq!(friction_sweep_window(1e-4, 0.1, 0.9, 2.0, 1.0, 0.5, 1000.0).unwrap(), 0.5);
         assert!((friction_sweep_window(0.5, 0.1, 0.9, 2.0, 1.0, 0.5, 1000.0).unwrap() - 0.35).abs() < 1e-12);
-        assert!(friction_sweep_window(0.5, 0.1, 0.5, 2.0, 1.0, 0.5, 1000.0).unwrap_err().to_string().contains("10 samples"));
+        assert!(friction_sweep_window(0.5, 0.1, 0.5, 2.0, 1.0, 0.5, 1000.0)
+            .unwrap_err()
+            .to_string()
+            .contains("10 samples"));
         assert!(friction_sweep_window(0.1, 0.1, 0.9, 2.0, f64::NAN, 0.5, 1000.0).is_err());
     }
 }

@@ -173,21 +173,23 @@ fn thermal_drift_carries_over_from_one_run_to_the_next_on_the_session_clock() {
         feedback: FeedbackErrors { thermal_drift: Some(drift.clone()), ..Default::default() },
         ..Default::default()
     };
-    let spec = |name: &str| ProcedureSpec::Positioning(PositioningSpec {
-        name: name.into(),
-        start: 0.2,
-        end: 0.8,
-        n_targets: 3,
-        targets: Some(vec![0.2, 0.5, 0.8]),
-        runs: 1,
-        feed: 0.2,
-        dwell: 0.3,
-        average: 0.1,
-        rate: 500.0,
-        overrun: 0.002,
-        accel: None,
-        sensors: vec!["laser".into()],
-    });
+    let spec = |name: &str| {
+        ProcedureSpec::Positioning(PositioningSpec {
+            name: name.into(),
+            start: 0.2,
+            end: 0.8,
+            n_targets: 3,
+            targets: Some(vec![0.2, 0.5, 0.8]),
+            runs: 1,
+            feed: 0.2,
+            dwell: 0.3,
+            average: 0.1,
+            rate: 500.0,
+            overrun: 0.002,
+            accel: None,
+            sensors: vec!["laser".into()],
+        })
+    };
     let plans: Vec<_> = ["first", "second"].iter().flat_map(|n| plan_procedure(&model, &spec(n), 1)).collect();
     let starts = session_schedule(&plans, 0.0);
     // Back to back: the second starts when the first has ended.

@@ -139,7 +139,10 @@ impl Vary {
                     values.len()
                 )));
             }
-            VaryKey::Scenario { path: path.to_string(), parts: parse_key_path(path).map_err(|e| usage(&e.to_string()))? }
+            VaryKey::Scenario {
+                path: path.to_string(),
+                parts: parse_key_path(path).map_err(|e| usage(&e.to_string()))?,
+            }
         };
         Ok(Vary { key, values })
     }
@@ -450,11 +453,7 @@ pub fn sensitivity(rows: &[TrialRow], names: &[String]) -> Vec<SensitivityRow> {
 /// The scenario text with the number at `parts` replaced by `v`. The key must be in the file (a new
 /// key would be ignored where the format accepts unknown keys, so a typo would pass silently); an
 /// integer key takes only integral values.
-pub fn set_scenario_number(
-    text: &str,
-    parts: &[(String, Option<usize>)],
-    v: f64,
-) -> Result<String, KeyPathError> {
+pub fn set_scenario_number(text: &str, parts: &[(String, Option<usize>)], v: f64) -> Result<String, KeyPathError> {
     let mut root: toml::Table = toml::from_str(text).map_err(KeyPathError::Toml)?;
     let mut node: &mut toml::Value =
         root.get_mut(&parts[0].0).ok_or_else(|| KeyPathError::NoKey(parts[0].0.clone()))?;
@@ -469,16 +468,15 @@ pub fn set_scenario_number(
         }
         if let Some(j) = index {
             walked += &format!("[{j}]");
-            node = node.as_array_mut().and_then(|a| a.get_mut(*j)).ok_or_else(|| KeyPathError::NoItem(walked.clone()))?;
+            node =
+                node.as_array_mut().and_then(|a| a.get_mut(*j)).ok_or_else(|| KeyPathError::NoItem(walked.clone()))?;
         }
     }
     *node = match node {
         toml::Value::Float(_) => toml::Value::Float(v),
         toml::Value::Integer(_) if v.fract() == 0.0 && v.abs() < 9.0e15 => toml::Value::Integer(v as i64),
         toml::Value::Integer(_) => return Err(KeyPathError::NotInteger { path: walked, value: v }),
-        other => {
-            return Err(KeyPathError::NotNumber { path: walked, what: crate::error::describe_value(other) })
-        }
+        other => return Err(KeyPathError::NotNumber { path: walked, what: crate::error::describe_value(other) }),
     };
     Ok(toml::to_string(&root)?)
 }

@@ -819,7 +819,8 @@ pub fn encoder_set_sized(dir: &Path, seed: u64, hidden: EncoderHidden, samples: 
         sigma,
         extra: if loop_key == name { "closes_loop = true\n".into() } else { String::new() },
     };
-    let sensors = vec![encoder("scale", "encoder_linear", sigma_scale), encoder("motor", "encoder_rotary", sigma_motor)];
+    let sensors =
+        vec![encoder("scale", "encoder_linear", sigma_scale), encoder("motor", "encoder_rotary", sigma_motor)];
     let _ = std::fs::remove_dir_all(dir);
     write_set(dir, "independent encoder logs of a ball-screw axis (issue 19 generator)", &sensors, &runs);
     let model: &[&str] = match hidden {
