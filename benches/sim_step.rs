@@ -12,7 +12,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use std::time::Instant;
 use vmt_sim::axis_sim::{AxisSim, AxisTruth, GuideFriction};
 use vmt_sim::drive::{BallScrewConfig, DriveConfig};
-use vmt_sim::friction::LugreParams;
+use vmt_sim::friction::{LugreParams, StribeckLaw};
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::machine::{AxisConfig, AxisModel, Fidelity};
 use vmt_sim::motion::Command;
@@ -37,7 +37,11 @@ fn cases() -> Vec<Case> {
         pitch: Profile::harmonics(vec![h(1e-5, 0.9)]),
         yaw: Profile::harmonics(vec![h(1e-5, 1.1)]),
     });
-    let lugre = LugreParams { sigma0: 1e8, sigma1: 2e4, sigma2: 800.0, fc: 150.0, fs: 250.0, vs: 1e-3, delta: 2.0 };
+    let lugre = LugreParams {
+        sigma0: 1e8,
+        sigma1: 2e4,
+        steady: StribeckLaw { fc: 150.0, fs: 250.0, vs: 1e-3, delta: 2.0, fv: 800.0 },
+    };
     vec![
         Case { name: "linear motor, six error motions", cfg: AxisConfig::default(), truth: six, feed: 0.1 },
         Case {

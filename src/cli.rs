@@ -898,7 +898,7 @@ pub fn straightness(
     json: bool,
     units: &str,
 ) -> Result<i32, VmtError> {
-    let method = parse_method(method).map_err(VmtError::Usage)?;
+    let method = parse_method(method).map_err(|e| VmtError::Usage(e.to_string()))?;
     let units = parse_units(units)?;
     let set = measurement::read(path)?;
     let names: Vec<String> = if sensors.is_empty() {
@@ -1278,7 +1278,7 @@ fn print_profiles(profiles: &[vmt_estimators::laser_ls::ProfileEstimate]) {
 /// RMS and max difference per error motion.
 pub fn score(truth: &Path, estimate: &Path, json: bool) -> Result<i32, VmtError> {
     let rows = crate::byo::score_profiles(&measurement::read_profiles(truth)?, &measurement::read_profiles(estimate)?)
-        .map_err(|e| VmtError::bad(estimate, "positions", &e))?;
+        .map_err(|e| VmtError::bad(estimate, "positions", e.to_string()))?;
     if rows.is_empty() {
         return Err(VmtError::bad(estimate, "line 1 (header)", "no error-motion column in common with the truth"));
     }

@@ -1,7 +1,8 @@
 //! vmt: a virtual machine tool. The root crate in layers, data flowing forward:
 //!
 //! ```text
-//! format/    FORMAT readers and writers (error, units, measurement, model)       plain data
+//! format/    FORMAT readers and writers (error, units, measurement, model,       plain data
+//!            output: the one atomic directory writer)
 //! scenario/  Scenario, load, chain building; spec.rs: EstimatorSpec             uses format
 //! modelcheck/ compare / diagnose / add                                           uses format
 //! workflow/  simulate → truth view + measurement set → estimate (one adapter      uses scenario, modelcheck, format
@@ -35,10 +36,9 @@ pub mod fuzz;
     rustdoc::private_intra_doc_links
 )]
 pub mod modelcheck;
-pub mod output;
 pub mod scenario;
 pub mod workflow;
 
-pub use format::{error, measurement, model, units};
+pub use format::{error, measurement, model, output, units};
 pub use workflow::estimate::straightness;
 pub use workflow::{byo, estimate, report, simulate, study};

@@ -159,19 +159,27 @@ fn accelerometer_generator_writes_a_readable_set() {
 // Rates over draws (the issue's "must show"). Each prints its rates; run with
 // `cargo test --release --test tests model_check_timeseries:: -- --ignored --nocapture`.
 
-fn accel_rates(hidden: AccelHidden, draws: u64, add: bool) -> Vec<(AccelTruth, Outcome)> {
-    let root = workdir(&format!("acc{hidden:?}"));
+/// The loop on `draws` sets of a generator (`make(dir, draw)` writes one into `dir` and returns its
+/// truth) below the work folder `tag`, in parallel, one line per draw printed:
+/// `{label} draw {seed}: {describe(truth)}; …`.
+fn loop_rates<T: Send>(
+    tag: &str,
+    label: &str,
+    draws: u64,
+    add: bool,
+    make: impl Fn(&Path, u64) -> T + Sync,
+    describe: impl Fn(&T) -> String + Sync,
+) -> Vec<(T, Outcome)> {
+    let root = workdir(tag);
     (0..draws)
         .into_par_iter()
         .map(|seed| {
             let dir = root.join(format!("d{seed}"));
-            let t = accel_set(&dir, 1000 + seed, hidden, 200.0);
+            let t = make(&dir, seed);
             let o = run_loop(&dir, add);
             eprintln!(
-                "{hidden:?} draw {seed}: {} samples, ρ {:.2} µg/√Hz, mode {:?}; nrms {:.2} first {:?} after {:?} ({:.1} s) {}",
-                t.samples,
-                t.density / G * 1e6,
-                t.mode,
+                "{label} draw {seed}: {}; nrms {:.2} first {:?} after {:?} ({:.1} s) {}",
+                describe(&t),
                 o.nrms_before,
                 o.first.as_ref().map(|f| (&f.0, &f.1)),
                 o.nrms_after,
@@ -183,27 +191,26 @@ fn accel_rates(hidden: AccelHidden, draws: u64, add: bool) -> Vec<(AccelTruth, O
         .collect()
 }
 
+fn accel_rates(hidden: AccelHidden, draws: u64, add: bool) -> Vec<(AccelTruth, Outcome)> {
+    loop_rates(
+        &format!("acc{hidden:?}"),
+        &format!("{hidden:?}"),
+        draws,
+        add,
+        |dir, seed| accel_set(dir, 1000 + seed, hidden, 200.0),
+        |t| format!("{} samples, ρ {:.2} µg/√Hz, mode {:?}", t.samples, t.density / G * 1e6, t.mode),
+    )
+}
+
 fn encoder_rates(hidden: EncoderHidden, draws: u64, add: bool) -> Vec<(EncoderTruth, Outcome)> {
-    let root = workdir(&format!("enc{hidden:?}"));
-    (0..draws)
-        .into_par_iter()
-        .map(|seed| {
-            let dir = root.join(format!("d{seed}"));
-            let t = encoder_set(&dir, 2000 + seed, hidden);
-            let o = run_loop(&dir, add);
-            eprintln!(
-                "{hidden:?} draw {seed}: {} samples, {:?}; nrms {:.2} first {:?} after {:?} ({:.1} s) {}",
-                t.samples,
-                t.feedback,
-                o.nrms_before,
-                o.first.as_ref().map(|f| (&f.0, &f.1)),
-                o.nrms_after,
-                o.seconds,
-                o.error.clone().unwrap_or_default()
-            );
-            (t, o)
-        })
-        .collect()
+    loop_rates(
+        &format!("enc{hidden:?}"),
+        &format!("{hidden:?}"),
+        draws,
+        add,
+        |dir, seed| encoder_set(dir, 2000 + seed, hidden),
+        |t| format!("{} samples, {:?}", t.samples, t.feedback),
+    )
 }
 
 /// The complete accelerometer model (straightness y and z fitted, nothing else present) on 3
@@ -337,18 +344,6 @@ fn hidden_accel(h: AccelHidden, expect: &str) {
         rate(named, n as usize)
     );
     assert!(rate(named, n as usize) >= 95.0 && rate(low, n as usize) >= 95.0 && rate(fitted_res, n_res) >= 95.0);
-}
-
-#[test]
-#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
-fn accel_hidden_resonance() {
-    hidden_accel(AccelHidden::Resonance, "resonance");
-}
-
-#[test]
-#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
-fn accel_hidden_roll() {
-    hidden_accel(AccelHidden::Roll, "gravity_tilt");
 }
 
 /// Complete encoder models (positioning + servo_lag): share with any `significant` claim.
@@ -489,28 +484,25 @@ fn encoder_hidden_cyclic_lead_and_backlash() {
     );
 }
 
-#[test]
-#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
-fn encoder_hidden_interpolation_error() {
-    hidden_encoder(EncoderHidden::InterpolationError, "interpolation_error");
+/// Rate studies of one hidden effect, ignored by default (each prints its measured rates; see the report
+/// of issue 19): `NAME => BODY;` is `#[test] #[ignore] fn NAME() { BODY; }`.
+macro_rules! rate_studies {
+    ($($name:ident => $body:expr;)*) => {$(
+        #[test]
+        #[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+        fn $name() {
+            $body;
+        }
+    )*};
 }
 
-#[test]
-#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
-fn encoder_hidden_cyclic_lead() {
-    hidden_encoder(EncoderHidden::CyclicLead, "cyclic_lead");
-}
-
-#[test]
-#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
-fn encoder_hidden_backlash() {
-    hidden_encoder(EncoderHidden::Backlash, "backlash");
-}
-
-#[test]
-#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
-fn encoder_hidden_servo_lag() {
-    hidden_encoder(EncoderHidden::ServoLag, "servo_lag");
+rate_studies! {
+    accel_hidden_resonance => hidden_accel(AccelHidden::Resonance, "resonance");
+    accel_hidden_roll => hidden_accel(AccelHidden::Roll, "gravity_tilt");
+    encoder_hidden_interpolation_error => hidden_encoder(EncoderHidden::InterpolationError, "interpolation_error");
+    encoder_hidden_cyclic_lead => hidden_encoder(EncoderHidden::CyclicLead, "cyclic_lead");
+    encoder_hidden_backlash => hidden_encoder(EncoderHidden::Backlash, "backlash");
+    encoder_hidden_servo_lag => hidden_encoder(EncoderHidden::ServoLag, "servo_lag");
 }
 
 /// Wall time of one `vmt diagnose` on accelerometer sets of `VMT_SAMPLES` samples (default 15 000;

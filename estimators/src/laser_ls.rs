@@ -61,6 +61,25 @@ pub enum LaserLsError {
     Svd,
 }
 
+/// A position (m) outside the domain [lo, hi] (m) of a motion's basis: its nodes or its Legendre range.
+#[derive(Debug, Error, Clone, Copy, PartialEq)]
+#[error("position {q} m is outside the {domain} [{lo}, {hi}] m")]
+struct OutsideBasis {
+    q: f64,
+    domain: &'static str,
+    lo: f64,
+    hi: f64,
+}
+
+/// A reading whose axis position lies outside the basis of one of the axis's motions.
+#[derive(Debug, Error, Clone, PartialEq)]
+#[error("axis {axis:?} ({motion}): {source}")]
+struct OutsideMotion {
+    axis: Axis,
+    motion: String,
+    source: OutsideBasis,
+}
+
 fn bad<T>(msg: String) -> Result<T, LaserLsError> {
     Err(LaserLsError::InvalidInput(msg))
 }
@@ -150,14 +169,14 @@ impl Basis {
     }
 
     /// Values of the basis functions at q; error if q is outside the basis domain.
-    fn eval(&self, q: f64, out: &mut Vec<f64>) -> Result<(), String> {
+    fn eval(&self, q: f64, out: &mut Vec<f64>) -> Result<(), OutsideBasis> {
         out.clear();
         match self {
             Basis::Fixed => Ok(()),
             Basis::Nodes(n) => {
                 let tol = 1e-9 * (n[n.len() - 1] - n[0]);
                 if !(q >= n[0] - tol && q <= n[n.len() - 1] + tol) {
-                    return Err(format!("position {q} m is outside the nodes [{}, {}] m", n[0], n[n.len() - 1]));
+                    return Err(OutsideBasis { q, domain: "nodes", lo: n[0], hi: n[n.len() - 1] });
                 }
                 out.resize(n.len(), 0.0);
                 // clamp: nodes finite and strictly increasing, at least two (Basis::validate).
@@ -175,7 +194,7 @@ impl Basis {
             Basis::Legendre { order, lo, hi } => {
                 let tol = 1e-9 * (hi - lo);
                 if !(q >= lo - tol && q <= hi + tol) {
-                    return Err(format!("position {q} m is outside the range [{lo}, {hi}] m"));
+                    return Err(OutsideBasis { q, domain: "range", lo: *lo, hi: *hi });
                 }
                 let t = 2.0 * (q - lo) / (hi - lo) - 1.0;
                 out.push(1.0);
@@ -455,7 +474,7 @@ fn build_layout(model: &Model, readings: &[Reading]) -> Layout {
 }
 
 /// Unweighted observation row of one reading (length `layout.n`).
-fn observation_row(model: &Model, layout: &Layout, r: &Reading, buf: &mut Vec<f64>) -> Result<Vec<f64>, String> {
+fn observation_row(model: &Model, layout: &Layout, r: &Reading, buf: &mut Vec<f64>) -> Result<Vec<f64>, OutsideMotion> {
     let mut row = vec![0.0; layout.n];
     let na = model.axes.len();
     for j in 0..na {
@@ -470,9 +489,11 @@ fn observation_row(model: &Model, layout: &Layout, r: &Reading, buf: &mut Vec<f6
             if len == 0 {
                 continue;
             }
-            model.axes[j].motions[k]
-                .eval(r.q[j], buf)
-                .map_err(|e| format!("axis {:?} ({}): {e}", model.axes[j].name, motion_name(model.axes[j].name, k)))?;
+            model.axes[j].motions[k].eval(r.q[j], buf).map_err(|source| OutsideMotion {
+                axis: model.axes[j].name,
+                motion: motion_name(model.axes[j].name, k),
+                source,
+            })?;
             // translation: u_k; rotation: (ê_k × ρ)·u = ê_k·(ρ × u)
             let s = if k < 3 { r.direction[k] } else { rxu[k - 3] };
             for (t, v) in buf.iter().enumerate() {

@@ -24,53 +24,43 @@ use serde::{Deserialize, Serialize};
 use vmt_core::friction::check;
 pub use vmt_core::friction::{stribeck_weight, FrictionError, StribeckLaw};
 
-fn default_delta() -> f64 {
-    2.0
-}
-
 /// LuGre friction (Canudas de Wit et al. 1995):
-/// dz/dt = v − σ0·|v|/g(v)·z, g(v) = Fc + (Fs − Fc)·exp(−|v/vs|^δ), F = σ0·z + σ1·dz/dt + σ2·v.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// dz/dt = v − σ0·|v|/g(v)·z, g(v) = Fc + (Fs − Fc)·exp(−|v/vs|^δ), F = σ0·z + σ1·dz/dt + σ2·v:
+/// the bristles (σ0, σ1) on the one Stribeck law of vmt, whose steady state it is (Fc, Fs, vs, δ
+/// and Fv = σ2).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LugreParams {
     /// Bristle stiffness σ0, N/m (> 0).
     pub sigma0: f64,
     /// Bristle (micro-)damping σ1, N·s/m (≥ 0).
     pub sigma1: f64,
-    /// Viscous coefficient σ2, N·s/m (≥ 0).
-    pub sigma2: f64,
-    /// Coulomb level Fc, N (> 0).
-    pub fc: f64,
-    /// Static level Fs, N (≥ Fc).
-    pub fs: f64,
-    /// Stribeck velocity vs, m/s (> 0).
-    pub vs: f64,
-    /// Shape exponent δ of g(v) (> 0). Default 2, as in the 1995 paper (exp(−(v/vs)²)).
-    #[serde(default = "default_delta")]
-    pub delta: f64,
+    /// The steady state: Fc (N, > 0), Fs (N, ≥ Fc), vs (m/s, > 0), δ (> 0; 2 in the 1995 paper,
+    /// exp(−(v/vs)²)) and the viscous coefficient σ2 = Fv (N·s/m, ≥ 0).
+    pub steady: StribeckLaw,
 }
 
 impl LugreParams {
     /// Checks σ0 > 0, σ1 ≥ 0, σ2 ≥ 0, 0 < Fc ≤ Fs, vs > 0, δ > 0, all finite.
     pub fn validate(&self) -> Result<(), FrictionError> {
+        let s = &self.steady;
         check("sigma0", self.sigma0, self.sigma0 > 0.0, "finite and > 0 N/m")?;
         check("sigma1", self.sigma1, self.sigma1 >= 0.0, "finite and >= 0 N*s/m")?;
-        check("sigma2", self.sigma2, self.sigma2 >= 0.0, "finite and >= 0 N*s/m")?;
-        check("fc", self.fc, self.fc > 0.0, "finite and > 0 N")?;
-        check("fs", self.fs, self.fs >= self.fc, "finite and >= fc")?;
-        check("vs", self.vs, self.vs > 0.0, "finite and > 0 m/s")?;
-        check("delta", self.delta, self.delta > 0.0, "finite and > 0")
+        check("sigma2", s.fv, s.fv >= 0.0, "finite and >= 0 N*s/m")?;
+        check("fc", s.fc, s.fc > 0.0, "finite and > 0 N")?;
+        check("fs", s.fs, s.fs >= s.fc, "finite and >= fc")?;
+        check("vs", s.vs, s.vs > 0.0, "finite and > 0 m/s")?;
+        check("delta", s.delta, s.delta > 0.0, "finite and > 0")
     }
 
     /// The parameters of the 1995 paper (Table I): σ0 = 1e5 N/m, σ1 = √1e5 N·s/m, σ2 = 0.4 N·s/m,
     /// Fc = 1 N, Fs = 1.5 N, vs = 1e-3 m/s, δ = 2.
     pub fn canudas1995() -> LugreParams {
-        LugreParams { sigma0: 1e5, sigma1: 1e5f64.sqrt(), sigma2: 0.4, fc: 1.0, fs: 1.5, vs: 1e-3, delta: 2.0 }
-    }
-
-    /// The Stribeck curve (N) that is this model's steady state, with Fv = σ2.
-    pub fn steady_state(&self) -> StribeckLaw {
-        StribeckLaw { fc: self.fc, fs: self.fs, vs: self.vs, delta: self.delta, fv: self.sigma2 }
+        LugreParams {
+            sigma0: 1e5,
+            sigma1: 1e5f64.sqrt(),
+            steady: StribeckLaw { fc: 1.0, fs: 1.5, vs: 1e-3, delta: 2.0, fv: 0.4 },
+        }
     }
 }
 
@@ -89,7 +79,7 @@ pub fn stribeck_force(p: &StribeckLaw, v: f64) -> Result<f64, FrictionError> {
 pub fn lugre_steady_state_force(p: &LugreParams, v: f64) -> Result<f64, FrictionError> {
     p.validate()?;
     check("v", v, true, "a finite velocity in m/s")?;
-    Ok(p.steady_state().force(v))
+    Ok(p.steady.force(v))
 }
 
 /// Inputs of one integrator step for a friction element with sticking.
@@ -190,7 +180,7 @@ pub fn lugre_step(p: &LugreParams, z: f64, v: f64, dt: f64) -> Result<LugreStep,
     check("z", z, true, "a finite bristle deflection in m")?;
     check("v", v, true, "a finite velocity in m/s")?;
     check("dt", dt, dt > 0.0, "finite and > 0 s")?;
-    let g = p.steady_state().level(v);
+    let g = p.steady.level(v);
     let a = p.sigma0 * v.abs() / g;
     let x = a * dt;
     // φ(x) = (1 − e^{−x})/x, accurate for small x.
@@ -202,7 +192,7 @@ pub fn lugre_step(p: &LugreParams, z: f64, v: f64, dt: f64) -> Result<LugreStep,
     let one_minus_phi_over_x = if x < 1e-6 { 0.5 - x / 6.0 } else { (1.0 - phi) / x };
     let z_mean = z * phi + v * dt * one_minus_phi_over_x;
     let dz_dt = (z_next - z) / dt;
-    let force = p.sigma0 * z_mean + p.sigma1 * dz_dt + p.sigma2 * v;
+    let force = p.sigma0 * z_mean + p.sigma1 * dz_dt + p.steady.fv * v;
     Ok(LugreStep { z_next, dz_dt, force_on_body: -force })
 }
 
@@ -318,7 +308,7 @@ mod tests {
         let s = lugre_step(&q, z0, v, dt).unwrap();
         let n = 100_000;
         let h = dt / n as f64;
-        let g = q.steady_state().level(v);
+        let g = q.steady.level(v);
         let (mut z, mut zsum) = (z0, 0.0);
         for _ in 0..n {
             zsum += z + 0.5 * h * (v - q.sigma0 * v.abs() / g * z);
@@ -327,7 +317,7 @@ mod tests {
         let zbar = zsum / n as f64;
         // Euler's global error is O(h·a) ≈ 4e-5 relative; tolerance 1e-4 relative of z_ss = 1e-5 m.
         assert!((s.z_next - z).abs() < 1e-4 * 1e-5, "{} vs {z}", s.z_next);
-        let f_ref = q.sigma0 * zbar + q.sigma1 * (z - z0) / dt + q.sigma2 * v;
+        let f_ref = q.sigma0 * zbar + q.sigma1 * (z - z0) / dt + q.steady.fv * v;
         assert!((-s.force_on_body - f_ref).abs() < 1e-4 * f_ref.abs());
         // At rest z does not move.
         let r = lugre_step(&q, 1e-6, 0.0, dt).unwrap();

@@ -9,7 +9,7 @@ use crate::axis_sim::{simulate_in_session, Sample};
 use crate::machine::AxisModel;
 use crate::motion::MotionPlan;
 use crate::rng::source_rng;
-use crate::sensors::{apply_errors, true_readings, SensorKind, SensorSpec};
+use crate::sensors::{apply_errors, true_readings, SensorError, SensorKind, SensorSpec};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
@@ -94,6 +94,49 @@ defaults! {
     d_sweep_vmax: f64 = 0.1;
 }
 
+/// An ISO 230-2 bidirectional positioning cycle ([`ProcedureSpec::Positioning`]): `targets` (or
+/// `n_targets` irregularly spaced between start and end), `runs` linear cycles up and down with an
+/// `overrun` before each reversal, dwell `dwell` s at each target, readings averaged over the last
+/// `average` s sampled at `rate` Hz.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PositioningSpec {
+    /// Procedure name; its one run (a point table, `run` column 1..=runs) is named after it.
+    pub name: String,
+    /// Target positions, m; `None`: `n_targets` irregularly spaced between `start` and `end`.
+    #[serde(default)]
+    pub targets: Option<Vec<f64>>,
+    /// Number of targets when `targets` is not given.
+    #[serde(default = "d_targets")]
+    pub n_targets: usize,
+    /// First target (when `targets` is not given), m.
+    pub start: f64,
+    /// Last target (when `targets` is not given), m.
+    pub end: f64,
+    /// Bidirectional cycles (ISO 230-2: at least 5).
+    #[serde(default = "d_runs")]
+    pub runs: u32,
+    /// Feed between targets, m/s.
+    pub feed: f64,
+    /// Stop at each target, s.
+    #[serde(default = "d_dwell")]
+    pub dwell: f64,
+    /// Averaging window at the end of each stop, s (≤ `dwell`).
+    #[serde(default = "d_average")]
+    pub average: f64,
+    /// Sample rate during the averaging window, Hz.
+    #[serde(default = "d_rate")]
+    pub rate: f64,
+    /// Overrun beyond the end targets before each reversal, m (ISO 230-2's approach from one side).
+    #[serde(default = "d_overrun")]
+    pub overrun: f64,
+    /// Acceleration of the moves, m/s² (default: the axis's max_accel).
+    #[serde(default)]
+    pub accel: Option<f64>,
+    /// Names of the scenario's sensors read at each stop.
+    pub sensors: Vec<String>,
+}
+
 /// A procedure as a scenario declares it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -123,45 +166,8 @@ pub enum ProcedureSpec {
         /// Names of the scenario's sensors that record the runs.
         sensors: Vec<String>,
     },
-    /// ISO 230-2 bidirectional positioning cycle: `targets` (or `n_targets` irregularly spaced between
-    /// start and end), `runs` linear cycles up and down with an `overrun` before each reversal, dwell
-    /// `dwell` s at each target, readings averaged over the last `average` s sampled at `rate` Hz.
-    Positioning {
-        /// Procedure name; its one run (a point table, `run` column 1..=runs) is named after it.
-        name: String,
-        /// Target positions, m; `None`: `n_targets` irregularly spaced between `start` and `end`.
-        #[serde(default)]
-        targets: Option<Vec<f64>>,
-        /// Number of targets when `targets` is not given.
-        #[serde(default = "d_targets")]
-        n_targets: usize,
-        /// First target (when `targets` is not given), m.
-        start: f64,
-        /// Last target (when `targets` is not given), m.
-        end: f64,
-        /// Bidirectional cycles (ISO 230-2: at least 5).
-        #[serde(default = "d_runs")]
-        runs: u32,
-        /// Feed between targets, m/s.
-        feed: f64,
-        /// Stop at each target, s.
-        #[serde(default = "d_dwell")]
-        dwell: f64,
-        /// Averaging window at the end of each stop, s (≤ `dwell`).
-        #[serde(default = "d_average")]
-        average: f64,
-        /// Sample rate during the averaging window, Hz.
-        #[serde(default = "d_rate")]
-        rate: f64,
-        /// Overrun beyond the end targets before each reversal, m (ISO 230-2's approach from one side).
-        #[serde(default = "d_overrun")]
-        overrun: f64,
-        /// Acceleration of the moves, m/s² (default: the axis's max_accel).
-        #[serde(default)]
-        accel: Option<f64>,
-        /// Names of the scenario's sensors read at each stop.
-        sensors: Vec<String>,
-    },
+    /// ISO 230-2 bidirectional positioning cycle ([`PositioningSpec`]).
+    Positioning(PositioningSpec),
     /// Low-speed crawl (seed 002): constant feeds from `start`, the sensors sampled at `rate` Hz
     /// (default 2 kHz) for `duration` s (default 1 s) once `settle` s (default 2 s) have passed.
     Crawl {
@@ -274,6 +280,104 @@ pub enum ProcedureSpec {
     },
 }
 
+/// Why a friction sweep cannot be planned: its speeds, or a sampled window at one of them on the axis.
+/// Speeds in m/s, lengths in m, times in s, rates in Hz, accelerations in m/s².
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum FrictionSweepError {
+    /// v_min, v_max not finite with 0 < v_min < v_max.
+    #[error("friction sweep: expected 0 < v_min < v_max (finite, m/s), got v_min {v_min}, v_max {v_max}")]
+    SpeedRange {
+        /// Lowest speed, m/s.
+        v_min: f64,
+        /// Highest speed, m/s.
+        v_max: f64,
+    },
+    /// `per_decade` outside 1..=[`MAX_SPEEDS`].
+    #[error("friction sweep: per_decade must be in 1..={MAX_SPEEDS}, got {0}")]
+    PerDecade(u32),
+    /// More than [`MAX_SPEEDS`] speeds.
+    #[error(
+        "friction sweep: {count} speeds from v_min {v_min} to v_max {v_max} at {per_decade} per decade; the limit is {MAX_SPEEDS}"
+    )]
+    TooManySpeeds {
+        /// Number of speeds the range makes.
+        count: f64,
+        /// Lowest speed, m/s.
+        v_min: f64,
+        /// Highest speed, m/s.
+        v_max: f64,
+        /// Speeds per decade.
+        per_decade: u32,
+    },
+    /// An empty list of speeds.
+    #[error("friction sweep: expected at least one speed")]
+    NoSpeed,
+    /// A speed ≤ 0 or not finite, m/s.
+    #[error("friction sweep: speeds must be finite and > 0 m/s, got {0}")]
+    BadSpeed(f64),
+    /// A speed given twice, m/s.
+    #[error("friction sweep: speeds must be distinct, got {0} twice")]
+    RepeatedSpeed(f64),
+    /// A key of the window that is not finite.
+    #[error("friction sweep: {key} must be finite, got {value}")]
+    NotFinite {
+        /// The key (`start`, `end`, `settle`, `duration`, `rate`).
+        key: &'static str,
+        /// Its value, in the key's unit.
+        value: f64,
+    },
+    /// The window's keys out of range.
+    #[error(
+        "friction sweep: expected end > start, accel > 0, settle ≥ 0, duration > 0, rate > 0, speed > 0; \
+         got start {start}, end {end}, accel {accel}, settle {settle}, duration {duration}, rate {rate}, speed {speed}"
+    )]
+    Window {
+        /// Start of the travel, m.
+        start: f64,
+        /// End of the travel, m.
+        end: f64,
+        /// Acceleration of the ramps, m/s².
+        accel: f64,
+        /// Settling time before the window, s.
+        settle: f64,
+        /// Window length asked for, s.
+        duration: f64,
+        /// Sample rate, Hz.
+        rate: f64,
+        /// Speed of the pass, m/s.
+        speed: f64,
+    },
+    /// Fewer than 10 samples fit into the steady cruise at one speed.
+    #[error(
+        "friction sweep: at {speed} m/s the travel [{start}, {end}] m leaves {cruise_left:.4} s of steady cruise after \
+         {settle} s of settling (ramps at {accel} m/s²); at least 10 samples at {rate} Hz are needed"
+    )]
+    ShortCruise {
+        /// Speed of the pass, m/s.
+        speed: f64,
+        /// Start of the travel, m.
+        start: f64,
+        /// End of the travel, m.
+        end: f64,
+        /// Steady cruise left after settling, s.
+        cruise_left: f64,
+        /// Settling time, s.
+        settle: f64,
+        /// Acceleration of the ramps, m/s².
+        accel: f64,
+        /// Sample rate, Hz.
+        rate: f64,
+    },
+    /// A speed above the axis's max feed.
+    #[error("friction sweep: speed {speed} m/s exceeds the axis's max feed {max_feed} m/s")]
+    AboveMaxFeed {
+        /// The speed, m/s.
+        speed: f64,
+        /// The axis's max feed, m/s.
+        max_feed: f64,
+    },
+}
+
 /// Speeds of a friction sweep, m/s, increasing: the given `speeds` (sorted), else v_k = v_min·10^(k/n) for
 /// k = 0..=K with n = `per_decade`, K = round(n·log10(v_max/v_min)) (so v_max is the last one up to the
 /// rounding of the decade count). Errors on non-positive or non-finite speeds, v_max ≤ v_min, n = 0,
@@ -283,39 +387,34 @@ pub fn friction_sweep_speeds(
     v_min: f64,
     v_max: f64,
     per_decade: u32,
-) -> Result<Vec<f64>, String> {
+) -> Result<Vec<f64>, FrictionSweepError> {
     let mut v: Vec<f64> = match speeds {
         Some(s) => s.to_vec(),
         None => {
             if !(v_min.is_finite() && v_min > 0.0 && v_max.is_finite() && v_max > v_min) {
-                return Err(format!(
-                    "friction sweep: expected 0 < v_min < v_max (finite, m/s), got v_min {v_min}, v_max {v_max}"
-                ));
+                return Err(FrictionSweepError::SpeedRange { v_min, v_max });
             }
             if per_decade == 0 || per_decade > MAX_SPEEDS as u32 {
-                return Err(format!("friction sweep: per_decade must be in 1..={MAX_SPEEDS}, got {per_decade}"));
+                return Err(FrictionSweepError::PerDecade(per_decade));
             }
             let n = per_decade as f64;
             let k = (n * (v_max / v_min).log10()).round();
             if k + 1.0 > MAX_SPEEDS as f64 {
-                return Err(format!(
-                    "friction sweep: {} speeds from v_min {v_min} to v_max {v_max} at {per_decade} per decade; the limit is {MAX_SPEEDS}",
-                    k + 1.0
-                ));
+                return Err(FrictionSweepError::TooManySpeeds { count: k + 1.0, v_min, v_max, per_decade });
             }
             let k = k as i32;
             (0..=k).map(|i| v_min * 10f64.powf(i as f64 / n)).collect()
         }
     };
     if v.is_empty() {
-        return Err("friction sweep: expected at least one speed".into());
+        return Err(FrictionSweepError::NoSpeed);
     }
     if let Some(bad) = v.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
-        return Err(format!("friction sweep: speeds must be finite and > 0 m/s, got {bad}"));
+        return Err(FrictionSweepError::BadSpeed(*bad));
     }
     v.sort_by(|a, b| a.total_cmp(b));
     if let Some(w) = v.windows(2).find(|w| w[1] <= w[0]) {
-        return Err(format!("friction sweep: speeds must be distinct, got {} twice", w[0]));
+        return Err(FrictionSweepError::RepeatedSpeed(w[0]));
     }
     Ok(v)
 }
@@ -333,26 +432,27 @@ pub fn friction_sweep_window(
     settle: f64,
     duration: f64,
     rate: f64,
-) -> Result<f64, String> {
-    for (k, x) in [("start", start), ("end", end), ("settle", settle), ("duration", duration), ("rate", rate)] {
-        if !x.is_finite() {
-            return Err(format!("friction sweep: {k} must be finite, got {x}"));
+) -> Result<f64, FrictionSweepError> {
+    for (key, value) in [("start", start), ("end", end), ("settle", settle), ("duration", duration), ("rate", rate)] {
+        if !value.is_finite() {
+            return Err(FrictionSweepError::NotFinite { key, value });
         }
     }
     if !(end > start && a > 0.0 && settle >= 0.0 && duration > 0.0 && rate > 0.0 && v > 0.0) {
-        return Err(format!(
-            "friction sweep: expected end > start, accel > 0, settle ≥ 0, duration > 0, rate > 0, speed > 0; \
-             got start {start}, end {end}, accel {a}, settle {settle}, duration {duration}, rate {rate}, speed {v}"
-        ));
+        return Err(FrictionSweepError::Window { start, end, accel: a, settle, duration, rate, speed: v });
     }
     let cruise = (end - start - v * v / a) / v;
     let window = duration.min(cruise - settle);
     if window * rate < 10.0 {
-        return Err(format!(
-            "friction sweep: at {v} m/s the travel [{start}, {end}] m leaves {:.4} s of steady cruise after \
-             {settle} s of settling (ramps at {a} m/s²); at least 10 samples at {rate} Hz are needed",
-            cruise - settle
-        ));
+        return Err(FrictionSweepError::ShortCruise {
+            speed: v,
+            start,
+            end,
+            cruise_left: cruise - settle,
+            settle,
+            accel: a,
+            rate,
+        });
     }
     Ok(window)
 }
@@ -404,29 +504,17 @@ impl ProcedureSpec {
                 count("samples", per_pass * speeds.len() as f64, MAX_SAMPLES)?;
                 (per_pass * speeds.len() as f64, time)
             }
-            ProcedureSpec::Positioning {
-                targets,
-                n_targets,
-                start,
-                end,
-                runs,
-                feed,
-                dwell,
-                average,
-                rate,
-                overrun,
-                ..
-            } => {
-                let n = targets.as_ref().map_or(*n_targets, Vec::len) as f64;
+            ProcedureSpec::Positioning(p) => {
+                let n = p.targets.as_ref().map_or(p.n_targets, Vec::len) as f64;
                 count("n_targets", n, MAX_TARGETS)?;
-                count("runs", *runs as f64, MAX_RUNS)?;
-                count("targets × runs", n * *runs as f64, MAX_VISITS)?;
-                time_key("dwell", *dwell, true)?;
-                time_key("average", *average, true)?;
-                rate_key("rate", *rate)?;
-                let visits = 2.0 * n * *runs as f64;
-                let travel = 2.0 * *runs as f64 * (span(*start, *end) + 2.0 * overrun.abs()) / feed;
-                (visits * (average * rate + 1.0), visits * dwell + travel)
+                count("runs", p.runs as f64, MAX_RUNS)?;
+                count("targets × runs", n * p.runs as f64, MAX_VISITS)?;
+                time_key("dwell", p.dwell, true)?;
+                time_key("average", p.average, true)?;
+                rate_key("rate", p.rate)?;
+                let visits = 2.0 * n * p.runs as f64;
+                let travel = 2.0 * p.runs as f64 * (span(p.start, p.end) + 2.0 * p.overrun.abs()) / p.feed;
+                (visits * (p.average * p.rate + 1.0), visits * p.dwell + travel)
             }
             ProcedureSpec::Crawl { feeds, start: _, duration, rate, settle, .. } => {
                 time_key("duration", *duration, true)?;
@@ -456,7 +544,7 @@ impl ProcedureSpec {
                     count("speeds", v.len() as f64, MAX_SPEEDS)?;
                 }
                 let n = friction_sweep_speeds(speeds.as_deref(), *v_min, *v_max, *per_decade)
-                    .map_err(|m| ("speeds".to_string(), m))?
+                    .map_err(|e| ("speeds".to_string(), e.to_string()))?
                     .len() as f64;
                 (2.0 * n * rate * duration, 2.0 * n * (0.5 + settle + duration + 1.0))
             }
@@ -481,7 +569,7 @@ impl ProcedureSpec {
 
     /// Checks what can only be checked against the axis (a friction sweep's speeds within the axis's
     /// max feed, and a sample window the travel allows at each speed); the message says what failed.
-    pub fn check(&self, model: &AxisModel) -> Result<(), String> {
+    pub fn check(&self, model: &AxisModel) -> Result<(), FrictionSweepError> {
         if let ProcedureSpec::FrictionSweep {
             speeds,
             v_min,
@@ -497,10 +585,7 @@ impl ProcedureSpec {
         {
             for v in friction_sweep_speeds(speeds.as_deref(), *v_min, *v_max, *per_decade)? {
                 if v > model.max_feed * (1.0 + 1e-9) {
-                    return Err(format!(
-                        "friction sweep: speed {v} m/s exceeds the axis's max feed {} m/s",
-                        model.max_feed
-                    ));
+                    return Err(FrictionSweepError::AboveMaxFeed { speed: v, max_feed: model.max_feed });
                 }
                 friction_sweep_window(v, *start, *end, model.max_accel, *settle, *duration, *rate)?;
             }
@@ -512,7 +597,7 @@ impl ProcedureSpec {
     pub fn name(&self) -> &str {
         match self {
             ProcedureSpec::ConstantVelocity { name, .. }
-            | ProcedureSpec::Positioning { name, .. }
+            | ProcedureSpec::Positioning(PositioningSpec { name, .. })
             | ProcedureSpec::Crawl { name, .. }
             | ProcedureSpec::NineLine { name, .. }
             | ProcedureSpec::FrictionSweep { name, .. }
@@ -524,7 +609,7 @@ impl ProcedureSpec {
     pub fn sensors(&self) -> &[String] {
         match self {
             ProcedureSpec::ConstantVelocity { sensors, .. }
-            | ProcedureSpec::Positioning { sensors, .. }
+            | ProcedureSpec::Positioning(PositioningSpec { sensors, .. })
             | ProcedureSpec::Crawl { sensors, .. }
             | ProcedureSpec::NineLine { sensors, .. }
             | ProcedureSpec::FrictionSweep { sensors, .. } => sensors,
@@ -810,25 +895,13 @@ pub fn plan_procedure(model: &AxisModel, spec: &ProcedureSpec, seed: u64) -> Vec
                 })
                 .collect()
         }
-        ProcedureSpec::Positioning {
-            name,
-            targets,
-            n_targets,
-            start,
-            end,
-            runs,
-            feed,
-            dwell,
-            average,
-            rate,
-            overrun,
-            accel,
-            ..
-        } => {
-            let targets = targets.clone().unwrap_or_else(|| irregular_targets(*start, *end, *n_targets, seed, name));
-            let a = accel.unwrap_or(model.max_accel);
-            let cycle = Cycle { runs: *runs, feed: *feed, accel: a, dwell: *dwell, average: *average, rate: *rate };
-            vec![positioning_cycle(name, &targets, &cycle, *overrun, spec.sensors())]
+        ProcedureSpec::Positioning(p) => {
+            let targets =
+                p.targets.clone().unwrap_or_else(|| irregular_targets(p.start, p.end, p.n_targets, seed, &p.name));
+            let a = p.accel.unwrap_or(model.max_accel);
+            let cycle =
+                Cycle { runs: p.runs, feed: p.feed, accel: a, dwell: p.dwell, average: p.average, rate: p.rate };
+            vec![positioning_cycle(&p.name, &targets, &cycle, p.overrun, &p.sensors)]
         }
         ProcedureSpec::Crawl { name, feeds, start, duration, rate, settle, direction, .. } => feeds
             .iter()
@@ -967,13 +1040,13 @@ pub fn read_run(
     truth: &RunTruth,
     sensors: &[SensorSpec],
     seed: u64,
-) -> Result<RunRecord, String> {
+) -> Result<RunRecord, SensorError> {
     let mut columns = Vec::new();
     for name in &truth.sensors {
         let spec = sensors
             .iter()
             .find(|s| &s.name == name)
-            .ok_or_else(|| format!("run `{}` names sensor `{name}`, which is not declared", truth.name))?
+            .ok_or_else(|| SensorError::Undeclared { run: truth.name.clone(), sensor: name.clone() })?
             .resolved();
         let clean = true_readings(&spec, model, physics.mode.as_ref(), &truth.samples)?;
         let mut rng = source_rng(seed, &format!("{}/{}", truth.name, spec.name));
@@ -1049,7 +1122,7 @@ pub fn noise_free_point_table(
     truth: &RunTruth,
     sensors: &[SensorSpec],
     name: &str,
-) -> Result<Option<Vec<f64>>, String> {
+) -> Result<Option<Vec<f64>>, SensorError> {
     let Layout::PointTable { visits } = &truth.layout else { return Ok(None) };
     if !truth.sensors.iter().any(|s| s == name) {
         return Ok(None);
@@ -1079,11 +1152,11 @@ mod tests {
         assert_eq!(v.len(), 9);
         assert!((v[1] / 1e-5 - 10f64.sqrt()).abs() < 1e-12 && (v[8] / 0.1 - 1.0).abs() < 1e-12);
         assert_eq!(friction_sweep_speeds(Some(&[0.2, 0.01]), 0.0, 0.0, 0).unwrap(), vec![0.01, 0.2]);
-        assert!(friction_sweep_speeds(None, 0.1, 1e-5, 2).unwrap_err().contains("v_min < v_max"));
+        assert!(friction_sweep_speeds(None, 0.1, 1e-5, 2).unwrap_err().to_string().contains("v_min < v_max"));
         assert!(friction_sweep_speeds(None, f64::NAN, 0.1, 2).is_err());
         assert!(friction_sweep_speeds(None, 1e-5, 0.1, 0).is_err());
-        assert!(friction_sweep_speeds(Some(&[0.1, -0.1]), 0.0, 0.0, 0).unwrap_err().contains("> 0"));
-        assert!(friction_sweep_speeds(Some(&[0.1, 0.1]), 0.0, 0.0, 0).unwrap_err().contains("distinct"));
+        assert!(friction_sweep_speeds(Some(&[0.1, -0.1]), 0.0, 0.0, 0).unwrap_err().to_string().contains("> 0"));
+        assert!(friction_sweep_speeds(Some(&[0.1, 0.1]), 0.0, 0.0, 0).unwrap_err().to_string().contains("distinct"));
     }
 
     #[test]
@@ -1092,7 +1165,10 @@ mod tests {
         // minus 1 s settle leaves 0.35 s.
         assert_eq!(friction_sweep_window(1e-4, 0.1, 0.9, 2.0, 1.0, 0.5, 1000.0).unwrap(), 0.5);
         assert!((friction_sweep_window(0.5, 0.1, 0.9, 2.0, 1.0, 0.5, 1000.0).unwrap() - 0.35).abs() < 1e-12);
-        assert!(friction_sweep_window(0.5, 0.1, 0.5, 2.0, 1.0, 0.5, 1000.0).unwrap_err().contains("10 samples"));
+        assert!(friction_sweep_window(0.5, 0.1, 0.5, 2.0, 1.0, 0.5, 1000.0)
+            .unwrap_err()
+            .to_string()
+            .contains("10 samples"));
         assert!(friction_sweep_window(0.1, 0.1, 0.9, 2.0, f64::NAN, 0.5, 1000.0).is_err());
     }
 }

@@ -15,6 +15,31 @@ use rand_distr::StandardNormal;
 use rapier3d_f64::glamx::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 
+/// Why a sensor cannot be read on an axis: its mounting does not fit the machine, or a run names a
+/// sensor the scenario does not declare.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum SensorError {
+    /// `link` names no link of the moving body.
+    #[error("sensor `{sensor}`: link `{link}` is not a link of the moving body")]
+    UnknownLink {
+        /// The sensor's name.
+        sensor: String,
+        /// The link it names.
+        link: String,
+    },
+    /// Both `position` and `link` are given.
+    #[error("sensor `{0}`: give either position or link, not both")]
+    PositionAndLink(String),
+    /// A run names a sensor that is not declared.
+    #[error("run `{run}` names sensor `{sensor}`, which is not declared")]
+    Undeclared {
+        /// The run's name.
+        run: String,
+        /// The sensor it names.
+        sensor: String,
+    },
+}
+
 /// Sensor kinds, named as in FORMAT.md §1.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -266,20 +291,20 @@ impl SensorSpec {
     }
 
     /// Mount point in the body frame.
-    pub fn mount(&self, model: &AxisModel) -> Result<DVec3, String> {
+    pub fn mount(&self, model: &AxisModel) -> Result<DVec3, SensorError> {
         match (&self.position, &self.link) {
             (Some(p), None) => Ok(model.home.rotation.inverse() * (model.axis_rotation * DVec3::from_array(*p))),
             (None, Some(l)) => model
                 .link(l)
                 .map(|f| f.translation)
-                .ok_or_else(|| format!("sensor `{}`: link `{l}` is not a link of the moving body", self.name)),
+                .ok_or_else(|| SensorError::UnknownLink { sensor: self.name.clone(), link: l.clone() }),
             (None, None) => Ok(DVec3::ZERO),
-            (Some(_), Some(_)) => Err(format!("sensor `{}`: give either position or link, not both", self.name)),
+            (Some(_), Some(_)) => Err(SensorError::PositionAndLink(self.name.clone())),
         }
     }
 
     /// Mount point in the axis frame (as written in a measurement-set manifest).
-    pub fn axis_position(&self, model: &AxisModel) -> Result<[f64; 3], String> {
+    pub fn axis_position(&self, model: &AxisModel) -> Result<[f64; 3], SensorError> {
         Ok(model.body_to_axis(self.mount(model)?).to_array())
     }
 
@@ -334,7 +359,7 @@ pub fn true_readings(
     model: &AxisModel,
     mode: Option<&StructuralMode>,
     samples: &[Sample],
-) -> Result<Vec<f64>, String> {
+) -> Result<Vec<f64>, SensorError> {
     let mount = spec.mount(model)?;
     let d = spec.unit_direction();
     let home_point = model.home.transform_point(mount);

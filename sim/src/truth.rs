@@ -131,15 +131,7 @@ pub fn axis_physics(set: &EffectSet, axis: Axis, model: &AxisModel) -> Result<(A
             return Err(TruthError::StaticBelowCoulomb { axis, lugre: lugre.is_some(), fs: law.fs, fc: law.fc });
         }
         Some(FrictionLaw { steady: law, lugre }) => match lugre {
-            Some([sigma0, sigma1]) => GuideFriction::LuGre(LugreParams {
-                sigma0,
-                sigma1,
-                sigma2: law.fv,
-                fc: law.fc,
-                fs: law.fs,
-                vs: law.vs,
-                delta: law.delta,
-            }),
+            Some([sigma0, sigma1]) => GuideFriction::LuGre(LugreParams { sigma0, sigma1, steady: law }),
             None => GuideFriction::Stribeck(law),
         },
     };

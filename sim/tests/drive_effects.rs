@@ -5,7 +5,7 @@ use vmt_sim::axis_sim::{AxisTruth, GuideFriction};
 use vmt_sim::drive::{BallScrewConfig, DriveConfig, FeedbackKind};
 use vmt_sim::friction::StribeckLaw;
 use vmt_sim::machine::AxisModel;
-use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureSpec, RunData};
+use vmt_sim::procedures::{read_run, simulate_procedure, PositioningSpec, ProcedureSpec, RunData};
 use vmt_sim::sensors::{SensorKind, SensorSpec};
 
 fn laser() -> SensorSpec {
@@ -22,7 +22,7 @@ fn guide_friction() -> GuideFriction {
 
 /// Mean reversal value B̄ = mean over targets of (mean↑ − mean↓) of a laser positioning run, m.
 fn mean_reversal(model: &AxisModel, truth: &AxisTruth) -> f64 {
-    let spec = ProcedureSpec::Positioning {
+    let spec = ProcedureSpec::Positioning(PositioningSpec {
         name: "iso".into(),
         targets: Some(vec![0.1, 0.33, 0.52, 0.71, 0.9]),
         n_targets: 5,
@@ -38,7 +38,7 @@ fn mean_reversal(model: &AxisModel, truth: &AxisTruth) -> f64 {
         // table never overtakes the nut inside the clearance while braking.
         accel: Some(0.1),
         sensors: vec!["laser".into()],
-    };
+    });
     let t = simulate_procedure(model, truth, &spec, 3);
     let rec = read_run(model, truth, &t[0], &[laser()], 3).unwrap();
     let RunData::PointTable { direction, columns, .. } = rec.data else { panic!() };

@@ -12,7 +12,7 @@ use vmt_sim::effects::ThermalExpansion;
 use vmt_sim::feedback::FeedbackErrors;
 use vmt_sim::machine::AxisModel;
 use vmt_sim::motion::MotionPlan;
-use vmt_sim::procedures::{read_run, simulate_procedure, ProcedureSpec, RunData};
+use vmt_sim::procedures::{read_run, simulate_procedure, PositioningSpec, ProcedureSpec, RunData};
 use vmt_sim::profile::{Harmonic, Profile};
 use vmt_sim::rng::source_rng;
 use vmt_sim::sensors::{apply_errors, true_readings, SensorKind, SensorSpec};
@@ -33,7 +33,7 @@ struct Table {
 /// One bidirectional ISO 230-2 cycle (`runs` runs) over `targets`; dwell 0.3 s, readings averaged over the
 /// last `average` s at 500 Hz.
 fn positioning(model: &AxisModel, truth: &AxisTruth, targets: Vec<f64>, runs: u32, feed: f64, average: f64) -> Table {
-    let spec = ProcedureSpec::Positioning {
+    let spec = ProcedureSpec::Positioning(PositioningSpec {
         name: "iso".into(),
         start: targets[0],
         end: targets[targets.len() - 1],
@@ -47,7 +47,7 @@ fn positioning(model: &AxisModel, truth: &AxisTruth, targets: Vec<f64>, runs: u3
         overrun: 0.002,
         accel: None,
         sensors: vec!["laser".into()],
-    };
+    });
     let t = simulate_procedure(model, truth, &spec, 11);
     let rec = read_run(model, truth, &t[0], &[laser()], 11).unwrap();
     let RunData::PointTable { target, t, columns, .. } = rec.data else { panic!("positioning is a point table") };
@@ -173,20 +173,22 @@ fn thermal_drift_carries_over_from_one_run_to_the_next_on_the_session_clock() {
         feedback: FeedbackErrors { thermal_drift: Some(drift.clone()), ..Default::default() },
         ..Default::default()
     };
-    let spec = |name: &str| ProcedureSpec::Positioning {
-        name: name.into(),
-        start: 0.2,
-        end: 0.8,
-        n_targets: 3,
-        targets: Some(vec![0.2, 0.5, 0.8]),
-        runs: 1,
-        feed: 0.2,
-        dwell: 0.3,
-        average: 0.1,
-        rate: 500.0,
-        overrun: 0.002,
-        accel: None,
-        sensors: vec!["laser".into()],
+    let spec = |name: &str| {
+        ProcedureSpec::Positioning(PositioningSpec {
+            name: name.into(),
+            start: 0.2,
+            end: 0.8,
+            n_targets: 3,
+            targets: Some(vec![0.2, 0.5, 0.8]),
+            runs: 1,
+            feed: 0.2,
+            dwell: 0.3,
+            average: 0.1,
+            rate: 500.0,
+            overrun: 0.002,
+            accel: None,
+            sensors: vec!["laser".into()],
+        })
     };
     let plans: Vec<_> = ["first", "second"].iter().flat_map(|n| plan_procedure(&model, &spec(n), 1)).collect();
     let starts = session_schedule(&plans, 0.0);

@@ -52,7 +52,7 @@ mod friction_lugre_canudas1995 {
     fn paper_parameters_check_g_is_gaussian() {
         // The paper's g(v) is Fc + (Fs − Fc)·exp(−(v/vs)²): δ = 2.
         let p = LugreParams::canudas1995();
-        assert_eq!(p.delta, 2.0);
+        assert_eq!(p.steady.delta, 2.0);
         assert_eq!(p.sigma1, 1e5f64.sqrt());
     }
 

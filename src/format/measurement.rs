@@ -1185,7 +1185,7 @@ pub fn write(set: &MeasurementSet, dir: &Path, units: UnitChoice) -> Result<(), 
 
 /// Writes a measurement set into directory `dir`, plus `extras` (file name, bytes) such as
 /// `truth.toml` and `truth_profiles.csv` (FORMAT.md §5), all in one output transaction
-/// ([`crate::output::replace_dir`]): written into a temporary sibling directory which is then swapped
+/// ([`super::output::replace_dir`]): written into a temporary sibling directory which is then swapped
 /// into place, replacing a previous vmt output or an empty directory.
 /// The set is validated first ([`validate`]): nothing is written that [`read`] would reject.
 pub fn write_with_extras(
@@ -1195,7 +1195,7 @@ pub fn write_with_extras(
     extras: &[(String, Vec<u8>)],
 ) -> Result<(), VmtError> {
     let files = set_files(set, dir, units, extras)?;
-    crate::output::replace_dir(dir, |tmp| put_files(tmp, &files))
+    super::output::replace_dir(dir, |tmp| put_files(tmp, &files))
 }
 
 /// The files of a measurement set (relative name, bytes), the manifest last, plus `extras`; `dir`

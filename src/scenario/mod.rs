@@ -331,7 +331,7 @@ fn validate_sensors(sensors: &[SensorSpec], axis: &AxisModel) -> Result<(), (Str
         if !s.direction.iter().all(|v| v.is_finite()) || s.unit_direction().length() < 0.5 {
             return Err((at("direction"), format!("expected a non-zero finite direction, got {:?}", s.direction)));
         }
-        s.mount(axis).map_err(|m| (at("link"), m))?;
+        s.mount(axis).map_err(|e| (at("link"), e.to_string()))?;
     }
     Ok(())
 }
@@ -397,37 +397,24 @@ fn validate_procedures(
                     return Err((at("high_rate"), "expected high_rate > 0, end > start and settle ≥ 0".into()));
                 }
             }
-            ProcedureSpec::Positioning {
-                targets,
-                n_targets,
-                start,
-                end,
-                runs,
-                feed,
-                dwell,
-                average,
-                rate,
-                overrun,
-                accel,
-                ..
-            } => {
-                in_travel("start", *start)?;
-                in_travel("end", *end)?;
-                feed_ok("feed", *feed)?;
-                if let Some(t) = targets {
+            ProcedureSpec::Positioning(q) => {
+                in_travel("start", q.start)?;
+                in_travel("end", q.end)?;
+                feed_ok("feed", q.feed)?;
+                if let Some(t) = &q.targets {
                     for x in t {
                         in_travel("targets", *x)?;
                     }
                     if t.len() < 2 || t.windows(2).any(|w| w[1] <= w[0]) {
                         return Err((at("targets"), "expected at least two strictly increasing targets".into()));
                     }
-                } else if *n_targets < 2 {
-                    return Err((at("n_targets"), format!("expected at least 2 targets, got {n_targets}")));
+                } else if q.n_targets < 2 {
+                    return Err((at("n_targets"), format!("expected at least 2 targets, got {}", q.n_targets)));
                 }
-                if accel.is_some_and(|a| !(a > 0.0 && a.is_finite())) {
-                    return Err((at("accel"), format!("expected an acceleration > 0 m/s², got {accel:?}")));
+                if q.accel.is_some_and(|a| !(a > 0.0 && a.is_finite())) {
+                    return Err((at("accel"), format!("expected an acceleration > 0 m/s², got {:?}", q.accel)));
                 }
-                if *runs < 1 || end <= start || !dwell_ok(*dwell, *average, *rate, *overrun) {
+                if q.runs < 1 || q.end <= q.start || !dwell_ok(q.dwell, q.average, q.rate, q.overrun) {
                     return Err((
                         at("dwell"),
                         "expected runs ≥ 1, end > start, dwell > 0, 0 < average ≤ dwell, rate > 0, overrun ≥ 0".into(),
@@ -447,7 +434,7 @@ fn validate_procedures(
                     return Err((at("duration"), "expected duration > 0, rate > 0 and settle ≥ 0".into()));
                 }
             }
-            ProcedureSpec::FrictionSweep { .. } => p.check(axis).map_err(|m| (at("speeds"), m))?,
+            ProcedureSpec::FrictionSweep { .. } => p.check(axis).map_err(|e| (at("speeds"), e.to_string()))?,
             ProcedureSpec::NineLine { start, end, step, feed, dwell, average, rate, overrun, .. } => {
                 in_travel("start", *start)?;
                 in_travel("end", *end)?;

@@ -63,6 +63,39 @@ pub struct ScoreRow {
     pub outside: usize,
 }
 
+/// Why two profile tables cannot be scored against each other ([`score_profiles`]); positions in m.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ScoreError {
+    /// The truth has no positions.
+    #[error("the truth has no positions")]
+    NoTruth,
+    /// The truth has one position (m), which cannot be interpolated.
+    #[error("the truth has one position ({0} m): it cannot be interpolated")]
+    OneTruthPosition(f64),
+    /// Too few of the estimate's positions lie inside the truth's range for a column.
+    #[error(
+        "column {column}: {inside} of the estimate's {total} positions lie inside the truth's range [{lo}, {hi}] m; \
+         scoring needs at least {need} there ({})",
+        if *.straightness { "straightness is compared about its least-squares line" } else { "the first value is the reference" }
+    )]
+    TooFewInside {
+        /// The column's name.
+        column: String,
+        /// The estimate's positions inside the truth's range.
+        inside: usize,
+        /// The estimate's positions.
+        total: usize,
+        /// First position of the truth, m.
+        lo: f64,
+        /// Last position of the truth, m.
+        hi: f64,
+        /// Positions needed inside (3 for straightness, 2 for the others).
+        need: usize,
+        /// Whether the column is a straightness (compared about its least-squares line).
+        straightness: bool,
+    },
+}
+
 /// Compares estimated profiles with the truth on the estimate's positions inside the truth's range
 /// (truth interpolated linearly, never extrapolated): straightness about its least-squares line on
 /// both sides, positioning and angles relative to their first position (the conventions of the
@@ -72,13 +105,13 @@ pub struct ScoreRow {
 /// two positions, or fewer scored positions than the reference removes plus one (three for
 /// straightness, whose line takes two; two for the others, whose first value is the reference) —
 /// one estimate point would otherwise score as perfect.
-pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Result<Vec<ScoreRow>, String> {
+pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Result<Vec<ScoreRow>, ScoreError> {
     use vmt_sim::effects::EffectName;
     let (Some(&t_lo), Some(&t_hi)) = (truth.position.first(), truth.position.last()) else {
-        return Err("the truth has no positions".into());
+        return Err(ScoreError::NoTruth);
     };
     if truth.position.len() < 2 {
-        return Err(format!("the truth has one position ({t_lo} m): it cannot be interpolated"));
+        return Err(ScoreError::OneTruthPosition(t_lo));
     }
     // A position within 1e-9 of the span of an end counts as inside (rounding of written CSVs).
     let slack = 1e-9 * (t_hi - t_lo);
@@ -102,18 +135,15 @@ pub fn score_profiles(truth: &ProfileTable, est: &ProfileTable) -> Result<Vec<Sc
         let straightness = matches!(c.effect, EffectName::StraightnessY | EffectName::StraightnessZ);
         let need = if straightness { 3 } else { 2 };
         if xs.len() < need {
-            return Err(format!(
-                "column {}: {} of the estimate's {} positions lie inside the truth's range [{t_lo}, {t_hi}] m; \
-                 scoring needs at least {need} there ({})",
-                c.column_name(),
-                xs.len(),
-                est.position.len(),
-                if straightness {
-                    "straightness is compared about its least-squares line"
-                } else {
-                    "the first value is the reference"
-                }
-            ));
+            return Err(ScoreError::TooFewInside {
+                column: c.column_name(),
+                inside: xs.len(),
+                total: est.position.len(),
+                lo: t_lo,
+                hi: t_hi,
+                need,
+                straightness,
+            });
         }
         let ev: Vec<f64> = inside.iter().map(|&i| c.values[i]).collect();
         let tv: Vec<f64> = xs.iter().map(|&x| interp(&tc.values, x)).collect();

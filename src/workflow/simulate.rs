@@ -8,7 +8,7 @@ use crate::error::VmtError;
 use crate::measurement::{self, MeasurementSet, ProfileColumn, ProfileTable, Run, Sensor, SensorKind, UnitChoice};
 use crate::model::model_to_toml;
 use crate::scenario::Scenario;
-use crate::workflow::truth::{ChainTruth, SensorTruth, TruthView};
+use crate::workflow::truth::{ChainTruth, RemeasureError, SensorTruth, TruthView};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -124,20 +124,21 @@ pub fn remeasure(
     run: &str,
     positions: &[f64],
     corrections: &[f64],
-) -> Result<Run, String> {
-    let spec = sc.procedures.iter().find(|p| p.name() == run).ok_or_else(|| format!("no procedure `{run}`"))?;
+) -> Result<Run, RemeasureError> {
+    let spec =
+        sc.procedures.iter().find(|p| p.name() == run).ok_or_else(|| RemeasureError::NoProcedure(run.to_string()))?;
     let mut verify = spec.clone();
-    let ProcedureSpec::Positioning { name, targets, n_targets, .. } = &mut verify else {
-        return Err("expected a positioning procedure".into());
+    let ProcedureSpec::Positioning(q) = &mut verify else {
+        return Err(RemeasureError::NotPositioning);
     };
-    *n_targets = targets.as_ref().map_or(*n_targets, Vec::len);
-    *targets = None;
-    *name = format!("{run}_after_compensation");
+    q.n_targets = q.targets.as_ref().map_or(q.n_targets, Vec::len);
+    q.targets = None;
+    q.name = format!("{run}_after_compensation");
     let mut model = ph.model.clone();
     model.compensation = Profile { terms: vec![Term::Table { x: positions.to_vec(), y: corrections.to_vec() }] };
     let plan = plan_procedure(&model, &verify, seed);
     let truth = simulate_run(&model, &ph.truth, &plan[0], session_end);
-    let rec = read_run(&model, &ph.truth, &truth, &ph.sensors, seed)?;
+    let rec = read_run(&model, &ph.truth, &truth, &ph.sensors, seed).map_err(|e| RemeasureError::Machine(e.into()))?;
     Ok(run_of(sc, &rec))
 }
 
@@ -182,7 +183,8 @@ pub fn read_all(sc: &Scenario, ph: &Physics, truths: &SessionTruth, seed: u64) -
         .runs
         .iter()
         .map(|t| {
-            read_run(&ph.model, &ph.truth, t, &ph.sensors, seed).map_err(|m| VmtError::bad(&sc.source, "sensors", m))
+            read_run(&ph.model, &ph.truth, t, &ph.sensors, seed)
+                .map_err(|e| VmtError::bad(&sc.source, "sensors", e.to_string()))
         })
         .collect::<Result<Vec<RunRecord>, VmtError>>()?;
     runs.extend(read_chain(sc, &truths.lines, seed));
@@ -252,7 +254,7 @@ pub fn to_measurement_set(sc: &Scenario, runs: &[RunRecord]) -> Result<Measureme
             name: s.name.clone(),
             kind: s.kind,
             axis,
-            position: s.axis_position(&sc.axis).map_err(|m| VmtError::bad(&sc.source, "sensors", m))?,
+            position: s.axis_position(&sc.axis).map_err(|e| VmtError::bad(&sc.source, "sensors", e.to_string()))?,
             direction: s.unit_direction().to_array(),
             sigma: reading_sigma(s),
             closes_loop: false,

@@ -139,7 +139,10 @@ impl Vary {
                     values.len()
                 )));
             }
-            VaryKey::Scenario { path: path.to_string(), parts: parse_key_path(path).map_err(|m| usage(&m))? }
+            VaryKey::Scenario {
+                path: path.to_string(),
+                parts: parse_key_path(path).map_err(|e| usage(&e.to_string()))?,
+            }
         };
         Ok(Vary { key, values })
     }
@@ -153,8 +156,47 @@ impl Vary {
     }
 }
 
+/// Why a scenario key path is refused, or the number at it cannot be set ([`set_scenario_number`]).
+#[derive(Debug, thiserror::Error)]
+pub enum KeyPathError {
+    /// A part of the path that is neither `KEY` nor `KEY[INDEX]`.
+    #[error("`{0}`: expected KEY or KEY[INDEX]")]
+    Part(String),
+    /// The scenario text is not TOML.
+    #[error("{}", .0.message())]
+    Toml(toml::de::Error),
+    /// The first key of the path is not in the scenario.
+    #[error("no key `{0}` in the scenario")]
+    NoKey(String),
+    /// A later key of the path is not in the scenario (the path walked so far).
+    #[error("no key `{0}` in the scenario (--vary changes a number the file gives; add it there first)")]
+    NoInnerKey(String),
+    /// An array index past the end (the path walked so far).
+    #[error("no item `{0}` in the scenario")]
+    NoItem(String),
+    /// A fractional or too large value for an integer key.
+    #[error("`{path}` is an integer; got {value}")]
+    NotInteger {
+        /// The key path.
+        path: String,
+        /// The value asked for, in the key's unit.
+        value: f64,
+    },
+    /// The key holds no number (what it holds, e.g. `a string "abc"`).
+    #[error("`{path}` is {what}, not a number")]
+    NotNumber {
+        /// The key path.
+        path: String,
+        /// What the key holds.
+        what: String,
+    },
+    /// The edited scenario could not be written as TOML.
+    #[error(transparent)]
+    Write(#[from] toml::ser::Error),
+}
+
 /// A scenario key path `a.b[2].c` as (key, optional array index) parts.
-fn parse_key_path(path: &str) -> Result<Vec<(String, Option<usize>)>, String> {
+fn parse_key_path(path: &str) -> Result<Vec<(String, Option<usize>)>, KeyPathError> {
     path.split('.')
         .map(|p| match p.split_once('[') {
             None if !p.is_empty() => Ok((p.to_string(), None)),
@@ -162,8 +204,8 @@ fn parse_key_path(path: &str) -> Result<Vec<(String, Option<usize>)>, String> {
                 .strip_suffix(']')
                 .and_then(|i| i.parse::<usize>().ok())
                 .map(|i| (k.to_string(), Some(i)))
-                .ok_or_else(|| format!("`{p}`: expected KEY or KEY[INDEX]")),
-            _ => Err(format!("`{p}`: expected KEY or KEY[INDEX]")),
+                .ok_or_else(|| KeyPathError::Part(p.to_string())),
+            _ => Err(KeyPathError::Part(p.to_string())),
         })
         .collect()
 }
@@ -195,27 +237,44 @@ pub enum Distribution {
     },
 }
 
+/// Why a `--sample` distribution is refused ([`Distribution::parse`]); its two arguments as written.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum DistributionError {
+    /// Not one of the three forms, or an argument that is not a finite number.
+    #[error("expected uniform(LO,HI), normal(MEAN,SD) or loguniform(LO,HI) with finite numbers")]
+    Form,
+    /// `uniform(LO,HI)` with LO ≥ HI.
+    #[error("uniform({0},{1}): expected LO < HI")]
+    Uniform(f64, f64),
+    /// `normal(MEAN,SD)` with SD ≤ 0.
+    #[error("normal({0},{1}): expected SD > 0")]
+    Normal(f64, f64),
+    /// `loguniform(LO,HI)` without 0 < LO < HI.
+    #[error("loguniform({0},{1}): expected 0 < LO < HI")]
+    LogUniform(f64, f64),
+}
+
 impl Distribution {
     /// Parses `uniform(2e-6,8e-6)`, `normal(5e-6,1e-6)` or `loguniform(1e-7,1e-5)`.
-    pub fn parse(s: &str) -> Result<Distribution, String> {
-        let expected = "expected uniform(LO,HI), normal(MEAN,SD) or loguniform(LO,HI) with finite numbers";
-        let (name, rest) = s.split_once('(').ok_or(expected)?;
+    pub fn parse(s: &str) -> Result<Distribution, DistributionError> {
+        let form = DistributionError::Form;
+        let (name, rest) = s.split_once('(').ok_or(form)?;
         let args: Vec<f64> = rest
             .strip_suffix(')')
-            .ok_or(expected)?
+            .ok_or(form)?
             .split(',')
             .map(|a| a.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
             .collect::<Option<_>>()
-            .ok_or(expected)?;
-        let [a, b] = args[..] else { return Err(expected.into()) };
+            .ok_or(form)?;
+        let [a, b] = args[..] else { return Err(form) };
         match name.trim() {
             "uniform" if a < b => Ok(Distribution::Uniform { lo: a, hi: b }),
             "normal" if b > 0.0 => Ok(Distribution::Normal { mean: a, sd: b }),
             "loguniform" if 0.0 < a && a < b => Ok(Distribution::LogUniform { lo: a, hi: b }),
-            "uniform" => Err(format!("uniform({a},{b}): expected LO < HI")),
-            "normal" => Err(format!("normal({a},{b}): expected SD > 0")),
-            "loguniform" => Err(format!("loguniform({a},{b}): expected 0 < LO < HI")),
-            _ => Err(expected.into()),
+            "uniform" => Err(DistributionError::Uniform(a, b)),
+            "normal" => Err(DistributionError::Normal(a, b)),
+            "loguniform" => Err(DistributionError::LogUniform(a, b)),
+            _ => Err(form),
         }
     }
 
@@ -256,8 +315,8 @@ impl Sample {
         }
         Ok(Sample {
             path: path.to_string(),
-            parts: parse_key_path(path).map_err(|m| usage(&m))?,
-            dist: Distribution::parse(dist).map_err(|m| usage(&m))?,
+            parts: parse_key_path(path).map_err(|e| usage(&e.to_string()))?,
+            dist: Distribution::parse(dist).map_err(|e| usage(&e.to_string()))?,
         })
     }
 }
@@ -302,7 +361,7 @@ pub fn run_sampled_study(
             };
             let mut t = text.clone();
             for (s, v) in samples.iter().zip(&values) {
-                t = set_scenario_number(&t, &s.parts, *v).map_err(at)?;
+                t = set_scenario_number(&t, &s.parts, *v).map_err(|e| at(e.to_string()))?;
             }
             let scenario = Scenario::parse(&t, &sc.source, sc.source.parent()).map_err(|e| at(e.to_string()))?;
             let ph = physics(&scenario).map_err(|e| at(e.to_string()))?;
@@ -394,35 +453,32 @@ pub fn sensitivity(rows: &[TrialRow], names: &[String]) -> Vec<SensitivityRow> {
 /// The scenario text with the number at `parts` replaced by `v`. The key must be in the file (a new
 /// key would be ignored where the format accepts unknown keys, so a typo would pass silently); an
 /// integer key takes only integral values.
-pub fn set_scenario_number(text: &str, parts: &[(String, Option<usize>)], v: f64) -> Result<String, String> {
-    let mut root: toml::Table = toml::from_str(text).map_err(|e| e.message().to_string())?;
+pub fn set_scenario_number(text: &str, parts: &[(String, Option<usize>)], v: f64) -> Result<String, KeyPathError> {
+    let mut root: toml::Table = toml::from_str(text).map_err(KeyPathError::Toml)?;
     let mut node: &mut toml::Value =
-        root.get_mut(&parts[0].0).ok_or_else(|| format!("no key `{}` in the scenario", parts[0].0))?;
+        root.get_mut(&parts[0].0).ok_or_else(|| KeyPathError::NoKey(parts[0].0.clone()))?;
     let mut walked = parts[0].0.clone();
     for (i, (key, index)) in parts.iter().enumerate() {
         if i > 0 {
             walked += &format!(".{key}");
-            node = node.as_table_mut().and_then(|t| t.get_mut(key)).ok_or_else(|| {
-                format!(
-                    "no key `{walked}` in the scenario (--vary changes a number the file gives; add it there first)"
-                )
-            })?;
+            node = node
+                .as_table_mut()
+                .and_then(|t| t.get_mut(key))
+                .ok_or_else(|| KeyPathError::NoInnerKey(walked.clone()))?;
         }
         if let Some(j) = index {
             walked += &format!("[{j}]");
-            node = node
-                .as_array_mut()
-                .and_then(|a| a.get_mut(*j))
-                .ok_or_else(|| format!("no item `{walked}` in the scenario"))?;
+            node =
+                node.as_array_mut().and_then(|a| a.get_mut(*j)).ok_or_else(|| KeyPathError::NoItem(walked.clone()))?;
         }
     }
     *node = match node {
         toml::Value::Float(_) => toml::Value::Float(v),
         toml::Value::Integer(_) if v.fract() == 0.0 && v.abs() < 9.0e15 => toml::Value::Integer(v as i64),
-        toml::Value::Integer(_) => return Err(format!("`{walked}` is an integer; got {v}")),
-        other => return Err(format!("`{walked}` is {}, not a number", crate::error::describe_value(other))),
+        toml::Value::Integer(_) => return Err(KeyPathError::NotInteger { path: walked, value: v }),
+        other => return Err(KeyPathError::NotNumber { path: walked, what: crate::error::describe_value(other) }),
     };
-    toml::to_string(&root).map_err(|e| e.to_string())
+    Ok(toml::to_string(&root)?)
 }
 
 /// One trial's result for one estimate.
@@ -514,7 +570,7 @@ pub fn run_study(
                 .iter()
                 .map(|&v| {
                     let at = |m: String| VmtError::Usage(format!("--vary {path}={v}: {m}"));
-                    let t = set_scenario_number(&text, parts, v).map_err(at)?;
+                    let t = set_scenario_number(&text, parts, v).map_err(|e| at(e.to_string()))?;
                     Scenario::parse(&t, &sc.source, sc.source.parent()).map_err(|e| at(e.to_string()))
                 })
                 .collect::<Result<_, _>>()?

@@ -8,6 +8,21 @@ use std::collections::BTreeMap;
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::Axis;
 
+/// Why a re-measurement ([`crate::estimate::Remeasure`]) failed: the simulator side's answer to the
+/// estimate workflow, which sees only this type.
+#[derive(Debug, thiserror::Error)]
+pub enum RemeasureError {
+    /// No procedure recorded the run named.
+    #[error("no procedure `{0}`")]
+    NoProcedure(String),
+    /// The run's procedure is not a positioning procedure (a point table).
+    #[error("expected a positioning procedure")]
+    NotPositioning,
+    /// The machine could not measure (its own error, e.g. a sensor that cannot be read).
+    #[error("{0}")]
+    Machine(Box<dyn std::error::Error + Send + Sync>),
+}
+
 /// What the estimate workflow may know of the truth of a recording.
 pub struct TruthView<'a> {
     /// The six injected error motions of the scenario's (single) axis, functions of the axis position.

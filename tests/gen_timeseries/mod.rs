@@ -811,24 +811,16 @@ pub fn encoder_set_sized(dir: &Path, seed: u64, hidden: EncoderHidden, samples: 
         });
         t0 += dur + 2.0;
     }
-    let sensors = vec![
-        SensorSpec {
-            name: "scale".into(),
-            kind: "encoder_linear",
-            position: [0.0; 3],
-            direction: [1.0, 0.0, 0.0],
-            sigma: sigma_scale,
-            extra: if loop_key == "scale" { "closes_loop = true\n".into() } else { String::new() },
-        },
-        SensorSpec {
-            name: "motor".into(),
-            kind: "encoder_rotary",
-            position: [0.0; 3],
-            direction: [1.0, 0.0, 0.0],
-            sigma: sigma_motor,
-            extra: if loop_key == "motor" { "closes_loop = true\n".into() } else { String::new() },
-        },
-    ];
+    let encoder = |name: &str, kind, sigma| SensorSpec {
+        name: name.into(),
+        kind,
+        position: [0.0; 3],
+        direction: [1.0, 0.0, 0.0],
+        sigma,
+        extra: if loop_key == name { "closes_loop = true\n".into() } else { String::new() },
+    };
+    let sensors =
+        vec![encoder("scale", "encoder_linear", sigma_scale), encoder("motor", "encoder_rotary", sigma_motor)];
     let _ = std::fs::remove_dir_all(dir);
     write_set(dir, "independent encoder logs of a ball-screw axis (issue 19 generator)", &sensors, &runs);
     let model: &[&str] = match hidden {

@@ -48,7 +48,7 @@ pub(super) fn compensation_checks(
     let table = variable_step_table(&positions, &deviations, &params).map_err(|e| bad(e.to_string()))?.table;
     // The re-test follows the scenario's session (time-dependent effects have moved on meanwhile), at
     // other irregular targets, as many as before.
-    let after_rec = remeasure(run, &table.positions, &table.corrections).map_err(bad)?;
+    let after_rec = remeasure(run, &table.positions, &table.corrections).map_err(|e| bad(e.to_string()))?;
     let after = iso(&after_rec)?;
     let label = format!("{} nodes", table.positions.len());
     let after_t: Vec<f64> = after.targets.iter().map(|t| t.target).collect();

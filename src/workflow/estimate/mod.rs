@@ -14,7 +14,7 @@
 use crate::error::VmtError;
 use crate::measurement::{MeasurementSet, Run};
 pub use crate::scenario::spec::EstimatorSpec;
-pub use crate::workflow::truth::{ChainTruth, SensorTruth, TruthView};
+pub use crate::workflow::truth::{ChainTruth, RemeasureError, SensorTruth, TruthView};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
@@ -445,7 +445,7 @@ impl Estimates {
 /// at other targets, on the machine with the compensation table (positions, corrections; m) in its CNC,
 /// and returns the new run as its sensors read it. The estimate workflow owns no machine: the caller
 /// passes one ([`crate::simulate::remeasure`] on the scenario's physics for `vmt run` and a study).
-pub type Remeasure<'a> = dyn Fn(&str, &[f64], &[f64]) -> Result<Run, String> + Sync + 'a;
+pub type Remeasure<'a> = dyn Fn(&str, &[f64], &[f64]) -> Result<Run, RemeasureError> + Sync + 'a;
 
 /// Runs the estimators `estimators` on a recording (`set`) and returns the checks with their figures;
 /// `truth` is what the estimates are compared with, `remeasure` the machine the compensation check

@@ -36,15 +36,18 @@ const SPEED_TOLERANCE: f64 = 0.02;
 /// Speeds closer than this (relative) count as one speed.
 const DISTINCT_SPEED: f64 = 0.01;
 
+/// A straightness method name that is none of [`parse_method`]'s.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("method: expected \"seed\" (seed 000, spatial-frequency continuity) or \"fusion\" (SNR-weighted), got \"{0}\"")]
+pub struct UnknownMethod(pub String);
+
 /// The method, by the names a user types (`seed`, `fusion`) or a scenario uses (`spatial_continuity`,
 /// `seed000`, `snr_weighted`).
-pub fn parse_method(name: &str) -> Result<FusionMethod, String> {
+pub fn parse_method(name: &str) -> Result<FusionMethod, UnknownMethod> {
     match name {
         "seed" | "spatial_continuity" | "seed000" => Ok(FusionMethod::SpatialContinuity),
         "fusion" | "snr_weighted" => Ok(FusionMethod::SnrWeighted),
-        other => Err(format!(
-            "method: expected \"seed\" (seed 000, spatial-frequency continuity) or \"fusion\" (SNR-weighted), got \"{other}\""
-        )),
+        other => Err(UnknownMethod(other.to_string())),
     }
 }
 
@@ -411,7 +414,7 @@ pub(super) fn accel_straightness_check(
     let simulated = truth.sensor(sensor);
     let spec = set.sensor(sensor).ok_or_else(|| bad("sensor not declared".into()))?;
     // The same adapter as `vmt straightness` on the measurement set this recording is written as.
-    let method = parse_method(method.unwrap_or("snr_weighted")).map_err(bad)?;
+    let method = parse_method(method.unwrap_or("snr_weighted")).map_err(|e| bad(e.to_string()))?;
     let runs = truth.procedure_runs.get(procedure).map_or(&[][..], |v| v.as_slice());
     let selection = PassSelection::Procedure { name: procedure, runs };
     let result = sensor_straightness(set, source, sensor, selection, method)?;

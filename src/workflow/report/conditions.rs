@@ -101,36 +101,23 @@ fn procedure_rows(sc: &Scenario) -> Vec<Vec<String>> {
                 dash(),
                 sensors.join(", "),
             ],
-            ProcedureSpec::Positioning {
-                name,
-                targets,
-                n_targets,
-                start,
-                end,
-                runs,
-                feed,
-                dwell,
-                average,
-                overrun,
-                sensors,
-                ..
-            } => vec![
-                name.clone(),
+            ProcedureSpec::Positioning(q) => vec![
+                q.name.clone(),
                 "ISO 230-2 positioning".into(),
-                format!("{:.0} mm/s", feed * 1e3),
-                format!("{dwell} s (mean of last {average} s)"),
-                format!("{runs} ↑ + {runs} ↓"),
-                match targets {
+                format!("{:.0} mm/s", q.feed * 1e3),
+                format!("{} s (mean of last {} s)", q.dwell, q.average),
+                format!("{} ↑ + {} ↓", q.runs, q.runs),
+                match &q.targets {
                     Some(t) => format!(
                         "{} given, {}–{}",
                         t.len(),
                         mm(t.iter().copied().fold(f64::INFINITY, f64::min)),
                         mm(t.iter().copied().fold(f64::NEG_INFINITY, f64::max))
                     ),
-                    None => format!("{n_targets} irregular, {}–{}", mm(*start), mm(*end)),
+                    None => format!("{} irregular, {}–{}", q.n_targets, mm(q.start), mm(q.end)),
                 },
-                mm(*overrun),
-                sensors.join(", "),
+                mm(q.overrun),
+                q.sensors.join(", "),
             ],
             ProcedureSpec::Crawl { name, feeds, duration, rate, sensors, .. } => vec![
                 name.clone(),
