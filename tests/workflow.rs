@@ -875,3 +875,57 @@ fn the_readme_physical_study_runs_on_its_bundled_scenario() {
     assert!(drawn.iter().all(|b| (2e-6..=8e-6).contains(b)), "{drawn:?}");
     assert!(drawn.iter().any(|b| *b != drawn[0]), "the two trials drew different backlash values");
 }
+
+/// Issue 13: `vmt run --units human` (like `vmt simulate --units human`) writes every CSV of the
+/// measurement set and the truth profiles beside it in the units a person reads, each header cell naming
+/// its unit — time `t[s]`, positions `[mm]`, deviations `[um]`, accelerations `[m/s^2]`, angles `[urad]`;
+/// only the integer columns `run` and `direction` are bare — and laser readings quantised to 1 nm show
+/// at most three decimals in µm (no conversion noise such as −5.372000000000001). The default stays SI.
+#[test]
+fn run_with_human_units_names_the_unit_of_every_csv_column() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (human, si) = (tmp.path().join("human"), tmp.path().join("si"));
+    for (dir, extra) in [(&human, &["--units", "human"][..]), (&si, &[][..])] {
+        let o = vmt().arg("run").arg(small()).arg("-o").arg(dir).args(extra).output().unwrap();
+        assert!(matches!(o.status.code(), Some(0 | 1)), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let mut csvs = 0;
+    let mut laser_cells = 0;
+    for e in std::fs::read_dir(human.join("data")).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().and_then(|x| x.to_str()) != Some("csv") {
+            continue;
+        }
+        csvs += 1;
+        let rows = csv_rows(&std::fs::read_to_string(&p).unwrap());
+        for (j, cell) in rows[0].iter().enumerate() {
+            if cell == "run" || cell == "direction" {
+                continue;
+            }
+            assert!(cell.ends_with(']') && cell.contains('['), "{}: column `{cell}` names no unit", p.display());
+            if cell.starts_with("laser") && cell.ends_with("[um]") {
+                for r in &rows[1..] {
+                    let decimals = r[j].split_once('.').map_or(0, |(_, d)| d.len());
+                    assert!(decimals <= 3, "{}: {cell} = {} (a 1 nm reading in µm)", p.display(), r[j]);
+                    laser_cells += 1;
+                }
+            }
+        }
+    }
+    assert!(csvs >= 3 && laser_cells > 100, "{csvs} CSV files, {laser_cells} laser cells checked");
+    let truth = std::fs::read_to_string(human.join("data/truth_profiles.csv")).unwrap();
+    assert!(truth.starts_with("position[mm],positioning[um],"), "{}", truth.lines().next().unwrap());
+    assert!(truth.lines().next().unwrap().contains("roll[urad]"));
+    let si_truth = std::fs::read_to_string(si.join("data/truth_profiles.csv")).unwrap();
+    assert!(si_truth.starts_with("position,positioning,"), "{}", si_truth.lines().next().unwrap());
+    // Both read back to the same truth (within 2 ulp of the conversion).
+    let (a, b) = (
+        vmt::measurement::read_profiles(&si.join("data/truth_profiles.csv")).unwrap(),
+        vmt::measurement::read_profiles(&human.join("data/truth_profiles.csv")).unwrap(),
+    );
+    for (ca, cb) in a.columns.iter().zip(&b.columns) {
+        for (x, y) in ca.values.iter().zip(&cb.values) {
+            assert!((x - y).abs() <= 4.5e-16 * x.abs(), "{}: {x:e} vs {y:e}", ca.column_name());
+        }
+    }
+}

@@ -640,6 +640,21 @@ pub fn study_unit(q: Quantity, units: crate::measurement::UnitChoice) -> (f64, &
     }
 }
 
+/// One statistic `si` (SI) of a study row of quantity `q` as a CSV cell in `units`: SI as Rust prints
+/// it; in human units (µm, µrad) with the fewest digits that read back to within one ulp of the SI
+/// value ([`crate::measurement::fmt_in_unit`]): a 0.1 µm tolerance is written 0.1, not the product
+/// 1e-7 × 1e6 = 0.09999999999999999.
+pub fn study_cell(q: Quantity, units: crate::measurement::UnitChoice, si: f64) -> String {
+    use crate::measurement::UnitChoice;
+    match units {
+        UnitChoice::Si => si.to_string(),
+        UnitChoice::Metrology => {
+            let (_, symbol) = study_unit(q, units);
+            crate::units::unit(symbol).map_or_else(|| si.to_string(), |u| crate::measurement::fmt_in_unit(&u, si))
+        }
+    }
+}
+
 /// CSV of trial rows (value, trial, estimate, difference, pass, bound, quantity, then one column per
 /// sampled parameter named by its key path, then `tolerance`), sorted so shards merge to the same file.
 /// With `UnitChoice::Metrology` the difference, bound and tolerance of each row are in µm or µrad as its
@@ -655,21 +670,22 @@ pub fn rows_csv(rows: &[TrialRow], sampled: &[String], units: crate::measurement
     }
     s += if human { ",tolerance,unit\n" } else { ",tolerance\n" };
     for r in rows {
-        let (scale, unit) = study_unit(r.quantity, units);
+        let (_, unit) = study_unit(r.quantity, units);
+        let cell = |x: f64| study_cell(r.quantity, units, x);
         s += &format!(
             "{},{},\"{}\",{},{},{},{}",
             r.value,
             r.trial,
             r.estimate.replace('"', "'"),
-            r.difference * scale,
+            cell(r.difference),
             r.pass.map_or(String::new(), |p| p.to_string()),
-            r.bound * scale,
+            cell(r.bound),
             quantity_id(r.quantity)
         );
         for v in &r.sampled {
             s += &format!(",{v}");
         }
-        s += &format!(",{}", r.tolerance.map_or(String::new(), |t| (t * scale).to_string()));
+        s += &format!(",{}", r.tolerance.map_or(String::new(), cell));
         s += &if human { format!(",{unit}\n") } else { "\n".to_string() };
     }
     s
@@ -898,4 +914,38 @@ pub fn summary_svg(summary: &[SummaryRow], x_label: &str) -> Result<String, VmtE
         log_y: positive,
     };
     figure_svg(&fig, 900, 560).map_err(|e| VmtError::Internal(format!("study plot: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::measurement::UnitChoice;
+
+    /// `--units human` writes a tolerance of 1e-7 m as 0.1 µm, not 1e-7 × 1e6 = 0.09999999999999999
+    /// (issue 13: no float noise in a written number); SI cells are unchanged.
+    #[test]
+    fn human_study_cells_carry_no_conversion_noise() {
+        let row = TrialRow {
+            value: 1e-6,
+            trial: 0,
+            estimate: "straightness acc_z (accelerometer)".into(),
+            difference: 2e-7,
+            pass: Some(true),
+            bound: 3.3e-8,
+            quantity: Quantity::Length,
+            sampled: Vec::new(),
+            tolerance: Some(1e-7),
+        };
+        let human = rows_csv(std::slice::from_ref(&row), &[], UnitChoice::Metrology);
+        assert_eq!(
+            human.lines().nth(1).unwrap(),
+            "0.000001,0,\"straightness acc_z (accelerometer)\",0.2,true,0.033,length,0.1,um"
+        );
+        let si = rows_csv(&[row], &[], UnitChoice::Si);
+        assert_eq!(
+            si.lines().nth(1).unwrap(),
+            "0.000001,0,\"straightness acc_z (accelerometer)\",0.0000002,true,0.000000033,length,0.0000001"
+        );
+        assert_eq!(study_cell(Quantity::Angle, UnitChoice::Metrology, 2e-7), "0.2");
+    }
 }

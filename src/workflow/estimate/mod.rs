@@ -359,9 +359,19 @@ pub fn display(q: Quantity, v: f64) -> String {
         return "—".to_string();
     }
     match q {
-        Quantity::Length => format!("{:.3} µm", v * 1e6),
-        Quantity::Angle => format!("{:.3} µrad", v * 1e6),
-        Quantity::Ratio => format!("{v:.3} (dimensionless)"),
+        Quantity::Length => format!("{} µm", fixed3(v * 1e6)),
+        Quantity::Angle => format!("{} µrad", fixed3(v * 1e6)),
+        Quantity::Ratio => format!("{} (dimensionless)", fixed3(v)),
+    }
+}
+
+/// `x` with three decimals, without the sign of a value that rounds to zero (−0.0002 → "0.000", not
+/// "-0.000": a minus on a printed zero reads as a measured negative value).
+fn fixed3(x: f64) -> String {
+    let s = format!("{x:.3}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_string(),
+        _ => s,
     }
 }
 
@@ -539,5 +549,15 @@ mod tests {
         assert_eq!(Statistic::Iso230_2(Iso230_2Parameter::BMean).as_str(), "ISO 230-2 B̄");
         let e = serde_json::from_str::<Statistic>("\"median\"").unwrap_err().to_string();
         assert!(e.contains("unknown statistic \"median\"") && e.contains("RMS of profile"), "{e}");
+    }
+
+    /// A value that rounds to zero prints without a sign (the default run printed B̄ "-0.000 µm").
+    #[test]
+    fn a_printed_zero_has_no_minus_sign() {
+        assert_eq!(display(Quantity::Length, -2e-10), "0.000 µm");
+        assert_eq!(display(Quantity::Length, -0.0), "0.000 µm");
+        assert_eq!(display(Quantity::Length, -6e-10), "-0.001 µm");
+        assert_eq!(display(Quantity::Angle, -1.5e-6), "-1.500 µrad");
+        assert_eq!(display(Quantity::Ratio, -1e-4), "0.000 (dimensionless)");
     }
 }
