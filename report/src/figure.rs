@@ -684,7 +684,8 @@ mod tests {
         assert!((g[1][0].0 + 1.0).abs() < 1e-12 && (g[1][0].1 + 0.2).abs() < 1e-12, "{:?}", g[1][0]);
     }
 
-    /// Iterations 0, 1, 2 are labelled 0, 1, 2 — never 0.5 or 1.5.
+    /// Iterations 0, 1, 2 are labelled 0, 1, 2 — never 0.5 or 1.5 (the SVG writes each label on its own
+    /// line inside `<text>`).
     #[test]
     fn an_integer_axis_has_integer_ticks_only() {
         let fig = line_figure(
@@ -693,16 +694,16 @@ mod tests {
         );
         let svg = figure_svg(&fig, 800, 500).unwrap();
         for t in ["0", "1", "2"] {
-            assert!(svg.contains(&format!(">{t}</text>")), "tick {t} missing");
+            assert!(svg.contains(&format!(">\n{t}\n</text>")), "tick {t} missing");
         }
         for t in ["0.5", "1.5", "0.2", "0.25"] {
-            assert!(!svg.contains(&format!(">{t}</text>")), "fractional tick {t} on an integer axis");
+            assert!(!svg.contains(&format!(">\n{t}\n</text>")), "fractional tick {t} on an integer axis");
         }
         // A position axis keeps its fractional ticks.
         let fig = line_figure(
             vec![series("p", &[0.0, 0.5, 1.0], &[40.0, 20.0, 10.0], SeriesStyle::LinePoints)],
             FigureKind::Line,
         );
-        assert!(figure_svg(&fig, 800, 500).unwrap().contains(">0.5</text>"));
+        assert!(figure_svg(&fig, 800, 500).unwrap().contains(">\n0.5\n</text>"));
     }
 }

@@ -915,37 +915,3 @@ pub fn summary_svg(summary: &[SummaryRow], x_label: &str) -> Result<String, VmtE
     };
     figure_svg(&fig, 900, 560).map_err(|e| VmtError::Internal(format!("study plot: {e}")))
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::measurement::UnitChoice;
-
-    /// `--units human` writes a tolerance of 1e-7 m as 0.1 µm, not 1e-7 × 1e6 = 0.09999999999999999
-    /// (issue 13: no float noise in a written number); SI cells are unchanged.
-    #[test]
-    fn human_study_cells_carry_no_conversion_noise() {
-        let row = TrialRow {
-            value: 1e-6,
-            trial: 0,
-            estimate: "straightness acc_z (accelerometer)".into(),
-            difference: 2e-7,
-            pass: Some(true),
-            bound: 3.3e-8,
-            quantity: Quantity::Length,
-            sampled: Vec::new(),
-            tolerance: Some(1e-7),
-        };
-        let human = rows_csv(std::slice::from_ref(&row), &[], UnitChoice::Metrology);
-        assert_eq!(
-            human.lines().nth(1).unwrap(),
-            "0.000001,0,\"straightness acc_z (accelerometer)\",0.2,true,0.033,length,0.1,um"
-        );
-        let si = rows_csv(&[row], &[], UnitChoice::Si);
-        assert_eq!(
-            si.lines().nth(1).unwrap(),
-            "0.000001,0,\"straightness acc_z (accelerometer)\",0.0000002,true,0.000000033,length,0.0000001"
-        );
-        assert_eq!(study_cell(Quantity::Angle, UnitChoice::Metrology, 2e-7), "0.2");
-    }
-}

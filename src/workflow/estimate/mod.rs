@@ -550,14 +550,4 @@ mod tests {
         let e = serde_json::from_str::<Statistic>("\"median\"").unwrap_err().to_string();
         assert!(e.contains("unknown statistic \"median\"") && e.contains("RMS of profile"), "{e}");
     }
-
-    /// A value that rounds to zero prints without a sign (the default run printed B̄ "-0.000 µm").
-    #[test]
-    fn a_printed_zero_has_no_minus_sign() {
-        assert_eq!(display(Quantity::Length, -2e-10), "0.000 µm");
-        assert_eq!(display(Quantity::Length, -0.0), "0.000 µm");
-        assert_eq!(display(Quantity::Length, -6e-10), "-0.001 µm");
-        assert_eq!(display(Quantity::Angle, -1.5e-6), "-1.500 µrad");
-        assert_eq!(display(Quantity::Ratio, -1e-4), "0.000 (dimensionless)");
-    }
 }
