@@ -704,6 +704,7 @@ mod tests {
             vec![series("p", &[0.0, 0.5, 1.0], &[40.0, 20.0, 10.0], SeriesStyle::LinePoints)],
             FigureKind::Line,
         );
-        assert!(figure_svg(&fig, 800, 500).unwrap().contains(">\n0.5\n</text>"));
+        let svg = figure_svg(&fig, 800, 500).unwrap();
+        assert!(["0.2", "0.25", "0.5"].iter().any(|t| svg.contains(&format!(">\n{t}\n</text>"))), "no fractional tick");
     }
 }
