@@ -51,7 +51,7 @@ pub fn simulate(path: Option<&Path>, out: &Path, units: &str, compensation: Opti
         let with = format!("compensation table {} loaded in the simulated CNC", c.display());
         set.description = Some(set.description.map_or(with.clone(), |d| format!("{d}; {with}")));
     }
-    measurement::write_with_extras(&set, out, units, &truth_extras(&sc, &ph)?)?;
+    measurement::write_with_extras(&set, out, units, &truth_extras(&sc, &ph, units)?)?;
     eprintln!("wrote {} runs to {}", set.runs.len(), out.display());
     Ok(())
 }
@@ -88,8 +88,10 @@ pub fn default_out(source: &Path) -> PathBuf {
     out
 }
 
-/// `vmt run [SCENARIO]`: simulate, estimate, print the table; exit 1 if any estimate misses its tolerance.
-pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, VmtError> {
+/// `vmt run [SCENARIO] [--units si|human]`: simulate, estimate, print the table (the measurement set
+/// written in `units`); exit 1 if any estimate misses its tolerance.
+pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool, units: &str) -> Result<i32, VmtError> {
+    let units = parse_units(units)?;
     let sc = load_scenario(path)?;
     let bar = spinner(&format!(
         "simulating {} procedures and running {} estimators",
@@ -104,7 +106,7 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool) -> Result<i32, V
     if let Some(p) = path {
         crate::output::refuse_input_overwrite(&out, &[p])?;
     }
-    let files = measurement::set_files(&set, &out.join("data"), UnitChoice::Si, &truth_extras(&sc, &ph)?)?;
+    let files = measurement::set_files(&set, &out.join("data"), units, &truth_extras(&sc, &ph, units)?)?;
     let est = crate::workflow::run::estimate_session(&sc, &ph, &truths, &set)?;
     let checks = &est.checks;
     let html = out.join("report.html");
@@ -195,16 +197,37 @@ fn slow_spinner(message: &str) -> indicatif::ProgressBar {
 }
 
 /// The table of checks ([`Check::cells`] under [`CHECK_HEADER`]), its legend and each row's note.
+/// Columns are at least as wide as before and widen to their longest cell, so a long value such as
+/// "42.253 (dimensionless)" stays in its column; combining marks (the bar of B̄) take no width.
 pub fn check_table(checks: &[Check]) -> String {
-    let line = |c: &[String]| {
-        format!(
-            "{:<36} {:<20} {:>14} {:>14} {:>14} {:>14}  {:<27} {}\n",
-            c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]
-        )
-    };
-    let mut s = line(&CHECK_HEADER.map(String::from));
-    for c in checks {
-        s += &line(&c.cells());
+    const MIN_WIDTH: [usize; 8] = [36, 20, 14, 14, 14, 14, 27, 0];
+    let rows: Vec<[String; 8]> =
+        std::iter::once(CHECK_HEADER.map(String::from)).chain(checks.iter().map(Check::cells)).collect();
+    let width = |t: &str| t.chars().filter(|c| !('\u{300}'..='\u{36f}').contains(c)).count();
+    let w: Vec<usize> =
+        (0..8).map(|j| rows.iter().map(|r| width(&r[j])).max().unwrap_or(0).max(MIN_WIDTH[j])).collect();
+    let mut s = String::new();
+    for r in &rows {
+        let pad = |j: usize| " ".repeat(w[j] - width(&r[j]));
+        // error, statistic and pass rule to the left; the four numbers to the right; pass last.
+        s += &format!(
+            "{}{} {}{} {}{} {}{} {}{} {}{}  {}{} {}\n",
+            r[0],
+            pad(0),
+            r[1],
+            pad(1),
+            pad(2),
+            r[2],
+            pad(3),
+            r[3],
+            pad(4),
+            r[4],
+            pad(5),
+            r[5],
+            r[6],
+            pad(6),
+            r[7]
+        );
     }
     s += &format!("{CHECK_LEGEND}\n");
     for c in checks {
@@ -215,9 +238,10 @@ pub fn check_table(checks: &[Check]) -> String {
     s
 }
 
-/// What was measured: per run, its procedure, samples and the RMS of each channel.
+/// What was measured: per run, its procedure, samples and the RMS about the mean of each channel
+/// (√(Σ(xᵢ − x̄)²/n), the spread of its readings), in the channel's display unit ([`channel_unit`]).
 pub fn summary_table(set: &MeasurementSet) -> String {
-    let mut s = format!("{:<16} {:<18} {:>8}  channels (RMS)\n", "run", "procedure", "samples");
+    let mut s = format!("{:<16} {:<18} {:>8}  channels (RMS about the mean)\n", "run", "procedure", "samples");
     for r in &set.runs {
         let chans: Vec<String> = r
             .data
@@ -227,12 +251,32 @@ pub fn summary_table(set: &MeasurementSet) -> String {
             .map(|(n, v)| {
                 let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
                 let rms = (v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / v.len().max(1) as f64).sqrt();
-                format!("{n} {rms:.3e}")
+                let (k, unit) = set.sensor(n).map_or((1.0, "(SI)"), |s| channel_unit(s.kind));
+                format!("{n} {} {unit}", measurement::round_significant(rms * k, 4))
             })
             .collect();
         s += &format!("{:<16} {:<18} {:>8}  {}\n", r.name, r.procedure.as_str(), r.data.len(), chans.join(", "));
     }
     s
+}
+
+/// The unit a person reads a sensor kind's values in, with the factor from SI: positions (commands,
+/// encoders) in mm, deviations in µm, angles in µrad, accelerations in mm/s², velocities in mm/s,
+/// forces in N, temperatures in K, pressures in Pa, humidity in %.
+pub fn channel_unit(kind: SensorKind) -> (f64, &'static str) {
+    use crate::units::Dimension;
+    match (kind, measurement::kind_dimension(kind)) {
+        (SensorKind::Command | SensorKind::EncoderLinear | SensorKind::EncoderRotary, _) => (1e3, "mm"),
+        (_, Dimension::Length) => (1e6, "µm"),
+        (_, Dimension::Angle) => (1e6, "µrad"),
+        (_, Dimension::Acceleration) => (1e3, "mm/s²"),
+        (_, Dimension::Velocity) => (1e3, "mm/s"),
+        (_, Dimension::Force) => (1.0, "N"),
+        (_, Dimension::Time) => (1.0, "s"),
+        (_, Dimension::Temperature) => (1.0, "K"),
+        (_, Dimension::Pressure) => (1.0, "Pa"),
+        (_, Dimension::Ratio) => (100.0, "%"),
+    }
 }
 
 /// `vmt iso230-2 PATH`: ISO 230-2 evaluation of a positioning test, from a measurement set directory
@@ -423,7 +467,7 @@ fn write_study(
     sc: Option<&Scenario>,
     units: UnitChoice,
 ) -> Result<i32, VmtError> {
-    use crate::study::{rows_csv, study_unit, summarize, summary_svg};
+    use crate::study::{rows_csv, study_cell, study_unit, summarize, summary_svg};
     let summary = summarize(rows);
     let human = units == UnitChoice::Metrology;
     let mut s =
@@ -431,8 +475,9 @@ fn write_study(
     s += if human { ",unit\n" } else { "\n" };
     for r in &summary {
         // An undefined statistic (no tolerance; no difference) is an empty cell, as docs/formats.md §6 says.
-        let (scale, unit) = study_unit(r.quantity, units);
-        let opt = |x: Option<f64>| x.map_or(String::new(), |x| (x * scale).to_string());
+        let (_, unit) = study_unit(r.quantity, units);
+        let cell = |x: f64| study_cell(r.quantity, units, x);
+        let opt = |x: Option<f64>| x.map_or(String::new(), cell);
         s += &format!(
             "{},\"{}\",{},{},{},{},{},{},{},{}",
             r.value,
@@ -441,7 +486,7 @@ fn write_study(
             opt(r.mean_abs),
             opt(r.p95_abs),
             r.pass_rate.map_or(String::new(), |x| x.to_string()),
-            r.bound * scale,
+            cell(r.bound),
             opt(r.rms),
             crate::study::quantity_id(r.quantity),
             opt(r.tolerance)
@@ -1054,7 +1099,7 @@ pub fn compare(model: &Path, data: &Path, json: bool, report: Option<&Path>) -> 
     bar.finish_and_clear();
     let r = r?;
     if let Some(out) = report {
-        write_report_html(out, &crate::report::model_check_report(model, data, &r, None))?;
+        write_report_html(out, &crate::report::model_check_report(model, data, &set, &r, None))?;
     }
     print_result("vmt-compare/1", &r, json, crate::modelcheck::compare_text)
 }
@@ -1075,7 +1120,7 @@ pub fn diagnose(model: &Path, data: &Path, json: bool, report: Option<&Path>) ->
     bar.finish_and_clear();
     let r = r?;
     if let (Some(out), Some(cmp)) = (report, cmp) {
-        write_report_html(out, &crate::report::model_check_report(model, data, &cmp?, Some(&r)))?;
+        write_report_html(out, &crate::report::model_check_report(model, data, &set, &cmp?, Some(&r)))?;
     }
     print_result("vmt-diagnose/1", &r, json, crate::modelcheck::diagnose_text)
 }

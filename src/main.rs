@@ -49,6 +49,11 @@ enum Command {
         /// Print JSON (`vmt-run/1`, docs/formats.md) instead of the table: the checks, the data and report paths.
         #[arg(long)]
         json: bool,
+        /// Write the measurement set's CSV columns in these units instead of SI ("si" or "human": mm
+        /// positions, um, urad, mm/s; time in s, accelerations in m/s^2 and forces in N, each header
+        /// naming its unit).
+        #[arg(long, default_value = "si")]
+        units: String,
     },
     /// Simulate a scenario and write its measurement set (docs/formats.md) with the truth beside it.
     Simulate {
@@ -247,7 +252,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run { scenario, out, json } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json),
+        Command::Run { scenario, out, json, units } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json, &units),
         Command::Simulate { scenario, out, units, compensation } => {
             vmt::cli::simulate(scenario.as_deref(), &out, &units, compensation.as_deref()).map(|_| 0)
         }

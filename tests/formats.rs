@@ -726,3 +726,33 @@ value = 4e-6
         "{e}"
     );
 }
+
+/// Issue 13: a converted value is written with the fewest digits that read back to within one ulp of
+/// its SI value. A 0.001 µm-resolution reading stored as −5.372e-6 m has no µm decimal whose division by
+/// 10⁶ is that very double; demanding equality wrote −5.372000000000001 (a quarter of the default
+/// scenario's laser cells under `--units human`). Positions keep their exact short forms.
+#[test]
+fn human_units_write_readings_without_conversion_noise() {
+    use vmt::measurement::fmt_in_unit;
+    let unit = |s: &str| vmt::units::unit(s).unwrap();
+    for (si, symbol, text) in [
+        (-5.372e-6, "um", "-5.372"),
+        (-3.463e-6, "um", "-3.463"),
+        (0.33595, "mm", "335.95"),
+        (1e-7, "um", "0.1"),
+        (2e-7, "urad", "0.2"),
+        (0.116794, "mm", "116.794"),
+        (1.5, "m", "1.5"),
+    ] {
+        let u = unit(symbol);
+        assert_eq!(fmt_in_unit(&u, si), text, "{si:e} m in {symbol}");
+        let back = u.to_si(text.parse().unwrap());
+        let ulp = si.abs().next_up() - si.abs();
+        assert!((back - si).abs() <= ulp, "{text} {symbol} reads back as {back:e}, not within 1 ulp of {si:e}");
+    }
+    // A value with no short form keeps its digits (17 at most) and still reads back within one ulp.
+    let x = std::f64::consts::PI * 1e-6;
+    let t = fmt_in_unit(&unit("um"), x);
+    assert!((unit("um").to_si(t.parse().unwrap()) - x).abs() <= x.next_up() - x, "{t}");
+    assert!(t.starts_with("3.14159265358979"), "{t}");
+}

@@ -169,6 +169,17 @@ fn every_kind_of_report_renders_in_chromium_and_is_readable() {
             report.sections.first().is_some_and(|s| s.heading == "Test conditions"),
             "{name}: the report must open with the test conditions"
         );
+        if *name == "crawl" {
+            // Every feed's velocity figure has a zoom where single readings show: four stick-slip cycles
+            // of a crawling run, the first samples of a smooth one (at 80 mm/min the whole record is a
+            // solid band 0.6 mm/min wide).
+            let titles: Vec<&str> =
+                report.sections.iter().flat_map(|s| s.figures.iter().map(|f| f.title.as_str())).collect();
+            for feed in ["5", "20", "80"] {
+                let zoom = format!("crawl at {feed} mm/min, zoom:");
+                assert!(titles.iter().any(|t| t.starts_with(&zoom)), "crawl: no zoom at {feed} mm/min: {titles:?}");
+            }
+        }
     }
     // `vmt diagnose --report` on the lesson's recording, as a user would on their own data: the page is
     // written by the command; its data, built by the same library calls, pass the same lint.
@@ -189,7 +200,7 @@ fn every_kind_of_report_renders_in_chromium_and_is_readable() {
         let set = vmt::measurement::read_data(&data).unwrap();
         let cmp = vmt::modelcheck::compare(&m, &set, &data).unwrap();
         let d = vmt::modelcheck::diagnose(&m, &set, &data).unwrap();
-        let report = vmt::report::model_check_report(&model, &data, &cmp, Some(&d));
+        let report = vmt::report::model_check_report(&model, &data, &set, &cmp, Some(&d));
         problems.extend(vmt_report::lint(&report).into_iter().map(|p| format!("diagnose --report: {p}")));
         assert_eq!(report.sections[0].heading, "Test conditions");
         let titles: Vec<&str> =

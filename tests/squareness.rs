@@ -24,7 +24,7 @@ fn written_set_reads_back(sc: &Scenario, truths: &[(usize, LineTruth)]) {
         &set,
         &out,
         UnitChoice::Si,
-        &truth_extras(sc, &vmt::simulate::physics(sc).unwrap()).unwrap(),
+        &truth_extras(sc, &vmt::simulate::physics(sc).unwrap(), UnitChoice::Si).unwrap(),
     )
     .unwrap();
     let back = measurement::read(&out).unwrap();

@@ -875,3 +875,99 @@ fn the_readme_physical_study_runs_on_its_bundled_scenario() {
     assert!(drawn.iter().all(|b| (2e-6..=8e-6).contains(b)), "{drawn:?}");
     assert!(drawn.iter().any(|b| *b != drawn[0]), "the two trials drew different backlash values");
 }
+
+/// Issue 13: `vmt run --units human` (like `vmt simulate --units human`) writes every CSV of the
+/// measurement set and the truth profiles beside it in the units a person reads, each header cell naming
+/// its unit — time `t[s]`, positions `[mm]`, deviations `[um]`, accelerations `[m/s^2]`, angles `[urad]`;
+/// only the integer columns `run` and `direction` are bare — and laser readings quantised to 1 nm show
+/// at most three decimals in µm (no conversion noise such as −5.372000000000001). The default stays SI.
+#[test]
+fn run_with_human_units_names_the_unit_of_every_csv_column() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (human, si) = (tmp.path().join("human"), tmp.path().join("si"));
+    for (dir, extra) in [(&human, &["--units", "human"][..]), (&si, &[][..])] {
+        let o = vmt().arg("run").arg(small()).arg("-o").arg(dir).args(extra).output().unwrap();
+        assert!(matches!(o.status.code(), Some(0 | 1)), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let mut csvs = 0;
+    let mut laser_cells = 0;
+    for e in std::fs::read_dir(human.join("data")).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().and_then(|x| x.to_str()) != Some("csv") {
+            continue;
+        }
+        csvs += 1;
+        let rows = csv_rows(&std::fs::read_to_string(&p).unwrap());
+        for (j, cell) in rows[0].iter().enumerate() {
+            if cell == "run" || cell == "direction" {
+                continue;
+            }
+            assert!(cell.ends_with(']') && cell.contains('['), "{}: column `{cell}` names no unit", p.display());
+            if cell.starts_with("laser") && cell.ends_with("[um]") {
+                for r in &rows[1..] {
+                    let decimals = r[j].split_once('.').map_or(0, |(_, d)| d.len());
+                    assert!(decimals <= 3, "{}: {cell} = {} (a 1 nm reading in µm)", p.display(), r[j]);
+                    laser_cells += 1;
+                }
+            }
+        }
+    }
+    assert!(csvs >= 3 && laser_cells >= 30, "{csvs} CSV files, {laser_cells} laser cells checked");
+    let truth = std::fs::read_to_string(human.join("data/truth_profiles.csv")).unwrap();
+    assert!(truth.starts_with("position[mm],positioning[um],"), "{}", truth.lines().next().unwrap());
+    assert!(truth.lines().next().unwrap().contains("roll[urad]"));
+    let si_truth = std::fs::read_to_string(si.join("data/truth_profiles.csv")).unwrap();
+    assert!(si_truth.starts_with("position,positioning,"), "{}", si_truth.lines().next().unwrap());
+    // Both read back to the same truth (within 2 ulp of the conversion).
+    let (a, b) = (
+        vmt::measurement::read_profiles(&si.join("data/truth_profiles.csv")).unwrap(),
+        vmt::measurement::read_profiles(&human.join("data/truth_profiles.csv")).unwrap(),
+    );
+    for (ca, cb) in a.columns.iter().zip(&b.columns) {
+        for (x, y) in ca.values.iter().zip(&cb.values) {
+            assert!((x - y).abs() <= 4.5e-16 * x.abs(), "{}: {x:e} vs {y:e}", ca.column_name());
+        }
+    }
+}
+
+/// Issue 13: `--units human` writes a study's tolerance of 1e-7 m as 0.1 µm, not 1e-7 × 1e6 =
+/// 0.09999999999999999 (no float noise in a written number); SI cells are unchanged.
+#[test]
+fn human_study_cells_carry_no_conversion_noise() {
+    use vmt::estimate::Quantity;
+    use vmt::measurement::UnitChoice;
+    use vmt::study::{rows_csv, study_cell, TrialRow};
+    let row = TrialRow {
+        value: 1e-6,
+        trial: 0,
+        estimate: "straightness acc_z (accelerometer)".into(),
+        difference: 2e-7,
+        pass: Some(true),
+        bound: 3.3e-8,
+        quantity: Quantity::Length,
+        sampled: Vec::new(),
+        tolerance: Some(1e-7),
+    };
+    let human = rows_csv(std::slice::from_ref(&row), &[], UnitChoice::Metrology);
+    assert_eq!(
+        human.lines().nth(1).unwrap(),
+        "0.000001,0,\"straightness acc_z (accelerometer)\",0.2,true,0.033,length,0.1,um"
+    );
+    let si = rows_csv(&[row], &[], UnitChoice::Si);
+    assert_eq!(
+        si.lines().nth(1).unwrap(),
+        "0.000001,0,\"straightness acc_z (accelerometer)\",0.0000002,true,0.000000033,length,0.0000001"
+    );
+    assert_eq!(study_cell(Quantity::Angle, UnitChoice::Metrology, 2e-7), "0.2");
+}
+
+/// A value that rounds to zero prints without a sign (the default run printed B̄ "-0.000 µm").
+#[test]
+fn a_printed_zero_has_no_minus_sign() {
+    use vmt::estimate::{display, Quantity};
+    assert_eq!(display(Quantity::Length, -2e-10), "0.000 µm");
+    assert_eq!(display(Quantity::Length, -0.0), "0.000 µm");
+    assert_eq!(display(Quantity::Length, -6e-10), "-0.001 µm");
+    assert_eq!(display(Quantity::Angle, -1.5e-6), "-1.500 µrad");
+    assert_eq!(display(Quantity::Ratio, -1e-4), "0.000 (dimensionless)");
+}

@@ -186,11 +186,34 @@ fn from_axis(t: f64, log: bool) -> f64 {
     }
 }
 
+/// The legend glyph of a drawn series (the same mark as in the plot).
+#[derive(Clone, Copy)]
+enum Glyph {
+    /// A filled square (bar charts).
+    Bar,
+    /// A short vertical bar (error bars).
+    ErrorBar,
+    /// A filled circle (points, or a line of one point).
+    Dot,
+    /// A 2 px line.
+    Line,
+    /// A 2 px line with a circle (line with markers).
+    LineDot,
+    /// A thin, half-transparent line.
+    Faint,
+    /// A thin dashed line.
+    Band,
+    /// A 2 px dashed line.
+    Dashed,
+}
+
 /// One bar: (x left, x right, y top) in data units.
 type Bar = (f64, f64, f64);
 
 /// Bar geometry: total group width 80 % of the smallest gap between distinct x (in axis space),
-/// split evenly between the series.
+/// split evenly between the series that have a bar at that x — a bar alone at its x is centred on it
+/// and takes the whole width (a ranking drawn as one series per candidate), bars of k series at the
+/// same x stand side by side in series order, each 1/k of the width.
 fn bars(prepared: &[Prepared<'_>], log_x: bool) -> Vec<Vec<Bar>> {
     let mut centres: Vec<f64> =
         prepared.iter().flat_map(|p| p.points.iter().map(|&(x, _)| to_axis(x, log_x))).collect();
@@ -209,7 +232,8 @@ fn bars(prepared: &[Prepared<'_>], log_x: bool) -> Vec<Vec<Bar>> {
             0.8
         }
     };
-    let n: f64 = prepared.len().max(1) as f64;
+    // Does series `k` have a bar at axis position `c`?
+    let has = |k: usize, c: f64| prepared[k].points.iter().any(|&(x, _)| to_axis(x, log_x) == c);
     prepared
         .iter()
         .enumerate()
@@ -217,7 +241,11 @@ fn bars(prepared: &[Prepared<'_>], log_x: bool) -> Vec<Vec<Bar>> {
             p.points
                 .iter()
                 .map(|&(x, y)| {
-                    let left: f64 = to_axis(x, log_x) - group / 2.0 + group * i as f64 / n;
+                    let c: f64 = to_axis(x, log_x);
+                    // Slot j of n: the series before this one with a bar at the same x, of all such series.
+                    let j: f64 = (0..i).filter(|&k| has(k, c)).count() as f64;
+                    let n: f64 = (0..prepared.len()).filter(|&k| k == i || has(k, c)).count() as f64;
+                    let left: f64 = c - group / 2.0 + group * j / n;
                     (from_axis(left, log_x), from_axis(left + group / n, log_x), y)
                 })
                 .collect()
@@ -297,17 +325,31 @@ impl Job<'_> {
 
         let x_span: f64 = if fig.log_x { 0.0 } else { self.x_range.1 - self.x_range.0 };
         let y_span: f64 = if fig.log_y { 0.0 } else { self.y_range.1 - self.y_range.0 };
-        let x_fmt = move |v: &f64| format_tick(*v, x_span);
+        // An integer x axis (iterations, ranks, approach directions): every x value a whole number
+        // spanning at most 20, on a linear axis. Its ticks are whole numbers only: at most one tick per
+        // integer is asked for, and a fractional tick, should one still be chosen, stays unlabelled.
+        let xs = || self.prepared.iter().flat_map(|p| p.points.iter().map(|&(x, _)| x));
+        let (x_min, x_max) = xs().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+        let integer_x: bool =
+            !fig.log_x && xs().next().is_some() && xs().all(|x| x.fract() == 0.0) && x_max - x_min <= 20.0;
+        let x_fmt = move |v: &f64| {
+            if integer_x && (v - v.round()).abs() > 1e-9 * x_span.max(1.0) {
+                String::new()
+            } else {
+                format_tick(*v, x_span)
+            }
+        };
         // Bar charts: about one x tick per bar group, so categories 1, 2, 3 are not labelled 1.5, 2.5.
-        let x_labels: usize = match self.bars {
-            Some(_) => {
-                let mut centres: Vec<f64> =
-                    self.prepared.iter().flat_map(|p| p.points.iter().map(|&(x, _)| x)).collect();
+        let x_labels: usize = match (self.bars, integer_x) {
+            (Some(_), _) => {
+                let mut centres: Vec<f64> = xs().collect();
                 centres.sort_by(|a, b| a.total_cmp(b));
                 centres.dedup();
                 (centres.len() + 1).clamp(2, 9)
             }
-            None => 9,
+            // One tick per integer of the data at most (iterations 0, 1, 2 → three ticks).
+            (None, true) => ((x_max - x_min) as usize + 1).clamp(2, 9),
+            (None, false) => 9,
         };
         let y_fmt = move |v: &f64| format_tick(*v, y_span);
         chart
@@ -351,20 +393,23 @@ impl Job<'_> {
                 FigureKind::Bar => SeriesStyle::Line, // unused below
             };
             let points = p.points.iter().copied();
-            let anno = if let (FigureKind::Bar, Some(bars)) = (fig.kind, self.bars) {
+            // Each series is drawn first; its legend entry (glyph and label) is attached only when it
+            // has a label: plotters lists every series with a glyph, so an unlabelled series (each run
+            // behind an ISO 230-2 mean) would otherwise leave an empty legend row.
+            let (anno, glyph) = if let (FigureKind::Bar, Some(bars)) = (fig.kind, self.bars) {
                 let base: f64 = if fig.log_y { self.y_range.0 } else { 0.0 };
                 let anno = chart
                     .draw_series(
                         bars[i].iter().map(|&(l, r, y)| Rectangle::new([(l, base), (r, y)], colour.mix(0.85).filled())),
                     )
                     .map_err(|e| e.to_string())?;
-                anno.legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 18, y + 6)], colour.filled()))
+                (anno, Glyph::Bar)
             } else {
                 match style {
                     SeriesStyle::ErrorBars => {
                         let pairs: Vec<(f64, f64, f64)> =
                             p.points.chunks_exact(2).map(|w| (w[0].0, w[0].1, w[1].1)).collect();
-                        chart
+                        let anno = chart
                             .draw_series(pairs.into_iter().map(|(x, y1, y2)| {
                                 ErrorBar::new_vertical(
                                     x,
@@ -375,58 +420,86 @@ impl Job<'_> {
                                     8,
                                 )
                             }))
-                            .map_err(|e| e.to_string())?
-                            .legend(move |(x, y)| {
-                                PathElement::new(vec![(x + 9, y - 6), (x + 9, y + 6)], colour.stroke_width(1))
-                            })
+                            .map_err(|e| e.to_string())?;
+                        (anno, Glyph::ErrorBar)
                     }
-                    SeriesStyle::Points => chart
-                        .draw_series(points.map(|pt| Circle::new(pt, 3, colour.filled())))
-                        .map_err(|e| e.to_string())?
-                        .legend(move |(x, y)| Circle::new((x + 9, y), 3, colour.filled())),
-                    _ if p.points.len() == 1 => chart
-                        .draw_series(points.map(|pt| Circle::new(pt, 3, colour.filled())))
-                        .map_err(|e| e.to_string())?
-                        .legend(move |(x, y)| Circle::new((x + 9, y), 3, colour.filled())),
-                    SeriesStyle::Line => chart
-                        .draw_series(LineSeries::new(points, colour.stroke_width(2)))
-                        .map_err(|e| e.to_string())?
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 22, y)], colour.stroke_width(2))),
+                    SeriesStyle::Points => (
+                        chart
+                            .draw_series(points.map(|pt| Circle::new(pt, 3, colour.filled())))
+                            .map_err(|e| e.to_string())?,
+                        Glyph::Dot,
+                    ),
+                    _ if p.points.len() == 1 => (
+                        chart
+                            .draw_series(points.map(|pt| Circle::new(pt, 3, colour.filled())))
+                            .map_err(|e| e.to_string())?,
+                        Glyph::Dot,
+                    ),
+                    SeriesStyle::Line => (
+                        chart
+                            .draw_series(LineSeries::new(points, colour.stroke_width(2)))
+                            .map_err(|e| e.to_string())?,
+                        Glyph::Line,
+                    ),
                     SeriesStyle::LinePoints => {
                         chart
                             .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))
                             .map_err(|e| e.to_string())?;
-                        chart
-                            .draw_series(points.map(|pt| Circle::new(pt, 4, colour.filled())))
-                            .map_err(|e| e.to_string())?
-                            .legend(move |(x, y)| {
-                                EmptyElement::at((x, y))
-                                    + PathElement::new(vec![(0, 0), (22, 0)], colour.stroke_width(2))
-                                    + Circle::new((11, 0), 4, colour.filled())
-                            })
+                        (
+                            chart
+                                .draw_series(points.map(|pt| Circle::new(pt, 4, colour.filled())))
+                                .map_err(|e| e.to_string())?,
+                            Glyph::LineDot,
+                        )
                     }
-                    SeriesStyle::Faint => chart
-                        .draw_series(LineSeries::new(points, colour.mix(0.45).stroke_width(1)))
-                        .map_err(|e| e.to_string())?
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 22, y)], colour.mix(0.45).stroke_width(1))
-                        }),
-                    SeriesStyle::Band => chart
-                        .draw_series(DashedLineSeries::new(points, 5, 4, colour.stroke_width(1)))
-                        .map_err(|e| e.to_string())?
-                        .legend(move |(x, y)| {
-                            DashedPathElement::new(vec![(x, y), (x + 24, y)], 5, 4, colour.stroke_width(1))
-                        }),
-                    SeriesStyle::Dashed => chart
-                        .draw_series(DashedLineSeries::new(points, 8, 5, colour.stroke_width(2)))
-                        .map_err(|e| e.to_string())?
-                        .legend(move |(x, y)| {
-                            DashedPathElement::new(vec![(x, y), (x + 24, y)], 7, 4, colour.stroke_width(2))
-                        }),
+                    SeriesStyle::Faint => (
+                        chart
+                            .draw_series(LineSeries::new(points, colour.mix(0.45).stroke_width(1)))
+                            .map_err(|e| e.to_string())?,
+                        Glyph::Faint,
+                    ),
+                    SeriesStyle::Band => (
+                        chart
+                            .draw_series(DashedLineSeries::new(points, 5, 4, colour.stroke_width(1)))
+                            .map_err(|e| e.to_string())?,
+                        Glyph::Band,
+                    ),
+                    SeriesStyle::Dashed => (
+                        chart
+                            .draw_series(DashedLineSeries::new(points, 8, 5, colour.stroke_width(2)))
+                            .map_err(|e| e.to_string())?,
+                        Glyph::Dashed,
+                    ),
                 }
             };
             if !label.is_empty() {
-                anno.label(label);
+                match glyph {
+                    Glyph::Bar => {
+                        anno.legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 18, y + 6)], colour.filled()))
+                    }
+                    Glyph::ErrorBar => anno.legend(move |(x, y)| {
+                        PathElement::new(vec![(x + 9, y - 6), (x + 9, y + 6)], colour.stroke_width(1))
+                    }),
+                    Glyph::Dot => anno.legend(move |(x, y)| Circle::new((x + 9, y), 3, colour.filled())),
+                    Glyph::Line => {
+                        anno.legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 22, y)], colour.stroke_width(2)))
+                    }
+                    Glyph::LineDot => anno.legend(move |(x, y)| {
+                        EmptyElement::at((x, y))
+                            + PathElement::new(vec![(0, 0), (22, 0)], colour.stroke_width(2))
+                            + Circle::new((11, 0), 4, colour.filled())
+                    }),
+                    Glyph::Faint => anno.legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 22, y)], colour.mix(0.45).stroke_width(1))
+                    }),
+                    Glyph::Band => anno.legend(move |(x, y)| {
+                        DashedPathElement::new(vec![(x, y), (x + 24, y)], 5, 4, colour.stroke_width(1))
+                    }),
+                    Glyph::Dashed => anno.legend(move |(x, y)| {
+                        DashedPathElement::new(vec![(x, y), (x + 24, y)], 7, 4, colour.stroke_width(2))
+                    }),
+                }
+                .label(label);
                 labelled = true;
             }
         }
@@ -535,5 +608,103 @@ mod tests {
         assert!((lo - 1.0).abs() < 1e-8 && (hi - 10.0).abs() < 1e-7, "{lo} {hi}");
         // No data.
         assert_eq!(axis_range(&[], false, false), (0.0, 1.0));
+    }
+
+    fn series(label: &str, x: &[f64], y: &[f64], style: SeriesStyle) -> Series {
+        Series { label: label.into(), x: x.to_vec(), y: y.to_vec(), style }
+    }
+
+    fn line_figure(series: Vec<Series>, kind: FigureKind) -> Figure {
+        Figure {
+            title: "t".into(),
+            x_label: "x".into(),
+            x_unit: "mm".into(),
+            y_label: "y".into(),
+            y_unit: "µm".into(),
+            series,
+            kind,
+            log_x: false,
+            log_y: false,
+        }
+    }
+
+    /// Heights of the legend boxes (the rects with the legend's #B0B0B0 border) of an SVG.
+    fn legend_heights(svg: &str) -> Vec<String> {
+        svg.split("<rect")
+            .skip(1)
+            .filter(|r| r.split('>').next().is_some_and(|a| a.to_ascii_uppercase().contains("#B0B0B0")))
+            .filter_map(|r| r.split("height=\"").nth(1).and_then(|h| h.split('"').next()).map(String::from))
+            .collect()
+    }
+
+    /// An unlabelled series (each run behind an ISO 230-2 mean) adds no row to the legend: the legend
+    /// of a mean with four unlabelled runs is as tall as that of the mean alone (plotters gave each
+    /// unlabelled series an empty row with its glyph: eight blank rows in the ISO figure).
+    #[test]
+    fn unlabelled_series_take_no_legend_row() {
+        let x = [0.0, 100.0, 200.0];
+        let mean = series("mean", &x, &[1.0, 2.0, 1.5], SeriesStyle::LinePoints);
+        let runs: Vec<Series> =
+            (0..4).map(|k| series("", &x, &[1.0 + 0.01 * k as f64, 2.0, 1.5], SeriesStyle::Faint)).collect();
+        let alone = figure_svg(&line_figure(vec![mean.clone()], FigureKind::Line), 800, 500).unwrap();
+        let with_runs =
+            figure_svg(&line_figure(std::iter::once(mean).chain(runs).collect(), FigureKind::Line), 800, 500).unwrap();
+        let (a, b) = (legend_heights(&alone), legend_heights(&with_runs));
+        assert_eq!(a.len(), 1, "one legend box expected: {a:?}");
+        assert_eq!(a, b, "the unlabelled runs changed the legend's height");
+    }
+
+    /// A bar alone at its x is centred on it with the whole group width (a ranking, one series per
+    /// candidate); two series at the same x stand side by side.
+    #[test]
+    fn bars_are_grouped_only_where_series_share_an_x() {
+        let (a, b, c) = (
+            series("a", &[1.0], &[5.0], SeriesStyle::Points),
+            series("b", &[2.0], &[3.0], SeriesStyle::Points),
+            series("c", &[3.0], &[1.0], SeriesStyle::Points),
+        );
+        let prepared: Vec<Prepared<'_>> =
+            [&a, &b, &c].iter().map(|s| Prepared { series: s, points: vec![(s.x[0], s.y[0])] }).collect();
+        for (k, bars) in bars(&prepared, false).iter().enumerate() {
+            let (l, r, _) = bars[0];
+            assert!(((l + r) / 2.0 - (k + 1) as f64).abs() < 1e-12, "bar {k} centred at {}", (l + r) / 2.0);
+            assert!((r - l - 0.8).abs() < 1e-12, "bar {k} width {}", r - l);
+        }
+        let (d, e) = (
+            series("d", &[-1.0, 1.0], &[1.0, 2.0], SeriesStyle::Points),
+            series("e", &[-1.0, 1.0], &[3.0, 4.0], SeriesStyle::Points),
+        );
+        let prepared: Vec<Prepared<'_>> = [&d, &e]
+            .iter()
+            .map(|s| Prepared { series: s, points: s.x.iter().copied().zip(s.y.iter().copied()).collect() })
+            .collect();
+        let g = bars(&prepared, false);
+        // Gap 2 → group 1.6, two slots of 0.8: d on [−1.8, −1.0], e on [−1.0, −0.2].
+        assert!((g[0][0].0 + 1.8).abs() < 1e-12 && (g[0][0].1 + 1.0).abs() < 1e-12, "{:?}", g[0][0]);
+        assert!((g[1][0].0 + 1.0).abs() < 1e-12 && (g[1][0].1 + 0.2).abs() < 1e-12, "{:?}", g[1][0]);
+    }
+
+    /// Iterations 0, 1, 2 are labelled 0, 1, 2 — never 0.5 or 1.5 (the SVG writes each label on its own
+    /// line inside `<text>`).
+    #[test]
+    fn an_integer_axis_has_integer_ticks_only() {
+        let fig = line_figure(
+            vec![series("NRMS", &[0.0, 1.0, 2.0], &[40.0, 20.0, 10.0], SeriesStyle::LinePoints)],
+            FigureKind::Line,
+        );
+        let svg = figure_svg(&fig, 800, 500).unwrap();
+        for t in ["0", "1", "2"] {
+            assert!(svg.contains(&format!(">\n{t}\n</text>")), "tick {t} missing");
+        }
+        for t in ["0.5", "1.5", "0.2", "0.25"] {
+            assert!(!svg.contains(&format!(">\n{t}\n</text>")), "fractional tick {t} on an integer axis");
+        }
+        // A position axis keeps its fractional ticks.
+        let fig = line_figure(
+            vec![series("p", &[0.0, 0.5, 1.0], &[40.0, 20.0, 10.0], SeriesStyle::LinePoints)],
+            FigureKind::Line,
+        );
+        let svg = figure_svg(&fig, 800, 500).unwrap();
+        assert!(["0.2", "0.25", "0.5"].iter().any(|t| svg.contains(&format!(">\n{t}\n</text>"))), "no fractional tick");
     }
 }

@@ -1028,10 +1028,29 @@ enum Col<'a> {
     Int(Vec<String>),
 }
 
-/// The number with the fewest significant digits (1 to 17) whose conversion `back` to SI gives exactly
-/// `si`; `x` itself (the full shortest round-trip representation) when none shorter does.
+/// The number with the fewest significant digits (1 to 17) whose conversion `back` to SI lands within
+/// one ulp of `si` (|back(r) − si| ≤ ulp(si), a relative 2.2e-16); `x` itself (the full shortest
+/// representation) when none shorter does. One ulp, not exact equality: a 0.001 µm-resolution reading
+/// stored as −5.372e-6 m has no decimal in µm whose division by 10⁶ gives that very double (−5.372/10⁶
+/// rounds to its neighbour), and exact equality wrote it −5.372000000000001 µm — noise a reader takes
+/// for a digit (issue 13).
 fn shortest_round_trip(x: f64, back: impl Fn(f64) -> f64, si: f64) -> f64 {
-    (1..=17usize).filter_map(|p| format!("{:.*e}", p - 1, x).parse::<f64>().ok()).find(|&r| back(r) == si).unwrap_or(x)
+    let ulp = si.abs().next_up() - si.abs();
+    (1..=17usize)
+        .filter_map(|p| format!("{:.*e}", p - 1, x).parse::<f64>().ok())
+        .find(|&r| (back(r) - si).abs() <= ulp)
+        .unwrap_or(x)
+}
+
+/// `si` written in unit `u` as a CSV cell: SI values exactly ([`fmt_f64`]), converted ones with the
+/// fewest digits that read back (through `u`) to within one ulp of `si` (335.95 mm, not
+/// 335.95000000000005). Callers check that the converted value is finite.
+pub fn fmt_in_unit(u: &Unit, si: f64) -> String {
+    if u.is_si() {
+        fmt_f64(si)
+    } else {
+        fmt_f64(shortest_round_trip(u.from_si(si), |r| u.to_si(r), si))
+    }
 }
 
 /// A value that overflows when written in the unit chosen (the caller adds the file).
@@ -1066,9 +1085,9 @@ fn csv_text(header: &[String], cols: &[Col<'_>], n: usize) -> Result<String, Uni
                     }
                     // A value converted out of SI (m → mm) carries the conversion's rounding noise
                     // (0.33595 m → 335.95000000000005 mm): written with the fewest significant digits
-                    // that read back (through the same unit) to the very same SI value, so the file
-                    // shows 335.95 and the round trip stays exact. SI values are written exactly.
-                    out.push_str(&fmt_f64(if u.is_si() { x } else { shortest_round_trip(x, |r| u.to_si(r), v[i]) }));
+                    // that read back (through the same unit) to within one ulp of the SI value, so the
+                    // file shows 335.95. SI values are written exactly.
+                    out.push_str(&fmt_in_unit(u, v[i]));
                 }
                 Col::Int(v) => out.push_str(&v[i]),
             }

@@ -217,7 +217,8 @@ pub fn study_report(sc: Option<&Scenario>, summary: &[crate::study::SummaryRow],
     }
 }
 
-/// Channels a `--report` of compare/diagnose draws residual figures for (each channel 3–4 figures).
+/// Channels over the travel a `--report` of compare/diagnose draws in its residual figures (each adds a
+/// series to every view; friction sweeps are all drawn, one point each in the velocity view).
 pub const MAX_REPORT_CHANNELS: usize = 8;
 
 /// The HTML report of `vmt compare` / `vmt diagnose --report FILE` on a user's data: the test
@@ -228,6 +229,7 @@ pub const MAX_REPORT_CHANNELS: usize = 8;
 pub fn model_check_report(
     model: &std::path::Path,
     data: &std::path::Path,
+    set: &crate::measurement::MeasurementSet,
     cmp: &crate::modelcheck::CompareReport,
     diag: Option<&crate::modelcheck::DiagnoseReport>,
 ) -> Report {
@@ -357,18 +359,23 @@ pub fn model_check_report(
             tables: if ranking.rows.is_empty() { Vec::new() } else { vec![ranking] },
         });
     }
-    let figures: Vec<vmt_report::Figure> = (0..cmp.channels.len().min(MAX_REPORT_CHANNELS))
-        .flat_map(|i| {
-            crate::estimate::model_check::residual_figures(&format!("vmt {kind}"), "model", i, &[(cmp, "model")])
-        })
-        .collect();
+    let figures: Vec<vmt_report::Figure> = crate::estimate::model_check::residual_figures(
+        &format!("vmt {kind}"),
+        "model",
+        set,
+        &[(cmp, "model")],
+        MAX_REPORT_CHANNELS,
+    );
     let mut text = vec!["The signed residual (measured − model) where each effect lives: by approach direction \
-                         (backlash, lost motion), by position (pitch, positioning and lead errors), over the \
-                         session time (thermal drift) and its strongest spatial periods (cyclic errors)."
+                         (backlash, lost motion), by position (pitch, positioning and lead errors; lasers at \
+                         two heights side by side for pitch), over the session time (thermal drift; a cold and \
+                         a warm test on one time axis), against the feed velocity for friction sweeps \
+                         (Stribeck friction) and its strongest spatial periods (cyclic errors)."
         .to_string()];
     if cmp.channels.len() > MAX_REPORT_CHANNELS {
         text.push(format!(
-            "Figures for the first {MAX_REPORT_CHANNELS} of {} channels; the table above lists all.",
+            "Figures for the first {MAX_REPORT_CHANNELS} channels over the travel and every friction sweep, of {} \
+             channels; the table above lists all.",
             cmp.channels.len()
         ));
     }

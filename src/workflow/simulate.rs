@@ -311,13 +311,13 @@ fn run_of(sc: &Scenario, r: &RunRecord) -> Run {
 
 /// The truth written beside a measurement set (FORMAT.md §5): `truth.toml` (the truth in the model
 /// format, with any table sidecars) and `truth_profiles.csv` (the six error motions every millimetre
-/// over the travel).
-pub fn truth_extras(sc: &Scenario, ph: &Physics) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
+/// over the travel, in `units` like the set's runs).
+pub fn truth_extras(sc: &Scenario, ph: &Physics, units: UnitChoice) -> Result<Vec<(String, Vec<u8>)>, VmtError> {
     let (toml_text, sidecars) = model_to_toml(&sc.truth, "truth")?;
     let mut out = vec![("truth.toml".to_string(), toml_text.into_bytes())];
     out.extend(sidecars.into_iter().map(|(n, t)| (n, t.into_bytes())));
     let table = truth_profiles(sc, ph)?;
-    let csv = measurement::profiles_csv(&table, Path::new("truth_profiles.csv"), UnitChoice::Si)?;
+    let csv = measurement::profiles_csv(&table, Path::new("truth_profiles.csv"), units)?;
     out.push(("truth_profiles.csv".to_string(), csv.into_bytes()));
     Ok(out)
 }

@@ -696,6 +696,21 @@ pub fn study_unit(q: Quantity, units: crate::measurement::UnitChoice) -> (f64, &
     }
 }
 
+/// One statistic `si` (SI) of a study row of quantity `q` as a CSV cell in `units`: SI as Rust prints
+/// it; in human units (µm, µrad) with the fewest digits that read back to within one ulp of the SI
+/// value ([`crate::measurement::fmt_in_unit`]): a 0.1 µm tolerance is written 0.1, not the product
+/// 1e-7 × 1e6 = 0.09999999999999999.
+pub fn study_cell(q: Quantity, units: crate::measurement::UnitChoice, si: f64) -> String {
+    use crate::measurement::UnitChoice;
+    match units {
+        UnitChoice::Si => si.to_string(),
+        UnitChoice::Metrology => {
+            let (_, symbol) = study_unit(q, units);
+            crate::units::unit(symbol).map_or_else(|| si.to_string(), |u| crate::measurement::fmt_in_unit(&u, si))
+        }
+    }
+}
+
 /// CSV of trial rows (value, trial, estimate, difference, pass, bound, quantity, then one column per
 /// sampled parameter named by its key path, then `tolerance`), sorted so shards merge to the same file.
 /// With `UnitChoice::Metrology` the difference, bound and tolerance of each row are in µm or µrad as its
@@ -711,21 +726,22 @@ pub fn rows_csv(rows: &[TrialRow], sampled: &[String], units: crate::measurement
     }
     s += if human { ",tolerance,unit\n" } else { ",tolerance\n" };
     for r in rows {
-        let (scale, unit) = study_unit(r.quantity, units);
+        let (_, unit) = study_unit(r.quantity, units);
+        let cell = |x: f64| study_cell(r.quantity, units, x);
         s += &format!(
             "{},{},\"{}\",{},{},{},{}",
             r.value,
             r.trial,
             r.estimate.replace('"', "'"),
-            r.difference * scale,
+            cell(r.difference),
             r.pass.map_or(String::new(), |p| p.to_string()),
-            r.bound * scale,
+            cell(r.bound),
             quantity_id(r.quantity)
         );
         for v in &r.sampled {
             s += &format!(",{v}");
         }
-        s += &format!(",{}", r.tolerance.map_or(String::new(), |t| (t * scale).to_string()));
+        s += &format!(",{}", r.tolerance.map_or(String::new(), cell));
         s += &if human { format!(",{unit}\n") } else { "\n".to_string() };
     }
     s

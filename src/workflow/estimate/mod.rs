@@ -359,9 +359,19 @@ pub fn display(q: Quantity, v: f64) -> String {
         return "—".to_string();
     }
     match q {
-        Quantity::Length => format!("{:.3} µm", v * 1e6),
-        Quantity::Angle => format!("{:.3} µrad", v * 1e6),
-        Quantity::Ratio => format!("{v:.3} (dimensionless)"),
+        Quantity::Length => format!("{} µm", fixed3(v * 1e6)),
+        Quantity::Angle => format!("{} µrad", fixed3(v * 1e6)),
+        Quantity::Ratio => format!("{} (dimensionless)", fixed3(v)),
+    }
+}
+
+/// `x` with three decimals, without the sign of a value that rounds to zero (−0.0002 → "0.000", not
+/// "-0.000": a minus on a printed zero reads as a measured negative value).
+fn fixed3(x: f64) -> String {
+    let s = format!("{x:.3}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_string(),
+        _ => s,
     }
 }
 

@@ -25,7 +25,8 @@ pub(super) fn model_check_loop(
     let mut m = crate::model::read_model(&base.join(model))?;
     let first = compare(&m, set, source)?;
     let mut history = vec![first.normalized_rms];
-    let mut last_report = first.clone();
+    // Every model's comparison with the recording: the starting model, then the model after each add.
+    let mut models: Vec<(crate::modelcheck::CompareReport, String)> = vec![(first, "starting model".into())];
     let mut added: Vec<String> = Vec::new();
     let mut first_ranking: Option<Vec<vmt_estimators::modelcheck::RankingEntry>> = None;
     for _ in 0..max_steps {
@@ -36,8 +37,9 @@ pub(super) fn model_check_loop(
             top.effect.parse().map_err(|e: vmt_sim::effects::UnknownEffect| VmtError::Internal(e.to_string()))?;
         m = add_effect(&m, name, Some(top)).map_err(|e| VmtError::bad(source, "estimators (model_check)", e))?;
         added.push(top.effect.clone());
-        last_report = compare(&m, set, source)?;
-        history.push(last_report.normalized_rms);
+        let after = compare(&m, set, source)?;
+        history.push(after.normalized_rms);
+        models.push((after, format!("after add {}", top.effect)));
     }
     let mut checks: Vec<Check> = expected
         .iter()
@@ -64,7 +66,7 @@ pub(super) fn model_check_loop(
     // The loop's evidence (issue 16): the error per iteration against the noise level, the first
     // diagnosis's ranking (which effect explains how much), and the signed residual where the effects
     // live — by approach direction (backlash, lost motion), over time (thermal drift), by position (pitch,
-    // positioning, lead errors) — for the starting and the final model.
+    // positioning, lead errors), against the feed (friction) — for the starting model and after each add.
     let iterations: Vec<f64> = (0..history.len()).map(|i| i as f64).collect();
     let nrms = Figure {
         title: format!(
@@ -100,11 +102,13 @@ pub(super) fn model_check_loop(
             &r,
         )
     }));
+    let models: Vec<(&crate::modelcheck::CompareReport, &str)> = models.iter().map(|(r, l)| (r, l.as_str())).collect();
     figures.extend(residual_figures(
         "model-check loop",
-        "starting and final model",
-        0,
-        &[(&first, "starting model"), (&last_report, "final model")],
+        "before and after each add",
+        set,
+        &models,
+        MAX_FIGURE_CHANNELS,
     ));
     Ok((checks, figures))
 }
@@ -135,102 +139,214 @@ pub(crate) fn ranking_figure(title: String, ranking: &[vmt_estimators::modelchec
     })
 }
 
-/// The signed residual of channel `channel` where the effects live, one series per (report, label):
-/// mean by approach direction (bars; backlash, lost motion), mean by position bin (pitch, positioning,
-/// lead errors), mean over the session time (thermal drift), and the strongest spatial periods of the
-/// residual (bars; cyclic errors). In µm for deviations, N for forces, m/s² for accelerations. Titles
-/// read `{prefix}: … ({run} / {sensor}), {which}`; a view without data draws no figure.
+/// Channels of a lesson report drawn in the residual figures (the first ones of the recording).
+pub(crate) const MAX_FIGURE_CHANNELS: usize = 4;
+
+/// Where an effect lives in one channel, by the procedure of its run: a point table or a pass over
+/// the travel (by direction, position, time and spatial period), or a friction sweep at one feed (by
+/// velocity: the Stribeck curve). Unknown runs count as a point table.
+#[derive(Clone, Copy, PartialEq)]
+enum ChannelPlace {
+    /// Positioning, constant-velocity, crawl or free runs.
+    Travel,
+    /// A friction-sweep run with its feed (mm/s) and direction (±1).
+    Sweep(f64, i8),
+}
+
+fn channel_place(set: &MeasurementSet, c: &crate::modelcheck::ChannelReport) -> ChannelPlace {
+    use crate::measurement::Procedure;
+    let Some(run) = set.run(&c.run) else { return ChannelPlace::Travel };
+    match (run.procedure, run.feed, run.direction) {
+        (Procedure::FrictionSweep, Some(feed), Some(d)) => ChannelPlace::Sweep(feed * 1e3, d.signum()),
+        (Procedure::FrictionSweep, _, _)
+        | (Procedure::Positioning | Procedure::ConstantVelocity | Procedure::Crawl | Procedure::Free, _, _) => {
+            ChannelPlace::Travel
+        }
+    }
+}
+
+/// The signed residual where the effects live, for the first `max_channels` channels over the travel
+/// and every friction-sweep channel of the reports
+/// (all compare reports of the same recording, one per model: the starting model and the model after
+/// each `add`), channels of one SI unit per figure, one series per (model, channel):
+/// - mean by approach direction (bars; backlash, lost motion) of point-table channels;
+/// - mean by position bin (pitch, positioning, lead errors; two lasers at two heights side by side:
+///   the Abbe effect of pitch) and over the session time (thermal drift; a cold and a warm test on one
+///   time axis: thermal expansion) of channels over the travel;
+/// - mean against the feed velocity, by direction, of friction-sweep channels (the Stribeck curve:
+///   what a friction model misses at low speed);
+/// - the strongest spatial periods of the residual (bars; cyclic errors).
+///
+/// In µm for deviations, N for forces, mm/s² for accelerations. Titles read `{prefix}: … , {which}`; a
+/// view without data draws no figure.
 pub(crate) fn residual_figures(
     prefix: &str,
     which: &str,
-    channel: usize,
+    set: &MeasurementSet,
     reports: &[(&crate::modelcheck::CompareReport, &str)],
+    max_channels: usize,
 ) -> Vec<Figure> {
-    let Some(c) = reports.first().and_then(|(r, _)| r.channels.get(channel)) else { return Vec::new() };
-    let (k, unit) = crate::modelcheck::display_unit(&c.unit);
-    let name = format!("{} / {}", c.run, c.sensor);
-    // One curve of a channel report: (x, y) in the report's units.
-    type Curve = (Vec<f64>, Vec<f64>);
-    let pick = |label: &str, f: &dyn Fn(&crate::modelcheck::ChannelReport) -> Curve| {
-        reports
-            .iter()
-            .filter_map(|(r, model)| {
-                let (x, y) = f(r.channels.get(channel)?);
-                (!x.is_empty()).then(|| Series {
-                    label: format!("{model} ({label})"),
-                    x,
-                    y: y.iter().map(|v| v * k).collect(),
-                    style: SeriesStyle::LinePoints,
-                })
-            })
-            .collect::<Vec<Series>>()
-    };
-    let figure = |what: &str, x_label: &str, x_unit: &str, y_label: &str, y_unit: &str, series, kind| Figure {
-        title: format!("{prefix}: {what} ({name}), {which}"),
-        x_label: x_label.into(),
-        x_unit: x_unit.into(),
-        y_label: y_label.into(),
-        y_unit: y_unit.into(),
-        series,
-        kind,
-        log_x: false,
-        log_y: false,
-    };
+    use crate::modelcheck::ChannelReport;
+    let Some((first, _)) = reports.first() else { return Vec::new() };
+    // The first `max_channels` channels over the travel (each adds series to every view) and every
+    // friction-sweep channel (each one point of the velocity view).
+    let all = 0..first.channels.len();
+    let place = |i: usize| channel_place(set, &first.channels[i]);
+    let travel: Vec<usize> = all.clone().filter(|&i| place(i) == ChannelPlace::Travel).take(max_channels).collect();
+    let shown: Vec<usize> = all.filter(|&i| place(i) != ChannelPlace::Travel || travel.contains(&i)).collect();
+    // Channels grouped by SI unit, in recording order.
+    let mut units: Vec<&str> = Vec::new();
+    for &i in &shown {
+        if !units.contains(&first.channels[i].unit.as_str()) {
+            units.push(&first.channels[i].unit);
+        }
+    }
     let mut figures = Vec::new();
-    let by_direction = pick("mean per direction", &|c| {
-        (c.by_direction.iter().map(|d| d.0 as f64).collect(), c.by_direction.iter().map(|d| d.1).collect())
-    });
-    if by_direction.iter().any(|s| s.x.len() > 1) {
-        figures.push(figure(
-            "mean residual by approach direction",
-            "approach direction",
-            "−1 = negative, +1 = positive",
-            "mean residual",
-            unit,
-            by_direction,
-            FigureKind::Bar,
-        ));
-    }
-    let by_position = pick("mean per position bin", &|c| {
-        (c.by_position.iter().map(|b| 0.5 * (b.0 + b.1) * 1e3).collect(), c.by_position.iter().map(|b| b.2).collect())
-    });
-    figures.push(figure(
-        "mean residual by position",
-        "position",
-        "mm",
-        "mean residual",
-        unit,
-        by_position,
-        FigureKind::Line,
-    ));
-    let by_time = pick("mean per time bin", &|c| {
-        (c.by_time.iter().map(|b| 0.5 * (b.0 + b.1)).collect(), c.by_time.iter().map(|b| b.2).collect())
-    });
-    if by_time.iter().any(|s| s.x.len() > 2) {
-        figures.push(figure(
-            "mean residual over the session time",
-            "time",
-            "s",
-            "mean residual",
-            unit,
-            by_time,
-            FigureKind::Line,
-        ));
-    }
-    // Amplitudes of a least-squares periodogram over position: drawn in the channel's unit like the rest.
-    let spectrum = pick("strongest periods", &|c| {
-        (c.spectrum_peaks.iter().map(|p| p.0 * 1e3).collect(), c.spectrum_peaks.iter().map(|p| p.1).collect())
-    });
-    if !spectrum.is_empty() {
-        figures.push(figure(
-            "strongest spatial periods of the residual (least-squares periodogram over position)",
-            "wavelength",
-            "mm",
-            "amplitude",
-            unit,
-            spectrum,
-            FigureKind::Bar,
-        ));
+    for si_unit in units {
+        let (k, unit) = crate::modelcheck::display_unit(si_unit);
+        let chans: Vec<usize> = shown.iter().copied().filter(|&i| first.channels[i].unit == si_unit).collect();
+        let several = chans.len() > 1;
+        // One series per (model, channel) of the channels `place` selects, from `f` (x, y in SI of y).
+        type Curve = (Vec<f64>, Vec<f64>);
+        let pick = |travel: bool, f: &dyn Fn(&ChannelReport) -> Curve| -> Vec<Series> {
+            let mut out = Vec::new();
+            for (r, model) in reports {
+                for &i in &chans {
+                    let Some(c) = r.channels.get(i) else { continue };
+                    if (channel_place(set, c) == ChannelPlace::Travel) != travel {
+                        continue;
+                    }
+                    let (x, y) = f(c);
+                    if x.is_empty() {
+                        continue;
+                    }
+                    out.push(Series {
+                        label: if several {
+                            format!("{model}: {} / {}", c.run, c.sensor)
+                        } else {
+                            (*model).to_string()
+                        },
+                        x,
+                        y: y.iter().map(|v| v * k).collect(),
+                        style: SeriesStyle::LinePoints,
+                    });
+                }
+            }
+            out
+        };
+        let names: Vec<String> =
+            chans.iter().map(|&i| format!("{} / {}", first.channels[i].run, first.channels[i].sensor)).collect();
+        let name = if names.len() > 3 { format!("{} channels", names.len()) } else { names.join(", ") };
+        let figure = |what: &str, x_label: &str, x_unit: &str, y_label: &str, series, kind, log_x| Figure {
+            title: format!("{prefix}: {what} ({name}), {which}"),
+            x_label: x_label.into(),
+            x_unit: x_unit.into(),
+            y_label: y_label.into(),
+            y_unit: unit.into(),
+            series,
+            kind,
+            log_x,
+            log_y: false,
+        };
+        let by_direction = pick(true, &|c| {
+            (c.by_direction.iter().map(|d| d.0 as f64).collect(), c.by_direction.iter().map(|d| d.1).collect())
+        });
+        if by_direction.iter().any(|s| s.x.len() > 1) {
+            figures.push(figure(
+                "mean residual by approach direction",
+                "approach direction",
+                "−1 = negative, +1 = positive",
+                "mean residual",
+                by_direction,
+                FigureKind::Bar,
+                false,
+            ));
+        }
+        let by_position = pick(true, &|c| {
+            (
+                c.by_position.iter().map(|b| 0.5 * (b.0 + b.1) * 1e3).collect(),
+                c.by_position.iter().map(|b| b.2).collect(),
+            )
+        });
+        if !by_position.is_empty() {
+            figures.push(figure(
+                "mean residual by position",
+                "position",
+                "mm",
+                "mean residual",
+                by_position,
+                FigureKind::Line,
+                false,
+            ));
+        }
+        let by_time = pick(true, &|c| {
+            (c.by_time.iter().map(|b| 0.5 * (b.0 + b.1)).collect(), c.by_time.iter().map(|b| b.2).collect())
+        });
+        if by_time.iter().any(|s| s.x.len() > 2) {
+            figures.push(figure(
+                "mean residual over the session time",
+                "time",
+                "s",
+                "mean residual",
+                by_time,
+                FigureKind::Line,
+                false,
+            ));
+        }
+        // Friction sweeps: each run is one feed in one direction; its mean residual against the feed,
+        // one series per (model, direction), in increasing feed.
+        let mut by_velocity = Vec::new();
+        for (r, model) in reports {
+            for dir in [1i8, -1] {
+                let mut pts: Vec<(f64, f64)> = chans
+                    .iter()
+                    .filter_map(|&i| {
+                        let c = r.channels.get(i)?;
+                        match (channel_place(set, c), c.by_direction.as_slice()) {
+                            (ChannelPlace::Sweep(feed, d), [(_, mean, _)]) if d == dir && feed > 0.0 => {
+                                Some((feed, mean * k))
+                            }
+                            (ChannelPlace::Sweep(..) | ChannelPlace::Travel, _) => None,
+                        }
+                    })
+                    .collect();
+                pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+                if !pts.is_empty() {
+                    by_velocity.push(Series {
+                        label: format!("{model}, {} direction", if dir > 0 { "positive" } else { "negative" }),
+                        x: pts.iter().map(|p| p.0).collect(),
+                        y: pts.iter().map(|p| p.1).collect(),
+                        style: SeriesStyle::LinePoints,
+                    });
+                }
+            }
+        }
+        if !by_velocity.is_empty() {
+            figures.push(figure(
+                "mean residual of each friction-sweep run against its feed velocity",
+                "feed velocity",
+                "mm/s",
+                "mean residual",
+                by_velocity,
+                FigureKind::Line,
+                true,
+            ));
+        }
+        // Amplitudes of a least-squares periodogram over position: drawn in the channel's unit like the rest.
+        let spectrum = pick(true, &|c| {
+            (c.spectrum_peaks.iter().map(|p| p.0 * 1e3).collect(), c.spectrum_peaks.iter().map(|p| p.1).collect())
+        });
+        if !spectrum.is_empty() {
+            figures.push(figure(
+                "strongest spatial periods of the residual (least-squares periodogram over position)",
+                "wavelength",
+                "mm",
+                "amplitude",
+                spectrum,
+                FigureKind::Bar,
+                false,
+            ));
+        }
     }
     figures
 }

@@ -32,8 +32,8 @@ pub enum RunSsiError {
 
 /// The crawl check: the SSI of `sensor` in every run of `procedure` (named `{procedure}_*`, one per feed)
 /// against the patent's example values `expected` within `tolerance` (dimensionless), each with a figure
-/// of the differentiated velocity against the commanded feed and, where the axis crawls, a zoom on four
-/// stick-slip cycles.
+/// of the differentiated velocity against the commanded feed and a zoom — where the axis crawls, on four
+/// stick-slip cycles, else on the first samples, where single readings can be told apart.
 pub(super) fn ssi_checks(
     source: &Path,
     set: &MeasurementSet,
@@ -96,8 +96,11 @@ pub(super) fn ssi_checks(
         // Four stick-slip cycles: from the 2nd to the 6th upward crossing of the mean velocity.
         let mean = v.iter().sum::<f64>() / v.len() as f64;
         let up: Vec<usize> = (1..v.len()).filter(|&i| v[i - 1] < mean && v[i] >= mean).collect();
-        let zoom = (res.ssi >= 1.0 && up.len() >= 6).then(|| {
-            view(
+        // A smooth run (no four cycles to show): its first ZOOM_SAMPLES samples, where the individual
+        // readings are visible (over the whole record they fill the band between v_min and v_max).
+        const ZOOM_SAMPLES: usize = 60;
+        let zoom = if res.ssi >= 1.0 && up.len() >= 6 {
+            Some(view(
                 format!(
                     "crawl at {feed:.0} mm/min, zoom: four stick-slip cycles, {:.3}–{:.3} s of the record's {:.2}–{:.2} s",
                     tv[up[1]],
@@ -106,8 +109,24 @@ pub(super) fn ssi_checks(
                     tv[tv.len() - 1]
                 ),
                 up[1]..up[5] + 1,
-            )
-        });
+            ))
+        } else {
+            let n = v.len().min(ZOOM_SAMPLES);
+            (n >= 2).then(|| {
+                view(
+                    format!(
+                        "crawl at {feed:.0} mm/min, zoom: the first {n} samples, {:.3}–{:.3} s of the record's \
+                         {:.2}–{:.2} s (SSI {:.2} < 1: no stick-slip cycle)",
+                        tv[0],
+                        tv[n - 1],
+                        tv[0],
+                        tv[tv.len() - 1],
+                        res.ssi
+                    ),
+                    0..n,
+                )
+            })
+        };
         // The patent's example value is a reference, not an injected truth (the SSI follows from the
         // simulated physics). An interval that reaches 0 is a one-sided limit: say so.
         let id = format!("ssi.{sensor}.{feed:.0}_mm_per_min");
