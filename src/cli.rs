@@ -664,7 +664,8 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
         if !(feed.is_finite() && feed > 0.0) {
             return Err(bad(format!("expected `feed` > 0 (m/s), got {feed}")));
         }
-        let moved = r.data.column("x_cmd").filter(|x| x.len() >= 2).map(|x| x[x.len() - 1] - x[0]).filter(|m| *m != 0.0);
+        let moved =
+            r.data.column("x_cmd").filter(|x| x.len() >= 2).map(|x| x[x.len() - 1] - x[0]).filter(|m| *m != 0.0);
         let dir = match (r.direction, moved) {
             (Some(d), Some(m)) if f64::from(d) * m < 0.0 => {
                 return Err(bad(format!("`direction` = {d} but x_cmd moves by {m:.6e} m")));
@@ -700,7 +701,9 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
         let pm = |name: &str, v: Option<f64>, sci: bool| match v {
             Some(v) if sci => format!("± {v:.4e}"),
             Some(v) => format!("± {v:.3}"),
-            None if fit.at_bound.iter().any(|b| b == name) => "(at a bound of the fit: a limit, no standard error)".into(),
+            None if fit.at_bound.iter().any(|b| b == name) => {
+                "(at a bound of the fit: a limit, no standard error)".into()
+            }
             None => "(no standard error: not determined by these points)".into(),
         };
         println!("  value ± standard error (1σ, from the Jacobian at the solution and the residual RMS):");

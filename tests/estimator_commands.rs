@@ -59,7 +59,11 @@ fn every_estimator_command_has_a_method_entry_with_uncertainty_assumptions_and_b
 
 fn run(args: &[&str]) -> (Option<i32>, String, String) {
     let out = vmt().args(args).output().unwrap();
-    (out.status.code(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 /// A crawl set written by hand: one encoder, one crawl run sampled every `dt` at positions `x`.
@@ -124,7 +128,13 @@ fn ssi_states_its_quantisation_floor_with_the_count_read_from_the_record() {
             assert!(text.contains("floor") && text.contains(&format!("{stated:.3}")), "{text}");
         }
         // Noise finer than a count: no lattice, no floor, and said so.
-        let noisy: Vec<f64> = counts.iter().map(|x| x + 0.1 * q * StandardNormal.sample(&mut rng) as f64).collect();
+        let noisy: Vec<f64> = counts
+            .iter()
+            .map(|x| {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                x + 0.1 * q * z
+            })
+            .collect();
         let dir = crawl_set(&tmp.path().join(format!("noisy{draw}")), dt, &noisy, v0);
         let (code, out, err) = run(&["ssi", dir.to_str().unwrap(), "--json"]);
         assert_eq!(code, Some(0), "{err}");

@@ -530,7 +530,11 @@ fn vmt_straightness_refuses_unusable_passes() {
             }),
             "expected uniformly spaced time stamps",
         ),
-        ("direction disagreeing with x_cmd", edit("backwards", &|s| s.runs[0].direction = Some(-1)), "`direction` = -1"),
+        (
+            "direction disagreeing with x_cmd",
+            edit("backwards", &|s| s.runs[0].direction = Some(-1)),
+            "`direction` = -1",
+        ),
     ];
     for (what, dir, expect) in cases {
         let out = run(&dir, &[]);
@@ -554,7 +558,11 @@ fn vmt_straightness_refuses_unusable_passes() {
     let counts: Vec<usize> = unequal.passes.iter().map(|p| p.1.len()).collect();
     for method in ["seed", "fusion"] {
         let out = run(&dir, &["--method", method]);
-        assert!(out.status.success(), "{method} on unequal counts {counts:?}: {}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{method} on unequal counts {counts:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
     }
 }
 
@@ -573,16 +581,19 @@ fn vmt_straightness_on_a_simulated_set_matches_the_library() {
     let out = vmt().arg("straightness").arg(&dir).arg("--json").output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let nums = |x: &serde_json::Value| -> Vec<f64> { x.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
+    let nums =
+        |x: &serde_json::Value| -> Vec<f64> { x.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
     let sensors = v["sensors"].as_array().unwrap();
     assert!(!sensors.is_empty());
     for e in sensors {
         let name = e["sensor"].as_str().unwrap();
-        let lib = sensor_straightness(&set, &dir, name, PassSelection::ConstantVelocity, FusionMethod::SnrWeighted)
-            .unwrap();
+        let lib =
+            sensor_straightness(&set, &dir, name, PassSelection::ConstantVelocity, FusionMethod::SnrWeighted).unwrap();
         let d = max_rel_diff(&lib.estimate.straightness, &nums(&e["estimate"]["straightness"]));
         let b = (lib.bounds.straightness_rms / e["bounds"]["straightness_rms"].as_f64().unwrap() - 1.0).abs();
-        println!("{name}: CLI on the written set against the library in memory: profile {d:.1e}, bound {b:.1e} relative");
+        println!(
+            "{name}: CLI on the written set against the library in memory: profile {d:.1e}, bound {b:.1e} relative"
+        );
         assert!(d <= 1e-12 && b <= 1e-12, "{name}: profile {d:e}, bound {b:e}");
         if let Some(t) = &lib.estimate.tilt {
             assert!(max_rel_diff(t, &nums(&e["estimate"]["tilt"])) <= 1e-12, "{name}: tilt");

@@ -259,15 +259,17 @@ mod tests {
             let zero = rng.gen_range(0.0..q);
             let per_sample = 10f64.powf(rng.gen_range(-0.5..1.6)) * q;
             let x0 = rng.gen_range(-0.2..0.2);
-            let exact: Vec<f64> = (0..2000)
-                .map(|i| x0 + per_sample * i as f64 * (1.0 + 0.3 * (i as f64 * 0.01).sin()))
-                .collect();
+            let exact: Vec<f64> =
+                (0..2000).map(|i| x0 + per_sample * i as f64 * (1.0 + 0.3 * (i as f64 * 0.01).sin())).collect();
             let counts: Vec<f64> = exact.iter().map(|x| ((x + zero) / q).floor() * q).collect();
             let d = lattice_step(&counts).expect("a quantised record has a lattice");
             assert!((d / q - 1.0).abs() < 1e-6, "q {q:e}, found {d:e}");
             let noisy: Vec<f64> = counts
                 .iter()
-                .map(|x| x + 0.1 * q * StandardNormal.sample(&mut rng) as f64)
+                .map(|x| {
+                    let z: f64 = StandardNormal.sample(&mut rng);
+                    x + 0.1 * q * z
+                })
                 .collect();
             assert_eq!(lattice_step(&noisy), None, "noise taken for a lattice (q {q:e})");
         }

@@ -307,7 +307,8 @@ fn positioning_layout(rng: &mut ChaCha8Rng) -> PositioningLayout {
     let m = rng.gen_range(5..=21);
     let travel = rng.gen_range(0.2..2.0);
     let targets: Vec<f64> = (0..m).map(|i| travel * i as f64 / (m - 1) as f64).collect();
-    // A pitch error (slope) plus two random waves (10–40 µm), a reversal of 0–8 µm varying along the travel.
+    // A pitch error (slope, ±20 µm over the travel) plus two random waves (1–10 µm each), a reversal of 0–8 µm
+    // varying along the travel.
     let slope = rng.gen_range(-20e-6..20e-6) / travel;
     let waves: Vec<(f64, f64, f64)> = (0..2)
         .map(|_| (rng.gen_range(1e-6..10e-6), travel / rng.gen_range(0.5..4.0), rng.gen_range(0.0..2.0 * PI)))
@@ -317,7 +318,14 @@ fn positioning_layout(rng: &mut ChaCha8Rng) -> PositioningLayout {
         .iter()
         .map(|&p| slope * p + waves.iter().map(|(a, l, ph)| a * (2.0 * PI * p / l + ph).sin()).sum::<f64>())
         .collect();
-    let half_rev: Vec<f64> = targets.iter().map(|&p| 0.5 * (rev + rev_slope * p / travel)).collect();
+    // In half the layouts one target's reversal stands out by 3–8 µm (a worn screw section): B then has a
+    // clear extreme.
+    let spike = rng.gen_bool(0.5).then(|| (rng.gen_range(0..m), rng.gen_range(3e-6..8e-6)));
+    let half_rev: Vec<f64> = targets
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| 0.5 * (rev + rev_slope * p / travel + spike.filter(|s| s.0 == i).map_or(0.0, |s| s.1)))
+        .collect();
     let sig = |rng: &mut ChaCha8Rng| (rng.gen_range((0.1e-6f64).ln()..(1.5e-6f64).ln())).exp();
     PositioningLayout {
         up: base.iter().zip(&half_rev).map(|(b, h)| b + h).collect(),
@@ -391,23 +399,24 @@ fn iso230_2_uncertainties_match_the_spread_on_independently_generated_tests() {
         let both: Vec<(f64, f64)> = (0..l.targets.len()).flat_map(|i| [(l.up[i], uu[i]), (l.down[i], ud[i])]).collect();
         let mid: Vec<(f64, f64)> =
             (0..l.targets.len()).map(|i| (0.5 * (l.up[i] + l.down[i]), 0.5 * uu[i].hypot(ud[i]))).collect();
-        let rev: Vec<(f64, f64)> = (0..l.targets.len()).map(|i| ((l.up[i] - l.down[i]).abs(), uu[i].hypot(ud[i]))).collect();
-        let margins = [extreme_margin(&both), extreme_margin(&mid), extreme_margin(&rev).max(0.0), f64::INFINITY];
+        let rev: Vec<(f64, f64)> =
+            (0..l.targets.len()).map(|i| ((l.up[i] - l.down[i]).abs(), uu[i].hypot(ud[i]))).collect();
+        // B is a largest |B_i|: only its upper side counts (a maximum over targets), and |B_i| must stay
+        // clear of 0 (where the sign flips); B̄ is linear (always "separated").
+        let b_margin = {
+            let mut r: Vec<&(f64, f64)> = rev.iter().collect();
+            r.sort_by(|a, b| b.0.total_cmp(&a.0));
+            let gap = r.get(1).map_or(f64::INFINITY, |s| (r[0].0 - s.0) / r[0].1.hypot(s.1));
+            gap.min(r[0].0 / r[0].1)
+        };
+        let margins = [extreme_margin(&both), extreme_margin(&mid), b_margin, f64::INFINITY];
         for k in 0..4 {
             let v = &values[k];
             let mean = v.iter().sum::<f64>() / DRAWS as f64;
             let spread = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (DRAWS - 1) as f64).sqrt();
             let ratio = spread / u2[k].sqrt();
             ratios[k].push(ratio);
-            // B is a largest |B_i|: only its upper side counts (a maximum over targets).
-            let separated = if k == 2 {
-                let mut r: Vec<&(f64, f64)> = rev.iter().collect();
-                r.sort_by(|a, b| b.0.total_cmp(&a.0));
-                r.len() < 2 || (r[0].0 - r[1].0) / r[0].1.hypot(r[1].1) >= 4.0 && r[0].0 >= 4.0 * r[0].1
-            } else {
-                margins[k] >= 4.0
-            };
-            if separated {
+            if margins[k] >= 4.0 {
                 separated_ratios[k].push(ratio);
                 assert!((ratio - 1.0).abs() <= 0.15, "layout {layout}: {} spread/u {ratio:.3} (separated)", names[k]);
             } else {
@@ -430,5 +439,7 @@ fn iso230_2_uncertainties_match_the_spread_on_independently_generated_tests() {
             all.iter().cloned().fold(0.0, f64::max),
         );
     }
-    assert!(separated_ratios[0].len() >= 10, "too few layouts with separated E extremes to test");
+    for k in 0..3 {
+        assert!(separated_ratios[k].len() >= 5, "too few layouts with separated {} extremes to test", names[k]);
+    }
 }
