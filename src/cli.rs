@@ -283,7 +283,8 @@ pub fn channel_unit(kind: SensorKind) -> (f64, &'static str) {
 /// (a point-table run and one of its deviation columns) or from an ecmc `.dat` file (key=value format).
 pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool) -> Result<i32, VmtError> {
     use vmt_estimators::iso230_2::evaluate_bidirectional;
-    let (label, targets, up, down) = if path.is_dir() {
+    // `place`: where the deviations come from, for a message on them (the estimator names target and run).
+    let (label, place, targets, up, down) = if path.is_dir() {
         let set = measurement::read(path)?;
         let r = match run {
             Some(n) => set.run(n).ok_or_else(|| VmtError::bad(path, "runs", format!("no run named `{n}`")))?,
@@ -306,14 +307,22 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
         let (t, u, d) = crate::estimate::point_table_deviations(r, &col).ok_or_else(|| {
             VmtError::bad(path, format!("run {}", r.name), format!("expected a point table with column `{col}`"))
         })?;
-        (format!("{} / {} / {}", path.display(), r.name, col), t, u, d)
+        (format!("{} / {} / {}", path.display(), r.name, col), format!("run {}, column `{col}`", r.name), t, u, d)
     } else {
         let dat = measurement::read_dat(path)?;
-        (path.display().to_string(), dat.targets, dat.up, dat.down)
+        (path.display().to_string(), "deviations".to_string(), dat.targets, dat.up, dat.down)
     };
-    let res = evaluate_bidirectional(&targets, &up, &down).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+    let res = evaluate_bidirectional(&targets, &up, &down).map_err(|e| VmtError::bad(path, place, e.to_string()))?;
+    let u = vmt_estimators::iso230_2::axis_uncertainties(&res);
     if json {
-        print_json("vmt-iso230-2/1", &res)?;
+        /// `vmt iso230-2 --json`: the evaluation and the type-A standard uncertainties of its axis values.
+        #[derive(serde::Serialize)]
+        struct Out<'a> {
+            #[serde(flatten)]
+            result: &'a vmt_estimators::iso230_2::AxisResult,
+            uncertainty: vmt_estimators::iso230_2::AxisUncertainty,
+        }
+        print_json("vmt-iso230-2/1", &Out { result: &res, uncertainty: u })?;
         return Ok(0);
     }
     let table = crate::estimate::iso_table(&format!("ISO 230-2:2014 evaluation of {label} (µm)"), &res);
@@ -323,6 +332,21 @@ pub fn iso230_2(path: &Path, run: Option<&str>, sensor: Option<&str>, json: bool
     for row in &table.rows {
         println!("{}", line(row));
     }
+    let um = |v: f64| format!("{:.3}", v * 1e6);
+    println!(
+        "standard uncertainty (1σ, type A from the repeats, first order at the extreme targets), µm: u(E) {}  u(E↑) {}  \
+         u(E↓) {}  u(M) {}  u(B) {}  u(B̄) {}",
+        um(u.e),
+        um(u.e_up),
+        um(u.e_down),
+        um(u.m),
+        um(u.b),
+        um(u.b_mean)
+    );
+    println!(
+        "per target: the scatter s↑, s↓ above (u of a mean x̄ = s/√n); R and A are maxima of the scatter and get \
+         no uncertainty here; the instrument's systematic share (ISO/TR 230-9) is not in the repeats"
+    );
     Ok(0)
 }
 
@@ -608,10 +632,21 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
         if t.len() < 3 {
             continue;
         }
-        let (_, res) = crate::estimate::ssi::run_ssi(t, x, None)
+        // The count q for the floor 2q/(Δt·v): nobody states it in a measurement set, so it is read from
+        // the record (every first difference a multiple of q), or the floor is not known.
+        let q = vmt_estimators::ssi::lattice_step(x);
+        let (_, res) = crate::estimate::ssi::run_ssi(t, x, q)
             .map_err(|m| VmtError::bad(path, format!("run {}", r.name), m.to_string()))?;
-        results
-            .push(serde_json::json!({"run": r.name, "sensor": s.name, "feed": r.feed, "ssi": res.ssi, "result": res}));
+        let resolution_source = if q.is_some() {
+            "found in the record: every first difference is a multiple of it"
+        } else {
+            "not found: the record is not on a lattice of counts (noise finer than a count, or too few moves)"
+        };
+        results.push(serde_json::json!({
+            "run": r.name, "sensor": s.name, "feed": r.feed, "ssi": res.ssi,
+            "quantisation_floor": res.quantisation_floor, "resolution": q,
+            "resolution_source": resolution_source, "result": res
+        }));
     }
     if results.is_empty() {
         return Err(VmtError::bad(path, "runs", "expected a time-series run with an encoder column"));
@@ -619,19 +654,33 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
     if json {
         print_json("vmt-ssi/1", &serde_json::json!({ "runs": results }))?;
     } else {
-        println!("{:<16} {:<12} {:>12} {:>8}  verdict (SSI ≥ 1: crawling)", "run", "sensor", "feed mm/min", "SSI");
+        println!(
+            "{:<16} {:<12} {:>12} {:>8} {:>10} {:>10}  verdict (SSI ≥ 1: crawling)",
+            "run", "sensor", "feed mm/min", "SSI", "floor", "count nm"
+        );
         for r in &results {
             let ssi = r["ssi"].as_f64().unwrap_or(f64::NAN);
             let feed = r["feed"].as_f64().map_or("-".to_string(), |f| format!("{:.1}", f * 60_000.0));
+            let floor = r["quantisation_floor"].as_f64();
+            let verdict = match floor {
+                Some(f) if (ssi - 1.0).abs() <= f => "undecided (|SSI − 1| ≤ floor)",
+                _ if ssi >= 1.0 => "crawling",
+                _ => "smooth",
+            };
             println!(
-                "{:<16} {:<12} {:>12} {:>8.3}  {}",
+                "{:<16} {:<12} {:>12} {:>8.3} {:>10} {:>10}  {verdict}",
                 r["run"].as_str().unwrap_or(""),
                 r["sensor"].as_str().unwrap_or(""),
                 feed,
                 ssi,
-                if ssi >= 1.0 { "crawling" } else { "smooth" }
+                floor.map_or("-".to_string(), |f| format!("{f:.3}")),
+                r["resolution"].as_f64().map_or("-".to_string(), |q| format!("{:.4}", q * 1e9)),
             );
         }
+        println!(
+            "floor: the quantisation floor 2q/(Δt·v̄) of the index (dimensionless): |SSI − SSI of the exact motion| ≤ floor;"
+        );
+        println!("count q: the encoder count read from the record (\"-\": the record is not on a lattice of counts, the floor is not known)");
     }
     Ok(0)
 }
@@ -651,10 +700,32 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
             .ok_or_else(|| VmtError::bad(path, "sensors", "expected a motor_force sensor"))?,
     };
     let (mut v, mut f) = (Vec::new(), Vec::new());
-    for r in set.runs.iter().filter(|r| r.procedure == measurement::Procedure::FrictionSweep) {
-        let (Some(feed), Some(col)) = (r.feed, r.data.column(&name)) else { continue };
-        v.push(feed * r.direction.unwrap_or(1) as f64);
-        f.push(col.iter().sum::<f64>() / col.len().max(1) as f64);
+    for (i, r) in set.runs.iter().enumerate().filter(|(_, r)| r.procedure == measurement::Procedure::FrictionSweep) {
+        let Some(col) = r.data.column(&name) else { continue };
+        let bad = |m: String| VmtError::bad(path, format!("runs[{i}] ({})", r.name), m);
+        // A sweep point is the run's signed steady speed and its mean force: a run without `feed`, or
+        // whose direction is neither stated nor read from `x_cmd`, is refused (never taken as +1).
+        let feed = r.feed.ok_or_else(|| bad(format!("missing `feed` (m/s): the speed of this sweep point")))?;
+        if !(feed.is_finite() && feed > 0.0) {
+            return Err(bad(format!("expected `feed` > 0 (m/s), got {feed}")));
+        }
+        let moved =
+            r.data.column("x_cmd").filter(|x| x.len() >= 2).map(|x| x[x.len() - 1] - x[0]).filter(|m| *m != 0.0);
+        let dir = match (r.direction, moved) {
+            (Some(d), Some(m)) if f64::from(d) * m < 0.0 => {
+                return Err(bad(format!("`direction` = {d} but x_cmd moves by {m:.6e} m")));
+            }
+            (Some(d), _) => f64::from(d),
+            (None, Some(m)) => m.signum(),
+            (None, None) => {
+                return Err(bad("missing `direction` (+1 / −1) and no moving `x_cmd` column to read it from".into()))
+            }
+        };
+        if col.is_empty() {
+            return Err(bad(format!("no samples in column `{name}`")));
+        }
+        v.push(feed * dir);
+        f.push(col.iter().sum::<f64>() / col.len() as f64);
     }
     if v.len() < 6 {
         return Err(VmtError::bad(
@@ -670,10 +741,22 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
     } else {
         let c = &fit.coefficients;
         println!("Stribeck fit of {} sweep points (residual RMS {:.3} N):", v.len(), fit.residual_rms);
-        println!(
-            "  Fc {:.3} N  Fs {:.3} N  vs {:.4e} m/s  shape {:.3}  Fv {:.3} N·s/m",
-            c.fc, c.fs, c.vs, c.delta, c.fv
-        );
+        let e = &fit.std_errors;
+        // Each value with its standard error, or why it has none (never a bare number).
+        let pm = |name: &str, v: Option<f64>, sci: bool| match v {
+            Some(v) if sci => format!("± {v:.4e}"),
+            Some(v) => format!("± {v:.3}"),
+            None if fit.at_bound.iter().any(|b| b == name) => {
+                "(at a bound of the fit: a limit, no standard error)".into()
+            }
+            None => "(no standard error: not determined by these points)".into(),
+        };
+        println!("  value ± standard error (1σ, from the Jacobian at the solution and the residual RMS):");
+        println!("  Fc {:>12.3} {} N", c.fc, pm("fc", e.fc, false));
+        println!("  Fs {:>12.3} {} N", c.fs, pm("fs", e.fs, false));
+        println!("  vs {:>12.4e} {} m/s", c.vs, pm("vs", e.vs, true));
+        println!("  δ  {:>12.3} {} (shape exponent, dimensionless)", c.delta, pm("delta", e.delta, false));
+        println!("  Fv {:>12.3} {} N·s/m", c.fv, pm("fv", e.fv, false));
     }
     Ok(0)
 }
@@ -749,7 +832,8 @@ pub fn compensate(path: &Path, out: &Path, opts: &CompensateOptions) -> Result<i
     let col = col.ok_or_else(|| VmtError::bad(path, format!("run {}", run.name), "expected a laser_linear column"))?;
     let (t, u, d) = crate::estimate::point_table_deviations(run, &col)
         .ok_or_else(|| VmtError::bad(path, format!("run {}", run.name), format!("no column `{col}`")))?;
-    let iso = evaluate_bidirectional(&t, &u, &d).map_err(|e| VmtError::bad(path, "", e.to_string()))?;
+    let iso = evaluate_bidirectional(&t, &u, &d)
+        .map_err(|e| VmtError::bad(path, format!("run {}, column `{col}`", run.name), e.to_string()))?;
     let targets: Vec<f64> = iso.targets.iter().map(|x| x.target).collect();
     let dev: Vec<f64> = iso.targets.iter().map(|x| x.mean_bidirectional).collect();
     let bad = |e: String| VmtError::bad(path, format!("run {}", run.name), e);

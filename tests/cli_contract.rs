@@ -24,7 +24,7 @@ fn lines_scenario(dir: &Path) -> PathBuf {
 }
 
 /// A friction-sweep set written by hand: 8 runs of constant motor force at ±1, 3, 10, 30 mm/s.
-fn friction_set(dir: &Path) -> PathBuf {
+pub(crate) fn friction_set(dir: &Path) -> PathBuf {
     let set = dir.join("friction");
     std::fs::create_dir_all(&set).unwrap();
     let mut manifest = String::from(

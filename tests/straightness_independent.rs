@@ -519,6 +519,22 @@ fn vmt_straightness_refuses_unusable_passes() {
             "the speed varies within the pass",
         ),
         ("too few speeds", edit("onespeed", &|s| s.runs.truncate(1)), "too few speeds"),
+        (
+            "non-uniform time stamps",
+            edit("jitter", &|s| {
+                if let RunData::TimeSeries { t, .. } = &mut s.runs[2].data {
+                    // one sample 40 % of a step late
+                    let dt = t[1] - t[0];
+                    t[100] += 0.4 * dt;
+                }
+            }),
+            "expected uniformly spaced time stamps",
+        ),
+        (
+            "direction disagreeing with x_cmd",
+            edit("backwards", &|s| s.runs[0].direction = Some(-1)),
+            "`direction` = -1",
+        ),
     ];
     for (what, dir, expect) in cases {
         let out = run(&dir, &[]);
@@ -527,5 +543,63 @@ fn vmt_straightness_refuses_unusable_passes() {
         assert_eq!(out.status.code(), Some(2), "{what}: {err}");
         assert!(err.contains(expect), "{what}: {err}");
         assert!(err.contains(dir.to_str().unwrap()), "{what}: the message names the set: {err}");
+        if what != "too few speeds" {
+            assert!(err.contains("runs["), "{what}: the message names the run: {err}");
+        }
+    }
+    // Unequal sample counts are not refused: every pass is resampled onto the common grid (half of the
+    // generator's draws have them; both methods run on this one).
+    let unequal = (0..40u64)
+        .map(|seed| generate(seed, false))
+        .find(|d| d.passes.iter().map(|p| p.1.len()).collect::<std::collections::BTreeSet<_>>().len() > 1)
+        .expect("a draw with unequal sample counts");
+    let dir = tmp.path().join("unequal");
+    write_set(&unequal, &dir, true);
+    let counts: Vec<usize> = unequal.passes.iter().map(|p| p.1.len()).collect();
+    for method in ["seed", "fusion"] {
+        let out = run(&dir, &["--method", method]);
+        assert!(
+            out.status.success(),
+            "{method} on unequal counts {counts:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}
+
+/// Issue 17: the same numbers through `vmt straightness` on a set written by `vmt simulate` as through the
+/// library on the simulated set in memory (what `vmt simulate` wrote, SI, read back bit for bit): profile,
+/// in-band bounds and tilt to 1e-12 relative, with the manifest's noise density used (not estimated).
+#[test]
+fn vmt_straightness_on_a_simulated_set_matches_the_library() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = crate::util::root().join("scenarios/study_accel.toml");
+    let dir = tmp.path().join("sim");
+    let out = vmt().arg("simulate").arg(&scenario).arg("-o").arg(&dir).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let sc = vmt::cli::load_scenario(Some(&scenario)).unwrap();
+    let set = vmt::cli::simulate_set(&sc).unwrap();
+    let out = vmt().arg("straightness").arg(&dir).arg("--json").output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let nums =
+        |x: &serde_json::Value| -> Vec<f64> { x.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
+    let sensors = v["sensors"].as_array().unwrap();
+    assert!(!sensors.is_empty());
+    for e in sensors {
+        let name = e["sensor"].as_str().unwrap();
+        let lib =
+            sensor_straightness(&set, &dir, name, PassSelection::ConstantVelocity, FusionMethod::SnrWeighted).unwrap();
+        let d = max_rel_diff(&lib.estimate.straightness, &nums(&e["estimate"]["straightness"]));
+        let b = (lib.bounds.straightness_rms / e["bounds"]["straightness_rms"].as_f64().unwrap() - 1.0).abs();
+        println!(
+            "{name}: CLI on the written set against the library in memory: profile {d:.1e}, bound {b:.1e} relative"
+        );
+        assert!(d <= 1e-12 && b <= 1e-12, "{name}: profile {d:e}, bound {b:e}");
+        if let Some(t) = &lib.estimate.tilt {
+            assert!(max_rel_diff(t, &nums(&e["estimate"]["tilt"])) <= 1e-12, "{name}: tilt");
+        }
+        for p in e["passes"].as_array().unwrap() {
+            assert_eq!(p["noise_density_source"], "manifest", "{name}: {p}");
+        }
     }
 }

@@ -16,6 +16,7 @@ mod gen_timeseries;
 
 mod bad_input;
 mod cli_contract;
+mod estimator_commands;
 mod estimators_on_simulation;
 mod fidelity;
 mod formats;

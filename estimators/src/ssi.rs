@@ -122,6 +122,41 @@ pub fn quantisation_floor(q: f64, dt: f64, v: f64) -> Result<f64, SsiError> {
     Ok(2.0 * q / (dt * v.abs()))
 }
 
+/// Most divisors `m` tried by [`lattice_step`] (steps d_min/m).
+const LATTICE_DIVISORS: usize = 1000;
+/// Fewest non-zero first differences [`lattice_step`] decides on.
+const LATTICE_MIN_STEPS: usize = 20;
+
+/// The encoder's count q (m) read from the record itself, for a record whose resolution nobody stated:
+/// the largest step `d` such that every first difference `x(n) − x(n−1)` is an integer multiple of `d`,
+/// searched as `d = d_min/m` for m = 1..=1000 (`d_min` the smallest non-zero |difference|). A difference
+/// counts as a multiple when it lies within `10⁻³·d + 10⁻¹¹·max|x|` of one (the rounding of positions
+/// written with 12 or more significant digits).
+///
+/// Returns None when there is no such step — the record carries noise finer than a count, or was written
+/// with too few digits to tell (the tolerance exceeds 5 % of `d`) — or when fewer than 20 differences are
+/// non-zero (too few to decide). Noise passes by chance with probability about (2·10⁻³)^20 or less.
+/// An encoder counting in steps of 2q returns 2q: the step the record actually resolves, which is what
+/// the floor 2q/(Δt·v) needs.
+pub fn lattice_step(x: &[f64]) -> Option<f64> {
+    let scale = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if !scale.is_finite() {
+        return None;
+    }
+    let steps: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|&d| d > 0.0).collect();
+    if steps.len() < LATTICE_MIN_STEPS {
+        return None;
+    }
+    let d_min = steps.iter().copied().fold(f64::INFINITY, f64::min);
+    (1..=LATTICE_DIVISORS).map(|m| d_min / m as f64).find_map(|d| {
+        let tol = 1e-3 * d + 1e-11 * scale;
+        if tol > 0.05 * d {
+            return None;
+        }
+        steps.iter().all(|&s| (s - (s / d).round() * d).abs() <= tol).then_some(d)
+    })
+}
+
 /// Percentile of sorted data with linear interpolation between order statistics:
 /// rank h = (p/100)·(n − 1), value = s[⌊h⌋] + (h − ⌊h⌋)·(s[⌊h⌋+1] − s[⌊h⌋]).
 fn percentile_sorted(sorted: &[f64], p: f64) -> f64 {
@@ -209,6 +244,38 @@ pub fn stick_slip_index_robust(
 mod tests {
     use super::*;
     use std::f64::consts::PI;
+
+    /// The count of a quantised record is found from the record alone (random q 1–100 nm, random zero,
+    /// random speeds so that a sample moves 0.3–40 counts), to 1e-6 relative; a record with noise of a
+    /// tenth of a count on top is not taken for a lattice; a record that moves fewer than 20 times is
+    /// not decided.
+    #[test]
+    fn lattice_step_recovers_the_count_of_a_quantised_record() {
+        use rand::{Rng, SeedableRng};
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(77);
+        for _ in 0..200 {
+            let q = 10f64.powf(rng.gen_range(-9.0..-7.0));
+            let zero = rng.gen_range(0.0..q);
+            let per_sample = 10f64.powf(rng.gen_range(-0.5..1.6)) * q;
+            let x0 = rng.gen_range(-0.2..0.2);
+            let exact: Vec<f64> =
+                (0..2000).map(|i| x0 + per_sample * i as f64 * (1.0 + 0.3 * (i as f64 * 0.01).sin())).collect();
+            let counts: Vec<f64> = exact.iter().map(|x| ((x + zero) / q).floor() * q).collect();
+            let d = lattice_step(&counts).expect("a quantised record has a lattice");
+            assert!((d / q - 1.0).abs() < 1e-6, "q {q:e}, found {d:e}");
+            let noisy: Vec<f64> = counts
+                .iter()
+                .map(|x| {
+                    let z: f64 = StandardNormal.sample(&mut rng);
+                    x + 0.1 * q * z
+                })
+                .collect();
+            assert_eq!(lattice_step(&noisy), None, "noise taken for a lattice (q {q:e})");
+        }
+        let still: Vec<f64> = (0..1000).map(|i| 1e-9 * (i / 100) as f64).collect();
+        assert_eq!(lattice_step(&still), None, "9 moves are too few to decide");
+    }
 
     /// Ramp with sinusoidal velocity ripple x(t) = v t + (a/ω) sin(ω t), true velocity v + a cos ωt.
     /// Sampled at t_n = t0 + nΔt with M samples per period and t0 = Δt/2, the first difference is

@@ -287,3 +287,159 @@ fn stick_slip_index_stays_within_its_quantisation_floor_on_independently_generat
         "only {decidable} of {DRAWS} draws decidable: the generator is too coarse"
     );
 }
+
+// ---------------------------------------------------------------------------------------------------
+// ISO 230-2 positioning tests
+// ---------------------------------------------------------------------------------------------------
+
+/// One random positioning test: targets, the true mean deviation per target and direction (m), and the
+/// noise σ per target and direction (m); `runs` per direction.
+struct PositioningLayout {
+    targets: Vec<f64>,
+    up: Vec<f64>,
+    down: Vec<f64>,
+    sigma_up: Vec<f64>,
+    sigma_down: Vec<f64>,
+    runs: usize,
+}
+
+fn positioning_layout(rng: &mut ChaCha8Rng) -> PositioningLayout {
+    let m = rng.gen_range(5..=21);
+    let travel = rng.gen_range(0.2..2.0);
+    let targets: Vec<f64> = (0..m).map(|i| travel * i as f64 / (m - 1) as f64).collect();
+    // A pitch error (slope, ±20 µm over the travel) plus two random waves (1–10 µm each), a reversal of 0–8 µm
+    // varying along the travel.
+    let slope = rng.gen_range(-20e-6..20e-6) / travel;
+    let waves: Vec<(f64, f64, f64)> = (0..2)
+        .map(|_| (rng.gen_range(1e-6..10e-6), travel / rng.gen_range(0.5..4.0), rng.gen_range(0.0..2.0 * PI)))
+        .collect();
+    let (rev, rev_slope) = (rng.gen_range(0.0..8e-6), rng.gen_range(-2e-6..2e-6));
+    let base: Vec<f64> = targets
+        .iter()
+        .map(|&p| slope * p + waves.iter().map(|(a, l, ph)| a * (2.0 * PI * p / l + ph).sin()).sum::<f64>())
+        .collect();
+    // In half the layouts one target's reversal stands out by 3–8 µm (a worn screw section): B then has a
+    // clear extreme.
+    let spike = rng.gen_bool(0.5).then(|| (rng.gen_range(0..m), rng.gen_range(3e-6..8e-6)));
+    let half_rev: Vec<f64> = targets
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| 0.5 * (rev + rev_slope * p / travel + spike.filter(|s| s.0 == i).map_or(0.0, |s| s.1)))
+        .collect();
+    let sig = |rng: &mut ChaCha8Rng| (rng.gen_range((0.1e-6f64).ln()..(1.5e-6f64).ln())).exp();
+    PositioningLayout {
+        up: base.iter().zip(&half_rev).map(|(b, h)| b + h).collect(),
+        down: base.iter().zip(&half_rev).map(|(b, h)| b - h).collect(),
+        sigma_up: (0..m).map(|_| sig(rng)).collect(),
+        sigma_down: (0..m).map(|_| sig(rng)).collect(),
+        runs: rng.gen_range(3..=10),
+        targets,
+    }
+}
+
+/// The smallest gap, in units of the value's own u, between an extreme and its runner-up, over the
+/// extremes E, M and B are taken at (a layout is "separated" when each extreme stays at its target under
+/// the noise).
+fn extreme_margin(values: &[(f64, f64)]) -> f64 {
+    let gap = |sign: f64| {
+        let mut v: Vec<(f64, f64)> = values.iter().map(|&(x, u)| (sign * x, u)).collect();
+        v.sort_by(|a, b| b.0.total_cmp(&a.0));
+        v.get(1).map_or(f64::INFINITY, |second| (v[0].0 - second.0) / v[0].1.hypot(second.1))
+    };
+    gap(1.0).min(gap(-1.0))
+}
+
+/// Over 40 random positioning tests (5–21 targets, 3–10 runs, smooth deviations of tens of µm, reversal
+/// 0–8 µm, noise 0.1–1.5 µm per target and direction) × 400 noise draws each: the type-A standard
+/// uncertainties that `axis_uncertainties` reports for E, M, B and B̄ against the spread of those values
+/// over the draws. B̄ is linear in the means: its ratio spread/u must be within 15 % on every layout
+/// (400 draws put the spread within ±3.5 % at 1σ, u is the root mean square of the reported values:
+/// 15 % is > 4σ). E, M and B are taken at extreme targets: on layouts whose extremes stand ≥ 4 u clear
+/// of their runner-up the same 15 % holds; elsewhere u may only overstate the spread (ratio ≤ 1.15).
+#[test]
+fn iso230_2_uncertainties_match_the_spread_on_independently_generated_tests() {
+    use vmt_estimators::iso230_2::{axis_uncertainties, evaluate_bidirectional};
+    const LAYOUTS: u64 = 40;
+    const DRAWS: usize = 400;
+    let names = ["E", "M", "B", "B̄"];
+    let mut ratios: Vec<Vec<f64>> = vec![Vec::new(); 4];
+    let mut separated_ratios: Vec<Vec<f64>> = vec![Vec::new(); 4];
+    for layout in 0..LAYOUTS {
+        let mut rng = ChaCha8Rng::seed_from_u64(11_000 + layout);
+        let l = positioning_layout(&mut rng);
+        let (mut values, mut u2) = (vec![Vec::new(); 4], [0.0; 4]);
+        let mut first = None;
+        for _ in 0..DRAWS {
+            let mut draw = |mean: &[f64], sigma: &[f64]| -> Vec<Vec<f64>> {
+                mean.iter()
+                    .zip(sigma)
+                    .map(|(m, s)| {
+                        (0..l.runs)
+                            .map(|_| {
+                                let z: f64 = StandardNormal.sample(&mut rng);
+                                m + s * z
+                            })
+                            .collect()
+                    })
+                    .collect()
+            };
+            let (up, down) = (draw(&l.up, &l.sigma_up), draw(&l.down, &l.sigma_down));
+            let r = evaluate_bidirectional(&l.targets, &up, &down).unwrap();
+            let u = axis_uncertainties(&r);
+            for (k, (v, uk)) in [(r.e, u.e), (r.m, u.m), (r.b, u.b), (r.b_mean, u.b_mean)].into_iter().enumerate() {
+                values[k].push(v);
+                u2[k] += uk * uk / DRAWS as f64;
+            }
+            first.get_or_insert(r);
+        }
+        // Separation from the true means and the true u of each mean.
+        let n = l.runs as f64;
+        let uu: Vec<f64> = l.sigma_up.iter().map(|s| s / n.sqrt()).collect();
+        let ud: Vec<f64> = l.sigma_down.iter().map(|s| s / n.sqrt()).collect();
+        let both: Vec<(f64, f64)> = (0..l.targets.len()).flat_map(|i| [(l.up[i], uu[i]), (l.down[i], ud[i])]).collect();
+        let mid: Vec<(f64, f64)> =
+            (0..l.targets.len()).map(|i| (0.5 * (l.up[i] + l.down[i]), 0.5 * uu[i].hypot(ud[i]))).collect();
+        let rev: Vec<(f64, f64)> =
+            (0..l.targets.len()).map(|i| ((l.up[i] - l.down[i]).abs(), uu[i].hypot(ud[i]))).collect();
+        // B is a largest |B_i|: only its upper side counts (a maximum over targets), and |B_i| must stay
+        // clear of 0 (where the sign flips); B̄ is linear (always "separated").
+        let b_margin = {
+            let mut r: Vec<&(f64, f64)> = rev.iter().collect();
+            r.sort_by(|a, b| b.0.total_cmp(&a.0));
+            let gap = r.get(1).map_or(f64::INFINITY, |s| (r[0].0 - s.0) / r[0].1.hypot(s.1));
+            gap.min(r[0].0 / r[0].1)
+        };
+        let margins = [extreme_margin(&both), extreme_margin(&mid), b_margin, f64::INFINITY];
+        for k in 0..4 {
+            let v = &values[k];
+            let mean = v.iter().sum::<f64>() / DRAWS as f64;
+            let spread = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (DRAWS - 1) as f64).sqrt();
+            let ratio = spread / u2[k].sqrt();
+            ratios[k].push(ratio);
+            if margins[k] >= 4.0 {
+                separated_ratios[k].push(ratio);
+                assert!((ratio - 1.0).abs() <= 0.15, "layout {layout}: {} spread/u {ratio:.3} (separated)", names[k]);
+            } else {
+                assert!(ratio <= 1.15, "layout {layout}: {} spread/u {ratio:.3} > 1.15", names[k]);
+            }
+        }
+    }
+    for k in 0..4 {
+        let s = &separated_ratios[k];
+        let all = &ratios[k];
+        println!(
+            "ISO 230-2 {}: spread over {DRAWS} draws / reported u — {} layouts with separated extremes: mean {:.3}, min {:.3}, max {:.3}; all {LAYOUTS}: mean {:.3}, min {:.3}, max {:.3}",
+            names[k],
+            s.len(),
+            s.iter().sum::<f64>() / s.len().max(1) as f64,
+            s.iter().cloned().fold(f64::INFINITY, f64::min),
+            s.iter().cloned().fold(0.0, f64::max),
+            all.iter().sum::<f64>() / all.len() as f64,
+            all.iter().cloned().fold(f64::INFINITY, f64::min),
+            all.iter().cloned().fold(0.0, f64::max),
+        );
+    }
+    for k in 0..3 {
+        assert!(separated_ratios[k].len() >= 5, "too few layouts with separated {} extremes to test", names[k]);
+    }
+}

@@ -316,6 +316,71 @@ pub fn evaluate_bidirectional(targets: &[f64], up: &[Vec<f64>], down: &[Vec<f64>
     })
 }
 
+/// Standard uncertainties (type A, GUM 4.2, from the repeats of the test itself) of the axis values that
+/// are functions of the mean deviations, m. ISO 230-2 gives no uncertainty for them; ISO 230-2:2014 §8
+/// asks the report to state one.
+///
+/// With u(x̄↑ᵢ) = s↑ᵢ/√n↑ᵢ and u(x̄↓ᵢ) = s↓ᵢ/√n↓ᵢ (runs independent), to first order at the extreme
+/// targets the values are taken at:
+/// - E = max − min over both directions of x̄: u(E) = √(u(x̄_max)² + u(x̄_min)²); E↑, E↓ likewise;
+/// - M = max x̄ᵢ − min x̄ᵢ, x̄ᵢ = (x̄↑ᵢ + x̄↓ᵢ)/2: u(x̄ᵢ) = ½·√(u(x̄↑ᵢ)² + u(x̄↓ᵢ)²), combined as for E;
+/// - B = |Bᵢ| at the target of largest |Bᵢ|, Bᵢ = x̄↑ᵢ − x̄↓ᵢ: u(Bᵢ) = √(u(x̄↑ᵢ)² + u(x̄↓ᵢ)²);
+/// - B̄ = (1/m)·Σ Bᵢ: u(B̄) = √(Σ u(Bᵢ)²)/m.
+///
+/// First order means: the extremes stay at the same targets under the noise. Where two targets compete
+/// for an extreme within a few u, the spread of E (M, B) over repeated tests is smaller than u and its
+/// mean is pushed outward (a maximum of noisy values); u then overstates the spread. The repeatability
+/// R and the accuracy A are maxima of the scatter estimates s themselves and get no value here. The
+/// instrument's systematic share (laser calibration, environment: ISO/TR 230-9) is not in the repeats.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AxisUncertainty {
+    /// u(E), m.
+    pub e: f64,
+    /// u(E↑), m.
+    pub e_up: f64,
+    /// u(E↓), m.
+    pub e_down: f64,
+    /// u(M), m.
+    pub m: f64,
+    /// u(B), m.
+    pub b: f64,
+    /// u(B̄), m.
+    pub b_mean: f64,
+}
+
+/// The standard uncertainty of a range max − min of `values` (value, u(value)): √(u_max² + u_min²) at the
+/// first largest and the first smallest value.
+fn range_uncertainty(values: impl Iterator<Item = (f64, f64)> + Clone) -> f64 {
+    let pick = |better: fn(f64, f64) -> bool| {
+        values.clone().fold(None, |best: Option<(f64, f64)>, (v, u)| match best {
+            Some((bv, _)) if !better(v, bv) => best,
+            _ => Some((v, u)),
+        })
+    };
+    let hi = pick(|a, b| a > b).map_or(0.0, |p| p.1);
+    let lo = pick(|a, b| a < b).map_or(0.0, |p| p.1);
+    (hi * hi + lo * lo).sqrt()
+}
+
+/// The type-A standard uncertainties of E, E↑, E↓, M, B and B̄ of an evaluation ([`AxisUncertainty`]).
+pub fn axis_uncertainties(r: &AxisResult) -> AxisUncertainty {
+    let u_mean = |d: &DirectionStats| d.s / (d.runs as f64).sqrt();
+    let t = &r.targets;
+    let u_b = |tr: &TargetResult| u_mean(&tr.up).hypot(u_mean(&tr.down));
+    let widest = t.iter().fold(None, |best: Option<&TargetResult>, tr| match best {
+        Some(b) if tr.reversal.abs() <= b.reversal.abs() => best,
+        _ => Some(tr),
+    });
+    AxisUncertainty {
+        e: range_uncertainty(t.iter().flat_map(|tr| [(tr.up.mean, u_mean(&tr.up)), (tr.down.mean, u_mean(&tr.down))])),
+        e_up: range_uncertainty(t.iter().map(|tr| (tr.up.mean, u_mean(&tr.up)))),
+        e_down: range_uncertainty(t.iter().map(|tr| (tr.down.mean, u_mean(&tr.down)))),
+        m: range_uncertainty(t.iter().map(|tr| (tr.mean_bidirectional, 0.5 * u_b(tr)))),
+        b: widest.map_or(0.0, u_b),
+        b_mean: t.iter().map(|tr| u_b(tr).powi(2)).sum::<f64>().sqrt() / t.len().max(1) as f64,
+    }
+}
+
 /// Evaluates a unidirectional positioning test per ISO 230-2:2014 (only one approach direction).
 ///
 /// `deviations[i][j]` = x_ij = actual − target (m) at target i, run j. Returns x̄_i, s_i,
