@@ -8,7 +8,7 @@
 //! runs the MuJoCo anchor `benches/anchors/slide_column_mujoco.py` (the same body, mass and inertia, the
 //! four blocks' stiffness and damping lumped about the centre of mass into five joint springs, a PD
 //! position servo on x, `mj_step(nstep)`), and the ratios to it are printed; otherwise it says it skipped.
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, Criterion};
 use std::time::Instant;
 use vmt_sim::axis_sim::{AxisSim, AxisTruth, GuideFriction};
 use vmt_sim::drive::{BallScrewConfig, DriveConfig};
@@ -187,5 +187,48 @@ fn run_mujoco(args: &[String]) -> Option<f64> {
     text.lines().find_map(|l| l.strip_prefix("us_per_step=")).and_then(|v| v.trim().parse().ok())
 }
 
+/// Runs `n` steps of case `case` (an index into [`cases`]) with the engine `fidelity` and prints the
+/// final position: a fixed amount of work for instruction counts, which do not depend on the machine's
+/// load (`VMT_STEP_COUNT=0,reference,100000 valgrind --tool=callgrind target/release/deps/sim_step-…`;
+/// the per-step count is the difference of two runs of different `n`, divided by their difference).
+fn count_steps(spec: &str) -> Result<(), String> {
+    let parts: Vec<&str> = spec.split(',').collect();
+    let [case, fidelity, n] = parts[..] else {
+        return Err(format!("VMT_STEP_COUNT={spec}: expected CASE,FIDELITY,STEPS (e.g. 0,reference,100000)"));
+    };
+    let all = cases();
+    let case = case.parse::<usize>().ok().and_then(|i| all.get(i)).ok_or(format!(
+        "VMT_STEP_COUNT={spec}: CASE must be an index below {} ({})",
+        all.len(),
+        all.iter().map(|c| c.name).collect::<Vec<_>>().join("; ")
+    ))?;
+    let fidelity = match fidelity {
+        "fast" => Fidelity::Fast,
+        "reference" => Fidelity::Reference,
+        other => return Err(format!("VMT_STEP_COUNT={spec}: FIDELITY {other:?} is not fast or reference")),
+    };
+    let n: u64 = n.parse().map_err(|_| format!("VMT_STEP_COUNT={spec}: STEPS {n:?} is not a count"))?;
+    let m = model(&case.cfg, fidelity);
+    let mut r = Runner { sim: AxisSim::new(&m, &case.truth, 0.2), x: 0.2, feed: case.feed, dt: m.dt };
+    for _ in 0..n {
+        r.step();
+    }
+    let s = r.sim.sample(Command { pos: r.x, vel: r.feed, acc: 0.0 });
+    println!("{}, {fidelity:?}: {n} steps, final position {:?} m, rotation {:?} rad", case.name, s.pos, s.rot);
+    Ok(())
+}
+
 criterion_group!(benches, step, interleaved_ratios);
-criterion_main!(benches);
+
+/// The criterion benchmarks, or with `VMT_STEP_COUNT` set, [`count_steps`] alone.
+fn main() {
+    if let Ok(spec) = std::env::var("VMT_STEP_COUNT") {
+        if let Err(e) = count_steps(&spec) {
+            eprintln!("{e}");
+            std::process::exit(2);
+        }
+        return;
+    }
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}

@@ -1377,8 +1377,13 @@ pub fn cramer_rao_harmonic(
     finite("AC-coupling corner (Hz)", ac_coupling_hz)?;
     let (mut s0, mut s2, mut s4) = (0.0, 0.0, 0.0);
     for (i, (&r, &v)) in noise_densities.iter().zip(speeds).enumerate() {
-        positive(&format!("noise_densities[{i}]"), r)?;
-        positive(&format!("speeds[{i}]"), v)?;
+        // Names formatted only on error (this runs per wavelength of every fit).
+        if !(r.is_finite() && r > 0.0) {
+            positive(&format!("noise_densities[{i}]"), r)?;
+        }
+        if !(v.is_finite() && v > 0.0) {
+            positive(&format!("speeds[{i}]"), v)?;
+        }
         let q = coefficient_information(v, travel, r, ac_coupling_hz, kappa);
         s0 += q;
         s2 += q * v * v;

@@ -142,8 +142,25 @@ impl Sample {
 
     /// Velocity of a body-frame point p, world frame, m/s.
     pub fn point_velocity(&self, model: &AxisModel, p: DVec3, mode: Option<&StructuralMode>) -> DVec3 {
+        self.point_velocity_turned(self.turn(), model, p, mode)
+    }
+
+    /// The body's rotation from its home orientation as a quaternion (from the rotation vector `rot`).
+    pub fn turn(&self) -> DQuat {
+        DQuat::from_scaled_axis(self.rot)
+    }
+
+    /// As [`Sample::point_velocity`], given `turn` = [`Sample::turn`] (computed once by a caller that
+    /// also needs it): v + ω × (R·(H·p)) + φ(p)·q̇, m/s, with R the turn and H the home rotation.
+    pub fn point_velocity_turned(
+        &self,
+        turn: DQuat,
+        model: &AxisModel,
+        p: DVec3,
+        mode: Option<&StructuralMode>,
+    ) -> DVec3 {
         let flex = mode.map_or(DVec3::ZERO, |m| self.mode_vel * m.shape(model.body_to_axis(p)));
-        self.vel + self.angvel.cross(DQuat::from_scaled_axis(self.rot) * (model.home.rotation * p)) + flex
+        self.vel + self.angvel.cross(turn * (model.home.rotation * p)) + flex
     }
 }
 

@@ -379,15 +379,15 @@ pub fn true_readings(
             let tilt = DQuat::from_scaled_axis(DVec3::from_array(spec.tilt));
             let axis_dir = model.home.rotation * (tilt * (model.axis_rotation * d));
             let mut out = Vec::with_capacity(samples.len());
-            for (i, s) in samples.iter().enumerate() {
-                let a = if i == 0 {
-                    DVec3::ZERO
-                } else {
-                    let p = &samples[i - 1];
-                    (velocity(s) - velocity(p)) / (s.t - p.t)
-                };
+            // Each sample's turn and mount velocity computed once (the difference reuses the last).
+            let mut last: Option<(DVec3, f64)> = None;
+            for s in samples {
+                let turn = s.turn();
+                let v = s.point_velocity_turned(turn, model, mount, mode);
+                let a = last.map_or(DVec3::ZERO, |(v0, t0)| (v - v0) / (s.t - t0));
+                last = Some((v, s.t));
                 let proper = a + DVec3::new(0.0, 0.0, GRAVITY);
-                out.push((DQuat::from_scaled_axis(s.rot) * axis_dir).dot(proper));
+                out.push((turn * axis_dir).dot(proper));
             }
             out
         }
