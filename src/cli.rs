@@ -1138,7 +1138,16 @@ fn print_straightness(path: &Path, results: &[SensorStraightness]) {
 fn model_and_data(model: &Path, data: &Path) -> Result<(crate::model::Model, MeasurementSet), VmtError> {
     let m = crate::model::read_model(model)?;
     let set = measurement::read_data(data)?;
+    check_model_on_data(&m, &set, model)?;
     Ok((m, set))
+}
+
+/// The model's stated error motions within [`crate::model::MAX_ERROR_MOTION`] over the positions the
+/// data measured (issue 14: polynomial coefficients of 1e300 were used as given, and surfaced as a
+/// message about the data's noise).
+fn check_model_on_data(m: &crate::model::Model, set: &MeasurementSet, model: &Path) -> Result<(), VmtError> {
+    m.check_error_motion_sizes("", "the data's positions", |axis| set.position_range(axis))
+        .map_err(|(place, msg)| VmtError::bad(model, place, msg))
 }
 
 /// Prints a result as JSON (`--json`) or as the text `text` makes of it; exit code 0.
@@ -1227,7 +1236,11 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
     let name: EffectName =
         effect.parse().map_err(|e: vmt_sim::effects::UnknownEffect| VmtError::Usage(format!("--effect: {e}")))?;
     let set = match data {
-        Some(d) => Some(measurement::read_data(d)?),
+        Some(d) => {
+            let set = measurement::read_data(d)?;
+            check_model_on_data(&m, &set, model)?;
+            Some(set)
+        }
         None if from_diagnosis => {
             return Err(VmtError::Usage("--from-diagnosis needs --data (the diagnosis is computed again)".into()))
         }

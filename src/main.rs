@@ -88,6 +88,8 @@ enum Command {
         #[arg(long)]
         sample: Vec<String>,
         /// Monte Carlo trials per value (each redraws the sensor noise; at least 1).
+        // index: a u64 ≥ 1 (the parser's range) to usize, lossless on 64-bit; run_study bounds values × trials by
+        // MAX_TRIALS before any allocation.
         #[arg(long, default_value_t = 100, value_parser = clap::builder::TypedValueParser::map(clap::value_parser!(u64).range(1..), |n| n as usize))]
         trials: usize,
         /// Compute only trials k with k mod n = i (for a cluster job array), e.g. 0/4; `auto` reads i and n

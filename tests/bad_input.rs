@@ -101,6 +101,16 @@ fn scenario_cases() -> Vec<Case> {
         ("axis.servo.velocity_bandwidth", vec![0.0, -40.0, nan, 1e12], "axis.servo.velocity_bandwidth"),
         ("axis.servo.integral_corner", vec![-1.0, nan, inf, 1e9], "axis.servo.integral_corner"),
         ("axis.servo.force_limit", vec![0.0, -1.0, nan, inf], "axis.servo.force_limit"),
+        // Finite but too weak to accelerate the 1236 kg slide at max_accel (issue 14: 1 N wrote 0.8 m of
+        // "positioning error", exit 0).
+        ("axis.servo.force_limit", vec![1.0, 1000.0], "mass·max_accel"),
+        // Slower than the position loop (kp = 50 1/s): 0.01 Hz wrote 11 m of positioning error, exit 0.
+        ("axis.servo.velocity_bandwidth", vec![1e-2, 1.0], "kp/(2π)"),
+        // Bearings that let the slide sag metres (1e3 N/m: 1.5 m of "straightness", exit 0).
+        ("axis.guideway.stiffness_z", vec![1e3, 1e-300], "axis.guideway.stiffness_z"),
+        ("axis.guideway.stiffness_y", vec![1e3], "axis.guideway.stiffness_y"),
+        // A max_accel of 1e-300 m/s² hung the first run-up (v²/2a = 1e298 m): the step budget counts it.
+        ("axis.max_accel", vec![1e-300, 1e-9], "axis.max_accel"),
         ("axis.servo.rate", vec![0.0, -5000.0, nan, 1e12], "axis.servo.rate"),
         // A servo rate of 1e-9 Hz is a period of 30 years: the discrete loop is unstable.
         ("axis.servo.rate", vec![1e-9, 1.0], "axis.servo.velocity_bandwidth"),
@@ -234,6 +244,24 @@ fn scenario_cases() -> Vec<Case> {
         ],
         "static friction fs = 50 N is below the Coulomb level fc = 100 N",
     ));
+    // The laser lines of a multi-axis scenario had no size budget (issue 14): `rate = 1e12` aborted on a
+    // 4 GiB allocation (exit 134), `dwell = 1e9` hung.
+    let chain = std::fs::read_to_string(root().join("scenarios/squareness_3axis.toml")).unwrap();
+    for (label, from, to) in [
+        ("chain rate = 1e12", "rate = 500.0", "rate = 1e12"),
+        ("chain dwell = 1e9", "dwell = 0.2", "dwell = 1e9"),
+        ("chain settle = inf", "settle = 0.5", "settle = inf"),
+        ("chain line n = 1e9", "n = 6 }", "n = 1000000000 }"),
+    ] {
+        assert!(chain.contains(from), "test setup: `{from}` not in squareness_3axis.toml");
+        cases.push(Case {
+            label: label.into(),
+            files: vec![("s.toml".into(), chain.replacen(from, to, 1).into_bytes())],
+            args: args(&["simulate", "{dir}/s.toml", "-o", "{dir}/out"]),
+            blamed: "s.toml".into(),
+            place: "chain_procedures[0]".into(),
+        });
+    }
     // The same scenario through `run` (which also writes a report) and `study`.
     for (label, key, v, place) in [
         ("run: max_accel = 0", "axis.max_accel", 0.0, "axis.max_accel"),
@@ -514,6 +542,10 @@ fn model_cases() -> Vec<Case> {
         ("thermal_expansion", "alpha = 1.0\ndelta_t = 1.0\ntau = 100.0", "effects.thermal_expansion.alpha"),
         ("scale_error", "value = 0.5", "effects.scale_error.value"),
         ("interpolation_error", "period = 1e-15\namplitude = 1e-7", "effects.interpolation_error.period"),
+        // Stated error-motion profiles beyond any machine over the data's positions (issue 14: poly
+        // coefficients of 1e300 were used as given, then blamed on the data's noise estimate).
+        ("straightness_y", "poly = [0.0, 1e300]", "effects.straightness_y"),
+        ("pitch", "poly = [0.0, 1e3]", "effects.pitch"),
     ];
     bad.iter()
         .flat_map(|(effect, keys, place)| {
@@ -577,6 +609,20 @@ fn urdf_cases() -> Vec<Case> {
         ("URDF 1 ug moving body", light.into_bytes(), "s.toml", "axis.dt"),
         ("URDF NaN mass", nan_mass.into_bytes(), "m.urdf", "line"),
         ("URDF travel 1e9 m", far.into_bytes(), "m.urdf", "joint `x`"),
+        // The XML deserialiser's own messages name no line (issue 14): `custom: invalid float literal`,
+        // `No elements found`.
+        (
+            "URDF limit not a number",
+            base.replacen("upper=\"1.0\"", "upper=\"one\"", 1).into_bytes(),
+            "m.urdf",
+            "upper=\"one\"",
+        ),
+        (
+            "URDF cut short",
+            base.lines().take(base.lines().count() / 2).collect::<Vec<_>>().join("\n").into_bytes(),
+            "m.urdf",
+            "the file ends inside",
+        ),
     ] {
         cases.push(Case {
             label: label.into(),
@@ -648,6 +694,26 @@ fn cli_cases() -> Vec<Case> {
             "--shard",
         ),
         ("--units furlongs", args(&["simulate", "{dir}/s.toml", "--units", "furlongs", "-o", "{dir}/out"]), "units"),
+        // A sensor key varied past the file's range checks (issue 14: scale_factor 0.9 was simulated).
+        (
+            "--vary scale_factor 0.9",
+            args(&[
+                "study",
+                "{dir}/s.toml",
+                "--vary",
+                "sensors.laser_x3.scale_factor=0.001,0.9",
+                "--trials",
+                "2",
+                "-o",
+                "{dir}/out",
+            ]),
+            "scale_factor",
+        ),
+        (
+            "--vary bias nan",
+            args(&["study", "{dir}/s.toml", "--vary", "sensors.laser_x3.bias=nan", "--trials", "2", "-o", "{dir}/out"]),
+            "--vary",
+        ),
     ] {
         cases.push(Case {
             label: label.into(),
@@ -706,6 +772,18 @@ fn cli_cases() -> Vec<Case> {
             args: args(&["simulate", "{dir}/s.toml", "--compensation", "{dir}/t.txt", "-o", "{dir}/out"]),
             blamed: "t.txt".into(),
             place: place.into(),
+        });
+    }
+    for (label, trial) in [("trial -1", "-1"), ("trial 1.5", "1.5"), ("trial nan", "nan")] {
+        cases.push(Case {
+            label: format!("study merge of {label}"),
+            files: vec![(
+                "a/trials.csv".into(),
+                format!("value,trial,estimate,difference,pass,bound\n1e-8,{trial},x,1e-6,true,NaN\n").into_bytes(),
+            )],
+            args: args(&["study", "merge", "{dir}/a", "-o", "{dir}/out"]),
+            blamed: "trials.csv".into(),
+            place: "line 2, column trial".into(),
         });
     }
     cases.push(Case {
@@ -807,7 +885,17 @@ fn walk(dir: &Path) -> Vec<String> {
 
 #[test]
 fn every_bad_input_exits_2_names_file_and_place_and_writes_nothing() {
-    let cases: Vec<Case> = [scenario_cases(), set_cases(), urdf_cases(), cli_cases()].into_iter().flatten().collect();
+    let groups = [scenario_cases(), set_cases(), urdf_cases(), cli_cases()];
+    let sizes: Vec<usize> = groups.iter().map(Vec::len).collect();
+    let cases: Vec<Case> = groups.into_iter().flatten().collect();
+    println!(
+        "bad_input: {} cases, one vmt run each (scenario {}, measurement set/.dat/model {}, URDF {}, command line/tables/study {})",
+        cases.len(),
+        sizes[0],
+        sizes[1],
+        sizes[2],
+        sizes[3]
+    );
     // Issue 14 asks for at least 150 inputs.
     assert!(cases.len() >= 150, "only {} cases", cases.len());
     let failures: Vec<String> = cases.par_iter().filter_map(check).collect();

@@ -26,6 +26,7 @@ mod fuzz_replay;
 #[allow(clippy::type_complexity)]
 mod gen_diagnose;
 mod golden;
+mod index_guard;
 mod kill;
 mod laser_independent;
 #[allow(clippy::type_complexity, clippy::needless_range_loop)]

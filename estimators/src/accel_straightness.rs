@@ -471,6 +471,7 @@ fn weighted_cosine_squares(bins: &[(usize, f64)], m: usize) -> Vec<f64> {
     for &(k, w) in bins {
         a[k % m] += Complex::from_polar(w, PI * k as f64 / m as f64);
     }
+    // index: m is the common grid's size, ≥ 16 (common_grid), so q ≤ m/2 < m and (m − q) % m < m.
     let mut spec: Vec<Complex<f64>> = (0..=m / 2).map(|q| (a[q] + a[(m - q) % m].conj()) * 0.5).collect();
     let half_total = 0.5 * bins.iter().map(|&(_, w)| w).sum::<f64>();
     // irfft divides by M; the sum wanted is the unnormalised one.
@@ -548,6 +549,8 @@ fn common_grid(runs: &[AccelRun]) -> Result<(f64, f64, usize)> {
     let mut dx = f64::INFINITY;
     for r in runs {
         let step = r.speed / r.sample_rate;
+        // index: every run has ≥ 16 samples and speed, rate > 0 (validate_run), so len − 1 ≥ 15 and dx > 0; hi > lo
+        // is checked below before m is formed.
         let end = r.start_position + r.direction as f64 * step * (r.acceleration.len() - 1) as f64;
         lo = lo.max(r.start_position.min(end));
         hi = hi.min(r.start_position.max(end));
@@ -576,6 +579,7 @@ fn resample_run(run: &AccelRun, values: &[f64], grid: &[f64]) -> Vec<f64> {
             // fractional sample index along the run
             // clamp: n ≥ 16 samples per run (validate_run), so 0 ≤ n − 1.
             let u = ((x - run.start_position) * run.direction as f64 / step).clamp(0.0, (n - 1) as f64);
+            // index: u is in [0, n − 1] (the clamp) and n ≥ 16, so j ≤ n − 2 and j + 1 < n.
             let j = (u.floor() as usize).min(n - 2);
             let f = u - j as f64;
             values[j] * (1.0 - f) + values[j + 1] * f
@@ -977,6 +981,7 @@ pub fn fuse_spatial_continuity(profiles: &[Vec<f64>], boundaries: &[f64], period
         return Err(AccelStraightnessError::BadInput(format!(
             "{} profiles need {} crossover wavenumbers, got {}",
             profiles.len(),
+            // index: spectra_of above refused an empty list of profiles.
             profiles.len() - 1,
             boundaries.len()
         )));

@@ -231,6 +231,7 @@ impl CompensationTable {
         if p <= self.positions[0] {
             return self.corrections[0];
         }
+        // index: a CompensationTable has ≥ 2 nodes (CompensationTable::new, its only constructor outside tests).
         if p >= self.positions[n - 1] {
             return self.corrections[n - 1];
         }
@@ -258,6 +259,7 @@ pub fn inverse_compensate(table: &CompensationTable, compensated: f64) -> Result
     if !compensated.is_finite() {
         return Err(CompensationError::NonFinite { what: "compensated position", index: 0, value: compensated });
     }
+    // index: a CompensationTable has ≥ 2 nodes (CompensationTable::new, its only constructor outside tests).
     let n = table.len();
     for k in 0..n - 1 {
         let s = table.slope(k);
@@ -443,6 +445,7 @@ pub struct VariableStepTable {
 
 /// Fits and tests window [s, e]; returns the segment and whether it passes.
 fn try_window(x: &[f64], y: &[f64], s: usize, e: usize, prm: &VariableStepParams) -> (Segment, bool) {
+    // index: the callers pass windows s ≤ e < x.len() = y.len(), so xs is non-empty.
     let xs = &x[s..=e];
     let ys = &y[s..=e];
     let (a, b) = fit_line(xs, ys);
@@ -639,6 +642,7 @@ pub struct ControllerTable {
 pub fn export_controller_table(table: &CompensationTable) -> Result<ControllerTable, CompensationError> {
     let p = &table.positions;
     let first = p[1] - p[0];
+    // index: a CompensationTable has ≥ 2 nodes (CompensationTable::new, its only constructor outside tests).
     let spacing = (p[p.len() - 1] - p[0]) / (p.len() - 1) as f64;
     for k in 0..p.len() - 1 {
         let d = p[k + 1] - p[k];

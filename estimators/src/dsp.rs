@@ -173,6 +173,7 @@ pub fn zero_phase_highpass(x: &[f64], cutoff_hz: f64, sample_rate: f64) -> Resul
     let f = butterworth2_highpass(cutoff_hz, sample_rate)?;
     min_len("high-pass input", x, 3)?;
     let tau = sample_rate / (2.0 * PI * cutoff_hz);
+    // index: x has ≥ 3 samples (min_len above), so len − 1 ≥ 2; a huge or NaN τ saturates and min() bounds the pad.
     let padlen = ((3.0 * tau).ceil() as usize).max(9).min(x.len() - 1);
     filtfilt(&f, x, padlen, EdgePadding::TrendOddResidualEven)
 }

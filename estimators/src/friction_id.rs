@@ -551,6 +551,7 @@ pub fn butterworth2_lowpass(x: &[f64], dt: f64, cutoff_hz: f64, mode: FilterMode
         FilterMode::ZeroPhase => {
             let n = x.len();
             // clamp: n ≥ 3 (check_series above), so 1 ≤ n − 1.
+            // index: the clamp keeps the pad in 1..=n − 1 whatever the cast gives (n ≥ 3).
             let pad = ((1.0 / (cutoff_hz * dt)).ceil() as usize).clamp(1, n - 1);
             let mut ext = Vec::with_capacity(n + 2 * pad);
             for i in (1..=pad).rev() {

@@ -174,6 +174,7 @@ impl Basis {
         match self {
             Basis::Fixed => Ok(()),
             Basis::Nodes(n) => {
+                // index: at least two finite, strictly increasing nodes (Basis::validate), so k ≤ len − 2 below.
                 let tol = 1e-9 * (n[n.len() - 1] - n[0]);
                 if !(q >= n[0] - tol && q <= n[n.len() - 1] + tol) {
                     return Err(OutsideBasis { q, domain: "nodes", lo: n[0], hi: n[n.len() - 1] });
@@ -1118,6 +1119,8 @@ fn lever_hint(model: &Model, _layout: &Layout, readings: &[Reading], name: &str)
         return None;
     }
     let b = name.as_bytes();
+    // index: is_angle_group above: byte 1 is A, B or C, so k is 0..3; the names are the model's own ISO names (E +
+    // two letters), not input.
     let k = (b[1] - b'A') as usize;
     let axis_letter = b[2] as char;
     let j = model.axes.iter().position(|a| a.name.iso_letter() == axis_letter)?;
@@ -1376,6 +1379,7 @@ pub fn kmeans(features: &[Vec<f64>], k: usize, seed: u64, max_iter: usize) -> Re
     let mut state = seed;
     let mut chosen: Vec<usize> = Vec::new();
     while chosen.len() < k {
+        // index: a remainder of m, so i < m (m ≥ 1 samples, checked above).
         let i = (splitmix(&mut state) % m as u64) as usize;
         if !chosen.contains(&i) {
             chosen.push(i);

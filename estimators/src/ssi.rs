@@ -160,6 +160,8 @@ pub fn lattice_step(x: &[f64]) -> Option<f64> {
 /// Percentile of sorted data with linear interpolation between order statistics:
 /// rank h = (p/100)·(n − 1), value = s[⌊h⌋] + (h − ⌊h⌋)·(s[⌊h⌋+1] − s[⌊h⌋]).
 fn percentile_sorted(sorted: &[f64], p: f64) -> f64 {
+    // index: ≥ 2 velocities (velocity_by_difference needs ≥ 3 samples) and 0 ≤ p ≤ 100 (evaluate checks the
+    // percentiles), so h is in [0, n − 1] and lo, hi < n.
     let h = p / 100.0 * (sorted.len() - 1) as f64;
     let lo = h.floor() as usize;
     let hi = (lo + 1).min(sorted.len() - 1);
@@ -170,6 +172,7 @@ fn evaluate(x: &[f64], dt: f64, q: Option<f64>, percentiles: Option<(f64, f64)>)
     let s = velocity_by_difference(x, dt)?;
     // Mean of s(n): the sum telescopes to (x(N−1) − x(0)) / ((N−1)·Δt); use the telescoped form,
     // which has no accumulated rounding.
+    // index: velocity_by_difference above refused fewer than 3 samples.
     let s_mean = (x[x.len() - 1] - x[0]) / ((x.len() - 1) as f64 * dt);
     if s_mean == 0.0 {
         return Err(SsiError::NoMotion);

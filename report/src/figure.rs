@@ -57,6 +57,8 @@ pub fn format_tick(value: f64, span: f64) -> String {
     }
     if !(1e-4..1e6).contains(&magnitude) {
         // Significant digits needed to tell ticks spaced span/10 apart, at least 1, at most 10.
+        // index: counts of digits, not indices: each is bounded here by min(10), min(15) or clamp(0, 15) (a NaN
+        // casts to 0).
         let digits: usize =
             if span > 0.0 { ((magnitude / (span / 10.0)).log10().ceil().max(0.0) as usize + 1).min(10) } else { 6 };
         let text: String = format!("{:.*e}", digits.saturating_sub(1), value);

@@ -780,6 +780,59 @@ impl LaserLinesSpec {
                 }
             }
         }
+        self.budget(chain)
+    }
+
+    /// The size budget of the single-axis procedures ([`ProcedureSpec::budget`](crate::procedures::ProcedureSpec::budget))
+    /// for a laser-line set, checked before planning (issue 14: `rate = 1e12` aborted on a 4 GiB
+    /// allocation and `dwell = 1e9` hung): times ≤ `MAX_SECONDS`, one sample per physics step at most
+    /// (rate ≤ 1/dt of the coarsest axis), at most `MAX_TARGETS` stops a line, and the recorded samples
+    /// and physics steps of the whole set within `MAX_SAMPLES` and `MAX_STEPS`.
+    fn budget(&self, chain: &ChainModel) -> Result<(), (String, String)> {
+        use crate::procedures::{MAX_SAMPLES, MAX_SECONDS, MAX_STEPS, MAX_TARGETS};
+        for (k, v) in [("dwell", self.dwell), ("average", self.average), ("settle", self.settle)] {
+            if v.is_nan() || v > MAX_SECONDS {
+                return Err((k.into(), format!("expected a time ≤ {MAX_SECONDS:e} s, got {v}")));
+            }
+        }
+        let dt = chain.axes.iter().map(|a| a.model.dt).fold(f64::MIN_POSITIVE, f64::max);
+        if self.rate * dt > 1.0 + 1e-9 {
+            return Err((
+                "rate".into(),
+                format!("expected a sampling rate ≤ 1/dt = {} Hz (dt = {dt} s), got {}", 1.0 / dt, self.rate),
+            ));
+        }
+        let accel = self.path_accel(chain);
+        let (mut samples, mut time) = (0.0, 0.0);
+        for (i, l) in self.lines.iter().enumerate() {
+            if l.n > MAX_TARGETS {
+                return Err((
+                    format!("lines[{i}] ({}).n", l.name),
+                    format!("{} targets; the limit is {MAX_TARGETS}", l.n),
+                ));
+            }
+            let n = l.n as f64;
+            samples += n * (self.average * self.rate + 1.0);
+            // Settle, a dwell per stop, the line at the feed, each stop's move v/a longer, and the way back.
+            time += self.settle + n * (self.dwell + self.feed / accel) + 2.0 * l.length() / self.feed;
+        }
+        if samples > MAX_SAMPLES as f64 {
+            return Err((
+                "lines".into(),
+                format!("the lines record about {samples:.3e} samples; the limit is {MAX_SAMPLES:e}"),
+            ));
+        }
+        let dt_min = chain.axes.iter().map(|a| a.model.dt).fold(f64::INFINITY, f64::min);
+        let steps = time / dt_min;
+        if steps.is_nan() || steps > MAX_STEPS {
+            return Err((
+                "lines".into(),
+                format!(
+                    "the lines need about {steps:.3e} physics steps ({time:.4e} s of machine time, from their \
+                     settle, dwells, feed, accel and lengths); the limit is {MAX_STEPS:e}"
+                ),
+            ));
+        }
         Ok(())
     }
 }
@@ -827,6 +880,9 @@ pub fn plan_laser_lines(chain: &ChainModel, spec: &LaserLinesSpec) -> Vec<LinePl
         .map(|line| {
             let mut plan = ChainPlan::starting_at(&line.from);
             plan.dwell(spec.settle);
+            // index: average ≤ dwell ≤ MAX_SECONDS and rate ≤ 1/dt (LaserLinesSpec::check and its budget), so `per`
+            // is a bounded count ≥ 1, and `times` below holds ≥ 1 sample per visit (its len − 1 is the visit's
+            // last).
             let per = ((spec.average * spec.rate).round() as usize).max(1);
             let mut times = Vec::new();
             let mut visits = Vec::new();

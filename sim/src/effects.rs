@@ -303,6 +303,7 @@ impl ParamUnit {
         let text = if !x.is_finite() || x == 0.0 || !(1e-3..1e7).contains(&x.abs()) {
             fmt_num(x)
         } else {
+            // index: a count of decimals, not an index: |x| is in [1e-3, 1e7) here, so it is 0..=6.
             let decimals = (3 - x.abs().log10().floor() as i32).max(0) as usize;
             format!("{x:.decimals$}")
         };

@@ -230,6 +230,7 @@ pub fn lugre_spring_pull(
     check("dt", dt, dt > 0.0, "finite and > 0 s")?;
     check("duration", duration, duration >= 0.0 && duration / dt < 1e9, "finite, >= 0 s and at most 1e9 steps")?;
     check("every", every as f64, every >= 1, ">= 1")?;
+    // index: 0 ≤ duration/dt < 1e9 by the checks above: a bounded step count.
     let n = (duration / dt).round() as usize;
     let (mut x, mut v, mut z) = (0.0f64, 0.0f64, 0.0f64);
     let mut out = Vec::with_capacity(n / every + 1);

@@ -94,6 +94,65 @@ pub const MIN_DT: f64 = 1e-7;
 /// force c = 2ζ√(km)); 1 keeps a factor 2 margin and a phase error of the mode below ~5 %.
 pub const MAX_OMEGA_DT: f64 = 1.0;
 
+/// Largest deflection of the guideway bearings under a load equal to the moving body's weight, m. Real
+/// linear guides deflect a few µm; a stiffness that lets the body sag by more than this is a unit
+/// mistake (N/µm written as N/m) and made the simulated slide hang metres below its rails (issue 14).
+pub const MAX_BEARING_SAG: f64 = 1e-3;
+
+/// The checks of an axis's numbers that need its moving mass (issue 14: each combination below wrote
+/// metres of "positioning error" on a 1 m axis, exit 0): the drive must be able to accelerate the mass
+/// at `max_accel`; the velocity loop must be faster than the position loop (the cascade's damping
+/// ζ = ½·√(2π·f_v/k_p) ≥ ½); the bearings must carry the weight within [`MAX_BEARING_SAG`]. Returns the
+/// key (`servo.force_limit`, …) and the message.
+fn check_physical_ranges(cfg: &AxisConfig, mass: f64, blocks: f64) -> Result<(), (String, String)> {
+    let needed = mass * cfg.max_accel;
+    if cfg.servo.force_limit < needed {
+        return Err((
+            "servo.force_limit".into(),
+            format!(
+                "{} N cannot accelerate the moving mass {} kg at max_accel = {} m/s²: expected force_limit ≥ \
+                 mass·max_accel = {} N (or a lower max_accel)",
+                crate::effects::fmt_num(cfg.servo.force_limit),
+                crate::effects::fmt_num(mass),
+                crate::effects::fmt_num(cfg.max_accel),
+                crate::effects::fmt_num(needed)
+            ),
+        ));
+    }
+    let f_min = cfg.servo.kp / std::f64::consts::TAU;
+    if cfg.servo.velocity_bandwidth < f_min {
+        return Err((
+            "servo.velocity_bandwidth".into(),
+            format!(
+                "{} Hz is slower than the position loop (kp = {} 1/s): the cascade would ring (damping \
+                 ½·√(2π·f_v/kp) < ½); expected velocity_bandwidth ≥ kp/(2π) = {} Hz",
+                crate::effects::fmt_num(cfg.servo.velocity_bandwidth),
+                crate::effects::fmt_num(cfg.servo.kp),
+                crate::effects::fmt_num(f_min)
+            ),
+        ));
+    }
+    let weight = mass * crate::axis_sim::GRAVITY;
+    for (k, stiffness) in [("stiffness_y", cfg.guideway.stiffness_y), ("stiffness_z", cfg.guideway.stiffness_z)] {
+        let sag = weight / (blocks * stiffness);
+        if sag > MAX_BEARING_SAG {
+            return Err((
+                format!("guideway.{k}"),
+                format!(
+                    "{} N/m per block lets the {} blocks deflect {} m under the moving weight ({} kg): expected \
+                     a deflection ≤ {MAX_BEARING_SAG} m, i.e. {k} ≥ {} N/m (linear guides are 1e8–1e10 N/m)",
+                    crate::effects::fmt_num(stiffness),
+                    blocks,
+                    crate::effects::fmt_num(sag),
+                    crate::effects::fmt_num(mass),
+                    crate::effects::fmt_num(weight / (blocks * MAX_BEARING_SAG))
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// The axis frame's y and z (the guideway's stiff directions, world frame `R_a·y`, `R_a·z` with R_a
 /// taking x onto the world-frame `axis`) expressed in the moving body's frame (rotation `home`).
 fn body_axis_directions(axis: DVec3, home: DQuat) -> (DVec3, DVec3) {
@@ -309,8 +368,10 @@ impl AxisModel {
         let mass = body.mass.mass;
         let n = blocks.len() as f64;
         let damping = |k: f64| 2.0 * cfg.guideway.damping_ratio * (k * mass / n).sqrt();
+        // index: servo.rate > 0 and rate·dt ≤ 1 (ServoConfig::check above), so 1/rate/dt is finite and ≥ 1.
         let servo_steps = ((1.0 / cfg.servo.rate) / cfg.dt).round().max(1.0) as usize;
         cfg.servo.check_discrete(cfg.dt * servo_steps as f64).map_err(key)?;
+        check_physical_ranges(cfg, mass, n).map_err(key)?;
         let (y, z) = body_axis_directions(ax.axis, ax.origin.rotation);
         let dirs = [(y, cfg.guideway.stiffness_y), (z, cfg.guideway.stiffness_z)];
         let omega_guide = stiffest_mode(mass, body.mass.com, &body.mass.inertia, &blocks, &dirs);

@@ -465,8 +465,10 @@ impl ProcedureSpec {
     /// count or a duration checked finite and within its limit, every sampling rate ≤ 1/dt (one sample
     /// per physics step at most), and the estimated number of recorded samples (Σ rate·window) and
     /// physics steps (machine time / dt). Returns the key and message of the first problem, else
-    /// (samples, steps). `dt` is the physics step (s).
-    pub fn budget(&self, dt: f64) -> Result<(f64, f64), (String, String)> {
+    /// (samples, steps). `dt` is the physics step (s), `max_accel` the axis's (m/s², > 0): a move at
+    /// feed v takes v/a longer than distance/v (issue 14: a max_accel of 1e-300 hung the simulation
+    /// in its first run-up, which the budget did not count).
+    pub fn budget(&self, dt: f64, max_accel: f64) -> Result<(f64, f64), (String, String)> {
         fn err<T>(k: &str, m: String) -> Result<T, (String, String)> {
             Err((k.to_string(), m))
         }
@@ -500,11 +502,18 @@ impl ProcedureSpec {
                 count("speeds", speeds.len() as f64, MAX_SPEEDS)?;
                 let vmax = speeds.iter().cloned().fold(0.0, f64::max);
                 let per_pass = high_rate * span(*start, *end) / vmax;
-                let time: f64 = speeds.iter().map(|v| settle + 2.0 * span(*start, *end) / v).sum();
+                // Each pass runs up over v²/(2a) + v·settle and back: 2·(2·v/a + settle) more than the span.
+                let time: f64 = speeds
+                    .iter()
+                    .map(|v| settle + 2.0 * span(*start, *end) / v + 4.0 * v / max_accel + 2.0 * settle)
+                    .sum();
                 count("samples", per_pass * speeds.len() as f64, MAX_SAMPLES)?;
                 (per_pass * speeds.len() as f64, time)
             }
             ProcedureSpec::Positioning(p) => {
+                if p.accel.is_some_and(|a| !(a.is_finite() && a > 0.0)) {
+                    return err("accel", format!("expected an acceleration > 0 m/s², got {:?}", p.accel));
+                }
                 let n = p.targets.as_ref().map_or(p.n_targets, Vec::len) as f64;
                 count("n_targets", n, MAX_TARGETS)?;
                 count("runs", p.runs as f64, MAX_RUNS)?;
@@ -514,7 +523,9 @@ impl ProcedureSpec {
                 rate_key("rate", p.rate)?;
                 let visits = 2.0 * n * p.runs as f64;
                 let travel = 2.0 * p.runs as f64 * (span(p.start, p.end) + 2.0 * p.overrun.abs()) / p.feed;
-                (visits * (p.average * p.rate + 1.0), visits * p.dwell + travel)
+                // One move per visit and two overrun moves per run, each v/a longer than its distance/v.
+                let ramps = (visits + 2.0 * p.runs as f64) * p.feed / p.accel.unwrap_or(max_accel);
+                (visits * (p.average * p.rate + 1.0), visits * p.dwell + travel + ramps)
             }
             ProcedureSpec::Crawl { feeds, start: _, duration, rate, settle, .. } => {
                 time_key("duration", *duration, true)?;
@@ -522,7 +533,8 @@ impl ProcedureSpec {
                 rate_key("rate", *rate)?;
                 count("feeds", feeds.len() as f64, MAX_SPEEDS)?;
                 let k = feeds.len() as f64;
-                (k * rate * duration, k * (settle + duration + 1.0))
+                let ramps: f64 = feeds.iter().map(|v| 2.0 * v / max_accel).sum();
+                (k * rate * duration, k * (settle + duration + 1.0) + ramps)
             }
             ProcedureSpec::NineLine { start, end, step, feed, dwell, average, rate, overrun, .. } => {
                 let n = span(*start, *end) / step + 1.0;
@@ -534,7 +546,8 @@ impl ProcedureSpec {
                 time_key("average", *average, true)?;
                 rate_key("rate", *rate)?;
                 let travel = 2.0 * (span(*start, *end) + 2.0 * overrun.abs()) / feed;
-                (2.0 * n * (average * rate + 1.0), 2.0 * n * dwell + travel)
+                let ramps = (2.0 * n + 2.0) * feed / max_accel;
+                (2.0 * n * (average * rate + 1.0), 2.0 * n * dwell + travel + ramps)
             }
             ProcedureSpec::FrictionSweep { speeds, v_min, v_max, per_decade, settle, duration, rate, .. } => {
                 time_key("settle", *settle, false)?;
@@ -543,10 +556,11 @@ impl ProcedureSpec {
                 if let Some(v) = speeds {
                     count("speeds", v.len() as f64, MAX_SPEEDS)?;
                 }
-                let n = friction_sweep_speeds(speeds.as_deref(), *v_min, *v_max, *per_decade)
-                    .map_err(|e| ("speeds".to_string(), e.to_string()))?
-                    .len() as f64;
-                (2.0 * n * rate * duration, 2.0 * n * (0.5 + settle + duration + 1.0))
+                let v = friction_sweep_speeds(speeds.as_deref(), *v_min, *v_max, *per_decade)
+                    .map_err(|e| ("speeds".to_string(), e.to_string()))?;
+                let n = v.len() as f64;
+                let ramps: f64 = v.iter().map(|v| 4.0 * v / max_accel).sum();
+                (2.0 * n * rate * duration, 2.0 * n * (0.5 + settle + duration + 1.0) + ramps)
             }
             ProcedureSpec::Pause { duration, .. } => {
                 time_key("duration", *duration, false)?;
@@ -559,8 +573,10 @@ impl ProcedureSpec {
             return err(
                 "",
                 format!(
-                    "the procedure needs about {steps:.3e} physics steps ({time:.4e} s of machine time at dt = {dt} s, \
-                     from its speeds, distances, dwells, runs and durations); the limit is {MAX_STEPS:e}"
+                    "the procedure needs about {steps:.3e} physics steps ({time:.4e} s of machine time at dt = {dt} s \
+                     and axis.max_accel = {} m/s², from its speeds, accelerations, distances, dwells, runs \
+                     and durations); the limit is {MAX_STEPS:e}",
+                    crate::effects::fmt_num(max_accel)
                 ),
             );
         }
@@ -869,6 +885,9 @@ pub fn plan_procedure(model: &AxisModel, spec: &ProcedureSpec, seed: u64) -> Vec
     match spec {
         ProcedureSpec::ConstantVelocity { name, speeds, start, end, high_rate, direction, settle, .. } => {
             let vmax = speeds.iter().cloned().fold(0.0, f64::max);
+            // index: every count below comes from keys the scenario checked before planning (ProcedureSpec::budget:
+            // rates ≤ 1/dt, times ≤ MAX_SECONDS, samples ≤ MAX_SAMPLES, targets ≤ MAX_TARGETS; validate_procedures:
+            // finite start/end/step).
             let n = (high_rate * (end - start).abs() / vmax).round() as usize;
             let labels: Vec<String> = if speeds.len() == 3 {
                 ["low", "mid", "high"].iter().map(|s| format!("{name}_{s}")).collect()
@@ -982,6 +1001,8 @@ struct Cycle {
 /// ISO 230-2 linear cycle: for each run, approach every target upwards (from below the first target by
 /// `overrun`), then every target downwards (from above the last by `overrun`).
 fn positioning_cycle(name: &str, targets: &[f64], c: &Cycle, overrun: f64, sensors: &[String]) -> RunPlan {
+    // index: ≥ 2 targets (validate_procedures: explicit targets; irregular_targets with n_targets ≥ 2), and
+    // average·rate is bounded by the budget.
     let first = targets[0];
     let last = targets[targets.len() - 1];
     let mut plan = MotionPlan::starting_at(first - overrun);

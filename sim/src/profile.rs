@@ -254,6 +254,7 @@ impl Tabulated {
         if u.is_nan() || u < 0.0 {
             return None;
         }
+        // index: u is not NaN and ≥ 0 here; the cast saturates and `get` below returns None past the table.
         let i = u as usize;
         let (a, b) = (self.nodes.get(i)?, self.nodes.get(i + 1)?);
         let t = u - i as f64;
@@ -290,6 +291,7 @@ impl Profile {
         if !(intervals >= 1.0 && intervals < MAX_NODES as f64) {
             return None;
         }
+        // index: 1 ≤ intervals < MAX_NODES by the check above.
         let n = intervals as usize;
         let h = span / n as f64;
         let nodes = (0..=n)

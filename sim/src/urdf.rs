@@ -219,6 +219,73 @@ pub fn check_xml_size(text: &str) -> Result<(), UrdfError> {
     Ok(())
 }
 
+/// Attributes that URDF reads as numbers (one, or three/six separated by spaces).
+const NUMERIC_ATTRIBUTES: &[&str] = &[
+    "value", "xyz", "rpy", "ixx", "ixy", "ixz", "iyy", "iyz", "izz", "lower", "upper", "effort", "velocity", "damping",
+    "friction", "radius", "length", "size", "scale",
+];
+
+/// Where a URDF that the XML deserialiser refused goes wrong, for its message (issue 14: URDF errors
+/// carried no line, e.g. `custom: invalid float literal`): the line of a number attribute that is not
+/// a number, of a closing tag that does not match the open element, or of the element the file ends
+/// inside. None when the scan finds nothing (the deserialiser's own message is used then).
+pub fn locate_xml_error(text: &str) -> Option<String> {
+    let b = text.as_bytes();
+    let line = |pos: usize| b[..pos].iter().filter(|&&c| c == b'\n').count() + 1;
+    let mut open: Vec<(&str, usize)> = Vec::new();
+    let mut i = 0;
+    while let Some(off) = text[i..].find('<') {
+        let start = i + off;
+        let rest = &text[start..];
+        let skip = |pat: &str| rest.find(pat).map(|p| start + p + pat.len());
+        if rest.starts_with("<!--") {
+            i = skip("-->")?;
+            continue;
+        }
+        if rest.starts_with("<?") || rest.starts_with("<!") {
+            i = skip(">")?;
+            continue;
+        }
+        let Some(end) = skip(">") else {
+            return Some(format!("line {}: a tag that is never closed with `>`", line(start)));
+        };
+        // index: `end` is just past the first `>` after this `<`, so start + 1 ≤ end − 1.
+        let tag = &text[start + 1..end - 1];
+        if let Some(name) = tag.strip_prefix('/') {
+            let name = name.trim();
+            match open.pop() {
+                Some((n, _)) if n == name => {}
+                Some((n, at)) => {
+                    return Some(format!("line {}: `</{name}>` closes `<{n}>` opened at line {at}", line(start)))
+                }
+                None => return Some(format!("line {}: `</{name}>` closes no open element", line(start))),
+            }
+        } else {
+            let self_closing = tag.ends_with('/');
+            let tag = tag.trim_end_matches('/');
+            let name = tag.split_whitespace().next().unwrap_or("");
+            // name="value" pairs; a value in single or double quotes.
+            let mut attrs = tag[name.len()..].trim_start();
+            while let Some(eq) = attrs.find('=') {
+                let key = attrs[..eq].trim();
+                let v = attrs[eq + 1..].trim_start();
+                let Some(q) = v.chars().next().filter(|c| *c == '"' || *c == '\'') else { break };
+                let Some(close) = v[1..].find(q) else { break };
+                let value = &v[1..1 + close];
+                if NUMERIC_ATTRIBUTES.contains(&key) && value.split_whitespace().any(|t| t.parse::<f64>().is_err()) {
+                    return Some(format!("line {}: <{name} {key}=\"{value}\">: expected numbers", line(start)));
+                }
+                attrs = v[1 + close + 1..].trim_start();
+            }
+            if !self_closing {
+                open.push((name, line(start)));
+            }
+        }
+        i = end;
+    }
+    open.last().map(|(n, at)| format!("the file ends inside `<{n}>` opened at line {at}"))
+}
+
 fn finite3(v: [f64; 3]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
@@ -229,7 +296,8 @@ fn finite3(v: [f64; 3]) -> bool {
 /// treated as fixed (vmt simulates linear axes); prismatic joints become axes.
 pub fn parse_urdf(text: &str) -> Result<MachineStructure, UrdfError> {
     check_xml_size(text)?;
-    let robot = urdf_rs::read_from_string(text).map_err(|e| UrdfError::Parse(e.to_string()))?;
+    let robot = urdf_rs::read_from_string(text)
+        .map_err(|e| UrdfError::Parse(locate_xml_error(text).unwrap_or_else(|| e.to_string())))?;
     let mut link_index: HashMap<&str, usize> = HashMap::new();
     for (i, l) in robot.links.iter().enumerate() {
         if link_index.insert(l.name.as_str(), i).is_some() {

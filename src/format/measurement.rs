@@ -121,6 +121,19 @@ impl MeasurementSet {
     pub fn run(&self, name: &str) -> Option<&Run> {
         self.runs.iter().find(|r| r.name == name)
     }
+
+    /// The smallest and largest position of axis `axis` the set measured at: the targets of its point
+    /// tables and the commanded positions (`x_cmd`) of its time series; None when it has neither.
+    pub fn position_range(&self, axis: Axis) -> Option<(f64, f64)> {
+        let positions = self.runs.iter().filter(|r| r.axis == axis).flat_map(|r| match &r.data {
+            RunData::PointTable { target, .. } => target.as_slice(),
+            RunData::TimeSeries { .. } => r.data.column("x_cmd").unwrap_or(&[]),
+        });
+        positions.filter(|x| x.is_finite()).fold(None, |acc, &x| match acc {
+            None => Some((x, x)),
+            Some((lo, hi)) => Some((f64::min(lo, x), f64::max(hi, x))),
+        })
+    }
 }
 
 /// Units of the headers a writer produces.

@@ -168,6 +168,60 @@ impl Model {
     }
 }
 
+/// The largest error motion a model or truth may state anywhere on the positions it is used at: 1 m
+/// (translational) or 0.1 rad (angular). A machine's geometric errors are µm and µrad; a profile that
+/// reaches these sizes (e.g. polynomial coefficients of 1e300, which are finite and pass the per-term
+/// checks) is a unit mistake, and would otherwise surface as NaN in an output file, or as a message
+/// about another file, far from its cause (issue 14).
+pub const MAX_ERROR_MOTION: (f64, f64) = (1.0, 0.1);
+
+impl Model {
+    /// Evaluates every error motion with a stated profile at 1001 points over `range(axis)` (the
+    /// travel of a scenario's truth, the measured positions of a model checked against data; an axis
+    /// without a range is skipped): finite and within [`MAX_ERROR_MOTION`], else the key path
+    /// (`PREFIX.effects.NAME`, `effects.NAME` for an empty prefix) and a message naming the worst
+    /// position and `over` (what the range is).
+    pub fn check_error_motion_sizes(
+        &self,
+        prefix: &str,
+        over: &str,
+        range: impl Fn(Axis) -> Option<(f64, f64)>,
+    ) -> Result<(), (String, String)> {
+        for me in &self.effects {
+            let Some(profile) = me.effect.params.profile() else { continue };
+            let Some((lo, hi)) = range(me.effect.axis) else { continue };
+            let (max, unit) =
+                if me.effect.name.is_translational() { (MAX_ERROR_MOTION.0, "m") } else { (MAX_ERROR_MOTION.1, "rad") };
+            let at = |i: usize| lo + (hi - lo) * i as f64 / 1000.0;
+            // Above the bound or NaN.
+            let too_large = |x: &f64| {
+                let v = profile.value(*x).abs();
+                v.is_nan() || v > max
+            };
+            if let Some(x) = (0..=1000).map(at).find(too_large) {
+                let key = if prefix.is_empty() {
+                    format!("effects.{}", me.effect.name)
+                } else {
+                    format!("{prefix}.effects.{}", me.effect.name)
+                };
+                return Err((
+                    key,
+                    format!(
+                        "the profile (axis {}) reaches {} {unit} at x = {} m ({over} {}..{} m); an error motion \
+                         stays within ±{max} {unit}",
+                        me.effect.axis,
+                        crate::error::fmt_num(profile.value(x)),
+                        crate::error::fmt_num(x),
+                        crate::error::fmt_num(lo),
+                        crate::error::fmt_num(hi)
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Reads a `vmt-model/1` file. Table profiles are read relative to the file's directory.
 pub fn read_model(path: &Path) -> Result<Model, VmtError> {
     let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the model", e))?;

@@ -125,7 +125,7 @@ impl Scenario {
             toml::Value::Table(t) => model::parse_model(t, source, &base_dir, "truth")?,
             _ => return Err(bad("truth", "expected a table (inline truth) or a file name".into())),
         };
-        check_truth_size(&truth, axis.travel).map_err(|(p, m)| bad(&p, m))?;
+        truth.check_error_motion_sizes("truth", "travel", |_| Some(axis.travel)).map_err(|(p, m)| bad(&p, m))?;
         validate_sensors(&raw.sensors, &axis).map_err(|(p, m)| bad(&p, m))?;
         for (i, e) in raw.estimators.iter().enumerate() {
             e.check().map_err(|(k, m)| bad(&format!("estimators[{i}].{k}"), m))?;
@@ -281,7 +281,7 @@ fn dwell_ok(dwell: f64, average: f64, rate: f64, overrun: f64) -> bool {
 }
 
 /// Checks sensor values; returns the key path and message of the first problem.
-fn validate_sensors(sensors: &[SensorSpec], axis: &AxisModel) -> Result<(), (String, String)> {
+pub(crate) fn validate_sensors(sensors: &[SensorSpec], axis: &AxisModel) -> Result<(), (String, String)> {
     for (i, s) in sensors.iter().enumerate() {
         let at = |k: &str| format!("sensors[{i}] ({}).{k}", s.name);
         if s.name.is_empty()
@@ -350,7 +350,7 @@ fn validate_procedures(
         if !p.name().is_empty() && procs[..i].iter().any(|o| o.name() == p.name()) {
             return Err((at("name"), "procedure names must be unique".into()));
         }
-        let (n, s) = p.budget(axis.dt).map_err(|(k, m)| (at(&k), m))?;
+        let (n, s) = p.budget(axis.dt, axis.max_accel).map_err(|(k, m)| (at(&k), m))?;
         samples += n;
         steps += s;
         if samples > MAX_SAMPLES as f64 || steps > MAX_STEPS {
@@ -451,42 +451,6 @@ fn validate_procedures(
                     return Err((at("duration"), format!("expected a pause of ≥ 0 s, got {duration}")));
                 }
             }
-        }
-    }
-    Ok(())
-}
-
-/// The largest error motion a truth may inject anywhere on the travel: 1 m (translational) or 0.1 rad
-/// (angular). A machine's geometric errors are µm and µrad; a profile that reaches these sizes (e.g.
-/// polynomial coefficients of 1e300, which are finite and pass the per-term checks) is a unit mistake,
-/// and would otherwise surface as NaN in an output file far from its cause.
-pub const MAX_ERROR_MOTION: (f64, f64) = (1.0, 0.1);
-
-/// Evaluates every error motion of the truth at 1001 points over the axis travel: finite and within
-/// [`MAX_ERROR_MOTION`], else the key path and the worst position.
-fn check_truth_size(truth: &model::Model, travel: (f64, f64)) -> Result<(), (String, String)> {
-    for me in &truth.effects {
-        let Some(profile) = me.effect.params.profile() else { continue };
-        let (max, unit) =
-            if me.effect.name.is_translational() { (MAX_ERROR_MOTION.0, "m") } else { (MAX_ERROR_MOTION.1, "rad") };
-        let at = |i: usize| travel.0 + (travel.1 - travel.0) * i as f64 / 1000.0;
-        if let Some(x) = (0..=1000).map(at).find(|x| {
-            // Above the bound or NaN.
-            !matches!(
-                profile.value(*x).abs().partial_cmp(&max),
-                Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
-            )
-        }) {
-            return Err((
-                format!("truth.effects.{}", me.effect.name),
-                format!(
-                    "the profile reaches {} {unit} at x = {} m (travel {}..{} m); an error motion stays within ±{max} {unit}",
-                    crate::error::fmt_num(profile.value(x)),
-                    crate::error::fmt_num(x),
-                    crate::error::fmt_num(travel.0),
-                    crate::error::fmt_num(travel.1)
-                ),
-            ));
         }
     }
     Ok(())

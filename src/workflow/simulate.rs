@@ -330,6 +330,7 @@ pub const MAX_PROFILE_POINTS: usize = 10_001;
 fn profile_positions(lo: f64, hi: f64) -> Vec<f64> {
     // clamp: constant bounds, 1 ≤ MAX_PROFILE_POINTS − 1.
     let n = ((hi - lo) / 1e-3).round().clamp(1.0, (MAX_PROFILE_POINTS - 1) as f64);
+    // index: n is clamped to [1, MAX_PROFILE_POINTS − 1] above, and NaN becomes 1 here: a bounded point count.
     let n = if n.is_finite() { n as usize } else { 1 };
     (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect()
 }

@@ -26,7 +26,7 @@ pub enum SensorParam {
     Bias,
     /// `resolution`: quantisation step (reading unit).
     Resolution,
-    /// `scale_factor`: gain of the reading (dimensionless, 1 = exact).
+    /// `scale_factor`: scale-factor error of the reading (dimensionless, reading = (1 + s)·true; 0 = exact).
     ScaleFactor,
     /// `bias_drift`: bias random-walk rate (reading unit per √s).
     BiasDrift,
@@ -128,7 +128,10 @@ impl Vary {
                 .into_iter()
                 .find(|p| p.key() == *key)
                 .ok_or_else(|| usage(&format!("unknown sensor key `{key}`")))?;
-            if values.iter().any(|v| *v < 0.0) {
+            // A bias and a scale-factor error have either sign; the other keys are sizes (≥ 0). Each
+            // value is checked against the scenario's own sensor checks in `run_study`.
+            let signed = matches!(key, SensorParam::Bias | SensorParam::ScaleFactor);
+            if !signed && values.iter().any(|v| *v < 0.0) {
                 return Err(usage("sensor parameter values must be ≥ 0"));
             }
             VaryKey::Sensor { sensor: sensor.to_string(), key }
@@ -402,6 +405,7 @@ pub fn first_order_index(x: &[f64], y: &[f64]) -> f64 {
     idx.sort_by(|a, b| x[*a].total_cmp(&x[*b]).then(a.cmp(b)));
     let mean = y[..n].iter().sum::<f64>() / n as f64;
     let var = y[..n].iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
+    // index: n is a count, so √n is finite and ≥ 0, and m is in 1..=√n.
     let m = ((n as f64).sqrt().floor() as usize).max(1);
     if n < 4 || var <= 0.0 {
         return 0.0;
@@ -557,9 +561,26 @@ pub fn run_study(
     // The scenario and physics of each value: one shared for a sensor parameter, one per value for
     // a scenario key (simulated in parallel; each value's trials then share it).
     let scenarios: Vec<Scenario> = match &vary.key {
-        VaryKey::Sensor { sensor, .. } => {
+        VaryKey::Sensor { sensor, key } => {
             if !sc.sensors.iter().any(|s| &s.name == sensor) {
                 return Err(VmtError::Usage(format!("--vary: no sensor `{sensor}` in the scenario")));
+            }
+            // Each value is checked as the scenario file's sensor would be (issue 14: `--vary
+            // sensors.laser.scale_factor=0.9` bypassed the file's |scale_factor| < 0.5).
+            for &v in &vary.values {
+                let mut edited = sc.sensors.clone();
+                for s in edited.iter_mut().filter(|s| &s.name == sensor) {
+                    *s = s.resolved();
+                    key.set(s, v);
+                    s.preset = None;
+                }
+                crate::scenario::validate_sensors(&edited, &sc.axis).map_err(|(place, m)| {
+                    VmtError::Usage(format!(
+                        "--vary sensors.{sensor}.{}={v}: {}: {place}: {m}",
+                        key.key(),
+                        sc.source.display()
+                    ))
+                })?;
             }
             vec![sc.clone()]
         }
@@ -787,9 +808,18 @@ pub fn read_rows(path: &Path) -> Result<(Vec<TrialRow>, Vec<String>), VmtError> 
                 format!("expected a finite varied value, got `{}`", f(0)),
             ));
         }
+        // The trial number as `study` writes it: a non-negative integer (issue 14: `-1`, `1.5` or `nan`
+        // were cast to a trial number without a word).
+        let trial = f(1).parse::<usize>().map_err(|_| {
+            VmtError::bad(
+                path,
+                format!("line {}, column trial", i + 2),
+                format!("expected a trial number (an integer ≥ 0), got `{}`", f(1)),
+            )
+        })?;
         out.push(TrialRow {
             value,
-            trial: num(1)? as usize,
+            trial,
             estimate: f(2).to_string(),
             difference: num(3)?,
             pass: match f(4) {
@@ -899,6 +929,7 @@ pub fn summarize(rows: &[TrialRow]) -> Vec<SummaryRow> {
                 mean_abs: stat(&|d| d.iter().sum::<f64>() / n as f64),
                 rms: stat(&|d| (d.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt()),
                 // clamp: `stat` runs only when `defined`, i.e. n ≥ 1.
+                // index: the clamp keeps ⌈0.95·n⌉ in 1..=n, so the index is in 0..n (n ≥ 1 when `stat` runs).
                 p95_abs: stat(&|d| d[((0.95 * n as f64).ceil() as usize).clamp(1, n) - 1]),
                 pass_rate,
                 bound,

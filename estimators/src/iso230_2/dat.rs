@@ -111,6 +111,7 @@ fn split_key(key: &str, line: usize) -> Result<(&str, Option<&str>), DatError> {
                     found: key.to_string(),
                 });
             }
+            // index: `key` ends with `]` and holds its first `[` at `open` < len − 1, so open + 1 ≤ len − 1.
             Ok((&key[..open], Some(&key[open + 1..key.len() - 1])))
         }
     }

@@ -187,6 +187,7 @@ pub fn frequency_grid(x: &[f64], oversample: f64, f_max: Option<f64>) -> Result<
             "frequency_grid: f_max = {f_max} is below the lowest resolvable frequency 1/span = {f_min}"
         )));
     }
+    // index: f_max and span are finite and positive (checked above); m ≤ 1e6 is checked below before any allocation.
     let m = ((f_max - f_min) / df).floor() as usize + 1;
     if m > 1_000_000 {
         return Err(ModelCheckError::Invalid(format!(

@@ -444,6 +444,7 @@ impl Estimates {
             Some(i) => i,
             None => {
                 self.figures.push(figure);
+                // index: the figure was just pushed, so len ≥ 1.
                 self.figures.len() - 1
             }
         };

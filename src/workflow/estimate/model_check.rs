@@ -23,6 +23,8 @@ pub(super) fn model_check_loop(
     use vmt_estimators::modelcheck::Verdict;
     let base = source.parent().unwrap_or(Path::new("."));
     let mut m = crate::model::read_model(&base.join(model))?;
+    m.check_error_motion_sizes("", "the recording's positions", |axis| set.position_range(axis))
+        .map_err(|(place, msg)| VmtError::bad(&base.join(model), place, msg))?;
     let first = compare(&m, set, source)?;
     let mut history = vec![first.normalized_rms];
     // Every model's comparison with the recording: the starting model, then the model after each add.

@@ -421,6 +421,8 @@ pub(super) fn accel_straightness_check(
     let (acc_runs, est) = (result.runs, result.estimate);
     let (r, u) = (spec.position, spec.direction);
     let n = est.positions.len();
+    // index: the estimate is on the common grid of the runs, which has ≥ 16 positions
+    // (accel_straightness::common_grid refuses fewer).
     let dx = (est.positions[n - 1] - est.positions[0]).abs() / (n - 1) as f64;
     // What the check does to a profile over the whole range before comparing (the same for truth, estimate
     // and, below, each basis function of the bound): the DFT pipeline applies the estimator's zero-phase
@@ -607,6 +609,8 @@ fn four_significant(x: f64) -> String {
     if !(x.is_finite() && x != 0.0) {
         return format!("{x}");
     }
+    // index: a count of decimals, not an index: x is finite and non-zero here, the casts saturate and max(0) keeps
+    // it ≥ 0.
     let decimals = (3 - x.abs().log10().floor() as i32).max(0) as usize;
     let s = format!("{x:.decimals$}");
     if s.contains('.') {

@@ -217,6 +217,7 @@ fn sig(v: f64) -> String {
     if v == 0.0 {
         return "0".into();
     }
+    // index: a count of digits, not an index: v ≠ 0 here, NaN casts to 0, ±∞ saturate and max(0) keeps it ≥ 0.
     let digits = (3 - v.abs().log10().floor() as i32).max(0) as usize;
     format!("{v:.digits$}")
 }
