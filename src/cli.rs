@@ -705,7 +705,7 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
         let bad = |m: String| VmtError::bad(path, format!("runs[{i}] ({})", r.name), m);
         // A sweep point is the run's signed steady speed and its mean force: a run without `feed`, or
         // whose direction is neither stated nor read from `x_cmd`, is refused (never taken as +1).
-        let feed = r.feed.ok_or_else(|| bad(format!("missing `feed` (m/s): the speed of this sweep point")))?;
+        let feed = r.feed.ok_or_else(|| bad("missing `feed` (m/s): the speed of this sweep point".to_string()))?;
         if !(feed.is_finite() && feed > 0.0) {
             return Err(bad(format!("expected `feed` > 0 (m/s), got {feed}")));
         }

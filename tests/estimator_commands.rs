@@ -178,6 +178,10 @@ fn friction_prints_a_standard_error_beside_every_coefficient_and_refuses_unplace
 /// `vmt iso230-2` gives the type-A standard uncertainty of E, M, B and B̄ beside the table (text) and in
 /// `uncertainty` (JSON), equal to the formulas of docs/methods.md computed here from the raw readings.
 #[test]
+#[allow(
+    clippy::needless_range_loop,
+    reason = "r is both the run number written to the CSV and the third index of readings[dir][target][run]"
+)]
 fn iso230_2_states_the_uncertainty_of_its_axis_values() {
     let tmp = tempfile::tempdir().unwrap();
     let set = tmp.path().join("set");

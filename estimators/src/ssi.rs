@@ -148,12 +148,9 @@ pub fn lattice_step(x: &[f64]) -> Option<f64> {
         return None;
     }
     let d_min = steps.iter().copied().fold(f64::INFINITY, f64::min);
-    (1..=LATTICE_DIVISORS).map(|m| d_min / m as f64).find_map(|d| {
+    (1..=LATTICE_DIVISORS).map(|m| d_min / m as f64).find(|&d| {
         let tol = 1e-3 * d + 1e-11 * scale;
-        if tol > 0.05 * d {
-            return None;
-        }
-        steps.iter().all(|&s| (s - (s / d).round() * d).abs() <= tol).then_some(d)
+        tol <= 0.05 * d && steps.iter().all(|&s| (s - (s / d).round() * d).abs() <= tol)
     })
 }
 
