@@ -75,7 +75,7 @@ pub struct Periodogram {
 
 /// Frequencies of an evenly spaced grid between fresh evaluations of the sines and cosines in
 /// [`ls_periodogram`] (the others by rotation).
-const RESEED: usize = 64;
+pub const RESEED: usize = 64;
 
 /// Generalised Lomb–Scargle periodogram (Zechmeister & Kürster 2009): at each trial frequency f
 /// fit r_i ≈ c + a·cos(2πf x_i) + b·sin(2πf x_i) by weighted least squares (weights 1/σ_i²) and
@@ -273,13 +273,13 @@ pub struct FrequencyScan {
 /// frequencies over a decade of spatial frequencies near 10⁵ /m.
 pub const SCAN_PIECE_SPAN: f64 = 5e-3;
 /// Peaks of the coarse stage whose neighbourhoods the fine stage searches.
-const SCAN_COARSE_PEAKS: usize = 3;
+pub const SCAN_COARSE_PEAKS: usize = 3;
 /// Peaks of the fine stage returned for exact evaluation.
-const SCAN_FINE_PEAKS: usize = 4;
+pub const SCAN_FINE_PEAKS: usize = 4;
 /// Largest number of frequencies of either stage.
-const SCAN_MAX_FREQUENCIES: usize = 200_000;
+pub const SCAN_MAX_FREQUENCIES: usize = 200_000;
 /// Fewest samples of a piece.
-const SCAN_MIN_PIECE: usize = 8;
+pub const SCAN_MIN_PIECE: usize = 8;
 
 /// A sinusoid of spatial frequency f ∈ [f_lo, f_hi] (say a scale's interpolation error, period
 /// 2–200 µm) in a residual r sampled at positions x that resolve f only in places: a log at
