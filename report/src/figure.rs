@@ -350,6 +350,7 @@ impl Job<'_> {
                 (centres.len() + 1).clamp(2, 9)
             }
             // One tick per integer of the data at most (iterations 0, 1, 2 → three ticks).
+            // index: a tick count, not an index: `as usize` saturates (a NaN span gives 0) and clamp(2, 9) bounds it.
             (None, true) => ((x_max - x_min) as usize + 1).clamp(2, 9),
             (None, false) => 9,
         };
