@@ -73,15 +73,9 @@ pub(crate) fn following_error(c: &Channel, kv: f64) -> Vec<f64> {
 /// [`Stack::loop_kv`] (∞: the identity). Columns zero on the transmission (offsets, servo_lag)
 /// pass unchanged.
 pub(crate) fn close_loop(st: &Stack, col: &mut [f64]) {
-    let starts: Vec<usize> = st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect();
-    for (j, c) in st.chans.iter().enumerate() {
-        if !matches!(c.encoder, Some(EncoderRole::Following { closed: true, .. })) {
-            continue;
-        }
-        let partner = st.chans.iter().position(|p| {
-            p.run == c.run && matches!(p.encoder, Some(EncoderRole::Transmission { .. })) && p.y.len() == c.y.len()
-        });
-        let Some(k) = partner else { continue };
+    let starts = channel_starts(st);
+    for (j, k) in closed_pairs(st) {
+        let c = &st.chans[j];
         let t = &col[starts[k]..starts[k] + c.y.len()];
         if t.iter().all(|v| *v == 0.0) {
             continue;
@@ -109,16 +103,10 @@ pub(crate) fn close_loop(st: &Stack, col: &mut [f64]) {
 /// the identity, as [`close_loop`]). Exact for a constant speed in continuous time; a servo that
 /// samples the scale at its own rate aliases such a wave too, which no log column can show.
 pub(crate) fn close_loop_wave(st: &Stack, p: f64, sin: &mut [f64], cos: &mut [f64]) {
-    let starts: Vec<usize> = st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect();
+    let starts = channel_starts(st);
     let kv = st.loop_kv;
-    for (j, c) in st.chans.iter().enumerate() {
-        if !matches!(c.encoder, Some(EncoderRole::Following { closed: true, .. })) {
-            continue;
-        }
-        let partner = st.chans.iter().position(|q| {
-            q.run == c.run && matches!(q.encoder, Some(EncoderRole::Transmission { .. })) && q.y.len() == c.y.len()
-        });
-        let Some(k) = partner else { continue };
+    for (j, k) in closed_pairs(st) {
+        let c = &st.chans[j];
         let (tk, xk) = (&st.chans[k].t, &st.chans[k].x);
         let m = c.y.len();
         for i in 0..m {
@@ -137,6 +125,31 @@ pub(crate) fn close_loop_wave(st: &Stack, p: f64, sin: &mut [f64], cos: &mut [f6
             cos[starts[j] + i] -= a * co - b * s;
         }
     }
+}
+
+/// The first row of each channel of a stack.
+fn channel_starts(st: &Stack) -> Vec<usize> {
+    st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect()
+}
+
+/// (following channel closed by the scale, its run's transmission channel of the same length):
+/// the pairs [`close_loop`] and [`close_loop_wave`] couple.
+fn closed_pairs(st: &Stack) -> Vec<(usize, usize)> {
+    st.chans
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| matches!(c.encoder, Some(EncoderRole::Following { closed: true, .. })))
+        .filter_map(|(j, c)| {
+            st.chans
+                .iter()
+                .position(|q| {
+                    q.run == c.run
+                        && matches!(q.encoder, Some(EncoderRole::Transmission { .. }))
+                        && q.y.len() == c.y.len()
+                })
+                .map(|k| (j, k))
+        })
+        .collect()
 }
 
 /// Whether any channel of `chans` is a following channel closed by the scale ([`close_loop`]).
