@@ -811,10 +811,10 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     let st = &f.st;
     // A resonance over fitted translations is driven by the guideway the base fit shows.
     let st_mode = fitted_excitation(st, &f.fs).map(|ex| st.with_excitation(ex));
-    let w_sig: Vec<f64> = per.iter().map(|s| 1.0 / s).collect();
+    let w: Vec<f64> = per.iter().map(|s| 1.0 / s).collect();
     let interp_scan = names
         .contains(&EffectName::InterpolationError)
-        .then(|| interpolation_periods(st, &f.fs.residual, &w_sig))
+        .then(|| interpolation_periods(st, &f.fs.residual, &w))
         .flatten();
     let make = |n: EffectName| -> Candidate {
         {
@@ -880,7 +880,6 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             .filter_map(|c| c.lead_cap.filter(|l| !l.in_model && l.free_best > l.order).map(|l| (c.name, l)))
             .collect();
     let split = !binding.is_empty() && names.contains(&EffectName::CyclicLead);
-    let w: Vec<f64> = per.iter().map(|s| 1.0 / s).collect();
     let fit_sigma = Sigma::PerSample(per.clone());
     // The lead's period and the shapes' orders chosen jointly (`lead_shape_scan`): the orders K*
     // at the best period set the lead's base, and the lead is searched only at periods those orders
