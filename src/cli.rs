@@ -436,21 +436,35 @@ pub fn study(
     let sc = Scenario::load(path)?;
     let cmd = estimator_cmd.map(|c| crate::byo::CommandEstimator { command: c.to_string() });
     let cmd = cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator);
+    // What `study merge` checks the shards by (the scenario file's content, not its path).
+    let bytes = std::fs::read(path).map_err(|e| VmtError::io(path, "reading the scenario", e))?;
+    let info = |design: String| crate::study::ShardInfo {
+        vmt_version: env!("CARGO_PKG_VERSION").to_string(),
+        scenario_fnv1a64: crate::study::content_fnv1a64(&bytes),
+        design,
+        trials,
+        estimator_cmd: estimator_cmd.map(str::to_string),
+        tolerance,
+        shard: shard.0,
+        shards: shard.1,
+    };
     match (vary, sample) {
         (Some(v), []) => {
             let vary = Vary::parse(v)?;
             let bar = spinner(&format!("{} values × {trials} trials", vary.values.len()));
             let rows = run_study(&sc, &vary, trials, shard, cmd, tolerance)?;
             bar.finish_and_clear();
-            write_study(&rows, &vary.label(), &[], out, Some(&sc), units)
+            write_study(&rows, &vary.label(), &[], out, Some(&sc), &info(format!("--vary {v}")), units)
         }
         (None, samples) if !samples.is_empty() => {
+            let design = samples.iter().map(|s| format!("--sample {s}")).collect::<Vec<_>>().join(" ");
             let samples: Vec<Sample> = samples.iter().map(|s| Sample::parse(s)).collect::<Result<_, _>>()?;
             let names: Vec<String> = samples.iter().map(|s| s.path.clone()).collect();
             let bar = spinner(&format!("{trials} trials, each with its own physics"));
             let rows = run_sampled_study(&sc, &samples, trials, shard, cmd, tolerance)?;
             bar.finish_and_clear();
-            write_study(&rows, "0 = all trials (parameters sampled per trial)", &names, out, Some(&sc), units)
+            let label = "0 = all trials (parameters sampled per trial)";
+            write_study(&rows, label, &names, out, Some(&sc), &info(design), units)
         }
         _ => Err(VmtError::Usage(
             "study needs either --vary KEY=V1,V2,… (sensors.NAME.KEY or a scenario key path) or one or more \
@@ -461,13 +475,17 @@ pub fn study(
 }
 
 /// `vmt study merge OUT SHARD_DIRS…`: joins the trials of shards and writes the same outputs as one run.
+/// The shards must be every shard of one study once ([`crate::study::check_shards`]: each directory's
+/// `shard.toml` names its study and index); a missing or repeated shard, or shards of different
+/// studies, are refused (exit 2) naming them.
 pub fn study_merge(out: &Path, shards: &[PathBuf], units: &str) -> Result<i32, VmtError> {
     let units = parse_units(units)?;
-    let mut rows = Vec::new();
+    let mut parts = Vec::new();
     let mut names: Option<Vec<String>> = None;
     for d in shards {
         let file = d.join("trials.csv");
         let (r, n) = crate::study::read_rows(&file)?;
+        let info = crate::study::ShardInfo::read(&d.join("shard.toml"))?;
         match &names {
             Some(first) if first != &n => {
                 return Err(VmtError::bad(
@@ -478,9 +496,13 @@ pub fn study_merge(out: &Path, shards: &[PathBuf], units: &str) -> Result<i32, V
             }
             _ => names = Some(n),
         }
-        rows.extend(r);
+        parts.push((d.clone(), info, r));
     }
-    write_study(&rows, "varied parameter", &names.unwrap_or_default(), out, None, units)
+    crate::study::check_shards(&parts)?;
+    // The merged directory is the whole study: shard 0 of 1.
+    let info = crate::study::ShardInfo { shard: 0, shards: 1, ..parts[0].1.clone() };
+    let rows: Vec<_> = parts.into_iter().flat_map(|(_, _, r)| r).collect();
+    write_study(&rows, "varied parameter", &names.unwrap_or_default(), out, None, &info, units)
 }
 
 fn write_study(
@@ -489,6 +511,7 @@ fn write_study(
     sampled: &[String],
     out: &Path,
     sc: Option<&Scenario>,
+    shard: &crate::study::ShardInfo,
     units: UnitChoice,
 ) -> Result<i32, VmtError> {
     use crate::study::{rows_csv, study_cell, study_unit, summarize, summary_svg};
@@ -524,6 +547,7 @@ fn write_study(
         ("study.svg".to_string(), summary_svg(&summary, label)?.into_bytes()),
         ("report.html".to_string(), html.into_bytes()),
         ("report.json".to_string(), json.into_bytes()),
+        ("shard.toml".to_string(), shard.to_toml().into_bytes()),
     ];
     // A sampled study: first-order Sobol indices of each estimate's difference per parameter
     // (SALib's S1 / S1_conf, one row per estimate and parameter).

@@ -74,7 +74,8 @@ enum Command {
     Study {
         /// Scenario file, or `merge` to join shard outputs.
         scenario: PathBuf,
-        /// With `merge`: the shard output directories.
+        /// With `merge`: the shard output directories (every shard of one study once, each with its
+        /// `shard.toml`; a missing, repeated or foreign shard is refused).
         shards: Vec<PathBuf>,
         /// The varied parameter and its values (SI): a sensor parameter, e.g.
         /// sensors.acc_z.noise_density=1e-7,3e-7,1e-6 (physics simulated once), or any number the scenario

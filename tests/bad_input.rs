@@ -786,6 +786,21 @@ fn cli_cases() -> Vec<Case> {
             place: "line 2, column trial".into(),
         });
     }
+    // The shard's identity file (issue 15): an index beyond the count, a misspelt key.
+    let rows = b"value,trial,estimate,difference,pass,bound\n1e-8,0,x,1e-6,true,NaN\n".to_vec();
+    for (label, text, place) in [
+        ("shard index beyond the count", "shards = 2\nshard = 2\n", "shard"),
+        ("misspelt key", "shards = 1\nshard = 0\nshrads = 3\n", "shrads"),
+    ] {
+        let head = "format = \"vmt-study-shard/1\"\nvmt_version = \"0\"\nscenario_fnv1a64 = \"0\"\ndesign = \"x\"\ntrials = 1\n";
+        cases.push(Case {
+            label: format!("study merge, shard.toml with a {label}"),
+            files: vec![("a/trials.csv".into(), rows.clone()), ("a/shard.toml".into(), format!("{head}{text}").into_bytes())],
+            args: args(&["study", "merge", "{dir}/a", "-o", "{dir}/out"]),
+            blamed: "shard.toml".into(),
+            place: place.into(),
+        });
+    }
     cases.push(Case {
         label: "study merge of a NaN value".into(),
         files: vec![(

@@ -850,30 +850,105 @@ fn a_procedure_whose_name_extends_another_lends_it_no_runs() {
 /// The README's physical study (issue 15) on its scenario, two trials: each draws its own backlash and
 /// pitch amplitude and simulates its own physics; every estimate meets its tolerance (exit 0), and the
 /// drawn values are the trials' own columns.
+/// The README's physical study (issue 15: backlash and pitch amplitude drawn per trial, each trial its own
+/// physics through the ISO 230-2 and nine-line procedures), 4 trials: the same trials.csv, summary.csv and
+/// sensitivity.csv on 1 and 2 threads and as 4 shards (one trial each) merged.
 #[test]
 fn the_readme_physical_study_runs_on_its_bundled_scenario() {
     let tmp = tempfile::tempdir().unwrap();
-    let st = vmt()
-        .arg("study")
-        .arg(root().join("benches/study_physical.toml"))
-        .args(["--sample", "truth.effects.backlash.value=uniform(2e-6,8e-6)"])
-        .args(["--sample", "truth.effects.pitch.harmonics[0].amplitude=normal(3e-6,0.5e-6)"])
-        .args(["--trials", "2", "-o"])
-        .arg(tmp.path().join("physical"))
-        .output()
-        .unwrap();
-    assert_eq!(
-        st.status.code(),
-        Some(0),
-        "{}{}",
-        String::from_utf8_lossy(&st.stdout),
-        String::from_utf8_lossy(&st.stderr)
-    );
+    let study = |threads: &str, shard: Option<&str>, out: &str| {
+        let mut c = vmt();
+        c.arg("study")
+            .arg(root().join("benches/study_physical.toml"))
+            .args(["--sample", "truth.effects.backlash.value=uniform(2e-6,8e-6)"])
+            .args(["--sample", "truth.effects.pitch.harmonics[0].amplitude=normal(3e-6,0.5e-6)"])
+            .args(["--trials", "4"]);
+        if let Some(s) = shard {
+            c.args(["--shard", s]);
+        }
+        let st = c.arg("-o").arg(tmp.path().join(out)).env("RAYON_NUM_THREADS", threads).output().unwrap();
+        assert_eq!(
+            st.status.code(),
+            Some(0),
+            "{}{}",
+            String::from_utf8_lossy(&st.stdout),
+            String::from_utf8_lossy(&st.stderr)
+        );
+    };
+    study("1", None, "physical");
+    study("2", None, "two_threads");
+    for i in 0..4 {
+        study("2", Some(&format!("{i}/4")), &format!("s{i}"));
+    }
+    let mut m = vmt();
+    m.args(["study", "merge"]).args((0..4).map(|i| tmp.path().join(format!("s{i}"))));
+    let m = m.arg("-o").arg(tmp.path().join("merged")).output().unwrap();
+    assert_eq!(m.status.code(), Some(0), "{}", String::from_utf8_lossy(&m.stderr));
+    for f in ["trials.csv", "summary.csv", "sensitivity.csv"] {
+        let read = |d: &str| std::fs::read_to_string(tmp.path().join(d).join(f)).unwrap();
+        assert_eq!(read("physical"), read("two_threads"), "{f}: 1 and 2 threads differ");
+        assert_eq!(read("physical"), read("merged"), "{f}: 4 shards merged differ from the whole run");
+    }
     let rows = csv_rows(&std::fs::read_to_string(tmp.path().join("physical/trials.csv")).unwrap());
     let col = rows[0].iter().position(|h| h == "truth.effects.backlash.value").expect("a column per sampled key");
     let drawn: Vec<f64> = rows[1..].iter().map(|r| r[col].parse().unwrap()).collect();
     assert!(drawn.iter().all(|b| (2e-6..=8e-6).contains(b)), "{drawn:?}");
-    assert!(drawn.iter().any(|b| *b != drawn[0]), "the two trials drew different backlash values");
+    assert!(drawn.iter().any(|b| *b != drawn[0]), "the trials drew different backlash values");
+}
+
+/// `study merge` (issue 15) takes every shard of one study once: a missing shard, a shard given twice, a
+/// shard of another study (other trial count) or of another scenario file are refused with exit 2, naming
+/// the shard indices or the differing key; the three shards merged equal the whole run, `shard.toml` included
+/// (the merged directory is shard 0 of 1).
+#[test]
+fn study_merge_names_missing_and_repeated_shards_and_refuses_foreign_ones() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sc = tmp.path().join("s.toml");
+    std::fs::copy(small(), &sc).unwrap();
+    let study = |scenario: &Path, trials: &str, shard: Option<&str>, out: &str| {
+        let mut c = vmt();
+        c.arg("study").arg(scenario).args(["--vary", "sensors.laser_x3.sigma=1e-8,3e-8", "--trials", trials]);
+        if let Some(s) = shard {
+            c.args(["--shard", s]);
+        }
+        let o = c.arg("-o").arg(tmp.path().join(out)).output().unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    study(&sc, "5", None, "whole");
+    for i in 0..3 {
+        study(&sc, "5", Some(&format!("{i}/3")), &format!("s{i}"));
+    }
+    study(&sc, "6", Some("2/3"), "six");
+    let other = tmp.path().join("other.toml");
+    std::fs::write(&other, std::fs::read_to_string(&sc).unwrap() + "\n# another file\n").unwrap();
+    study(&other, "5", Some("2/3"), "other");
+    let merge = |dirs: &[&str]| {
+        let mut c = vmt();
+        c.args(["study", "merge"]);
+        for d in dirs {
+            c.arg(tmp.path().join(d));
+        }
+        let o = c.arg("-o").arg(tmp.path().join("merged")).output().unwrap();
+        (o.status.code(), String::from_utf8_lossy(&o.stderr).to_string())
+    };
+    let (code, err) = merge(&["s0", "s2"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("1/3") && err.contains("missing"), "{err}");
+    let (code, err) = merge(&["s0", "s1", "s1", "s2"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("1/3") && err.contains("more than once"), "{err}");
+    let (code, err) = merge(&["s0", "s1", "six"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("trials = 6") && err.contains("shard.toml"), "{err}");
+    let (code, err) = merge(&["s0", "s1", "other"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("scenario_fnv1a64"), "{err}");
+    let (code, err) = merge(&["s2", "s0", "s1"]);
+    assert_eq!(code, Some(0), "{err}");
+    for f in ["trials.csv", "summary.csv", "shard.toml"] {
+        let read = |d: &str| std::fs::read_to_string(tmp.path().join(d).join(f)).unwrap();
+        assert_eq!(read("whole"), read("merged"), "{f}");
+    }
 }
 
 /// Issue 13: `vmt run --units human` (like `vmt simulate --units human`) writes every CSV of the

@@ -263,6 +263,19 @@ impl Body {
                 world.gravity = DVec3::new(0.0, 0.0, -GRAVITY);
                 world.integration_parameters.dt = dt;
                 world.integration_parameters.num_solver_iterations = 1;
+                // The world holds this one body and nothing else (no collider, joint or contact), so
+                // the passes that act on constraints have nothing to act on and are switched off;
+                // none touches the body's state (the trajectory is bit-identical with and without
+                // them): continuous collision detection, the constraint solver's velocity passes (with
+                // and without bias) and its warm start, and the statistics counters (which otherwise
+                // sum the contacts of the solver's 129 colour buckets every step). The force, the
+                // gyroscopic correction and the pose update are integrated as before. A world given a
+                // collider or joint would need the defaults back.
+                world.integration_parameters.max_ccd_substeps = 0;
+                world.integration_parameters.num_internal_pgs_iterations = 0;
+                world.integration_parameters.num_internal_stabilization_iterations = 0;
+                world.integration_parameters.warmstart_coefficient = 0.0;
+                world.physics_pipeline.counters.disable();
                 let rb =
                     RigidBodyBuilder::dynamic().pose(start).additional_mass_properties(mprops).can_sleep(false).build();
                 let handle = world.bodies.insert(rb);

@@ -858,6 +858,179 @@ pub fn read_rows(path: &Path) -> Result<(Vec<TrialRow>, Vec<String>), VmtError> 
     Ok((out, sampled))
 }
 
+/// Which part of which study an output directory holds: `shard.toml` beside `trials.csv`
+/// (docs/formats.md §6), written by `vmt study` (and by `vmt study merge`, as shard 0 of 1) so that
+/// `vmt study merge` can name a missing or repeated shard and refuse shards of different studies.
+///
+/// Two shards belong to one study when every field but `shard` is equal: the same vmt version, the same
+/// scenario file content (FNV-1a 64 of its bytes; the file may sit at another path on another machine),
+/// the same design (`--vary`/`--sample` arguments as given), trial count, external estimator and its
+/// tolerance. Shard i of n holds the trials k < `trials` with k mod n = i.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShardInfo {
+    /// The vmt version that computed the shard.
+    pub vmt_version: String,
+    /// FNV-1a 64 of the scenario file's bytes, 16 hex digits.
+    pub scenario_fnv1a64: String,
+    /// The design as given on the command line: `--vary KEY=V1,V2,…` or the `--sample KEY=DIST`
+    /// arguments joined by spaces.
+    pub design: String,
+    /// Trials per value of the whole study (`--trials`).
+    pub trials: usize,
+    /// `--estimator-cmd`, if any.
+    pub estimator_cmd: Option<String>,
+    /// `--tolerance` (SI: m or rad), if any.
+    pub tolerance: Option<f64>,
+    /// This shard's index i, 0 ≤ i < `shards`.
+    pub shard: usize,
+    /// The number of shards n the study was split into (1: the whole study).
+    pub shards: usize,
+}
+
+/// The format line of `shard.toml`.
+pub const SHARD_FORMAT: &str = "vmt-study-shard/1";
+
+impl ShardInfo {
+    /// The file's text (TOML).
+    pub fn to_toml(&self) -> String {
+        let q = |s: &str| toml::Value::String(s.to_string()).to_string();
+        let mut t = format!(
+            "# which part of which vmt study this directory holds (docs/formats.md §6)\nformat = {}\nvmt_version = {}\n\
+             scenario_fnv1a64 = {}\ndesign = {}\ntrials = {}\n",
+            q(SHARD_FORMAT),
+            q(&self.vmt_version),
+            q(&self.scenario_fnv1a64),
+            q(&self.design),
+            self.trials
+        );
+        if let Some(c) = &self.estimator_cmd {
+            t += &format!("estimator_cmd = {}\n", q(c));
+        }
+        if let Some(x) = self.tolerance {
+            t += &format!("tolerance = {}\n", crate::measurement::fmt_toml_f64(x));
+        }
+        t += &format!("shard = {}\nshards = {}\n", self.shard, self.shards);
+        t
+    }
+
+    /// Reads `shard.toml` (every key checked; unknown keys refused).
+    pub fn read(path: &Path) -> Result<ShardInfo, VmtError> {
+        let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the shard's identity", e))?;
+        let table = crate::error::parse_toml(path, &text)?;
+        let r = crate::error::TomlReader::new(path, "", &table);
+        let format = r.req_str("format", "the format line")?;
+        if format != SHARD_FORMAT {
+            return Err(r.bad("format", format!("expected \"{SHARD_FORMAT}\", got \"{format}\"")));
+        }
+        let count = |key: &str| -> Result<usize, VmtError> {
+            let v = r.opt_u64(key, "a count")?.ok_or_else(|| r.bad(key, "missing key: expected a count"))?;
+            usize::try_from(v).map_err(|_| r.bad(key, format!("{v} is too large")))
+        };
+        let info = ShardInfo {
+            vmt_version: r.req_str("vmt_version", "the vmt version")?.to_string(),
+            scenario_fnv1a64: r.req_str("scenario_fnv1a64", "a hash")?.to_string(),
+            design: r.req_str("design", "the study design")?.to_string(),
+            trials: count("trials")?,
+            estimator_cmd: r.opt_str("estimator_cmd", "a command")?.map(str::to_string),
+            tolerance: r.opt_f64("tolerance", "a tolerance")?,
+            shard: count("shard")?,
+            shards: count("shards")?,
+        };
+        r.deny_unknown()?;
+        if info.shards == 0 || info.shard >= info.shards {
+            return Err(r.bad("shard", format!("shard {} of {}: expected 0 ≤ shard < shards", info.shard, info.shards)));
+        }
+        Ok(info)
+    }
+
+    /// The fields two shards of one study share, by name, as text (everything but `shard`).
+    fn identity(&self) -> [(&'static str, String); 7] {
+        [
+            ("vmt_version", self.vmt_version.clone()),
+            ("scenario_fnv1a64", self.scenario_fnv1a64.clone()),
+            ("design", self.design.clone()),
+            ("trials", self.trials.to_string()),
+            ("estimator_cmd", format!("{:?}", self.estimator_cmd)),
+            ("tolerance", format!("{:?}", self.tolerance)),
+            ("shards", self.shards.to_string()),
+        ]
+    }
+}
+
+/// FNV-1a 64 of a file's bytes as `ShardInfo::scenario_fnv1a64` writes it.
+pub fn content_fnv1a64(bytes: &[u8]) -> String {
+    let h = bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ *b as u64).wrapping_mul(0x0000_0100_0000_01b3));
+    format!("{h:016x}")
+}
+
+/// Checks that `shards` (directory, its `shard.toml`, its trial rows) are the n shards of one study, each
+/// once and complete: the same identity ([`ShardInfo`]), every index 0..n present once, and each shard's
+/// rows holding exactly its trials (k < trials, k mod n = i, every such k present). Errors name the
+/// directories, the missing or repeated shard indices, or the field that differs.
+pub fn check_shards(shards: &[(std::path::PathBuf, ShardInfo, Vec<TrialRow>)]) -> Result<(), VmtError> {
+    let Some((first_dir, first, _)) = shards.first() else {
+        return Err(VmtError::Usage("study merge: expected at least one shard directory".into()));
+    };
+    let file = |d: &Path| d.join("shard.toml");
+    for (dir, info, _) in &shards[1..] {
+        for ((key, a), (_, b)) in first.identity().iter().zip(info.identity().iter()) {
+            if a != b {
+                return Err(VmtError::bad(
+                    &file(dir),
+                    format!("key {key}"),
+                    format!("{key} = {b}, but {} has {key} = {a}: not shards of one study", file(first_dir).display()),
+                ));
+            }
+        }
+    }
+    let n = first.shards;
+    let mut by_index: Vec<Vec<&Path>> = vec![Vec::new(); n];
+    for (dir, info, _) in shards {
+        by_index[info.shard].push(dir);
+    }
+    let repeated: Vec<String> = by_index
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| d.len() > 1)
+        .map(|(i, d)| format!("{i}/{n} in {}", d.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" and ")))
+        .collect();
+    if !repeated.is_empty() {
+        return Err(VmtError::Usage(format!("study merge: shard given more than once: {}", repeated.join("; "))));
+    }
+    let missing: Vec<String> =
+        by_index.iter().enumerate().filter(|(_, d)| d.is_empty()).map(|(i, _)| format!("{i}/{n}")).collect();
+    if !missing.is_empty() {
+        return Err(VmtError::Usage(format!(
+            "study merge: shard{} {} missing (a study split in {n} needs every shard 0/{n} … {}/{n})",
+            if missing.len() > 1 { "s" } else { "" },
+            missing.join(", "),
+            n - 1
+        )));
+    }
+    for (dir, info, rows) in shards {
+        let csv = dir.join("trials.csv");
+        let mut seen = std::collections::BTreeSet::new();
+        for r in rows {
+            if r.trial >= info.trials || r.trial % n != info.shard {
+                return Err(VmtError::bad(
+                    &csv,
+                    format!("trial {}", r.trial),
+                    format!("not a trial of shard {}/{n} of a study of {} trials", info.shard, info.trials),
+                ));
+            }
+            seen.insert(r.trial);
+        }
+        if let Some(k) = (info.shard..info.trials).step_by(n).find(|k| !seen.contains(k)) {
+            return Err(VmtError::bad(
+                &csv,
+                format!("trial {k}"),
+                format!("missing: shard {}/{n} holds trials k < {} with k mod {n} = {}", info.shard, info.trials, info.shard),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Summary per (value, estimate): trials, mean |difference|, 95th percentile of |difference|, pass rate.
 ///
 /// The difference statistics are `None` (undefined, written empty and shown as "—") for an estimate whose
