@@ -795,7 +795,10 @@ fn cli_cases() -> Vec<Case> {
         let head = "format = \"vmt-study-shard/1\"\nvmt_version = \"0\"\nscenario_fnv1a64 = \"0\"\ndesign = \"x\"\ntrials = 1\n";
         cases.push(Case {
             label: format!("study merge, shard.toml with a {label}"),
-            files: vec![("a/trials.csv".into(), rows.clone()), ("a/shard.toml".into(), format!("{head}{text}").into_bytes())],
+            files: vec![
+                ("a/trials.csv".into(), rows.clone()),
+                ("a/shard.toml".into(), format!("{head}{text}").into_bytes()),
+            ],
             args: args(&["study", "merge", "{dir}/a", "-o", "{dir}/out"]),
             blamed: "shard.toml".into(),
             place: place.into(),

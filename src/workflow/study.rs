@@ -992,7 +992,9 @@ pub fn check_shards(shards: &[(std::path::PathBuf, ShardInfo, Vec<TrialRow>)]) -
         .iter()
         .enumerate()
         .filter(|(_, d)| d.len() > 1)
-        .map(|(i, d)| format!("{i}/{n} in {}", d.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" and ")))
+        .map(|(i, d)| {
+            format!("{i}/{n} in {}", d.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" and "))
+        })
         .collect();
     if !repeated.is_empty() {
         return Err(VmtError::Usage(format!("study merge: shard given more than once: {}", repeated.join("; "))));
@@ -1024,7 +1026,10 @@ pub fn check_shards(shards: &[(std::path::PathBuf, ShardInfo, Vec<TrialRow>)]) -
             return Err(VmtError::bad(
                 &csv,
                 format!("trial {k}"),
-                format!("missing: shard {}/{n} holds trials k < {} with k mod {n} = {}", info.shard, info.trials, info.shard),
+                format!(
+                    "missing: shard {}/{n} holds trials k < {} with k mod {n} = {}",
+                    info.shard, info.trials, info.shard
+                ),
             ));
         }
     }
