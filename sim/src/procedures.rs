@@ -1062,19 +1062,51 @@ pub fn read_run(
     sensors: &[SensorSpec],
     seed: u64,
 ) -> Result<RunRecord, SensorError> {
+    read_run_clean(model, truth, sensors, seed, &clean_run(model, physics, truth, sensors)?)
+}
+
+/// The sensor declared under `name`, resolved (its preset's values filled in).
+fn declared(truth: &RunTruth, sensors: &[SensorSpec], name: &str) -> Result<SensorSpec, SensorError> {
+    sensors
+        .iter()
+        .find(|s| s.name == name)
+        .map(SensorSpec::resolved)
+        .ok_or_else(|| SensorError::Undeclared { run: truth.name.clone(), sensor: name.to_string() })
+}
+
+/// The noise-free readings ([`true_readings`]) of every sensor of a run, in the order of
+/// `truth.sensors`: what [`read_run_clean`] applies each trial's errors and noise to. They depend on the
+/// sensors' kind, mounting and direction, not on their noise, so a study whose trials share the physics and
+/// the sensors computes them once.
+pub fn clean_run(
+    model: &AxisModel,
+    physics: &AxisTruth,
+    truth: &RunTruth,
+    sensors: &[SensorSpec],
+) -> Result<Vec<Vec<f64>>, SensorError> {
+    truth
+        .sensors
+        .iter()
+        .map(|name| true_readings(&declared(truth, sensors, name)?, model, physics.mode.as_ref(), &truth.samples))
+        .collect()
+}
+
+/// [`read_run`] from the run's noise-free readings `clean` ([`clean_run`] of the same truth and sensors).
+pub fn read_run_clean(
+    model: &AxisModel,
+    truth: &RunTruth,
+    sensors: &[SensorSpec],
+    seed: u64,
+    clean: &[Vec<f64>],
+) -> Result<RunRecord, SensorError> {
     let mut columns = Vec::new();
-    for name in &truth.sensors {
-        let spec = sensors
-            .iter()
-            .find(|s| &s.name == name)
-            .ok_or_else(|| SensorError::Undeclared { run: truth.name.clone(), sensor: name.clone() })?
-            .resolved();
-        let clean = true_readings(&spec, model, physics.mode.as_ref(), &truth.samples)?;
+    for (name, clean) in truth.sensors.iter().zip(clean) {
+        let spec = declared(truth, sensors, name)?;
         let mut rng = source_rng(seed, &format!("{}/{}", truth.name, spec.name));
         let values = match &truth.layout {
             Layout::TimeSeries { rate } => apply_errors(&spec, &clean[1..], *rate, &mut rng),
             Layout::PointTable { visits } => {
-                let means = visit_means(&spec, model, &clean, visits);
+                let means = visit_means(&spec, model, clean, visits);
                 let window = visits.first().map_or(1.0, |a| (a.last - a.first + 1) as f64);
                 apply_errors(&spec, &means, sample_rate(&truth.samples) / window, &mut rng)
             }

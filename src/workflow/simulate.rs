@@ -179,11 +179,36 @@ pub fn simulate_truth(sc: &Scenario, ph: &Physics) -> SessionTruth {
 
 /// Sensor readings of every run, noise seeded by `seed`: the single-axis runs, then the chain lines.
 pub fn read_all(sc: &Scenario, ph: &Physics, truths: &SessionTruth, seed: u64) -> Result<Vec<RunRecord>, VmtError> {
-    let mut runs = truths
+    read_all_clean(sc, ph, truths, seed, &clean_all(sc, ph, truths)?)
+}
+
+/// The noise-free readings of every sensor of every single-axis run (`vmt_sim::procedures::clean_run`,
+/// one entry per run of `truths.runs`), to be read by [`read_all_clean`] with any number of seeds.
+pub fn clean_all(sc: &Scenario, ph: &Physics, truths: &SessionTruth) -> Result<Vec<Vec<Vec<f64>>>, VmtError> {
+    truths
         .runs
         .iter()
         .map(|t| {
-            read_run(&ph.model, &ph.truth, t, &ph.sensors, seed)
+            vmt_sim::procedures::clean_run(&ph.model, &ph.truth, t, &ph.sensors)
+                .map_err(|e| VmtError::bad(&sc.source, "sensors", e.to_string()))
+        })
+        .collect()
+}
+
+/// [`read_all`] from the runs' noise-free readings `clean` ([`clean_all`] of the same physics and truths).
+pub fn read_all_clean(
+    sc: &Scenario,
+    ph: &Physics,
+    truths: &SessionTruth,
+    seed: u64,
+    clean: &[Vec<Vec<f64>>],
+) -> Result<Vec<RunRecord>, VmtError> {
+    let mut runs = truths
+        .runs
+        .iter()
+        .zip(clean)
+        .map(|(t, c)| {
+            vmt_sim::procedures::read_run_clean(&ph.model, t, &ph.sensors, seed, c)
                 .map_err(|e| VmtError::bad(&sc.source, "sensors", e.to_string()))
         })
         .collect::<Result<Vec<RunRecord>, VmtError>>()?;

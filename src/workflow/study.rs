@@ -370,7 +370,7 @@ pub fn run_sampled_study(
             let ph = physics(&scenario).map_err(|e| at(e.to_string()))?;
             let truth_table = crate::simulate::truth_profiles(&scenario, &ph).map_err(|e| at(e.to_string()))?;
             let truths = simulate_truth(&scenario, &ph);
-            let session = Session { sc: &scenario, ph: &ph, truths: &truths, truth_table: &truth_table };
+            let session = Session { sc: &scenario, ph: &ph, truths: &truths, truth_table: &truth_table, clean: None };
             let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/0/{k}"));
             let mut rows = trial_rows(&session, seed, (0.0, k), estimator, tolerance)?;
             rows.iter_mut().for_each(|r| r.sampled = values.clone());
@@ -617,24 +617,35 @@ pub fn run_study(
         })
         .collect::<Result<_, VmtError>>()?;
     let of_value = |i: usize| i.min(scenarios.len() - 1);
+    // Each value's physics with its sensors, and their noise-free readings: computed once per value,
+    // read by every trial with its own seed (the trials differ only in the noise).
+    let values: Vec<(Physics, Vec<Vec<Vec<f64>>>)> = (0..vary.values.len())
+        .into_par_iter()
+        .map(|i| {
+            let (sc, (ph, truths, _)) = (&scenarios[of_value(i)], &sessions[of_value(i)]);
+            let mut p = ph.clone();
+            if let VaryKey::Sensor { sensor, key } = &vary.key {
+                for s in p.sensors.iter_mut().filter(|s| &s.name == sensor) {
+                    *s = s.resolved();
+                    key.set(s, vary.values[i]);
+                    s.preset = None;
+                }
+            }
+            let clean = crate::simulate::clean_all(sc, &p, truths)?;
+            Ok((p, clean))
+        })
+        .collect::<Result<_, VmtError>>()?;
     let jobs: Vec<(usize, usize)> = (0..vary.values.len())
         .flat_map(|i| (0..trials).filter(|k| k % shard.1 == shard.0).map(move |k| (i, k)))
         .collect();
     let rows: Result<Vec<Vec<TrialRow>>, VmtError> = jobs
         .par_iter()
         .map(|&(i, k)| {
-            let (sc, (ph, truths, truth_table)) = (&scenarios[of_value(i)], &sessions[of_value(i)]);
-            let mut p = ph.clone();
-            let v = vary.values[i];
-            if let VaryKey::Sensor { sensor, key } = &vary.key {
-                for s in p.sensors.iter_mut().filter(|s| &s.name == sensor) {
-                    *s = s.resolved();
-                    key.set(s, v);
-                    s.preset = None;
-                }
-            }
+            let (sc, (_, truths, truth_table)) = (&scenarios[of_value(i)], &sessions[of_value(i)]);
+            let (p, clean) = &values[i];
             let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/{i}/{k}"));
-            trial_rows(&Session { sc, ph: &p, truths, truth_table }, seed, (v, k), estimator, tolerance)
+            let session = Session { sc, ph: p, truths, truth_table, clean: Some(clean) };
+            trial_rows(&session, seed, (vary.values[i], k), estimator, tolerance)
         })
         .collect();
     Ok(rows?.into_iter().flatten().collect())
@@ -647,6 +658,9 @@ struct Session<'a> {
     ph: &'a Physics,
     truths: &'a crate::simulate::SessionTruth,
     truth_table: &'a crate::measurement::ProfileTable,
+    /// The runs' noise-free readings ([`crate::simulate::clean_all`]) when the trials share them;
+    /// `None`: computed in the trial.
+    clean: Option<&'a [Vec<Vec<f64>>]>,
 }
 
 /// The rows of one trial: the session read by its sensors with the trial's `seed`, then the
@@ -659,8 +673,11 @@ fn trial_rows(
     estimator: Option<&dyn Estimator>,
     tolerance: Option<f64>,
 ) -> Result<Vec<TrialRow>, VmtError> {
-    let Session { sc, ph: p, truths, truth_table } = *session;
-    let runs = read_all(sc, p, truths, seed)?;
+    let Session { sc, ph: p, truths, truth_table, clean } = *session;
+    let runs = match clean {
+        Some(c) => crate::simulate::read_all_clean(sc, p, truths, seed, c)?,
+        None => read_all(sc, p, truths, seed)?,
+    };
     let set = to_measurement_set(sc, &runs)?;
     if let Some(e) = estimator {
         let work = std::env::temp_dir().join(format!("vmt-study-{}-{seed:x}", std::process::id()));
