@@ -1292,7 +1292,8 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
     if let Some(d) = data {
         crate::output::refuse_input_overwrite(out, &[d])?;
     }
-    let mut m2 = crate::modelcheck::add_effect(&m, name, entry.as_ref()).map_err(|e| VmtError::bad(model, "", e))?;
+    let mut m2 =
+        crate::modelcheck::add_effect(&m, name, entry.as_ref()).map_err(|e| VmtError::bad(model, "", e.to_string()))?;
     m2.source = out.to_path_buf();
     crate::model::write_model(&m2, out)?;
     eprintln!("wrote {} ({} added, fit = true)", out.display(), name);

@@ -307,23 +307,21 @@ fn hidden_accel(h: AccelHidden, expect: &str) {
     let named = r.iter().filter(|x| x.1.first.as_ref().is_some_and(|f| f.0 == expect && f.1 == "significant")).count();
     let low = r.iter().filter(|x| x.1.nrms_after.is_some_and(|v| v <= 1.3)).count();
     // The mode fitted after `add` (compare's refined values) against the generator's: frequency
-    // within 1 %, damping within 10 % (the issue's thresholds). These are met only where the data
-    // determine the mode that well: a draw is *resolvable* when 3× its Cramér–Rao bound
-    // (`AccelTruth::mode_crb`, a lower bound: the shapes fitted beside the mode are not profiled
-    // out) is inside both thresholds. The assertion is on the resolvable draws; the rate over all
-    // draws and each error in units of its bound are printed.
+    // within 1 %, damping within 10 % (the issue's thresholds). Each is met only where the data
+    // determine it that well: the frequency of a draw is *resolvable* when 3× its Cramér–Rao bound
+    // (`AccelTruth::mode_crb`, with the straightness profiled out) is inside 1 %, the damping when 3×
+    // its bound is inside 10 %. Each assertion is on its resolvable draws; the rates over all draws
+    // and each error in units of its bound are printed.
     let got = |o: &Outcome, k: &str| o.fitted_after.as_ref().and_then(|v| v[k].as_f64()).unwrap_or(f64::NAN);
-    let within = |t: &AccelTruth, o: &Outcome| -> bool {
-        let Some((f, z)) = t.mode else { return true };
-        (got(o, "frequency") / f - 1.0).abs() <= 0.01 && (got(o, "damping") / z - 1.0).abs() <= 0.10
-    };
-    let resolvable = |t: &AccelTruth| match (t.mode, t.mode_crb) {
-        (Some((f, z)), Some((sf, sz))) => 3.0 * sf <= 0.01 * f && 3.0 * sz <= 0.10 * z,
-        _ => true,
-    };
+    let f_ok = |t: &AccelTruth, o: &Outcome| t.mode.is_none_or(|(f, _)| (got(o, "frequency") / f - 1.0).abs() <= 0.01);
+    let z_ok = |t: &AccelTruth, o: &Outcome| t.mode.is_none_or(|(_, z)| (got(o, "damping") / z - 1.0).abs() <= 0.10);
+    let within = |t: &AccelTruth, o: &Outcome| f_ok(t, o) && z_ok(t, o);
+    let f_res = |t: &AccelTruth| t.mode.zip(t.mode_crb).is_none_or(|((f, _), (sf, _))| 3.0 * sf <= 0.01 * f);
+    let z_res = |t: &AccelTruth| t.mode.zip(t.mode_crb).is_none_or(|((_, z), (_, sz))| 3.0 * sz <= 0.10 * z);
     let fitted = r.iter().filter(|x| within(&x.0, &x.1)).count();
-    let n_res = r.iter().filter(|x| resolvable(&x.0)).count();
-    let fitted_res = r.iter().filter(|x| resolvable(&x.0) && within(&x.0, &x.1)).count();
+    let (n_f, n_z) = (r.iter().filter(|x| f_res(&x.0)).count(), r.iter().filter(|x| z_res(&x.0)).count());
+    let f_fit = r.iter().filter(|x| f_res(&x.0) && f_ok(&x.0, &x.1)).count();
+    let z_fit = r.iter().filter(|x| z_res(&x.0) && z_ok(&x.0, &x.1)).count();
     for (t, o) in &r {
         if let (Some((f, z)), Some((sf, sz))) = (t.mode, t.mode_crb) {
             let (fa, za) = (got(o, "frequency"), got(o, "damping"));
@@ -332,18 +330,50 @@ fn hidden_accel(h: AccelHidden, expect: &str) {
                  error {:+.2} σ_f, {:+.2} σ_ζ",
                 100.0 * sf / f,
                 100.0 * sz / z,
-                if resolvable(t) { "" } else { ", not resolvable to 1 % / 10 %" },
+                match (f_res(t), z_res(t)) {
+                    (true, true) => "",
+                    (true, false) => ", ζ not resolvable to 10 %",
+                    (false, true) => ", f not resolvable to 1 %",
+                    (false, false) => ", f and ζ not resolvable to 1 % / 10 %",
+                },
                 (fa - f) / sf,
                 (za - z) / sz
             );
         }
     }
+    // The roll after `add` + `compare` against its bound (`AccelTruth::roll_crb`): the RMS over the
+    // travel of the fitted tilt of acc_y minus the true roll, both with their mean removed (an offset
+    // per pass hides it), within 2× the bound (the issue's threshold).
+    let roll_err = |t: &AccelTruth, o: &Outcome| -> Option<(f64, f64)> {
+        let (roll, bound) = (t.roll.as_ref()?, t.roll_crb?);
+        let fitted = o.fitted_after.as_ref();
+        let c = |k: usize| fitted.and_then(|v| v[format!("tilt_acc_y_c{k}")].as_f64());
+        let coefs: Vec<f64> = (1..).map_while(c).collect();
+        let (lo, hi) = t.travel;
+        let xs: Vec<f64> = (0..400).map(|g| lo + (hi - lo) * (g as f64 + 0.5) / 400.0).collect();
+        let diff: Vec<f64> = xs
+            .iter()
+            .map(|&x| coefs.iter().enumerate().map(|(k, ck)| ck * x.powi(k as i32 + 1)).sum::<f64>() - roll.value(x))
+            .collect();
+        let mean = diff.iter().sum::<f64>() / diff.len() as f64;
+        let rms = (diff.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / diff.len() as f64).sqrt();
+        Some((if coefs.is_empty() { f64::INFINITY } else { rms }, bound))
+    };
+    let rolls: Vec<(f64, f64)> = r.iter().filter_map(|(t, o)| roll_err(t, o)).collect();
+    for (e, b) in &rolls {
+        eprintln!("  roll: RMS error {:.3} µrad, bound {:.3} µrad ({:.2} × the bound)", e * 1e6, b * 1e6, e / b);
+    }
+    let roll_in = rolls.iter().filter(|(e, b)| e <= &(2.0 * b)).count();
     eprintln!(
         "accelerometer {h:?}: `{expect}` first & significant {named}/{n} ({:.0} %), nrms ≤ 1.3 after add {low}/{n}, \
-         mode within 1 % / 10 % {fitted}/{n} (of the {n_res} resolvable draws: {fitted_res})",
-        rate(named, n as usize)
+         mode within 1 % / 10 % {fitted}/{n}; f within 1 % on {f_fit} of the {n_f} draws whose bound allows it, ζ \
+         within 10 % on {z_fit} of {n_z}; roll within 2 × its bound {roll_in}/{}",
+        rate(named, n as usize),
+        rolls.len()
     );
-    assert!(rate(named, n as usize) >= 95.0 && rate(low, n as usize) >= 95.0 && rate(fitted_res, n_res) >= 95.0);
+    assert!(rate(named, n as usize) >= 95.0 && rate(low, n as usize) >= 95.0);
+    assert!(rate(f_fit, n_f) >= 95.0 && rate(z_fit, n_z) >= 95.0);
+    assert!(rolls.is_empty() || rate(roll_in, rolls.len()) >= 95.0);
 }
 
 /// Complete encoder models (positioning + servo_lag): share with any `significant` claim.
@@ -544,6 +574,30 @@ fn write_encoder_draw() {
     };
     let t = encoder_set(&out, seed, hidden);
     eprintln!("{t:?}");
+}
+
+/// The mode studies' draws without the loop: each draw's mode and its Cramér–Rao bound
+/// (`AccelTruth::mode_crb`), and whether 3× the bound is inside 1 % in f and 10 % in ζ (a
+/// *resolvable* draw of `accel_hidden_resonance`), for `VMT_DRAWS` draws (default 30) from seed 1000.
+#[test]
+#[ignore = "tool: prints the mode bound of each study draw"]
+fn print_mode_bounds() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut resolvable = 0;
+    let n = draws(30);
+    for k in 0..n {
+        let t = accel_set(&tmp.path().join(format!("d{k}")), 1000 + k, AccelHidden::Resonance, 200.0);
+        let (Some((f, z)), Some((sf, sz))) = (t.mode, t.mode_crb) else { continue };
+        let ok = 3.0 * sf <= 0.01 * f && 3.0 * sz <= 0.10 * z;
+        resolvable += usize::from(ok);
+        eprintln!(
+            "draw {k}: mode {f:.3} Hz, ζ {z:.5}; CRB σ_f {:.4} %, σ_ζ {:.2} %{}",
+            100.0 * sf / f,
+            100.0 * sz / z,
+            if ok { "" } else { " (not resolvable to 1 % / 10 % at 3σ)" }
+        );
+    }
+    eprintln!("{resolvable} of {n} draws resolvable");
 }
 
 /// The benchmark's sets written to `VMT_OUT` (a directory) for timing and profiling `vmt diagnose`

@@ -8,9 +8,9 @@ use super::*;
 /// The model with effect `name` (on the model's axis) added, `fit = true`; with `from` (a ranking
 /// entry of a diagnosis) its parameters are the starting values: error-motion polynomial
 /// coefficients `cK`, or the scalar parameters by key.
-pub fn add_effect(model: &Model, name: EffectName, from: Option<&RankingEntry>) -> Result<Model, String> {
+pub fn add_effect(model: &Model, name: EffectName, from: Option<&RankingEntry>) -> Result<Model, AddError> {
     if model.get(name, model.axis).is_some() {
-        return Err(format!("the model already has `{name}` on axis {}", model.axis));
+        return Err(AddError::AlreadyInModel { name, axis: model.axis });
     }
     let mut effect = Effect { name, axis: model.axis, params: EffectParams::default_for(name) };
     let mut given: Vec<String> = Vec::new();
@@ -54,11 +54,32 @@ pub fn add_effect(model: &Model, name: EffectName, from: Option<&RankingEntry>) 
         }
     }
     if let Some(p) = effect.validate().into_iter().next() {
-        return Err(format!("{}: {}", p.key, p.message));
+        return Err(AddError::OutOfRange { key: p.key, message: p.message });
     }
     let mut m = model.clone();
     m.insert(ModelEffect { effect, fit: true, basis: None, order: None, given });
     Ok(m)
+}
+
+/// Why [`add_effect`] cannot add an effect.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AddError {
+    /// The model has the effect on its axis already.
+    #[error("the model already has `{name}` on axis {axis}")]
+    AlreadyInModel {
+        /// The effect.
+        name: EffectName,
+        /// The model's axis.
+        axis: vmt_core::axis::Axis,
+    },
+    /// A parameter of the effect is outside the catalogue's range even at its default.
+    #[error("{key}: {message}")]
+    OutOfRange {
+        /// The parameter's key.
+        key: String,
+        /// What the catalogue expects.
+        message: String,
+    },
 }
 
 /// `history.json` beside a model file.

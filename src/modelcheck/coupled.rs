@@ -240,7 +240,7 @@ impl Problem<'_> {
     /// The weighted least squares whose unknowns are [the p mixed columns | the fixed columns | the
     /// free vibration of each excited channel] at (f, ζ); returns the coefficients and the weighted
     /// residual (length n, stack order).
-    fn solve(&self, fz: (f64, f64), mix: &[(Vec<f64>, usize)]) -> Result<(Vec<f64>, Vec<f64>), String> {
+    fn solve(&self, fz: (f64, f64), mix: &[(Vec<f64>, usize)]) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
         let p = mix.first().map_or(0, |m| m.1);
         let q = p + self.n_fixed + self.n_free;
         let (f, zeta) = fz;
@@ -318,7 +318,7 @@ impl Problem<'_> {
                 nm[i * q + j] = nm[j * q + i];
             }
         }
-        let beta = solve_normal(&nm, &b).map_err(|e| e.to_string())?;
+        let beta = solve_normal(&nm, &b)?;
         let mut resid = vec![0.0; self.n];
         for ((ch, (a, _)), (_, _, free_cols)) in self.chans.iter().zip(mix).zip(&parts) {
             let r = ch.raw.len();
@@ -345,7 +345,7 @@ impl Problem<'_> {
     }
 
     /// The coupled fit at θ = (f, ζ, gains…): coefficients and weighted residual.
-    fn coupled(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>), String> {
+    fn coupled(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
         let fz = (theta[0], theta[1]);
         let mix: Vec<(Vec<f64>, usize)> = self.chans.iter().map(|ch| self.mixing(ch, fz, &theta[2..], None)).collect();
         self.solve(fz, &mix)
@@ -695,6 +695,7 @@ fn reselect(st: &Stack, pb: &Problem, terms: &[FitTerm], theta: &[f64], target: 
     for m in 0..pb.inputs.len() {
         let term = pb.inputs[m].term;
         let sh = terms[term].shape.clone();
+        // index: an order ≤ what the data's distinct positions resolve (`resolvable_order`), a u32 widened.
         let top = resolvable_order(st, terms[term].name, sh.range) as usize;
         let all: Vec<usize> = (1..=top).collect();
         let dict = coupled_series(m, &sh, &all);
@@ -759,6 +760,7 @@ pub(crate) fn refit_coupled<'a>(
 ) -> Option<(Stack<'a>, FitState, Coupled)> {
     let ti_r = fs.terms.iter().position(|t| t.name == EffectName::Resonance)?;
     let hi = accel_min_rate(st).map_or(200.0, |f| (0.4 * f).min(200.0)).max(6.0);
+    // index: hi ≤ 200 Hz (clamped above), so at most ln(40)/0.03 + 1 = 124 grid points.
     let grid = log_grid(5.0, hi, ((hi / 5.0).ln() / COUPLED_SCAN_STEP).ceil() as usize + 1);
     let pb1 = problem(st_mode, &fs.terms, &fs.target, w)?;
     let c0 = input_coefs(&pb1, fs);
@@ -869,6 +871,7 @@ pub(crate) fn joint_mode(
         shapes: vec![],
     };
     let (_, fit, c) = refit_coupled(st, st_mode, &seq, sigma, w, false)?;
+    // index: `terms` holds at least the resonance term pushed above, and the refit keeps its terms.
     let ti = fit.terms.len() - 1;
     let gains = fit.terms[ti]
         .shape

@@ -65,17 +65,17 @@ pub(crate) fn design(st: &Stack, terms: &[FitTerm]) -> Vec<Vec<f64>> {
 /// Drops columns that are all zero (an effect no channel sees) so the solver sees a clean design;
 /// returns the kept indices. A large design ([`large_design`]: flexible shapes or time series) is
 /// solved by pivoted QR (`lstsq_qr`, ≈ 2np² flops) instead of the SVD.
-pub(crate) fn solve(r: &[f64], cols: &[Vec<f64>], sigma: &Sigma) -> Result<(Vec<f64>, Vec<f64>), String> {
+pub(crate) fn solve(r: &[f64], cols: &[Vec<f64>], sigma: &Sigma) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
     let keep: Vec<usize> = (0..cols.len()).filter(|&j| cols[j].iter().any(|v| *v != 0.0)).collect();
     let sub: Vec<Vec<f64>> = keep.iter().map(|&j| cols[j].clone()).collect();
     if sub.is_empty() {
         return Ok((vec![0.0; cols.len()], r.to_vec()));
     }
     let (coefficients, residual) = if large_design(r.len(), sub.len()) {
-        let w = sigma.weights(r.len()).map_err(|e| e.to_string())?;
-        lstsq_qr(r, &sub, &w).map_err(|e| e.to_string())?
+        let w = sigma.weights(r.len())?;
+        lstsq_qr(r, &sub, &w)?
     } else {
-        let fit = fit_signature(r, &sub, sigma).map_err(|e| e.to_string())?;
+        let fit = fit_signature(r, &sub, sigma)?;
         (fit.coefficients, fit.residual)
     };
     let mut beta = vec![0.0; cols.len()];
@@ -95,7 +95,7 @@ pub(crate) fn solve_blocks(
     r: &[f64],
     cols: &[Vec<f64>],
     sigma: &Sigma,
-) -> Result<(Vec<f64>, Vec<f64>), String> {
+) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
     let starts: Vec<usize> = st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect();
     let m = st.chans.len();
     let seen = |col: &[f64], j: usize| col[starts[j]..starts[j] + st.chans[j].y.len()].iter().any(|v| *v != 0.0);
@@ -122,7 +122,7 @@ pub(crate) fn solve_blocks(
     if blocks.len() <= 1 || !large_design(r.len(), cols.len()) {
         return solve(r, cols, sigma);
     }
-    let per = sigma.weights(r.len()).map_err(|e| e.to_string())?;
+    let per = sigma.weights(r.len())?;
     let mut beta = vec![0.0; cols.len()];
     let mut residual = vec![0.0; r.len()];
     for b in blocks {
@@ -294,14 +294,14 @@ pub(crate) fn order_curve(
     target: &[f64],
     w: &[f64],
     base: &OrthoBase,
-) -> Result<Vec<(u32, f64, usize)>, String> {
+) -> Result<Vec<(u32, f64, usize)>, ModelCheckError> {
     let series = |order: u32| {
         let sh = shape(st, name, 1, order, false);
         let sh = if basis == ShapeBasis::Legendre { sh } else { sh.in_basis(st, basis, order) };
         columns(st, name, &sh, &[])
     };
-    let nested = |order: u32| -> Result<Vec<(u32, f64, usize)>, String> {
-        let nr = nested_rss(target, w, base, &series(order)).map_err(|e| e.to_string())?;
+    let nested = |order: u32| -> Result<Vec<(u32, f64, usize)>, ModelCheckError> {
+        let nr = nested_rss(target, w, base, &series(order))?;
         // k series columns taken: the order of the k-th (the lowest when none is needed).
         Ok((0..nr.rss.len())
             .filter_map(|k| {
@@ -343,7 +343,7 @@ pub(crate) fn order_curve(
             orders
                 .into_par_iter()
                 .map(|o| {
-                    let nr = nested_rss(target, w, base, &series(o)).map_err(|e| e.to_string())?;
+                    let nr = nested_rss(target, w, base, &series(o))?;
                     Ok((o, nr.rss[nr.rss.len() - 1], base.rank() + nr.used.len()))
                 })
                 .collect()
@@ -365,7 +365,7 @@ pub(crate) fn order_curve(
 /// gain (`diagnose` weighs the lead against them). For a given `order` the preferred one is still
 /// computed (a shape too stiff for the data is a finding). Data with accelerometer channels:
 /// [`fit_orders_nested`].
-pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) -> Result<FitState, String> {
+pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) -> Result<FitState, ModelCheckError> {
     let default = |me: &ModelEffect| me.order.unwrap_or(DEFAULT_ORDER);
     let first = fit_model_fixed(st, model, sigma, w, &|_, me: &ModelEffect| (default(me), None))?;
     let m = distinct_positions(st).len() as u32;
@@ -395,7 +395,7 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
                 let name = terms[ti].name;
                 let (me, basis, span, mut fixed) = order_search_setup(st, model, &terms, ti);
                 fixed.retain(|c| c.iter().any(|v| *v != 0.0));
-                let base = OrthoBase::new(&fixed, w).map_err(|e| e.to_string())?;
+                let base = OrthoBase::new(&fixed, w)?;
                 // (user order, weighted RSS, linear parameters) of every order BIC may choose.
                 let curve = order_curve(st, name, basis, top, &round_fit.target, w, &base)?;
                 let bic = |k: usize| bic_unknown_sigma(curve[k].1, n, curve[k].2);
@@ -487,7 +487,7 @@ pub(crate) fn rechoose_orders(
     k_extra: usize,
     period: Option<f64>,
     start: &[(EffectName, u32)],
-) -> Result<(Vec<(EffectName, u32)>, f64), String> {
+) -> Result<(Vec<(EffectName, u32)>, f64), ModelCheckError> {
     let top = (distinct_positions(st).len() as u32).saturating_sub(1).max(1);
     let mut terms = fs.terms.clone();
     let mut orders: Vec<(EffectName, u32)> = start.to_vec();
@@ -509,7 +509,7 @@ pub(crate) fn rechoose_orders(
             let (me, basis, span, mut fixed) = order_search_setup(st, model, &terms, ti);
             fixed.extend(extra.iter().cloned());
             fixed.retain(|c| c.iter().any(|v| *v != 0.0));
-            let base = OrthoBase::new(&fixed, w).map_err(|e| e.to_string())?;
+            let base = OrthoBase::new(&fixed, w)?;
             let curve = order_curve(st, name, basis, top, &fs.target, w, &base)?;
             let allowed = |o: u32| {
                 basis == ShapeBasis::Table || period.is_none_or(|p| basis.shortest_wavelength(span, o) > p) || o == 1
@@ -573,7 +573,7 @@ pub(crate) fn lead_shape_scan(
     binding: &[(EffectName, LeadCap)],
     w: &[f64],
     (p_lo, p_hi): (f64, f64),
-) -> Result<Option<LeadScan>, String> {
+) -> Result<Option<LeadScan>, ModelCheckError> {
     let Some(&(m0, cap0)) = binding.first() else { return Ok(None) };
     if !matches!(cap0.basis, ShapeBasis::Legendre | ShapeBasis::Harmonics) || !(p_hi > p_lo) {
         return Ok(None);
@@ -588,7 +588,7 @@ pub(crate) fn lead_shape_scan(
     }
     let others: Vec<FitTerm> = terms.iter().filter(|t| t.name != m0).cloned().collect();
     let fixed: Vec<Vec<f64>> = design(st, &others).into_iter().filter(|c| c.iter().any(|v| *v != 0.0)).collect();
-    let base = OrthoBase::new(&fixed, w).map_err(|e| e.to_string())?;
+    let base = OrthoBase::new(&fixed, w)?;
     let top = cap0.free_best;
     let sh = shape(st, m0, 1, top, false);
     let sh = if cap0.basis == ShapeBasis::Legendre { sh } else { sh.in_basis(st, cap0.basis, top) };
@@ -674,6 +674,8 @@ pub(crate) fn lead_shape_scan(
         (best, power)
     };
     let joint = |p: f64| joint_and_power(p).0;
+    // index: (p_lo, p_hi) is the catalogue's lead range (`period_range`: 2–60 mm, ratio ≤ 30), so at most
+    // ln(30)·400 ≈ 1 361 periods.
     let count = (((p_hi / p_lo).ln() * LEAD_SCAN_PER_E).ceil() as usize).max(2);
     let grid = log_grid(p_lo, p_hi, count);
     let scored: Vec<((f64, usize), f64)> = grid.par_iter().map(|&p| joint_and_power(p)).collect();
@@ -772,7 +774,7 @@ fn fit_orders_nested(
     w: &[f64],
     first: FitState,
     motions: &[usize],
-) -> Result<FitState, String> {
+) -> Result<FitState, ModelCheckError> {
     let mut terms = first.terms.clone();
     let mut best: BTreeMap<usize, (u32, u32)> = BTreeMap::new();
     // A second sweep only when two motions share a channel (else each choice is independent).
@@ -810,7 +812,7 @@ fn fit_orders_nested(
                 .unzip();
             let wr = pick(w);
             let y = pick(&first.target);
-            let base = OrthoBase::new(&fixed, &wr).map_err(|e| e.to_string())?;
+            let base = OrthoBase::new(&fixed, &wr)?;
             let me = &model.effects[terms[ti].index];
             let sparse = shape(st, name, 1, top, false).basis == ShapeBasis::Cosine && me.order.is_none();
             // The order in which the series enters: by degree (nested orders), or for a cosine series
@@ -818,9 +820,9 @@ fn fit_orders_nested(
             // signal at a few high orders, where nesting by degree would charge every order below
             // it; at the fast pass the short waves alias, so the terms are not orthogonal there).
             let nr = if sparse {
-                greedy_rss(&y, &wr, &base, &nested, GREEDY_STOP).map_err(|e| e.to_string())?
+                greedy_rss(&y, &wr, &base, &nested, GREEDY_STOP)?
             } else {
-                nested_rss(&y, &wr, &base, &nested).map_err(|e| e.to_string())?
+                nested_rss(&y, &wr, &base, &nested)?
             };
             let nm = rows.len() as f64;
             let bic = |k: usize| nm * (nr.rss[k].max(1e-300) / nm).ln() + (base.rank() + k) as f64 * nm.ln();
@@ -869,7 +871,7 @@ pub(crate) fn fit_model_fixed(
     sigma: &Sigma,
     w: &[f64],
     order_of: &dyn Fn(usize, &ModelEffect) -> (u32, Option<Vec<u32>>),
-) -> Result<FitState, String> {
+) -> Result<FitState, ModelCheckError> {
     fit_model_orders(st, model, sigma, w, order_of, None)
 }
 
@@ -886,7 +888,7 @@ pub(crate) fn fit_model_held(
     w: &[f64],
     order_of: &dyn Fn(usize, &ModelEffect) -> (u32, Option<Vec<u32>>),
     held: &FitState,
-) -> Result<FitState, String> {
+) -> Result<FitState, ModelCheckError> {
     fit_model_orders(st, model, sigma, w, order_of, Some(held))
 }
 
@@ -897,7 +899,7 @@ fn fit_model_orders(
     w: &[f64],
     order_of: &dyn Fn(usize, &ModelEffect) -> (u32, Option<Vec<u32>>),
     held: Option<&FitState>,
-) -> Result<FitState, String> {
+) -> Result<FitState, ModelCheckError> {
     let mut known = vec![0.0; st.n];
     let mut terms: Vec<FitTerm> = Vec::new();
     for (index, me) in model.effects.iter().enumerate() {
@@ -1003,7 +1005,7 @@ fn fit_model_orders(
     let moving = |t: &FitTerm| t.searched.iter().any(|s| *s);
     let fixed_base = if n_searched > 0 && large_design(st.n, design(st, &terms).len()) {
         let fixed: Vec<FitTerm> = terms.iter().filter(|t| !moving(t)).cloned().collect();
-        let base = OrthoBase::new(&design(st, &fixed), w).map_err(|e| e.to_string())?;
+        let base = OrthoBase::new(&design(st, &fixed), w)?;
         let target = base.project_vector(&r0, w);
         Some((base, target))
     } else {
@@ -1133,7 +1135,7 @@ fn refine_jointly(
     let (lo, hi): (Vec<f64>, Vec<f64>) = free.iter().zip(&start).map(|(&(ti, h), &x)| bracket(ti, h, x)).unzip();
     let base_terms: Vec<FitTerm> = terms.to_vec();
     let ones = vec![1.0; w.len()];
-    let resid = |x: &[f64]| -> Result<Vec<f64>, String> {
+    let resid = |x: &[f64]| -> Result<Vec<f64>, ModelCheckError> {
         let mut tt = base_terms.clone();
         for (&(ti, hi), v) in free.iter().zip(x) {
             tt[ti].hyper[hi] = *v;
@@ -1146,7 +1148,7 @@ fn refine_jointly(
                     .flat_map(|t| columns(st, t.name, &t.shape, &t.hyper))
                     .collect();
                 let pc = base.project_columns(&moving, w);
-                let ob = OrthoBase::new(&pc, &ones).map_err(|e| e.to_string())?;
+                let ob = OrthoBase::new(&pc, &ones)?;
                 Ok(ob.project_vector(target, &ones))
             }
             None => {
@@ -1233,6 +1235,7 @@ pub(crate) fn describe(
         n if n.is_error_motion() => {
             // The Legendre series as monomials c_j·x^j (FORMAT.md §2 keys); c0 is left out (the
             // per-channel offsets carry the constant).
+            // index: `first_power` (0, 1 or 2) is a u32 widened to name a coefficient, not a size.
             match sh.basis {
                 // The monomials c_j (rounding grows with the order: only up to
                 // [`MONOMIAL_MAX_ORDER`]), and always the series itself, p_k on [x_lo, x_hi].

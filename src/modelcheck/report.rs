@@ -223,9 +223,8 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
     // positions cannot resolve is held at zero with a note (its aliases would fit per-target misfit).
     for me in model.effects.iter().filter(|m| m.fit && m.effect.axis == model.axis && predicts(m.effect.name)) {
         if me.effect.name.is_error_motion() {
-            check_basis(&st, me).map_err(|m| {
-                let key = if me.order.is_some() && !m.starts_with("basis") { "order" } else { "basis" };
-                VmtError::bad(&model.source, format!("effects.{}.{key}", me.effect.name), m)
+            check_basis(&st, me).map_err(|f| {
+                VmtError::bad(&model.source, format!("effects.{}.{}", me.effect.name, f.key.as_str()), f.message)
             })?;
         }
         let sh = shape(&st, me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER), lacks_coulomb(model));
@@ -507,7 +506,7 @@ pub(crate) fn significance_sigma(f: &Fitted, per: &[f64]) -> Vec<f64> {
 /// point table (the positions repeat: at most half as many distinct positions as readings); an
 /// `order` these m distinct positions can determine after the offsets (Legendre degree ≤ m − 1,
 /// B-splines and table values 2..=m, harmonics 1..=(m − 2)/2 beside their slope).
-pub(crate) fn check_basis(st: &Stack, me: &ModelEffect) -> Result<(), String> {
+pub(crate) fn check_basis(st: &Stack, me: &ModelEffect) -> Result<(), BasisFault> {
     let name = me.effect.name;
     let seeing: Vec<&Channel> = st.chans.iter().filter(|c| c.s_motion(name) != 0.0).collect();
     let mut xs: Vec<f64> = seeing.iter().flat_map(|c| c.x.iter().copied()).collect();
@@ -516,19 +515,27 @@ pub(crate) fn check_basis(st: &Stack, me: &ModelEffect) -> Result<(), String> {
     let m = xs.len() as u32;
     let readings: usize = seeing.iter().map(|c| c.y.len()).sum();
     let basis = me.basis.unwrap_or(Basis::Poly);
+    let fault = |key, message| Err(BasisFault { key, message });
     if basis != Basis::Poly && seeing.iter().any(|c| c.is_accel()) {
-        return Err(format!(
-            "basis `{}` is fitted to readings of the motion itself; `{name}` is seen here by accelerometers \
+        return fault(
+            BasisKey::Basis,
+            format!(
+                "basis `{}` is fitted to readings of the motion itself; `{name}` is seen here by accelerometers \
              (its second derivative): use `poly` or leave `basis` out",
-            basis.as_str()
-        ));
+                basis.as_str()
+            ),
+        );
     }
+    // index: m is a count of distinct positions (a u32 from a length), widened for a comparison only.
     if basis == Basis::Table && 2 * m as usize > readings {
-        return Err(format!(
-            "basis `table` is one value per target of a point table; these data have {m} distinct positions in \
+        return fault(
+            BasisKey::Basis,
+            format!(
+                "basis `table` is one value per target of a point table; these data have {m} distinct positions in \
              {readings} readings (a time series, or no repeated targets): use `poly`, `bspline` or `harmonics` \
              with an `order`"
-        ));
+            ),
+        );
     }
     let Some(order) = me.order else { return Ok(()) };
     let (lo, hi, what) = match basis {
@@ -538,13 +545,44 @@ pub(crate) fn check_basis(st: &Stack, me: &ModelEffect) -> Result<(), String> {
         Basis::Harmonics => (1, m.saturating_sub(2) / 2, "a number of harmonics"),
     };
     if order < lo || order > hi {
-        return Err(format!(
-            "order {order} for basis `{}`: expected {what} from {lo} to {hi}, what {m} distinct positions \
+        return fault(
+            BasisKey::Order,
+            format!(
+                "order {order} for basis `{}`: expected {what} from {lo} to {hi}, what {m} distinct positions \
              determine after the per-run offsets",
-            basis.as_str()
-        ));
+                basis.as_str()
+            ),
+        );
     }
     Ok(())
+}
+
+/// The model key a [`check_basis`] refusal names: `effects.NAME.basis` or `effects.NAME.order`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum BasisKey {
+    /// The basis does not suit the channels that see the effect.
+    Basis,
+    /// The order is outside what the data's distinct positions determine.
+    Order,
+}
+
+impl BasisKey {
+    /// The key's name in the model file.
+    pub(crate) fn as_str(self) -> &'static str {
+        match self {
+            BasisKey::Basis => "basis",
+            BasisKey::Order => "order",
+        }
+    }
+}
+
+/// Why [`check_basis`] refuses an effect's basis or order: the key at fault and what is expected.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct BasisFault {
+    /// The key at fault.
+    pub key: BasisKey,
+    /// What is wrong and what is expected, for the user.
+    pub message: String,
 }
 
 /// Per-sample σ from per-channel σ (NaN → 1: unweighted first pass).
@@ -828,7 +866,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             let mut c = Candidate::new(n.as_str(), &coef, move |h: &[f64]| {
                 let cols = columns(st, n, &sh2, h);
                 if cols.iter().all(|c| c.iter().all(|v| *v == 0.0)) {
-                    Err("the signature vanishes on these samples (an alias of a constant)".to_string())
+                    Err(ModelCheckError::VanishingSignature)
                 } else {
                     Ok(cols)
                 }
@@ -961,7 +999,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
                     ranking.push(r);
                 }
             }
-            Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) => {
+            Err(ModelCheckError::NothingToExplain) => {
                 notes.push("the model explains the data exactly: nothing to diagnose".into())
             }
             Err(e) => return Err(VmtError::bad(data, "", format!("diagnose: {e}"))),
@@ -1217,7 +1255,7 @@ impl Reshape<'_, '_> {
         cols: &[Vec<f64>],
         k_hyper: usize,
         away: bool,
-    ) -> Result<(), String> {
+    ) -> Result<(), ModelCheckError> {
         let (st, f, w) = (self.st, self.f, self.w);
         let free: Vec<(EffectName, u32)> =
             f.fs.shapes.iter().filter(|c| !c.given && c.max.is_some()).map(|c| (c.name, c.order)).collect();
@@ -1246,8 +1284,8 @@ impl Reshape<'_, '_> {
         let fs_c = fit_model_held(st, self.model, self.fit_sigma, w, &order_of, &f.fs)?;
         let d = match self.rank_against(&fs_c, &cand) {
             Ok(d) => d,
-            Err(vmt_estimators::modelcheck::ModelCheckError::NothingToExplain) => return Ok(()),
-            Err(e) => return Err(e.to_string()),
+            Err(ModelCheckError::NothingToExplain) => return Ok(()),
+            Err(e) => return Err(e),
         };
         let Some(mut r2) = d.ranking.into_iter().next() else { return Ok(()) };
         let nonzero = |fs: &FitState| fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();

@@ -59,10 +59,23 @@ pub(crate) fn sample_interval(c: &Channel, i: usize) -> f64 {
     }
 }
 
-/// Number of mode-integration steps over a sample interval `dt` (s).
+/// Number of mode-integration steps over a sample interval `dt` (s): steps of [`MODE_STEP`], at
+/// least 4 and at most [`MODE_STEPS_MAX`] (a gap in a log longer than 0.4 s is integrated in longer
+/// steps: the hold of the mean input over each step stays exact for a constant input, and a mode
+/// of the guideway's band has decayed over such a gap).
 pub(crate) fn mode_steps(dt: f64) -> usize {
-    ((dt / MODE_STEP).ceil() as usize).max(4)
+    // index: bounded to [4, MODE_STEPS_MAX] before the cast (a NaN dt fails the comparison: 4).
+    let steps = (dt / MODE_STEP).ceil();
+    if steps >= 4.0 {
+        steps.min(MODE_STEPS_MAX as f64) as usize
+    } else {
+        4
+    }
 }
+
+/// The most mode-integration steps over one sample interval ([`mode_steps`]): a log's gap between
+/// two samples cannot size the input table beyond this.
+pub(crate) const MODE_STEPS_MAX: usize = 4096;
 
 impl Excitation {
     /// The excitation of channel `c` by the given (not fitted) translation error motions of
@@ -325,6 +338,7 @@ impl<'a> Stack<'a> {
             };
             let g = keys.iter().position(|k| *k == key).unwrap_or_else(|| {
                 keys.push(key);
+                // index: `keys` has just been pushed to.
                 keys.len() - 1
             });
             group.push(g);
@@ -569,6 +583,8 @@ impl Shape {
     /// The basis orders of an error motion's series, one per coefficient: `select`, else
     /// first_power..=order.
     pub(crate) fn ks(&self) -> Vec<usize> {
+        // index: orders and powers are u32 the shape was built with, bounded by `check_basis` and
+        // `resolvable_order` (≤ the data's distinct positions); widened, not computed from floats.
         match &self.select {
             Some(sel) => sel.iter().map(|k| *k as usize).collect(),
             None => (self.first_power as usize..=self.order as usize).collect(),
@@ -585,6 +601,7 @@ impl Shape {
     /// Values and slopes (d/dx, 1/m) of the basis functions of orders 0..=`order` at x (m).
     pub(crate) fn basis_at(&self, x: f64) -> (Vec<f64>, Vec<f64>) {
         let (a, b) = self.range;
+        // index: the shape's order, a u32 bounded by `check_basis`/`resolvable_order`, widened.
         let top = self.order as usize;
         match self.basis {
             ShapeBasis::Legendre => {
@@ -656,6 +673,7 @@ impl Shape {
         self.knots = match basis {
             ShapeBasis::Table => {
                 let xs = distinct_positions(st);
+                // index: a u32 order widened for a comparison.
                 if xs.len() == order as usize {
                     xs.to_vec()
                 } else {
@@ -713,6 +731,7 @@ pub(crate) fn resonance_segments(st: &Stack) -> Vec<(usize, usize, f64, f64)> {
         let lo = c.t.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = c.t.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let span = hi - lo;
+        // index: a saturating float → count; then m ≤ samples/8 (below), so a huge span cannot size anything.
         let mut m = ((span / RESONANCE_SEGMENT).ceil() as usize).max(1);
         if c.t.len() / m < 8 {
             m = (c.t.len() / 8).max(1);
@@ -866,6 +885,7 @@ pub(crate) fn legendre(u: f64, n: usize) -> (Vec<f64>, Vec<f64>) {
 /// u = α·x + β with α = 2/(b − a), β = −(a + b)/(b − a): the Legendre series of a fitted error
 /// motion written as FORMAT.md §2 `c_j` (for reading; the fit itself stays in the Legendre basis).
 pub(crate) fn legendre_to_monomials(first: u32, c: &[f64], range: (f64, f64)) -> Vec<f64> {
+    // index: `first` is a shape's first power (0, 1 or 2), a u32 widened; `c` one coefficient per order.
     let n = first as usize + c.len();
     // Coefficients of P_k in powers of u, by the same recurrence.
     let mut pu: Vec<Vec<f64>> = vec![vec![1.0]];
@@ -1311,6 +1331,7 @@ pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>
     match (name, hyper) {
         (_, "tau") => {
             let (lo, hi) = tau_range(st);
+            // index: the log of a ratio of two finite positive f64 is ≤ 616 decades: ≤ 6 161 points.
             let n = ((hi / lo).log10() * TAU_PER_DECADE).ceil().max(2.0) as usize + 1;
             (log_grid(lo, hi, n), true)
         }
@@ -1330,6 +1351,7 @@ pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>
         // 5 Hz resolution of a segment), refined by golden section.
         (_, "frequency") => {
             let hi = accel_min_rate(st).map_or(200.0, |f| (0.4 * f).min(200.0)).max(6.0);
+            // index: hi ≤ 200 Hz (clamped above): ≤ 196 frequencies.
             let n = (hi - 5.0).floor() as usize + 1;
             ((0..n).map(|k| 5.0 + k as f64).collect(), true)
         }

@@ -58,6 +58,7 @@ pub fn compare_text(r: &CompareReport) -> String {
         s += "iterations (normalised RMS):\n";
         let max = r.history.iter().map(|h| h.normalized_rms).fold(0.0, f64::max).max(1e-300);
         for (i, h) in r.history.iter().enumerate() {
+            // index: normalized_rms ≤ max, so the bar is ≤ 40 characters.
             let bar = "#".repeat(((h.normalized_rms / max) * 40.0).round() as usize);
             s += &format!("  {i:>2} {:>10.3} {bar} {} {}\n", h.normalized_rms, h.model, h.added);
         }

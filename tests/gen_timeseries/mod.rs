@@ -236,10 +236,16 @@ pub struct AccelTruth {
     pub hidden_chi2: f64,
     /// Cramér–Rao bound (σ_f Hz, σ_ζ) of the mode's frequency and damping from these samples
     /// (when a mode is present): (JᵀJ/σ²)⁻¹ with J = ∂(mode response)/∂(f, ζ) by central
-    /// differences, the mode's gain per channel and each pass's offset per channel profiled out.
-    /// The straightness shapes a model fits beside it are not profiled out, so the bound of a
-    /// real fit is larger: an error of a few of these is the best any estimator can do.
+    /// differences, with each pass's offset per channel, the mode's gain per channel and the
+    /// straightness in its true family (every wave's amplitude and phase) profiled out
+    /// ([`mode_crb`]): an error of a few of these is the best any estimator can do.
     pub mode_crb: Option<(f64, f64)>,
+    /// The travel the passes cover, (x_lo, x_hi) in m.
+    pub travel: (f64, f64),
+    /// Cramér–Rao bound of the roll seen through gravity (when a roll is hidden and no mode): the
+    /// RMS over the travel of the error of any unbiased estimate of the roll profile, its mean
+    /// removed (an offset per pass hides it), rad ([`roll_crb`]).
+    pub roll_crb: Option<f64>,
 }
 
 /// Exact one-step map of q̈ + 2ζω q̇ + ω² q = −a (a constant over the step h): state (q, q̇).
@@ -271,6 +277,101 @@ impl Oscillator {
     }
 }
 
+/// Cramér–Rao bound of a roll profile `roll` seen through gravity by the y accelerometer
+/// ([`AccelTruth::roll_crb`]): the RMS over the travel `(x_lo, x_hi)` of the error of an unbiased
+/// estimate of the roll profile, its mean removed, for passes `(v, dir, x₀, Δt, n)` and noise σ.
+///
+/// The y channel reads μ_i = G·roll(x_i) + geo(E_y)_i + b_p. The roll is in its true family (the
+/// waves of `roll`, a cos and a sin coefficient each: θ); each pass's offset b_p and the straightness
+/// E_y in its true family (every wave of `straight_y` with amplitude and phase free) are profiled out.
+/// With D the roll columns left after the nuisance is projected out (D = U·S·Vᵀ), Cov(θ̂) ≥
+/// σ²·V·S⁻²·Vᵀ, and the mean-square error of the de-meaned profile is tr(Cov·M̃), M̃ the Gram matrix
+/// of the de-meaned basis over the travel (400 points). Directions with s below 1e-10 of the
+/// largest are left out (a wave the offsets absorb: its de-meaned profile is nil).
+fn roll_crb(roll: &Waves, passes: &[ModePass], straight_y: &Waves, travel: (f64, f64), sigma: f64) -> f64 {
+    let total: usize = passes.iter().map(|p| p.4).sum();
+    let xs: Vec<f64> =
+        passes.iter().flat_map(|&(v, dirn, x0, dt, n)| (0..n).map(move |i| x0 + dirn * v * i as f64 * dt)).collect();
+    let basis = |k: f64, sin: bool, x: f64| if sin { (k * x).sin() } else { (k * x).cos() };
+    let wave_list = |w: &Waves| w.k.iter().flat_map(|&k| [(k, false), (k, true)]).collect::<Vec<_>>();
+    let (theta, nuis_waves) = (wave_list(roll), wave_list(straight_y));
+    let mut nuisance: Vec<Vec<f64>> = Vec::new();
+    let mut at = 0;
+    for &(_, _, _, _, n) in passes {
+        nuisance.push((0..total).map(|i| if (at..at + n).contains(&i) { 1.0 } else { 0.0 }).collect());
+        at += n;
+    }
+    // Geometric acceleration of each straightness wave: dir·v·(e'(x_i) − e'(x_{i−1}))/Δt.
+    let e1 = |k: f64, sin: bool, x: f64| if sin { k * (k * x).cos() } else { -k * (k * x).sin() };
+    for &(k, sin) in &nuis_waves {
+        nuisance.push(
+            passes
+                .iter()
+                .flat_map(|&(v, dirn, x0, dt, n)| {
+                    (0..n).map(move |i| {
+                        let (x, xp) = (x0 + dirn * v * i as f64 * dt, x0 + dirn * v * (i as f64 - 1.0) * dt);
+                        dirn * v * (e1(k, sin, x) - e1(k, sin, xp)) / dt
+                    })
+                })
+                .collect(),
+        );
+    }
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let project_out = |v: &mut Vec<f64>, ortho: &[Vec<f64>]| {
+        for _ in 0..2 {
+            for q in ortho {
+                let c = dot(v, q);
+                v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
+            }
+        }
+    };
+    let mut ortho: Vec<Vec<f64>> = Vec::new();
+    for mut v in nuisance {
+        let before = dot(&v, &v).sqrt();
+        project_out(&mut v, &ortho);
+        let norm = dot(&v, &v).sqrt();
+        if norm > 1e-9 * before {
+            v.iter_mut().for_each(|x| *x /= norm);
+            ortho.push(v);
+        }
+    }
+    let d: Vec<Vec<f64>> = theta
+        .iter()
+        .map(|&(k, sin)| {
+            let mut c: Vec<f64> = xs.iter().map(|&x| G * basis(k, sin, x)).collect();
+            project_out(&mut c, &ortho);
+            c
+        })
+        .collect();
+    let m = theta.len();
+    let jm = faer::Mat::<f64>::from_fn(total, m, |i, j| d[j][i] / sigma);
+    let svd = jm.thin_svd().expect("roll_crb: SVD of the projected roll columns");
+    let (vv, sv) = (svd.V(), svd.S().column_vector());
+    let s_max = (0..m).map(|j| sv[j]).fold(0.0, f64::max);
+    // De-meaned basis over the travel.
+    let grid: Vec<f64> = (0..400).map(|g| travel.0 + (travel.1 - travel.0) * (g as f64 + 0.5) / 400.0).collect();
+    let phi: Vec<Vec<f64>> = theta
+        .iter()
+        .map(|&(k, sin)| {
+            let col: Vec<f64> = grid.iter().map(|&x| basis(k, sin, x)).collect();
+            let mean = col.iter().sum::<f64>() / col.len() as f64;
+            col.iter().map(|v| v - mean).collect()
+        })
+        .collect();
+    // tr(V S⁻² Vᵀ M̃) = Σ_m s_m⁻²·mean_g (Σ_j V_jm φ̃_j(x_g))².
+    let mut mse = 0.0;
+    for mm in 0..m {
+        if sv[mm] <= 1e-10 * s_max {
+            continue;
+        }
+        let prof: f64 =
+            (0..grid.len()).map(|g| (0..m).map(|j| vv[(j, mm)] * phi[j][g]).sum::<f64>().powi(2)).sum::<f64>()
+                / grid.len() as f64;
+        mse += prof / (sv[mm] * sv[mm]);
+    }
+    mse.sqrt()
+}
+
 /// One accelerometer draw, written to `dir` (manifest.toml, pass_k.csv, model.toml). Hidden effects
 /// are drawn large enough to be seen: the χ² of their contribution (mean removed per channel) is at
 /// least `min_chi2`, redrawn otherwise (an effect below the noise cannot be diagnosed by anyone).
@@ -299,63 +400,111 @@ fn mode_series(f: f64, z: f64, dt: f64, n: usize, a: &dyn Fn(f64) -> f64) -> Vec
     out
 }
 
-/// One pass for [`mode_crb`]: sample interval (s), number of samples, and the base acceleration
-/// a(τ) that drives the mode (m/s², τ in s from the first sample).
-type ModePass<'a> = (f64, usize, Box<dyn Fn(f64) -> f64 + 'a>);
+/// One pass for [`mode_crb`]: speed v (m/s), direction (±1), position of the first sample x₀ (m),
+/// sample interval Δt (s) and number of samples.
+type ModePass = (f64, f64, f64, f64, usize);
 
-/// Cramér–Rao bound of (f, ζ) ([`AccelTruth::mode_crb`]) for passes `(dt, n, a)` seen by two
-/// channels with mode-shape components `shape` (y, z) and noise σ `sigma`.
-fn mode_crb(f: f64, z: f64, passes: &[ModePass<'_>], shape: [f64; 2], sigma: f64) -> (f64, f64) {
-    // Columns over all samples (pass by pass, y then z): ∂/∂f, ∂/∂ζ of the response, and the
-    // nuisance: the response per channel (its gain) and a constant per (pass, channel).
+/// Cramér–Rao bound of (f, ζ) ([`AccelTruth::mode_crb`]) for passes `(v, dir, x₀, Δt, n)` seen by
+/// two channels (y, z) with mode-shape components `shape`, straightness profiles `straight` (y, z)
+/// and noise σ `sigma`.
+///
+/// The mean reading of channel c at sample i is μ_c,i = geo(E_c)_i + shape_c·q̈̄_i + b_c,p, with the
+/// mode driven by a(τ) = Σ_c shape_c·v²·E_c''(x(τ)). Unknown besides (f, ζ), and profiled out: each
+/// pass's offset per channel, the mode's gain per channel, and the straightness itself in its true
+/// family — every wave of `straight` with its amplitude and phase free (a cos and a sin coefficient
+/// per wave number), each such column holding its geometric acceleration on its own channel and the
+/// mode's response to it on both. The straightness is profiled out because no estimator knows it: the
+/// mode's excitation is the same guideway curvature a model fits beside the mode, so a fitted shape
+/// can take up part of the mode's decay. (A model's own shapes are a more flexible family than these
+/// waves, so its bound is larger still: this is a lower bound for any estimator.)
+fn mode_crb(f: f64, z: f64, passes: &[ModePass], straight: &[Waves], shape: [f64; 2], sigma: f64) -> (f64, f64) {
     let (df, dz) = (f * 1e-4, z * 1e-3);
-    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); 4];
-    // (first sample, count) of each (pass, channel): its offset column is 1 there.
-    let mut offsets: Vec<(usize, usize)> = Vec::new();
-    let mut total = 0;
-    for (dt, n, a) in passes {
-        let m0 = mode_series(f, z, *dt, *n, a.as_ref());
-        let fp = mode_series(f + df, z, *dt, *n, a.as_ref());
-        let fm = mode_series(f - df, z, *dt, *n, a.as_ref());
-        let zp = mode_series(f, z + dz, *dt, *n, a.as_ref());
-        let zm = mode_series(f, z - dz, *dt, *n, a.as_ref());
-        for (c, g) in shape.iter().enumerate() {
-            for i in 0..*n {
-                cols[0].push(g * (fp[i] - fm[i]) / (2.0 * df));
-                cols[1].push(g * (zp[i] - zm[i]) / (2.0 * dz));
-                cols[2].push(if c == 0 { m0[i] } else { 0.0 });
-                cols[3].push(if c == 1 { m0[i] } else { 0.0 });
-            }
-            offsets.push((total, *n));
-            total += n;
+    let total: usize = passes.iter().map(|p| 2 * p.4).sum();
+    // Row of (pass p, channel c, sample i): pass by pass, y then z.
+    let mut first = Vec::new();
+    let mut acc = 0;
+    for p in passes {
+        first.push(acc);
+        acc += 2 * p.4;
+    }
+    let row = |p: usize, c: usize, i: usize| first[p] + c * passes[p].4 + i;
+    // The straightness nuisance: (channel, wave number, cos or sin) of every wave.
+    let mut waves: Vec<(usize, f64, bool)> = Vec::new();
+    for (c, w) in straight.iter().enumerate() {
+        for &k in &w.k {
+            waves.push((c, k, false));
+            waves.push((c, k, true));
         }
     }
-    // Profile out the nuisance by Gram–Schmidt: the offset columns, then the gain columns, then
-    // the 2 × 2 information of what the derivatives have left (the Schur complement).
-    let mut basis: Vec<Vec<f64>> = offsets
-        .iter()
-        .map(|&(start, n)| (0..total).map(|i| if (start..start + n).contains(&i) { 1.0 } else { 0.0 }).collect())
-        .collect();
-    basis.extend([cols[2].clone(), cols[3].clone()]);
+    let e1 = |k: f64, sin: bool, x: f64| if sin { k * (k * x).cos() } else { -k * (k * x).sin() };
+    let e2 = |k: f64, sin: bool, x: f64| if sin { -k * k * (k * x).sin() } else { -k * k * (k * x).cos() };
+    let mut d = [vec![0.0; total], vec![0.0; total]];
+    let mut nuisance: Vec<Vec<f64>> = Vec::new();
+    // Offsets per (pass, channel).
+    for (p, ps) in passes.iter().enumerate() {
+        for c in 0..2 {
+            let mut col = vec![0.0; total];
+            (0..ps.4).for_each(|i| col[row(p, c, i)] = 1.0);
+            nuisance.push(col);
+        }
+    }
+    let mut gains = [vec![0.0; total], vec![0.0; total]];
+    let mut wave_cols = vec![vec![0.0; total]; waves.len()];
+    for (p, &(v, dirn, x0, dt, n)) in passes.iter().enumerate() {
+        let x_at = |tm: f64| x0 + dirn * v * tm;
+        let base = |tm: f64| {
+            let x = x_at(tm);
+            v * v * (0..2).map(|c| shape[c] * straight[c].d2(x)).sum::<f64>()
+        };
+        let m0 = mode_series(f, z, dt, n, &base);
+        let fp = mode_series(f + df, z, dt, n, &base);
+        let fm = mode_series(f - df, z, dt, n, &base);
+        let zp = mode_series(f, z + dz, dt, n, &base);
+        let zm = mode_series(f, z - dz, dt, n, &base);
+        for (c, g) in shape.iter().enumerate() {
+            for i in 0..n {
+                d[0][row(p, c, i)] = g * (fp[i] - fm[i]) / (2.0 * df);
+                d[1][row(p, c, i)] = g * (zp[i] - zm[i]) / (2.0 * dz);
+                gains[c][row(p, c, i)] = m0[i];
+            }
+        }
+        for (col, &(c, k, sin)) in wave_cols.iter_mut().zip(&waves) {
+            let resp = mode_series(f, z, dt, n, &|tm: f64| shape[c] * v * v * e2(k, sin, x_at(tm)));
+            for i in 0..n {
+                let (x, xp) = (x_at(i as f64 * dt), x_at((i as f64 - 1.0) * dt));
+                col[row(p, c, i)] += dirn * v * (e1(k, sin, x) - e1(k, sin, xp)) / dt;
+                for (cc, g) in shape.iter().enumerate() {
+                    col[row(p, cc, i)] += g * resp[i];
+                }
+            }
+        }
+    }
+    nuisance.extend(gains);
+    nuisance.extend(wave_cols);
+    // Profile out the nuisance by Gram–Schmidt (twice, for the nearly dependent long waves; a
+    // column left with less than 1e-9 of its norm is dependent and dropped), then the 2 × 2
+    // information of what the derivatives have left (the Schur complement).
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     let mut ortho: Vec<Vec<f64>> = Vec::new();
-    for mut v in basis {
-        for q in &ortho {
-            let c = dot(&v, q);
-            v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
+    let project_out = |v: &mut Vec<f64>, ortho: &[Vec<f64>]| {
+        for _ in 0..2 {
+            for q in ortho {
+                let c = dot(v, q);
+                v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
+            }
         }
+    };
+    for mut v in nuisance {
+        let before = dot(&v, &v).sqrt();
+        project_out(&mut v, &ortho);
         let norm = dot(&v, &v).sqrt();
-        if norm > 0.0 {
+        if norm > 1e-9 * before {
             v.iter_mut().for_each(|x| *x /= norm);
             ortho.push(v);
         }
     }
-    let mut d = [cols[0].clone(), cols[1].clone()];
     for v in d.iter_mut() {
-        for q in &ortho {
-            let c = dot(v, q);
-            v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
-        }
+        project_out(v, &ortho);
     }
     let s2 = sigma * sigma;
     let (a, b, c) = (dot(&d[0], &d[0]) / s2, dot(&d[0], &d[1]) / s2, dot(&d[1], &d[1]) / s2);
@@ -446,7 +595,7 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
     let mut samples = 0;
     let mut chi2 = 0.0;
     let mut t0 = 0.0;
-    let mut layout: Vec<(f64, f64, f64, f64, usize)> = Vec::new();
+    let mut layout: Vec<ModePass> = Vec::new();
     for (k, &v) in speeds.iter().enumerate() {
         let dt = 1.0 / rate;
         let dirn = if d.chance(0.5) { 1.0 } else { -1.0 };
@@ -524,20 +673,11 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
         sigmas.push(sigma);
         rates.push(rate);
     }
-    let mode_crb = mode.map(|(f, z)| {
-        let passes: Vec<ModePass<'_>> = layout
-            .iter()
-            .map(|&(v, dirn, x0, dt, n)| {
-                let st = &straight;
-                let a: Box<dyn Fn(f64) -> f64 + '_> = Box::new(move |tm: f64| {
-                    let x = x0 + dirn * v * tm;
-                    m_shape[1] * v * v * st[0].d2(x) + m_shape[2] * v * v * st[1].d2(x)
-                });
-                (dt, n, a)
-            })
-            .collect();
-        mode_crb(f, z, &passes, [m_shape[1], m_shape[2]], sigma)
-    });
+    let mode_crb = mode.map(|(f, z)| mode_crb(f, z, &layout, &straight, [m_shape[1], m_shape[2]], sigma));
+    let roll_crb = match (&roll, mode) {
+        (Some(r), None) => Some(roll_crb(r, &layout, &straight[0], (x_lo, x_lo + travel), sigma)),
+        _ => None,
+    };
     let sensors: Vec<SensorSpec> = sensors.into_iter().map(|s| SensorSpec { sigma, ..s }).collect();
     let _ = std::fs::remove_dir_all(dir);
     write_set(dir, "independent accelerometer passes (issue 19 generator)", &sensors, &runs);
@@ -553,6 +693,8 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
         samples,
         hidden_chi2: chi2,
         mode_crb,
+        travel: (x_lo, x_lo + travel),
+        roll_crb,
     }
 }
 

@@ -46,7 +46,7 @@ use std::collections::BTreeMap;
 /// The signature of a candidate: hyper-parameter values (in the order of
 /// [`Candidate::hyper_parameters`]) → design columns, one `Vec` of n values per linear
 /// coefficient. An `Err` marks a hyper-parameter value as invalid (it is skipped in the search).
-pub type SignatureFn<'a> = dyn Fn(&[f64]) -> Result<Vec<Vec<f64>>, String> + Send + Sync + 'a;
+pub type SignatureFn<'a> = dyn Fn(&[f64]) -> Result<Vec<Vec<f64>>, ModelCheckError> + Send + Sync + 'a;
 
 /// Optional conversion of (coefficients, hyper-parameters) into the reported `params` (e.g. a
 /// sine and cosine coefficient into amplitude and phase).
@@ -90,7 +90,7 @@ impl<'a> Candidate<'a> {
     pub fn new(
         effect: &str,
         coefficient_names: &[&str],
-        signature: impl Fn(&[f64]) -> Result<Vec<Vec<f64>>, String> + Send + Sync + 'a,
+        signature: impl Fn(&[f64]) -> Result<Vec<Vec<f64>>, ModelCheckError> + Send + Sync + 'a,
     ) -> Self {
         Candidate {
             effect: effect.to_string(),
@@ -379,28 +379,21 @@ fn candidate_basis(p: &Prepared, cols: &[Vec<f64>]) -> Basis {
 }
 
 /// The candidate's signature at `h`, checked: one column per coefficient name, n finite values each.
-fn checked_columns(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<Vec<Vec<f64>>, String> {
+fn checked_columns(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<Vec<Vec<f64>>, ModelCheckError> {
     let cols = (cand.signature)(h)?;
-    if cols.len() != cand.coefficient_names.len() {
-        return Err(format!(
-            "signature returned {} columns, expected {} (one per coefficient name)",
-            cols.len(),
-            cand.coefficient_names.len()
-        ));
-    }
+    check_len("signature columns (one per coefficient name)", cand.coefficient_names.len(), cols.len())?;
     for (j, c) in cols.iter().enumerate() {
-        if c.len() != p.n {
-            return Err(format!("signature column {j} has {} values, expected {} (one per sample)", c.len(), p.n));
-        }
+        let what = || format!("signature column {j}");
+        check_len(&what(), p.n, c.len())?;
         if let Some(i) = c.iter().position(|x| !x.is_finite()) {
-            return Err(format!("signature column {j} is not finite at sample {i}: {}", c[i]));
+            return Err(ModelCheckError::NotFinite { what: what(), index: i, value: c[i] });
         }
     }
     Ok(cols)
 }
 
 /// Evaluates a candidate's signature at `h` and returns (χ² or RSS reduction, columns).
-fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<f64>>), String> {
+fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<f64>>), ModelCheckError> {
     let cols = checked_columns(p, cand, h)?;
     Ok((reduction_of(p, &cols), cols))
 }
@@ -408,7 +401,7 @@ fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<
 /// The weighted residual that base + candidate columns at `h` leave, P⊥(h)·W^{1/2}·r (the
 /// variable-projection residual [`super::refine`] minimises; its squared norm is χ²_new or the
 /// weighted RSS).
-fn projected_residual(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<Vec<f64>, String> {
+fn projected_residual(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<Vec<f64>, ModelCheckError> {
     let cols = checked_columns(p, cand, h)?;
     Ok(p.base.projected_fit(&p.r_t, &cols, &p.w, true).1.unwrap_or_else(|| p.r_t.clone()))
 }
@@ -416,13 +409,8 @@ fn projected_residual(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<Vec<f
 /// The screening score of a candidate at `h` ([`Candidate::with_screen`]): ‖projection of the
 /// base-projected weighted residual on the candidate's weighted columns‖², the columns not
 /// projected on the base.
-fn screen_score(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<f64, String> {
-    let cols = (cand.signature)(h)?;
-    for c in &cols {
-        if c.len() != p.n || c.iter().any(|x| !x.is_finite()) {
-            return Err("signature column of the wrong length or not finite".into());
-        }
-    }
+fn screen_score(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<f64, ModelCheckError> {
+    let cols = checked_columns(p, cand, h)?;
     Ok(span_projection(&cols, &p.w, &p.r_t))
 }
 
@@ -504,10 +492,10 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
             order
         }
     };
-    let reds: Vec<(usize, Result<f64, String>)> =
+    let reds: Vec<(usize, Result<f64, ModelCheckError>)> =
         exact_points.into_par_iter().map(|g| (g, reduction(p, cand, &point(g)).map(|r| r.0))).collect();
     let mut best: Option<(f64, Vec<f64>)> = None;
-    let mut first_error: Option<String> = None;
+    let mut first_error: Option<ModelCheckError> = None;
     let mut evaluations = reds.len();
     for (g, r) in reds.into_iter() {
         match r {
@@ -523,7 +511,7 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
     }
     let (mut best_red, mut best_h) = match best {
         Some(b) => b,
-        None => return Err(err(first_error.unwrap_or_else(|| "no grid point".into()))),
+        None => return Err(err(first_error.map_or_else(|| "no grid point".into(), |e| e.to_string()))),
     };
     // Joint refinement (Levenberg–Marquardt over variable projection, [`super::refine`]) of the
     // refinable hyper-parameters inside the box between the neighbours of their best grid values;
@@ -586,7 +574,7 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
             }
         }
     }
-    let (_, cols) = reduction(p, cand, &best_h).map_err(err)?;
+    let (_, cols) = reduction(p, cand, &best_h).map_err(|e| err(e.to_string()))?;
     // Variable projection: the candidate's coefficients of the joint weighted fit (base +
     // candidate) are those of the base-projected residual on the base-projected columns, with the
     // same covariance block; the weighted new residual is what that fit leaves.

@@ -53,25 +53,65 @@ use thiserror::Error;
 pub enum ModelCheckError {
     /// Fewer samples than the statistic needs.
     #[error("{what}: need at least {need} samples, got {got}")]
-    TooFewSamples { what: String, need: usize, got: usize },
+    TooFewSamples {
+        /// The statistic or input that is short.
+        what: String,
+        /// Samples it needs.
+        need: usize,
+        /// Samples it got.
+        got: usize,
+    },
     /// Fewer samples than [`estimate_noise_sigma`] needs.
     #[error("too little data to estimate the noise sigma: need ≥ {need} samples, got {got}")]
-    TooLittleDataForSigma { need: usize, got: usize },
+    TooLittleDataForSigma {
+        /// Samples it needs ([`MIN_SAMPLES_NOISE_SIGMA`]).
+        need: usize,
+        /// Samples it got.
+        got: usize,
+    },
     /// Two inputs that must have one value per sample differ in length.
     #[error("{what} must have {expected} values (one per sample), got {got}")]
-    LengthMismatch { what: String, expected: usize, got: usize },
+    LengthMismatch {
+        /// The input whose length is wrong.
+        what: String,
+        /// Its expected length.
+        expected: usize,
+        /// Its length.
+        got: usize,
+    },
     /// A NaN or infinite input value.
     #[error("{what}[{index}] must be a finite number, got {value}")]
-    NotFinite { what: String, index: usize, value: f64 },
+    NotFinite {
+        /// The input holding the value.
+        what: String,
+        /// The value's index in it.
+        index: usize,
+        /// The value.
+        value: f64,
+    },
     /// A noise standard deviation that is not strictly positive.
     #[error("sigma[{index}] must be positive and finite, got {value}")]
-    BadSigma { index: usize, value: f64 },
+    BadSigma {
+        /// The sample's index.
+        index: usize,
+        /// The σ given for it.
+        value: f64,
+    },
     /// Any other argument out of its allowed range.
     #[error("invalid argument: {0}")]
     Invalid(String),
     /// A candidate's signature could not be evaluated or fitted.
     #[error("candidate `{effect}`: {message}")]
-    Candidate { effect: String, message: String },
+    Candidate {
+        /// The candidate's effect name.
+        effect: String,
+        /// What went wrong.
+        message: String,
+    },
+    /// A signature that is zero at every sample (e.g. a period aliased to a constant by the
+    /// sampling): the hyper-parameter value that produced it is skipped.
+    #[error("the signature vanishes on these samples (an alias of a constant)")]
+    VanishingSignature,
     /// The residual is zero (below 1e-12 of its norm) after fitting the base columns.
     #[error("the residual is zero after fitting the base columns: nothing to explain")]
     NothingToExplain,

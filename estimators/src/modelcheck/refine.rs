@@ -20,12 +20,13 @@
 //! profiled out (Golub & Pereyra 1973 §6); s = 1 when the weights are 1/σ, else the residual
 //! scale, which the caller applies.
 
+use super::ModelCheckError;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 
 /// The projected residual θ ↦ P⊥(θ)·W^{1/2}·r (module doc), length n for every θ; `Err` marks θ
 /// as invalid (the solver then stops and the starting point stands).
-pub type ProjectedResidualFn<'a> = dyn Fn(&[f64]) -> Result<Vec<f64>, String> + Sync + 'a;
+pub type ProjectedResidualFn<'a> = dyn Fn(&[f64]) -> Result<Vec<f64>, ModelCheckError> + Sync + 'a;
 
 /// Result of [`refine_projected`].
 #[derive(Debug, Clone, PartialEq)]
@@ -177,7 +178,7 @@ mod tests {
         t.iter().map(|t| (-a * t).exp() * (b.0 * (2.0 * PI * f * t).sin() + b.1 * (2.0 * PI * f * t).cos())).collect()
     }
 
-    fn projected<'a>(t: &'a [f64], y: &'a [f64]) -> impl Fn(&[f64]) -> Result<Vec<f64>, String> + Sync + 'a {
+    fn projected<'a>(t: &'a [f64], y: &'a [f64]) -> impl Fn(&[f64]) -> Result<Vec<f64>, ModelCheckError> + Sync + 'a {
         move |th: &[f64]| {
             let mut b = crate::modelcheck::lsq::Basis::default();
             for g in [f64::sin, f64::cos] {
@@ -248,7 +249,7 @@ mod tests {
     /// A box that is empty, or a start that is not finite, is refused rather than searched.
     #[test]
     fn refuses_a_degenerate_box() {
-        let f = |_: &[f64]| -> Result<Vec<f64>, String> { Ok(vec![1.0]) };
+        let f = |_: &[f64]| -> Result<Vec<f64>, ModelCheckError> { Ok(vec![1.0]) };
         assert!(refine_projected(&f, &[1.0], &[2.0], &[2.0], 10).is_none());
         assert!(refine_projected(&f, &[f64::NAN], &[0.0], &[2.0], 10).is_none());
     }

@@ -37,7 +37,8 @@ pub(super) fn model_check_loop(
         let Some(top) = d.ranking.iter().find(|r| r.verdict == Verdict::Significant) else { break };
         let name: vmt_sim::effects::EffectName =
             top.effect.parse().map_err(|e: vmt_sim::effects::UnknownEffect| VmtError::Internal(e.to_string()))?;
-        m = add_effect(&m, name, Some(top)).map_err(|e| VmtError::bad(source, "estimators (model_check)", e))?;
+        m = add_effect(&m, name, Some(top))
+            .map_err(|e| VmtError::bad(source, "estimators (model_check)", e.to_string()))?;
         added.push(top.effect.clone());
         let after = compare(&m, set, source)?;
         history.push(after.normalized_rms);
