@@ -701,18 +701,21 @@ mod tests {
             line_figure(vec![series("a zigzag that fills every corner", &x, &y, SeriesStyle::Line)], FigureKind::Line);
         let svg = figure_svg(&fig, 860, 480).unwrap();
         let (bx, by, bw, bh) = legend_box(&svg);
-        let line = svg.split("<polyline").nth(1).expect("the series' line");
-        let points: Vec<(f64, f64)> = line
-            .split("points=\"")
-            .nth(1)
-            .and_then(|p| p.split('"').next())
-            .unwrap()
-            .split_whitespace()
-            .map(|xy| {
-                let (a, b) = xy.split_once(',').unwrap();
-                (a.parse().unwrap(), b.parse().unwrap())
+        // The series' line: the polyline with the most vertices (grid and axes are 2-point lines).
+        let points: Vec<(f64, f64)> = svg
+            .split("<polyline")
+            .skip(1)
+            .filter_map(|l| l.split("points=\"").nth(1).and_then(|p| p.split('"').next()))
+            .map(|p| {
+                p.split_whitespace()
+                    .map(|xy| {
+                        let (a, b) = xy.split_once(',').unwrap();
+                        (a.parse().unwrap(), b.parse().unwrap())
+                    })
+                    .collect::<Vec<(f64, f64)>>()
             })
-            .collect();
+            .max_by_key(Vec::len)
+            .expect("the series' line");
         assert_eq!(points.len(), 200);
         let inside = points.iter().filter(|&&(px, py)| px >= bx && px <= bx + bw && py >= by && py <= by + bh).count();
         assert_eq!(inside, 0, "{inside} points under the legend box ({bx}, {by}, {bw} × {bh})");
