@@ -711,6 +711,87 @@ fn accelerometer_guideway_acceleration_is_predicted_from_a_given_straightness() 
     }
 }
 
+/// Issue 16: the report draws the residual's spectrum where a resonance lives, in time. With the
+/// 30 Hz column mode of [`accelerometer_hidden_resonance_is_found_at_its_frequency`] missing from the
+/// model, each accelerometer channel's whole periodogram (`ChannelReport::spectrum`) has its peak fall
+/// below a third once the mode is given (measured 12× and 105×); on the fast pass the peak lies where the
+/// mode magnifies the base motion ≥ 4×; the compare report draws it over time (Hz, linear axis), thinned
+/// to ≤ 1000 points without losing that peak, and draws no accelerometer spectrum over position.
+#[test]
+fn the_residual_time_spectrum_of_an_accelerometer_peaks_at_a_missing_mode() {
+    let sc = guideway_scenario("[truth.effects.resonance]\nfrequency = 30.0\ndamping = 0.02\n");
+    let data = Path::new("sim");
+    let set = &sets(&sc, &[1])[0];
+    let without = compare(&known_truth(&sc, &[EffectName::Resonance]), set, data).unwrap();
+    let with = compare(&known_truth(&sc, &[]), set, data).unwrap();
+    let peak = |s: &[(f64, f64)]| s.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
+    let mut checked = 0;
+    let mut peaks: Vec<(String, f64)> = Vec::new();
+    for (a, b) in without.channels.iter().zip(&with.channels) {
+        assert!(a.spectrum.len() > 100, "{} / {}: {} spectrum bins", a.run, a.sensor, a.spectrum.len());
+        let (f, amp) = peak(&a.spectrum);
+        let after = b.spectrum.iter().find(|p| p.0 == f).expect("the same frequency grid").1;
+        eprintln!(
+            "{} / {}: residual spectrum peak {f:.2} Hz, amplitude {:.3} mm/s² without the mode, {:.3} mm/s² with it",
+            a.run,
+            a.sensor,
+            amp * 1e3,
+            after * 1e3
+        );
+        peaks.push((a.run.clone(), f));
+        assert!(after < amp / 3.0, "{} / {}: {after} vs {amp}", a.run, a.sensor);
+        checked += 1;
+    }
+    assert!(checked >= 2 && peaks.iter().any(|p| p.0 == "cv_2"), "{checked} channels: {peaks:?}");
+    // The mode magnifies the base acceleration by |H − 1| = r²/|1 − r² + 2iζr| (r = f/30 Hz, ζ = 0.02): at
+    // least 4× between 26.8 and 34.6 Hz. On the fast pass (0.2 m/s, where the guideway excites 30 Hz) the
+    // residual's strongest line lies in that band (32.01 Hz on seed 1: one guideway realisation, whose
+    // lines near 30 Hz are at 27.7, 32.0 and 33.8 Hz); the slow pass (0.1 m/s) barely excites the mode,
+    // its residual is the mode's quasi-static r² part below resonance (peak 19.8 Hz).
+    let magnification = |f: f64| {
+        let r: f64 = f / 30.0;
+        r * r / ((1.0 - r * r).powi(2) + (0.04 * r).powi(2)).sqrt()
+    };
+    for (run, f) in &peaks {
+        if run == "cv_2" {
+            assert!(
+                magnification(*f) >= 4.0,
+                "{run}: peak at {f} Hz, where the mode magnifies {:.2}×",
+                magnification(*f)
+            );
+        }
+    }
+    let report = vmt::report::model_check_report(Path::new("model.toml"), data, set, &without, None);
+    let fig = report
+        .sections
+        .iter()
+        .flat_map(|s| &s.figures)
+        .find(|f| f.title.contains("spectrum of the residual over time"))
+        .expect("a time spectrum figure");
+    assert!(fig.x_unit == "Hz" && !fig.log_x && fig.y_unit == "m/s²", "{} {} {}", fig.x_unit, fig.log_x, fig.y_unit);
+    assert!(
+        fig.series.iter().any(|s| s.label.contains("cv_2")),
+        "{:?}",
+        fig.series.iter().map(|s| &s.label).collect::<Vec<_>>()
+    );
+    for s in &fig.series {
+        assert!(s.x.len() <= 1000, "{}: {} points", s.label, s.x.len());
+        let top = s.x.iter().zip(&s.y).max_by(|a, b| a.1.total_cmp(b.1)).unwrap();
+        eprintln!("{}: drawn peak at {:.2} Hz", s.label, top.0);
+        if s.label.contains("cv_2") {
+            assert!(magnification(*top.0) >= 4.0, "{}: drawn peak at {} Hz", s.label, top.0);
+        }
+    }
+    assert!(
+        !report
+            .sections
+            .iter()
+            .flat_map(|s| &s.figures)
+            .any(|f| f.title.contains("over position") && f.y_unit == "m/s²"),
+        "an accelerometer's spectrum drawn over position"
+    );
+}
+
 /// Accelerometers, resonance: a 30 Hz column mode (ζ = 0.02: the first bending mode of a tall
 /// column; inside the guideway's band, which reaches 48 Hz at 0.2 m/s, see [`guideway_scenario`])
 /// excited by the random guideway; the model knows the straightness (given) and has nothing for

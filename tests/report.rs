@@ -103,7 +103,7 @@ fn lesson_reports_show_the_residual_where_each_effect_lives() {
         assert_eq!(s.x.len(), 7, "{}: one point per feed of the 7-feed sweep", s.label);
         assert!(s.x.windows(2).all(|w| w[0] < w[1]), "{}: feeds in increasing order", s.label);
     }
-    for meaningless in ["by position", "spatial periods", "approach direction"] {
+    for meaningless in ["by position", "spectrum of the residual", "approach direction"] {
         assert!(
             !figs.iter().any(|f| f.title.contains(meaningless)),
             "stribeck: a `{meaningless}` view of friction sweeps"
@@ -114,6 +114,24 @@ fn lesson_reports_show_the_residual_where_each_effect_lives() {
     let l = labels(find(&figs, "drift_and_lead", "mean residual by position"));
     for model in ["starting model", "after add cyclic_lead", "after add thermal_drift"] {
         assert!(l.iter().any(|s| s.starts_with(model)), "drift_and_lead lacks `{model}`: {l:?}");
+    }
+    // Cyclic lead: the residual's whole spectrum over position (period in mm, log axis) peaks at the 16 mm
+    // screw lead for the starting model, on each laser; after both adds the amplitude there is below a third.
+    let sp = find(&figs, "drift_and_lead", "spectrum of the residual over position");
+    assert!(sp.log_x && sp.x_unit == "mm" && sp.y_unit == "µm", "{} {} {}", sp.log_x, sp.x_unit, sp.y_unit);
+    for laser in ["laser_low", "laser_high"] {
+        let series = |model: &str| {
+            sp.series
+                .iter()
+                .find(|s| s.label.starts_with(model) && s.label.ends_with(laser))
+                .unwrap_or_else(|| panic!("no `{model}` spectrum of {laser}: {:?}", labels(sp)))
+        };
+        let (start, last) = (series("starting model"), series("after add thermal_drift"));
+        let (i, (period, amp)) =
+            start.x.iter().zip(&start.y).enumerate().max_by(|a, b| a.1 .1.total_cmp(b.1 .1)).unwrap();
+        assert!((period - 16.0).abs() < 1.6, "{laser}: peak at {period} mm");
+        assert_eq!(last.x[i], *period, "{laser}: the same period grid before and after");
+        assert!(last.y[i] < amp / 3.0, "{laser}: {} µm after the adds vs {amp} µm", last.y[i]);
     }
     let nrms = find(&figs, "drift_and_lead", "normalised residual RMS per iteration");
     assert_eq!(nrms.series[0].x, vec![0.0, 1.0, 2.0]);

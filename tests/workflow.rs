@@ -1005,6 +1005,58 @@ fn run_with_human_units_names_the_unit_of_every_csv_column() {
     }
 }
 
+/// Significant digits of a number as written (sign, decimal point, exponent and leading zeros not counted).
+fn significant_digits(cell: &str) -> usize {
+    let mantissa = cell.trim_start_matches('-').split(['e', 'E']).next().unwrap_or("");
+    let digits: String = mantissa.chars().filter(char::is_ascii_digit).collect();
+    digits.trim_start_matches('0').len()
+}
+
+/// Issue 13: written times and positions are the exact values of their samples, without float noise in
+/// SI either. Every time (`t`, the manifest's `start_time`) is a whole number of nanoseconds (the
+/// recorder's clock, `vmt_sim::procedures::recorder_time`) and written with at most 15 significant digits
+/// (a sum's rounding shows 17: 22.480000000000004); every target and every reading of a 1 nm sensor (the
+/// laser and scale columns) likewise (5.102e-6, not 5.1020000000000004e-6 = 5102 × 1e-9).
+#[test]
+fn written_times_and_nanometre_readings_carry_no_float_noise() {
+    let tmp = tempfile::tempdir().unwrap();
+    let o = vmt().arg("simulate").arg(small()).arg("-o").arg(tmp.path()).output().unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let (mut times, mut exact) = (0, 0);
+    for e in std::fs::read_dir(tmp.path()).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().and_then(|x| x.to_str()) != Some("csv") || p.ends_with("truth_profiles.csv") {
+            continue;
+        }
+        let rows = csv_rows(&std::fs::read_to_string(&p).unwrap());
+        for (j, name) in rows[0].iter().enumerate() {
+            let is_time = name == "t";
+            let nm = name == "target" || name == "scale" || name.starts_with("laser");
+            for r in rows[1..].iter().filter(|_| is_time || nm) {
+                let cell = &r[j];
+                assert!(significant_digits(cell) <= 15, "{}: {name} = {cell} (float noise)", p.display());
+                let x: f64 = cell.parse().unwrap();
+                if is_time {
+                    assert_eq!((x * 1e9).round() / 1e9, x, "{}: t = {cell} is not a whole ns", p.display());
+                    times += 1;
+                } else {
+                    exact += 1;
+                }
+            }
+        }
+    }
+    let manifest = std::fs::read_to_string(tmp.path().join("manifest.toml")).unwrap();
+    let starts: Vec<&str> = manifest.lines().filter_map(|l| l.strip_prefix("start_time = ")).collect();
+    for s in &starts {
+        assert!(significant_digits(s) <= 15, "start_time = {s} (float noise)");
+    }
+    assert!(
+        times >= 100 && exact >= 100 && starts.len() >= 3,
+        "{times} times, {exact} positions, {} starts",
+        starts.len()
+    );
+}
+
 /// Issue 13: `--units human` writes a study's tolerance of 1e-7 m as 0.1 µm, not 1e-7 × 1e6 =
 /// 0.09999999999999999 (no float noise in a written number); SI cells are unchanged.
 #[test]

@@ -279,7 +279,20 @@ pub(crate) fn render_svg(fig: &Figure, width: u32, height: u32, draw_title: bool
     };
     let ys: Vec<f64> = prepared.iter().flat_map(|p| p.points.iter().map(|&(_, y)| y)).collect();
     let x_range: (f64, f64) = axis_range(&xs, fig.log_x, false);
-    let y_range: (f64, f64) = axis_range(&ys, fig.log_y, fig.kind == FigureKind::Bar && !fig.log_y);
+    let mut y_range: (f64, f64) = axis_range(&ys, fig.log_y, fig.kind == FigureKind::Bar && !fig.log_y);
+    // Room for the legend: when every corner of the plot would put data under it, the y axis is raised
+    // by the legend's height, so that the upper corners are free of data (not for a legend taller than
+    // 40 % of the plot, which would squash the data instead). The plot's size is estimated from the
+    // margins `Job::draw` sets (12 + 24 px beside, 78 px of y labels; 12 + 12 px above and below, 52 px of
+    // x labels, about 40 px of title), a little smaller than drawn, so that the room is enough.
+    let plot_w: i32 = width as i32 - 114 - 10;
+    let plot_h: i32 = height as i32 - 76 - if draw_title && !fig.title.is_empty() { 40 } else { 0 } - 10;
+    let probe = Job { fig, prepared: &prepared, bars: bar_geometry.as_deref(), x_range, y_range, draw_title };
+    let (covered, (_, h_frac)) = (probe.legend_corner(plot_w, plot_h).0, probe.legend_size(plot_w, plot_h));
+    if covered > 0 && h_frac <= 0.4 && prepared.iter().any(|p| !p.series.label.is_empty()) {
+        let (a, b) = (to_axis(y_range.0, fig.log_y), to_axis(y_range.1, fig.log_y));
+        y_range.1 = from_axis(a + (b - a) / (1.0 - h_frac), fig.log_y);
+    }
 
     let plot_error = |e: String| ReportError::Plot { figure: fig.title.clone(), message: e };
     let mut buf: String = String::new();
@@ -517,7 +530,7 @@ impl Job<'_> {
         }
 
         if labelled {
-            let position: SeriesLabelPosition = self.legend_corner(px0.end - px0.start, px1.end - px1.start);
+            let position: SeriesLabelPosition = self.legend_corner(px0.end - px0.start, px1.end - px1.start).1;
             chart
                 .configure_series_labels()
                 .position(position)
@@ -531,15 +544,21 @@ impl Job<'_> {
         Ok(())
     }
 
-    /// Corner whose legend-sized box contains the fewest data points (ties: upper right first).
-    fn legend_corner(&self, plot_w: i32, plot_h: i32) -> SeriesLabelPosition {
-        let fig: &Figure = self.fig;
+    /// The legend's size as fractions (width, height) of a `plot_w` × `plot_h` px plotting area: ~8 px per
+    /// character at the 16-unit legend font, sample + margins 50 px wide, 20 px per entry + 20 px high.
+    fn legend_size(&self, plot_w: i32, plot_h: i32) -> (f64, f64) {
         let n_labels: usize = self.prepared.iter().filter(|p| !p.series.label.is_empty()).count();
         let max_chars: usize = self.prepared.iter().map(|p| p.series.label.chars().count()).max().unwrap_or(0);
-        // Legend size estimate in pixels: ~8 px per character at the 16-unit legend font, sample + margins 50 px,
-        // 20 px per entry; as a fraction of the plotting area.
         let w_frac: f64 = ((max_chars as f64 * 8.0 + 50.0) / plot_w.max(1) as f64).min(1.0);
         let h_frac: f64 = ((n_labels as f64 * 20.0 + 20.0) / plot_h.max(1) as f64).min(1.0);
+        (w_frac, h_frac)
+    }
+
+    /// Corner whose legend-sized box ([`Job::legend_size`]) contains the fewest data points (ties: upper
+    /// right first), with that number of points.
+    fn legend_corner(&self, plot_w: i32, plot_h: i32) -> (usize, SeriesLabelPosition) {
+        let fig: &Figure = self.fig;
+        let (w_frac, h_frac) = self.legend_size(plot_w, plot_h);
         let norm = |v: f64, range: (f64, f64), log: bool| -> f64 {
             let (a, b) = (to_axis(range.0, log), to_axis(range.1, log));
             (to_axis(v, log) - a) / (b - a)
@@ -568,7 +587,7 @@ impl Job<'_> {
                 best = (count, position);
             }
         }
-        best.1
+        best
     }
 }
 
@@ -655,6 +674,54 @@ mod tests {
         let (a, b) = (legend_heights(&alone), legend_heights(&with_runs));
         assert_eq!(a.len(), 1, "one legend box expected: {a:?}");
         assert_eq!(a, b, "the unlabelled runs changed the legend's height");
+    }
+
+    /// The box of the legend (x, y, width, height in px) of an SVG: the rect with the legend's border.
+    fn legend_box(svg: &str) -> (f64, f64, f64, f64) {
+        let rect = svg
+            .split("<rect")
+            .skip(1)
+            .find(|r| r.split('>').next().is_some_and(|a| a.to_ascii_uppercase().contains("#B0B0B0")))
+            .expect("a legend box");
+        let attr = |name: &str| -> f64 {
+            rect.split(&format!(" {name}=\"")).nth(1).and_then(|v| v.split('"').next()).unwrap().parse().unwrap()
+        };
+        (attr("x"), attr("y"), attr("width"), attr("height"))
+    }
+
+    /// A legend covers no data: a zigzag that fills every corner of the plot (each corner would hide
+    /// data under the legend) raises the y axis by the legend's height, and no vertex of the line lies
+    /// inside the legend's box; the line's top still reaches the upper part of the plot (the room added
+    /// is the legend's, not more).
+    #[test]
+    fn a_legend_covers_no_data() {
+        let x: Vec<f64> = (0..200).map(f64::from).collect();
+        let y: Vec<f64> = (0..200).map(|i| if i % 2 == 0 { 1.0 } else { -1.0 }).collect();
+        let fig =
+            line_figure(vec![series("a zigzag that fills every corner", &x, &y, SeriesStyle::Line)], FigureKind::Line);
+        let svg = figure_svg(&fig, 860, 480).unwrap();
+        let (bx, by, bw, bh) = legend_box(&svg);
+        // The series' line: the polyline with the most vertices (grid and axes are 2-point lines).
+        let points: Vec<(f64, f64)> = svg
+            .split("<polyline")
+            .skip(1)
+            .filter_map(|l| l.split("points=\"").nth(1).and_then(|p| p.split('"').next()))
+            .map(|p| {
+                p.split_whitespace()
+                    .map(|xy| {
+                        let (a, b) = xy.split_once(',').unwrap();
+                        (a.parse().unwrap(), b.parse().unwrap())
+                    })
+                    .collect::<Vec<(f64, f64)>>()
+            })
+            .max_by_key(Vec::len)
+            .expect("the series' line");
+        assert_eq!(points.len(), 200);
+        let inside = points.iter().filter(|&&(px, py)| px >= bx && px <= bx + bw && py >= by && py <= by + bh).count();
+        assert_eq!(inside, 0, "{inside} points under the legend box ({bx}, {by}, {bw} × {bh})");
+        // The top of the zigzag lies within a legend's height (plus the 5 % padding) of the top of the box.
+        let top = points.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+        assert!(top > by + bh && top < by + 2.0 * bh + 40.0, "top of the data at {top} px, legend {by}–{}", by + bh);
     }
 
     /// A bar alone at its x is centred on it with the whole group width (a ranking, one series per

@@ -59,7 +59,7 @@ use crate::effects::{EffectName, EffectParams, EffectSet};
 use crate::geometry::ErrorMotions;
 use crate::machine::{AxisConfig, AxisModel, MachineError};
 use crate::motion::{MotionPlan, Segment};
-use crate::procedures::{ProcedureKind, RunData, RunRecord, Visit};
+use crate::procedures::{recorder_time, ProcedureKind, RunData, RunRecord, Visit};
 use crate::profile::{Profile, Term};
 use crate::rng::source_rng;
 use crate::truth::{axis_physics, Adjustments};
@@ -892,7 +892,7 @@ pub fn plan_laser_lines(chain: &ChainModel, spec: &LaserLinesSpec) -> Vec<LinePl
                 let (_, t1) = plan.dwell(spec.dwell);
                 let first = times.len();
                 for i in 0..per {
-                    times.push(t1 - (per - 1 - i) as f64 / spec.rate);
+                    times.push(recorder_time(t1 - (per - 1 - i) as f64 / spec.rate));
                 }
                 let s = len * k as f64 / (line.n - 1) as f64;
                 visits.push(Visit { target: s, run: 1, direction: 1, first, last: times.len() - 1 });

@@ -538,8 +538,8 @@ impl ProcedureSpec {
             }
             ProcedureSpec::NineLine { start, end, step, feed, dwell, average, rate, overrun, .. } => {
                 let n = span(*start, *end) / step + 1.0;
-                if step.is_nan() || *step <= 0.0 {
-                    return err("step", format!("expected a step > 0 m, got {step}"));
+                if step.is_nan() || *step < 1e-9 {
+                    return err("step", format!("expected a step ≥ 1e-9 m (the targets' 1 nm grid), got {step}"));
                 }
                 count("n_targets", n, MAX_TARGETS)?;
                 time_key("dwell", *dwell, true)?;
@@ -783,6 +783,18 @@ pub fn irregular_targets(start: f64, end: f64, n: usize, seed: u64, name: &str) 
         .collect()
 }
 
+/// Ticks per second of the recorder's clock: every record time and session start is a whole number of
+/// nanoseconds.
+pub const RECORD_CLOCK_HZ: f64 = 1e9;
+
+/// A time (s) on the recorder's clock: t' = round(t·f_c)/f_c with f_c = [`RECORD_CLOCK_HZ`], the double
+/// nearest to a whole number of nanoseconds (|t' − t| ≤ 0.5 ns). The plan's times are sums of segment
+/// durations and carry their rounding (22.480000000000004 s); the simulator samples the truth at t', so a
+/// written time is the exact time of its sample and reads as the decimal it is (22.48 s).
+pub fn recorder_time(t: f64) -> f64 {
+    (t * RECORD_CLOCK_HZ).round() / RECORD_CLOCK_HZ
+}
+
 /// The commanded motion of one run and the times at which its truth is recorded (run time, s), before
 /// any physics: what a procedure asks of the machine.
 #[derive(Clone, Debug)]
@@ -801,7 +813,8 @@ pub struct RunPlan {
     pub layout: Layout,
     /// Commanded motion, run time from 0.
     pub plan: MotionPlan,
-    /// Times at which the truth is recorded, run time, s, increasing.
+    /// Times at which the truth is recorded, run time, s, increasing, on the recorder's clock
+    /// ([`recorder_time`]).
     pub record_times: Vec<f64>,
 }
 
@@ -816,11 +829,12 @@ impl RunPlan {
 /// Session start time of each run when the runs follow one another without a pause, in order, the
 /// first starting at `t0` (s): start_k = t0 + Σ_{i<k} duration_i. This is the session clock that
 /// time-dependent effects (thermal expansion, thermal drift) are evaluated on, so that they carry
-/// over from one run to the next, as on a real machine warming up during a measurement session.
+/// over from one run to the next, as on a real machine warming up during a measurement session. Each
+/// start is on the recorder's clock ([`recorder_time`]), as the manifest's `start_time` writes it.
 pub fn session_schedule(runs: &[RunPlan], t0: f64) -> Vec<f64> {
     runs.iter()
         .scan(t0, |t, r| {
-            let start = *t;
+            let start = recorder_time(*t);
             *t += r.duration();
             Some(start)
         })
@@ -872,7 +886,7 @@ pub fn simulate_procedure(model: &AxisModel, errors: &AxisTruth, spec: &Procedur
 /// The runs of a procedure as commanded motions and record times (no physics). A friction sweep that
 /// fails [`ProcedureSpec::check`], and a pause, yield no runs.
 pub fn plan_procedure(model: &AxisModel, spec: &ProcedureSpec, seed: u64) -> Vec<RunPlan> {
-    let time_series = |name: String, procedure, v: f64, direction: i8, rate: f64, plan, record_times| RunPlan {
+    let time_series = |name: String, procedure, v: f64, direction: i8, rate: f64, plan, times: Vec<f64>| RunPlan {
         name,
         procedure,
         feed: Some(v),
@@ -880,7 +894,7 @@ pub fn plan_procedure(model: &AxisModel, spec: &ProcedureSpec, seed: u64) -> Vec
         sensors: spec.sensors().to_vec(),
         layout: Layout::TimeSeries { rate },
         plan,
-        record_times,
+        record_times: times.into_iter().map(recorder_time).collect(),
     };
     match spec {
         ProcedureSpec::ConstantVelocity { name, speeds, start, end, high_rate, direction, settle, .. } => {
@@ -938,7 +952,9 @@ pub fn plan_procedure(model: &AxisModel, spec: &ProcedureSpec, seed: u64) -> Vec
             .collect(),
         ProcedureSpec::NineLine { name, start, end, step, feed, dwell, average, rate, overrun, .. } => {
             let n = ((end - start) / step).round() as usize;
-            let targets: Vec<f64> = (0..=n).map(|i| start + step * i as f64).collect();
+            // On a 1 nm grid (a CNC commands a target on its position grid; `budget` refuses a step below
+            // 1 nm): start + step·i carries the sum's rounding (0.30000000000000004 m).
+            let targets: Vec<f64> = (0..=n).map(|i| ((start + step * i as f64) * 1e9).round() / 1e9).collect();
             let cycle =
                 Cycle { runs: 1, feed: *feed, accel: model.max_accel, dwell: *dwell, average: *average, rate: *rate };
             vec![positioning_cycle(name, &targets, &cycle, *overrun, spec.sensors())]
@@ -1033,7 +1049,7 @@ fn positioning_cycle(name: &str, targets: &[f64], c: &Cycle, overrun: f64, senso
     for (t1, (target, run, direction)) in windows.iter().zip(visits_meta) {
         let first = times.len();
         for k in 0..per {
-            times.push(t1 - (per - 1 - k) as f64 / c.rate);
+            times.push(recorder_time(t1 - (per - 1 - k) as f64 / c.rate));
         }
         visits.push(Visit { target, run, direction, first, last: times.len() - 1 });
     }
@@ -1197,6 +1213,15 @@ fn sample_rate(samples: &[Sample]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn record_times_are_whole_nanoseconds_without_the_sums_rounding() {
+        let noisy = 0.9 + 21.58;
+        assert_ne!(noisy, 22.48);
+        assert_eq!(recorder_time(noisy), 22.48);
+        assert_eq!(recorder_time(0.625 + 72.0 / 400.0), 0.805);
+        assert!((recorder_time(1.0 / 3.0) - 1.0 / 3.0).abs() <= 0.5e-9);
+    }
 
     #[test]
     fn sweep_speeds_are_log_spaced_and_bad_ones_rejected() {

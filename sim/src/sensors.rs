@@ -422,10 +422,24 @@ pub fn apply_errors(spec: &SensorSpec, truth: &[f64], fs: f64, rng: &mut ChaCha8
         let n: f64 = rng.sample(StandardNormal);
         *y += sigma * n;
         if spec.resolution > 0.0 {
-            *y = (*y / spec.resolution).round() * spec.resolution;
+            *y = quantise_reading(*y, spec.resolution);
         }
     }
     out
+}
+
+/// A reading quantised to the resolution `q` (> 0, in the reading's unit): k = round(y/q) counts, the
+/// value k·q. When 1/q is a whole number of counts per unit (q = 1e-9 m: 10⁹ counts/m) the value is
+/// computed as k/(1/q), the double nearest to the decimal k·q: 5102 counts of 1 nm are 5.102e-6 m, where
+/// k·q carries q's representation error (5.1020000000000004e-6).
+pub fn quantise_reading(y: f64, q: f64) -> f64 {
+    let k = (y / q).round();
+    let per_unit = (1.0 / q).round();
+    if per_unit >= 1.0 && (per_unit * q - 1.0).abs() <= 1e-12 {
+        k / per_unit
+    } else {
+        k * q
+    }
 }
 
 /// First-order RC high-pass, discrete: `y[n] = α·(y[n−1] + x[n] − x[n−1])`, α = RC/(RC + T), RC = 1/(2π·fc),
@@ -443,6 +457,17 @@ pub fn highpass_first_order(x: &[f64], fc: f64, fs: f64) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_reading_of_whole_nanometres_is_the_nearest_double_to_its_decimal() {
+        // 5102 counts of 1 nm: k·q would be 5.1020000000000004e-6.
+        assert_eq!(5102.0 * 1e-9, 5.1020000000000004e-6);
+        assert_eq!(quantise_reading(5.1017e-6, 1e-9), 5.102e-6);
+        assert_eq!(quantise_reading(-0.1090000000004, 1e-9), -0.109);
+        // A resolution that is no whole number of counts per unit stays k·q.
+        let q = 1.1690437793731688e-5;
+        assert_eq!(quantise_reading(3.1 * q, q), 3.0 * q);
+    }
 
     #[test]
     fn material_error_only_for_length_lasers_and_zero_by_default() {

@@ -41,6 +41,13 @@ pub struct ChannelReport {
     /// Strongest spatial periods of the residual: (wavelength m, amplitude m), from a
     /// least-squares periodogram over position.
     pub spectrum_peaks: Vec<(f64, f64)>,
+    /// The residual's whole least-squares periodogram (`ls_periodogram`, σ unknown, 5× oversampled up
+    /// to the pseudo-Nyquist frequency): (frequency, amplitude in the channel's SI unit), over the
+    /// session time in Hz for accelerometer channels (a resonance lives in time), over the position in
+    /// cycles per m for the others (cyclic errors live in space). Empty when the channel has too few
+    /// distinct coordinates. Not written to JSON (thousands of values per channel); reports draw it.
+    #[serde(skip)]
+    pub spectrum: Vec<(f64, f64)>,
 }
 
 /// One iteration of the loop, as kept in `history.json`.
@@ -750,15 +757,34 @@ pub(crate) fn channel_report(c: &Channel, r: &[f64], p: &[f64], s: f64, est: boo
             })
             .unwrap_or_default()
     };
-    let spectrum_peaks = frequency_grid(&c.x, 5.0, None)
-        .ok()
-        .and_then(|g| ls_periodogram(&c.x, r, &Sigma::Unknown, &g).ok())
+    let periodogram =
+        |x: &[f64]| frequency_grid(x, 5.0, None).ok().and_then(|g| ls_periodogram(x, r, &Sigma::Unknown, &g).ok());
+    let spatial = periodogram(&c.x);
+    let spectrum_peaks = spatial
+        .as_ref()
         .map(|pg| {
             let mut idx: Vec<usize> = (0..pg.frequency.len()).collect();
             idx.sort_by(|a, b| pg.amplitude[*b].total_cmp(&pg.amplitude[*a]));
             idx.into_iter().take(3).map(|i| (1.0 / pg.frequency[i], pg.amplitude[i])).collect()
         })
         .unwrap_or_default();
+    let spectrum = match c.kind {
+        SensorKind::Accelerometer => periodogram(&c.t),
+        SensorKind::Command
+        | SensorKind::EncoderRotary
+        | SensorKind::EncoderLinear
+        | SensorKind::LaserLinear
+        | SensorKind::LaserStraightness
+        | SensorKind::LaserAngular
+        | SensorKind::LaserVector
+        | SensorKind::MotorForce
+        | SensorKind::Velocity
+        | SensorKind::Temperature
+        | SensorKind::Pressure
+        | SensorKind::Humidity => spatial,
+    }
+    .map(|pg| pg.frequency.into_iter().zip(pg.amplitude).collect())
+    .unwrap_or_default();
     ChannelReport {
         run: c.run.clone(),
         unit: channel_unit(c).into(),
@@ -776,6 +802,7 @@ pub(crate) fn channel_report(c: &Channel, r: &[f64], p: &[f64], s: f64, est: boo
         by_position: ranged(&c.x),
         by_time: ranged(&c.t),
         spectrum_peaks,
+        spectrum,
     }
 }
 

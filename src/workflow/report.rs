@@ -225,7 +225,8 @@ pub const MAX_REPORT_CHANNELS: usize = 8;
 /// conditions (program, date, command, model, data), each channel's residual against its noise, the
 /// fitted shapes and parameters, for a diagnosis its ranking (table and bar chart of the share each
 /// candidate explains) with the advice, and per channel the signed residual where the effects live (by
-/// approach direction, position, time, spatial period).
+/// approach direction, position, time, and its spectrum: over position for deviations, over time in Hz for
+/// accelerometers).
 pub fn model_check_report(
     model: &std::path::Path,
     data: &std::path::Path,
@@ -370,7 +371,8 @@ pub fn model_check_report(
                          (backlash, lost motion), by position (pitch, positioning and lead errors; lasers at \
                          two heights side by side for pitch), over the session time (thermal drift; a cold and \
                          a warm test on one time axis), against the feed velocity for friction sweeps \
-                         (Stribeck friction) and its strongest spatial periods (cyclic errors)."
+                         (Stribeck friction) and its spectrum: over position for cyclic errors, over time in Hz for the \
+                         resonances accelerometers see."
         .to_string()];
     if cmp.channels.len() > MAX_REPORT_CHANNELS {
         text.push(format!(

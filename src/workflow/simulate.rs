@@ -227,7 +227,8 @@ pub fn chain_truths(sc: &Scenario, session_start: f64) -> Vec<(usize, LineTruth)
     for (i, p) in sc.chain_procedures.iter().enumerate() {
         let ChainProcedureSpec::LaserLines(l) = p;
         for line in plan_laser_lines(chain, l) {
-            let start = clock;
+            // On the recorder's clock, as the single-axis runs' starts (`recorder_time`).
+            let start = vmt_sim::procedures::recorder_time(clock);
             clock += line.duration();
             jobs.push((i, line, start));
         }

@@ -148,6 +148,17 @@ pub(crate) const MAX_FIGURE_CHANNELS: usize = 4;
 /// Where an effect lives in one channel, by the procedure of its run: a point table or a pass over
 /// the travel (by direction, position, time and spatial period), or a friction sweep at one feed (by
 /// velocity: the Stribeck curve). Unknown runs count as a point table.
+/// The most points a spectrum series draws ([`spectrum_points`]).
+pub(crate) const MAX_SPECTRUM_POINTS: usize = 1000;
+
+/// A spectrum's (frequency, amplitude) points thinned to at most `max` (≥ 1): consecutive bins in
+/// groups of g = ⌈n/max⌉, each group drawn as its bin of largest amplitude, so that a narrow peak
+/// keeps its height; returns (frequencies, amplitudes).
+fn spectrum_points(spectrum: &[(f64, f64)], max: usize) -> (Vec<f64>, Vec<f64>) {
+    let g = spectrum.len().div_ceil(max.max(1)).max(1);
+    spectrum.chunks(g).filter_map(|c| c.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1))).unzip()
+}
+
 #[derive(Clone, Copy, PartialEq)]
 enum ChannelPlace {
     /// Positioning, constant-velocity, crawl or free runs.
@@ -178,7 +189,10 @@ fn channel_place(set: &MeasurementSet, c: &crate::modelcheck::ChannelReport) -> 
 ///   time axis: thermal expansion) of channels over the travel;
 /// - mean against the feed velocity, by direction, of friction-sweep channels (the Stribeck curve:
 ///   what a friction model misses at low speed);
-/// - the strongest spatial periods of the residual (bars; cyclic errors).
+/// - the residual's whole periodogram ([`crate::modelcheck::ChannelReport::spectrum`]): amplitude
+///   against frequency in Hz for accelerometer channels (resonance), against the spatial period in mm
+///   for the others (cyclic errors), each series thinned to at most [`MAX_SPECTRUM_POINTS`] points by
+///   keeping the largest amplitude of consecutive bins (a peak is never dropped).
 ///
 /// In µm for deviations, N for forces, mm/s² for accelerations. Titles read `{prefix}: … , {which}`; a
 /// view without data draws no figure.
@@ -335,20 +349,58 @@ pub(crate) fn residual_figures(
                 true,
             ));
         }
-        // Amplitudes of a least-squares periodogram over position: drawn in the channel's unit like the rest.
+        // The residual's whole least-squares periodogram, in the channel's unit like the rest: over time
+        // (Hz) for accelerometers, whose resonances live in time; over position (period in mm, log axis)
+        // for the others, whose cyclic errors live in space.
+        let in_time = chans.iter().all(|&i| {
+            set.sensor(&first.channels[i].sensor)
+                .is_some_and(|s| s.kind == crate::measurement::SensorKind::Accelerometer)
+        });
         let spectrum = pick(true, &|c| {
-            (c.spectrum_peaks.iter().map(|p| p.0 * 1e3).collect(), c.spectrum_peaks.iter().map(|p| p.1).collect())
+            let (f, a) = spectrum_points(&c.spectrum, MAX_SPECTRUM_POINTS);
+            if in_time {
+                (f, a)
+            } else {
+                (f.iter().map(|f| 1e3 / f).collect(), a)
+            }
         });
         if !spectrum.is_empty() {
-            figures.push(figure(
-                "strongest spatial periods of the residual (least-squares periodogram over position)",
-                "wavelength",
-                "mm",
-                "amplitude",
-                spectrum,
-                FigureKind::Bar,
-                false,
-            ));
+            let thinned = chans.iter().any(|&i| {
+                reports.iter().any(|(r, _)| r.channels.get(i).is_some_and(|c| c.spectrum.len() > MAX_SPECTRUM_POINTS))
+            });
+            let how = if thinned {
+                format!(
+                    "least-squares periodogram; each point the largest amplitude of consecutive bins, at most \
+                     {MAX_SPECTRUM_POINTS} points"
+                )
+            } else {
+                "least-squares periodogram".to_string()
+            };
+            let mut fig = if in_time {
+                figure(
+                    &format!("spectrum of the residual over time ({how})"),
+                    "frequency",
+                    "Hz",
+                    "amplitude",
+                    spectrum,
+                    FigureKind::Line,
+                    false,
+                )
+            } else {
+                figure(
+                    &format!("spectrum of the residual over position ({how})"),
+                    "spatial period",
+                    "mm",
+                    "amplitude",
+                    spectrum,
+                    FigureKind::Line,
+                    true,
+                )
+            };
+            for s in &mut fig.series {
+                s.style = SeriesStyle::Line;
+            }
+            figures.push(fig);
         }
     }
     figures

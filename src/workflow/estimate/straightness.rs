@@ -539,10 +539,10 @@ pub(super) fn accel_straightness_check(
     let name = format!("straightness {sensor} (accelerometer)");
     let fig = profile_figure(
         format!(
-            "{name}: injected vs recovered in the recoverable band {:.0}–{:.0} mm (Cramér–Rao bound of the RMS error {:.3} µm)",
-            est.band.min_wavelength * 1e3,
-            est.band.max_wavelength * 1e3,
-            bound * 1e6
+            "{name}: injected vs recovered in the recoverable band {}–{} mm (Cramér–Rao bound of the RMS error {})",
+            four_significant(est.band.min_wavelength * 1e3),
+            four_significant(est.band.max_wavelength * 1e3),
+            display(Quantity::Length, bound)
         ),
         Quantity::Length,
         xs,

@@ -227,7 +227,14 @@ fn sensor_rows(sc: &Scenario) -> Vec<Vec<String>> {
     sc.sensors
         .iter()
         .map(|s| {
-            let (mount, abbe) = match s.position {
+            // The mounting point in the axis frame: as written, or the origin of the link it is mounted on
+            // (the scenario checked that the link exists), or the axis origin.
+            let (p, place) = match (s.position, &s.link) {
+                (Some(p), _) => (Some(p), String::new()),
+                (None, Some(l)) => (s.axis_position(&sc.axis).ok(), format!("link {l} at ")),
+                (None, None) => (Some([0.0; 3]), "axis origin ".into()),
+            };
+            let (mount, abbe) = match p {
                 Some(p) => {
                     // Abbe offset: the distance of the mounting point from the line through the axis
                     // reference point along the sensing direction d, |p − (p·d)d| (ISO 230-1 §3.4.17).
@@ -236,12 +243,17 @@ fn sensor_rows(sc: &Scenario) -> Vec<Vec<String>> {
                     let along = p[0] * d[0] + p[1] * d[1] + p[2] * d[2];
                     let off = [p[0] - along * d[0], p[1] - along * d[1], p[2] - along * d[2]];
                     let len = off.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    // Whole mm, and a value that rounds to zero written 0, not -0.
+                    let mm = |v: f64| format!("{}", (v * 1e3).round() + 0.0);
                     (
-                        format!("({:.0}, {:.0}, {:.0}) mm", p[0] * 1e3, p[1] * 1e3, p[2] * 1e3),
-                        format!("{:.0} mm ({:.0}, {:.0}, {:.0})", len * 1e3, off[0] * 1e3, off[1] * 1e3, off[2] * 1e3),
+                        format!("{place}({}, {}, {}) mm", mm(p[0]), mm(p[1]), mm(p[2])),
+                        format!("{} mm ({}, {}, {})", mm(len), mm(off[0]), mm(off[1]), mm(off[2])),
                     )
                 }
-                None => (s.link.clone().map_or("axis origin".into(), |l| format!("link {l}")), "—".into()),
+                None => (
+                    s.link.clone().map_or("—".into(), |l| format!("link {l} (not in the machine)")),
+                    "— (no mounting point)".into(),
+                ),
             };
             vec![
                 s.name.clone(),
