@@ -15,7 +15,8 @@ mod modelcheck {
     use std::f64::consts::PI;
     use vmt_estimators::modelcheck::{
         amplitude_spectrum, autocorrelation, bin_by_label, estimate_noise_sigma, forward_select, ljung_box,
-        normalized_rms, rank_candidates, Candidate, DiagnoseConfig, Diagnosis, ResidualInput, Sigma, Verdict,
+        normalized_rms, rank_candidates, Candidate, DiagnoseConfig, Diagnosis, ModelCheckError, ResidualInput, Sigma,
+        Verdict,
     };
 
     const SIGMA: f64 = 1e-6;
@@ -73,7 +74,7 @@ mod modelcheck {
             Candidate::new(name, &["cos", "sin"], move |h: &[f64]| {
                 let p = h[0];
                 if p <= 0.0 {
-                    return Err(format!("period must be positive, got {p}"));
+                    return Err(ModelCheckError::Invalid(format!("period must be positive, got {p}")));
                 }
                 Ok(vec![
                     s2.x.iter().map(|x| (2.0 * PI * x / p).cos()).collect(),

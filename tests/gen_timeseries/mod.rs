@@ -316,25 +316,7 @@ fn roll_crb(roll: &Waves, passes: &[ModePass], straight_y: &Waves, travel: (f64,
                 .collect(),
         );
     }
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let project_out = |v: &mut Vec<f64>, ortho: &[Vec<f64>]| {
-        for _ in 0..2 {
-            for q in ortho {
-                let c = dot(v, q);
-                v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
-            }
-        }
-    };
-    let mut ortho: Vec<Vec<f64>> = Vec::new();
-    for mut v in nuisance {
-        let before = dot(&v, &v).sqrt();
-        project_out(&mut v, &ortho);
-        let norm = dot(&v, &v).sqrt();
-        if norm > 1e-9 * before {
-            v.iter_mut().for_each(|x| *x /= norm);
-            ortho.push(v);
-        }
-    }
+    let ortho = orthonormal(nuisance);
     let d: Vec<Vec<f64>> = theta
         .iter()
         .map(|&(k, sin)| {
@@ -398,6 +380,39 @@ fn mode_series(f: f64, z: f64, dt: f64, n: usize, a: &dyn Fn(f64) -> f64) -> Vec
         }
     }
     out
+}
+
+/// Σ aᵢ·bᵢ.
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// `v` minus its projections on the orthonormal columns `ortho`, twice (classical Gram–Schmidt
+/// repeated: the nearly dependent long waves of a profile would otherwise leave rounding behind).
+fn project_out(v: &mut [f64], ortho: &[Vec<f64>]) {
+    for _ in 0..2 {
+        for q in ortho {
+            let c = dot(v, q);
+            v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
+        }
+    }
+}
+
+/// An orthonormal basis of the span of `cols` (Gram–Schmidt in order, [`project_out`]); a column
+/// left with less than 1e-9 of its norm is dependent on the earlier ones and dropped. Projecting a
+/// parameter's column off this basis profiles the nuisance out of its Fisher information.
+fn orthonormal(cols: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
+    let mut ortho: Vec<Vec<f64>> = Vec::new();
+    for mut v in cols {
+        let before = dot(&v, &v).sqrt();
+        project_out(&mut v, &ortho);
+        let norm = dot(&v, &v).sqrt();
+        if norm > 1e-9 * before {
+            v.iter_mut().for_each(|x| *x /= norm);
+            ortho.push(v);
+        }
+    }
+    ortho
 }
 
 /// One pass for [`mode_crb`]: speed v (m/s), direction (±1), position of the first sample x₀ (m),
@@ -481,28 +496,9 @@ fn mode_crb(f: f64, z: f64, passes: &[ModePass], straight: &[Waves], shape: [f64
     }
     nuisance.extend(gains);
     nuisance.extend(wave_cols);
-    // Profile out the nuisance by Gram–Schmidt (twice, for the nearly dependent long waves; a
-    // column left with less than 1e-9 of its norm is dependent and dropped), then the 2 × 2
-    // information of what the derivatives have left (the Schur complement).
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let mut ortho: Vec<Vec<f64>> = Vec::new();
-    let project_out = |v: &mut Vec<f64>, ortho: &[Vec<f64>]| {
-        for _ in 0..2 {
-            for q in ortho {
-                let c = dot(v, q);
-                v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
-            }
-        }
-    };
-    for mut v in nuisance {
-        let before = dot(&v, &v).sqrt();
-        project_out(&mut v, &ortho);
-        let norm = dot(&v, &v).sqrt();
-        if norm > 1e-9 * before {
-            v.iter_mut().for_each(|x| *x /= norm);
-            ortho.push(v);
-        }
-    }
+    // Profile out the nuisance, then the 2 × 2 information of what the derivatives have left (the
+    // Schur complement).
+    let ortho = orthonormal(nuisance);
     for v in d.iter_mut() {
         project_out(v, &ortho);
     }
