@@ -13,5 +13,9 @@ pub mod input;
 pub mod iso230_2;
 pub mod laser_ls;
 pub mod line;
+// Clippy lints left inside modelcheck/ (owner: the model-check issues): `!(x > y)` written on purpose so
+// that NaN takes the refusing branch (refine.rs, spectrum.rs), and index loops over several arrays at once
+// (ortho.rs, refine.rs); rustdoc reads `rss[m]` in ortho.rs as a link. Lift once rewritten.
+#[allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop, rustdoc::broken_intra_doc_links)]
 pub mod modelcheck;
 pub mod ssi;

@@ -963,7 +963,7 @@ mod tests {
         // Bad input is an error, not a panic.
         let bad = vec![Candidate::new("bad", &["a"], |_| Ok(vec![vec![1.0; 3]]))];
         let e = rank_candidates(&inp, &bad, &DiagnoseConfig::default()).unwrap_err();
-        assert!(e.to_string().contains("expected 40 (one per sample)"), "{e}");
+        assert!(e.to_string().contains("must have 40 values (one per sample), got 3"), "{e}");
     }
 
     /// The Gram-matrix projection of the screen equals the orthogonalised one (MGS, `Basis`) to
