@@ -244,20 +244,10 @@ fn call_args(text: &str) -> Option<Vec<String>> {
 /// them found each bound ordered by an existing check, named in its comment).
 #[test]
 fn every_clamp_has_literal_bounds_or_says_why_they_are_ordered() {
-    fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                rust_files(&p, out);
-            } else if p.extension().is_some_and(|x| x == "rs") {
-                out.push(p);
-            }
-        }
-    }
     let literal = |a: &str| a.trim_start_matches('-').replace('_', "").parse::<f64>().is_ok();
     let mut files = Vec::new();
     for dir in ["src", "sim/src", "estimators/src", "report/src"] {
-        rust_files(&root().join(dir), &mut files);
+        crate::util::rust_files(&root().join(dir), &mut files);
     }
     files.sort();
     let (mut seen, mut unexplained) = (0, Vec::new());

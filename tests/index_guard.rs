@@ -40,8 +40,7 @@
 //! own bad-input test (`a_crawl_shorter_than_two_samples_exits_2_naming_the_ssi_check`). `.clamp(` is
 //! the clamp test's (`cli_contract::every_clamp_has_literal_bounds_or_says_why_they_are_ordered`).
 
-use crate::util::root;
-use std::path::{Path, PathBuf};
+use crate::util::{root, rust_files};
 
 /// Texts that, before a site in its function, show a length or count check (see the module doc), besides
 /// a comparison with an integer literal ([`compares_with_count`]).
@@ -61,17 +60,6 @@ pub const LENGTH_GUARDS: &[&str] = &[
     "validate_run(",
     "TooFew",
 ];
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for e in std::fs::read_dir(dir).unwrap().flatten() {
-        let p = e.path();
-        if p.is_dir() {
-            rust_files(&p, out);
-        } else if p.extension().is_some_and(|x| x == "rs") {
-            out.push(p);
-        }
-    }
-}
 
 /// The line without its `//` comment and with string literals emptied (so `"a - b"` is not code).
 fn code_of(line: &str) -> String {

@@ -11,6 +11,18 @@ pub fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// Every `.rs` file under `dir` (recursively), appended to `out` in directory order (callers sort).
+pub fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            rust_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
 /// A command that runs the `vmt` binary built with these tests.
 pub fn vmt() -> Command {
     Command::new(env!("CARGO_BIN_EXE_vmt"))
