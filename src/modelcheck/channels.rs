@@ -39,6 +39,16 @@ pub struct Channel {
 }
 
 impl Channel {
+    /// Where the screw is at sample `i`, m: the motor encoder's reading on a transmission channel
+    /// (scale − motor; a cyclic lead is a function of the screw's angle, and the scale reads the
+    /// table, which stands apart from it by the play), else the channel's own position `x`.
+    pub(crate) fn screw_x(&self, i: usize) -> f64 {
+        match &self.encoder {
+            Some(EncoderRole::Transmission { drive }) => drive[i],
+            Some(EncoderRole::Following { .. }) | None => self.x[i],
+        }
+    }
+
     /// Sensitivity to the drive terms (backlash, cyclic lead): u·axis for a laser, 1 for a linear
     /// scale, 0 for a rotary encoder.
     pub(crate) fn s_drive(&self) -> f64 {

@@ -208,8 +208,17 @@ pub struct DiagnoseReport {
 /// new kv in [`close_loop`] (see the fit loop: 1e-5 leaves ≈ 0.04 nm of a 4 µm coupling).
 pub(crate) const LOOP_KV_HOLD: f64 = 1e-5;
 
-/// Most refits of a closed loop's model with the loop gain its previous fit found.
-pub(crate) const LOOP_KV_REFITS: usize = 4;
+/// Most refits of a closed loop's model with the loop gain kv and transmission gain g its
+/// previous fit found.
+pub(crate) const LOOP_KV_REFITS: usize = 6;
+
+/// Change of a closed loop's transmission gain g ([`Stack::loop_gain`]) below which the fit is not
+/// repeated: 10⁻³ of the lag L_kv[T] − T of a 1 µm lead is 1 nm, under an encoder's noise.
+pub(crate) const LOOP_GAIN_HOLD: f64 = 1e-3;
+
+/// Range of a closed loop's transmission gain g: 1 for a continuous loop, 1 + kv·h/2 for a loop
+/// sampled every h, more with a computation delay; a stable sampled P loop has kv·h < 1 (g < 1.6).
+pub(crate) const LOOP_GAIN_RANGE: (f64, f64) = (0.8, 2.0);
 
 /// Everything a compare computes, for diagnose to build on.
 pub(crate) struct Fitted<'a> {
@@ -289,15 +298,23 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
         // moves by ≈ (δkv/kv)·v·T'/kv: a 2 µm lead of 14 mm at 0.1 m/s and kv 25/s has
         // v·T'/kv ≈ 4 µm, so 0.1 % left 4 nm, the noise of a linear scale, and the shapes
         // absorbed it; kv is fixed far better than that by the lag v/kv of the passes).
+        // A sampled loop passes the transmission with the gain g of [`Stack::loop_gain`]: one
+        // Gauss–Newton step per refit, held once it moves less than LOOP_GAIN_HOLD.
         for _ in 0..LOOP_KV_REFITS {
-            let kv = fs.terms.iter().find(|t| t.name == EffectName::ServoLag).and_then(|t| t.hyper.first().copied());
-            match kv {
-                Some(kv) if has_closed_loop(chans) && kv > 0.0 && (kv / st.loop_kv - 1.0).abs() > LOOP_KV_HOLD => {
-                    st = st.with_loop_kv(kv);
-                    fs = fit_model_on(&st, &bare, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
-                }
-                _ => break,
+            if !has_closed_loop(chans) {
+                break;
             }
+            let kv = fs.terms.iter().find(|t| t.name == EffectName::ServoLag).and_then(|t| t.hyper.first().copied());
+            let kv_moved = kv.filter(|kv| *kv > 0.0 && (kv / st.loop_kv - 1.0).abs() > LOOP_KV_HOLD);
+            let prediction: Vec<f64> = st.y().iter().zip(&fs.residual).map(|(y, r)| y - r).collect();
+            let g_moved = loop_gain_step(&st, &prediction, &fs.residual, &w)
+                .map(|d| (st.loop_gain + d).clamp(LOOP_GAIN_RANGE.0, LOOP_GAIN_RANGE.1))
+                .filter(|g| (g - st.loop_gain).abs() > LOOP_GAIN_HOLD);
+            if kv_moved.is_none() && g_moved.is_none() {
+                break;
+            }
+            st = st.with_loop(kv_moved.unwrap_or(st.loop_kv), g_moved.unwrap_or(st.loop_gain));
+            fs = fit_model_on(&st, &bare, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
         }
         if pass == 0 && est.iter().any(|e| *e) {
             let mut k0 = 0;
@@ -331,6 +348,15 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                 }
             }
             continue;
+        }
+        if has_closed_loop(chans) && st.loop_kv.is_finite() {
+            let g = st.loop_gain;
+            notes.push(format!(
+                "closed loop: the transmission reaches the following channel through the loop (kv = {:.4} 1/s) with \
+                 gain g = {g:.4} on its lag (1 for a continuous loop; a loop sampled every h gives g ≈ 1 + kv·h/2{})",
+                st.loop_kv,
+                if g > 1.0 { format!(": h ≈ {:.3} ms", 2.0 * (g - 1.0) / st.loop_kv * 1e3) } else { String::new() }
+            ));
         }
         let (st, fs) = if mode_over_shapes {
             let st2 = match fitted_excitation(&st, &fs) {

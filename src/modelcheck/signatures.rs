@@ -26,6 +26,12 @@ pub(crate) struct Stack<'a> {
     /// Position-loop gain kv (1/s) through which a closed loop's transmission reaches its
     /// following channels ([`close_loop`]); ∞ (the identity) when the model has no servo_lag.
     pub(crate) loop_kv: f64,
+    /// Gain g with which a closed loop passes its transmission T to the following channels,
+    /// −[T + g·(L_kv[T] − T)] ([`close_loop`]): 1 for a continuous loop; a loop sampled every h
+    /// (zero-order hold) follows its input as a continuous one with the decay rate kv and the lag
+    /// scaled by g = kv·h/(1 − e^{−kv·h}) ≈ 1 + kv·h/2 (module doc of `encoder`). Fitted from the
+    /// data ([`loop_gain_step`]).
+    pub(crate) loop_gain: f64,
     /// The distinct sample positions of all channels, sorted (m): computed on first use and
     /// shared by the stacks derived from this one (their channels are the same).
     distinct: std::sync::Arc<std::sync::OnceLock<Vec<f64>>>,
@@ -312,10 +318,12 @@ impl<'a> Stack<'a> {
         Stack { excitation, group: self.group.clone(), distinct: self.distinct.clone(), ..*self }
     }
 
-    /// The same stack with the position-loop gain `kv` (1/s, [`Stack::loop_kv`]).
-    pub(crate) fn with_loop_kv(&self, kv: f64) -> Stack<'a> {
+    /// The same stack with the position-loop gain `kv` (1/s, [`Stack::loop_kv`]) and the gain `g`
+    /// of its transmission path ([`Stack::loop_gain`]).
+    pub(crate) fn with_loop(&self, kv: f64, g: f64) -> Stack<'a> {
         Stack {
             loop_kv: kv,
+            loop_gain: g,
             group: self.group.clone(),
             excitation: self.excitation.clone(),
             distinct: self.distinct.clone(),
@@ -350,6 +358,7 @@ impl<'a> Stack<'a> {
             n_groups: keys.len(),
             excitation: vec![Vec::new(); chans.len()],
             loop_kv: f64::INFINITY,
+            loop_gain: 1.0,
             distinct: Default::default(),
         }
     }
@@ -927,8 +936,11 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
     let mut cols = open_loop_columns(st, name, sh, h);
     if has_closed_loop(st.chans) {
         match (name, cols.as_mut_slice()) {
-            // A wave in the scale's reading, faster than the log samples it (`close_loop_wave`).
-            (EffectName::InterpolationError, [sin, cos]) => close_loop_wave(st, h[0], sin, cos),
+            // A wave in position, whose frequency in time at speed a log may sample sparsely or
+            // near the loop's bandwidth (`close_loop_wave`): an interpolation error, a cyclic lead.
+            (EffectName::InterpolationError | EffectName::CyclicLead, [sin, cos]) => {
+                close_loop_wave(st, h[0], sin, cos)
+            }
             _ => cols.iter_mut().for_each(|c| close_loop(st, c)),
         }
     }
@@ -997,10 +1009,11 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
                 return vec![vec![0.0; st.n], vec![0.0; st.n]];
             }
             let drive = name == EffectName::CyclicLead;
-            let s = move |c: &Channel| if drive { c.s_drive() } else { c.s_chain() };
             let (sin, cos) = st.col_pair(|c, i| {
-                let (a, b) = (TWO_PI * c.x[i] / p).sin_cos();
-                (s(c) * a, s(c) * b)
+                // A cyclic lead at the screw's position, an interpolation error at the scale's reading.
+                let (s, x) = if drive { (c.s_drive(), c.screw_x(i)) } else { (c.s_chain(), c.x[i]) };
+                let (a, b) = (TWO_PI * x / p).sin_cos();
+                (s * a, s * b)
             });
             vec![sin, cos]
         }
@@ -1225,21 +1238,47 @@ pub(crate) fn shortest_resolvable_period(st: &Stack) -> Option<f64> {
 /// The prediction of a known (not fitted) effect at every sample, passed through a closed
 /// position loop onto its following channels ([`close_loop`]).
 pub(crate) fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
-    if let (EffectParams::InterpolationError(ie), true) = (&e.params, has_closed_loop(st.chans)) {
-        // A·sin(θ + φ) = A·cos φ·sin θ + A·sin φ·cos θ, through the loop as a wave (`close_loop_wave`).
-        let (mut sin, mut cos) = st.col_pair(|c, i| {
-            let (a, b) = (TWO_PI * c.x[i] / ie.period).sin_cos();
-            (c.s_chain() * a, c.s_chain() * b)
-        });
-        close_loop_wave(st, ie.period, &mut sin, &mut cos);
-        let (sp, cp) = ie.phase.sin_cos();
-        return sin.iter().zip(&cos).map(|(a, b)| ie.amplitude * (cp * a + sp * b)).collect();
+    if has_closed_loop(st.chans) {
+        // Waves in position pass the loop as waves (`close_loop_wave`, as their columns do).
+        match &e.params {
+            EffectParams::InterpolationError(ie) => {
+                return waves_through_loop(st, &[(ie.amplitude, ie.period, ie.phase)], false);
+            }
+            EffectParams::CyclicLead(l) => {
+                let mut waves = vec![(l.amplitude, l.period, l.phase)];
+                waves.extend(l.harmonics.iter().map(|h| (h.amplitude, l.period / f64::from(h.order), h.phase)));
+                return waves_through_loop(st, &waves, true);
+            }
+            _ => {}
+        }
     }
     let mut col = open_loop_prediction(st, e);
     if has_closed_loop(st.chans) {
         close_loop(st, &mut col);
     }
     col
+}
+
+/// Σ_k A_k·sin(2πx/p_k + φ_k) on every channel, each wave passed through the closed loop onto
+/// the following channels as a wave ([`close_loop_wave`]): A·sin(θ + φ) = A·cos φ·sin θ +
+/// A·sin φ·cos θ. `waves` holds (A m, p m, φ rad); `screw`: a wave of the screw (a cyclic lead,
+/// at [`Channel::screw_x`] times [`Channel::s_drive`]), else of the scale (an interpolation error,
+/// at the reading times [`Channel::s_chain`]).
+fn waves_through_loop(st: &Stack, waves: &[(f64, f64, f64)], screw: bool) -> Vec<f64> {
+    let mut out = vec![0.0; st.n];
+    for &(amplitude, period, phase) in waves {
+        let (mut sin, mut cos) = st.col_pair(|c, i| {
+            let (s, x) = if screw { (c.s_drive(), c.screw_x(i)) } else { (c.s_chain(), c.x[i]) };
+            let (a, b) = (TWO_PI * x / period).sin_cos();
+            (s * a, s * b)
+        });
+        close_loop_wave(st, period, &mut sin, &mut cos);
+        let (sp, cp) = phase.sin_cos();
+        for (o, (a, b)) in out.iter_mut().zip(sin.iter().zip(&cos)) {
+            *o += amplitude * (cp * a + sp * b);
+        }
+    }
+    out
 }
 
 /// The prediction of [`known_prediction`] on each channel alone.
@@ -1266,7 +1305,7 @@ fn open_loop_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
             col
         }
         (EffectParams::ScaleError(s), _) => st.col(|c, i| c.s_chain() * s.value * c.x[i]),
-        (EffectParams::CyclicLead(l), _) => st.col(|c, i| c.s_drive() * l.value(c.x[i])),
+        (EffectParams::CyclicLead(l), _) => st.col(|c, i| c.s_drive() * l.value(c.screw_x(i))),
         (EffectParams::InterpolationError(ie), _) => st.col(|c, i| c.s_chain() * ie.value(c.x[i])),
         (EffectParams::ThermalExpansion(th), _) => st.col(|c, i| c.s_chain() * th.value(c.x[i], c.t[i])),
         (EffectParams::ThermalDrift(dr), _) => st.col(|c, i| c.s_chain() * dr.value_at(c.t[i])),
