@@ -936,11 +936,10 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
     let mut cols = open_loop_columns(st, name, sh, h);
     if has_closed_loop(st.chans) {
         match (name, cols.as_mut_slice()) {
-            // A wave in position, whose frequency in time at speed a log may sample sparsely or
-            // near the loop's bandwidth (`close_loop_wave`): an interpolation error, a cyclic lead.
-            (EffectName::InterpolationError | EffectName::CyclicLead, [sin, cos]) => {
-                close_loop_wave(st, h[0], sin, cos)
-            }
+            // A wave in the scale's reading, faster than the log samples it (`close_loop_wave`).
+            // (A cyclic lead, 2–60 mm, is sampled densely and takes `close_loop`: passed as a wave
+            // it was no longer found against a flexible positioning shape, draw 2007.)
+            (EffectName::InterpolationError, [sin, cos]) => close_loop_wave(st, h[0], sin, cos),
             _ => cols.iter_mut().for_each(|c| close_loop(st, c)),
         }
     }
@@ -1239,17 +1238,9 @@ pub(crate) fn shortest_resolvable_period(st: &Stack) -> Option<f64> {
 /// position loop onto its following channels ([`close_loop`]).
 pub(crate) fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
     if has_closed_loop(st.chans) {
-        // Waves in position pass the loop as waves (`close_loop_wave`, as their columns do).
-        match &e.params {
-            EffectParams::InterpolationError(ie) => {
-                return waves_through_loop(st, &[(ie.amplitude, ie.period, ie.phase)], false);
-            }
-            EffectParams::CyclicLead(l) => {
-                let mut waves = vec![(l.amplitude, l.period, l.phase)];
-                waves.extend(l.harmonics.iter().map(|h| (h.amplitude, l.period / f64::from(h.order), h.phase)));
-                return waves_through_loop(st, &waves, true);
-            }
-            _ => {}
+        // An interpolation error passes the loop as a wave (`close_loop_wave`, as its columns do).
+        if let EffectParams::InterpolationError(ie) = &e.params {
+            return waves_through_loop(st, &[(ie.amplitude, ie.period, ie.phase)]);
         }
     }
     let mut col = open_loop_prediction(st, e);
@@ -1259,18 +1250,15 @@ pub(crate) fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
     col
 }
 
-/// Σ_k A_k·sin(2πx/p_k + φ_k) on every channel, each wave passed through the closed loop onto
-/// the following channels as a wave ([`close_loop_wave`]): A·sin(θ + φ) = A·cos φ·sin θ +
-/// A·sin φ·cos θ. `waves` holds (A m, p m, φ rad); `screw`: a wave of the screw (a cyclic lead,
-/// at [`Channel::screw_x`] times [`Channel::s_drive`]), else of the scale (an interpolation error,
-/// at the reading times [`Channel::s_chain`]).
-fn waves_through_loop(st: &Stack, waves: &[(f64, f64, f64)], screw: bool) -> Vec<f64> {
+/// Σ_k A_k·sin(2πx/p_k + φ_k) in the scale's reading x (times [`Channel::s_chain`]), each wave
+/// passed through the closed loop onto the following channels as a wave ([`close_loop_wave`]):
+/// A·sin(θ + φ) = A·cos φ·sin θ + A·sin φ·cos θ. `waves` holds (A m, p m, φ rad).
+fn waves_through_loop(st: &Stack, waves: &[(f64, f64, f64)]) -> Vec<f64> {
     let mut out = vec![0.0; st.n];
     for &(amplitude, period, phase) in waves {
         let (mut sin, mut cos) = st.col_pair(|c, i| {
-            let (s, x) = if screw { (c.s_drive(), c.screw_x(i)) } else { (c.s_chain(), c.x[i]) };
-            let (a, b) = (TWO_PI * x / period).sin_cos();
-            (s * a, s * b)
+            let (a, b) = (TWO_PI * c.x[i] / period).sin_cos();
+            (c.s_chain() * a, c.s_chain() * b)
         });
         close_loop_wave(st, period, &mut sin, &mut cos);
         let (sp, cp) = phase.sin_cos();
