@@ -75,9 +75,8 @@ fn zero(l: usize) -> f64 {
 fn write_set(c: &Case, dir: &Path, rng: &mut ChaCha8Rng) {
     std::fs::create_dir_all(dir).unwrap();
     let l = &c.layout;
-    let mut manifest = String::from(
-        "format = \"vmt-measurements/1\"\ndescription = \"laser lines written by tests/laser_cli.rs\"\n",
-    );
+    let mut manifest =
+        String::from("format = \"vmt-measurements/1\"\ndescription = \"laser lines written by tests/laser_cli.rs\"\n");
     for (i, (r, u)) in l.lines.iter().enumerate() {
         let kind = if u[0] == 1.0 { "laser_linear" } else { "laser_straightness" };
         writeln!(
@@ -100,8 +99,7 @@ fn write_set(c: &Case, dir: &Path, rng: &mut ChaCha8Rng) {
     csv.push('\n');
     for run in 1..=c.runs {
         for dir in [1i32, -1] {
-            let order: Vec<f64> =
-                if dir == 1 { l.targets.clone() } else { l.targets.iter().rev().copied().collect() };
+            let order: Vec<f64> = if dir == 1 { l.targets.clone() } else { l.targets.iter().rev().copied().collect() };
             for q in order {
                 write!(csv, "{:e},{run},{dir}", q * 1e3).unwrap();
                 for (i, line) in l.lines.iter().enumerate() {
@@ -226,6 +224,8 @@ struct LayoutResult {
     values: usize,
     /// √(mean over values of (spread over draws / RMS reported σ)²).
     spread_over_sigma: f64,
+    /// Per value: spread over the draws / RMS reported σ.
+    per_value: Vec<f64>,
     /// √(mean over values and draws of ((estimate − truth)/σ)²).
     error_over_sigma: f64,
     /// Values whose σ is null where the independent rank test says observable, or the reverse.
@@ -334,6 +334,7 @@ fn run_layout(i: u64, draws: usize) -> LayoutResult {
         lines: c.layout.lines.len(),
         values: ratios.len(),
         spread_over_sigma: if ratios.is_empty() { f64::NAN } else { rms(&ratios) },
+        per_value: ratios.clone(),
         error_over_sigma: if z2.is_empty() { f64::NAN } else { (z2.iter().sum::<f64>() / z2.len() as f64).sqrt() },
         observability_mismatches: mismatches,
         undetermined: obs.iter().flatten().filter(|o| !**o).count(),
@@ -370,7 +371,11 @@ fn study(layouts: u64, draws: usize) {
         if r.observability_mismatches > 0 || r.unnamed > 0 {
             fails.push(format!("layout {i}: observability {} / naming {}", r.observability_mismatches, r.unnamed));
         }
-        for (what, x) in [("spread/σ", Some(r.spread_over_sigma)), ("error/σ", Some(r.error_over_sigma)), ("compensation", r.compensation)] {
+        for (what, x) in [
+            ("spread/σ", Some(r.spread_over_sigma)),
+            ("error/σ", Some(r.error_over_sigma)),
+            ("compensation", r.compensation),
+        ] {
             if let Some(x) = x.filter(|x| !x.is_nan()) {
                 if (x - 1.0).abs() > 0.2 {
                     fails.push(format!("layout {i}: {what} {x:.3} not within 20 %"));
@@ -392,6 +397,19 @@ fn study(layouts: u64, draws: usize) {
             s[s.len() - 1]
         );
     };
+    let mut all: Vec<f64> = results.iter().flat_map(|r| r.per_value.iter().copied()).collect();
+    all.sort_by(f64::total_cmp);
+    if !all.is_empty() {
+        println!(
+            "identify, per value: spread over {draws} draws / RMS reported σ over {} values: mean {:.3}, p5 {:.3}, p95 {:.3}, min {:.3}, max {:.3}",
+            all.len(),
+            all.iter().sum::<f64>() / all.len() as f64,
+            all[all.len() / 20],
+            all[all.len() * 19 / 20],
+            all[0],
+            all[all.len() - 1]
+        );
+    }
     summary("identify spread/σ", results.iter().map(|r| r.spread_over_sigma).filter(|x| !x.is_nan()).collect());
     summary("identify error/σ", results.iter().map(|r| r.error_over_sigma).filter(|x| !x.is_nan()).collect());
     summary("compensate residual/allowed", results.iter().filter_map(|r| r.compensation).collect());
