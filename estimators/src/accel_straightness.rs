@@ -1092,7 +1092,8 @@ fn spectra_of(profiles: &[Vec<f64>]) -> Result<Vec<Vec<Complex<f64>>>> {
 /// DESIGN.md §7 fusion: curvature profiles `c_i = (a_i − ā_i)/v_i²` (1/m, on a common uniform grid of
 /// period `P`) are fused per DFT bin with inverse-variance weights `w_i(κ) = κ⁴·v_i³·L/ρ_i²`
 /// ([`snr_weight`]), `C(κ) = Σ w_i·C_i(κ)/Σ w_i`, integrated exactly, `E(κ) = −C(κ)/κ²`, and kept only for
-/// `λ = 2π/κ` in `[min_wavelength, max_wavelength]`. Zero phase; no drift.
+/// `λ = 2π/κ` in `[min_wavelength, max_wavelength]`. Zero phase; no drift. Run `i` (sample spacing
+/// `spacings[i]` = `v/fs`, m) enters only the bins it resolves ([`resolves`]); a bin none resolves is 0.
 ///
 /// The DFT treats the grid as periodic over `P`: exact for profiles periodic over the travel. Otherwise
 /// the solution differs from the truth by the unobservable quadratic plus the in-band part of that
@@ -1156,6 +1157,9 @@ pub fn fuse_snr_weighted(
 ///
 /// 1. Validates the runs; builds the common uniform position grid (overlap of the runs, finest spacing;
 ///    runs with the seed's equal spatial sampling map onto it exactly, others by linear interpolation).
+///    The band's shortest wavelength defaults to 4 grid spacings, raised with the tilt separated to the
+///    shortest wavelength two speeds resolve ([`joint_min_wavelength`]); each run enters the fusion and
+///    the bound only at wavelengths of at least 4 of its own spacings ([`resolves`]).
 /// 2. Noise density per run: `config.noise_density` or [`estimate_noise_density`].
 /// 3. `SpatialContinuity`: per run [`seed_run_displacement`] with `λ_c,i` =
 ///    [`single_run_noise_wavelength`] (capped at the maximum wavelength) — the seed's text does not say how
@@ -1551,6 +1555,9 @@ pub struct FusionSettings {
 /// tilt ignored:    K = Σ q_i v_i² A_i / S₄          (the inverse-variance fusion of fuse_snr_weighted)
 /// ```
 ///
+/// where the sums run over the runs that resolve `κ_k` (`spacings[i]` is run `i`'s sample spacing `v/fs`,
+/// m; [`resolves`]: a run interpolated onto a finer grid holds nothing of the shorter wavelengths), and a
+/// coefficient no run resolves — or, with the tilt separated, only runs of one speed — is left out;
 /// then `E_k = −K_k/κ_k²` inside `[min_wavelength, max_wavelength]` and `T_k` inside
 /// `[min_wavelength, tilt_max_wavelength]`, inverted to the grid. Both are the Gauss–Markov (minimum
 /// variance unbiased) estimates of the model and reach [`cramer_rao_harmonic`]; with one speed or equal
