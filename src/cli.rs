@@ -1357,7 +1357,20 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, units: &str,
         print_profiles(&id.profiles);
     }
     if let Some(out) = out {
-        measurement::write_profiles(&crate::byo::profiles_of(&id), out, units)?;
+        let mut table = crate::byo::profiles_of(&id);
+        // A profile with a value the lines do not determine has no σ column; its numbers are the gauge's
+        // arbitrary choice, which `vmt score` would compare with a truth: not written, and said so.
+        table.columns.retain(|c| {
+            if c.sigma.is_none() {
+                eprintln!(
+                    "note: {} not written to {}: not observable from these lines",
+                    c.effect.as_str(),
+                    out.display()
+                );
+            }
+            c.sigma.is_some()
+        });
+        measurement::write_profiles(&table, out, units)?;
         eprintln!("wrote {}", out.display());
     }
     Ok(0)
@@ -1421,7 +1434,9 @@ fn unobservable_profiles(profiles: &[vmt_estimators::laser_ls::ProfileEstimate])
 fn print_profiles(profiles: &[vmt_estimators::laser_ls::ProfileEstimate]) {
     for p in profiles {
         let q = if p.component < 3 { Quantity::Length } else { Quantity::Angle };
-        let peak = p.values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        // Over the determined values only: an undetermined one is the gauge's arbitrary number.
+        let peak =
+            p.values.iter().zip(&p.std_errors).filter(|(_, e)| e.is_some()).fold(0.0f64, |m, (v, _)| m.max(v.abs()));
         let missing = p.std_errors.iter().filter(|e| e.is_none()).count();
         let worst = p.std_errors.iter().flatten().cloned().fold(0.0, f64::max);
         let se = match missing {

@@ -5,87 +5,26 @@
 //! line layouts (3–9 lines, measuring points anywhere in a 0.6 × 0.6 × 1.2 m box on the carriage, beams
 //! along X, Y or Z), plus deliberately rank-deficient layouts.
 
-use rand::{Rng, SeedableRng};
+use crate::gen::laser::{line_value, random_layout, random_motions, LineLayout as Layout, Smooth, BEAMS};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use vmt_estimators::laser_ls::{identify, Axis, AxisModel, IdOptions, Model, Reading};
 
-/// A smooth random profile: `Σ a_j cos(k_j q + φ_j)`.
-struct Smooth(Vec<(f64, f64, f64)>);
-
-impl Smooth {
-    // A phase range, not 2π: replacing 6.283 by TAU would move every fixed-seed draw of this test.
-    #[allow(clippy::approx_constant)]
-    fn random(rng: &mut ChaCha8Rng, rms: f64, ell: f64) -> Smooth {
-        let n = 12;
-        Smooth(
-            (0..n)
-                .map(|_| {
-                    let z: f64 = StandardNormal.sample(rng);
-                    let w: f64 = StandardNormal.sample(rng);
-                    (rms * (2.0 / n as f64).sqrt() * w, z / ell, rng.gen::<f64>() * 6.283)
-                })
-                .collect(),
-        )
-    }
-    fn at(&self, q: f64) -> f64 {
-        self.0.iter().map(|(a, k, p)| a * (k * q + p).cos()).sum()
-    }
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-/// A line: measuring point (m) and beam direction.
-type Line = ([f64; 3], [f64; 3]);
-
-struct Layout {
-    targets: Vec<f64>,
-    lines: Vec<Line>,
-    sigma: f64,
-}
-
-const BEAMS: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-
-fn random_layout(rng: &mut ChaCha8Rng) -> Layout {
-    let travel = rng.gen_range(0.3..1.5);
-    let n = rng.gen_range(6..16);
-    let step = travel / (n - 1) as f64;
-    let targets: Vec<f64> = (0..n)
-        .map(|i| {
-            let jitter = if i == 0 || i == n - 1 { 0.0 } else { rng.gen_range(-0.3..0.3) * step };
-            i as f64 * step + jitter
-        })
-        .collect();
-    let n_lines = rng.gen_range(3..10);
-    let lines = (0..n_lines)
-        .map(|_| {
-            let p = [rng.gen_range(-0.3..0.3), rng.gen_range(-0.3..0.3), rng.gen_range(0.0..1.2)];
-            (p, BEAMS[rng.gen_range(0..3)])
-        })
-        .collect();
-    Layout { targets, lines, sigma: 10f64.powf(rng.gen_range(-8.0..-6.5)) }
-}
-
 /// Readings of a layout for error motions `motions` (EXX, EYX, EZX, EAX, EBX, ECX) with noise from `rng`
 /// (none when `rng` is None).
 fn readings(l: &Layout, motions: &[Smooth; 6], mut rng: Option<&mut ChaCha8Rng>) -> Vec<Reading> {
     let mut out = Vec::new();
-    for (li, (r, u)) in l.lines.iter().enumerate() {
+    for (li, line) in l.lines.iter().enumerate() {
         let zero = 1e-5 * li as f64;
         for &q in &l.targets {
-            let e = [motions[0].at(q), motions[1].at(q), motions[2].at(q)];
-            let eps = [motions[3].at(q), motions[4].at(q), motions[5].at(q)];
-            let c = cross(eps, *r);
-            let d = [e[0] + c[0], e[1] + c[1], e[2] + c[2]];
             let noise: f64 = rng.as_deref_mut().map_or(0.0, |g| StandardNormal.sample(g));
             out.push(Reading {
                 q: vec![q],
-                point: *r,
-                direction: *u,
-                value: u[0] * d[0] + u[1] * d[1] + u[2] * d[2] + zero + l.sigma * noise,
+                point: line.0,
+                direction: line.1,
+                value: line_value(motions, line, q) + zero + l.sigma * noise,
                 sigma: l.sigma,
                 line: Some(li),
             });
@@ -96,14 +35,6 @@ fn readings(l: &Layout, motions: &[Smooth; 6], mut rng: Option<&mut ChaCha8Rng>)
 
 fn model(l: &Layout) -> Model {
     Model { axes: vec![AxisModel::with_nodes(Axis::X, &l.targets)], squareness: false }
-}
-
-fn random_motions(rng: &mut ChaCha8Rng, travel: f64) -> [Smooth; 6] {
-    let mut m = |rms: f64| {
-        let ell = travel * rng.gen_range(0.15..0.6);
-        Smooth::random(rng, rms, ell)
-    };
-    [m(10e-6), m(3e-6), m(3e-6), m(10e-6), m(10e-6), m(10e-6)]
 }
 
 /// Per layout: over 60 noise draws, each identified value's error (against the identification of the

@@ -28,6 +28,7 @@ mod gen_diagnose;
 mod golden;
 mod index_guard;
 mod kill;
+mod laser_cli;
 mod laser_independent;
 #[allow(clippy::type_complexity, clippy::needless_range_loop)]
 mod model_check;

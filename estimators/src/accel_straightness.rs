@@ -506,6 +506,65 @@ pub fn in_band(wavelength: f64, min_wavelength: f64, max_wavelength: f64) -> boo
     wavelength >= min_wavelength * (1.0 - REL) && wavelength <= max_wavelength * (1.0 + REL)
 }
 
+/// Shortest wavelength a record resolves, in its own sample spacings: `λ ≥ 4·Δx` (twice the spatial
+/// Nyquist wavelength; the default shortest wavelength of the band on the finest spacing, too).
+pub const MIN_WAVELENGTH_SPACINGS: f64 = 4.0;
+
+/// Whether a run of sample spacing `spacing` (m, `v/fs`) resolves `wavelength` (m):
+/// `λ ≥` [`MIN_WAVELENGTH_SPACINGS`]`·Δx` ([`in_band`]'s tolerance). A run sampled more coarsely than the
+/// common grid carries no information about shorter wavelengths: its samples, interpolated onto the
+/// grid, hold nothing of the signal there (linear interpolation passes `sinc²` of it) and only a
+/// fraction of its noise. Fusing it there with its white-noise weight shrank the estimate (per-coefficient
+/// gain 0.05–0.3 at the band's short end on runs of unequal spacing) and the bound counted information
+/// the run does not have.
+pub fn resolves(spacing: f64, wavelength: f64) -> bool {
+    in_band(wavelength, MIN_WAVELENGTH_SPACINGS * spacing, f64::INFINITY)
+}
+
+/// [`cramer_rao_harmonic`] over the runs that resolve `wavelength` ([`resolves`]): run `i` has noise
+/// density `noise_densities[i]`, speed `speeds[i]` and sample spacing `spacings[i]` (m). The bound of
+/// every estimate of [`FusionMethod::SnrWeighted`].
+pub fn cramer_rao_resolved(
+    noise_densities: &[f64],
+    speeds: &[f64],
+    spacings: &[f64],
+    travel: f64,
+    wavelength: f64,
+    ac_coupling_hz: f64,
+    joint_tilt: bool,
+) -> Result<HarmonicBound> {
+    if spacings.len() != speeds.len() {
+        return Err(AccelStraightnessError::BadInput(format!(
+            "one sample spacing per speed expected: {} spacings for {} speeds",
+            spacings.len(),
+            speeds.len()
+        )));
+    }
+    let keep: Vec<usize> = (0..speeds.len()).filter(|&i| resolves(spacings[i], wavelength)).collect();
+    let rhos: Vec<f64> = keep.iter().filter_map(|&i| noise_densities.get(i).copied()).collect();
+    let v: Vec<f64> = keep.iter().map(|&i| speeds[i]).collect();
+    if keep.is_empty() || rhos.len() != keep.len() {
+        return Err(AccelStraightnessError::BadInput(format!(
+            "no run resolves the wavelength {wavelength} m (spacings {spacings:?} m; {} noise densities)",
+            noise_densities.len()
+        )));
+    }
+    cramer_rao_harmonic(&rhos, &v, travel, wavelength, ac_coupling_hz, joint_tilt)
+}
+
+/// The shortest wavelength (m) at which the runs that resolve it ([`resolves`]) include two distinct
+/// speeds, so that the gravity tilt can be told from the straightness (one of the `4·Δx_i`); `None` when
+/// the runs have fewer than two distinct speeds.
+pub fn joint_min_wavelength(speeds: &[f64], spacings: &[f64]) -> Option<f64> {
+    let mut cand: Vec<f64> = spacings.iter().map(|d| MIN_WAVELENGTH_SPACINGS * d).collect();
+    cand.sort_by(f64::total_cmp);
+    cand.into_iter().find(|&lam| {
+        let v: Vec<f64> = (0..speeds.len()).filter(|&i| resolves(spacings[i], lam)).map(|i| speeds[i]).collect();
+        let (lo, hi) = v.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &x| (a.min(x), b.max(x)));
+        hi > lo * (1.0 + 1e-9)
+    })
+}
+
 /// Band-limits a profile on a uniform grid to the wavelengths `[min_wavelength, max_wavelength]` (m):
 /// takes the DFT with period `P = M·Δx`, keeps the bins whose wavelength `λ_k = P/k` lies in the band
 /// (DC dropped), inverts, and removes the least-squares reference line (ISO 230-1). Used to compare an
@@ -753,18 +812,20 @@ pub struct StraightnessEstimate {
 
 impl StraightnessEstimate {
     /// Predicted noise standard deviation (m) of one quadrature component of the harmonic at `wavelength`
-    /// in this estimate: SNR method — the combined Cramér–Rao bound that applies ([`cramer_rao_harmonic`]:
-    /// joint when the tilt was separated, with the AC-coupling loss; equal to [`cramer_rao_runs`] for a
-    /// DC-coupled sensor without separation); seed method —
+    /// in this estimate: SNR method — the combined Cramér–Rao bound that applies ([`cramer_rao_resolved`]:
+    /// over the runs that resolve the wavelength, joint when the tilt was separated, with the AC-coupling
+    /// loss; equal to [`cramer_rao_runs`] for a DC-coupled sensor without separation where every run
+    /// resolves it); seed method —
     /// `√(Σ w_i²·σ_i²)` with the crossover weights `w_i` of [`continuity_weights`] (ignores the Kalman
     /// filter's and high-pass's gain, so it is a guide, not a bound).
     pub fn harmonic_std(&self, wavelength: f64) -> Result<f64> {
         let rhos: Vec<f64> = self.runs.iter().map(|r| r.noise_density).collect();
         let speeds: Vec<f64> = self.runs.iter().map(|r| r.speed).collect();
         match self.method {
-            FusionMethod::SnrWeighted => Ok(cramer_rao_harmonic(
+            FusionMethod::SnrWeighted => Ok(cramer_rao_resolved(
                 &rhos,
                 &speeds,
+                &self.spacings(),
                 self.travel,
                 wavelength,
                 self.ac_coupling_hz,
@@ -788,14 +849,22 @@ impl StraightnessEstimate {
 
 impl StraightnessEstimate {
     /// Cramér–Rao bound (rad) of one quadrature component of the tilt harmonic at `wavelength` in the
-    /// joint model ([`cramer_rao_harmonic`]); `None` when the tilt was not separated.
+    /// joint model, over the runs that resolve it ([`cramer_rao_resolved`]); `None` when the tilt was not
+    /// separated.
     pub fn tilt_std(&self, wavelength: f64) -> Result<Option<f64>> {
         if !self.gravity_tilt_separated {
             return Ok(None);
         }
         let rhos: Vec<f64> = self.runs.iter().map(|r| r.noise_density).collect();
         let speeds: Vec<f64> = self.runs.iter().map(|r| r.speed).collect();
-        Ok(cramer_rao_harmonic(&rhos, &speeds, self.travel, wavelength, self.ac_coupling_hz, true)?.tilt_joint)
+        let spacings = self.spacings();
+        Ok(cramer_rao_resolved(&rhos, &speeds, &spacings, self.travel, wavelength, self.ac_coupling_hz, true)?
+            .tilt_joint)
+    }
+
+    /// Sample spacing of each run, `v/fs` (m), in input order.
+    pub fn spacings(&self) -> Vec<f64> {
+        self.runs.iter().map(|r| r.speed / r.sample_rate).collect()
     }
 
     /// Seed method: deterministic gain (dimensionless) of the seed pipeline for a harmonic of
@@ -1023,7 +1092,8 @@ fn spectra_of(profiles: &[Vec<f64>]) -> Result<Vec<Vec<Complex<f64>>>> {
 /// DESIGN.md §7 fusion: curvature profiles `c_i = (a_i − ā_i)/v_i²` (1/m, on a common uniform grid of
 /// period `P`) are fused per DFT bin with inverse-variance weights `w_i(κ) = κ⁴·v_i³·L/ρ_i²`
 /// ([`snr_weight`]), `C(κ) = Σ w_i·C_i(κ)/Σ w_i`, integrated exactly, `E(κ) = −C(κ)/κ²`, and kept only for
-/// `λ = 2π/κ` in `[min_wavelength, max_wavelength]`. Zero phase; no drift.
+/// `λ = 2π/κ` in `[min_wavelength, max_wavelength]`. Zero phase; no drift. Run `i` (sample spacing
+/// `spacings[i]` = `v/fs`, m) enters only the bins it resolves ([`resolves`]); a bin none resolves is 0.
 ///
 /// The DFT treats the grid as periodic over `P`: exact for profiles periodic over the travel. Otherwise
 /// the solution differs from the truth by the unobservable quadratic plus the in-band part of that
@@ -1033,17 +1103,22 @@ pub fn fuse_snr_weighted(
     curvatures: &[Vec<f64>],
     speeds: &[f64],
     noise_densities: &[f64],
+    spacings: &[f64],
     period: f64,
     min_wavelength: f64,
     max_wavelength: f64,
 ) -> Result<Vec<f64>> {
     let spectra = spectra_of(curvatures)?;
-    if speeds.len() != curvatures.len() || noise_densities.len() != curvatures.len() {
+    if speeds.len() != curvatures.len()
+        || noise_densities.len() != curvatures.len()
+        || spacings.len() != curvatures.len()
+    {
         return Err(AccelStraightnessError::BadInput(format!(
-            "{} curvature profiles need as many speeds and noise densities, got {} and {}",
+            "{} curvature profiles need as many speeds, noise densities and spacings, got {}, {} and {}",
             curvatures.len(),
             speeds.len(),
-            noise_densities.len()
+            noise_densities.len(),
+            spacings.len()
         )));
     }
     for i in 0..speeds.len() {
@@ -1064,11 +1139,16 @@ pub fn fuse_snr_weighted(
         let mut num = Complex::new(0.0, 0.0);
         let mut den = 0.0;
         for i in 0..spectra.len() {
+            if !resolves(spacings[i], wl) {
+                continue;
+            }
             let w = snr_weight(kappa, speeds[i], period, noise_densities[i]);
             num += spectra[i][k] * w;
             den += w;
         }
-        *c = -num / (den * kappa * kappa);
+        if den > 0.0 {
+            *c = -num / (den * kappa * kappa);
+        }
     }
     Ok(irfft(&mut fused, m))
 }
@@ -1077,6 +1157,9 @@ pub fn fuse_snr_weighted(
 ///
 /// 1. Validates the runs; builds the common uniform position grid (overlap of the runs, finest spacing;
 ///    runs with the seed's equal spatial sampling map onto it exactly, others by linear interpolation).
+///    The band's shortest wavelength defaults to 4 grid spacings, raised with the tilt separated to the
+///    shortest wavelength two speeds resolve ([`joint_min_wavelength`]); each run enters the fusion and
+///    the bound only at wavelengths of at least 4 of its own spacings ([`resolves`]).
 /// 2. Noise density per run: `config.noise_density` or [`estimate_noise_density`].
 /// 3. `SpatialContinuity`: per run [`seed_run_displacement`] with `λ_c,i` =
 ///    [`single_run_noise_wavelength`] (capped at the maximum wavelength) — the seed's text does not say how
@@ -1124,15 +1207,21 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
     let (x_start, dx, m) = common_grid(runs)?;
     let grid: Vec<f64> = (0..m).map(|j| x_start + dx * j as f64).collect();
     let travel = m as f64 * dx;
+    let speeds: Vec<f64> = runs.iter().map(|r| r.speed).collect();
+    let spacings: Vec<f64> = runs.iter().map(|r| r.speed / r.sample_rate).collect();
+    let sep = config.separate_gravity_tilt && config.method == FusionMethod::SnrWeighted;
+    // With the tilt separated, a wavelength only one speed resolves cannot be split into tilt and
+    // straightness: the band starts where two speeds resolve it.
+    let joint_min = if sep { joint_min_wavelength(&speeds, &spacings) } else { None }.unwrap_or(0.0);
     let min_wl = match config.min_wavelength {
         Some(w) => positive("min_wavelength (m)", w)?,
-        None => 4.0 * dx,
-    };
+        None => MIN_WAVELENGTH_SPACINGS * dx,
+    }
+    .max(joint_min);
     let max_wl = match config.max_wavelength {
         Some(w) => positive("max_wavelength (m)", w)?,
         None => 0.5 * travel,
     };
-    let speeds: Vec<f64> = runs.iter().map(|r| r.speed).collect();
     let mut rhos = Vec::with_capacity(runs.len());
     for r in runs {
         rhos.push(match config.noise_density {
@@ -1160,6 +1249,11 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
         })
         .collect();
 
+    let tilt_min = match config.tilt_min_wavelength {
+        Some(w) => positive("tilt_min_wavelength (m)", w)?,
+        None => travel / 20.0,
+    }
+    .max(joint_min);
     let ac = config.ac_coupling_hz;
     if !(ac >= 0.0 && ac.is_finite()) {
         return Err(AccelStraightnessError::BadInput(format!("ac_coupling_hz must be finite and >= 0, got {ac}")));
@@ -1181,16 +1275,16 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
             let prof = if band.empty {
                 vec![0.0; m]
             } else {
-                fuse_snr_weighted(&curv, &speeds, &rhos, travel, band.min_wavelength, band.max_wavelength)?
+                fuse_snr_weighted(&curv, &speeds, &rhos, &spacings, travel, band.min_wavelength, band.max_wavelength)?
             };
             (prof, band, Vec::new())
         }
         FusionMethod::SnrWeighted => {
             // Noise limit of the bound that applies (AC loss, joint model): σ(λ) increases with λ, bisect
             // in log λ for σ(λ) = threshold.
-            let sep = config.separate_gravity_tilt;
-            let sigma =
-                |wl: f64| -> Result<f64> { Ok(cramer_rao_harmonic(&rhos, &speeds, travel, wl, ac, sep)?.straightness) };
+            let sigma = |wl: f64| -> Result<f64> {
+                Ok(cramer_rao_resolved(&rhos, &speeds, &spacings, travel, wl.max(min_wl), ac, sep)?.straightness)
+            };
             let thr = config.amplitude_threshold;
             let (mut lo, mut hi) = (min_wl * 1e-3, travel * 1e3);
             let noise_limit = if sigma(hi)? <= thr {
@@ -1229,14 +1323,11 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
                 min_wavelength: band.min_wavelength,
                 max_wavelength: if band.empty { band.min_wavelength * 0.5 } else { band.max_wavelength },
                 tilt_max_wavelength: t_max,
-                tilt_min_wavelength: match config.tilt_min_wavelength {
-                    Some(w) => positive("tilt_min_wavelength (m)", w)?,
-                    None => travel / 20.0,
-                },
+                tilt_min_wavelength: tilt_min,
                 ac_coupling_hz: ac,
                 separate_gravity_tilt: sep,
             };
-            let fused = fuse_multi_speed(&acc, &speeds, &rhos, travel, &settings)?;
+            let fused = fuse_multi_speed(&acc, &speeds, &rhos, &spacings, travel, &settings)?;
             if sep {
                 tilt_max = Some(t_max);
                 tilt = fused.tilt.map(|t| {
@@ -1291,7 +1382,7 @@ pub fn estimate_straightness(runs: &[AccelRun], config: &StraightnessConfig) -> 
         ac_coupling_hz: if config.method == FusionMethod::SnrWeighted { ac } else { 0.0 },
         tilt,
         tilt_max_wavelength: tilt_max,
-        tilt_min_wavelength: tilt_max.map(|_| config.tilt_min_wavelength.unwrap_or(travel / 20.0)),
+        tilt_min_wavelength: tilt_max.map(|_| tilt_min),
     })
 }
 
@@ -1464,6 +1555,9 @@ pub struct FusionSettings {
 /// tilt ignored:    K = Σ q_i v_i² A_i / S₄          (the inverse-variance fusion of fuse_snr_weighted)
 /// ```
 ///
+/// where the sums run over the runs that resolve `κ_k` (`spacings[i]` is run `i`'s sample spacing `v/fs`,
+/// m; [`resolves`]: a run interpolated onto a finer grid holds nothing of the shorter wavelengths), and a
+/// coefficient no run resolves — or, with the tilt separated, only runs of one speed — is left out;
 /// then `E_k = −K_k/κ_k²` inside `[min_wavelength, max_wavelength]` and `T_k` inside
 /// `[min_wavelength, tilt_max_wavelength]`, inverted to the grid. Both are the Gauss–Markov (minimum
 /// variance unbiased) estimates of the model and reach [`cramer_rao_harmonic`]; with one speed or equal
@@ -1473,18 +1567,23 @@ pub fn fuse_multi_speed(
     accelerations: &[Vec<f64>],
     speeds: &[f64],
     noise_densities: &[f64],
+    spacings: &[f64],
     travel: f64,
     settings: &FusionSettings,
 ) -> Result<FusedProfiles> {
     if accelerations.is_empty() {
         return Err(AccelStraightnessError::BadInput("fusion needs at least one run".into()));
     }
-    if speeds.len() != accelerations.len() || noise_densities.len() != accelerations.len() {
+    if speeds.len() != accelerations.len()
+        || noise_densities.len() != accelerations.len()
+        || spacings.len() != accelerations.len()
+    {
         return Err(AccelStraightnessError::BadInput(format!(
-            "{} acceleration profiles need as many speeds and noise densities, got {} and {}",
+            "{} acceleration profiles need as many speeds, noise densities and spacings, got {}, {} and {}",
             accelerations.len(),
             speeds.len(),
-            noise_densities.len()
+            noise_densities.len(),
+            spacings.len()
         )));
     }
     let m = accelerations[0].len();
@@ -1542,6 +1641,9 @@ pub fn fuse_multi_speed(
         let (mut s0, mut s2, mut s4) = (0.0, 0.0, 0.0);
         let (mut r2, mut r0) = (Complex::new(0.0, 0.0), Complex::new(0.0, 0.0));
         for i in 0..spectra.len() {
+            if !resolves(spacings[i], wl) {
+                continue;
+            }
             let v = speeds[i];
             let q = coefficient_information(v, travel, noise_densities[i], settings.ac_coupling_hz, kappa);
             s0 += q;
@@ -1550,9 +1652,15 @@ pub fn fuse_multi_speed(
             r2 += spectra[i][k] * (q * v * v);
             r0 += spectra[i][k] * q;
         }
+        if s4 <= 0.0 {
+            continue; // no run resolves this wavelength
+        }
         let (curv, tilt) = if settings.separate_gravity_tilt {
             // [S4, g S2; g S2, g² S0]·[K; T] = [r2; g r0]; Cramer's rule, det = g²(S0 S4 − S2²).
             let d = s0 * s4 - s2 * s2;
+            if d.partial_cmp(&(1e-9 * s0 * s4)) != Some(std::cmp::Ordering::Greater) {
+                continue; // the runs that resolve it share one speed: tilt and curvature inseparable
+            }
             ((r2 * s0 - r0 * s2) / d, (r0 * s4 - r2 * s2) / (g * d))
         } else {
             (r2 / s4, Complex::new(0.0, 0.0))

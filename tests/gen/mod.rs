@@ -32,6 +32,10 @@
 
 #![allow(dead_code)]
 
+/// Laser line sets of one X axis from the first-order volumetric model (tests/laser_independent.rs,
+/// tests/laser_cli.rs).
+pub mod laser;
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};

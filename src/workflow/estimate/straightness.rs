@@ -477,10 +477,12 @@ pub(super) fn accel_straightness_check(
         })
         .collect();
     let speeds: Vec<f64> = est.runs.iter().map(|r| r.speed).collect();
+    let spacings = est.spacings();
     let sigma_k = |lam: f64| {
-        vmt_estimators::accel_straightness::cramer_rao_harmonic(
+        vmt_estimators::accel_straightness::cramer_rao_resolved(
             &rhos,
             &speeds,
+            &spacings,
             est.travel,
             lam,
             est.ac_coupling_hz,
