@@ -28,10 +28,11 @@ pub enum Segment {
     },
 }
 
-/// Ticks per metre of the grid on which every commanded position lies: 1 pm. A CNC's interpolator emits
-/// positions in whole increments of its resolution; vmt's is 10⁻¹² m, far below any sensor's, so the
-/// grid changes no physics that a reading could show, but a commanded position is then a short exact
-/// decimal (`0.101875`, not the plan's `0.10187500000000001`).
+/// Ticks per metre of the grid on which every recorded commanded position lies: 1 pm, the resolution
+/// at which the recorder logs the CNC's command (as a controller logs its command in whole increments).
+/// The servo follows the plan's exact command (the machine's physics does not depend on the grid); the
+/// recorded `x_cmd` is within 0.5 pm of it and a short exact decimal (`0.101875`, not the plan's
+/// `0.10187500000000001`).
 pub const POSITION_GRID_PER_M: f64 = 1e12;
 
 /// A position (m) on the 1 pm grid: x' = round(x·g)/g with g = [`POSITION_GRID_PER_M`]. For |x| below
@@ -73,15 +74,8 @@ impl Segment {
         }
     }
 
-    /// Command at time t (s) within the segment (clamped to its ends); the position on the 1 pm grid
-    /// ([`on_position_grid`]), as the servo receives it and the recorder writes it.
+    /// Command at time t (s) within the segment (clamped to its ends).
     pub fn at(&self, t: f64) -> Command {
-        let c = self.exact_at(t);
-        Command { pos: on_position_grid(c.pos), ..c }
-    }
-
-    /// The plan's exact command at time t (s), before the position grid.
-    fn exact_at(&self, t: f64) -> Command {
         match *self {
             Segment::Dwell { x, .. } => Command { pos: x, vel: 0.0, acc: 0.0 },
             Segment::Move { t0, x0, x1, feed, accel } => {
@@ -152,6 +146,13 @@ impl MotionPlan {
         (t0, t1)
     }
 
+    /// The command at time t as the recorder logs it: [`MotionPlan::at`] with the position on the 1 pm
+    /// grid ([`on_position_grid`]); velocity and acceleration as planned.
+    pub fn recorded_at(&self, t: f64) -> Command {
+        let c = self.at(t);
+        Command { pos: on_position_grid(c.pos), ..c }
+    }
+
     /// Command at time t.
     pub fn at(&self, t: f64) -> Command {
         let i = self.segments.partition_point(|s| s.t0() <= t).max(1) - 1;
@@ -193,10 +194,10 @@ mod tests {
         text.split('e').next().unwrap_or("").chars().filter(char::is_ascii_digit).count()
     }
 
-    /// Issue 13: a commanded position is a short exact decimal. A slow pass (0.1 → 0.9 m at 15 mm/s,
-    /// 0.5 m/s²) sampled at 1 kHz: the plan's exact values carry a double's digits (17 significant
-    /// digits, as 0.10187500000000001) in many samples; the commands carry at most 13
-    /// significant digits, each within 0.5 pm of the exact value and a whole number of picometres.
+    /// Issue 13: a recorded commanded position is a short exact decimal. A slow pass (0.1 → 0.9 m at
+    /// 15 mm/s, 0.5 m/s²) sampled at 1 kHz: the plan's exact values carry a double's digits (17
+    /// significant digits, as 0.10187500000000001) in many samples; the recorded commands carry at most
+    /// 13 significant digits, each within 0.5 pm of the exact value and a whole number of picometres.
     #[test]
     fn commanded_positions_lie_on_the_picometre_grid_and_are_written_short() {
         let mut p = MotionPlan::starting_at(0.1);
@@ -204,7 +205,7 @@ mod tests {
         let (mut noisy_exact, mut n) = (0, 0);
         let mut t = t0;
         while t < t1 {
-            let (exact, cmd) = (p.segments[1].exact_at(t).pos, p.at(t).pos);
+            let (exact, cmd) = (p.at(t).pos, p.recorded_at(t).pos);
             noisy_exact += usize::from(significant_digits(exact) > 15);
             assert!(significant_digits(cmd) <= 13, "t = {t} s: x_cmd = {cmd}");
             assert!((cmd - exact).abs() <= 0.5e-12 + 1e-16, "t = {t} s: {cmd} for {exact}");
