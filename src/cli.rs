@@ -1342,7 +1342,7 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, units: &str,
         eprintln!("note: {n}");
     }
     if json {
-        print_json(
+        print_identify_json(
             "vmt-identify/1",
             &IdentifyJson { unobservable_profiles: unobservable_profiles(&id.profiles), result: &id },
         )?;
@@ -1357,19 +1357,19 @@ pub fn identify(path: &Path, run: Option<&str>, out: Option<&Path>, units: &str,
         print_profiles(&id.profiles);
     }
     if let Some(out) = out {
+        // Only the error motions the lines determine at every position are written, with their σ (a
+        // column has a σ exactly then, `byo::profiles_of`): a column of the minimum-norm solution's
+        // 1e-21 m would read as "no error".
         let mut table = crate::byo::profiles_of(&id);
-        // A profile with a value the lines do not determine has no σ column; its numbers are the gauge's
-        // arbitrary choice, which `vmt score` would compare with a truth: not written, and said so.
-        table.columns.retain(|c| {
-            if c.sigma.is_none() {
-                eprintln!(
-                    "note: {} not written to {}: not observable from these lines",
-                    c.effect.as_str(),
-                    out.display()
-                );
-            }
-            c.sigma.is_some()
-        });
+        let left_out = unobservable_profiles(&id.profiles);
+        table.columns.retain(|c| c.sigma.is_some());
+        if !left_out.is_empty() {
+            eprintln!(
+                "note: not written to {} (not observable from these lines): {}",
+                out.display(),
+                left_out.join(", ")
+            );
+        }
         measurement::write_profiles(&table, out, units)?;
         eprintln!("wrote {}", out.display());
     }
@@ -1394,7 +1394,7 @@ fn identify_axes(
     let id = &ci.identification;
     if json {
         let unobservable_profiles = unobservable_profiles(&id.profiles);
-        print_json("vmt-identify-chain/1", &IdentifyJson { unobservable_profiles, result: ci })?;
+        print_identify_json("vmt-identify-chain/1", &IdentifyJson { unobservable_profiles, result: ci })?;
         return Ok(0);
     }
     println!(
@@ -1408,8 +1408,12 @@ fn identify_axes(
         println!("  not observable: {u}");
     }
     for s in &id.squareness {
-        let sigma = s.std_error.map_or("not observable".to_string(), |e| format!("± {:.3} µrad", e * 1e6));
-        println!("  {} {:<14} {:>10.3} µrad {sigma}", s.name, s.effect, s.value * 1e6);
+        match s.std_error {
+            Some(e) => {
+                println!("  {} {:<14} {:>10.3} µrad ± {:.3} µrad (1σ)", s.name, s.effect, s.value * 1e6, e * 1e6)
+            }
+            None => println!("  {} {:<14} unobservable from these lines", s.name, s.effect),
+        }
     }
     print_profiles(&id.profiles);
     Ok(0)
@@ -1429,26 +1433,69 @@ fn unobservable_profiles(profiles: &[vmt_estimators::laser_ls::ProfileEstimate])
     profiles.iter().filter(|p| p.std_errors.iter().any(Option::is_none)).map(|p| p.name.as_str()).collect()
 }
 
+/// Prints an identification as JSON with `null` for every value the lines do not determine: a
+/// profile's `values[i]` and a parameter's `params[i]` where the matching `std_errors[i]` is `null`, a
+/// squareness `value` whose `std_error` is `null` (the solver's minimum-norm numbers there, e.g.
+/// 7e-22 m, are not estimates), and the whole of a profile determined only at its reference position.
+/// `unobservable_profiles` is the flag naming the profiles concerned.
+fn print_identify_json<T: serde::Serialize>(format: &str, v: &T) -> Result<(), VmtError> {
+    fn null_unobservable(v: &mut serde_json::Value) {
+        use serde_json::Value;
+        match v {
+            Value::Object(m) => {
+                if let Some(Value::Array(mut se)) = m.get("std_errors").cloned() {
+                    // A profile determined only at its reference position (zero there by the reporting
+                    // convention, σ = 0) is not observable at all: nothing of it is a number.
+                    if se.iter().any(Value::is_null) && se.iter().all(|s| s.is_null() || s.as_f64() == Some(0.0)) {
+                        se.iter_mut().for_each(|s| *s = Value::Null);
+                        m.insert("std_errors".into(), Value::Array(se.clone()));
+                    }
+                    for key in ["values", "params"] {
+                        if let Some(Value::Array(xs)) = m.get_mut(key) {
+                            if xs.len() == se.len() {
+                                xs.iter_mut().zip(&se).filter(|(_, s)| s.is_null()).for_each(|(x, _)| *x = Value::Null);
+                            }
+                        }
+                    }
+                }
+                if m.get("std_error").is_some_and(Value::is_null) {
+                    if let Some(x) = m.get_mut("value") {
+                        *x = Value::Null;
+                    }
+                }
+                m.values_mut().for_each(null_unobservable);
+            }
+            Value::Array(a) => a.iter_mut().for_each(null_unobservable),
+            Value::Null | Value::Bool(_) | Value::Number(_) | Value::String(_) => {}
+        }
+    }
+    let mut value = serde_json::to_value(v).map_err(|e| VmtError::Internal(format!("{format} JSON: {e}")))?;
+    null_unobservable(&mut value);
+    print_json(format, &value)
+}
+
 /// The identified profiles, one line each: peak |value| and largest standard error in µm or µrad, or
 /// "unobservable" where the readings do not determine the value (never a number for those).
 fn print_profiles(profiles: &[vmt_estimators::laser_ls::ProfileEstimate]) {
     for p in profiles {
         let q = if p.component < 3 { Quantity::Length } else { Quantity::Angle };
-        // Over the determined values only: an undetermined one is the gauge's arbitrary number.
         let peak =
             p.values.iter().zip(&p.std_errors).filter(|(_, e)| e.is_some()).fold(0.0f64, |m, (v, _)| m.max(v.abs()));
         let missing = p.std_errors.iter().filter(|e| e.is_none()).count();
         let worst = p.std_errors.iter().flatten().cloned().fold(0.0, f64::max);
+        // A profile whose only determined value is its zero at the reference position (σ = 0 by the
+        // reporting convention) is not observable at all.
+        let datum_only = missing > 0 && worst == 0.0;
         let se = match missing {
             0 => format!("largest standard error (1σ) {}", display(q, worst)),
-            m if m == p.std_errors.len() => "unobservable from these lines".to_string(),
+            m if m == p.std_errors.len() || datum_only => "unobservable from these lines".to_string(),
             m => format!(
                 "unobservable at {m} of {} positions; elsewhere largest standard error (1σ) {}",
                 p.std_errors.len(),
                 display(q, worst)
             ),
         };
-        if missing == p.std_errors.len() {
+        if missing == p.std_errors.len() || datum_only {
             println!("  {:<4} {se}", p.name);
         } else {
             println!("  {:<4} peak |value| {:>12}  {se}", p.name, display(q, peak));

@@ -288,3 +288,118 @@ fn every_clamp_has_literal_bounds_or_says_why_they_are_ordered() {
         unexplained.join("\n")
     );
 }
+
+/// Issue 13: `vmt identify` prints "unobservable", never a number, for an error motion it calls
+/// unobservable. Three x beams (laser_x1..3 of the nine-line layout) see EXX, EBX and ECX; EYX, EZX and
+/// EAX are not observable (EAX only at its reference position, where it is zero by convention). Text:
+/// their lines say "unobservable" and carry no digit. JSON: their values and standard errors are `null`
+/// and `unobservable_profiles` names them, while EXX has numbers. `-o`: their columns are not written
+/// (a note names them), the observable ones are, each with its σ.
+#[test]
+fn identify_prints_unobservable_never_a_number() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(small()).unwrap();
+    let from = "sensors = [\"scale\", \"laser_x3\", \"laser_y1\"]";
+    assert!(text.contains(from), "test setup: `{from}` not in tests/data/small.toml");
+    let sc = tmp.path().join("x_only.toml");
+    std::fs::write(&sc, text.replacen(from, "sensors = [\"laser_x1\", \"laser_x2\", \"laser_x3\"]", 1)).unwrap();
+    let set = tmp.path().join("set");
+    ok(vmt().arg("simulate").arg(&sc).arg("-o").arg(&set).output().unwrap(), "simulate");
+    let unobservable = ["EYX", "EZX", "EAX"];
+
+    let out = ok(vmt().arg("identify").arg(&set).output().unwrap(), "identify");
+    for name in unobservable {
+        let line =
+            out.lines().find(|l| l.trim_start().starts_with(&format!("{name} "))).unwrap_or_else(|| panic!("{out}"));
+        assert!(line.contains("unobservable"), "{line}");
+        assert!(!line[line.find(name).unwrap() + 3..].contains(|c: char| c.is_ascii_digit()), "a number: {line}");
+    }
+    let exx = out.lines().find(|l| l.trim_start().starts_with("EXX ")).unwrap();
+    assert!(exx.contains("standard error (1σ)") && !exx.contains("unobservable"), "{exx}");
+
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(vmt().args(["identify", "--json"]).arg(&set).output().unwrap(), "identify --json"))
+            .unwrap();
+    let flagged: Vec<&str> =
+        json["unobservable_profiles"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
+    assert_eq!(flagged, unobservable);
+    for p in json["profiles"].as_array().unwrap() {
+        let name = p["name"].as_str().unwrap();
+        let (values, sigmas) = (p["values"].as_array().unwrap(), p["std_errors"].as_array().unwrap());
+        if unobservable.contains(&name) {
+            assert!(values.iter().chain(sigmas).all(serde_json::Value::is_null), "{name}: {p}");
+        } else {
+            assert!(values.iter().chain(sigmas).all(serde_json::Value::is_f64), "{name}: {p}");
+            assert!(sigmas.iter().skip(1).all(|s| s.as_f64().unwrap() > 0.0), "{name}: {p}");
+        }
+    }
+    // The parameter list: a number only where it has a standard error.
+    let (params, sigmas) = (json["params"].as_array().unwrap(), json["std_errors"].as_array().unwrap());
+    assert!(sigmas.iter().any(serde_json::Value::is_null));
+    for (x, s) in params.iter().zip(sigmas) {
+        assert_eq!(x.is_null(), s.is_null(), "{x} ± {s}");
+    }
+
+    let csv = tmp.path().join("profiles.csv");
+    let o = vmt().arg("identify").arg(&set).arg("-o").arg(&csv).output().unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("not observable from these lines): EYX, EZX, EAX"), "{err}");
+    let header = std::fs::read_to_string(&csv).unwrap().lines().next().unwrap().to_string();
+    assert_eq!(header, "position,positioning,positioning_sigma,pitch,pitch_sigma,yaw,yaw_sigma");
+}
+
+/// Issue 13/14: exit codes. `--help` documents 1 (a missed tolerance), 2 (bad input) and 3 (an I/O
+/// failure of the machine); a missing input is 2; a write the machine refuses is 3, never 1 or 2, and
+/// leaves nothing under the destination's name: (a) a file-size limit (`ulimit -f`, SIGXFSZ ignored so
+/// that the write fails with EFBIG, as on a full disk), (b) a directory the kernel will not create
+/// (under /proc; this works for root too, for whom a read-only directory is writable).
+#[cfg(target_os = "linux")]
+#[test]
+fn an_io_failure_of_the_machine_exits_3() {
+    let help = ok(vmt().arg("--help").output().unwrap(), "vmt --help");
+    for code in ["1 an estimate missed its tolerance", "2 bad input", "3 an I/O failure of the machine"] {
+        assert!(help.contains(code), "--help does not document `{code}`: {help}");
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let missing = vmt().arg("simulate").arg(tmp.path().join("nope.toml")).arg("-o").arg(tmp.path().join("o")).output();
+    assert_eq!(missing.unwrap().status.code(), Some(2), "a missing input is bad input");
+
+    let dest = tmp.path().join("out");
+    let o = Command::new("sh")
+        .args(["-c", "trap '' XFSZ; ulimit -f 8; exec \"$0\" \"$@\""])
+        .arg(env!("CARGO_BIN_EXE_vmt"))
+        .arg("simulate")
+        .arg(small())
+        .arg("-o")
+        .arg(&dest)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "a write over the file-size limit: {err}");
+    assert!(err.contains("writing") && err.contains("File too large"), "{err}");
+    assert!(!dest.exists(), "a failed write left {}", dest.display());
+    let left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "leftovers beside the destination: {left:?}");
+
+    let o = vmt().arg("simulate").arg(small()).arg("-o").arg("/proc/vmt-test-output").output().unwrap();
+    assert_eq!(o.status.code(), Some(3), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// Issue 13: `--effect` lists the effect names, in `vmt add --help` and in the error for an unknown name
+/// (exit 2); every name of the effect catalogue is listed.
+#[test]
+fn add_lists_the_effect_names_in_help_and_in_the_error() {
+    let help = ok(vmt().args(["add", "--help"]).output().unwrap(), "vmt add --help");
+    let o = vmt().args(["add", "--model", "m.toml", "--effect", "backlsh", "-o", "out.toml"]).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("backlsh"), "{err}");
+    for name in vmt_sim::effects::EffectName::ALL {
+        let listed = |text: &str| {
+            text.contains(&format!(" {},", name.as_str())) || text.contains(&format!(" {}]", name.as_str()))
+        };
+        assert!(listed(&help), "`{}` not listed in vmt add --help:\n{help}", name.as_str());
+        assert!(listed(&err), "`{}` not listed in the error:\n{err}", name.as_str());
+    }
+}

@@ -136,3 +136,98 @@ fn lesson_reports_show_the_residual_where_each_effect_lives() {
     let nrms = find(&figs, "drift_and_lead", "normalised residual RMS per iteration");
     assert_eq!(nrms.series[0].x, vec![0.0, 1.0, 2.0]);
 }
+
+/// Issue 16, first bullet: the report opens with every test condition a calibration engineer reads
+/// before any number, each read from the rendered report (report.json's first section, and the same text
+/// in report.html): program and version (with the git commit when built from git), date
+/// (`SOURCE_DATE_EPOCH`), command line, scenario, machine, seed; per procedure feed, dwell, runs,
+/// targets, overrun; per sensor noise, mounting point, Abbe offset; per laser the air, the material
+/// temperature, α and the Edlén index applied. laser_x3 of tests/data/small.toml is given non-default
+/// air and material so that those cells must come from the scenario.
+#[test]
+fn the_report_opens_with_every_test_condition() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(small()).unwrap();
+    let from = "name = \"laser_x3\"\n";
+    assert!(text.contains(from), "test setup: laser_x3 not in tests/data/small.toml");
+    let env = "material_temperature = 22.5\nassumed_material_temperature = 22.0\nmaterial_alpha = 8e-6\n\
+               air = { temperature = 23.0, pressure = 100000.0, humidity = 40.0 }\n";
+    let scenario = tmp.path().join("conditions.toml");
+    std::fs::write(&scenario, text.replacen(from, &format!("{from}{env}"), 1)).unwrap();
+    let out_dir = tmp.path().join("out");
+    let o = vmt()
+        .env("SOURCE_DATE_EPOCH", "1000000000")
+        .arg("run")
+        .arg(&scenario)
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert!(o.status.code() == Some(0) || o.status.code() == Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: vmt_report::Report =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("report.json")).unwrap()).unwrap();
+    let html = std::fs::read_to_string(out_dir.join("report.html")).unwrap();
+    let first = &report.sections[0];
+    assert_eq!(first.heading, "Test conditions");
+    let table = |caption: &str| -> &vmt_report::Table {
+        first.tables.iter().find(|t| t.caption.starts_with(caption)).unwrap_or_else(|| panic!("no `{caption}` table"))
+    };
+    // A cell of `table` in the row whose first cell is `row`, under the column headed `column`; it must
+    // also be on the rendered page.
+    let cell = |t: &vmt_report::Table, row: &str, column: &str| -> String {
+        let j =
+            t.header.iter().position(|h| h == column).unwrap_or_else(|| panic!("{}: no column `{column}`", t.caption));
+        let r = t.rows.iter().find(|r| r[0] == row).unwrap_or_else(|| panic!("{}: no row `{row}`", t.caption));
+        let c = r[j].clone();
+        let escaped = c.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;");
+        assert!(html.contains(&escaped), "report.html lacks {column} of {row}: {c}");
+        c
+    };
+    let run = table("Run");
+    let program = cell(run, "program", "value");
+    assert!(program.starts_with(&format!("vmt {}", env!("CARGO_PKG_VERSION"))), "{program}");
+    let head = std::process::Command::new("git")
+        .args(["-C", env!("CARGO_MANIFEST_DIR"), "rev-parse", "--short=12", "HEAD"])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
+    if let Some(head) = head {
+        assert!(program.contains(&format!("(git {head}")), "built from git at {head}: {program}");
+    }
+    assert_eq!(cell(run, "date (UTC)", "value"), "2001-09-09T01:46:40Z");
+    let command = cell(run, "command line", "value");
+    assert!(command.contains(" run ") && command.contains(&*scenario.to_string_lossy()), "{command}");
+    assert_eq!(cell(run, "scenario", "value"), scenario.display().to_string());
+    assert_eq!(cell(run, "machine", "value"), "slide_column");
+    assert!(cell(run, "seed", "value").starts_with("20261121 "));
+
+    let p = table("Procedures");
+    assert_eq!(cell(p, "iso", "feed"), "400 mm/s");
+    assert_eq!(cell(p, "iso", "dwell"), "0.2 s (mean of last 0.1 s)");
+    assert_eq!(cell(p, "iso", "runs"), "2 ↑ + 2 ↓");
+    assert_eq!(cell(p, "iso", "targets"), "4 given, 100.0 mm–900.0 mm");
+    assert!(cell(p, "iso", "overrun").ends_with(" mm"));
+    assert_eq!(cell(p, "cv", "feed"), "200, 400 mm/s");
+
+    let s = table("Sensors");
+    assert_eq!(cell(s, "laser_x3", "noise"), "σ 0.02000 µm, step 0.001000 µm");
+    assert_eq!(cell(s, "laser_x3", "mounting point"), "link mp3 at (300, 150, 1200) mm");
+    // Abbe offset of a beam along x from (300, 150, 1200) mm: |(0, 150, 1200)| = 1209.3 mm.
+    assert_eq!(cell(s, "laser_x3", "Abbe offset"), "1209 mm (0, 150, 1200)");
+    assert_eq!(cell(s, "acc_z", "noise"), "0.300 µg/√Hz");
+
+    let l = table("Lasers");
+    assert_eq!(cell(l, "laser_x3", "air at the beam"), "23.00 °C, 100.00 kPa, 40 % RH");
+    assert_eq!(cell(l, "laser_x3", "material temperature"), "22.50 °C");
+    assert_eq!(cell(l, "laser_x3", "material temperature assumed"), "22.00 °C");
+    assert_eq!(cell(l, "laser_x3", "α"), "8.00 µm/(m·K)");
+    assert_eq!(cell(l, "laser_x1", "α"), "11.50 µm/(m·K)");
+    let ppm = |c: String| -> f64 { c.strip_suffix(" ppm").unwrap_or_else(|| panic!("{c}")).parse().unwrap() };
+    // Birch & Downs at 633 nm: n − 1 = 271.4 ppm in reference air; ∝ p/T, so ≈ 265 ppm at 23 °C, 100 kPa.
+    let reference = ppm(cell(l, "laser_x1", "Edlén n − 1 applied"));
+    let warm = ppm(cell(l, "laser_x3", "Edlén n − 1 applied"));
+    assert!((271.0..271.8).contains(&reference) && (263.0..267.0).contains(&warm), "{reference} / {warm} ppm");
+    // The laser assumes 22.0 °C for material at 22.5 °C: 8e-6 · 0.5 K / (1 + 8e-6 · 2 K) = 4.000 ppm.
+    assert_eq!(cell(l, "laser_x3", "normalisation error"), "4.000 ppm");
+}

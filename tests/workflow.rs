@@ -1015,46 +1015,61 @@ fn significant_digits(cell: &str) -> usize {
 /// Issue 13: written times and positions are the exact values of their samples, without float noise in
 /// SI either. Every time (`t`, the manifest's `start_time`) is a whole number of nanoseconds (the
 /// recorder's clock, `vmt_sim::procedures::recorder_time`) and written with at most 15 significant digits
-/// (a sum's rounding shows 17: 22.480000000000004); every target and every reading of a 1 nm sensor (the
-/// laser and scale columns) likewise (5.102e-6, not 5.1020000000000004e-6 = 5102 × 1e-9).
+/// (a sum's rounding shows 17: 22.480000000000004); every reading of a 1 nm sensor (the laser and scale
+/// columns of tests/data/small.toml) likewise (5.102e-6, not 5.1020000000000004e-6 = 5102 × 1e-9). Every
+/// written position — the commanded `x_cmd`/`y_cmd`/`z_cmd`, a point table's `target` (on the 3-axis
+/// scenario's diagonal lines the distance √3·0.1 m) and the truth profiles' `position` — is a whole number
+/// of picometres (`vmt_sim::motion::on_position_grid`) written with at most 15 significant digits
+/// (0.101875, not the motion plan's 0.10187500000000001; 0.003, not 0.0030000000000000005).
 #[test]
 fn written_times_and_nanometre_readings_carry_no_float_noise() {
-    let tmp = tempfile::tempdir().unwrap();
-    let o = vmt().arg("simulate").arg(small()).arg("-o").arg(tmp.path()).output().unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
-    let (mut times, mut exact) = (0, 0);
-    for e in std::fs::read_dir(tmp.path()).unwrap() {
-        let p = e.unwrap().path();
-        if p.extension().and_then(|x| x.to_str()) != Some("csv") || p.ends_with("truth_profiles.csv") {
-            continue;
-        }
-        let rows = csv_rows(&std::fs::read_to_string(&p).unwrap());
-        for (j, name) in rows[0].iter().enumerate() {
-            let is_time = name == "t";
-            let nm = name == "target" || name == "scale" || name.starts_with("laser");
-            for r in rows[1..].iter().filter(|_| is_time || nm) {
-                let cell = &r[j];
-                assert!(significant_digits(cell) <= 15, "{}: {name} = {cell} (float noise)", p.display());
-                let x: f64 = cell.parse().unwrap();
-                if is_time {
-                    assert_eq!((x * 1e9).round() / 1e9, x, "{}: t = {cell} is not a whole ns", p.display());
-                    times += 1;
-                } else {
-                    exact += 1;
+    let (mut times, mut exact, mut positions, mut starts) = (0, 0, 0, 0);
+    let mut commanded = std::collections::BTreeSet::new();
+    for (scenario, nm_readings) in [(small(), true), (root().join("scenarios/squareness_3axis.toml"), false)] {
+        let tmp = tempfile::tempdir().unwrap();
+        let o = vmt().arg("simulate").arg(&scenario).arg("-o").arg(tmp.path()).output().unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        for e in std::fs::read_dir(tmp.path()).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().and_then(|x| x.to_str()) != Some("csv") {
+                continue;
+            }
+            let truth = p.ends_with("truth_profiles.csv");
+            let rows = csv_rows(&std::fs::read_to_string(&p).unwrap());
+            for (j, name) in rows[0].iter().enumerate() {
+                let is_time = name == "t" && !truth;
+                let is_position = if truth { name == "position" } else { name.ends_with("_cmd") || name == "target" };
+                let nm = nm_readings && !truth && (name == "scale" || name.starts_with("laser"));
+                for r in rows[1..].iter().filter(|_| is_time || is_position || nm) {
+                    let cell = &r[j];
+                    assert!(significant_digits(cell) <= 15, "{}: {name} = {cell} (float noise)", p.display());
+                    let x: f64 = cell.parse().unwrap();
+                    if is_time {
+                        assert_eq!((x * 1e9).round() / 1e9, x, "{}: t = {cell} is not a whole ns", p.display());
+                        times += 1;
+                    } else if is_position {
+                        assert_eq!((x * 1e12).round() / 1e12, x, "{}: {name} = {cell} is not a whole pm", p.display());
+                        positions += 1;
+                        if name.ends_with("_cmd") {
+                            commanded.insert(name.clone());
+                        }
+                    } else {
+                        exact += 1;
+                    }
                 }
             }
         }
-    }
-    let manifest = std::fs::read_to_string(tmp.path().join("manifest.toml")).unwrap();
-    let starts: Vec<&str> = manifest.lines().filter_map(|l| l.strip_prefix("start_time = ")).collect();
-    for s in &starts {
-        assert!(significant_digits(s) <= 15, "start_time = {s} (float noise)");
+        let manifest = std::fs::read_to_string(tmp.path().join("manifest.toml")).unwrap();
+        for s in manifest.lines().filter_map(|l| l.strip_prefix("start_time = ")) {
+            assert!(significant_digits(s) <= 15, "{}: start_time = {s} (float noise)", scenario.display());
+            starts += 1;
+        }
     }
     assert!(
-        times >= 100 && exact >= 100 && starts.len() >= 3,
-        "{times} times, {exact} positions, {} starts",
-        starts.len()
+        times >= 100 && exact >= 100 && positions >= 1000 && starts >= 3,
+        "{times} times, {exact} readings, {positions} positions, {starts} starts"
     );
+    assert_eq!(commanded.into_iter().collect::<Vec<_>>(), ["x_cmd", "y_cmd", "z_cmd"]);
 }
 
 /// Issue 13: `--units human` writes a study's tolerance of 1e-7 m as 0.1 µm, not 1e-7 × 1e6 =

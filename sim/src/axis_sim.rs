@@ -643,7 +643,7 @@ pub fn simulate_in_session(
     let mut next = 0;
     let prev = sim.sample(plan.at(0.0));
     while next < record_times.len() && record_times[next] <= prev.t {
-        out.push(Sample { t: record_times[next], ..prev });
+        out.push(Sample { t: record_times[next], cmd: plan.recorded_at(0.0), ..prev });
         next += 1;
     }
     // `prev` is the truth sample before the step when a record time falls within it; samples are taken
@@ -664,7 +664,7 @@ pub fn simulate_in_session(
             let tr = record_times[next];
             let w = (tr - before.t) / (cur.t - before.t);
             let mut s = before.lerp(&cur, w);
-            s.cmd = plan.at(tr);
+            s.cmd = plan.recorded_at(tr);
             out.push(s);
             next += 1;
         }

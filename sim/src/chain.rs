@@ -615,10 +615,11 @@ impl LaserLineSpec {
         self.from.iter().zip(&self.to).map(|(a, b)| (b - a) * (b - a)).sum::<f64>().sqrt()
     }
 
-    /// Joint positions of target k (0..n).
+    /// Joint positions of target k (0..n), m, on the 1 pm grid of commanded positions
+    /// ([`crate::motion::on_position_grid`]).
     pub fn target(&self, k: usize) -> Vec<f64> {
         let w = if self.n > 1 { k as f64 / (self.n - 1) as f64 } else { 0.0 };
-        self.from.iter().zip(&self.to).map(|(a, b)| a + (b - a) * w).collect()
+        self.from.iter().zip(&self.to).map(|(a, b)| crate::motion::on_position_grid(a + (b - a) * w)).collect()
     }
 }
 
@@ -894,7 +895,9 @@ pub fn plan_laser_lines(chain: &ChainModel, spec: &LaserLinesSpec) -> Vec<LinePl
                 for i in 0..per {
                     times.push(recorder_time(t1 - (per - 1 - i) as f64 / spec.rate));
                 }
-                let s = len * k as f64 / (line.n - 1) as f64;
+                // The distance along the line, written as `target`: on the 1 pm grid (√3·0.1 m is written
+                // 0.173205080757, not 0.17320508075688773).
+                let s = crate::motion::on_position_grid(len * k as f64 / (line.n - 1) as f64);
                 visits.push(Visit { target: s, run: 1, direction: 1, first, last: times.len() - 1 });
             }
             LinePlan { name: spec.run_name(line), line: line.clone(), visits, plan, record_times: times }

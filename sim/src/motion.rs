@@ -28,6 +28,21 @@ pub enum Segment {
     },
 }
 
+/// Ticks per metre of the grid on which every recorded commanded position lies: 1 pm, the resolution
+/// at which the recorder logs the CNC's command (as a controller logs its command in whole increments).
+/// The servo follows the plan's exact command (the machine's physics does not depend on the grid); the
+/// recorded `x_cmd` is within 0.5 pm of it and a short exact decimal (`0.101875`, not the plan's
+/// `0.10187500000000001`).
+pub const POSITION_GRID_PER_M: f64 = 1e12;
+
+/// A position (m) on the 1 pm grid: x' = round(x·g)/g with g = [`POSITION_GRID_PER_M`]. For |x| below
+/// 9000 m, round(x·g) is an exact integer k and the quotient the double nearest to the decimal k·10⁻¹²
+/// (both operands exact, the division correctly rounded), so x' is written as that decimal, with at most
+/// 15 significant digits below 1000 m. |x' − x| ≤ 0.5 pm. NaN and ±∞ pass through.
+pub fn on_position_grid(x: f64) -> f64 {
+    (x * POSITION_GRID_PER_M).round() / POSITION_GRID_PER_M
+}
+
 /// Commanded position, velocity and acceleration at one instant.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Command {
@@ -131,6 +146,13 @@ impl MotionPlan {
         (t0, t1)
     }
 
+    /// The command at time t as the recorder logs it: [`MotionPlan::at`] with the position on the 1 pm
+    /// grid ([`on_position_grid`]); velocity and acceleration as planned.
+    pub fn recorded_at(&self, t: f64) -> Command {
+        let c = self.at(t);
+        Command { pos: on_position_grid(c.pos), ..c }
+    }
+
     /// Command at time t.
     pub fn at(&self, t: f64) -> Command {
         let i = self.segments.partition_point(|s| s.t0() <= t).max(1) - 1;
@@ -164,5 +186,35 @@ mod tests {
         let (a, b) = p.dwell(1.0);
         assert_eq!(p.at(0.5 * (a + b)).pos, 0.1);
         assert!(p.at(0.3).vel < 0.0);
+    }
+
+    /// Significant digits of a number as Rust writes it (shortest round-trip decimal).
+    fn significant_digits(x: f64) -> usize {
+        let text = format!("{:e}", x.abs());
+        text.split('e').next().unwrap_or("").chars().filter(char::is_ascii_digit).count()
+    }
+
+    /// Issue 13: a recorded commanded position is a short exact decimal. A slow pass (0.1 → 0.9 m at
+    /// 15 mm/s, 0.5 m/s²) sampled at 1 kHz: the plan's exact values carry a double's digits (17
+    /// significant digits, as 0.10187500000000001) in many samples; the recorded commands carry at most
+    /// 13 significant digits, each within 0.5 pm of the exact value and a whole number of picometres.
+    #[test]
+    fn commanded_positions_lie_on_the_picometre_grid_and_are_written_short() {
+        let mut p = MotionPlan::starting_at(0.1);
+        let (t0, t1) = p.move_to(0.9, 0.015, 0.5);
+        let (mut noisy_exact, mut n) = (0, 0);
+        let mut t = t0;
+        while t < t1 {
+            let (exact, cmd) = (p.at(t).pos, p.recorded_at(t).pos);
+            noisy_exact += usize::from(significant_digits(exact) > 15);
+            assert!(significant_digits(cmd) <= 13, "t = {t} s: x_cmd = {cmd}");
+            assert!((cmd - exact).abs() <= 0.5e-12 + 1e-16, "t = {t} s: {cmd} for {exact}");
+            assert_eq!((cmd * 1e12).round() / 1e12, cmd);
+            n += 1;
+            t = crate::procedures::recorder_time(t + 1e-3);
+        }
+        assert!(n > 50_000 && noisy_exact > n / 10, "{noisy_exact} of {n} exact values carry float noise");
+        assert_eq!(on_position_grid(0.10187500000000001).to_string(), "0.101875");
+        assert!(on_position_grid(f64::NAN).is_nan() && on_position_grid(f64::INFINITY) == f64::INFINITY);
     }
 }

@@ -352,13 +352,15 @@ pub fn truth_extras(sc: &Scenario, ph: &Physics, units: UnitChoice) -> Result<Ve
 pub const MAX_PROFILE_POINTS: usize = 10_001;
 
 /// Positions of a truth profile over [lo, hi] (m): every millimetre, but at most
-/// [`MAX_PROFILE_POINTS`] points evenly spread (a 1000 m URDF travel gets 10 cm steps, not 10⁶ points).
+/// [`MAX_PROFILE_POINTS`] points evenly spread (a 1000 m URDF travel gets 10 cm steps, not 10⁶ points),
+/// each on the 1 pm grid of written positions.
 fn profile_positions(lo: f64, hi: f64) -> Vec<f64> {
     // clamp: constant bounds, 1 ≤ MAX_PROFILE_POINTS − 1.
     let n = ((hi - lo) / 1e-3).round().clamp(1.0, (MAX_PROFILE_POINTS - 1) as f64);
     // index: n is clamped to [1, MAX_PROFILE_POINTS − 1] above, and NaN becomes 1 here: a bounded point count.
     let n = if n.is_finite() { n as usize } else { 1 };
-    (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect()
+    // On the 1 pm grid: the truth is evaluated at the position written (0.003, not 0.0030000000000000005).
+    (0..=n).map(|i| vmt_sim::motion::on_position_grid(lo + (hi - lo) * i as f64 / n as f64)).collect()
 }
 
 /// The six injected error motions every millimetre over the travel (FORMAT.md §5 table), from the
