@@ -419,6 +419,39 @@ mod tests {
         assert!((x2[k] - want).abs() < 1e-12, "{} vs {want}", x2[k]);
     }
 
+    /// A closed loop's log as its two channels (transmission `tr_log`, following motor − command)
+    /// at speed `v` (m/s), and the following channel's readings.
+    fn closed_loop_log(
+        t_log: &[f64],
+        x_log: &[f64],
+        m_log: &[f64],
+        tr_log: &[f64],
+        v: f64,
+    ) -> (Vec<Channel>, Vec<f64>) {
+        let n = t_log.len();
+        let chan = |y: Vec<f64>, role: EncoderRole| Channel {
+            run: "r".into(),
+            sensor: "s".into(),
+            kind: SensorKind::EncoderLinear,
+            u: [1.0, 0.0, 0.0],
+            r: [0.0; 3],
+            x: m_log.to_vec(),
+            d: vec![1.0; n],
+            cycle: vec![1; n],
+            t: t_log.to_vec(),
+            v: vec![v; n],
+            y,
+            sigma: None,
+            encoder: Some(role),
+        };
+        let follow: Vec<f64> = m_log.iter().zip(x_log).map(|(a, b)| a - b).collect();
+        let chans = vec![
+            chan(tr_log.to_vec(), EncoderRole::Transmission { drive: m_log.to_vec() }),
+            chan(follow.clone(), EncoderRole::Following { command: x_log.to_vec(), s_transmission: 0.0, closed: true }),
+        ];
+        (chans, follow)
+    }
+
     /// A closed loop's following channel is the lag of the command less the lag of the
     /// transmission: a P loop fed back from the scale (ẋ_m = kv·(x_cmd − x_m − T(x_m)), integrated
     /// here by RK4 at 20 µs, T a lead error of a few µm with a 7 mm wave) is predicted by
@@ -454,26 +487,7 @@ mod tests {
             xm += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
         }
         let n = t_log.len();
-        let chan = |y: Vec<f64>, role: EncoderRole| Channel {
-            run: "r".into(),
-            sensor: "s".into(),
-            kind: SensorKind::EncoderLinear,
-            u: [1.0, 0.0, 0.0],
-            r: [0.0; 3],
-            x: m_log.clone(),
-            d: vec![1.0; n],
-            cycle: vec![1; n],
-            t: t_log.clone(),
-            v: vec![0.04; n],
-            y,
-            sigma: None,
-            encoder: Some(role),
-        };
-        let follow: Vec<f64> = m_log.iter().zip(&x_log).map(|(a, b)| a - b).collect();
-        let chans = vec![
-            chan(tr_log.clone(), EncoderRole::Transmission { drive: m_log.clone() }),
-            chan(follow.clone(), EncoderRole::Following { command: x_log.clone(), s_transmission: 0.0, closed: true }),
-        ];
+        let (chans, follow) = closed_loop_log(&t_log, &x_log, &m_log, &tr_log, 0.04);
         let st = Stack::new(&chans).with_loop(kv, 1.0);
         let lag = following_error(&chans[1], kv);
         let mut col: Vec<f64> = tr_log.iter().copied().chain(std::iter::repeat(0.0).take(n)).collect();
@@ -519,26 +533,7 @@ mod tests {
             xm += kv * h * (cmd(t) - xm - tr(xm));
         }
         let n = t_log.len();
-        let chan = |y: Vec<f64>, role: EncoderRole| Channel {
-            run: "r".into(),
-            sensor: "s".into(),
-            kind: SensorKind::EncoderLinear,
-            u: [1.0, 0.0, 0.0],
-            r: [0.0; 3],
-            x: m_log.clone(),
-            d: vec![1.0; n],
-            cycle: vec![1; n],
-            t: t_log.clone(),
-            v: vec![0.05; n],
-            y,
-            sigma: None,
-            encoder: Some(role),
-        };
-        let follow: Vec<f64> = m_log.iter().zip(&x_log).map(|(a, b)| a - b).collect();
-        let chans = vec![
-            chan(tr_log.clone(), EncoderRole::Transmission { drive: m_log.clone() }),
-            chan(follow.clone(), EncoderRole::Following { command: x_log.clone(), s_transmission: 0.0, closed: true }),
-        ];
+        let (chans, follow) = closed_loop_log(&t_log, &x_log, &m_log, &tr_log, 0.05);
         let lag = following_error(&chans[1], kv_eq);
         let skip = (0.5 / (h * every as f64)) as usize;
         let worst_with = |gain: f64| {
