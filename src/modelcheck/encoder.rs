@@ -419,15 +419,30 @@ mod tests {
         assert!((x2[k] - want).abs() < 1e-12, "{} vs {want}", x2[k]);
     }
 
-    /// A closed loop's log as its two channels (transmission `tr_log`, following motor − command)
-    /// at speed `v` (m/s), and the following channel's readings.
+    /// A closed loop run for `duration` s in ticks of `h` s from the motor at `xm` (m), each tick
+    /// `step(t, x_m) → x_m`, logged every `every` ticks as its two channels (the transmission
+    /// T(x_m) = `tr`, the following channel motor − `cmd`) at speed `v` (m/s); and the following
+    /// channel's readings.
     fn closed_loop_log(
-        t_log: &[f64],
-        x_log: &[f64],
-        m_log: &[f64],
-        tr_log: &[f64],
+        (duration, h, every): (f64, f64, usize),
         v: f64,
+        cmd: &dyn Fn(f64) -> f64,
+        tr: &dyn Fn(f64) -> f64,
+        mut xm: f64,
+        step: &dyn Fn(f64, f64) -> f64,
     ) -> (Vec<Channel>, Vec<f64>) {
+        let (mut t_log, mut x_log, mut m_log, mut tr_log) = (vec![], vec![], vec![], vec![]);
+        for k in 0..(duration / h) as usize {
+            let t = k as f64 * h;
+            if k % every == 0 {
+                t_log.push(t);
+                x_log.push(cmd(t));
+                m_log.push(xm);
+                tr_log.push(tr(xm));
+            }
+            xm = step(t, xm);
+        }
+        let (t_log, x_log, m_log, tr_log) = (&t_log, &x_log, &m_log, &tr_log);
         let n = t_log.len();
         let chan = |y: Vec<f64>, role: EncoderRole| Channel {
             run: "r".into(),
@@ -471,23 +486,16 @@ mod tests {
         }
         let f = |t: f64, x: f64| kv * (cmd(t) - x - tr(x));
         let (h, every) = (20e-6, 100);
-        let (mut t_log, mut x_log, mut m_log, mut tr_log) = (vec![], vec![], vec![], vec![]);
-        for k in 0..(1.5 / h) as usize {
-            let t = k as f64 * h;
-            if k % every == 0 {
-                t_log.push(t);
-                x_log.push(cmd(t));
-                m_log.push(xm);
-                tr_log.push(tr(xm));
-            }
+        let rk4 = |t: f64, xm: f64| {
             let k1 = f(t, xm);
             let k2 = f(t + h / 2.0, xm + h / 2.0 * k1);
             let k3 = f(t + h / 2.0, xm + h / 2.0 * k2);
             let k4 = f(t + h, xm + h * k3);
-            xm += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
-        }
-        let n = t_log.len();
-        let (chans, follow) = closed_loop_log(&t_log, &x_log, &m_log, &tr_log, 0.04);
+            xm + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        };
+        let (chans, follow) = closed_loop_log((1.5, h, every), 0.04, &cmd, &tr, xm, &rk4);
+        let tr_log = chans[0].y.clone();
+        let n = tr_log.len();
         let st = Stack::new(&chans).with_loop(kv, 1.0);
         let lag = following_error(&chans[1], kv);
         let mut col: Vec<f64> = tr_log.iter().copied().chain(std::iter::repeat(0.0).take(n)).collect();
@@ -520,20 +528,11 @@ mod tests {
         let tr = |x: f64| 2e-6 * (x / 0.3) + 1e-6 * (std::f64::consts::TAU * x / 7e-3 + 0.4).sin();
         let cmd = |t: f64| 0.1 + 0.05 * t;
         // Settled on the ramp: the error u − x is v/kv, u = cmd − T.
-        let mut xm = cmd(0.0) - 0.05 / kv - tr(cmd(0.0));
-        let (mut t_log, mut x_log, mut m_log, mut tr_log) = (vec![], vec![], vec![], vec![]);
-        for k in 0..(1.2 / h) as usize {
-            let t = k as f64 * h;
-            if k % every == 0 {
-                t_log.push(t);
-                x_log.push(cmd(t));
-                m_log.push(xm);
-                tr_log.push(tr(xm));
-            }
-            xm += kv * h * (cmd(t) - xm - tr(xm));
-        }
-        let n = t_log.len();
-        let (chans, follow) = closed_loop_log(&t_log, &x_log, &m_log, &tr_log, 0.05);
+        let xm = cmd(0.0) - 0.05 / kv - tr(cmd(0.0));
+        let sampled = |t: f64, xm: f64| xm + kv * h * (cmd(t) - xm - tr(xm));
+        let (chans, follow) = closed_loop_log((1.2, h, every), 0.05, &cmd, &tr, xm, &sampled);
+        let tr_log = chans[0].y.clone();
+        let n = tr_log.len();
         let lag = following_error(&chans[1], kv_eq);
         let skip = (0.5 / (h * every as f64)) as usize;
         let worst_with = |gain: f64| {
