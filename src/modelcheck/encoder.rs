@@ -89,9 +89,9 @@ pub(crate) fn close_loop(st: &Stack, col: &mut [f64]) {
         if t.iter().all(|v| *v == 0.0) {
             continue;
         }
-        let lagged = if st.loop_kv.is_finite() { first_order_lag(&c.t, t, st.loop_kv) } else { t.to_vec() };
-        let g = st.loop_gain;
-        let through: Vec<f64> = t.iter().zip(&lagged).map(|(t, l)| t + g * (l - t)).collect();
+        let mut through = if st.loop_kv.is_finite() { first_order_lag(&c.t, t, st.loop_kv) } else { t.to_vec() };
+        // T + g·(L_kv[T] − T), in place of the lag.
+        through.iter_mut().zip(t).for_each(|(l, t)| *l = t + st.loop_gain * (*l - t));
         for (y, l) in col[starts[j]..starts[j] + c.y.len()].iter_mut().zip(through) {
             *y -= l;
         }

@@ -1237,36 +1237,21 @@ pub(crate) fn shortest_resolvable_period(st: &Stack) -> Option<f64> {
 /// The prediction of a known (not fitted) effect at every sample, passed through a closed
 /// position loop onto its following channels ([`close_loop`]).
 pub(crate) fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
-    if has_closed_loop(st.chans) {
-        // An interpolation error passes the loop as a wave (`close_loop_wave`, as its columns do).
-        if let EffectParams::InterpolationError(ie) = &e.params {
-            return waves_through_loop(st, &[(ie.amplitude, ie.period, ie.phase)]);
-        }
+    if let (EffectParams::InterpolationError(ie), true) = (&e.params, has_closed_loop(st.chans)) {
+        // A·sin(θ + φ) = A·cos φ·sin θ + A·sin φ·cos θ, through the loop as a wave (`close_loop_wave`).
+        let (mut sin, mut cos) = st.col_pair(|c, i| {
+            let (a, b) = (TWO_PI * c.x[i] / ie.period).sin_cos();
+            (c.s_chain() * a, c.s_chain() * b)
+        });
+        close_loop_wave(st, ie.period, &mut sin, &mut cos);
+        let (sp, cp) = ie.phase.sin_cos();
+        return sin.iter().zip(&cos).map(|(a, b)| ie.amplitude * (cp * a + sp * b)).collect();
     }
     let mut col = open_loop_prediction(st, e);
     if has_closed_loop(st.chans) {
         close_loop(st, &mut col);
     }
     col
-}
-
-/// Σ_k A_k·sin(2πx/p_k + φ_k) in the scale's reading x (times [`Channel::s_chain`]), each wave
-/// passed through the closed loop onto the following channels as a wave ([`close_loop_wave`]):
-/// A·sin(θ + φ) = A·cos φ·sin θ + A·sin φ·cos θ. `waves` holds (A m, p m, φ rad).
-fn waves_through_loop(st: &Stack, waves: &[(f64, f64, f64)]) -> Vec<f64> {
-    let mut out = vec![0.0; st.n];
-    for &(amplitude, period, phase) in waves {
-        let (mut sin, mut cos) = st.col_pair(|c, i| {
-            let (a, b) = (TWO_PI * c.x[i] / period).sin_cos();
-            (c.s_chain() * a, c.s_chain() * b)
-        });
-        close_loop_wave(st, period, &mut sin, &mut cos);
-        let (sp, cp) = phase.sin_cos();
-        for (o, (a, b)) in out.iter_mut().zip(sin.iter().zip(&cos)) {
-            *o += amplitude * (cp * a + sp * b);
-        }
-    }
-    out
 }
 
 /// The prediction of [`known_prediction`] on each channel alone.
