@@ -171,7 +171,7 @@ fn loop_rates<T: Send>(
     describe: impl Fn(&T) -> String + Sync,
 ) -> Vec<(T, Outcome)> {
     let root = workdir(tag);
-    (0..draws)
+    draw_range(draws)
         .into_par_iter()
         .map(|seed| {
             let dir = root.join(format!("d{seed}"));
@@ -299,6 +299,14 @@ fn accel_complete_model_false_alarms() {
 /// The number of draws of a rate study: `VMT_DRAWS`, else `default`.
 fn draws(default: u64) -> u64 {
     std::env::var("VMT_DRAWS").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
+/// The draw numbers of a rate study of `n` draws: `VMT_DRAW_FROM..VMT_DRAW_FROM + n` (from 0 unless
+/// set), so that a long study can be finished in parts with the same draws (each draw's seed is
+/// fixed by its number).
+fn draw_range(n: u64) -> std::ops::Range<u64> {
+    let from: u64 = std::env::var("VMT_DRAW_FROM").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
+    from..from + n
 }
 
 fn hidden_accel(h: AccelHidden, expect: &str) {
@@ -474,7 +482,7 @@ fn hidden_pair<T: Send>(
     what: &str,
 ) -> Vec<(T, bool)> {
     let root = workdir(what);
-    let r: Vec<(T, TwoRounds)> = (0..n)
+    let r: Vec<(T, TwoRounds)> = draw_range(n)
         .into_par_iter()
         .map(|seed| {
             let dir = root.join(format!("d{seed}"));
@@ -573,6 +581,24 @@ fn write_encoder_draw() {
         _ => EncoderHidden::None,
     };
     let t = encoder_set(&out, seed, hidden);
+    eprintln!("{t:?}");
+}
+
+/// Writes one accelerometer draw to `VMT_OUT` (seed `VMT_SEED`, e.g. 1000 + k for the k-th draw of
+/// a hidden-mode study; hidden effect `VMT_HIDDEN` = none|mode|roll|mode+roll) and prints its truth:
+/// the accelerometer twin of [`write_encoder_draw`].
+#[test]
+#[ignore = "tool: writes one accelerometer draw (see the doc comment)"]
+fn write_accel_draw() {
+    let out = PathBuf::from(std::env::var("VMT_OUT").expect("VMT_OUT"));
+    let seed: u64 = std::env::var("VMT_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(1000);
+    let hidden = match std::env::var("VMT_HIDDEN").as_deref().unwrap_or("none") {
+        "mode" => AccelHidden::Resonance,
+        "roll" => AccelHidden::Roll,
+        "mode+roll" => AccelHidden::ResonanceAndRoll,
+        _ => AccelHidden::None,
+    };
+    let t = accel_set(&out, seed, hidden, 200.0);
     eprintln!("{t:?}");
 }
 
