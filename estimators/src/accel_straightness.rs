@@ -542,9 +542,7 @@ pub fn cramer_rao_resolved(
     }
     // Every run resolving it (the common case, and every bin of a study's bound): the runs as given, without
     // copying them (this runs per harmonic of every estimate); the same sums in the same order.
-    if !speeds.is_empty()
-        && noise_densities.len() == speeds.len()
-        && spacings.iter().all(|&d| resolves(d, wavelength))
+    if !speeds.is_empty() && noise_densities.len() == speeds.len() && spacings.iter().all(|&d| resolves(d, wavelength))
     {
         return cramer_rao_harmonic(noise_densities, speeds, travel, wavelength, ac_coupling_hz, joint_tilt);
     }

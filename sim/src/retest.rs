@@ -14,9 +14,11 @@
 //! What this neglects, and its size (c the table's correction, a few µm to tens of µm):
 //! - the settling state (servo residual, the bearings' deflection, where friction holds the table
 //!   inside the backlash) is taken as at the uncompensated position; it changes with position only
-//!   through the slopes of the error motions and of the friction-free servo response, O(|c|·|∂δ/∂x|) with
-//!   δ ≲ 1 µm and ∂/∂x ≲ 1e-4 /m: below 1e-14 m, and through the move lengths, which change by Δc ≲ 10 µm
-//!   in moves of ~0.1 m;
+//!   through the slopes of the error motions, O(|c|·|∂δ/∂x|) with δ ≲ 1 µm and ∂/∂x ≲ 1e-4 /m: below
+//!   1e-14 m;
+//! - the loop gain: the table makes the loop see f + c(f), its gain scaled by 1 + c'(f), so an error δ
+//!   the loop has not yet settled at a reading (δ = command − feedback: µm after a short dwell, nm after
+//!   a long one) changes by about |c'|·|δ| (c' ≲ 3e-4 on the bundled tables);
 //! - the feedback quantisation r: the loop holds its quantised feedback on the target's count, and where
 //!   inside that count the table rests is not transported: up to one count r (1 nm on the bundled
 //!   scenarios) per sample, a deterministic offset that does not average out over a dwell;

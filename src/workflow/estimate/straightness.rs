@@ -380,7 +380,8 @@ fn memo<K: PartialEq, V: Clone>(
     compute: impl FnOnce() -> Result<V, VmtError>,
 ) -> Result<V, VmtError> {
     use std::sync::PoisonError;
-    let cached = cache.lock().unwrap_or_else(PoisonError::into_inner).iter().find(|(k, _)| *k == key).map(|e| e.1.clone());
+    let cached =
+        cache.lock().unwrap_or_else(PoisonError::into_inner).iter().find(|(k, _)| *k == key).map(|e| e.1.clone());
     if let Some(v) = cached {
         return Ok(v);
     }
