@@ -15,6 +15,7 @@
 //!   the lessons dwell 0.15 s) changes by about |c'|·|δ|; twice that, as it is an order, not a sharp bound;
 //! - the other neglected terms (the settling state's change over a correction of tens of µm) are below
 //!   1e-14 m.
+//!
 //! E and A are extremes of x̄ ± 2s over targets and directions; a change of at most d per reading moves a
 //! mean by at most d and a standard deviation of n ≥ 2 readings by at most d·√(n/(n − 1)) ≤ d·√2
 //! (Minkowski), so E and A move by at most 2·d·(1 + 2·√2) ≈ 7.7·d, with noise one count of the lasers'

@@ -121,7 +121,8 @@ pub enum Retest<'a> {
     /// each sample moved to where the table's action puts the body at rest
     /// (`vmt_sim::retest::at_rest_with_compensation`: exact in the table, the positioning chain and the
     /// error motions' values; it neglects where inside one feedback count the loop settles, up to one
-    /// count (1 nm on the bundled scenarios) per reading, and the settling state's change over the
+    /// count (1 nm on the bundled scenarios) per reading, the change of a not yet settled loop error δ
+    /// with the loop gain the table alters, about |c'|·|δ|, and the settling state's change over the
     /// correction, below 1e-14 m). A study's trials of one value share the physics, so the re-test of
     /// each trial's table costs no physics (issue 12); `tests/retest.rs` holds it to [`Retest::Simulated`].
     Derived(&'a UncompensatedRetests),
@@ -181,10 +182,10 @@ pub fn uncompensated_retests(sc: &Scenario, ph: &Physics, session_end: f64) -> R
 }
 
 /// The compensation check's re-measurement (seed 004): the positioning procedure that recorded run `run`
-/// run again at other irregular targets ([`retest_plan`]) on the machine of `ph` with the compensation
-/// table (`positions`, `corrections`, m) in its CNC, starting at session time `session_end` (s;
-/// time-dependent effects have moved on during the session), read by the sensors with noise seed `seed`;
-/// simulated or derived as `retest` says. The one place the estimate workflow's
+/// run again at other irregular targets (`{run}_after_compensation`, as many as before) on the machine of
+/// `ph` with the compensation table (`positions`, `corrections`, m) in its CNC, starting at session time
+/// `session_end` (s; time-dependent effects have moved on during the session), read by the sensors with
+/// noise seed `seed`; simulated or derived as `retest` says. The one place the estimate workflow's
 /// [`crate::estimate::Remeasure`] callback reaches the physics.
 #[allow(clippy::too_many_arguments)]
 pub fn remeasure(
