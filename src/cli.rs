@@ -107,7 +107,8 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool, units: &str) -> 
         crate::output::refuse_input_overwrite(&out, &[p])?;
     }
     let files = measurement::set_files(&set, &out.join("data"), units, &truth_extras(&sc, &ph, units)?)?;
-    let est = crate::workflow::run::estimate_session(&sc, &ph, &truths, &set)?;
+    // The compensation re-test simulated with the table in the CNC (exact; a study derives it instead).
+    let est = crate::workflow::run::estimate_session(&sc, &ph, &truths, &set, crate::simulate::Retest::Simulated)?;
     let checks = &est.checks;
     let html = out.join("report.html");
     let (report, report_json) = crate::report::report_files(&crate::report::run_report(&sc, &set, &est))?;

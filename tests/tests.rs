@@ -36,6 +36,7 @@ mod model_check_timeseries;
 mod real_dat_cli;
 mod render_chromium;
 mod report;
+mod retest;
 mod session_clock;
 mod squareness;
 mod straightness_independent;

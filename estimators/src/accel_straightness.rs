@@ -540,6 +540,12 @@ pub fn cramer_rao_resolved(
             speeds.len()
         )));
     }
+    // Every run resolving it (the common case, and every bin of a study's bound): the runs as given, without
+    // copying them (this runs per harmonic of every estimate); the same sums in the same order.
+    if !speeds.is_empty() && noise_densities.len() == speeds.len() && spacings.iter().all(|&d| resolves(d, wavelength))
+    {
+        return cramer_rao_harmonic(noise_densities, speeds, travel, wavelength, ac_coupling_hz, joint_tilt);
+    }
     let keep: Vec<usize> = (0..speeds.len()).filter(|&i| resolves(spacings[i], wavelength)).collect();
     let rhos: Vec<f64> = keep.iter().filter_map(|&i| noise_densities.get(i).copied()).collect();
     let v: Vec<f64> = keep.iter().map(|&i| speeds[i]).collect();

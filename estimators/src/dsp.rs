@@ -178,11 +178,19 @@ pub fn zero_phase_highpass(x: &[f64], cutoff_hz: f64, sample_rate: f64) -> Resul
     filtfilt(&f, x, padlen, EdgePadding::TrendOddResidualEven)
 }
 
+thread_local! {
+    /// This thread's FFT planner. A plan (the algorithm and twiddle factors for one length) is made once
+    /// per length and reused: planning a length cost more than transforming it (a study transforms records
+    /// of the same few lengths in every trial). The planner chooses the same algorithm for a length
+    /// whenever it plans it, so a reused plan gives the bits a fresh one would. It keeps a plan per length
+    /// used (O(N) memory each) for the thread's life.
+    static PLANNER: std::cell::RefCell<RealFftPlanner<f64>> = std::cell::RefCell::new(RealFftPlanner::new());
+}
+
 /// Real FFT (unnormalised), `X_k = Σ_{j<N} x_j·e^{−2πijk/N}`, `k = 0…⌊N/2⌋` (as numpy.fft.rfft); `input`
 /// is used as scratch space. Units: those of `x`.
 pub fn rfft(input: &mut [f64]) -> Vec<Complex<f64>> {
-    let mut planner = RealFftPlanner::<f64>::new();
-    let fft = planner.plan_fft_forward(input.len());
+    let fft = PLANNER.with(|p| p.borrow_mut().plan_fft_forward(input.len()));
     let mut out = fft.make_output_vec();
     // Lengths come from make_output_vec: process cannot fail.
     let _ = fft.process(input, &mut out);
@@ -193,8 +201,7 @@ pub fn rfft(input: &mut [f64]) -> Vec<Complex<f64>> {
 /// over the full Hermitian spectrum; the imaginary parts of the DC (and, for even `n`, Nyquist) bins are
 /// ignored. `spec` is used as scratch space.
 pub fn irfft(spec: &mut [Complex<f64>], n: usize) -> Vec<f64> {
-    let mut planner = RealFftPlanner::<f64>::new();
-    let fft = planner.plan_fft_inverse(n);
+    let fft = PLANNER.with(|p| p.borrow_mut().plan_fft_inverse(n));
     spec[0].im = 0.0;
     if n.is_multiple_of(2) {
         spec[n / 2].im = 0.0;

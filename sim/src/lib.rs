@@ -23,6 +23,7 @@ pub mod motion;
 pub mod presets;
 pub mod procedures;
 pub mod profile;
+pub mod retest;
 pub mod rng;
 pub mod sensors;
 pub mod servo;

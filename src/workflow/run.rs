@@ -7,24 +7,27 @@ use crate::estimate::chain::{identify_chain_runs, ChainIdentification, LineSigma
 use crate::estimate::{estimate_recording, Estimates};
 use crate::measurement::MeasurementSet;
 use crate::scenario::Scenario;
-use crate::simulate::{procedure_run_names, remeasure, to_measurement_set, truth_view, Physics, SessionTruth};
+use crate::simulate::{procedure_run_names, remeasure, to_measurement_set, truth_view, Physics, Retest, SessionTruth};
 use vmt_sim::procedures::RunRecord;
 
 /// Runs every estimator of `sc` on its recording `set`, read from the session `truths` simulated on `ph`
 /// (the truth view compared with), the compensation check re-measuring on `ph` from the session's end
-/// with the scenario's seed.
+/// with the scenario's seed, its re-test simulated or derived as `retest` says (`vmt run` simulates it;
+/// a study's trials derive it from the re-test without compensation simulated once per value).
 pub fn estimate_session(
     sc: &Scenario,
     ph: &Physics,
     truths: &SessionTruth,
     set: &MeasurementSet,
+    retest: Retest<'_>,
 ) -> Result<Estimates, VmtError> {
-    let again = |run: &str, x: &[f64], y: &[f64]| remeasure(sc, ph, sc.seed, truths.end, run, x, y);
+    let again = |run: &str, x: &[f64], y: &[f64]| remeasure(sc, ph, retest, sc.seed, truths.end, run, x, y);
     estimate_recording(&sc.source, &sc.estimators, &truth_view(sc, ph, truths), set, &again)
 }
 
 /// Runs every estimator of a scenario on its recording `runs` (read from the session `truths`) and
-/// returns the checks with their figures: [`estimate_session`] on the measurement set written from `runs`.
+/// returns the checks with their figures: [`estimate_session`] on the measurement set written from `runs`,
+/// the compensation re-test simulated.
 pub fn run_estimators(
     sc: &Scenario,
     ph: &Physics,
@@ -32,7 +35,7 @@ pub fn run_estimators(
     runs: &[RunRecord],
 ) -> Result<Estimates, VmtError> {
     let set = to_measurement_set(sc, runs)?;
-    estimate_session(sc, ph, truths, &set)
+    estimate_session(sc, ph, truths, &set, Retest::Simulated)
 }
 
 /// The 21-error identification of the chain procedure `procedure`'s laser lines in the simulated runs

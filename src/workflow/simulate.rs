@@ -24,6 +24,7 @@ use vmt_sim::procedures::{
     RunTruth,
 };
 use vmt_sim::profile::{Profile, Term};
+
 use vmt_sim::sensors::SensorSpec;
 use vmt_sim::truth::axis_physics;
 
@@ -110,21 +111,31 @@ pub fn procedure_run_names(sc: &Scenario, model: &AxisModel) -> BTreeMap<String,
     out
 }
 
-/// The compensation check's re-measurement (seed 004): the positioning procedure that recorded run `run`
-/// run again at other irregular targets (they derive from the procedure name, `{run}_after_compensation`;
-/// as many as before) on the machine of `ph` with the compensation table (`positions`, `corrections`, m)
-/// in its CNC, starting at session time `session_end` (s; time-dependent effects have moved on during
-/// the session), read by the sensors with noise seed `seed`. The one place the estimate workflow's
-/// [`crate::estimate::Remeasure`] callback reaches the physics.
-pub fn remeasure(
-    sc: &Scenario,
-    ph: &Physics,
-    seed: u64,
-    session_end: f64,
-    run: &str,
-    positions: &[f64],
-    corrections: &[f64],
-) -> Result<Run, RemeasureError> {
+/// How the compensation check's re-test is obtained ([`remeasure`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Retest<'a> {
+    /// Simulated with the table in the CNC: the exact re-test (`vmt run`, a sampled study's trials,
+    /// each with its own physics).
+    Simulated,
+    /// Derived from the same re-test simulated once without compensation ([`uncompensated_retests`]),
+    /// each sample moved to where the table's action puts the body at rest
+    /// (`vmt_sim::retest::at_rest_with_compensation`: exact in the table, the positioning chain and the
+    /// error motions' values; it neglects where inside one feedback count the loop settles, up to one
+    /// count (1 nm on the bundled scenarios) per reading, the change of a not yet settled loop error δ
+    /// with the loop gain the table alters, about |c'|·|δ|, and the settling state's change over the
+    /// correction, below 1e-14 m). A study's trials of one value share the physics, so the re-test of
+    /// each trial's table costs no physics (issue 12); `tests/retest.rs` holds it to [`Retest::Simulated`].
+    Derived(&'a UncompensatedRetests),
+}
+
+/// The compensation check's re-tests without compensation, positioning run name → the re-test's
+/// noise-free truth ([`uncompensated_retests`]).
+pub type UncompensatedRetests = BTreeMap<String, RunTruth>;
+
+/// The re-test of the positioning procedure that recorded run `run`: the procedure again at other
+/// irregular targets (they derive from the procedure name, `{run}_after_compensation`; as many as
+/// before), planned on `model` with `seed`.
+fn retest_plan(sc: &Scenario, model: &AxisModel, seed: u64, run: &str) -> Result<RunPlan, RemeasureError> {
     let spec =
         sc.procedures.iter().find(|p| p.name() == run).ok_or_else(|| RemeasureError::NoProcedure(run.to_string()))?;
     let mut verify = spec.clone();
@@ -134,10 +145,75 @@ pub fn remeasure(
     q.n_targets = q.targets.as_ref().map_or(q.n_targets, Vec::len);
     q.targets = None;
     q.name = format!("{run}_after_compensation");
-    let mut model = ph.model.clone();
-    model.compensation = Profile { terms: vec![Term::Table { x: positions.to_vec(), y: corrections.to_vec() }] };
-    let plan = plan_procedure(&model, &verify, seed);
-    let truth = simulate_run(&model, &ph.truth, &plan[0], session_end);
+    plan_procedure(model, &verify, seed).into_iter().next().ok_or(RemeasureError::NotPositioning)
+}
+
+/// The machine of `ph` without a compensation table in its CNC.
+fn uncompensated(ph: &Physics) -> AxisModel {
+    AxisModel { compensation: Profile::zero(), ..ph.model.clone() }
+}
+
+/// The re-test of every positioning run a compensation check of `sc` names, simulated on the machine of
+/// `ph` without compensation from session time `session_end` (s) with the scenario's seed: what
+/// [`Retest::Derived`] moves to each table's compensated positions. Simulated in parallel (each run is
+/// deterministic given its plan and start).
+pub fn uncompensated_retests(sc: &Scenario, ph: &Physics, session_end: f64) -> Result<UncompensatedRetests, VmtError> {
+    let model = uncompensated(ph);
+    let mut runs: Vec<&str> = sc
+        .estimators
+        .iter()
+        .filter_map(|e| {
+            if let crate::scenario::EstimatorSpec::Compensation { run, .. } = e {
+                Some(run.as_str())
+            } else {
+                None
+            }
+        })
+        .collect();
+    runs.sort_unstable();
+    runs.dedup();
+    runs.par_iter()
+        .map(|run| {
+            let plan = retest_plan(sc, &model, sc.seed, run)
+                .map_err(|e| VmtError::bad(&sc.source, format!("estimators (compensation {run})"), e.to_string()))?;
+            Ok((run.to_string(), simulate_run(&model, &ph.truth, &plan, session_end)))
+        })
+        .collect()
+}
+
+/// The compensation check's re-measurement (seed 004): the positioning procedure that recorded run `run`
+/// run again at other irregular targets (`{run}_after_compensation`, as many as before) on the machine of
+/// `ph` with the compensation table (`positions`, `corrections`, m) in its CNC, starting at session time
+/// `session_end` (s; time-dependent effects have moved on during the session), read by the sensors with
+/// noise seed `seed`; simulated or derived as `retest` says. The one place the estimate workflow's
+/// [`crate::estimate::Remeasure`] callback reaches the physics.
+#[allow(clippy::too_many_arguments)]
+pub fn remeasure(
+    sc: &Scenario,
+    ph: &Physics,
+    retest: Retest<'_>,
+    seed: u64,
+    session_end: f64,
+    run: &str,
+    positions: &[f64],
+    corrections: &[f64],
+) -> Result<Run, RemeasureError> {
+    let table = Profile { terms: vec![Term::Table { x: positions.to_vec(), y: corrections.to_vec() }] };
+    let (model, truth) = match retest {
+        Retest::Simulated => {
+            let model = AxisModel { compensation: table, ..ph.model.clone() };
+            let plan = retest_plan(sc, &model, seed, run)?;
+            let truth = simulate_run(&model, &ph.truth, &plan, session_end);
+            (model, truth)
+        }
+        Retest::Derived(retests) => {
+            let model = uncompensated(ph);
+            let plain = retests.get(run).ok_or_else(|| RemeasureError::NoProcedure(run.to_string()))?;
+            let truth = vmt_sim::retest::at_rest_with_compensation(&model, &ph.truth, plain, &table)
+                .ok_or(RemeasureError::NotPositioning)?;
+            (model, truth)
+        }
+    };
     let rec = read_run(&model, &ph.truth, &truth, &ph.sensors, seed).map_err(|e| RemeasureError::Machine(e.into()))?;
     Ok(run_of(sc, &rec))
 }

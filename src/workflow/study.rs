@@ -3,13 +3,18 @@
 //! effect's parameter, a servo gain, a feed: the physics is simulated once per value). Every trial
 //! redraws the sensor noise with its own seed (derived from the scenario seed, the value index and the
 //! trial number), so the results are the same on any number of threads and shards can be computed on
-//! different machines and merged.
+//! different machines and merged. A compensation check's re-test is simulated once per value without
+//! compensation and each trial's table applied to it (`crate::simulate::Retest::Derived`: within about
+//! one feedback count per reading of the simulated re-test `vmt run` makes, docs/methods.md), so a
+//! trial simulates no physics.
 
 use crate::byo::{score_profiles, Estimator};
 use crate::error::VmtError;
 use crate::estimate::Quantity;
 use crate::scenario::Scenario;
-use crate::simulate::{physics, read_all, simulate_truth, to_measurement_set, Physics};
+use crate::simulate::{
+    physics, read_all, simulate_truth, to_measurement_set, uncompensated_retests, Physics, Retest, UncompensatedRetests,
+};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
@@ -370,7 +375,16 @@ pub fn run_sampled_study(
             let ph = physics(&scenario).map_err(|e| at(e.to_string()))?;
             let truth_table = crate::simulate::truth_profiles(&scenario, &ph).map_err(|e| at(e.to_string()))?;
             let truths = simulate_truth(&scenario, &ph);
-            let session = Session { sc: &scenario, ph: &ph, truths: &truths, truth_table: &truth_table, clean: None };
+            // Each trial has its own physics: its compensation re-test is simulated (deriving it would
+            // simulate the re-test without compensation instead, at the same cost).
+            let session = Session {
+                sc: &scenario,
+                ph: &ph,
+                truths: &truths,
+                truth_table: &truth_table,
+                clean: None,
+                retest: Retest::Simulated,
+            };
             let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/0/{k}"));
             let mut rows = trial_rows(&session, seed, (0.0, k), estimator, tolerance)?;
             rows.iter_mut().for_each(|r| r.sampled = values.clone());
@@ -597,7 +611,11 @@ pub fn run_study(
                 .collect::<Result<_, _>>()?
         }
     };
-    let sessions: Vec<(Physics, crate::simulate::SessionTruth, crate::measurement::ProfileTable)> = scenarios
+    // Each value's compensation re-tests are simulated once without compensation; every trial derives
+    // its own table's re-test from them (`Retest::Derived`, issue 12) instead of simulating it.
+    type ValueSession =
+        (Physics, crate::simulate::SessionTruth, crate::measurement::ProfileTable, UncompensatedRetests);
+    let sessions: Vec<ValueSession> = scenarios
         .par_iter()
         .enumerate()
         .map(|(i, s)| {
@@ -605,7 +623,11 @@ pub fn run_study(
                 let ph = physics(s)?;
                 let table = crate::simulate::truth_profiles(s, &ph)?;
                 let truths = simulate_truth(s, &ph);
-                Ok((ph, truths, table))
+                let retests = match estimator {
+                    Some(_) => UncompensatedRetests::new(),
+                    None => uncompensated_retests(s, &ph, truths.end)?,
+                };
+                Ok((ph, truths, table, retests))
             };
             session().map_err(|e| match &vary.key {
                 VaryKey::Sensor { .. } => e,
@@ -622,7 +644,7 @@ pub fn run_study(
     let values: Vec<(Physics, Vec<Vec<Vec<f64>>>)> = (0..vary.values.len())
         .into_par_iter()
         .map(|i| {
-            let (sc, (ph, truths, _)) = (&scenarios[of_value(i)], &sessions[of_value(i)]);
+            let (sc, (ph, truths, _, _)) = (&scenarios[of_value(i)], &sessions[of_value(i)]);
             let mut p = ph.clone();
             if let VaryKey::Sensor { sensor, key } = &vary.key {
                 for s in p.sensors.iter_mut().filter(|s| &s.name == sensor) {
@@ -641,10 +663,11 @@ pub fn run_study(
     let rows: Result<Vec<Vec<TrialRow>>, VmtError> = jobs
         .par_iter()
         .map(|&(i, k)| {
-            let (sc, (_, truths, truth_table)) = (&scenarios[of_value(i)], &sessions[of_value(i)]);
+            let (sc, (_, truths, truth_table, retests)) = (&scenarios[of_value(i)], &sessions[of_value(i)]);
             let (p, clean) = &values[i];
             let seed = vmt_sim::rng::derive_seed(sc.seed, &format!("study/{i}/{k}"));
-            let session = Session { sc, ph: p, truths, truth_table, clean: Some(clean) };
+            let session =
+                Session { sc, ph: p, truths, truth_table, clean: Some(clean), retest: Retest::Derived(retests) };
             trial_rows(&session, seed, (vary.values[i], k), estimator, tolerance)
         })
         .collect();
@@ -661,6 +684,8 @@ struct Session<'a> {
     /// The runs' noise-free readings ([`crate::simulate::clean_all`]) when the trials share them;
     /// `None`: computed in the trial.
     clean: Option<&'a [Vec<Vec<f64>>]>,
+    /// How the compensation check's re-test is obtained.
+    retest: Retest<'a>,
 }
 
 /// The rows of one trial: the session read by its sensors with the trial's `seed`, then the
@@ -673,7 +698,7 @@ fn trial_rows(
     estimator: Option<&dyn Estimator>,
     tolerance: Option<f64>,
 ) -> Result<Vec<TrialRow>, VmtError> {
-    let Session { sc, ph: p, truths, truth_table, clean } = *session;
+    let Session { sc, ph: p, truths, truth_table, clean, retest } = *session;
     let runs = match clean {
         Some(c) => crate::simulate::read_all_clean(sc, p, truths, seed, c)?,
         None => read_all(sc, p, truths, seed)?,
@@ -702,7 +727,7 @@ fn trial_rows(
             .collect());
     }
     // The compensation check re-measures on this trial's sensors, after the session simulated once.
-    let est = crate::workflow::run::estimate_session(sc, p, truths, &set)?;
+    let est = crate::workflow::run::estimate_session(sc, p, truths, &set, retest)?;
     Ok(est
         .checks
         .into_iter()

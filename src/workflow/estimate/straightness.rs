@@ -370,28 +370,63 @@ struct GeometryKey {
 /// check's RMS difference.
 type BandGeometry = std::sync::Arc<Vec<(f64, Vec<(f64, f64)>)>>;
 
-/// The band geometry for `key`, computed by `compute` once and shared by later calls with the same key
-/// (a study's trials: the same grid, a different noise). The cache holds the last few keys; a value is a
-/// pure function of its key, so results do not depend on the cache or on thread scheduling.
+/// The value of `key` in `cache`, computed by `compute` once and shared by later calls with an equal key (a
+/// study's trials: the same grid and truth, a different noise). The cache holds the last [`MEMO_KEPT`]
+/// keys; a value is a pure function of its key, so results do not depend on the cache or on thread
+/// scheduling (two threads missing at once both compute the same value).
+fn memo<K: PartialEq, V: Clone>(
+    cache: &std::sync::Mutex<Vec<(K, V)>>,
+    key: K,
+    compute: impl FnOnce() -> Result<V, VmtError>,
+) -> Result<V, VmtError> {
+    use std::sync::PoisonError;
+    let cached =
+        cache.lock().unwrap_or_else(PoisonError::into_inner).iter().find(|(k, _)| *k == key).map(|e| e.1.clone());
+    if let Some(v) = cached {
+        return Ok(v);
+    }
+    let v = compute()?;
+    let mut cache = cache.lock().unwrap_or_else(PoisonError::into_inner);
+    if cache.len() >= MEMO_KEPT {
+        cache.remove(0);
+    }
+    cache.push((key, v.clone()));
+    Ok(v)
+}
+
+/// Keys a [`memo`] cache keeps (a study of many values computes each value's entry again when its trials
+/// interleave with more than this many other values' trials: slower, never different).
+const MEMO_KEPT: usize = 8;
+
+/// The band geometry for `key`, computed by `compute` once and shared by later calls with the same key.
 fn band_geometry(
     key: GeometryKey,
     compute: impl FnOnce() -> Result<Vec<(f64, Vec<(f64, f64)>)>, VmtError>,
 ) -> Result<BandGeometry, VmtError> {
-    use std::sync::{Mutex, PoisonError};
-    static CACHE: Mutex<Vec<(GeometryKey, BandGeometry)>> = Mutex::new(Vec::new());
-    const KEPT: usize = 8;
-    let cached =
-        CACHE.lock().unwrap_or_else(PoisonError::into_inner).iter().find(|(k, _)| *k == key).map(|e| e.1.clone());
-    if let Some(g) = cached {
-        return Ok(g);
-    }
-    let g = std::sync::Arc::new(compute()?);
-    let mut cache = CACHE.lock().unwrap_or_else(PoisonError::into_inner);
-    if cache.len() >= KEPT {
-        cache.remove(0);
-    }
-    cache.push((key, g.clone()));
-    Ok(g)
+    static CACHE: std::sync::Mutex<Vec<(GeometryKey, BandGeometry)>> = std::sync::Mutex::new(Vec::new());
+    memo(&CACHE, key, || compute().map(std::sync::Arc::new))
+}
+
+/// What the band-limited truth of [`accel_straightness_check`] depends on, bit for bit: the estimate's
+/// grid, the band's wavelengths, the sensor's point and direction, and the injected error motions.
+#[derive(Clone, PartialEq)]
+struct TruthKey {
+    positions: Vec<u64>,
+    band: [u64; 2],
+    point: [u64; 3],
+    direction: [u64; 3],
+    motions: vmt_sim::geometry::ErrorMotions,
+}
+
+/// The injected curvature at the sensor's point integrated in the cosine basis over the band (the truth
+/// the cosine-basis check compares with), computed once per [`TruthKey`] and shared (a study's trials).
+fn band_limited_truth(
+    key: TruthKey,
+    compute: impl FnOnce() -> Result<Vec<f64>, VmtError>,
+) -> Result<std::sync::Arc<Vec<f64>>, VmtError> {
+    type Cache = Vec<(TruthKey, std::sync::Arc<Vec<f64>>)>;
+    static CACHE: std::sync::Mutex<Cache> = std::sync::Mutex::new(Vec::new());
+    memo(&CACHE, key, || compute().map(std::sync::Arc::new))
 }
 
 /// The accelerometer straightness check of one sensor (seed 000 / SNR-weighted fusion): the profile of
@@ -445,10 +480,22 @@ pub(super) fn accel_straightness_check(
     let truth: Vec<f64> = match est.basis {
         // The truth band-limited by the estimator's own operator: the mount point's noise-free curvature
         // u·(E'' + ε''×r) integrated in the cosine basis over the recoverable band, over the whole range.
+        // The same in every trial of a study (it depends on the grid, band, mount and truth, not on the noise).
         SpectralBasis::Cosine => {
-            let curvature: Vec<f64> = est.positions.iter().map(|&x| dot(u, errors.curvature_at(x, r))).collect();
             let (lo, hi) = (est.band.min_wavelength, est.band.max_wavelength);
-            integrate_curvature_cosine(&est.positions, &curvature, lo, hi).map_err(|e| bad(e.to_string()))?
+            let bits = |v: [f64; 3]| v.map(f64::to_bits);
+            let key = TruthKey {
+                positions: est.positions.iter().map(|v| v.to_bits()).collect(),
+                band: [lo.to_bits(), hi.to_bits()],
+                point: bits(r),
+                direction: bits(u),
+                motions: errors.clone(),
+            };
+            let truth = band_limited_truth(key, || {
+                let curvature: Vec<f64> = est.positions.iter().map(|&x| dot(u, errors.curvature_at(x, r))).collect();
+                integrate_curvature_cosine(&est.positions, &curvature, lo, hi).map_err(|e| bad(e.to_string()))
+            })?;
+            truth.to_vec()
         }
         SpectralBasis::Periodic => est.positions.iter().map(|&x| dot(u, errors.deviation_at(x, r))).collect(),
     };
