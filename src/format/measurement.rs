@@ -464,8 +464,9 @@ pub fn uniform_interval(t: &[f64]) -> Result<f64, SampleIntervalError> {
     let mut sorted = steps.clone();
     sorted.sort_by(f64::total_cmp);
     let h = sorted[sorted.len() / 2];
-    // `!(… ≤ …)`: a NaN step or a non-positive median deviates.
-    if let Some(k) = steps.iter().position(|s| !((s - h).abs() <= 1e-3 * h)) {
+    // A NaN step or a non-positive median deviates (`is_some_and` is false on NaN).
+    let within = |s: f64| (s - h).abs().partial_cmp(&(1e-3 * h)).is_some_and(|o| o.is_le());
+    if let Some(k) = steps.iter().position(|&s| !within(s)) {
         return Err(SampleIntervalError::NonUniform { interval: h, step: steps[k], row: k + 2 });
     }
     Ok(dt)
