@@ -13,8 +13,8 @@
 //!   the command is killed on entering its K-th call of one file syscall. A first traced run lists
 //!   every call that touches the destination or its temporary sibling; [`SYSCALL_KILLS`] are aimed at
 //!   them, half per scenario (the number of `write` calls depends on the bytes written): every call
-//!   from 3 before to 3 after the `renameat2(RENAME_EXCHANGE)` that swaps the output in, the rest
-//!   spread evenly over the others. Where a kill actually landed is read back from
+//!   from 3 before to 3 after the rename that swaps the output in (`renameat2(RENAME_EXCHANGE)`, or
+//!   the two renames where the system lacks it), the rest spread evenly over the others. Where a kill actually landed is read back from
 //!   strace's log (the call left unfinished, `= ?`). A timed kill cannot aim at a window of a few
 //!   microseconds; these can, and they land on the swap itself. Without strace this part is skipped
 //!   with a visible line (under CI, `.ci/run` installs it and its absence is a failure).
@@ -143,7 +143,7 @@ struct Tally {
     call_new: usize,
     /// Syscall kills that landed on a call touching the destination or its temporary sibling.
     call_on_output: usize,
-    /// Syscall kills that landed on the swap itself (`renameat2` with `RENAME_EXCHANGE`).
+    /// Syscall kills that landed on the swap itself (a rename of the destination, [`is_swap`]).
     call_on_swap: usize,
     /// Each syscall kill: the call aimed at and the call it landed on (for a failure's message).
     call_log: Vec<String>,
@@ -284,6 +284,13 @@ fn landed_call(log: &str) -> String {
     }
 }
 
+/// Whether a strace line is a rename of the destination `out` itself (its path quoted whole): the swap,
+/// `renameat2(…, RENAME_EXCHANGE)`, or either rename of a two-rename swap where the system lacks it.
+fn is_swap(line: &str, out: &str) -> bool {
+    let call = line.split_once(' ').map_or(line, |(_, rest)| rest.trim_start());
+    ["rename(", "renameat(", "renameat2("].iter().any(|r| call.starts_with(r)) && line.contains(&format!("\"{out}\""))
+}
+
 /// Whether strace can trace here (installed, and ptrace allowed).
 fn strace_works() -> bool {
     Command::new("strace")
@@ -321,8 +328,8 @@ fn syscall_kills(kind: Kind, dest: &mut Dest, dir: &Path, tally: &mut Tally) {
             calls(&std::fs::read_to_string(&log).unwrap()).into_iter().filter(|c| c.line.contains(&out_text)).collect();
         let swap = on_out
             .iter()
-            .position(|c| c.name == "renameat2" && c.line.contains("RENAME_EXCHANGE"))
-            .unwrap_or_else(|| panic!("{kind:?}: no renameat2(RENAME_EXCHANGE) of the destination in the trace"));
+            .position(|c| is_swap(&c.line, &out_text))
+            .unwrap_or_else(|| panic!("{kind:?}: no rename of the destination in the trace"));
         let near: Vec<usize> = (swap.saturating_sub(3)..(swap + 4).min(on_out.len())).collect();
         let rest: Vec<usize> = (0..on_out.len()).filter(|i| !near.contains(i)).collect();
         let spread = (SYSCALL_KILLS / 2).saturating_sub(near.len()).min(rest.len());
@@ -366,7 +373,7 @@ fn syscall_kills(kind: Kind, dest: &mut Dest, dir: &Path, tally: &mut Tally) {
         eprintln!("{kind:?}: {line}");
         tally.call_log.push(line);
         tally.call_on_output += usize::from(landed.contains(&out_text));
-        tally.call_on_swap += usize::from(landed.contains("renameat2") && landed.contains("RENAME_EXCHANGE"));
+        tally.call_on_swap += usize::from(is_swap(&landed, &out_text));
         if dest.after_kill(kind, &format!("a kill at `{landed}`")) {
             tally.call_new += 1;
         } else {
@@ -399,7 +406,7 @@ fn killed_run_simulate_and_study_leave_the_complete_old_or_new_output() {
         if r.traced {
             eprintln!(
                 "{k:?}: {} kills at file-system calls: {} left the old output, {} the new one; {} landed on a call \
-                 touching the destination or its temporary sibling, {} on the swap (renameat2 RENAME_EXCHANGE)",
+                 touching the destination or its temporary sibling, {} on the swap (a rename of the destination)",
                 r.call_old + r.call_new,
                 r.call_old,
                 r.call_new,
