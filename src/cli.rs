@@ -39,6 +39,7 @@ pub fn simulate(path: Option<&Path>, out: &Path, units: &str, compensation: Opti
     let sc = load_scenario(path)?;
     let inputs: Vec<&Path> = path.into_iter().chain(compensation).collect();
     crate::output::refuse_input_overwrite(out, &inputs)?;
+    crate::output::check_destination(out)?;
     let table = compensation.map(crate::format::compensation::read_table).transpose()?;
     let mut ph = physics(&sc)?;
     if let Some(table) = table {
@@ -93,6 +94,11 @@ pub fn default_out(source: &Path) -> PathBuf {
 pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool, units: &str) -> Result<i32, VmtError> {
     let units = parse_units(units)?;
     let sc = load_scenario(path)?;
+    let out = out.map(Path::to_path_buf).unwrap_or_else(|| default_out(&sc.source));
+    if let Some(p) = path {
+        crate::output::refuse_input_overwrite(&out, &[p])?;
+    }
+    crate::output::check_destination(&out)?;
     let bar = spinner(&format!(
         "simulating {} procedures and running {} estimators",
         sc.procedures.len(),
@@ -102,10 +108,6 @@ pub fn run(path: Option<&Path>, out: Option<&Path>, json: bool, units: &str) -> 
     let truths = simulate_truth(&sc, &ph);
     let runs = read_all(&sc, &ph, &truths, sc.seed)?;
     let set = to_measurement_set(&sc, &runs)?;
-    let out = out.map(Path::to_path_buf).unwrap_or_else(|| default_out(&sc.source));
-    if let Some(p) = path {
-        crate::output::refuse_input_overwrite(&out, &[p])?;
-    }
     let files = measurement::set_files(&set, &out.join("data"), units, &truth_extras(&sc, &ph, units)?)?;
     // The compensation re-test simulated with the table in the CNC (exact; a study derives it instead).
     let est = crate::workflow::run::estimate_session(&sc, &ph, &truths, &set, crate::simulate::Retest::Simulated)?;
@@ -435,6 +437,7 @@ pub fn study(
         Some(s) => parse_shard(s, &|k| std::env::var(k).ok())?,
     };
     let sc = Scenario::load(path)?;
+    crate::output::check_destination(out)?;
     let cmd = estimator_cmd.map(|c| crate::byo::CommandEstimator { command: c.to_string() });
     let cmd = cmd.as_ref().map(|c| c as &dyn crate::byo::Estimator);
     // What `study merge` checks the shards by (the scenario file's content, not its path).
@@ -481,6 +484,7 @@ pub fn study(
 /// studies, are refused (exit 2) naming them.
 pub fn study_merge(out: &Path, shards: &[PathBuf], units: &str) -> Result<i32, VmtError> {
     let units = parse_units(units)?;
+    crate::output::check_destination(out)?;
     let mut parts = Vec::new();
     let mut names: Option<Vec<String>> = None;
     for d in shards {
@@ -661,7 +665,7 @@ pub fn ssi(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, VmtErro
         // the record (every first difference a multiple of q), or the floor is not known.
         let q = vmt_estimators::ssi::lattice_step(x);
         let (_, res) = crate::estimate::ssi::run_ssi(t, x, q)
-            .map_err(|m| VmtError::bad(path, format!("run {}", r.name), m.to_string()))?;
+            .map_err(|m| VmtError::bad(&path.join(&r.file), format!("run {}", r.name), m.to_string()))?;
         let resolution_source = if q.is_some() {
             "found in the record: every first difference is a multiple of it"
         } else {

@@ -118,10 +118,11 @@ enum Command {
     Straightness {
         /// The measurement set directory (manifest.toml + CSV runs with accelerometer columns).
         data: PathBuf,
-        /// Write the estimate as a FORMAT.md §5 profile CSV with `_sigma` columns.
+        /// Write the estimate as a profile CSV (docs/formats.md §5) with `_sigma` columns.
         #[arg(short, long)]
         out: Option<PathBuf>,
-        /// `fusion` (SNR-weighted, DESIGN.md §7) or `seed` (seed 000, spatial-frequency continuity).
+        /// `fusion` (vmt's SNR-weighted spectral fusion) or `seed` (the Dalian University of Technology
+        /// patent's spatial-frequency continuity); both in docs/methods.md.
         #[arg(long, default_value = "fusion")]
         method: String,
         /// Accelerometers to use (default: every accelerometer with a column in a constant_velocity run).

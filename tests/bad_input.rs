@@ -373,6 +373,66 @@ fn set_cases() -> Vec<Case> {
             });
         }
     }
+    // The point-table rows every reader of a set must refuse the same way (issue 14: a repeated
+    // (target, run, direction) row was counted twice by compare, diagnose, iso230-2, compensate and
+    // identify): the same tables through the other readers.
+    let model = b"format = \"vmt-model/1\"\n[effects.positioning]\nfit = true\n".to_vec();
+    for (label, bad_row, place) in [("repeated row", 1usize, "line 14"), ("target 1e20 m", 4, "line 6")] {
+        let mut rows = good_rows();
+        if label == "repeated row" {
+            rows.push(rows[bad_row]);
+        } else {
+            rows[bad_row].0 = 1e20;
+        }
+        for cmd in ["compare", "diagnose", "identify", "add"] {
+            let mut files = set_files(&table(&rows));
+            files.push(("m.toml".into(), model.clone()));
+            let a = match cmd {
+                "identify" => args(&["identify", "{dir}/set"]),
+                "add" => args(&[
+                    "add",
+                    "--model",
+                    "{dir}/m.toml",
+                    "--effect",
+                    "backlash",
+                    "--data",
+                    "{dir}/set",
+                    "-o",
+                    "{dir}/m1.toml",
+                ]),
+                _ => args(&[cmd, "--model", "{dir}/m.toml", "--data", "{dir}/set"]),
+            };
+            cases.push(Case {
+                label: format!("{cmd}: {label}"),
+                files,
+                args: a,
+                blamed: "iso.csv".into(),
+                place: place.into(),
+            });
+        }
+    }
+    // `vmt ssi` on a record whose time stamps are not uniform (issue 14: it used t[1] − t[0] as the
+    // sample interval of the whole record).
+    let crawl_manifest = "format = \"vmt-measurements/1\"\n\
+        [[sensors]]\nname = \"scale\"\nkind = \"encoder_linear\"\naxis = \"x\"\n\
+        [[runs]]\nname = \"crawl\"\nfile = \"crawl.csv\"\nprocedure = \"crawl\"\naxis = \"x\"\nfeed = 1e-4\ndirection = 1\n";
+    let crawl: String = std::iter::once("t,scale\n".to_string())
+        .chain((0..200).map(|i| {
+            // One sample late by half an interval at row 120.
+            let t = i as f64 * 1e-3 + if i >= 120 { 5e-4 } else { 0.0 };
+            format!("{t:e},{:e}\n", t * 1e-4)
+        }))
+        .collect();
+    cases.push(Case {
+        label: "ssi: non-uniform time stamps".into(),
+        files: vec![
+            ("set/manifest.toml".into(), crawl_manifest.as_bytes().to_vec()),
+            ("set/crawl.csv".into(), crawl.into_bytes()),
+        ],
+        args: args(&["ssi", "{dir}/set"]),
+        blamed: "crawl.csv".into(),
+        place: "data row 121".into(),
+    });
     // Encodings and file kinds.
     let utf16: Vec<u8> = "format = \"vmt-measurements/1\"\n".encode_utf16().flat_map(|u| u.to_le_bytes()).collect();
     let mut f = set_files(&table(&good_rows()));
@@ -547,16 +607,32 @@ fn model_cases() -> Vec<Case> {
         ("straightness_y", "poly = [0.0, 1e300]", "effects.straightness_y"),
         ("pitch", "poly = [0.0, 1e3]", "effects.pitch"),
     ];
-    bad.iter()
-        .flat_map(|(effect, keys, place)| {
+    let mut models: Vec<(String, String)> = bad
+        .iter()
+        .map(|(effect, keys, place)| {
             let model =
                 format!("format = \"vmt-model/1\"\n[effects.positioning]\nfit = true\n[effects.{effect}]\n{keys}\n");
+            (model, place.to_string())
+        })
+        .collect();
+    // A basis order from input sizes the fit's design matrix (issue 14: `order = 4294967295` aborted).
+    for (basis, order) in [("poly", "4294967295"), ("bspline", "100000000"), ("harmonics", "4294967295")] {
+        models.push((
+            format!(
+                "format = \"vmt-model/1\"\n[effects.positioning]\nfit = true\nbasis = \"{basis}\"\norder = {order}\n"
+            ),
+            "effects.positioning.order".into(),
+        ));
+    }
+    models
+        .into_iter()
+        .flat_map(|(model, place)| {
             ["compare", "diagnose"].map(|cmd| Case {
-                label: format!("{cmd}: model {place} out of physical bounds"),
+                label: format!("{cmd}: model {place} out of bounds ({})", model.lines().last().unwrap_or("")),
                 files: vec![("t.dat".into(), data.clone()), ("m.toml".into(), model.clone().into_bytes())],
                 args: args(&[cmd, "--model", "{dir}/m.toml", "--data", "{dir}/t.dat"]),
                 blamed: "m.toml".into(),
-                place: place.to_string(),
+                place: place.clone(),
             })
         })
         .collect()
@@ -817,6 +893,84 @@ fn cli_cases() -> Vec<Case> {
     cases
 }
 
+/// Outputs vmt must not write over (issue 14: `simulate -o` into a user's measurement set deleted the
+/// user's other files there; `study -o` and `run -o` overwrote an unrelated `summary.csv` /
+/// `report.html`; `add` silently replaced a corrupt `history.json`). Each is refused before any work,
+/// naming the directory (or file) and why, and leaves every file as it was.
+fn output_cases() -> Vec<Case> {
+    let s = scenario_text(&[]);
+    let study = |out: &str| {
+        args(&["study", "{dir}/s.toml", "--vary", "sensors.laser_x3.sigma=1e-8", "--trials", "2", "-o", out])
+    };
+    let mut cases = Vec::new();
+    let set = set_files(&table(&good_rows()));
+    for (label, user_files, a, place) in [
+        (
+            "simulate -o into a user's measurement set",
+            set.clone(),
+            args(&["simulate", "{dir}/s.toml", "-o", "{dir}/set"]),
+            "holds no `.vmt-output`",
+        ),
+        (
+            "run -o into a folder with the user's report.html",
+            vec![("user/report.html".to_string(), b"<p>my report</p>".to_vec())],
+            args(&["run", "{dir}/s.toml", "-o", "{dir}/user"]),
+            "holds no `.vmt-output`",
+        ),
+        (
+            "study -o into a folder with the user's summary.csv",
+            vec![("user/summary.csv".to_string(), b"a,b\n1,2\n".to_vec())],
+            study("{dir}/user"),
+            "holds no `.vmt-output`",
+        ),
+        (
+            "simulate -o into vmt's output where the user added a file",
+            vec![
+                ("user/.vmt-output".to_string(), b"manifest.toml\n".to_vec()),
+                ("user/manifest.toml".to_string(), b"format = \"vmt-measurements/1\"\n".to_vec()),
+                ("user/notes.txt".to_string(), b"mine".to_vec()),
+            ],
+            args(&["simulate", "{dir}/s.toml", "-o", "{dir}/user"]),
+            "`notes.txt` is not one of the files vmt wrote there",
+        ),
+        (
+            "study -o onto a file",
+            vec![("user".to_string(), b"a file".to_vec())],
+            study("{dir}/user"),
+            "a file of that name exists",
+        ),
+    ] {
+        let mut files = user_files;
+        files.push(("s.toml".into(), s.clone()));
+        let blamed = if label.contains("measurement set") { "set" } else { "user" };
+        cases.push(Case { label: label.into(), files, args: a, blamed: blamed.into(), place: place.into() });
+    }
+    // A corrupt history.json beside `add`'s output model.
+    let model = b"format = \"vmt-model/1\"\n[effects.positioning]\nfit = true\n".to_vec();
+    cases.push(Case {
+        label: "add beside a corrupt history.json".into(),
+        files: vec![
+            ("t.dat".into(), dat_text(&[-20.0, -10.0, 0.0, 10.0, 20.0], 0.004, None)),
+            ("m.toml".into(), model),
+            ("it/history.json".into(), b"[{\"model\": \"m0.toml\", \"norm".to_vec()),
+        ],
+        args: args(&[
+            "add",
+            "--model",
+            "{dir}/m.toml",
+            "--effect",
+            "backlash",
+            "--data",
+            "{dir}/t.dat",
+            "-o",
+            "{dir}/it/m1.toml",
+        ]),
+        blamed: "history.json".into(),
+        place: "corrupt".into(),
+    });
+    cases
+}
+
 /// Runs one case in a fresh directory; returns a description of what went wrong, if anything.
 fn check(c: &Case) -> Option<String> {
     let tmp = tempfile::tempdir().unwrap();
@@ -903,16 +1057,22 @@ fn walk(dir: &Path) -> Vec<String> {
 
 #[test]
 fn every_bad_input_exits_2_names_file_and_place_and_writes_nothing() {
-    let groups = [scenario_cases(), set_cases(), urdf_cases(), cli_cases()];
+    let groups = [scenario_cases(), set_cases(), urdf_cases(), cli_cases(), output_cases()];
     let sizes: Vec<usize> = groups.iter().map(Vec::len).collect();
     let cases: Vec<Case> = groups.into_iter().flatten().collect();
+    let mut inputs: Vec<&Vec<(String, Vec<u8>)>> = cases.iter().map(|c| &c.files).collect();
+    inputs.sort();
+    inputs.dedup();
     println!(
-        "bad_input: {} cases, one vmt run each (scenario {}, measurement set/.dat/model {}, URDF {}, command line/tables/study {})",
+        "bad_input: {} cases, one vmt run each, over {} distinct input file sets (scenario {}, measurement \
+         set/.dat/model {}, URDF {}, command line/tables/study {}, outputs {})",
         cases.len(),
+        inputs.len(),
         sizes[0],
         sizes[1],
         sizes[2],
-        sizes[3]
+        sizes[3],
+        sizes[4]
     );
     // Issue 14 asks for at least 150 inputs.
     assert!(cases.len() >= 150, "only {} cases", cases.len());

@@ -403,3 +403,69 @@ fn add_lists_the_effect_names_in_help_and_in_the_error() {
         assert!(listed(&err), "`{}` not listed in the error:\n{err}", name.as_str());
     }
 }
+
+/// Issue 13: what a person reads cites no document that is not in the repository (FORMAT.md,
+/// DESIGN.md, the seed texts as "seed 00N"): methods are named by their source and the formats and
+/// methods by docs/formats.md and docs/methods.md. Read: `vmt --help` and every command's help, the
+/// README, docs/, the bundled scenarios (comments and descriptions: `vmt run` prints the description),
+/// the golden `vmt run` outputs, and every string literal of the release code (messages, report text).
+#[test]
+fn no_user_facing_text_cites_a_document_outside_the_repository() {
+    const OUTSIDE: [&str; 5] = ["FORMAT.md", "DESIGN.md", "seed 00", "seed-00", "seeds/"];
+    let mut texts: Vec<(String, String)> = Vec::new();
+    let help = ok(vmt().arg("--help").output().unwrap(), "vmt --help");
+    let commands: Vec<String> = help
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .filter(|c| c != "help")
+        .collect();
+    assert!(commands.len() >= 10, "{help}");
+    for c in &commands {
+        texts.push((format!("vmt {c} --help"), ok(vmt().args([c.as_str(), "--help"]).output().unwrap(), c)));
+    }
+    texts.push(("vmt --help".into(), help));
+    let mut files = vec![root().join("README.md"), root().join("scenarios/lessons/README.md")];
+    for dir in ["docs", "scenarios", "tests/golden/run", "examples"] {
+        let mut stack = vec![root().join(dir)];
+        while let Some(d) = stack.pop() {
+            for e in std::fs::read_dir(&d).unwrap().flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else if p.extension().is_some_and(|x| ["md", "toml", "txt", "py"].contains(&x.to_str().unwrap_or("")))
+                {
+                    files.push(p);
+                }
+            }
+        }
+    }
+    for p in files {
+        texts.push((p.display().to_string(), std::fs::read_to_string(&p).unwrap()));
+    }
+    // String literals of the release code: lines that are not comments and hold a quote.
+    let mut sources = Vec::new();
+    for dir in ["src", "sim/src", "estimators/src", "report/src", "core/src"] {
+        crate::util::rust_files(&root().join(dir), &mut sources);
+    }
+    for p in sources {
+        let code: String = std::fs::read_to_string(&p)
+            .unwrap()
+            .lines()
+            .filter(|l| !l.trim_start().starts_with("//") && l.contains('"'))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        texts.push((p.display().to_string(), code));
+    }
+    let mut found = Vec::new();
+    for (what, text) in &texts {
+        for (i, line) in text.lines().enumerate() {
+            if let Some(w) = OUTSIDE.iter().find(|w| line.contains(*w)) {
+                found.push(format!("{what}, line {}: `{w}` in {}", i + 1, line.trim()));
+            }
+        }
+    }
+    assert!(found.is_empty(), "{} lines cite a document outside the repository:\n{}", found.len(), found.join("\n"));
+}

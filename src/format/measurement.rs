@@ -430,13 +430,13 @@ pub enum SampleIntervalError {
     },
     /// A step deviates from the mean step by more than 1e-3 of it.
     #[error(
-        "expected uniformly sampled `t` (step {} s), got a step of {} s at row {row}: this estimator needs a \
-         constant sample rate",
+        "expected uniformly sampled `t` (median step {} s), got a step of {} s ending at data row {row}: this \
+         estimator needs a constant sample rate",
         fmt_num(*.interval),
         fmt_num(*.step)
     )]
     NonUniform {
-        /// The mean step (t_last − t_0)/(n − 1), s.
+        /// The median step, s.
         interval: f64,
         /// The deviating step, s.
         step: f64,
@@ -445,8 +445,10 @@ pub enum SampleIntervalError {
     },
 }
 
-/// The sample interval of a uniformly sampled time column, s: Δt = (t_last − t_0)/(n − 1), checked
-/// against every step t_k+1 − t_k (relative deviation ≤ 1e-3: CSV rounding, not a missing sample).
+/// The sample interval of a uniformly sampled time column, s: Δt = (t_last − t_0)/(n − 1), with every
+/// step t_k+1 − t_k within 1e-3 of the median step h (CSV rounding, not a missing sample; then Δt is
+/// within 1e-3 of h too). The median, not Δt, is the reference so that the error names the row where a
+/// step deviates: one late sample shifts Δt and would make every other step deviate from it.
 /// For estimators that take one rate (SSI, accelerometer straightness). Errors on fewer than two
 /// samples or a non-uniform step, naming the row.
 pub fn uniform_interval(t: &[f64]) -> Result<f64, SampleIntervalError> {
@@ -458,8 +460,14 @@ pub fn uniform_interval(t: &[f64]) -> Result<f64, SampleIntervalError> {
     if !(dt > 0.0 && dt.is_finite()) {
         return Err(SampleIntervalError::NotIncreasing { first: t[0], last: t[n - 1] });
     }
-    if let Some(k) = t.windows(2).position(|w| ((w[1] - w[0]) - dt).abs() > 1e-3 * dt) {
-        return Err(SampleIntervalError::NonUniform { interval: dt, step: t[k + 1] - t[k], row: k + 2 });
+    let steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let mut sorted = steps.clone();
+    sorted.sort_by(f64::total_cmp);
+    let h = sorted[sorted.len() / 2];
+    // A NaN step or a non-positive median deviates (`is_some_and` is false on NaN).
+    let within = |s: f64| (s - h).abs().partial_cmp(&(1e-3 * h)).is_some_and(|o| o.is_le());
+    if let Some(k) = steps.iter().position(|&s| !within(s)) {
+        return Err(SampleIntervalError::NonUniform { interval: h, step: steps[k], row: k + 2 });
     }
     Ok(dt)
 }

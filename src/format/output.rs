@@ -95,6 +95,13 @@ fn check_replaceable(dest: &Path) -> Result<bool, VmtError> {
     Ok(true)
 }
 
+/// Checks, before a command does its work, that its output directory `dest` may be replaced (absent,
+/// empty, or a previous vmt output holding only the files its `.vmt-output` lists), so that a refusal
+/// comes at once and not after the simulation; [`replace_dir`] checks again just before it writes.
+pub fn check_destination(dest: &Path) -> Result<(), VmtError> {
+    check_replaceable(dest).map(|_| ())
+}
+
 /// Removes the leftovers `NAME.vmt-partial-*` of interrupted commands writing to `dest` (only
 /// directories holding vmt's own markers, or empty ones).
 fn clean_leftovers(dest: &Path) {

@@ -38,7 +38,10 @@ const DISTINCT_SPEED: f64 = 0.01;
 
 /// A straightness method name that is none of [`parse_method`]'s.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("method: expected \"seed\" (seed 000, spatial-frequency continuity) or \"fusion\" (SNR-weighted), got \"{0}\"")]
+#[error(
+    "method: expected \"seed\" (the patent's spatial-frequency continuity) or \"fusion\" (SNR-weighted), got \"{0}\" \
+     (docs/methods.md)"
+)]
 pub struct UnknownMethod(pub String);
 
 /// The method, by the names a user types (`seed`, `fusion`) or a scenario uses (`spatial_continuity`,

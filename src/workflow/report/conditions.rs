@@ -131,7 +131,7 @@ fn procedure_rows(sc: &Scenario) -> Vec<Vec<String>> {
             ],
             ProcedureSpec::NineLine { name, start, end, step, feed, dwell, average, overrun, sensors, .. } => vec![
                 name.clone(),
-                "9-line laser (seed 003)".into(),
+                "9-line laser (k-means patent 2022, docs/methods.md)".into(),
                 format!("{:.0} mm/s", feed * 1e3),
                 format!("{dwell} s (mean of last {average} s)"),
                 "1 ↑ + 1 ↓".into(),
@@ -169,7 +169,7 @@ fn procedure_rows(sc: &Scenario) -> Vec<Vec<String>> {
         rows.push(match c {
             ChainProcedureSpec::LaserLines(s) => vec![
                 s.name.clone(),
-                "laser line set (seed 001)".into(),
+                "laser line set (Gan, Liu, Zhao; docs/methods.md)".into(),
                 format!("{:.0} mm/s path", s.feed * 1e3),
                 format!("{} s (mean of last {} s)", s.dwell, s.average),
                 format!("{} lines", s.lines.len()),
