@@ -696,8 +696,9 @@ fn resample_run(run: &AccelRun, values: &[f64], grid: &[f64]) -> Vec<f64> {
             (0..taps).map(move |j| resampling_kernel(j as f64 - (half - 1) as f64 - s))
         })
         .collect();
-    // Mirror index of sample i about both ends (n ≥ 16 > a samples, validate_run, so one reflection
-    // suffices).
+    // Mirror index of sample i about both ends.
+    // index: i is within a = 8 samples of [0, n − 1] (j ≤ n − 2, taps j − 7 … j + 8) and n ≥ 16 samples
+    // (validate_run), so one reflection lands in [0, n − 1].
     let mirror = |i: isize| -> usize {
         let last = n as isize - 1;
         let i = if i < 0 { -i } else { i };
