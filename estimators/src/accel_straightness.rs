@@ -635,8 +635,8 @@ fn common_grid(runs: &[AccelRun]) -> Result<(f64, f64, usize)> {
     Ok((lo, dx, m))
 }
 
-/// Half-width of the resampling kernel, in samples: [`resample_run`] weighs the `2·a` = 16 samples
-/// nearest a grid position.
+/// Half-width of the resampling kernel, in samples: the resampling of a pass onto the common grid
+/// weighs the `2·a` = 16 samples nearest a grid position.
 pub const RESAMPLE_HALF_WIDTH: usize = 8;
 
 /// Kaiser window shape of the resampling kernel ([`resampling_kernel`]).
