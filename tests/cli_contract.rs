@@ -45,8 +45,8 @@ pub(crate) fn friction_set(dir: &Path) -> PathBuf {
     set
 }
 
-/// The commands whose help offers `--json`, from `vmt help` (so a new command with `--json` is covered).
-fn commands_with_json() -> Vec<String> {
+/// `vmt --help` and the commands it lists (without `help`), so that a new command is covered.
+fn help_and_commands() -> (String, Vec<String>) {
     let help = ok(vmt().arg("--help").output().unwrap(), "vmt --help");
     let commands: Vec<String> = help
         .lines()
@@ -57,6 +57,12 @@ fn commands_with_json() -> Vec<String> {
         .filter(|c| c != "help")
         .collect();
     assert!(commands.len() >= 10, "{help}");
+    (help, commands)
+}
+
+/// The commands whose help offers `--json`, from `vmt help` (so a new command with `--json` is covered).
+fn commands_with_json() -> Vec<String> {
+    let (_, commands) = help_and_commands();
     commands
         .into_iter()
         .filter(|c| ok(vmt().args([c.as_str(), "--help"]).output().unwrap(), c).contains("--json"))
@@ -413,16 +419,7 @@ fn add_lists_the_effect_names_in_help_and_in_the_error() {
 fn no_user_facing_text_cites_a_document_outside_the_repository() {
     const OUTSIDE: [&str; 5] = ["FORMAT.md", "DESIGN.md", "seed 00", "seed-00", "seeds/"];
     let mut texts: Vec<(String, String)> = Vec::new();
-    let help = ok(vmt().arg("--help").output().unwrap(), "vmt --help");
-    let commands: Vec<String> = help
-        .lines()
-        .skip_while(|l| !l.starts_with("Commands:"))
-        .skip(1)
-        .take_while(|l| l.starts_with("  "))
-        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
-        .filter(|c| c != "help")
-        .collect();
-    assert!(commands.len() >= 10, "{help}");
+    let (help, commands) = help_and_commands();
     for c in &commands {
         texts.push((format!("vmt {c} --help"), ok(vmt().args([c.as_str(), "--help"]).output().unwrap(), c)));
     }

@@ -689,13 +689,16 @@ fn resample_run(run: &AccelRun, values: &[f64], grid: &[f64]) -> Vec<f64> {
     let half = RESAMPLE_HALF_WIDTH as isize;
     let taps = 2 * RESAMPLE_HALF_WIDTH;
     // The kernel tabulated at offsets j − s for s = 0, 1/STEPS, …, 1 (one row per sub-sample offset,
-    // tap j = −a+1 … a): built once per call (16 × 1025 kernel values).
-    let table: Vec<f64> = (0..=RESAMPLE_TABLE_STEPS)
-        .flat_map(|si| {
-            let s = si as f64 / RESAMPLE_TABLE_STEPS as f64;
-            (0..taps).map(move |j| resampling_kernel(j as f64 - (half - 1) as f64 - s))
-        })
-        .collect();
+    // tap j = −a+1 … a): 16 × 1025 kernel values, computed once per process (a constant of the method).
+    static TABLE: std::sync::OnceLock<Vec<f64>> = std::sync::OnceLock::new();
+    let table = TABLE.get_or_init(|| {
+        (0..=RESAMPLE_TABLE_STEPS)
+            .flat_map(|si| {
+                let s = si as f64 / RESAMPLE_TABLE_STEPS as f64;
+                (0..taps).map(move |j| resampling_kernel(j as f64 - (half - 1) as f64 - s))
+            })
+            .collect()
+    });
     // Mirror index of sample i about both ends.
     // index: i is within a = 8 samples of [0, n − 1] (j ≤ n − 2, taps j − 7 … j + 8) and n ≥ 16 samples
     // (validate_run), so one reflection lands in [0, n − 1].
