@@ -41,7 +41,7 @@
 
 use super::*;
 use rayon::prelude::*;
-use vmt_estimators::modelcheck::solve_normal;
+use vmt_estimators::modelcheck::{solve_normal, Columns};
 
 /// What a basis index of a fitted error motion's series is in time at constant velocity.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -124,10 +124,12 @@ struct ChannelGram {
     /// Per input: the channel's sensitivity u_{s,m} to it, and its gain's index (this sensor).
     sens: Vec<f64>,
     gain: Vec<Option<usize>>,
-    raw: Vec<Vec<f64>>,
-    /// Fixed columns non-zero here: (fixed index, weighted values).
-    fixed: Vec<(usize, Vec<f64>)>,
-    y: Vec<f64>,
+    /// Number of raw columns R.
+    r: usize,
+    /// The fixed columns non-zero here (their indices among the fixed columns).
+    fixed: Vec<usize>,
+    /// The weighted columns [U | F | y] (R + |fixed| + 1 of them, one value per sample).
+    cols: Columns,
     /// Uᵀ·U (R × R), Uᵀ·F (R × |fixed|), Fᵀ·F, Uᵀ·y, Fᵀ·y; row-major.
     guu: Vec<f64>,
     guf: Vec<f64>,
@@ -136,6 +138,18 @@ struct ChannelGram {
     bf: Vec<f64>,
     /// Excited channels: the position of its two free-vibration unknowns among the free ones.
     free: Option<usize>,
+}
+
+/// One excited channel's free vibration at one (f, ζ) ([`Problem::free_parts`]): its two weighted
+/// columns φ_j (the responses from unit initial displacement and velocity, [`free_vibration`]) and
+/// their products with the channel's raw columns (uphi[j][k] = u_kᵀφ_j), fixed columns
+/// (fphi[j][g]), each other (gram[j][jj] = φ_jjᵀφ_j) and the weighted target (by[j] = φ_jᵀy).
+struct FreePart {
+    cols: Vec<Vec<f64>>,
+    uphi: Vec<Vec<f64>>,
+    fphi: Vec<Vec<f64>>,
+    gram: Vec<Vec<f64>>,
+    by: Vec<f64>,
 }
 
 /// The joint optimum of the mode and the shapes ([`refit_coupled`]).
@@ -206,7 +220,7 @@ impl Problem<'_> {
         gains: &[f64],
         excite: Option<&[Vec<f64>]>,
     ) -> (Vec<f64>, usize) {
-        let r = ch.raw.len();
+        let r = ch.r;
         let p = self.n_shape() + excite.map_or(0, |_| self.n_gains);
         let mut a = vec![0.0; r * p];
         let mut col = 0;
@@ -237,20 +251,53 @@ impl Problem<'_> {
         (a, p)
     }
 
+    /// The free vibration of every excited channel at (f, ζ) ([`FreePart`]), in parallel over the
+    /// channels; None for a channel the mode does not reach. It depends on (f, ζ) only, so the
+    /// solves of one (f, ζ) (the rounds of [`Problem::alternating_gains`], a cost after them, the
+    /// gain differences of a Jacobian) share it.
+    fn free_parts(&self, fz: (f64, f64)) -> Vec<Option<FreePart>> {
+        self.chans
+            .par_iter()
+            .map(|ch| {
+                ch.free?;
+                let c = &self.st.chans[ch.index];
+                let wch = &self.w[ch.start..ch.start + ch.cols.rows()];
+                let cols: Vec<Vec<f64>> = free_vibration(c, fz.0, fz.1)
+                    .iter()
+                    .map(|resp| resp.iter().zip(wch).map(|(x, w)| x * w).collect())
+                    .collect();
+                // [U | F | y]ᵀ[φ_0 φ_1], row-major.
+                let t = ch.cols.t_mul(&[&cols[0], &cols[1]]).ok()?;
+                let (r, nf) = (ch.r, ch.fixed.len());
+                let uphi = (0..2).map(|j| (0..r).map(|a| t[a * 2 + j]).collect()).collect();
+                let fphi = (0..2).map(|j| (r..r + nf).map(|a| t[a * 2 + j]).collect()).collect();
+                let gram = cols.iter().map(|phi| cols.iter().map(|psi| dot(psi, phi)).collect()).collect();
+                let by = (0..2).map(|j| t[(r + nf) * 2 + j]).collect();
+                Some(FreePart { cols, uphi, fphi, gram, by })
+            })
+            .collect()
+    }
+
     /// The weighted least squares whose unknowns are [the p mixed columns | the fixed columns | the
-    /// free vibration of each excited channel] at (f, ζ); returns the coefficients and the weighted
-    /// residual (length n, stack order).
-    fn solve(&self, fz: (f64, f64), mix: &[(Vec<f64>, usize)]) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
+    /// free vibration of each excited channel] at (f, ζ) (`free`: [`Problem::free_parts`] at that
+    /// (f, ζ)); returns the coefficients and, when `residual` is set, the weighted residual (length
+    /// n, stack order; empty otherwise).
+    fn solve(
+        &self,
+        mix: &[(Vec<f64>, usize)],
+        free: &[Option<FreePart>],
+        residual: bool,
+    ) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
         let p = mix.first().map_or(0, |m| m.1);
         let q = p + self.n_fixed + self.n_free;
-        let (f, zeta) = fz;
-        // Per channel (in parallel), its free-vibration columns and its share of the normal equations.
-        let parts: Vec<(Vec<f64>, Vec<f64>, Vec<Vec<f64>>)> = self
+        // Per channel (in parallel), its share of the normal equations.
+        let parts: Vec<(Vec<f64>, Vec<f64>)> = self
             .chans
             .par_iter()
             .zip(mix)
-            .map(|(ch, (a, _))| {
-                let r = ch.raw.len();
+            .zip(free)
+            .map(|((ch, (a, _)), fp)| {
+                let r = ch.r;
                 let mut nm = vec![0.0; q * q];
                 let mut b = vec![0.0; q];
                 let nz: Vec<Vec<(usize, f64)>> = (0..p)
@@ -269,47 +316,40 @@ impl Problem<'_> {
                     }
                     b[i] += nz[i].iter().map(|&(k, v)| v * ch.bu[k]).sum::<f64>();
                     let nf = ch.fixed.len();
-                    for (fi, (g, _)) in ch.fixed.iter().enumerate() {
+                    for (fi, g) in ch.fixed.iter().enumerate() {
                         nm[i * q + p + g] += nz[i].iter().map(|&(k, v)| v * ch.guf[k * nf + fi]).sum::<f64>();
                     }
                 }
                 let nf = ch.fixed.len();
-                for (fi, (g, _)) in ch.fixed.iter().enumerate() {
+                for (fi, g) in ch.fixed.iter().enumerate() {
                     b[p + g] += ch.bf[fi];
-                    for (fj, (h, _)) in ch.fixed.iter().enumerate() {
+                    for (fj, h) in ch.fixed.iter().enumerate() {
                         if h >= g {
                             nm[(p + g) * q + p + h] += ch.gff[fi * nf + fj];
                         }
                     }
                 }
-                let mut free_cols = Vec::new();
-                if let Some(slot) = ch.free {
-                    let c = &self.st.chans[ch.index];
-                    let wch = &self.w[ch.start..ch.start + ch.y.len()];
-                    for resp in free_vibration(c, f, zeta) {
-                        free_cols.push(resp.iter().zip(wch).map(|(x, w)| x * w).collect::<Vec<f64>>());
-                    }
-                    for (j, phi) in free_cols.iter().enumerate() {
+                if let (Some(slot), Some(fp)) = (ch.free, fp) {
+                    for j in 0..fp.cols.len() {
                         let col = p + self.n_fixed + slot + j;
-                        let uphi: Vec<f64> = ch.raw.iter().map(|u| dot(u, phi)).collect();
                         for i in 0..p {
-                            nm[i * q + col] += nz[i].iter().map(|&(k, v)| v * uphi[k]).sum::<f64>();
+                            nm[i * q + col] += nz[i].iter().map(|&(k, v)| v * fp.uphi[j][k]).sum::<f64>();
                         }
-                        for (g, fx) in &ch.fixed {
-                            nm[(p + g) * q + col] += dot(fx, phi);
+                        for (g, v) in ch.fixed.iter().zip(&fp.fphi[j]) {
+                            nm[(p + g) * q + col] += v;
                         }
-                        for (jj, psi) in free_cols.iter().enumerate().take(j + 1) {
-                            nm[(p + self.n_fixed + slot + jj) * q + col] += dot(psi, phi);
+                        for jj in 0..=j {
+                            nm[(p + self.n_fixed + slot + jj) * q + col] += fp.gram[j][jj];
                         }
-                        b[col] += dot(phi, &ch.y);
+                        b[col] += fp.by[j];
                     }
                 }
-                (nm, b, free_cols)
+                (nm, b)
             })
             .collect();
         let mut nm = vec![0.0; q * q];
         let mut b = vec![0.0; q];
-        for (pn, pb, _) in &parts {
+        for (pn, pb) in &parts {
             nm.iter_mut().zip(pn).for_each(|(x, y)| *x += y);
             b.iter_mut().zip(pb).for_each(|(x, y)| *x += y);
         }
@@ -319,23 +359,19 @@ impl Problem<'_> {
             }
         }
         let beta = solve_normal(&nm, &b)?;
+        if !residual {
+            return Ok((beta, Vec::new()));
+        }
         let mut resid = vec![0.0; self.n];
-        for ((ch, (a, _)), (_, _, free_cols)) in self.chans.iter().zip(mix).zip(&parts) {
-            let r = ch.raw.len();
-            let gamma: Vec<f64> = (0..r).map(|k| (0..p).map(|j| a[k * p + j] * beta[j]).sum::<f64>()).collect();
-            let out = &mut resid[ch.start..ch.start + ch.y.len()];
-            out.copy_from_slice(&ch.y);
-            for (u, g) in ch.raw.iter().zip(&gamma) {
-                if *g != 0.0 {
-                    out.iter_mut().zip(u).for_each(|(o, x)| *o -= g * x);
-                }
-            }
-            for (g, fx) in &ch.fixed {
-                let bg = beta[p + g];
-                out.iter_mut().zip(fx).for_each(|(o, x)| *o -= bg * x);
-            }
-            if let Some(slot) = ch.free {
-                for (j, phi) in free_cols.iter().enumerate() {
+        for ((ch, (a, _)), fp) in self.chans.iter().zip(mix).zip(free) {
+            // y − U·γ − F·β_F = [U | F | y]·[−γ | −β_F | 1], γ = A·β_p.
+            let mut coef: Vec<f64> = (0..ch.r).map(|k| -(0..p).map(|j| a[k * p + j] * beta[j]).sum::<f64>()).collect();
+            coef.extend(ch.fixed.iter().map(|g| -beta[p + g]));
+            coef.push(1.0);
+            let out = &mut resid[ch.start..ch.start + ch.cols.rows()];
+            out.copy_from_slice(&ch.cols.combine(&coef)?);
+            if let (Some(slot), Some(fp)) = (ch.free, fp) {
+                for (j, phi) in fp.cols.iter().enumerate() {
                     let bj = beta[p + self.n_fixed + slot + j];
                     out.iter_mut().zip(phi).for_each(|(o, x)| *o -= bj * x);
                 }
@@ -344,11 +380,17 @@ impl Problem<'_> {
         Ok((beta, resid))
     }
 
-    /// The coupled fit at θ = (f, ζ, gains…): coefficients and weighted residual.
-    fn coupled(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
+    /// The coupled fit at θ = (f, ζ, gains…) with the free vibration `free` of (f, ζ)
+    /// ([`Problem::free_parts`]): coefficients and weighted residual.
+    fn coupled_with(&self, theta: &[f64], free: &[Option<FreePart>]) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
         let fz = (theta[0], theta[1]);
         let mix: Vec<(Vec<f64>, usize)> = self.chans.iter().map(|ch| self.mixing(ch, fz, &theta[2..], None)).collect();
-        self.solve(fz, &mix)
+        self.solve(&mix, free, true)
+    }
+
+    /// The coupled fit at θ = (f, ζ, gains…): coefficients and weighted residual.
+    fn coupled(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
+        self.coupled_with(theta, &self.free_parts((theta[0], theta[1])))
     }
 
     /// The shape coefficients per input from the first unknowns of a solve.
@@ -402,6 +444,10 @@ pub(crate) const COUPLED_SCAN_DAMPING: f64 = 0.02;
 pub(crate) const COUPLED_ROUNDS: usize = 2;
 /// Alternations of shapes and gains that fit a held mode's gains ([`refit_coupled`]).
 pub(crate) const HELD_GAIN_ROUNDS: usize = 4;
+/// Alternations of [`Problem::alternating_gains`] that give each point of the joint frequency scan
+/// its gains: the sequential fit with the excitation held at the shapes, then once more with the
+/// shapes it fitted (the starting gains of a joint refinement).
+pub(crate) const SEQUENTIAL_GAIN_ROUNDS: usize = 2;
 /// Starts refined after the joint frequency scan: its best points at least a box apart.
 pub(crate) const COUPLED_STARTS: usize = 3;
 
@@ -504,56 +550,64 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
                 .map(|(g, col)| (g, col[s0..s0 + len].iter().zip(wch).map(|(x, w)| x * w).collect()))
                 .collect();
             let y: Vec<f64> = target[s0..s0 + len].iter().zip(wch).map(|(x, w)| x * w).collect();
-            let r = raw.len();
-            let mut guu = vec![0.0; r * r];
-            for a in 0..r {
-                for b in a..r {
-                    let v = dot(&raw[a], &raw[b]);
-                    guu[a * r + b] = v;
-                    guu[b * r + a] = v;
-                }
-            }
-            let nf = fixed.len();
-            let guf: Vec<f64> = (0..r * nf).map(|k| dot(&raw[k / nf], &fixed[k % nf].1)).collect();
-            let gff: Vec<f64> = (0..nf * nf).map(|k| dot(&fixed[k / nf].1, &fixed[k % nf].1)).collect();
-            let bu: Vec<f64> = raw.iter().map(|u| dot(u, &y)).collect();
-            let bf: Vec<f64> = fixed.iter().map(|(_, f)| dot(f, &y)).collect();
-            ChannelGram {
+            let (r, nf) = (raw.len(), fixed.len());
+            let mut all: Vec<&[f64]> = raw.iter().map(Vec::as_slice).collect();
+            all.extend(fixed.iter().map(|(_, f)| f.as_slice()));
+            all.push(&y);
+            let cols = Columns::new(len, &all).ok()?;
+            // [U | F | y]ᵀ[U | F | y], and its blocks.
+            let k = r + nf + 1;
+            let g = cols.gram();
+            let block = |rows: std::ops::Range<usize>, cs: std::ops::Range<usize>| -> Vec<f64> {
+                rows.flat_map(|a| cs.clone().map(move |b| a * k + b)).map(|e| g[e]).collect()
+            };
+            let guu = block(0..r, 0..r);
+            let guf = block(0..r, r..r + nf);
+            let gff = block(r..r + nf, r..r + nf);
+            let bu = block(0..r, k - 1..k);
+            let bf = block(r..r + nf, k - 1..k);
+            Some(ChannelGram {
                 start: s0,
                 index: j,
                 accel: c.is_accel(),
                 v: c.v.first().copied().unwrap_or(0.0),
                 sens: inputs.iter().map(|i| c.s_motion(i.name)).collect(),
                 gain: (0..inputs.len()).map(|m| gains.iter().position(|(s, k, _)| *s == c.sensor && *k == m)).collect(),
-                raw,
-                fixed,
-                y,
+                r,
+                fixed: fixed.iter().map(|(g, _)| *g).collect(),
+                cols,
                 guu,
                 guf,
                 gff,
                 bu,
                 bf,
                 free: frees[j],
-            }
+            })
         })
-        .collect();
+        .collect::<Option<Vec<ChannelGram>>>()?;
     Some(Problem { st, inputs, n_gains: gains.len(), n_fixed: fixed_cols.len(), n_free: free_slots, n: st.n, w, chans })
 }
 
 impl Problem<'_> {
-    /// The gains at (f, ζ) of the sequential fit with the excitation held at the shapes `c`, twice
-    /// (the second with the shapes the first fitted): the starting gains of a joint refinement.
-    fn sequential_gains(&self, fz: (f64, f64), c: &[Vec<f64>], g: &[f64]) -> Vec<f64> {
-        self.alternating_gains(fz, c, g, 2)
-    }
-
     /// The gains at (f, ζ) by `rounds` alternations of the shapes (gains held) and the gains (shapes held):
     /// the least squares of the gains with the mode's frequency and damping fixed.
     fn alternating_gains(&self, fz: (f64, f64), c: &[Vec<f64>], g: &[f64], rounds: usize) -> Vec<f64> {
+        self.alternating_gains_with(fz, &self.free_parts(fz), c, g, rounds)
+    }
+
+    /// [`Problem::alternating_gains`] with the free vibration of (f, ζ) given ([`Problem::free_parts`]).
+    fn alternating_gains_with(
+        &self,
+        fz: (f64, f64),
+        free: &[Option<FreePart>],
+        c: &[Vec<f64>],
+        g: &[f64],
+        rounds: usize,
+    ) -> Vec<f64> {
         let (mut c, mut g) = (c.to_vec(), g.to_vec());
         for _ in 0..rounds {
             let mix: Vec<(Vec<f64>, usize)> = self.chans.iter().map(|ch| self.mixing(ch, fz, &g, Some(&c))).collect();
-            let Ok((beta, _)) = self.solve(fz, &mix) else { break };
+            let Ok((beta, _)) = self.solve(&mix, free, false) else { break };
             g = beta[self.n_shape()..self.n_shape() + self.n_gains].to_vec();
             c = self.shape_coefs(&beta);
         }
@@ -562,7 +616,12 @@ impl Problem<'_> {
 
     /// Weighted RSS of the coupled fit at θ (∞ where it cannot be solved).
     fn cost(&self, theta: &[f64]) -> f64 {
-        self.coupled(theta).map_or(f64::INFINITY, |(_, r)| r.iter().map(|v| v * v).sum())
+        self.cost_with(theta, &self.free_parts((theta[0], theta[1])))
+    }
+
+    /// [`Problem::cost`] with the free vibration of θ's (f, ζ) given ([`Problem::free_parts`]).
+    fn cost_with(&self, theta: &[f64], free: &[Option<FreePart>]) -> f64 {
+        self.coupled_with(theta, free).map_or(f64::INFINITY, |(_, r)| r.iter().map(|v| v * v).sum())
     }
 
     /// Levenberg–Marquardt from `start` = (f, ζ, gains…) inside the box (f ± [`COUPLED_FREQUENCY_BOX`],
@@ -576,22 +635,40 @@ impl Problem<'_> {
         let mut s = start.to_vec();
         // clamp: the box's constants are ordered (0.001·1.01 < 0.3·0.99): the start strictly inside it.
         s[1] = s[1].clamp(COUPLED_DAMPING_BOX.0 * 1.01, COUPLED_DAMPING_BOX.1 * 0.99);
-        let resid = |th: &[f64]| self.coupled(th).map(|(_, r)| r);
+        // The Jacobian's differences in the gains keep (f, ζ) to the bit: their free vibration is
+        // the last one computed.
+        let last: std::sync::Mutex<Option<([u64; 2], std::sync::Arc<Vec<Option<FreePart>>>)>> =
+            std::sync::Mutex::new(None);
+        let resid = |th: &[f64]| {
+            let key = [th[0].to_bits(), th[1].to_bits()];
+            let cached = last.lock().ok().and_then(|l| l.as_ref().filter(|(k, _)| *k == key).map(|(_, f)| f.clone()));
+            let free = cached.unwrap_or_else(|| {
+                let f = std::sync::Arc::new(self.free_parts((th[0], th[1])));
+                if let Ok(mut l) = last.lock() {
+                    *l = Some((key, f.clone()));
+                }
+                f
+            });
+            self.coupled_with(th, &free).map(|(_, r)| r)
+        };
         refine_projected(&resid, &s, &lo, &hi, COUPLED_EVALUATIONS).map_or(s, |r| r.theta)
     }
 
     /// The joint optimum: a scan of the frequency over `grid` (Hz; damping [`COUPLED_SCAN_DAMPING`],
-    /// gains from [`Problem::sequential_gains`] at the shapes `c`), its best [`COUPLED_STARTS`]
+    /// gains from [`SEQUENTIAL_GAIN_ROUNDS`] of [`Problem::alternating_gains`] from the shapes `c`), its best [`COUPLED_STARTS`]
     /// points at least a box apart and the `starts` (full θ) each refined ([`Problem::refine`]); the
     /// lowest cost wins. Returns (θ, cost).
     fn search(&self, grid: &[f64], c: &[Vec<f64>], g: &[f64], starts: &[Vec<f64>]) -> Option<(Vec<f64>, f64)> {
         let scan: Vec<(f64, Vec<f64>, f64)> = grid
             .par_iter()
             .map(|&f| {
-                let gains = self.sequential_gains((f, COUPLED_SCAN_DAMPING), c, g);
+                let fz = (f, COUPLED_SCAN_DAMPING);
+                let free = self.free_parts(fz);
+                let gains = self.alternating_gains_with(fz, &free, c, g, SEQUENTIAL_GAIN_ROUNDS);
                 let mut th = vec![f, COUPLED_SCAN_DAMPING];
                 th.extend(&gains);
-                (f, th.clone(), self.cost(&th))
+                let cost = self.cost_with(&th, &free);
+                (f, th, cost)
             })
             .collect();
         let mut order: Vec<usize> = (0..scan.len()).collect();

@@ -14,6 +14,7 @@ use super::{check_finite, check_len, ModelCheckError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::householder;
 use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::qr;
 use faer::{Accum, Conj, Mat, Par};
 use rayon::prelude::*;
@@ -554,8 +555,25 @@ pub fn greedy_rss(
     // The Gram matrix G = AᵀA of the projected unit columns, one level-3 product (compute-bound),
     // where each step's Aᵀv would read all of A again (memory-bound); the steps then run in the
     // coefficients of the columns taken.
+    // Its lower triangle only (half the products; each entry the same sum as the full product's,
+    // to the bit), mirrored.
     let mut g = Mat::<f64>::zeros(k, k);
-    matmul(g.as_mut(), Accum::Replace, a.transpose(), a.as_ref(), 1.0, Par::Seq);
+    triangular::matmul(
+        g.as_mut(),
+        BlockStructure::TriangularLower,
+        Accum::Replace,
+        a.transpose(),
+        BlockStructure::Rectangular,
+        a.as_ref(),
+        BlockStructure::Rectangular,
+        1.0,
+        Par::Seq,
+    );
+    for j in 0..k {
+        for i in 0..j {
+            g[(i, j)] = g[(j, i)];
+        }
+    }
     let mut taken = vec![false; k];
     // Step s's unit vector v_s = Σ_t coef[s][t]·a_{used[t]} and its products d_s = Aᵀv_s.
     let mut coef: Vec<Vec<f64>> = Vec::new();
