@@ -41,7 +41,7 @@
 
 use super::*;
 use rayon::prelude::*;
-use vmt_estimators::modelcheck::{solve_normal, Columns};
+use vmt_estimators::modelcheck::{greedy_rss_with_gram, solve_normal, Columns};
 
 /// What a basis index of a fitted error motion's series is in time at constant velocity.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -696,74 +696,201 @@ impl Problem<'_> {
     }
 }
 
-/// The shapes of the driving translations re-chosen with the mode in the model at θ = (f, ζ,
-/// gains…): for each input in turn, the greedy forward selection ([`greedy_rss`], BIC with σ
-/// unknown on all samples) over its whole series up to what the passes resolve
-/// ([`resolvable_order`]), each series column coupled (its own reading plus the mode's response to
-/// it, module doc), on top of the offsets, the other terms, the free vibration and the other
-/// inputs' coupled columns. Returns the terms with the new selections.
-fn reselect(st: &Stack, pb: &Problem, terms: &[FitTerm], theta: &[f64], target: &[f64]) -> Option<Vec<FitTerm>> {
-    let (f, zeta) = (theta[0], theta[1]);
-    let gains = &theta[2..];
-    let w = pb.w;
-    let mut terms = terms.to_vec();
-    // A coupled column of input m's wave k (with partner), one value per sample, weighted later.
-    let coupled_series = |m: usize, sh: &Shape, ks: &[usize]| -> Vec<Vec<f64>> {
-        let top = ks.iter().copied().max().unwrap_or(1) + 1;
-        let mut shx = sh.clone();
-        shx.select = None;
-        shx.order = top as u32;
-        let name = pb.inputs[m].name;
-        let mut cols: Vec<Vec<f64>> = ks.iter().map(|_| Vec::with_capacity(st.n)).collect();
-        for (j, c) in st.chans.iter().enumerate() {
-            let ch = &pb.chans[j];
-            let g = ch.gain[m].map_or(0.0, |i| gains[i]);
-            for i in 0..c.y.len() {
-                let (own, part): (Vec<f64>, Box<dyn Fn(usize) -> f64>) = if c.is_accel() {
-                    let dt = sample_interval(c, i);
-                    let v = c.v[i];
-                    if !(dt > 0.0) || v == 0.0 {
-                        cols.iter_mut().for_each(|col| col.push(0.0));
-                        continue;
-                    }
-                    let (xb, xa) = (c.x[i], c.x[i] - v * dt);
-                    let ((_, d1), (_, d0)) = (shx.basis_at(xb), shx.basis_at(xa));
-                    let u: Vec<f64> = d1.iter().zip(&d0).map(|(b, a)| v * (b - a) / dt).collect();
-                    let u2 = u.clone();
-                    (u, Box::new(move |k| u2[k]))
-                } else {
-                    let vals = match c.motion_read(i, name) {
-                        MotionRead::Value { s, x } => shx.basis_at(x).0.iter().map(|p| s * p).collect(),
-                        _ => vec![0.0; top + 1],
-                    };
-                    (vals, Box::new(|_| 0.0))
-                };
-                for (col, &k) in cols.iter_mut().zip(ks) {
-                    if !c.is_accel() {
-                        col.push(own[k]);
-                        continue;
-                    }
-                    let mut v = ch.sens[m] * own[k];
-                    match wave_of(&shx, k) {
-                        Some(Wave::Cos { kappa, partner }) => {
-                            let (tr, ti) = mode_ratio(f, zeta, kappa * ch.v);
-                            v += g * (tr * own[k] - ti * part(partner));
+/// A series' raw columns on the stack ([`raw_series`]): per basis index of the shape (its order
+/// `top` + 1 of them), one value per sample.
+type RawSeries = Vec<Vec<f64>>;
+
+/// The raw columns of input `m`'s series `shx` (all its basis indices) on the stack: on an
+/// accelerometer channel the reference point's acceleration v·(φ'_k(x_i) − φ'_k(x_i − v·Δt))/Δt
+/// (zero where the channel stands), elsewhere the channel's own reading s·φ_k(x) of the motion
+/// `name` (zero where it has none). Unweighted.
+fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
+    // index: the shape's order, a u32 bounded by `resolvable_order`, widened.
+    let top = shx.order as usize;
+    let mut cols: RawSeries = (0..=top).map(|_| Vec::with_capacity(st.n)).collect();
+    for c in st.chans.iter() {
+        for i in 0..c.y.len() {
+            if c.is_accel() {
+                let dt = sample_interval(c, i);
+                let v = c.v[i];
+                if !(dt > 0.0) || v == 0.0 {
+                    cols.iter_mut().for_each(|col| col.push(0.0));
+                    continue;
+                }
+                let (xb, xa) = (c.x[i], c.x[i] - v * dt);
+                let ((_, d1), (_, d0)) = (shx.basis_at(xb), shx.basis_at(xa));
+                for ((col, b), a) in cols.iter_mut().zip(&d1).zip(&d0) {
+                    col.push(v * (b - a) / dt);
+                }
+            } else {
+                match c.motion_read(i, name) {
+                    MotionRead::Value { s, x } => {
+                        for (col, p) in cols.iter_mut().zip(shx.basis_at(x).0) {
+                            col.push(s * p);
                         }
-                        Some(Wave::Sin { kappa, partner }) => {
-                            let (tr, ti) = mode_ratio(f, zeta, kappa * ch.v);
-                            v += g * (tr * own[k] + ti * part(partner));
-                        }
-                        Some(Wave::Still) | None => {}
                     }
-                    col.push(v);
+                    _ => cols.iter_mut().for_each(|col| col.push(0.0)),
                 }
             }
         }
-        cols
+    }
+    cols
+}
+
+/// Per channel of the stack, the weighted Gram matrix Σ_i w_i²·u_a(i)·u_b(i) of a series' raw
+/// columns over the channel's samples (row-major, (top + 1)²). It does not change with the mode,
+/// so the rounds of [`refit_coupled`] compute it once per series ([`RawGramCache`]).
+type RawGrams = Vec<Vec<f64>>;
+
+/// The [`RawGrams`] of each series the re-selection has met, by (motion, range, order); the
+/// motion is part of the key only when a channel that is not an accelerometer reads it.
+#[derive(Default)]
+struct RawGramCache(BTreeMap<(Option<EffectName>, [u64; 2], u32), RawGrams>);
+
+impl RawGramCache {
+    /// The per-channel Gram matrices of `raw` (the raw columns of motion `name`'s series `shx`),
+    /// computed on first use.
+    fn get(&mut self, st: &Stack, w: &[f64], name: EffectName, shx: &Shape, raw: &RawSeries) -> Option<&RawGrams> {
+        let reads = st.chans.iter().any(|c| !c.is_accel());
+        let key = (reads.then_some(name), [shx.range.0.to_bits(), shx.range.1.to_bits()], shx.order);
+        if !self.0.contains_key(&key) {
+            let mut grams = Vec::with_capacity(st.chans.len());
+            let mut s0 = 0;
+            for c in st.chans.iter() {
+                let len = c.y.len();
+                let wc: Vec<Vec<f64>> = raw
+                    .iter()
+                    .map(|col| col[s0..s0 + len].iter().zip(&w[s0..s0 + len]).map(|(x, w)| x * w).collect())
+                    .collect();
+                let refs: Vec<&[f64]> = wc.iter().map(Vec::as_slice).collect();
+                grams.push(Columns::new(len, &refs).ok()?.gram());
+                s0 += len;
+            }
+            self.0.insert(key, grams);
+        }
+        self.0.get(&key)
+    }
+}
+
+/// How a coupled column of input m's basis index k reads the raw columns on one channel:
+/// α·u_k + β·u_partner (module doc: u·X_k + g·R_k; on a channel that is not an accelerometer α = 1,
+/// β = 0).
+#[derive(Clone, Copy)]
+struct Mix {
+    k: usize,
+    alpha: f64,
+    partner: usize,
+    beta: f64,
+}
+
+/// The [`Mix`] of input `m`'s basis indices `ks` of series `shx` on each channel of `pb`, at the
+/// mode (f, ζ) with `gains`.
+fn mixes(pb: &Problem, m: usize, shx: &Shape, ks: &[usize], fz: (f64, f64), gains: &[f64]) -> Vec<Vec<Mix>> {
+    pb.chans
+        .iter()
+        .map(|ch| {
+            let g = ch.gain[m].map_or(0.0, |i| gains[i]);
+            ks.iter()
+                .map(|&k| {
+                    if !ch.accel {
+                        return Mix { k, alpha: 1.0, partner: k, beta: 0.0 };
+                    }
+                    let plain = Mix { k, alpha: ch.sens[m], partner: k, beta: 0.0 };
+                    match wave_of(shx, k) {
+                        Some(Wave::Cos { kappa, partner }) => {
+                            let (tr, ti) = mode_ratio(fz.0, fz.1, kappa * ch.v);
+                            Mix { k, alpha: ch.sens[m] + g * tr, partner, beta: -g * ti }
+                        }
+                        Some(Wave::Sin { kappa, partner }) => {
+                            let (tr, ti) = mode_ratio(fz.0, fz.1, kappa * ch.v);
+                            Mix { k, alpha: ch.sens[m] + g * tr, partner, beta: g * ti }
+                        }
+                        Some(Wave::Still) | None => plain,
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The coupled columns (one value per sample) of `mixes` over the raw columns `raw`.
+fn coupled_columns(st: &Stack, raw: &RawSeries, mixes: &[Vec<Mix>]) -> Vec<Vec<f64>> {
+    let k = mixes.first().map_or(0, Vec::len);
+    (0..k)
+        .map(|c| {
+            let mut col = Vec::with_capacity(st.n);
+            let mut s0 = 0;
+            for (ch, mx) in st.chans.iter().zip(mixes) {
+                let len = ch.y.len();
+                let Mix { k, alpha, partner, beta } = mx[c];
+                let (a, b) = (&raw[k][s0..s0 + len], &raw[partner][s0..s0 + len]);
+                col.extend(a.iter().zip(b).map(|(x, y)| alpha * x + beta * y));
+                s0 += len;
+            }
+            col
+        })
+        .collect()
+}
+
+/// The weighted Gram matrix of the coupled columns `mixes` (those at `keep`) from the channels' raw
+/// Gram matrices: G_cd = Σ_channels [α_c·α_d·R_{k_c k_d} + α_c·β_d·R_{k_c p_d} + β_c·α_d·R_{p_c k_d} +
+/// β_c·β_d·R_{p_c p_d}] (row-major, |keep|²).
+fn coupled_gram(grams: &RawGrams, mixes: &[Vec<Mix>], keep: &[usize]) -> Vec<f64> {
+    let n = keep.len();
+    let mut g = vec![0.0; n * n];
+    for (rg, mx) in grams.iter().zip(mixes) {
+        // index: a raw Gram matrix is (top + 1)² over the basis indices every Mix names.
+        let r = (rg.len() as f64).sqrt().round() as usize;
+        for (a, &c) in keep.iter().enumerate() {
+            let x = mx[c];
+            for (b, &d) in keep.iter().enumerate().skip(a) {
+                let y = mx[d];
+                let v = x.alpha * y.alpha * rg[x.k * r + y.k]
+                    + x.alpha * y.beta * rg[x.k * r + y.partner]
+                    + x.beta * y.alpha * rg[x.partner * r + y.k]
+                    + x.beta * y.beta * rg[x.partner * r + y.partner];
+                g[a * n + b] += v;
+            }
+        }
+    }
+    for a in 0..n {
+        for b in 0..a {
+            g[a * n + b] = g[b * n + a];
+        }
+    }
+    g
+}
+
+/// The shapes of the driving translations re-chosen with the mode in the model at θ = (f, ζ,
+/// gains…): for each input in turn, the greedy forward selection ([`greedy_rss_with_gram`], BIC
+/// with σ unknown on all samples) over its whole series up to what the passes resolve
+/// ([`resolvable_order`]), each series column coupled (its own reading plus the mode's response to
+/// it, module doc), on top of the offsets, the other terms, the free vibration and the other
+/// inputs' coupled columns. The coupled columns' Gram matrix comes from the raw columns' per-channel
+/// Gram matrices in `cache` (2 × 2 mixes per channel). Returns the terms with the new selections.
+fn reselect(
+    st: &Stack,
+    pb: &Problem,
+    terms: &[FitTerm],
+    theta: &[f64],
+    target: &[f64],
+    cache: &mut RawGramCache,
+) -> Option<Vec<FitTerm>> {
+    let fz = (theta[0], theta[1]);
+    let gains = &theta[2..];
+    let w = pb.w;
+    let mut terms = terms.to_vec();
+    // The series of input m with its basis up to the largest of `ks`, and its raw columns.
+    let series = |m: usize, sh: &Shape, ks: &[usize]| -> (Shape, RawSeries) {
+        let mut shx = sh.clone();
+        shx.select = None;
+        shx.order = ks.iter().copied().max().unwrap_or(1) as u32 + 1;
+        let raw = raw_series(st, pb.inputs[m].name, &shx);
+        (shx, raw)
     };
     let mut free_cols: Vec<Vec<f64>> = Vec::new();
     for (j, c) in st.chans.iter().enumerate().filter(|(j, _)| !st.excitation[*j].is_empty()) {
-        for r in free_vibration(c, f, zeta) {
+        for r in free_vibration(c, fz.0, fz.1) {
             free_cols.push(st.col_j(|_, i, jj| if jj == j { r[i] } else { 0.0 }));
         }
     }
@@ -775,7 +902,9 @@ fn reselect(st: &Stack, pb: &Problem, terms: &[FitTerm], theta: &[f64], target: 
         // index: an order ≤ what the data's distinct positions resolve (`resolvable_order`), a u32 widened.
         let top = resolvable_order(st, terms[term].name, sh.range) as usize;
         let all: Vec<usize> = (1..=top).collect();
-        let dict = coupled_series(m, &sh, &all);
+        let (shx, raw) = series(m, &sh, &all);
+        let mx = mixes(pb, m, &shx, &all, fz, gains);
+        let dict = coupled_columns(st, &raw, &mx);
         let mut base_cols: Vec<Vec<f64>> = design(
             st,
             &terms
@@ -787,13 +916,18 @@ fn reselect(st: &Stack, pb: &Problem, terms: &[FitTerm], theta: &[f64], target: 
         );
         base_cols.extend(free_cols.iter().cloned());
         for (o, inp) in pb.inputs.iter().enumerate().filter(|(o, _)| *o != m) {
-            base_cols.extend(coupled_series(o, &terms[inp.term].shape, &terms[inp.term].shape.ks()));
+            let ks = terms[inp.term].shape.ks();
+            let (shx_o, raw_o) = series(o, &terms[inp.term].shape, &ks);
+            base_cols.extend(coupled_columns(st, &raw_o, &mixes(pb, o, &shx_o, &ks, fz, gains)));
         }
         base_cols.retain(|c| c.iter().any(|v| *v != 0.0));
         let base = OrthoBase::new(&base_cols, w).ok()?;
-        let (orders, nested): (Vec<usize>, Vec<Vec<f64>>) =
-            all.iter().zip(dict).filter(|(_, c)| c.iter().any(|v| *v != 0.0)).map(|(k, c)| (*k, c)).unzip();
-        let nr = greedy_rss(target, w, &base, &nested, GREEDY_STOP).ok()?;
+        let keep: Vec<usize> = (0..all.len()).filter(|&c| dict[c].iter().any(|v| *v != 0.0)).collect();
+        let gram = coupled_gram(cache.get(st, w, pb.inputs[m].name, &shx, &raw)?, &mx, &keep);
+        let orders: Vec<usize> = keep.iter().map(|&c| all[c]).collect();
+        let nested: Vec<Vec<f64>> =
+            dict.into_iter().enumerate().filter(|(c, _)| keep.contains(c)).map(|(_, v)| v).collect();
+        let nr = greedy_rss_with_gram(target, w, &base, &nested, &gram, GREEDY_STOP).ok()?;
         let bic = |k: usize| n * (nr.rss[k].max(1e-300) / n).ln() + (base.rank() + k) as f64 * n.ln();
         let k = (0..nr.rss.len()).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0);
         let mut sel: Vec<u32> = nr.used[..k.max(1).min(nr.used.len())].iter().map(|&j| orders[j] as u32).collect();
@@ -855,7 +989,8 @@ pub(crate) fn refit_coupled<'a>(
     let mut own = vec![fz.0, fz.1];
     own.extend(&g0);
     let mut theta1 = if held { held_theta(&pb1, &c0, &g0) } else { pb1.search(&grid, &c0, &g0, &[own])?.0 };
-    let mut terms2 = reselect(st_mode, &pb1, &fs.terms, &theta1, &fs.target)?;
+    let mut cache = RawGramCache::default();
+    let mut terms2 = reselect(st_mode, &pb1, &fs.terms, &theta1, &fs.target, &mut cache)?;
     // Further rounds: the scan again with the re-chosen shapes (their coefficients and gains at
     // the last optimum), then the shapes re-chosen at its optimum.
     for _ in 1..COUPLED_ROUNDS {
@@ -863,7 +998,7 @@ pub(crate) fn refit_coupled<'a>(
         let (beta, _) = pb.coupled(&theta1).ok()?;
         let (c, g) = (pb.shape_coefs(&beta), theta1[2..].to_vec());
         theta1 = if held { held_theta(&pb, &c, &g) } else { pb.search(&grid, &c, &g, &[theta1.clone()])?.0 };
-        terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target)?;
+        terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target, &mut cache)?;
     }
     let pb2 = problem(st_mode, &terms2, &fs.target, w)?;
     let (theta, at_bound) = if held {

@@ -310,19 +310,24 @@ impl Columns {
         self.m.ncols()
     }
 
-    /// G = CᵀC, G_jk = Σ_i c_ij·c_ik (count × count, row-major).
+    /// G = CᵀC, G_jk = Σ_i c_ij·c_ik (count × count, row-major; its lower triangle computed and
+    /// mirrored).
     pub fn gram(&self) -> Vec<f64> {
+        use faer::linalg::matmul::triangular::{matmul, BlockStructure};
         let k = self.count();
         let mut g = Mat::<f64>::zeros(k, k);
-        faer::linalg::matmul::matmul(
+        matmul(
             g.as_mut(),
+            BlockStructure::TriangularLower,
             faer::Accum::Replace,
             self.m.transpose(),
+            BlockStructure::Rectangular,
             self.m.as_ref(),
+            BlockStructure::Rectangular,
             1.0,
             faer::Par::Seq,
         );
-        (0..k * k).map(|e| g[(e / k, e % k)]).collect()
+        (0..k * k).map(|e| if e % k <= e / k { g[(e / k, e % k)] } else { g[(e % k, e / k)] }).collect()
     }
 
     /// Cᵀ·[v_1 … v_m]: the products Σ_i c_ij·v_i of every column j with each of `vs` (count × m,

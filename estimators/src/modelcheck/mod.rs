@@ -33,7 +33,7 @@ pub use diagnose::{
     ForwardSelection, HyperParameter, RankingEntry, ResidualInput, Verdict,
 };
 pub use lsq::{fit_signature, solve_normal, Columns, LinearFit};
-pub use ortho::{greedy_rss, lstsq_qr, nested_rss, NestedRss, OrthoBase};
+pub use ortho::{greedy_rss, greedy_rss_with_gram, lstsq_qr, nested_rss, NestedRss, OrthoBase};
 pub use refine::{refine_projected, ProjectedResidualFn, Refined};
 pub use spectrum::{
     amplitude_spectrum, frequency_grid, ls_periodogram, sinusoid_reductions, sparse_frequency_scan, AmplitudeSpectrum,
