@@ -415,8 +415,11 @@ impl StepProfiles {
         StepProfiles::exact2(exact, x)
     }
 
-    /// Value and slope of the exact profile at x (no table, or x outside it): kept out of line, so the
-    /// table lookup above stays small where it is inlined.
+    /// Value and slope of the exact profile at x (no table, or x outside it; [0, 0] for a zero profile):
+    /// kept out of line, so the table lookup above stays small where it is inlined. Marked cold: with
+    /// the fast engine's tables it runs only for zero profiles (a quick return) or off the travel
+    /// (measured: the physical study's step takes 1.7 % fewer instructions than testing for a zero
+    /// profile before every lookup).
     #[cold]
     #[inline(never)]
     fn exact2(exact: &Profile, x: f64) -> [f64; 2] {
