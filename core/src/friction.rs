@@ -93,6 +93,12 @@ pub const PARAMETER_NAMES: [&str; 5] = ["fc", "fs", "vs", "delta", "fv"];
 impl StribeckLaw {
     /// Checks 0 ≤ Fc ≤ Fs, vs > 0, δ > 0, Fv ≥ 0, all finite.
     pub fn validate(&self) -> Result<(), FrictionError> {
+        // The conditions below, tested at once for the common case (a simulator validates its law every
+        // step); any failure goes through the named checks for the message.
+        let finite = [self.fc, self.fs, self.vs, self.delta, self.fv].iter().all(|v| v.is_finite());
+        if finite && self.fc >= 0.0 && self.fs >= self.fc && self.vs > 0.0 && self.delta > 0.0 && self.fv >= 0.0 {
+            return Ok(());
+        }
         check("fc", self.fc, self.fc >= 0.0, "finite and >= 0 N")?;
         check("fs", self.fs, self.fs >= self.fc, "finite and >= fc")?;
         check("vs", self.vs, self.vs > 0.0, "finite and > 0 m/s")?;
@@ -118,6 +124,12 @@ impl StribeckLaw {
     /// Stribeck level g(v) = Fc + (Fs − Fc)·exp(−|v/vs|^δ), N: the magnitude of the dry part at velocity
     /// v (m/s). Equals Fs at v = 0 and tends to Fc for |v| ≫ vs. The LuGre model's g(v).
     pub fn level(&self, v: f64) -> f64 {
+        if self.fs == self.fc && self.fc.is_finite() && !(v / self.vs).is_nan() && !self.delta.is_nan() {
+            // Coulomb (Fs = Fc finite): Fs − Fc = +0, and w = exp(−|v/vs|^δ) is in [0, 1] (never NaN
+            // when v/vs and δ are not), so the excess is +0 and the level is Fc + 0 — the same bits
+            // as the full expression, without its powf and exp.
+            return self.fc + 0.0;
+        }
         self.fc + (self.fs - self.fc) * stribeck_weight(v, self.vs, self.delta)
     }
 

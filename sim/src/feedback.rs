@@ -19,6 +19,11 @@ pub struct FeedbackErrors {
 }
 
 impl FeedbackErrors {
+    /// True when the chain has no error: [`FeedbackErrors::error`] is +0 at every x and t.
+    pub fn is_zero(&self) -> bool {
+        self.along.is_zero() && self.thermal_expansion.is_none() && self.thermal_drift.is_none()
+    }
+
     /// e(x, t), m: the table lands at command + e.
     pub fn error(&self, x: f64, t: f64) -> f64 {
         let mut e = if self.along.is_zero() { 0.0 } else { self.along.value(x) };

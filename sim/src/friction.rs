@@ -106,6 +106,12 @@ pub struct StepInput {
 
 impl StepInput {
     fn validate(&self) -> Result<(), FrictionError> {
+        // All conditions at once for the common case (checked every physics step); a failure goes
+        // through the named checks below for the message.
+        let finite = [self.v, self.f_ext, self.mass, self.dt, self.stick_band].iter().all(|v| v.is_finite());
+        if finite && self.mass > 0.0 && self.dt > 0.0 && self.stick_band >= 0.0 {
+            return Ok(());
+        }
         check("v", self.v, true, "a finite velocity in m/s")?;
         check("f_ext", self.f_ext, true, "a finite force in N")?;
         check("mass", self.mass, self.mass > 0.0, "finite and > 0 kg")?;

@@ -82,9 +82,16 @@ impl ErrorMotions {
 
     /// The six error motions and their slopes as `value_slope(i, profile)` gives them for the motion of
     /// ISO index i (0..6: EXX, EYX, EZX, EAX, EBX, ECX) — exactly, or from a table of the profile.
+    #[inline(always)]
     pub fn at_with(&self, value_slope: impl Fn(usize, &Profile) -> [f64; 2]) -> MotionsAt {
-        let ev = |i: usize| value_slope(i, self.by_index(i));
-        let [px, py, pz, rx, ry, rz] = [ev(0), ev(1), ev(2), ev(3), ev(4), ev(5)];
+        let [px, py, pz, rx, ry, rz] = [
+            value_slope(0, &self.positioning),
+            value_slope(1, &self.straightness_y),
+            value_slope(2, &self.straightness_z),
+            value_slope(3, &self.roll),
+            value_slope(4, &self.pitch),
+            value_slope(5, &self.yaw),
+        ];
         MotionsAt {
             translation: DVec3::new(px[0], py[0], pz[0]),
             rotation: DVec3::new(rx[0], ry[0], rz[0]),

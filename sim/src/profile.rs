@@ -244,18 +244,22 @@ pub struct Tabulated {
     h: f64,
     /// (value, slope) at x0 + i·h.
     nodes: Vec<[f64; 2]>,
+    /// Index of the last node as a float, n: x is inside the table when (x − x0)/h < n.
+    last: f64,
 }
 
 impl Tabulated {
     /// Value and slope at x, or None outside the tabulated domain.
-    #[inline]
+    #[inline(always)]
     pub fn eval2(&self, x: f64) -> Option<[f64; 2]> {
         let u = (x - self.x0) / self.h;
-        if u.is_nan() || u < 0.0 {
+        // Inside the table: 0 ≤ u < n (nodes 0..=n; false for NaN), i.e. nodes i = ⌊u⌋ and i + 1 exist.
+        if !(u >= 0.0 && u < self.last) {
             return None;
         }
-        // index: u is not NaN and ≥ 0 here; the cast saturates and `get` below returns None past the table.
-        let i = u as usize;
+        // index: 0 ≤ u < n < MAX_NODES here, so the cast through i64 is exact truncation (⌊u⌋) and
+        // cheaper than the saturating cast to usize; `get` below still guards the table.
+        let i = u as i64 as usize;
         let (a, b) = (self.nodes.get(i)?, self.nodes.get(i + 1)?);
         let t = u - i as f64;
         let (t2, t3) = (t * t, t * t * t);
@@ -300,7 +304,8 @@ impl Profile {
                 [e[0], e[1]]
             })
             .collect();
-        Some(Tabulated { x0: lo, h, nodes })
+        // index: n ≤ MAX_NODES (checked above), exact as a float.
+        Some(Tabulated { x0: lo, h, nodes, last: n as f64 })
     }
 }
 
