@@ -702,7 +702,7 @@ impl Shape {
     }
 }
 
-/// True for the effects phase 1 can predict in a point table ([`CatalogueRow::predicts`]).
+/// True for the effects phase 1 can predict in a point table (the model check's catalogue row of the effect).
 pub fn predicts(name: EffectName) -> bool {
     catalogue_row(name).predicts
 }
