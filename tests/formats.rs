@@ -574,6 +574,18 @@ fn every_effect_model() -> Model {
     let mut bl_y = scalar(EffectName::Backlash, EffectParams::Backlash(Backlash { value: 2e-6 }));
     bl_y.effect.axis = Axis::Y;
     effects.push(bl_y);
+    // Every catalogue effect not written out above (one added later) round-trips too, from its starting
+    // values with each scalar moved off its default (×1.5, or 1e-6 where the default is 0: inside
+    // every parameter's range and physical bounds).
+    for name in EffectName::ALL {
+        if !effects.iter().any(|e| e.effect.name == name) {
+            let mut params = EffectParams::default_for(name);
+            for s in vmt_sim::effects::param_specs(name) {
+                params.set(s.key, if s.default != 0.0 { 1.5 * s.default } else { 1e-6 });
+            }
+            effects.push(scalar(name, params));
+        }
+    }
     let mut m = Model { machine: Some("slide_column".to_string()), axis: Axis::X, effects, source: PathBuf::new() };
     m.sort();
     m

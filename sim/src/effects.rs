@@ -87,6 +87,24 @@ catalogue! {
     AccelBiasDrift = "accel_bias_drift",
 }
 
+/// The six error motions of an axis (ISO 230-1), the effects whose parameters are a [`Profile`] of
+/// the axis position ([`EffectName::error_motion`]); for the X axis EXX, EYX, EZX, EAX, EBX, ECX.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ErrorMotion {
+    /// Positioning error motion along the axis, EXX for X (m).
+    Positioning,
+    /// Straightness in the first transverse direction, EYX for X (m).
+    StraightnessY,
+    /// Straightness in the second transverse direction, EZX for X (m).
+    StraightnessZ,
+    /// Roll, the angle about the axis itself, EAX for X (rad).
+    Roll,
+    /// Pitch, the angle about the first transverse direction, EBX for X (rad).
+    Pitch,
+    /// Yaw, the angle about the second transverse direction, ECX for X (rad).
+    Yaw,
+}
+
 /// Returned by `EffectName::from_str` for a name that is not in the catalogue.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("unknown effect `{name}`; known effects: {}", EffectName::known_list())]
@@ -113,31 +131,28 @@ impl EffectName {
 
     /// True for the six error motions, whose parameters are a [`Profile`] of the axis position.
     pub fn is_error_motion(self) -> bool {
-        EffectName::ERROR_MOTIONS.contains(&self)
+        self.error_motion().is_some()
     }
 
     /// True for the translational error motions (positioning, straightness: values in m); false
     /// for everything else. Roll, pitch and yaw are angles (rad).
     pub fn is_translational(self) -> bool {
-        matches!(self, EffectName::Positioning | EffectName::StraightnessY | EffectName::StraightnessZ)
+        matches!(
+            self.error_motion(),
+            Some(ErrorMotion::Positioning | ErrorMotion::StraightnessY | ErrorMotion::StraightnessZ)
+        )
     }
 
-    /// ISO 230-1 symbol of an error motion of `axis` (x, y or z), e.g. pitch of X → `EBX`.
-    ///
-    /// Convention (vmt's, for axes other than X): `straightness_y`/`straightness_z` are the first
-    /// and second transverse directions in the order x, y, z with the axis itself skipped, and
-    /// `pitch`/`yaw` the rotations about those same two directions; `roll` is about the axis.
-    /// So for Y: EYY, EXY, EZY, EBY, EAY, ECY; for Z: EZZ, EXZ, EYZ, ECZ, EAZ, EBZ.
-    /// `None` for effects that are not error motions.
-    pub fn iso230_symbol(self, a: Axis) -> Option<String> {
-        let [t1, t2] = a.transverse();
-        let component = match self {
-            EffectName::Positioning => a.iso_letter(),
-            EffectName::StraightnessY => t1.iso_letter(),
-            EffectName::StraightnessZ => t2.iso_letter(),
-            EffectName::Roll => a.rotation_letter(),
-            EffectName::Pitch => t1.rotation_letter(),
-            EffectName::Yaw => t2.rotation_letter(),
+    /// The error motion this effect is, `None` for every other effect. One arm per effect and no
+    /// wildcard: the one place where a new effect says whether it is an error motion.
+    pub fn error_motion(self) -> Option<ErrorMotion> {
+        match self {
+            EffectName::Positioning => Some(ErrorMotion::Positioning),
+            EffectName::StraightnessY => Some(ErrorMotion::StraightnessY),
+            EffectName::StraightnessZ => Some(ErrorMotion::StraightnessZ),
+            EffectName::Roll => Some(ErrorMotion::Roll),
+            EffectName::Pitch => Some(ErrorMotion::Pitch),
+            EffectName::Yaw => Some(ErrorMotion::Yaw),
             EffectName::SquarenessXy
             | EffectName::SquarenessXz
             | EffectName::SquarenessYz
@@ -154,7 +169,26 @@ impl EffectName {
             | EffectName::ServoLag
             | EffectName::Resonance
             | EffectName::GravityTilt
-            | EffectName::AccelBiasDrift => return None,
+            | EffectName::AccelBiasDrift => None,
+        }
+    }
+
+    /// ISO 230-1 symbol of an error motion of `axis` (x, y or z), e.g. pitch of X → `EBX`.
+    ///
+    /// Convention (vmt's, for axes other than X): `straightness_y`/`straightness_z` are the first
+    /// and second transverse directions in the order x, y, z with the axis itself skipped, and
+    /// `pitch`/`yaw` the rotations about those same two directions; `roll` is about the axis.
+    /// So for Y: EYY, EXY, EZY, EBY, EAY, ECY; for Z: EZZ, EXZ, EYZ, ECZ, EAZ, EBZ.
+    /// `None` for effects that are not error motions.
+    pub fn iso230_symbol(self, a: Axis) -> Option<String> {
+        let [t1, t2] = a.transverse();
+        let component = match self.error_motion()? {
+            ErrorMotion::Positioning => a.iso_letter(),
+            ErrorMotion::StraightnessY => t1.iso_letter(),
+            ErrorMotion::StraightnessZ => t2.iso_letter(),
+            ErrorMotion::Roll => a.rotation_letter(),
+            ErrorMotion::Pitch => t1.rotation_letter(),
+            ErrorMotion::Yaw => t2.rotation_letter(),
         };
         Some(format!("E{component}{}", a.iso_letter()))
     }

@@ -1,6 +1,7 @@
 //! Channels: the measurement set as stacked channels with per-sample sensitivities.
 
 use super::*;
+use vmt_sim::effects::ErrorMotion;
 use vmt_sim::Axis;
 
 // ------------------------------------------------------------------------------------------
@@ -106,14 +107,14 @@ impl Channel {
         let [ux, uy, uz] = self.u;
         let [rx, ry, rz] = self.r;
         let rxu = [ry * uz - rz * uy, rz * ux - rx * uz, rx * uy - ry * ux];
-        match name {
-            EffectName::Positioning => ux,
-            EffectName::StraightnessY => uy,
-            EffectName::StraightnessZ => uz,
-            EffectName::Roll => rxu[0],
-            EffectName::Pitch => rxu[1],
-            EffectName::Yaw => rxu[2],
-            _ => 0.0,
+        match name.error_motion() {
+            Some(ErrorMotion::Positioning) => ux,
+            Some(ErrorMotion::StraightnessY) => uy,
+            Some(ErrorMotion::StraightnessZ) => uz,
+            Some(ErrorMotion::Roll) => rxu[0],
+            Some(ErrorMotion::Pitch) => rxu[1],
+            Some(ErrorMotion::Yaw) => rxu[2],
+            None => 0.0,
         }
     }
 }

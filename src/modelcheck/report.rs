@@ -652,24 +652,9 @@ pub(crate) fn visible(st: &Stack, name: EffectName, sh: &Shape, fixed: Option<f6
     })
 }
 
-/// What data shows an effect (for the "missing channel" message and the advice).
+/// What data shows an effect (for the "missing channel" message and the advice; [`catalogue_row`]).
 pub(crate) fn needs(name: EffectName) -> &'static str {
-    match name {
-        EffectName::Positioning => "needs a laser_linear along the axis in a positioning run",
-        EffectName::StraightnessY | EffectName::StraightnessZ => {
-            "needs a laser_straightness across the axis in a positioning run, or an accelerometer across the axis \
-             in a constant-velocity run"
-        }
-        EffectName::Roll | EffectName::Pitch | EffectName::Yaw => {
-            "needs a laser whose measuring point is offset from the axis (an Abbe offset) across its direction"
-        }
-        EffectName::Backlash | EffectName::CyclicLead => {
-            "needs a laser_linear or a linear scale in a positioning run, or a linear scale and a motor encoder \
-             logged against x_cmd in a time series"
-        }
-        EffectName::ServoLag => "needs an encoder logged against the command (x_cmd) in a time series",
-        _ => "needs a laser_linear along the axis in a positioning run",
-    }
+    catalogue_row(name).needs
 }
 
 /// The SI unit of a channel's readings and residual: N (motor force), m/s² (accelerometer), else m.
@@ -1442,10 +1427,8 @@ pub(crate) fn weigh_lead_against_shapes(
 
 /// Why a periodic effect is not searched on these positions, and what measurement would show it.
 pub(crate) fn unresolved_period_note(st: &Stack, name: EffectName) -> String {
-    let range = match name {
-        EffectName::CyclicLead => "2–60 mm (screw leads)",
-        _ => "2–200 µm (scale signal periods)",
-    };
+    // Called for periodic effects only (a `period` hyper-parameter).
+    let range = catalogue_row(name).period.map_or("of its catalogue range", |p| p.text);
     let shortest = match shortest_resolvable_period(st) {
         Some(p) => format!("the shortest period they resolve is {} mm", fmt_num(p * 1e3)),
         None => "they resolve no period".to_string(),

@@ -702,24 +702,107 @@ impl Shape {
     }
 }
 
-/// True for the effects phase 1 can predict in a point table.
+/// True for the effects phase 1 can predict in a point table (the model check's catalogue row of the effect).
 pub fn predicts(name: EffectName) -> bool {
-    name.is_error_motion()
-        || matches!(
-            name,
-            EffectName::Backlash
-                | EffectName::CyclicLead
-                | EffectName::ScaleError
-                | EffectName::ThermalExpansion
-                | EffectName::ThermalDrift
-                | EffectName::InterpolationError
-                | EffectName::Coulomb
-                | EffectName::Viscous
-                | EffectName::Stribeck
-                | EffectName::Resonance
-                | EffectName::GravityTilt
-                | EffectName::ServoLag
-        )
+    catalogue_row(name).predicts
+}
+
+/// What the model check knows of one catalogue effect besides its signature ([`shape`], [`columns`],
+/// the known prediction) and the reading back of its fitted coefficients: whether phase 1 predicts
+/// it, what data shows it, and a periodic effect's period range. [`catalogue_row`] has one arm per
+/// effect and no wildcard, so the compiler names it for a new effect (issue 12).
+pub(crate) struct CatalogueRow {
+    /// Phase 1 can predict it (it has a signature on the stacked samples); the others are neither
+    /// fitted nor searched as candidates.
+    pub(crate) predicts: bool,
+    /// What data shows it, for the "no channel sees it" message.
+    pub(crate) needs: &'static str,
+    /// A periodic effect's period (its catalogue range and search grid); None for the others.
+    pub(crate) period: Option<PeriodRange>,
+}
+
+/// The catalogue range of a periodic effect's period, m, and the grid `diagnose` searches it on.
+pub(crate) struct PeriodRange {
+    /// Shortest period of the catalogue range, m.
+    pub(crate) lo: f64,
+    /// Longest period of the catalogue range, m.
+    pub(crate) hi: f64,
+    /// The range as a note reads it, e.g. "2–60 mm (screw leads)".
+    pub(crate) text: &'static str,
+    /// The periods searched before any refinement.
+    pub(crate) grid: PeriodGrid,
+}
+
+/// How the periods of a [`PeriodRange`] are searched.
+pub(crate) enum PeriodGrid {
+    /// `n` log-spaced periods from `lo` to `hi`, refined by golden section.
+    Log(usize),
+    /// These periods (m), not refined.
+    List(&'static [f64]),
+}
+
+impl PeriodRange {
+    /// The search grid on these data: the periods of [`PeriodRange::grid`] that the sample positions
+    /// resolve (never an alias), and whether the best is refined.
+    fn search_grid(&self, st: &Stack) -> (Vec<f64>, bool) {
+        match self.grid {
+            PeriodGrid::Log(n) => (resolvable_only(st, log_grid(self.lo, self.hi, n)), true),
+            PeriodGrid::List(periods) => (resolvable_only(st, periods.to_vec()), false),
+        }
+    }
+}
+
+/// The model check's row of effect `name` ([`CatalogueRow`]).
+pub(crate) fn catalogue_row(name: EffectName) -> CatalogueRow {
+    const LASER_LINEAR: &str = "needs a laser_linear along the axis in a positioning run";
+    const SCREW: &str = "needs a laser_linear or a linear scale in a positioning run, or a linear scale and a motor \
+                         encoder logged against x_cmd in a time series";
+    let row = |predicts: bool, needs: &'static str| CatalogueRow { predicts, needs, period: None };
+    match name {
+        EffectName::Positioning => row(true, LASER_LINEAR),
+        EffectName::StraightnessY | EffectName::StraightnessZ => row(
+            true,
+            "needs a laser_straightness across the axis in a positioning run, or an accelerometer across the axis \
+             in a constant-velocity run",
+        ),
+        EffectName::Roll | EffectName::Pitch | EffectName::Yaw => row(
+            true,
+            "needs a laser whose measuring point is offset from the axis (an Abbe offset) across its direction",
+        ),
+        // A squareness joins the axes of a chain: not predicted on one axis.
+        EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz => row(false, LASER_LINEAR),
+        EffectName::Backlash => row(true, SCREW),
+        // Screw leads 2–60 mm.
+        EffectName::CyclicLead => CatalogueRow {
+            predicts: true,
+            needs: SCREW,
+            period: Some(PeriodRange {
+                lo: 2e-3,
+                hi: 60e-3,
+                text: "2–60 mm (screw leads)",
+                grid: PeriodGrid::Log(120),
+            }),
+        },
+        EffectName::ScaleError | EffectName::ThermalExpansion | EffectName::ThermalDrift => row(true, LASER_LINEAR),
+        // Signal periods of common linear and rotary scales (Heidenhain, Renishaw): 2–200 µm.
+        EffectName::InterpolationError => CatalogueRow {
+            predicts: true,
+            needs: LASER_LINEAR,
+            period: Some(PeriodRange {
+                lo: 2e-6,
+                hi: 200e-6,
+                text: "2–200 µm (scale signal periods)",
+                grid: PeriodGrid::List(&[2e-6, 4e-6, 8e-6, 10e-6, 20e-6, 40e-6, 100e-6, 200e-6]),
+            }),
+        },
+        EffectName::Coulomb | EffectName::Viscous | EffectName::Stribeck => row(true, LASER_LINEAR),
+        // LuGre's bristle state has no signature in phase 1 (its steady state is the Stribeck curve).
+        EffectName::Lugre => row(false, LASER_LINEAR),
+        EffectName::ServoLag => row(true, "needs an encoder logged against the command (x_cmd) in a time series"),
+        EffectName::Resonance | EffectName::GravityTilt => row(true, LASER_LINEAR),
+        // A random walk of an accelerometer's bias: not predicted (the offsets carry its mean).
+        EffectName::AccelBiasDrift => row(false, LASER_LINEAR),
+    }
 }
 
 /// Length of the segments over which a resonance's amplitude and phase are held, s. A base-excited
@@ -1350,8 +1433,8 @@ pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>
         // Stribeck shape exponents δ of lubricated guideways, 0.5–3 (Armstrong-Hélouvry 1994:
         // 0.5–2; δ = 2 the Gaussian law).
         (EffectName::Stribeck, "shape") => (log_grid(0.5, 3.0, 9), true),
-        // Screw leads 2–60 mm, only the periods these positions resolve (`period_resolvable`).
-        (EffectName::CyclicLead, _) => (resolvable_only(st, log_grid(2e-3, 60e-3, 120)), true),
+        // A periodic effect's periods ([`catalogue_row`]), only those these positions resolve.
+        (_, "period") => catalogue_row(name).period.map_or((Vec::new(), false), |p| p.search_grid(st)),
         // Position-loop gains of machine tools, 2–500 1/s.
         (_, "kv") => (log_grid(2.0, 500.0, 41), true),
         // Play of a ball-screw transmission, 0.1–100 µm.
@@ -1377,38 +1460,15 @@ pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>
                 (vec![0.02], false)
             }
         }
-        // Signal periods of common linear and rotary scales (Heidenhain, Renishaw): 2–200 µm.
-        _ => (resolvable_only(st, vec![2e-6, 4e-6, 8e-6, 10e-6, 20e-6, 40e-6, 100e-6, 200e-6]), false),
+        // No other hyper-parameter: [`shape`] names only those above (`shape` only for Stribeck).
+        _ => (Vec::new(), false),
     }
 }
 
-/// The catalogue range (m) of a periodic candidate's period: screw leads, scale signal periods.
+/// The catalogue range (m) of a periodic candidate's period: screw leads, scale signal periods
+/// ([`catalogue_row`]).
 pub(crate) fn period_range(name: EffectName) -> Option<(f64, f64)> {
-    match name {
-        EffectName::CyclicLead => Some((2e-3, 60e-3)),
-        EffectName::InterpolationError => Some((2e-6, 200e-6)),
-        EffectName::Positioning
-        | EffectName::StraightnessY
-        | EffectName::StraightnessZ
-        | EffectName::Roll
-        | EffectName::Pitch
-        | EffectName::Yaw
-        | EffectName::Backlash
-        | EffectName::ScaleError
-        | EffectName::ThermalExpansion
-        | EffectName::ThermalDrift
-        | EffectName::Coulomb
-        | EffectName::Viscous
-        | EffectName::Stribeck
-        | EffectName::Resonance
-        | EffectName::GravityTilt
-        | EffectName::SquarenessXy
-        | EffectName::SquarenessXz
-        | EffectName::SquarenessYz
-        | EffectName::Lugre
-        | EffectName::ServoLag
-        | EffectName::AccelBiasDrift => None,
-    }
+    catalogue_row(name).period.map(|p| (p.lo, p.hi))
 }
 
 /// The periods of `grid` that the sample positions resolve (never search an alias).
