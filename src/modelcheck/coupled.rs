@@ -753,7 +753,7 @@ impl RawGramCache {
     fn get(&mut self, st: &Stack, w: &[f64], name: EffectName, shx: &Shape, raw: &RawSeries) -> Option<&RawGrams> {
         let reads = st.chans.iter().any(|c| !c.is_accel());
         let key = (reads.then_some(name), [shx.range.0.to_bits(), shx.range.1.to_bits()], shx.order);
-        if !self.0.contains_key(&key) {
+        if let std::collections::btree_map::Entry::Vacant(slot) = self.0.entry(key) {
             let mut grams = Vec::with_capacity(st.chans.len());
             let mut s0 = 0;
             for c in st.chans.iter() {
@@ -766,7 +766,7 @@ impl RawGramCache {
                 grams.push(Columns::new(len, &refs).ok()?.gram());
                 s0 += len;
             }
-            self.0.insert(key, grams);
+            slot.insert(grams);
         }
         self.0.get(&key)
     }
