@@ -833,14 +833,12 @@ fn coupled_columns(st: &Stack, raw: &RawSeries, mixes: &[Vec<Mix>]) -> Vec<Vec<f
 }
 
 /// The weighted Gram matrix of the coupled columns `mixes` (those at `keep`) from the channels' raw
-/// Gram matrices: G_cd = Σ_channels [α_c·α_d·R_{k_c k_d} + α_c·β_d·R_{k_c p_d} + β_c·α_d·R_{p_c k_d} +
+/// Gram matrices (each r × r, r = the series' top + 1): G_cd = Σ_channels [α_c·α_d·R_{k_c k_d} + α_c·β_d·R_{k_c p_d} + β_c·α_d·R_{p_c k_d} +
 /// β_c·β_d·R_{p_c p_d}] (row-major, |keep|²).
-fn coupled_gram(grams: &RawGrams, mixes: &[Vec<Mix>], keep: &[usize]) -> Vec<f64> {
+fn coupled_gram(grams: &RawGrams, r: usize, mixes: &[Vec<Mix>], keep: &[usize]) -> Vec<f64> {
     let n = keep.len();
     let mut g = vec![0.0; n * n];
     for (rg, mx) in grams.iter().zip(mixes) {
-        // index: a raw Gram matrix is (top + 1)² over the basis indices every Mix names.
-        let r = (rg.len() as f64).sqrt().round() as usize;
         for (a, &c) in keep.iter().enumerate() {
             let x = mx[c];
             for (b, &d) in keep.iter().enumerate().skip(a) {
@@ -923,10 +921,9 @@ fn reselect(
         base_cols.retain(|c| c.iter().any(|v| *v != 0.0));
         let base = OrthoBase::new(&base_cols, w).ok()?;
         let keep: Vec<usize> = (0..all.len()).filter(|&c| dict[c].iter().any(|v| *v != 0.0)).collect();
-        let gram = coupled_gram(cache.get(st, w, pb.inputs[m].name, &shx, &raw)?, &mx, &keep);
+        let gram = coupled_gram(cache.get(st, w, pb.inputs[m].name, &shx, &raw)?, raw.len(), &mx, &keep);
         let orders: Vec<usize> = keep.iter().map(|&c| all[c]).collect();
-        let nested: Vec<Vec<f64>> =
-            dict.into_iter().enumerate().filter(|(c, _)| keep.contains(c)).map(|(_, v)| v).collect();
+        let nested: Vec<Vec<f64>> = dict.into_iter().filter(|col| col.iter().any(|v| *v != 0.0)).collect();
         let nr = greedy_rss_with_gram(target, w, &base, &nested, &gram, GREEDY_STOP).ok()?;
         let bic = |k: usize| n * (nr.rss[k].max(1e-300) / n).ln() + (base.rank() + k) as f64 * n.ln();
         let k = (0..nr.rss.len()).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0);

@@ -313,21 +313,9 @@ impl Columns {
     /// G = CᵀC, G_jk = Σ_i c_ij·c_ik (count × count, row-major; its lower triangle computed and
     /// mirrored).
     pub fn gram(&self) -> Vec<f64> {
-        use faer::linalg::matmul::triangular::{matmul, BlockStructure};
         let k = self.count();
-        let mut g = Mat::<f64>::zeros(k, k);
-        matmul(
-            g.as_mut(),
-            BlockStructure::TriangularLower,
-            faer::Accum::Replace,
-            self.m.transpose(),
-            BlockStructure::Rectangular,
-            self.m.as_ref(),
-            BlockStructure::Rectangular,
-            1.0,
-            faer::Par::Seq,
-        );
-        (0..k * k).map(|e| if e % k <= e / k { g[(e / k, e % k)] } else { g[(e % k, e / k)] }).collect()
+        let g = gram_of(self.m.as_ref());
+        (0..k * k).map(|e| g[(e / k, e % k)]).collect()
     }
 
     /// Cᵀ·[v_1 … v_m]: the products Σ_i c_ij·v_i of every column j with each of `vs` (count × m,
@@ -355,6 +343,31 @@ impl Columns {
         faer::linalg::matmul::matmul(out.as_mut(), faer::Accum::Replace, self.m.as_ref(), b, 1.0, faer::Par::Seq);
         Ok((0..self.rows()).map(|i| out[(i, 0)]).collect())
     }
+}
+
+/// The Gram matrix AᵀA of the columns of `a`: its lower triangle by one sequential faer product
+/// (half the products of the full one, each entry the same sum to the bit), mirrored.
+pub(crate) fn gram_of(a: faer::MatRef<'_, f64>) -> Mat<f64> {
+    use faer::linalg::matmul::triangular::{matmul, BlockStructure};
+    let k = a.ncols();
+    let mut g = Mat::<f64>::zeros(k, k);
+    matmul(
+        g.as_mut(),
+        BlockStructure::TriangularLower,
+        faer::Accum::Replace,
+        a.transpose(),
+        BlockStructure::Rectangular,
+        a,
+        BlockStructure::Rectangular,
+        1.0,
+        faer::Par::Seq,
+    );
+    for j in 0..k {
+        for i in 0..j {
+            g[(i, j)] = g[(j, i)];
+        }
+    }
+    g
 }
 
 #[cfg(test)]

@@ -14,7 +14,6 @@ use super::{check_finite, check_len, ModelCheckError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::householder;
 use faer::linalg::matmul::matmul;
-use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::qr;
 use faer::{Accum, Conj, Mat, Par};
 use rayon::prelude::*;
@@ -553,25 +552,8 @@ pub fn greedy_rss(
     let corr = columns_dot(&a, &r);
     // The Gram matrix G = AᵀA of the projected unit columns, one level-3 product (compute-bound),
     // where each step's Aᵀv would read all of A again (memory-bound); the steps then run in the
-    // coefficients of the columns taken. Its lower triangle only (half the products; each entry
-    // the same sum as the full product's, to the bit), mirrored.
-    let mut g = Mat::<f64>::zeros(k, k);
-    triangular::matmul(
-        g.as_mut(),
-        BlockStructure::TriangularLower,
-        Accum::Replace,
-        a.transpose(),
-        BlockStructure::Rectangular,
-        a.as_ref(),
-        BlockStructure::Rectangular,
-        1.0,
-        Par::Seq,
-    );
-    for j in 0..k {
-        for i in 0..j {
-            g[(i, j)] = g[(j, i)];
-        }
-    }
+    // coefficients of the columns taken.
+    let g = super::lsq::gram_of(a.as_ref());
     Ok(greedy_steps(&g, left, corr, rss, n, stop))
 }
 
