@@ -222,6 +222,9 @@ pub struct AccelTruth {
     pub hidden: AccelHidden,
     /// Mode frequency, Hz, and damping ratio (when present).
     pub mode: Option<(f64, f64)>,
+    /// The mode's shape on (y, z): its input is the guideway's acceleration projected on it and
+    /// each accelerometer reads its projection (a unit vector; present with `mode`).
+    pub mode_shape: [f64; 2],
     /// Roll profile EAX(x), rad (when present).
     pub roll: Option<Waves>,
     /// Noise density, m/s²/√Hz, and the per-sample σ of each pass, m/s².
@@ -232,7 +235,8 @@ pub struct AccelTruth {
     pub rates: Vec<f64>,
     /// Total number of samples (all passes, both channels).
     pub samples: usize,
-    /// χ² of the hidden effects' contribution (Σ((h − mean h)/σ)² over all samples).
+    /// χ² of the weakest hidden effect's contribution (Σ((h − mean h)/σ)² over all samples, the
+    /// mean per pass and channel): each of two hidden effects must be visible on its own.
     pub hidden_chi2: f64,
     /// Cramér–Rao bound (σ_f Hz, σ_ζ) of the mode's frequency and damping from these samples
     /// (when a mode is present): (JᵀJ/σ²)⁻¹ with J = ∂(mode response)/∂(f, ζ) by central
@@ -589,7 +593,7 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
     let mut sigmas = Vec::new();
     let mut rates = Vec::new();
     let mut samples = 0;
-    let mut chi2 = 0.0;
+    let (mut chi2_roll, mut chi2_mode) = (0.0, 0.0);
     let mut t0 = 0.0;
     let mut layout: Vec<ModePass> = Vec::new();
     for (k, &v) in speeds.iter().enumerate() {
@@ -645,10 +649,17 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
             ay.push(geo(&straight[0]) + gy + my + bias[0] + sigma * d.normal());
             az.push(geo(&straight[1]) + mz + bias[1] + sigma * d.normal());
         }
-        for hcol in [&hy, &hz] {
-            let mean = hcol.iter().sum::<f64>() / hcol.len() as f64;
-            chi2 += hcol.iter().map(|v| ((v - mean) / sigma).powi(2)).sum::<f64>();
-        }
+        // Each hidden effect's own χ² (its signal, less the pass's mean, over the noise): the roll's
+        // on y, the mode's on y and z.
+        let demeaned_chi2 = |col: &[f64]| {
+            let mean = col.iter().sum::<f64>() / col.len() as f64;
+            col.iter().map(|v| ((v - mean) / sigma).powi(2)).sum::<f64>()
+        };
+        let roll_y: Vec<f64> = xcol.iter().map(|&x| roll.as_ref().map_or(0.0, |r| G * r.value(x))).collect();
+        let mode_y: Vec<f64> = hy.iter().zip(&roll_y).map(|(h, r)| h - r).collect();
+        chi2_roll += demeaned_chi2(&roll_y);
+        chi2_mode += demeaned_chi2(&mode_y);
+        chi2_mode += demeaned_chi2(&hz);
         samples += 2 * n;
         let dur = n as f64 * dt;
         runs.push(RunSpec {
@@ -675,19 +686,26 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
         _ => None,
     };
     let sensors: Vec<SensorSpec> = sensors.into_iter().map(|s| SensorSpec { sigma, ..s }).collect();
+    let has_roll = roll.is_some();
     let _ = std::fs::remove_dir_all(dir);
     write_set(dir, "independent accelerometer passes (issue 19 generator)", &sensors, &runs);
     write_model(&dir.join("model.toml"), &["straightness_y", "straightness_z"]);
     AccelTruth {
         hidden,
         mode,
+        mode_shape: [m_shape[1], m_shape[2]],
         roll,
         density,
         sigmas,
         speeds: speeds.to_vec(),
         rates,
         samples,
-        hidden_chi2: chi2,
+        hidden_chi2: match (has_roll, mode.is_some()) {
+            (true, true) => chi2_roll.min(chi2_mode),
+            (true, false) => chi2_roll,
+            (false, true) => chi2_mode,
+            (false, false) => 0.0,
+        },
         mode_crb,
         travel: (x_lo, x_lo + travel),
         roll_crb,

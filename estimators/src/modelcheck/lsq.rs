@@ -238,7 +238,7 @@ mod tests {
 
 /// Least squares from the normal equations: β̂ minimising ‖y − Xβ‖² given only the Gram matrix
 /// N = XᵀX (`gram`, p × p, row-major, symmetric) and b = Xᵀy. Solved by the symmetric
-/// eigendecomposition (nalgebra) of the Jacobi-scaled D⁻¹ND⁻¹ (D = √diag N), eigenvalues below
+/// eigendecomposition (faer) of the Jacobi-scaled D⁻¹ND⁻¹ (D = √diag N), eigenvalues below
 /// 1e-13 of the largest dropped (a pseudo-inverse: columns dependent to ≈ 3e-7 relative count as
 /// dependent, as the squared condition number of the normal equations allows), β̂ = D⁻¹V Λ⁺Vᵀ D⁻¹b.
 /// For designs whose Gram matrix is cheap to update while the columns themselves are not (many
@@ -268,14 +268,20 @@ pub fn solve_normal(gram: &[f64], b: &[f64]) -> Result<Vec<f64>, ModelCheckError
             }
         }
     }
-    let eig = nalgebra::SymmetricEigen::new(m);
-    let top = eig.eigenvalues.iter().copied().fold(0.0_f64, f64::max);
-    let proj = eig.eigenvectors.transpose() * &bs;
-    let mut z = nalgebra::DVector::zeros(p);
+    // faer's self-adjoint eigendecomposition (sequential: the same bits on any thread count).
+    let mf = Mat::<f64>::from_fn(p, p, |i, j| m[(i, j)]);
+    let eig = mf
+        .self_adjoint_eigen(faer::Side::Lower)
+        .map_err(|e| ModelCheckError::Numerical(format!("solve_normal: eigendecomposition: {e:?}")))?;
+    let (u, l) = (eig.U(), eig.S().column_vector());
+    let top = (0..p).map(|k| l[k]).fold(0.0_f64, f64::max);
+    let mut z = vec![0.0; p];
     for k in 0..p {
-        let l = eig.eigenvalues[k];
-        if l > 1e-13 * top && top > 0.0 {
-            z += eig.eigenvectors.column(k) * (proj[k] / l);
+        if l[k] > 1e-13 * top && top > 0.0 {
+            let proj: f64 = (0..p).map(|i| u[(i, k)] * bs[i]).sum::<f64>() / l[k];
+            for (i, zi) in z.iter_mut().enumerate() {
+                *zi += u[(i, k)] * proj;
+            }
         }
     }
     Ok((0..p).map(|j| z[j] * inv(j)).collect())
