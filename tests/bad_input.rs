@@ -435,42 +435,31 @@ fn set_cases() -> Vec<Case> {
     });
     // Encodings and file kinds.
     let utf16: Vec<u8> = "format = \"vmt-measurements/1\"\n".encode_utf16().flat_map(|u| u.to_le_bytes()).collect();
-    let mut f = set_files(&table(&good_rows()));
-    f[0].1 = [vec![0xFF, 0xFE], utf16].concat();
-    cases.push(Case {
-        label: "UTF-16 manifest".into(),
-        files: f,
-        args: args(&["iso230-2", "{dir}/set"]),
-        blamed: "manifest.toml".into(),
-        place: "UTF-8".into(),
-    });
-    let mut f = set_files(&table(&good_rows()));
-    f[1].1 = b"target,run,direction,laser\n0,1,1,\xff\xfe\n".to_vec();
-    cases.push(Case {
-        label: "non-UTF-8 CSV".into(),
-        files: f,
-        args: args(&["iso230-2", "{dir}/set"]),
-        blamed: "iso.csv".into(),
-        place: "line 2".into(),
-    });
-    let mut f = set_files(&table(&good_rows()));
-    f[1] = ("set/iso.csv/".into(), Vec::new());
-    cases.push(Case {
-        label: "CSV is a directory".into(),
-        files: f,
-        args: args(&["iso230-2", "{dir}/set"]),
-        blamed: "iso.csv".into(),
-        place: "directory".into(),
-    });
-    let mut f = set_files(&table(&good_rows()));
-    f[0] = ("set/manifest.toml/".into(), Vec::new());
-    cases.push(Case {
-        label: "manifest is a directory".into(),
-        files: f,
-        args: args(&["iso230-2", "{dir}/set"]),
-        blamed: "manifest.toml".into(),
-        place: "directory".into(),
-    });
+    // (label, the set's file replaced: manifest 0 or CSV 1, by this path and content, file blamed, place)
+    let set_file_cases = [
+        ("UTF-16 manifest", 0, "set/manifest.toml", [vec![0xFF, 0xFE], utf16].concat(), "manifest.toml", "UTF-8"),
+        (
+            "non-UTF-8 CSV",
+            1,
+            "set/iso.csv",
+            b"target,run,direction,laser\n0,1,1,\xff\xfe\n".to_vec(),
+            "iso.csv",
+            "line 2",
+        ),
+        ("CSV is a directory", 1, "set/iso.csv/", Vec::new(), "iso.csv", "directory"),
+        ("manifest is a directory", 0, "set/manifest.toml/", Vec::new(), "manifest.toml", "directory"),
+    ];
+    for (label, i, path, content, blamed, place) in set_file_cases {
+        let mut files = set_files(&table(&good_rows()));
+        files[i] = (path.into(), content);
+        cases.push(Case {
+            label: label.into(),
+            files,
+            args: args(&["iso230-2", "{dir}/set"]),
+            blamed: blamed.into(),
+            place: place.into(),
+        });
+    }
     cases.push(Case {
         label: "scenario is a directory".into(),
         files: vec![("s.toml/".into(), Vec::new())],

@@ -595,9 +595,9 @@ fn every_effect_model() -> Model {
 fn a_model_with_every_effect_round_trips() {
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("model.toml");
+    // Every catalogue effect is in the model by construction (`every_effect_model` adds any not written
+    // out by hand), and each one is compared after the round trip below.
     let m = every_effect_model();
-    let names: std::collections::BTreeSet<EffectName> = m.effects.iter().map(|e| e.effect.name).collect();
-    assert_eq!(names.len(), EffectName::ALL.len(), "every effect is in the model");
     let written = model::write_model(&m, &path).unwrap();
     // Six table sidecars (one per error motion of x) and the model.
     assert_eq!(written.len(), 7, "{written:?}");

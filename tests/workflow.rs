@@ -2,7 +2,7 @@
 //! independence, round trips of simulated measurement sets, and bad input (exit code 2, a message that
 //! names the file and the place).
 
-use crate::util::{root, small, vmt};
+use crate::util::{root, rust_files, small, vmt};
 use std::path::{Path, PathBuf};
 
 /// All files of a directory, sorted, with their bytes.
@@ -1112,4 +1112,43 @@ fn a_printed_zero_has_no_minus_sign() {
     assert_eq!(display(Quantity::Length, -6e-10), "-0.001 µm");
     assert_eq!(display(Quantity::Angle, -1.5e-6), "-1.500 µrad");
     assert_eq!(display(Quantity::Ratio, -1e-4), "0.000 (dimensionless)");
+}
+
+/// The estimate workflow's layer boundary (issue 12, src/lib.rs): `src/workflow/estimate/` takes a
+/// measurement set, a truth view and a re-measure callback, and never names the scenario, the
+/// simulator's run records or its physics. Its code (comments skipped) is read for any path that would
+/// reach them; the estimator specs of `scenario/spec.rs` are plain data and allowed.
+#[test]
+fn the_estimate_workflow_sees_no_scenario_and_no_physics() {
+    const FORBIDDEN: [&str; 14] = [
+        "Scenario",
+        "crate::scenario::",
+        "crate::simulate",
+        "workflow::simulate",
+        "RunRecord",
+        "vmt_sim::axis_sim",
+        "vmt_sim::truth",
+        "vmt_sim::machine",
+        "vmt_sim::procedures",
+        "vmt_sim::chain",
+        "vmt_sim::drive",
+        "vmt_sim::servo",
+        "vmt_sim::sensors",
+        "vmt_sim::presets",
+    ];
+    const ALLOWED: &str = "crate::scenario::spec::";
+    let dir = root().join("src/workflow/estimate");
+    let mut paths = Vec::new();
+    rust_files(&dir, &mut paths);
+    let mut found = Vec::new();
+    for path in &paths {
+        for (i, line) in std::fs::read_to_string(path).unwrap().lines().enumerate() {
+            let code = line.split("//").next().unwrap_or("").replace(ALLOWED, "");
+            for f in FORBIDDEN.iter().filter(|f| code.contains(*f)) {
+                found.push(format!("{}:{}: {f}", path.display(), i + 1));
+            }
+        }
+    }
+    assert!(paths.len() >= 8, "read only {} files in {}", paths.len(), dir.display());
+    assert!(found.is_empty(), "the estimate workflow reaches the scenario or the physics:\n{}", found.join("\n"));
 }

@@ -105,6 +105,21 @@ pub enum ErrorMotion {
     Yaw,
 }
 
+/// The six error motions as a pattern in a `match` over [`EffectName`] (`error_motions!() => …`):
+/// the one list of them for the matches that treat them alike. The match stays exhaustive, so the
+/// compiler still names it for a new effect.
+#[macro_export]
+macro_rules! error_motions {
+    () => {
+        $crate::effects::EffectName::Positioning
+            | $crate::effects::EffectName::StraightnessY
+            | $crate::effects::EffectName::StraightnessZ
+            | $crate::effects::EffectName::Roll
+            | $crate::effects::EffectName::Pitch
+            | $crate::effects::EffectName::Yaw
+    };
+}
+
 /// Returned by `EffectName::from_str` for a name that is not in the catalogue.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("unknown effect `{name}`; known effects: {}", EffectName::known_list())]
@@ -439,42 +454,46 @@ static RESONANCE_SPECS: [ParamSpec; 2] = [
     spec("frequency", "a frequency in Hz", ParamUnit::Frequency, Range::Positive, 100.0, true),
     spec("damping", "a damping ratio", ParamUnit::Dimensionless, Range::UnitInterval, 0.02, true),
 ];
+static NO_SCALARS: [ParamSpec; 0] = [];
 static ACCEL_BIAS_DRIFT_SPECS: [ParamSpec; 1] =
     [spec("rate", "a random-walk rate in m/s²/√s", ParamUnit::AccelRandomWalk, Range::NonNegative, 0.0, true)];
 
-/// The scalar parameters of an effect, in the order they are written. Error motions (whose
-/// parameter is a profile), `gravity_tilt` (none) and the list-valued `cyclic_lead.harmonics`
-/// are not scalar and are not listed.
-pub fn param_specs(name: EffectName) -> &'static [ParamSpec] {
-    match name {
-        EffectName::Positioning
-        | EffectName::StraightnessY
-        | EffectName::StraightnessZ
-        | EffectName::Roll
-        | EffectName::Pitch
-        | EffectName::Yaw
-        | EffectName::GravityTilt => &[],
-        EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz => &SQUARENESS_SPECS,
-        EffectName::Backlash => &BACKLASH_SPECS,
-        EffectName::CyclicLead => &CYCLIC_LEAD_SPECS,
-        EffectName::ScaleError => &SCALE_ERROR_SPECS,
-        EffectName::ThermalExpansion => &THERMAL_EXPANSION_SPECS,
-        EffectName::ThermalDrift => &THERMAL_DRIFT_SPECS,
-        EffectName::InterpolationError => &INTERPOLATION_SPECS,
-        EffectName::Coulomb => &COULOMB_SPECS,
-        EffectName::Viscous => &VISCOUS_SPECS,
-        EffectName::Stribeck => &STRIBECK_SPECS,
-        EffectName::Lugre => &LUGRE_SPECS,
-        EffectName::ServoLag => &SERVO_LAG_SPECS,
-        EffectName::Resonance => &RESONANCE_SPECS,
-        EffectName::AccelBiasDrift => &ACCEL_BIAS_DRIFT_SPECS,
+/// What [`effect_params!`] asks of every parameter struct: its scalar parameters by TOML key and
+/// its starting values.
+trait Params: Sized {
+    /// Value of the scalar parameter `key` (SI), `None` if unknown or unset.
+    fn scalar(&self, key: &str) -> Option<f64>;
+    /// Sets the scalar parameter `key` (SI); false if there is no such key.
+    fn set_scalar(&mut self, key: &str, value: f64) -> bool;
+    /// The starting values: `default(key)` for every scalar, optional ones unset, lists empty.
+    fn starting(default: &dyn Fn(&str) -> f64) -> Self;
+    /// The profile of an error motion, `None` for every other parameter set.
+    fn as_profile(&self) -> Option<&Profile> {
+        None
+    }
+}
+
+/// An error motion's parameter is its profile: no scalar parameters, zero to start with.
+impl Params for Profile {
+    fn scalar(&self, _: &str) -> Option<f64> {
+        None
+    }
+    fn set_scalar(&mut self, _: &str, _: f64) -> bool {
+        false
+    }
+    fn starting(_: &dyn Fn(&str) -> f64) -> Profile {
+        Profile::zero()
+    }
+    fn as_profile(&self) -> Option<&Profile> {
+        Some(self)
     }
 }
 
 /// Generates `get(key)` / `set(key, value)` for a parameter struct from its f64 and Option<f64>
-/// fields, so that readers, writers, validators and fitters can address parameters by TOML key.
+/// fields, so that readers, writers, validators and fitters can address parameters by TOML key,
+/// and its [`Params`] (starting values; `lists` are list-valued fields, empty to start with).
 macro_rules! keyed_params {
-    ($t:ty { $($f:ident),* } optional { $($o:ident),* }) => {
+    ($t:ty { $($f:ident),* } optional { $($o:ident),* } $(lists { $($l:ident),* })?) => {
         impl $t {
             /// Value of the scalar parameter `key` (SI), `None` if unknown or unset.
             pub fn get(&self, key: &str) -> Option<f64> {
@@ -491,6 +510,17 @@ macro_rules! keyed_params {
                     $(stringify!($o) => { self.$o = Some(value); true })*
                     _ => false,
                 }
+            }
+        }
+        impl Params for $t {
+            fn scalar(&self, key: &str) -> Option<f64> {
+                self.get(key)
+            }
+            fn set_scalar(&mut self, key: &str, value: f64) -> bool {
+                self.set(key, value)
+            }
+            fn starting(default: &dyn Fn(&str) -> f64) -> Self {
+                Self { $($f: default(stringify!($f)),)* $($o: None,)* $($($l: Vec::new(),)*)? }
             }
         }
     };
@@ -536,7 +566,7 @@ pub struct CyclicLead {
     /// Optional higher harmonics.
     pub harmonics: Vec<LeadHarmonic>,
 }
-keyed_params!(CyclicLead { period, amplitude, phase } optional {});
+keyed_params!(CyclicLead { period, amplitude, phase } optional {} lists { harmonics });
 
 impl CyclicLead {
     /// Lead error δ(x), m, at axis position x (m): A·sin(2πx/p + φ) + Σ A_k·sin(2πkx/p + φ_k).
@@ -717,195 +747,125 @@ pub struct AccelBiasDrift {
 }
 keyed_params!(AccelBiasDrift { rate } optional {});
 
-/// The parameters of one effect. The variant must match the effect's name
-/// ([`EffectParams::fits`]); error motions carry a [`Profile`] (m, or rad for roll/pitch/yaw).
-#[derive(Clone, Debug, PartialEq)]
-pub enum EffectParams {
+/// Defines [`EffectParams`] from the rows of the table below (one row a parameter set: its variant
+/// and struct, the effects it serves as a pattern, their scalar [`ParamSpec`]s), and from the same
+/// rows [`param_specs`], [`EffectParams::default_for`], [`EffectParams::fits`], [`EffectParams::get`],
+/// [`EffectParams::set`] and [`EffectParams::profile`]. The matches it writes over [`EffectName`]
+/// have no wildcard: an effect without a row is named by the compiler here. The one variant without
+/// parameters (`gravity_tilt`) follows the rows after `;`.
+macro_rules! effect_params {
+    (
+        $($(#[$doc:meta])* $variant:ident($t:ty) for $names:pat => $specs:expr,)*
+        ; $(#[$unit_doc:meta])* $unit:ident for $unit_name:pat => $unit_specs:expr,
+    ) => {
+        /// The parameters of one effect. The variant must match the effect's name
+        /// ([`EffectParams::fits`]); error motions carry a [`Profile`] (m, or rad for roll/pitch/yaw).
+        #[derive(Clone, Debug, PartialEq)]
+        pub enum EffectParams {
+            $($(#[$doc])* $variant($t),)*
+            $(#[$unit_doc])* $unit,
+        }
+
+        /// The scalar parameters of an effect, in the order they are written. Error motions (whose
+        /// parameter is a profile), `gravity_tilt` (none) and the list-valued `cyclic_lead.harmonics`
+        /// are not scalar and are not listed.
+        pub fn param_specs(name: EffectName) -> &'static [ParamSpec] {
+            match name {
+                $($names => &$specs,)*
+                $unit_name => &$unit_specs,
+            }
+        }
+
+        impl EffectParams {
+            /// The starting values of `name`'s parameters ([`ParamSpec::default`]; a zero profile
+            /// for error motions; optional parameters unset, lists empty): what a fit starts from
+            /// when a model gives none.
+            pub fn default_for(name: EffectName) -> EffectParams {
+                let d = |key: &str| param_specs(name).iter().find(|s| s.key == key).map_or(0.0, |s| s.default);
+                match name {
+                    $($names => EffectParams::$variant(<$t as Params>::starting(&d)),)*
+                    $unit_name => EffectParams::$unit,
+                }
+            }
+
+            /// True if this parameter variant belongs to the effect `name`.
+            pub fn fits(&self, name: EffectName) -> bool {
+                match self {
+                    $(EffectParams::$variant(_) => matches!(name, $names),)*
+                    EffectParams::$unit => matches!(name, $unit_name),
+                }
+            }
+
+            /// Value of the scalar parameter `key` (SI); `None` for unknown keys, unset optional
+            /// parameters, profiles and lists.
+            pub fn get(&self, key: &str) -> Option<f64> {
+                match self {
+                    $(EffectParams::$variant(p) => p.scalar(key),)*
+                    EffectParams::$unit => None,
+                }
+            }
+
+            /// Sets the scalar parameter `key` (SI); false if there is no such scalar parameter.
+            pub fn set(&mut self, key: &str, value: f64) -> bool {
+                match self {
+                    $(EffectParams::$variant(p) => p.set_scalar(key, value),)*
+                    EffectParams::$unit => false,
+                }
+            }
+
+            /// The profile of an error motion, `None` for other effects.
+            pub fn profile(&self) -> Option<&Profile> {
+                match self {
+                    $(EffectParams::$variant(p) => p.as_profile(),)*
+                    EffectParams::$unit => None,
+                }
+            }
+        }
+    };
+}
+
+effect_params! {
     /// Error motion as a function of axis position (positioning … yaw).
-    ErrorMotion(Profile),
+    ErrorMotion(Profile) for error_motions!() => NO_SCALARS,
     /// squareness_xy / _xz / _yz.
-    Squareness(Squareness),
+    Squareness(Squareness) for EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz
+        => SQUARENESS_SPECS,
     /// backlash.
-    Backlash(Backlash),
+    Backlash(Backlash) for EffectName::Backlash => BACKLASH_SPECS,
     /// cyclic_lead.
-    CyclicLead(CyclicLead),
+    CyclicLead(CyclicLead) for EffectName::CyclicLead => CYCLIC_LEAD_SPECS,
     /// scale_error.
-    ScaleError(ScaleError),
+    ScaleError(ScaleError) for EffectName::ScaleError => SCALE_ERROR_SPECS,
     /// thermal_expansion.
-    ThermalExpansion(ThermalExpansion),
+    ThermalExpansion(ThermalExpansion) for EffectName::ThermalExpansion => THERMAL_EXPANSION_SPECS,
     /// thermal_drift.
-    ThermalDrift(ThermalDrift),
+    ThermalDrift(ThermalDrift) for EffectName::ThermalDrift => THERMAL_DRIFT_SPECS,
     /// interpolation_error.
-    InterpolationError(InterpolationError),
+    InterpolationError(InterpolationError) for EffectName::InterpolationError => INTERPOLATION_SPECS,
     /// coulomb.
-    Coulomb(Coulomb),
+    Coulomb(Coulomb) for EffectName::Coulomb => COULOMB_SPECS,
     /// viscous.
-    Viscous(Viscous),
+    Viscous(Viscous) for EffectName::Viscous => VISCOUS_SPECS,
     /// stribeck.
-    Stribeck(Stribeck),
+    Stribeck(Stribeck) for EffectName::Stribeck => STRIBECK_SPECS,
     /// lugre.
-    Lugre(Lugre),
+    Lugre(Lugre) for EffectName::Lugre => LUGRE_SPECS,
     /// servo_lag.
-    ServoLag(ServoLag),
+    ServoLag(ServoLag) for EffectName::ServoLag => SERVO_LAG_SPECS,
     /// resonance.
-    Resonance(Resonance),
-    /// gravity_tilt: follows from the angles, no parameters.
-    GravityTilt,
+    Resonance(Resonance) for EffectName::Resonance => RESONANCE_SPECS,
     /// accel_bias_drift.
-    AccelBiasDrift(AccelBiasDrift),
+    AccelBiasDrift(AccelBiasDrift) for EffectName::AccelBiasDrift => ACCEL_BIAS_DRIFT_SPECS,
+    ;
+    /// gravity_tilt: follows from the angles, no parameters.
+    GravityTilt for EffectName::GravityTilt => NO_SCALARS,
 }
 
 impl EffectParams {
-    /// The starting values of `name`'s parameters ([`ParamSpec::default`]; a zero profile for
-    /// error motions; optional parameters unset): what a fit starts from when a model gives none.
-    pub fn default_for(name: EffectName) -> EffectParams {
-        let d = |key: &str| param_specs(name).iter().find(|s| s.key == key).map(|s| s.default).unwrap_or(0.0);
-        match name {
-            EffectName::Positioning
-            | EffectName::StraightnessY
-            | EffectName::StraightnessZ
-            | EffectName::Roll
-            | EffectName::Pitch
-            | EffectName::Yaw => EffectParams::ErrorMotion(Profile::zero()),
-            EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz => {
-                EffectParams::Squareness(Squareness { value: d("value") })
-            }
-            EffectName::Backlash => EffectParams::Backlash(Backlash { value: d("value") }),
-            EffectName::CyclicLead => EffectParams::CyclicLead(CyclicLead {
-                period: d("period"),
-                amplitude: d("amplitude"),
-                phase: d("phase"),
-                harmonics: Vec::new(),
-            }),
-            EffectName::ScaleError => EffectParams::ScaleError(ScaleError { value: d("value") }),
-            EffectName::ThermalExpansion => EffectParams::ThermalExpansion(ThermalExpansion {
-                alpha: d("alpha"),
-                delta_t: d("delta_t"),
-                tau: d("tau"),
-            }),
-            EffectName::ThermalDrift => EffectParams::ThermalDrift(ThermalDrift { value: d("value"), tau: d("tau") }),
-            EffectName::InterpolationError => EffectParams::InterpolationError(InterpolationError {
-                period: d("period"),
-                amplitude: d("amplitude"),
-                phase: d("phase"),
-            }),
-            EffectName::Coulomb => EffectParams::Coulomb(Coulomb { fc: d("fc") }),
-            EffectName::Viscous => EffectParams::Viscous(Viscous { fv: d("fv") }),
-            EffectName::Stribeck => {
-                EffectParams::Stribeck(Stribeck { fc: None, fs: d("fs"), vs: d("vs"), shape: d("shape") })
-            }
-            EffectName::Lugre => EffectParams::Lugre(Lugre {
-                sigma0: d("sigma0"),
-                sigma1: d("sigma1"),
-                sigma2: d("sigma2"),
-                fc: d("fc"),
-                fs: d("fs"),
-                vs: d("vs"),
-                shape: d("shape"),
-            }),
-            EffectName::ServoLag => EffectParams::ServoLag(ServoLag { kv: d("kv"), kp: None, ki: None }),
-            EffectName::Resonance => {
-                EffectParams::Resonance(Resonance { frequency: d("frequency"), damping: d("damping") })
-            }
-            EffectName::GravityTilt => EffectParams::GravityTilt,
-            EffectName::AccelBiasDrift => EffectParams::AccelBiasDrift(AccelBiasDrift { rate: d("rate") }),
-        }
-    }
-
-    /// True if this parameter variant belongs to the effect `name`.
-    pub fn fits(&self, name: EffectName) -> bool {
-        // One arm per parameter set, no wildcard: a new set is named here by the compiler.
-        match self {
-            EffectParams::ErrorMotion(_) => name.is_error_motion(),
-            EffectParams::Squareness(_) => {
-                matches!(name, EffectName::SquarenessXy | EffectName::SquarenessXz | EffectName::SquarenessYz)
-            }
-            EffectParams::Backlash(_) => name == EffectName::Backlash,
-            EffectParams::CyclicLead(_) => name == EffectName::CyclicLead,
-            EffectParams::ScaleError(_) => name == EffectName::ScaleError,
-            EffectParams::ThermalExpansion(_) => name == EffectName::ThermalExpansion,
-            EffectParams::ThermalDrift(_) => name == EffectName::ThermalDrift,
-            EffectParams::InterpolationError(_) => name == EffectName::InterpolationError,
-            EffectParams::Coulomb(_) => name == EffectName::Coulomb,
-            EffectParams::Viscous(_) => name == EffectName::Viscous,
-            EffectParams::Stribeck(_) => name == EffectName::Stribeck,
-            EffectParams::Lugre(_) => name == EffectName::Lugre,
-            EffectParams::ServoLag(_) => name == EffectName::ServoLag,
-            EffectParams::Resonance(_) => name == EffectName::Resonance,
-            EffectParams::GravityTilt => name == EffectName::GravityTilt,
-            EffectParams::AccelBiasDrift(_) => name == EffectName::AccelBiasDrift,
-        }
-    }
-
-    /// Value of the scalar parameter `key` (SI); `None` for unknown keys, unset optional
-    /// parameters, profiles and lists.
-    pub fn get(&self, key: &str) -> Option<f64> {
-        match self {
-            EffectParams::ErrorMotion(_) | EffectParams::GravityTilt => None,
-            EffectParams::Squareness(p) => p.get(key),
-            EffectParams::Backlash(p) => p.get(key),
-            EffectParams::CyclicLead(p) => p.get(key),
-            EffectParams::ScaleError(p) => p.get(key),
-            EffectParams::ThermalExpansion(p) => p.get(key),
-            EffectParams::ThermalDrift(p) => p.get(key),
-            EffectParams::InterpolationError(p) => p.get(key),
-            EffectParams::Coulomb(p) => p.get(key),
-            EffectParams::Viscous(p) => p.get(key),
-            EffectParams::Stribeck(p) => p.get(key),
-            EffectParams::Lugre(p) => p.get(key),
-            EffectParams::ServoLag(p) => p.get(key),
-            EffectParams::Resonance(p) => p.get(key),
-            EffectParams::AccelBiasDrift(p) => p.get(key),
-        }
-    }
-
-    /// Sets the scalar parameter `key` (SI); false if there is no such scalar parameter.
-    pub fn set(&mut self, key: &str, value: f64) -> bool {
-        match self {
-            EffectParams::ErrorMotion(_) | EffectParams::GravityTilt => false,
-            EffectParams::Squareness(p) => p.set(key, value),
-            EffectParams::Backlash(p) => p.set(key, value),
-            EffectParams::CyclicLead(p) => p.set(key, value),
-            EffectParams::ScaleError(p) => p.set(key, value),
-            EffectParams::ThermalExpansion(p) => p.set(key, value),
-            EffectParams::ThermalDrift(p) => p.set(key, value),
-            EffectParams::InterpolationError(p) => p.set(key, value),
-            EffectParams::Coulomb(p) => p.set(key, value),
-            EffectParams::Viscous(p) => p.set(key, value),
-            EffectParams::Stribeck(p) => p.set(key, value),
-            EffectParams::Lugre(p) => p.set(key, value),
-            EffectParams::ServoLag(p) => p.set(key, value),
-            EffectParams::Resonance(p) => p.set(key, value),
-            EffectParams::AccelBiasDrift(p) => p.set(key, value),
-        }
-    }
-
     /// The set scalar parameters as (key, value) pairs in [`param_specs`] order, for JSON output
     /// (`"params": {"value": 6.1e-6}`) and for fitters that work on a parameter vector.
     pub fn scalars(&self, name: EffectName) -> Vec<(&'static str, f64)> {
         param_specs(name).iter().filter_map(|s| self.get(s.key).map(|v| (s.key, v))).collect()
-    }
-
-    /// The profile of an error motion, `None` for other effects.
-    pub fn profile(&self) -> Option<&Profile> {
-        match self {
-            EffectParams::ErrorMotion(p) => Some(p),
-            EffectParams::Squareness(_)
-            | EffectParams::Backlash(_)
-            | EffectParams::CyclicLead(_)
-            | EffectParams::ScaleError(_)
-            | EffectParams::ThermalExpansion(_)
-            | EffectParams::ThermalDrift(_)
-            | EffectParams::InterpolationError(_)
-            | EffectParams::Coulomb(_)
-            | EffectParams::Viscous(_)
-            | EffectParams::Stribeck(_)
-            | EffectParams::Lugre(_)
-            | EffectParams::ServoLag(_)
-            | EffectParams::Resonance(_)
-            | EffectParams::GravityTilt
-            | EffectParams::AccelBiasDrift(_) => None,
-        }
     }
 }
 

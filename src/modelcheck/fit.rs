@@ -246,7 +246,7 @@ pub(crate) fn lead_period(st: &Stack, model: &Model, first: &FitState) -> Option
     if model.get(EffectName::CyclicLead, model.axis).is_some() || !st.chans.iter().any(|c| c.s_drive() != 0.0) {
         return None;
     }
-    hyper_grid(st, EffectName::CyclicLead, "period").0.last().map(|p| (*p, false))
+    hyper_grid(st, EffectName::CyclicLead, Hyper::Period).0.last().map(|p| (*p, false))
 }
 
 /// The series basis a model asks for a fitted error motion (`basis`, FORMAT.md §2); None for
@@ -946,16 +946,16 @@ fn fit_model_orders(
         };
         let mut hyper = Vec::new();
         let mut searched = Vec::new();
-        for h in &sh.hypers {
-            let given = !me.fit || me.given.iter().any(|g| g == h);
-            let start = me.effect.params.get(h).unwrap_or(1.0);
+        for &h in &sh.hypers {
+            let given = !me.fit || me.given.iter().any(|g| g == h.as_str());
+            let start = me.effect.params.get(h.as_str()).unwrap_or(1.0);
             // A given period (screw lead, signal period) is held; a given τ is a starting value.
             // A damping that these data cannot resolve (no predicted excitation) is held. Every
             // hyper-parameter of an effect with `fit = false` is held.
-            let resolvable = *h != "damping" || hyper_grid(st, me.effect.name, h).1;
+            let resolvable = h != Hyper::Damping || hyper_grid(st, me.effect.name, h).1;
             hyper.push(if given || !resolvable { start } else { f64::NAN });
             // A given period or Stribeck shape exponent is held (the diagnosis searched it).
-            searched.push(me.fit && !(given && matches!(*h, "period" | "shape")) && resolvable);
+            searched.push(me.fit && !(given && matches!(h, Hyper::Period | Hyper::Shape)) && resolvable);
         }
         if let Some(h) = held.and_then(|h| h.terms.iter().find(|t| t.index == index && !t.name.is_error_motion())) {
             if h.hyper.len() == hyper.len() {
@@ -976,7 +976,7 @@ fn fit_model_orders(
             (0..t.hyper.len())
                 .map(|hi| {
                     let v = t.hyper[hi];
-                    if v.is_finite() && t.shape.hypers[hi] == "frequency" {
+                    if v.is_finite() && t.shape.hypers[hi] == Hyper::Frequency {
                         // A given mode frequency is a starting value: ±5 % in 41 steps.
                         ((0..41).map(|k| v * (0.95 + 0.0025 * k as f64)).collect(), true)
                     } else if v.is_finite() {
@@ -1190,8 +1190,7 @@ pub(crate) fn term_coefs(fs: &FitState, ti: usize) -> &[f64] {
 /// structural mode is driven by the guideway the data show. None when no fitted translation
 /// gives an input.
 pub(crate) fn fitted_excitation(st: &Stack, fs: &FitState) -> Option<Vec<Vec<Excitation>>> {
-    let translation =
-        |n: EffectName| matches!(n, EffectName::Positioning | EffectName::StraightnessY | EffectName::StraightnessZ);
+    let translation = EffectName::is_translational;
     let mut added = false;
     let ex = st
         .chans
@@ -1373,19 +1372,7 @@ pub(crate) fn describe(
                 m.insert(format!("tilt_{k}"), *v);
             }
         }
-        EffectName::Positioning
-        | EffectName::StraightnessY
-        | EffectName::StraightnessZ
-        | EffectName::Roll
-        | EffectName::Pitch
-        | EffectName::Yaw
-        | EffectName::SquarenessXy
-        | EffectName::SquarenessXz
-        | EffectName::SquarenessYz
-        | EffectName::Backlash
-        | EffectName::ScaleError
-        | EffectName::Lugre
-        | EffectName::AccelBiasDrift => {
+        no_own_signature!() | EffectName::Backlash | EffectName::ScaleError => {
             m.insert("value".into(), c[0]);
         }
     }

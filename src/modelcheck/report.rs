@@ -110,8 +110,14 @@ pub(crate) fn fit_at_bound(fs: &FitState) -> BTreeMap<String, Vec<String>> {
     fs.terms
         .iter()
         .filter_map(|t| {
-            let names: Vec<String> =
-                t.shape.hypers.iter().zip(&t.at_bound).filter(|(_, b)| **b).map(|(h, _)| h.to_string()).collect();
+            let names: Vec<String> = t
+                .shape
+                .hypers
+                .iter()
+                .zip(&t.at_bound)
+                .filter(|(_, b)| **b)
+                .map(|(h, _)| h.as_str().to_string())
+                .collect();
             (!names.is_empty()).then(|| (t.name.as_str().to_string(), names))
         })
         .collect()
@@ -245,7 +251,7 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
         }
         let sh = shape(&st, me.effect.name, 1, me.order.unwrap_or(DEFAULT_ORDER), lacks_coulomb(model));
         let period = me.given.iter().any(|g| g == "period").then(|| me.effect.params.get("period")).flatten();
-        if !visible(&st, me.effect.name, &sh, period) && sh.hypers.first() == Some(&"period") && st.n > 0 {
+        if !visible(&st, me.effect.name, &sh, period) && sh.hypers.first() == Some(&Hyper::Period) && st.n > 0 {
             notes.push(format!("{} (held at zero in this fit)", unresolved_period_note(&st, me.effect.name)));
         } else if !visible(&st, me.effect.name, &sh, period) {
             return Err(bad(format!(
@@ -647,8 +653,10 @@ pub(crate) fn visible(st: &Stack, name: EffectName, sh: &Shape, fixed: Option<f6
         // t₀ for every kv (kv). So one grid value answers for the grid. (A period's columns are
         // zeroed where the positions do not resolve it, a Stribeck weight exp(−|v/vs|^δ) can
         // underflow at one vs and not another: their grids are scanned.)
-        (None, Some(&h)) if matches!(h, "tau" | "kv") => hyper_grid(st, name, h).0.into_iter().take(1).collect(),
-        (None, Some(h)) => hyper_grid(st, name, h).0,
+        (None, Some(&h)) if matches!(h, Hyper::Tau | Hyper::Kv) => {
+            hyper_grid(st, name, h).0.into_iter().take(1).collect()
+        }
+        (None, Some(&h)) => hyper_grid(st, name, h).0,
         (None, None) => vec![1.0],
     };
     grid.iter().any(|g| {
@@ -869,19 +877,20 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     // Periodic candidates these positions cannot resolve: not searched, listed with a note.
     let mut unresolved: Vec<EffectName> = Vec::new();
     let mut restricted: Option<String> = None;
-    for n in [EffectName::CyclicLead, EffectName::InterpolationError] {
+    // The periodic effects of the catalogue (a cyclic lead, an interpolation error).
+    let periodic = EffectName::ALL.into_iter().filter_map(|n| catalogue_row(n).period.map(|r| (n, r)));
+    for (n, range) in periodic {
         if !names.contains(&n) && model.get(n, model.axis).is_none() && !f.st.chans.is_empty() {
             let sh = candidate_shape(&f.st, n, false);
             // Not visible: no period of its range resolvable, or the waves vanish on these positions.
-            // A cyclic lead acts on the drive, an interpolation error on the feedback chain.
-            let sees = |c: &Channel| if n == EffectName::CyclicLead { c.s_drive() } else { c.s_chain() } != 0.0;
-            if sh.hypers.first() == Some(&"period") && f.st.chans.iter().any(sees) {
+            let sees = |c: &Channel| range.path.sensitivity(c) != 0.0;
+            if sh.hypers.first() == Some(&Hyper::Period) && f.st.chans.iter().any(sees) {
                 unresolved.push(n);
             }
         } else if names.contains(&n) && n == EffectName::CyclicLead {
-            if let Some(p) = shortest_resolvable_period(&f.st).filter(|p| *p > 2e-3) {
+            if let Some(p) = shortest_resolvable_period(&f.st).filter(|p| *p > range.lo) {
                 restricted = Some(format!(
-                    "cyclic_lead searched only at periods ≥ {} mm, the shortest these sample positions resolve \
+                    "{n} searched only at periods ≥ {} mm, the shortest these sample positions resolve \
                      (twice the gap between neighbouring targets); a shorter lead needs targets every ≤ P/3 over a period",
                     fmt_num(p * 1e3)
                 ));
@@ -915,9 +924,9 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
                     Ok(cols)
                 }
             });
-            for hname in &sh.hypers {
-                let (grid, refine) = hyper_grid(st, n, hname);
-                c.hyper_parameters.push(HyperParameter { name: hname.to_string(), grid, refine });
+            for &h in &sh.hypers {
+                let (grid, refine) = hyper_grid(st, n, h);
+                c.hyper_parameters.push(HyperParameter { name: h.as_str().to_string(), grid, refine });
             }
             // An interpolation error's period is chosen from the residual (the catalogue's periods
             // miss a real scale's by more than its likelihood peak is wide).
@@ -967,7 +976,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     // at the best period set the lead's base, and the lead is searched only at periods those orders
     // cannot represent.
     let scan = if split {
-        let grid = hyper_grid(st, EffectName::CyclicLead, "period").0;
+        let grid = hyper_grid(st, EffectName::CyclicLead, Hyper::Period).0;
         match (grid.first(), grid.last()) {
             (Some(lo), Some(hi)) => lead_shape_scan(st, &f.fs, &binding, &w, (*lo, *hi))
                 .map_err(|m| VmtError::bad(data, "", format!("scanning the cyclic lead against the shapes: {m}")))?,
@@ -1089,11 +1098,11 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
                 fmt_num(dz)
             );
             // The joint fit's own limits replace the candidate grid's.
-            r.at_bound = ["frequency", "damping"]
+            r.at_bound = [Hyper::Frequency, Hyper::Damping]
                 .iter()
                 .zip(c.at_bound)
                 .filter(|(_, b)| *b)
-                .map(|(k, _)| k.to_string())
+                .map(|(h, _)| h.as_str().to_string())
                 .collect();
             if !r.at_bound.is_empty() {
                 note += &format!("; {}", bound_note(&r.at_bound));
@@ -1148,7 +1157,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     // A fitted period at an end of the range searched is a bound, not an estimate: the criterion
     // still improves beyond it, so the signal is not this candidate's in the range searched.
     for r in ranking.iter_mut().filter(|r| r.verdict == Verdict::Significant) {
-        if !r.at_bound.iter().any(|h| h == "period") {
+        if !r.at_bound.iter().any(|h| h == Hyper::Period.as_str()) {
             continue;
         }
         let p = r.params.get("period").copied().unwrap_or(f64::NAN);

@@ -96,9 +96,7 @@ impl Excitation {
             .iter()
             .filter(|m| !m.fit && m.effect.axis == model.axis)
             .filter_map(|m| match (&m.effect.params, m.effect.name) {
-                (EffectParams::ErrorMotion(p), n)
-                    if matches!(n, EffectName::Positioning | EffectName::StraightnessY | EffectName::StraightnessZ) =>
-                {
+                (EffectParams::ErrorMotion(p), n) if n.is_translational() => {
                     let s = c.s_motion(n);
                     (s != 0.0 && !p.is_zero()).then_some((s, p))
                 }
@@ -429,7 +427,7 @@ impl<'a> Stack<'a> {
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Shape {
     pub(crate) coefs: Vec<String>,
-    pub(crate) hypers: Vec<&'static str>,
+    pub(crate) hypers: Vec<Hyper>,
     /// Lowest degree of an error motion's Legendre series (1 in a model; 2 for the positioning
     /// candidate, whose linear term is the scale error's signature).
     pub(crate) first_power: u32,
@@ -445,6 +443,44 @@ pub(crate) struct Shape {
     pub(crate) select: Option<Vec<u32>>,
     /// [`ShapeBasis::Table`]: the positions (m) of its values, ascending; empty otherwise.
     pub(crate) knots: Vec<f64>,
+}
+
+/// A nonlinear hyper-parameter of a signature, searched on a grid ([`hyper_grid`]); named as the
+/// effect's parameter it fits (FORMAT.md §2), except the encoder play.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Hyper {
+    /// A periodic effect's period p, m (`cyclic_lead`, `interpolation_error`).
+    Period,
+    /// A thermal time constant τ, s.
+    Tau,
+    /// The position-loop gain kv of the servo lag, 1/s.
+    Kv,
+    /// The play b of a backlash on encoder time series, m.
+    Play,
+    /// The Stribeck velocity vs, m/s.
+    Vs,
+    /// The Stribeck shape exponent δ (dimensionless).
+    Shape,
+    /// A structural mode's natural frequency f, Hz.
+    Frequency,
+    /// A structural mode's damping ratio ζ (dimensionless).
+    Damping,
+}
+
+impl Hyper {
+    /// The name in reports and candidates, the effect's parameter key: `period`, `tau`, ….
+    pub(crate) fn as_str(self) -> &'static str {
+        match self {
+            Hyper::Period => "period",
+            Hyper::Tau => "tau",
+            Hyper::Kv => "kv",
+            Hyper::Play => "play",
+            Hyper::Vs => "vs",
+            Hyper::Shape => "shape",
+            Hyper::Frequency => "frequency",
+            Hyper::Damping => "damping",
+        }
+    }
 }
 
 /// The basis of a fitted error motion's series (over the range [a, b] of the sample positions).
@@ -731,6 +767,35 @@ pub(crate) struct PeriodRange {
     pub(crate) text: &'static str,
     /// The periods searched before any refinement.
     pub(crate) grid: PeriodGrid,
+    /// Where the wave enters a channel's reading.
+    pub(crate) path: WavePath,
+}
+
+/// Where a periodic effect's wave sin(2πx/p + φ) enters a channel's reading (module doc).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum WavePath {
+    /// In the drive, at the screw's position (a cyclic lead): [`Channel::s_drive`], [`Channel::screw_x`].
+    Drive,
+    /// In the feedback chain, at the scale's reading (an interpolation error): [`Channel::s_chain`], `x`.
+    Chain,
+}
+
+impl WavePath {
+    /// Sensitivity of channel `c` to a wave on this path (0: it does not see it).
+    pub(crate) fn sensitivity(self, c: &Channel) -> f64 {
+        match self {
+            WavePath::Drive => c.s_drive(),
+            WavePath::Chain => c.s_chain(),
+        }
+    }
+
+    /// (sensitivity, position the wave is a function of in m) of channel `c` at sample `i`.
+    pub(crate) fn read(self, c: &Channel, i: usize) -> (f64, f64) {
+        match self {
+            WavePath::Drive => (c.s_drive(), c.screw_x(i)),
+            WavePath::Chain => (c.s_chain(), c.x[i]),
+        }
+    }
 }
 
 /// How the periods of a [`PeriodRange`] are searched.
@@ -781,6 +846,7 @@ pub(crate) fn catalogue_row(name: EffectName) -> CatalogueRow {
                 hi: 60e-3,
                 text: "2–60 mm (screw leads)",
                 grid: PeriodGrid::Log(120),
+                path: WavePath::Drive,
             }),
         },
         EffectName::ScaleError | EffectName::ThermalExpansion | EffectName::ThermalDrift => row(true, LASER_LINEAR),
@@ -793,6 +859,7 @@ pub(crate) fn catalogue_row(name: EffectName) -> CatalogueRow {
                 hi: 200e-6,
                 text: "2–200 µm (scale signal periods)",
                 grid: PeriodGrid::List(&[2e-6, 4e-6, 8e-6, 10e-6, 20e-6, 40e-6, 100e-6, 200e-6]),
+                path: WavePath::Chain,
             }),
         },
         EffectName::Coulomb | EffectName::Viscous | EffectName::Stribeck => row(true, LASER_LINEAR),
@@ -804,6 +871,24 @@ pub(crate) fn catalogue_row(name: EffectName) -> CatalogueRow {
         EffectName::AccelBiasDrift => row(false, LASER_LINEAR),
     }
 }
+
+/// The effects without a signature of their own on the stacked samples, as a pattern in a `match`
+/// over [`EffectName`] (`no_own_signature!() => …`): the error motions (fitted as shapes, [`Shape`]),
+/// the squarenesses (they join the axes of a chain), LuGre (its bristle state has no signature in
+/// phase 1; its steady state is the Stribeck curve) and the accelerometer bias drift (the offsets
+/// carry its mean). The one list of them for [`shape`], [`columns`] and the reading back of fitted
+/// coefficients; those matches stay exhaustive, so the compiler names each for a new effect.
+macro_rules! no_own_signature {
+    () => {
+        vmt_sim::error_motions!()
+            | EffectName::SquarenessXy
+            | EffectName::SquarenessXz
+            | EffectName::SquarenessYz
+            | EffectName::Lugre
+            | EffectName::AccelBiasDrift
+    };
+}
+pub(crate) use no_own_signature;
 
 /// Length of the segments over which a resonance's amplitude and phase are held, s. A base-excited
 /// mode driven by a random guideway profile is a narrow-band random process whose amplitude and
@@ -895,24 +980,24 @@ pub(crate) fn accel_min_rate(st: &Stack) -> Option<f64> {
 
 pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, with_fc: bool) -> Shape {
     let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<String>>();
-    let (coefs, hypers): (Vec<String>, Vec<&'static str>) = match name {
+    let (coefs, hypers): (Vec<String>, Vec<Hyper>) = match name {
         n if n.is_error_motion() => ((first_power..=order).map(|k| format!("c{k}")).collect(), vec![]),
         // On encoder time series the backlash is a play whose take-up at a reversal depends on it.
-        EffectName::Backlash if st.chans.iter().any(|c| c.encoder.is_some()) => (s(&["value"]), vec!["play"]),
+        EffectName::Backlash if st.chans.iter().any(|c| c.encoder.is_some()) => (s(&["value"]), vec![Hyper::Play]),
         EffectName::Backlash | EffectName::ScaleError => (s(&["value"]), vec![]),
         EffectName::ServoLag => {
             // The gain, and per following channel the decay of its unknown starting state.
             let mut names = s(&["gain"]);
             names.extend(following_channels(st).map(|j| format!("start_{j}")));
-            (names, vec!["kv"])
+            (names, vec![Hyper::Kv])
         }
-        EffectName::CyclicLead | EffectName::InterpolationError => (s(&["a_sin", "a_cos"]), vec!["period"]),
-        EffectName::ThermalExpansion => (s(&["alpha_delta_t"]), vec!["tau"]),
-        EffectName::ThermalDrift => (s(&["value"]), vec!["tau"]),
+        EffectName::CyclicLead | EffectName::InterpolationError => (s(&["a_sin", "a_cos"]), vec![Hyper::Period]),
+        EffectName::ThermalExpansion => (s(&["alpha_delta_t"]), vec![Hyper::Tau]),
+        EffectName::ThermalDrift => (s(&["value"]), vec![Hyper::Tau]),
         EffectName::Coulomb => (s(&["fc"]), vec![]),
         EffectName::Viscous => (s(&["fv"]), vec![]),
-        EffectName::Stribeck if with_fc => (s(&["fs_minus_fc", "fc"]), vec!["vs", "shape"]),
-        EffectName::Stribeck => (s(&["fs_minus_fc"]), vec!["vs", "shape"]),
+        EffectName::Stribeck if with_fc => (s(&["fs_minus_fc", "fc"]), vec![Hyper::Vs, Hyper::Shape]),
+        EffectName::Stribeck => (s(&["fs_minus_fc"]), vec![Hyper::Vs, Hyper::Shape]),
         EffectName::Resonance => {
             let mut names: Vec<String> = resonance_gains(st).into_iter().map(|g| g.2).collect();
             for (j, _) in st.excitation.iter().enumerate().filter(|(_, e)| !e.is_empty()) {
@@ -922,22 +1007,12 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
             names.extend(
                 resonance_segments(st).iter().flat_map(|(j, k, _, _)| [format!("sin_{j}_{k}"), format!("cos_{j}_{k}")]),
             );
-            (names, vec!["frequency", "damping"])
+            (names, vec![Hyper::Frequency, Hyper::Damping])
         }
         EffectName::GravityTilt => {
             (accel_sensors(st).iter().flat_map(|a| (1..=order).map(move |k| format!("{a}_c{k}"))).collect(), vec![])
         }
-        EffectName::Positioning
-        | EffectName::StraightnessY
-        | EffectName::StraightnessZ
-        | EffectName::Roll
-        | EffectName::Pitch
-        | EffectName::Yaw
-        | EffectName::SquarenessXy
-        | EffectName::SquarenessXz
-        | EffectName::SquarenessYz
-        | EffectName::Lugre
-        | EffectName::AccelBiasDrift => (vec![], vec![]),
+        no_own_signature!() => (vec![], vec![]),
     };
     let range = match distinct_positions(st) {
         xs if xs.len() >= 2 => (xs[0], xs[xs.len() - 1]),
@@ -1087,13 +1162,14 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
         EffectName::ScaleError => vec![st.col(|c, i| c.x[i] * c.s_chain())],
         EffectName::CyclicLead | EffectName::InterpolationError => {
             let p = h[0];
+            // A cyclic lead at the screw's position, an interpolation error at the scale's reading.
+            // (Both have a period row: the `else` is not taken.)
+            let Some(path) = catalogue_row(name).period.map(|r| r.path) else { return vec![] };
             if !phases_spread(st, p) || !period_resolvable(st, p) {
                 return vec![vec![0.0; st.n], vec![0.0; st.n]];
             }
-            let drive = name == EffectName::CyclicLead;
             let (sin, cos) = st.col_pair(|c, i| {
-                // A cyclic lead at the screw's position, an interpolation error at the scale's reading.
-                let (s, x) = if drive { (c.s_drive(), c.screw_x(i)) } else { (c.s_chain(), c.x[i]) };
+                let (s, x) = path.read(c, i);
                 let (a, b) = (TWO_PI * x / p).sin_cos();
                 (s * a, s * b)
             });
@@ -1165,17 +1241,7 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             }
             cols
         }
-        EffectName::Positioning
-        | EffectName::StraightnessY
-        | EffectName::StraightnessZ
-        | EffectName::Roll
-        | EffectName::Pitch
-        | EffectName::Yaw
-        | EffectName::SquarenessXy
-        | EffectName::SquarenessXz
-        | EffectName::SquarenessYz
-        | EffectName::Lugre
-        | EffectName::AccelBiasDrift => vec![],
+        no_own_signature!() => vec![],
     }
 }
 
@@ -1422,9 +1488,9 @@ pub(crate) const TAU_MAX_RECORDS: f64 = 30.0;
 /// Search grid of a hyper-parameter on these data: time constants over [`tau_range`] on a log
 /// grid of [`TAU_PER_DECADE`] per decade; screw leads 2–60 mm; Stribeck velocities and shape
 /// exponents; encoder signal periods from the common scale gratings.
-pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>, bool) {
-    match (name, hyper) {
-        (_, "tau") => {
+pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: Hyper) -> (Vec<f64>, bool) {
+    match hyper {
+        Hyper::Tau => {
             let (lo, hi) = tau_range(st);
             // index: the log of a ratio of two finite positive f64 is ≤ 616 decades: ≤ 6 161 points.
             let n = ((hi / lo).log10() * TAU_PER_DECADE).ceil().max(2.0) as usize + 1;
@@ -1432,19 +1498,19 @@ pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>
         }
         // Stribeck shape exponents δ of lubricated guideways, 0.5–3 (Armstrong-Hélouvry 1994:
         // 0.5–2; δ = 2 the Gaussian law).
-        (EffectName::Stribeck, "shape") => (log_grid(0.5, 3.0, 9), true),
+        Hyper::Shape => (log_grid(0.5, 3.0, 9), true),
         // A periodic effect's periods ([`catalogue_row`]), only those these positions resolve.
-        (_, "period") => catalogue_row(name).period.map_or((Vec::new(), false), |p| p.search_grid(st)),
+        Hyper::Period => catalogue_row(name).period.map_or((Vec::new(), false), |p| p.search_grid(st)),
         // Position-loop gains of machine tools, 2–500 1/s.
-        (_, "kv") => (log_grid(2.0, 500.0, 41), true),
+        Hyper::Kv => (log_grid(2.0, 500.0, 41), true),
         // Play of a ball-screw transmission, 0.1–100 µm.
-        (_, "play") => (log_grid(0.1e-6, 100e-6, 31), true),
+        Hyper::Play => (log_grid(0.1e-6, 100e-6, 31), true),
         // Stribeck velocities of machine-tool guideways: 10 µm/s to 100 mm/s.
-        (_, "vs") => (log_grid(1e-5, 0.1, 41), true),
+        Hyper::Vs => (log_grid(1e-5, 0.1, 41), true),
         // Structural modes of machine-tool columns and frames: 5–200 Hz, capped at 0.4× the slowest
         // accelerometer rate (below Nyquist), in steps of 1 Hz (five points across the 1/0.2 s =
         // 5 Hz resolution of a segment), refined by golden section.
-        (_, "frequency") => {
+        Hyper::Frequency => {
             let hi = accel_min_rate(st).map_or(200.0, |f| (0.4 * f).min(200.0)).max(6.0);
             // index: hi ≤ 200 Hz (clamped above): ≤ 196 frequencies.
             let n = (hi - 5.0).floor() as usize + 1;
@@ -1453,15 +1519,13 @@ pub(crate) fn hyper_grid(st: &Stack, name: EffectName, hyper: &str) -> (Vec<f64>
         // Damping ratios of machine-tool structural modes, 0.5–10 % (bolted and welded frames; a
         // column's first bending mode is typically 2–5 %); only the forced response resolves it,
         // so without a predicted excitation it is held at 2 % (not searched).
-        (_, "damping") => {
+        Hyper::Damping => {
             if st.excitation.iter().any(|e| !e.is_empty()) {
                 (log_grid(0.005, 0.1, 6), true)
             } else {
                 (vec![0.02], false)
             }
         }
-        // No other hyper-parameter: [`shape`] names only those above (`shape` only for Stribeck).
-        _ => (Vec::new(), false),
     }
 }
 
