@@ -1,6 +1,8 @@
 //! One physics step of slide_column at dt = 1e-4 s, fast integrator against the rapier reference
 //! (issue 15): the guideway bearings, the servo and the body update. Two configurations: a linear motor
-//! with six error motions, and the full drive (ball screw, backlash, LuGre friction).
+//! with six error motions, the full drive (ball screw, backlash, LuGre friction), and the physical
+//! study's physics (semi-closed ball screw, backlash, Coulomb friction, six error motions). The command
+//! sweeps 0.1–0.9 m of the 1 m travel back and forth, so the step measured is the step of a procedure.
 //!
 //! Besides criterion's per-function timings, `interleaved_ratios` alternates short rounds of the fast
 //! and the reference step and prints the median per-step times and their ratio measured in the same
@@ -11,7 +13,7 @@
 use criterion::{criterion_group, Criterion};
 use std::time::Instant;
 use vmt_sim::axis_sim::{AxisSim, AxisTruth, GuideFriction};
-use vmt_sim::drive::{BallScrewConfig, DriveConfig};
+use vmt_sim::drive::{BallScrewConfig, DriveConfig, FeedbackKind};
 use vmt_sim::friction::{LugreParams, StribeckLaw};
 use vmt_sim::geometry::ErrorMotions;
 use vmt_sim::machine::{AxisConfig, AxisModel, Fidelity};
@@ -42,13 +44,22 @@ fn cases() -> Vec<Case> {
         sigma1: 2e4,
         steady: StribeckLaw { fc: 150.0, fs: 250.0, vs: 1e-3, delta: 2.0, fv: 800.0 },
     };
+    let semi = BallScrewConfig { feedback: FeedbackKind::Rotary, ..BallScrewConfig::default() };
     vec![
-        Case { name: "linear motor, six error motions", cfg: AxisConfig::default(), truth: six, feed: 0.1 },
+        Case { name: "linear motor, six error motions", cfg: AxisConfig::default(), truth: six.clone(), feed: 0.1 },
         Case {
             name: "ball screw + backlash + LuGre",
             cfg: AxisConfig { drive: DriveConfig::BallScrew(BallScrewConfig::default()), ..AxisConfig::default() },
             truth: AxisTruth { backlash: 4e-6, friction: GuideFriction::LuGre(lugre), ..AxisTruth::default() },
             feed: 0.01,
+        },
+        // The physics of the physical study (benches/study_physical.toml): semi-closed loop on the motor
+        // encoder, backlash, Coulomb guideway friction and six error motions.
+        Case {
+            name: "semi-closed ball screw + backlash + Coulomb, six error motions",
+            cfg: AxisConfig { drive: DriveConfig::BallScrew(semi), ..AxisConfig::default() },
+            truth: AxisTruth { backlash: 4e-6, friction: GuideFriction::Stribeck(StribeckLaw::coulomb(100.0)), ..six },
+            feed: 0.1,
         },
     ]
 }
@@ -58,7 +69,12 @@ fn model(cfg: &AxisConfig, fidelity: Fidelity) -> AxisModel {
     AxisModel::build(&parse_urdf(text).unwrap(), &AxisConfig { fidelity, ..cfg.clone() }).unwrap()
 }
 
-/// A running simulation stepping along a constant-feed command.
+/// The stretch of the 0..1 m travel the bench's command sweeps, m: the axis stays where the fast
+/// engine's tabulated error motions apply (as in every procedure), however many steps a benchmark takes.
+const SWEEP: (f64, f64) = (0.1, 0.9);
+
+/// A running simulation stepping along a constant-feed command that reverses at the ends of [`SWEEP`]
+/// (a triangle wave in position, feed `feed` m/s).
 struct Runner<'a> {
     sim: AxisSim<'a>,
     x: f64,
@@ -66,9 +82,17 @@ struct Runner<'a> {
     dt: f64,
 }
 
-impl Runner<'_> {
+impl<'a> Runner<'a> {
+    /// A run of `m` under `truth` starting at rest at x = 0.2 m, commanded at `feed` m/s.
+    fn new(m: &'a AxisModel, truth: &'a AxisTruth, feed: f64) -> Runner<'a> {
+        Runner { sim: AxisSim::new(m, truth, 0.2), x: 0.2, feed, dt: m.dt }
+    }
+
     fn step(&mut self) {
         self.x += self.feed * self.dt;
+        if !(SWEEP.0..=SWEEP.1).contains(&self.x) {
+            self.feed = -self.feed;
+        }
         self.sim.step(Command { pos: self.x, vel: self.feed, acc: 0.0 });
     }
 }
@@ -78,7 +102,7 @@ fn step(c: &mut Criterion) {
     for case in cases() {
         for fidelity in [Fidelity::Fast, Fidelity::Reference] {
             let m = model(&case.cfg, fidelity);
-            let mut r = Runner { sim: AxisSim::new(&m, &case.truth, 0.2), x: 0.2, feed: case.feed, dt: m.dt };
+            let mut r = Runner::new(&m, &case.truth, case.feed);
             g.bench_function(format!("{}, {fidelity:?}", case.name), |b| b.iter(|| r.step()));
         }
     }
@@ -98,8 +122,8 @@ fn interleaved_ratios(_c: &mut Criterion) {
     const STEPS: usize = 20_000;
     for case in cases() {
         let (mf, mr) = (model(&case.cfg, Fidelity::Fast), model(&case.cfg, Fidelity::Reference));
-        let mut fast = Runner { sim: AxisSim::new(&mf, &case.truth, 0.2), x: 0.2, feed: case.feed, dt: mf.dt };
-        let mut reference = Runner { sim: AxisSim::new(&mr, &case.truth, 0.2), x: 0.2, feed: case.feed, dt: mr.dt };
+        let mut fast = Runner::new(&mf, &case.truth, case.feed);
+        let mut reference = Runner::new(&mr, &case.truth, case.feed);
         let (mut tf, mut tr) = (Vec::new(), Vec::new());
         for _ in 0..ROUNDS {
             for (r, t) in [(&mut fast, &mut tf), (&mut reference, &mut tr)] {
@@ -209,7 +233,7 @@ fn count_steps(spec: &str) -> Result<(), String> {
     };
     let n: u64 = n.parse().map_err(|_| format!("VMT_STEP_COUNT={spec}: STEPS {n:?} is not a count"))?;
     let m = model(&case.cfg, fidelity);
-    let mut r = Runner { sim: AxisSim::new(&m, &case.truth, 0.2), x: 0.2, feed: case.feed, dt: m.dt };
+    let mut r = Runner::new(&m, &case.truth, case.feed);
     for _ in 0..n {
         r.step();
     }

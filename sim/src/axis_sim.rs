@@ -7,13 +7,13 @@
 
 use crate::drive::{dead_zone_force, DriveConfig, FeedbackKind};
 use crate::feedback::FeedbackErrors;
-use crate::friction::{lugre_step, stick_slip_step, LugreParams, StepInput, StribeckLaw};
+use crate::friction::{lugre_step, stick_slip_force, LugreParams, StepInput, StribeckLaw};
 use crate::geometry::{ErrorMotions, MotionsAt};
 use crate::machine::{AxisModel, Fidelity};
 use crate::motion::{Command, MotionPlan};
 use crate::profile::{Profile, Tabulated};
 use crate::servo::{quantise, servo_update, ServoState};
-use rapier3d_f64::glamx::{DQuat, DVec3};
+use rapier3d_f64::glamx::{DMat3, DQuat, DVec3};
 use rapier3d_f64::prelude::*;
 
 /// Standard gravity, m/s² (acts along −Z of the machine frame).
@@ -183,6 +183,8 @@ struct Motor {
 #[derive(Clone, Copy, Debug)]
 struct BodyState {
     pose: Pose,
+    /// The pose's rotation as a matrix (computed once per step for the points it carries).
+    rot: DMat3,
     com: DVec3,
     linvel: DVec3,
     angvel: DVec3,
@@ -228,24 +230,34 @@ impl FastBody {
     fn step(&mut self, force: DVec3, torque: DVec3, dt: f64) {
         let mp = &self.mprops;
         self.linvel += (force + DVec3::new(0.0, 0.0, -GRAVITY) * (1.0 / mp.inv_mass)) * mp.inv_mass * dt;
-        self.angvel += mp.world_inv_inertia(&self.rot) * torque * dt;
-        // Gyroscopic correction in the principal frame, angular momentum magnitude preserved.
-        let axes = self.rot * mp.principal_inertia_local_frame;
-        let w = axes.inverse() * self.angvel;
+        // The angular update in the principal frame A = R(q ∘ principal frame), one matrix for the three
+        // rotations: w = Aᵀω + diag(1/I_p)·Aᵀτ·dt is Aᵀ of ω + I_w⁻¹·τ·dt (I_w⁻¹ = A·diag(1/I_p)·Aᵀ).
+        let axes = DMat3::from_quat(self.rot * mp.principal_inertia_local_frame);
+        let w = axes.mul_transpose_vec3(self.angvel) + mp.inv_principal_inertia * axes.mul_transpose_vec3(torque) * dt;
+        // Gyroscopic correction, angular momentum magnitude preserved.
         let l = self.principal_inertia * w;
         let l_new = l - w.cross(l) * dt;
         let n2 = l_new.length_squared();
-        if n2 != 0.0 {
-            self.angvel = axes * (mp.inv_principal_inertia * (l_new * (l.length_squared() / n2).sqrt()));
-        }
+        self.angvel = if n2 != 0.0 {
+            axes * (mp.inv_principal_inertia * (l_new * (l.length_squared() / n2).sqrt()))
+        } else {
+            axes * w
+        };
         let h = self.angvel * (dt * 0.5);
         self.rot = (DQuat::from_xyzw(h.x, h.y, h.z, 1.0) * self.rot).normalize();
         self.com += self.linvel * dt;
     }
 
     fn state(&self) -> BodyState {
-        let origin = self.com - self.rot * self.mprops.local_com;
-        BodyState { pose: Pose::from_parts(origin, self.rot), com: self.com, linvel: self.linvel, angvel: self.angvel }
+        let rot = DMat3::from_quat(self.rot);
+        let origin = self.com - rot * self.mprops.local_com;
+        BodyState {
+            pose: Pose::from_parts(origin, self.rot),
+            rot,
+            com: self.com,
+            linvel: self.linvel,
+            angvel: self.angvel,
+        }
     }
 }
 
@@ -296,7 +308,14 @@ impl Body {
         match self {
             Body::Reference(r) => {
                 let rb = &r.world.bodies[r.handle];
-                BodyState { pose: *rb.position(), com: rb.center_of_mass(), linvel: rb.linvel(), angvel: rb.angvel() }
+                let pose = *rb.position();
+                BodyState {
+                    pose,
+                    rot: DMat3::from_quat(pose.rotation),
+                    com: rb.center_of_mass(),
+                    linvel: rb.linvel(),
+                    angvel: rb.angvel(),
+                }
             }
             Body::Fast(f) => f.state(),
         }
@@ -331,6 +350,34 @@ impl Body {
     }
 }
 
+/// What the bearing blocks' spring-damper magnitudes a(b) = α + b·γ depend on in one step (see
+/// [`AxisSim::step`]): the body's and the rest pose's rotations R and R_r and R − R_r, the offset o − o_r of
+/// the body origin from its rest point (m), the origin's velocity relative to the rest point's (m/s), the
+/// angular velocity ω (rad/s), the slope ε' of the angular error motions (rad/m) and the axis velocity q̇.
+struct Bearing {
+    rot: DMat3,
+    rest_rot: DMat3,
+    turn: DMat3,
+    offset: DVec3,
+    v_origin: DVec3,
+    angvel: DVec3,
+    deps: DVec3,
+    q_dot: f64,
+}
+
+impl Bearing {
+    /// (α, γ) of the blocks' magnitudes along the unit direction e with stiffness k (N/m) and damping c
+    /// (N·s/m): α = k·(o − o_r)·e + c·v_o·e (N), γ = k·(R − R_r)ᵀ·e + c·(Rᵀ·(e × ω) − q̇·R_rᵀ·(e × ε')) (N/m).
+    #[inline(always)]
+    fn affine(&self, e: DVec3, k: f64, c: f64) -> (f64, DVec3) {
+        let alpha = k * self.offset.dot(e) + c * self.v_origin.dot(e);
+        let gamma = k * self.turn.mul_transpose_vec3(e)
+            + c * (self.rot.mul_transpose_vec3(e.cross(self.angvel))
+                - self.q_dot * self.rest_rot.mul_transpose_vec3(e.cross(self.deps)));
+        (alpha, gamma)
+    }
+}
+
 /// The mutable state of a simulation run of one axis.
 pub struct AxisSim<'a> {
     model: &'a AxisModel,
@@ -342,6 +389,9 @@ pub struct AxisSim<'a> {
     bristle: f64,
     /// Friction force of the last step on the body along the axis, N.
     friction_force: f64,
+    /// The truth's guideway friction, its law checked once for the run ([`StribeckLaw::validate`]): a
+    /// Stribeck law that fails the check is no friction (the force stick_slip_step's error gave).
+    friction: GuideFriction,
     /// Structural mode state (displacement, velocity) and the reference point's last velocity.
     mode: (DVec3, DVec3),
     last_vel: Option<DVec3>,
@@ -374,42 +424,49 @@ struct ScrewConstants {
     servo_mass: f64,
 }
 
-/// The profiles a step reads — the six error motions (ISO index 0..6: EXX, EYX, EZX, EAX, EBX, ECX) and
-/// the screw's lead error (7th) — tabulated ([`Profile::tabulate`], value within 1e-13, slope within
-/// 1e-11 of the exact profile) over the travel and a margin when the model's fidelity is
-/// [`Fidelity::Fast`], exact otherwise (and wherever a table is not possible or the axis leaves the
-/// domain). The fast engine evaluates every harmonic and random cosine once per run instead of every
-/// step; the rapier reference keeps the exact functions.
+/// The profiles a step reads — the six error motions (ISO index 0..6: EXX, EYX, EZX, EAX, EBX, ECX), EXX
+/// alone (the positioning chain) and the screw's lead error — tabulated ([`Tabulated`], value within
+/// 1e-13, slope within 1e-11 of the exact profile) over the travel and a margin when the model's
+/// fidelity is [`Fidelity::Fast`], exact otherwise (and wherever a table is not possible or the axis
+/// leaves the domain). The fast engine evaluates every harmonic and random cosine once per run instead
+/// of every step, and the six motions on one grid (one node index and one set of weights per step).
 struct StepProfiles {
-    tables: [Option<Tabulated>; 7],
+    /// The six error motions on one grid; one that cannot be tabulated is zero there and marked in `exact`.
+    motions: Option<Tabulated<6>>,
+    /// The motions evaluated exactly (not tabulable: a table term).
+    exact: [bool; 6],
+    /// EXX, for the positioning chain at positions other than the step's.
+    positioning: Option<Tabulated>,
+    /// The screw's lead error.
+    lead: Option<Tabulated>,
 }
 
 impl StepProfiles {
     fn new(model: &AxisModel, truth: &AxisTruth) -> StepProfiles {
         let (lo, hi) = model.travel;
         let margin = 0.05 * (hi - lo).abs() + 0.01;
-        let table = |p: &Profile| match model.fidelity {
-            Fidelity::Fast if !p.is_zero() => p.tabulate(lo - margin, hi + margin),
-            Fidelity::Fast | Fidelity::Reference => None,
+        let (lo, hi) = (lo - margin, hi + margin);
+        let fast = match model.fidelity {
+            Fidelity::Fast => true,
+            Fidelity::Reference => false,
         };
         let m = &truth.motions;
+        let exact = std::array::from_fn(|i| m.by_index(i).tabulation_step(lo, hi).is_none());
+        let zero = Profile::default();
+        let on_grid: [&Profile; 6] = std::array::from_fn(|i| if exact[i] { &zero } else { m.by_index(i) });
+        let table = |p: &Profile| if fast && !p.is_zero() { p.tabulate(lo, hi) } else { None };
         StepProfiles {
-            tables: [
-                table(&m.positioning),
-                table(&m.straightness_y),
-                table(&m.straightness_z),
-                table(&m.roll),
-                table(&m.pitch),
-                table(&m.yaw),
-                table(&truth.lead_error),
-            ],
+            motions: if fast && exact.contains(&false) { Tabulated::of(on_grid, lo, hi) } else { None },
+            exact,
+            positioning: table(&m.positioning),
+            lead: table(&truth.lead_error),
         }
     }
 
-    /// Value and slope of profile `i` (`exact` is the profile itself) at x.
+    /// Value and slope of a profile (`exact` is the profile itself, `table` its table if any) at x.
     #[inline(always)]
-    fn eval2(&self, i: usize, exact: &Profile, x: f64) -> [f64; 2] {
-        if let Some(v) = self.tables[i].as_ref().and_then(|t| t.eval2(x)) {
+    fn eval2(table: Option<&Tabulated>, exact: &Profile, x: f64) -> [f64; 2] {
+        if let Some(v) = table.and_then(|t| t.eval2(x)) {
             return v;
         }
         StepProfiles::exact2(exact, x)
@@ -432,7 +489,10 @@ impl StepProfiles {
 
     /// The six error motions and their slopes at x ([`ErrorMotions::at`]).
     fn motions_at(&self, m: &ErrorMotions, x: f64) -> MotionsAt {
-        m.at_with(|i, exact| self.eval2(i, exact, x))
+        match self.motions.as_ref().and_then(|t| t.eval2_all(x)) {
+            Some(v) => m.at_with(|i, exact| if self.exact[i] { StepProfiles::exact2(exact, x) } else { v[i] }),
+            None => m.at_with(|_, exact| StepProfiles::exact2(exact, x)),
+        }
     }
 }
 
@@ -463,6 +523,10 @@ impl<'a> AxisSim<'a> {
             motor: Motor::default(),
             bristle: 0.0,
             friction_force: 0.0,
+            friction: match &truth.friction {
+                GuideFriction::Stribeck(p) if p.validate().is_err() => GuideFriction::None,
+                f @ (GuideFriction::None | GuideFriction::Stribeck(_) | GuideFriction::LuGre(_)) => f.clone(),
+            },
             mode: (DVec3::ZERO, DVec3::ZERO),
             last_vel: None,
             steps: 0,
@@ -520,12 +584,12 @@ impl<'a> AxisSim<'a> {
     #[inline]
     fn chain_error(&self, x: f64) -> f64 {
         let e = if self.feedback_zero { 0.0 } else { self.truth.feedback.error(x, self.session_start + self.time()) };
-        self.profiles.eval2(0, &self.truth.motions.positioning, x)[0] + e
+        StepProfiles::eval2(self.profiles.positioning.as_ref(), &self.truth.motions.positioning, x)[0] + e
     }
 
     /// Lead error of the screw at screw position u, m.
     fn lead_error(&self, u: f64) -> f64 {
-        self.profiles.eval2(6, &self.truth.lead_error, u)[0]
+        StepProfiles::eval2(self.profiles.lead.as_ref(), &self.truth.lead_error, u)[0]
     }
 
     /// Nominal axis position (what the machine believes) for a table at x: x − EXX(x) − e(x, t).
@@ -595,7 +659,7 @@ impl<'a> AxisSim<'a> {
         // Every error motion evaluated once per step: value (rest pose) and slope (its velocity).
         let at = self.profiles.motions_at(&self.truth.motions, q);
         let rest = m.rest_pose_at(&at, q);
-        let (de, deps) = (m.axis_rotation * at.translation_slope, m.axis_rotation * at.rotation_slope);
+        let (de, deps) = (m.axis_to_world(at.translation_slope), m.axis_to_world(at.rotation_slope));
         // Drive force on the body at the nut, and the motor's own motion.
         let f_drive = match self.screw {
             None => self.servo.force,
@@ -617,11 +681,18 @@ impl<'a> AxisSim<'a> {
             }
         };
         let f_axis = f_drive - m.axis_damping * q_dot;
-        let f_friction = match &self.truth.friction {
+        let f_friction = match &self.friction {
             GuideFriction::None => 0.0,
             GuideFriction::Stribeck(p) => {
+                // The law was checked when the run started (`friction`); the model's mass and dt are > 0
+                // (AxisModel::build); a non-finite state gets no friction force, as stick_slip_step's
+                // error did.
                 let input = StepInput { v: q_dot, f_ext: f_axis, mass: m.mass, dt: m.dt, stick_band: STICK_BAND };
-                stick_slip_step(p, &input).unwrap_or(0.0)
+                if q_dot.is_finite() && f_axis.is_finite() {
+                    stick_slip_force(p, &input)
+                } else {
+                    0.0
+                }
             }
             GuideFriction::LuGre(p) => match lugre_step(p, self.bristle, q_dot, m.dt) {
                 Ok(st) => {
@@ -632,25 +703,40 @@ impl<'a> AxisSim<'a> {
             },
         };
         self.friction_force = f_friction;
-        // Sum of the forces and their torque about the centre of mass.
-        let (mut force, mut torque) = (DVec3::ZERO, DVec3::ZERO);
-        let mut add = |f: DVec3, p: DVec3| {
-            force += f;
-            torque += (p - st.com).cross(f);
-        };
+        // Bearing block i at body point b_i pushes back along e_y and e_z by the spring-damper magnitudes
+        // a_i = k·d_i·e + c·Δv_i·e (k, c, e: k_y, c_y, e_y or k_z, c_z, e_z), with d_i its offset from its
+        // rest point and Δv_i its velocity relative to the rest point's. With R, R_r the body's and the
+        // rest pose's rotations, o, o_r their origins, c_m the centre of mass, v, ω the body's velocities:
+        //   d_i  = (o − o_r) + (R − R_r)·b_i
+        //   Δv_i = v + ω × (o − c_m + R·b_i) − q̇·(x̂ + E' + ε' × R_r·b_i)
+        // so a_i = α + b_i·γ is affine in b_i (scalar triple products moved onto b_i):
+        //   α = k·(o − o_r)·e + c·(v + ω × (o − c_m) − q̇·(x̂ + E'))·e
+        //   γ = k·(R − R_r)ᵀ·e + c·(Rᵀ·(e × ω) − q̇·R_rᵀ·(e × ε'))
+        // The blocks' force is −(Σa_i·e_y + Σa_i·e_z) and their torque −((Σa_i·r_i) × e_y + …) about c_m,
+        // with the arms r_i = (o − c_m) + R·b_i: Σa_i·r_i = (Σa_i)·(o − c_m) + R·(Σa_i·b_i).
+        let (rot, rest_rot) = (st.rot, DMat3::from_quat(rest.rotation));
+        let origin_arm = pose.translation - st.com;
+        let (offset, v_origin) =
+            (pose.translation - rest.translation, st.linvel + st.angvel.cross(origin_arm) - q_dot * (m.axis + de));
+        let bearing = Bearing { rot, rest_rot, turn: rot - rest_rot, offset, v_origin, angvel: st.angvel, deps, q_dot };
+        let ((alpha_y, gamma_y), (alpha_z, gamma_z)) =
+            (bearing.affine(self.ey, m.k_y, m.c_y), bearing.affine(self.ez, m.k_z, m.c_z));
+        let (mut sum_y, mut sum_z, mut first_y, mut first_z) = (0.0, 0.0, DVec3::ZERO, DVec3::ZERO);
         for b in &m.blocks {
-            let p = pose.transform_point(*b);
-            let rb_rest = rest.rotation * *b;
-            let d = p - (rest.translation + rb_rest);
-            let v_rest = q_dot * (m.axis + de + deps.cross(rb_rest));
-            let dv = st.velocity_at_point(p) - v_rest;
-            let f = -(m.k_y * d.dot(self.ey) + m.c_y * dv.dot(self.ey)) * self.ey
-                - (m.k_z * d.dot(self.ez) + m.c_z * dv.dot(self.ez)) * self.ez;
-            add(f, p);
+            let (a_y, a_z) = (alpha_y + b.dot(gamma_y), alpha_z + b.dot(gamma_z));
+            (sum_y, sum_z) = (sum_y + a_y, sum_z + a_z);
+            (first_y, first_z) = (first_y + a_y * *b, first_z + a_z * *b);
         }
-        add(m.axis * f_axis, pose.transform_point(m.nut));
+        let (moment_y, moment_z) = (sum_y * origin_arm + rot * first_y, sum_z * origin_arm + rot * first_z);
+        let mut force = -(sum_y * self.ey + sum_z * self.ez);
+        let mut torque = -(moment_y.cross(self.ey) + moment_z.cross(self.ez));
+        let mut add = |f: DVec3, arm: DVec3| {
+            force += f;
+            torque += arm.cross(f);
+        };
+        add(m.axis * f_axis, origin_arm + rot * m.nut);
         // Guideway friction acts in the plane of the bearing blocks, at the reference point.
-        add(m.axis * f_friction, pose.translation);
+        add(m.axis * f_friction, origin_arm);
         self.body.step(force, torque, m.dt);
         self.steps += 1;
         if let Some(md) = &self.truth.mode {

@@ -140,19 +140,26 @@ impl StepInput {
 pub fn stick_slip_step(p: &StribeckLaw, input: &StepInput) -> Result<f64, FrictionError> {
     p.validate()?;
     input.validate()?;
+    Ok(stick_slip_force(p, input))
+}
+
+/// The force of [`stick_slip_step`] (N, on the body along +x) for a law and an input its checks
+/// accept ([`StribeckLaw::validate`]; v, F_ext finite, m > 0, dt > 0, stick band ≥ 0), without
+/// checking them again: a simulator checks its law once per run instead of every step.
+pub(crate) fn stick_slip_force(p: &StribeckLaw, input: &StepInput) -> f64 {
     let StepInput { v, f_ext, mass, dt, stick_band } = *input;
     let f_stick = -(mass * v / dt + f_ext);
-    // clamp: p.validate() above: fs finite and ≥ fc ≥ 0, so −fs ≤ fs.
+    // clamp: the law is valid (caller's contract): fs finite and ≥ fc ≥ 0, so −fs ≤ fs.
     let stuck = f_stick.clamp(-p.fs, p.fs);
     if v.abs() <= stick_band {
-        return Ok(stuck);
+        return stuck;
     }
     let f_slide = -p.force(v);
     let v_next = v + dt * (f_ext + f_slide) / mass;
     if v_next * v <= 0.0 {
-        Ok(stuck)
+        stuck
     } else {
-        Ok(f_slide)
+        f_slide
     }
 }
 

@@ -439,11 +439,38 @@ impl AxisModel {
 
     /// As [`AxisModel::rest_pose`], from error motions already evaluated at x.
     pub fn rest_pose_at(&self, at: &MotionsAt, x: f64) -> Frame {
-        let e = self.axis_rotation * at.translation;
-        let eps = self.axis_rotation * at.rotation;
+        let e = self.axis_to_world(at.translation);
+        let eps = self.axis_to_world(at.rotation);
+        let turn = small_rotation(eps);
         Frame {
             translation: self.home.translation + self.axis * x + e,
-            rotation: DQuat::from_scaled_axis(eps) * self.home.rotation,
+            rotation: if self.home.rotation == DQuat::IDENTITY { turn } else { turn * self.home.rotation },
         }
     }
+
+    /// An axis-frame vector in the world frame, R_a·v (v itself for an axis along the world's x, whose
+    /// rotation is the identity: the same numbers without the product).
+    #[inline]
+    pub fn axis_to_world(&self, v: DVec3) -> DVec3 {
+        if self.axis_rotation == DQuat::IDENTITY {
+            v
+        } else {
+            self.axis_rotation * v
+        }
+    }
+}
+
+/// The rotation by the rotation vector e (rad) as a unit quaternion (sin(θ/2)·e/θ, cos(θ/2)), θ = |e|
+/// (`DQuat::from_scaled_axis`). For the error motions' angles (θ² < 1e-6) from the series
+/// sin(θ/2)/θ = ½ − θ²/48 + θ⁴/3840 and cos(θ/2) = 1 − θ²/8 + θ⁴/384, whose next terms (θ⁶/645 120
+/// and θ⁶/46 080, below 3e-23) are far under the 1.1e-16 rounding of the components: the same rotation
+/// to rounding without the square root, division and sine of the exact form, which larger angles take.
+fn small_rotation(e: DVec3) -> DQuat {
+    let t2 = e.length_squared();
+    if t2 >= 1e-6 {
+        return DQuat::from_scaled_axis(e);
+    }
+    let s = 0.5 - t2 * (1.0 / 48.0 - t2 * (1.0 / 3840.0));
+    let c = 1.0 - t2 * (0.125 - t2 * (1.0 / 384.0));
+    DQuat::from_xyzw(e.x * s, e.y * s, e.z * s, c)
 }

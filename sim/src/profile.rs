@@ -226,8 +226,9 @@ pub const TABULATED_SLOPE_ERROR: f64 = 1e-11;
 /// evaluated exactly.
 const MAX_NODES: usize = 100_000;
 
-/// A profile tabulated for fast evaluation: value and slope at equally spaced nodes over a domain,
-/// read back by cubic Hermite interpolation (for t = (x − x_i)/h in [0, 1]):
+/// Profiles tabulated for fast evaluation — N of them on one grid (N = 1: one profile): value and slope
+/// at equally spaced nodes over a domain, read back by cubic Hermite interpolation (for t = (x − x_i)/h
+/// in [0, 1]):
 ///
 /// ```text
 /// p(x)  = (2t³ − 3t² + 1)·v_i + (t³ − 2t² + t)·h·d_i + (3t² − 2t³)·v_{i+1} + (t³ − t²)·h·d_{i+1}
@@ -236,14 +237,17 @@ const MAX_NODES: usize = 100_000;
 ///
 /// whose errors are at most M₄·h⁴/384 (value) and (√3/216)·M₄·h³ (slope) for |f⁗| ≤ M₄ (de Boor, *A
 /// Practical Guide to Splines*, ch. IV); h is chosen so that they stay below [`TABULATED_VALUE_ERROR`]
-/// and [`TABULATED_SLOPE_ERROR`]. One evaluation costs a few multiplications whatever the number of
-/// harmonics or random cosines the profile has.
+/// and [`TABULATED_SLOPE_ERROR`] for every profile of the grid (the step of the most demanding one).
+/// One evaluation costs a few multiplications whatever the number of harmonics or random cosines the
+/// profiles have, and the N profiles of one grid share the node index and the weights of t.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Tabulated {
+pub struct Tabulated<const N: usize = 1> {
     x0: f64,
     h: f64,
-    /// (value, slope) at x0 + i·h.
-    nodes: Vec<[f64; 2]>,
+    /// 1/h, 1/m (a product where the lookup would divide).
+    inv_h: f64,
+    /// (value, slope) of each profile at x0 + i·h.
+    nodes: Vec<[[f64; 2]; N]>,
     /// Index of the last node as a float, n: x is inside the table when (x − x0)/h < n.
     last: f64,
 }
@@ -252,7 +256,40 @@ impl Tabulated {
     /// Value and slope at x, or None outside the tabulated domain.
     #[inline(always)]
     pub fn eval2(&self, x: f64) -> Option<[f64; 2]> {
-        let u = (x - self.x0) / self.h;
+        self.eval2_all(x).map(|[v]| v)
+    }
+}
+
+impl<const N: usize> Tabulated<N> {
+    /// The N profiles tabulated on one grid over [lo, hi] (m) within [`TABULATED_VALUE_ERROR`] and
+    /// [`TABULATED_SLOPE_ERROR`]; None when one has a table term ([`Profile::tabulation_step`]), when the
+    /// domain is empty or not finite, or when the accuracy would need more than 100 000 nodes.
+    pub fn of(profiles: [&Profile; N], lo: f64, hi: f64) -> Option<Tabulated<N>> {
+        let h = profiles.iter().map(|p| p.tabulation_step(lo, hi)).try_fold(f64::INFINITY, |m, h| Some(m.min(h?)))?;
+        let span = hi - lo;
+        let intervals = (span / h).ceil();
+        if !(intervals >= 1.0 && intervals < MAX_NODES as f64) {
+            return None;
+        }
+        // index: 1 ≤ intervals < MAX_NODES by the check above.
+        let n = intervals as usize;
+        let h = span / n as f64;
+        let nodes = (0..=n)
+            .map(|i| {
+                profiles.map(|p| {
+                    let e = p.eval3(lo + i as f64 * h);
+                    [e[0], e[1]]
+                })
+            })
+            .collect();
+        // index: n ≤ MAX_NODES (checked above), exact as a float.
+        Some(Tabulated { x0: lo, h, inv_h: 1.0 / h, nodes, last: n as f64 })
+    }
+
+    /// Value and slope of each profile at x, or None outside the tabulated domain.
+    #[inline(always)]
+    pub fn eval2_all(&self, x: f64) -> Option<[[f64; 2]; N]> {
+        let u = (x - self.x0) * self.inv_h;
         // Inside the table: 0 ≤ u < n (nodes 0..=n; false for NaN), i.e. nodes i = ⌊u⌋ and i + 1 exist.
         if !(u >= 0.0 && u < self.last) {
             return None;
@@ -263,49 +300,41 @@ impl Tabulated {
         let (a, b) = (self.nodes.get(i)?, self.nodes.get(i + 1)?);
         let t = u - i as f64;
         let (t2, t3) = (t * t, t * t * t);
-        let h = self.h;
-        let v = (2.0 * t3 - 3.0 * t2 + 1.0) * a[0]
-            + (t3 - 2.0 * t2 + t) * h * a[1]
-            + (3.0 * t2 - 2.0 * t3) * b[0]
-            + (t3 - t2) * h * b[1];
-        let d = 6.0 * (t2 - t) * (a[0] - b[0]) / h + (3.0 * t2 - 4.0 * t + 1.0) * a[1] + (3.0 * t2 - 2.0 * t) * b[1];
-        Some([v, d])
+        // The weights of t, shared by the N profiles.
+        let (wa, wda, wb, wdb) =
+            (2.0 * t3 - 3.0 * t2 + 1.0, (t3 - 2.0 * t2 + t) * self.h, 3.0 * t2 - 2.0 * t3, (t3 - t2) * self.h);
+        let (sv, sda, sdb) = (6.0 * (t2 - t) * self.inv_h, 3.0 * t2 - 4.0 * t + 1.0, 3.0 * t2 - 2.0 * t);
+        Some(std::array::from_fn(|k| {
+            let ([va, da], [vb, db]) = (a[k], b[k]);
+            [wa * va + wda * da + wb * vb + wdb * db, sv * (va - vb) + sda * da + sdb * db]
+        }))
     }
 }
 
 impl Profile {
-    /// The profile tabulated over [lo, hi] (m) within [`TABULATED_VALUE_ERROR`] and
-    /// [`TABULATED_SLOPE_ERROR`] ([`Tabulated`]); None when it has a table term, when the domain is
-    /// empty or not finite, or when the accuracy would need more than 100 000 nodes.
+    /// The profile tabulated over [lo, hi] (m) ([`Tabulated::of`] of this one profile).
     pub fn tabulate(&self, lo: f64, hi: f64) -> Option<Tabulated> {
+        Tabulated::of([self], lo, hi)
+    }
+
+    /// The node spacing (m) a table of this profile over [lo, hi] needs to stay within
+    /// [`TABULATED_VALUE_ERROR`] and [`TABULATED_SLOPE_ERROR`]: min((384·ε_v/M₄)^¼, (216/√3·ε_s/M₄)^⅓, hi − lo)
+    /// for |f⁗| ≤ M₄ on the domain, the whole span for at most a cubic (interpolated exactly); None for
+    /// a table term (kinks, not smoothed) or an empty or non-finite domain.
+    pub fn tabulation_step(&self, lo: f64, hi: f64) -> Option<f64> {
         if !(lo.is_finite() && hi.is_finite() && hi > lo) {
             return None;
         }
         let reach = lo.abs().max(hi.abs());
         let m4: f64 = self.terms.iter().map(|t| t.fourth_derivative_bound(reach)).sum::<Option<f64>>()?;
         let span = hi - lo;
-        let h = if m4 > 0.0 {
+        Some(if m4 > 0.0 {
             let by_value = (384.0 * TABULATED_VALUE_ERROR / m4).powf(0.25);
             let by_slope = (216.0 / 3f64.sqrt() * TABULATED_SLOPE_ERROR / m4).cbrt();
             by_value.min(by_slope).min(span)
         } else {
-            span // at most a cubic: the interpolation is exact
-        };
-        let intervals = (span / h).ceil();
-        if !(intervals >= 1.0 && intervals < MAX_NODES as f64) {
-            return None;
-        }
-        // index: 1 ≤ intervals < MAX_NODES by the check above.
-        let n = intervals as usize;
-        let h = span / n as f64;
-        let nodes = (0..=n)
-            .map(|i| {
-                let e = self.eval3(lo + i as f64 * h);
-                [e[0], e[1]]
-            })
-            .collect();
-        // index: n ≤ MAX_NODES (checked above), exact as a float.
-        Some(Tabulated { x0: lo, h, nodes, last: n as f64 })
+            span
+        })
     }
 }
 
