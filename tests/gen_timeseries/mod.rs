@@ -532,7 +532,12 @@ pub fn accel_set_sized(
     let mut attempt = 0u64;
     loop {
         let t = accel_try(dir, seed.wrapping_mul(1_000_003).wrapping_add(attempt), hidden, samples);
-        if hidden == AccelHidden::None || t.hidden_chi2 >= min_chi2 || attempt > 200 {
+        // Each hidden effect visible (χ² ≥ min_chi2) and worth adding by diagnose's own floor: it
+        // must explain ≥ 1 % of the residual (`explained_floor`), whose χ² is about the sample
+        // count, so the generator asks 2 % of the samples (a margin for what the offsets, the
+        // flexible shapes and a candidate's own family do not take up).
+        let floor = min_chi2.max(0.02 * t.samples as f64);
+        if hidden == AccelHidden::None || t.hidden_chi2 >= floor || attempt > 200 {
             return t;
         }
         attempt += 1;
