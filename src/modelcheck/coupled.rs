@@ -41,7 +41,7 @@
 
 use super::*;
 use rayon::prelude::*;
-use vmt_estimators::modelcheck::{greedy_rss_with_gram, solve_normal, Columns};
+use vmt_estimators::modelcheck::{greedy_rss_with_gram, solve_normal, Columns, NestedRss};
 
 /// What a basis index of a fitted error motion's series is in time at constant velocity.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -893,7 +893,6 @@ fn reselect(
         }
     }
     let ti_r = terms.iter().position(|t| t.name == EffectName::Resonance)?;
-    let n = st.n as f64;
     for m in 0..pb.inputs.len() {
         let term = pb.inputs[m].term;
         let sh = terms[term].shape.clone();
@@ -925,8 +924,7 @@ fn reselect(
         let gram = coupled_gram(grams, raw.len(), &mx, &keep);
         let nested: Vec<Vec<f64>> = dict.into_iter().filter(|col| col.iter().any(|v| *v != 0.0)).collect();
         let nr = greedy_rss_with_gram(target, w, &base, &nested, &gram, GREEDY_STOP).ok()?;
-        let bic = |k: usize| n * (nr.rss[k].max(1e-300) / n).ln() + (base.rank() + k) as f64 * n.ln();
-        let k = (0..nr.rss.len()).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0);
+        let k = bic_count(&nr, base.rank(), st.n);
         let used = &nr.used[..k.max(1).min(nr.used.len())];
         // Indices (into `all`) of the coupled selection.
         let mut picked: Vec<usize> = used.iter().map(|&j| keep[j]).collect();
@@ -947,8 +945,7 @@ fn reselect(
         let mx2: Vec<Vec<Mix>> = mx0.iter().map(|mx| keep2.iter().map(|&c| mx[c]).collect()).collect();
         let plain = coupled_columns(st, &raw, &mx2);
         let nr2 = greedy_rss_with_gram(target, w, &base2, &plain, &gram2, GREEDY_STOP).ok()?;
-        let bic2 = |k: usize| n * (nr2.rss[k].max(1e-300) / n).ln() + (base2.rank() + k) as f64 * n.ln();
-        let k2 = (0..nr2.rss.len()).min_by(|a, b| bic2(*a).total_cmp(&bic2(*b))).unwrap_or(0);
+        let k2 = bic_count(&nr2, base2.rank(), st.n);
         picked.extend(nr2.used[..k2].iter().map(|&j| keep2[j]));
         let mut sel: Vec<u32> = picked.iter().map(|&c| all[c] as u32).collect();
         sel.sort_unstable();
@@ -961,6 +958,16 @@ fn reselect(
         terms[term].shape = nsh;
     }
     Some(terms)
+}
+
+/// The number of a greedy selection's columns BIC with σ unknown prefers ([`bic_unknown_sigma`]
+/// over `n` samples, the base's `rank` columns counted).
+fn bic_count(nr: &NestedRss, rank: usize, n: usize) -> usize {
+    (0..nr.rss.len())
+        .min_by(|a, b| {
+            bic_unknown_sigma(nr.rss[*a], n, rank + a).total_cmp(&bic_unknown_sigma(nr.rss[*b], n, rank + b))
+        })
+        .unwrap_or(0)
 }
 
 /// The coefficients of the driving translations in a fit, per input of `pb`.
