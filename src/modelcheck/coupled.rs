@@ -864,8 +864,10 @@ fn coupled_gram(grams: &RawGrams, r: usize, mixes: &[Vec<Mix>], keep: &[usize]) 
 /// with σ unknown on all samples) over its whole series up to what the passes resolve
 /// ([`resolvable_order`]), each series column coupled (its own reading plus the mode's response to
 /// it, module doc), on top of the offsets, the other terms, the free vibration and the other
-/// inputs' coupled columns. The coupled columns' Gram matrix comes from the raw columns' per-channel
-/// Gram matrices in `cache` (2 × 2 mixes per channel). Returns the terms with the new selections.
+/// inputs' coupled columns; then a second greedy selection over the series' plain columns (the
+/// reading without the mode's response) on top of those and the coupled selection, the union kept.
+/// The Gram matrices come from the raw columns' per-channel Gram matrices in `cache` (2 × 2 mixes
+/// per channel). Returns the terms with the new selections.
 fn reselect(
     st: &Stack,
     pb: &Problem,
@@ -939,10 +941,10 @@ fn reselect(
         let base2 = OrthoBase::new(&base_cols, w).ok()?;
         drop(base_cols);
         let keep2: Vec<usize> = keep.iter().copied().filter(|c| !picked.contains(c)).collect();
-        let zero = vec![0.0; gains.len()];
-        let mx0 = mixes(pb, m, &shx, &all, fz, &zero);
-        let gram2 = coupled_gram(grams, raw.len(), &mx0, &keep2);
-        let mx2: Vec<Vec<Mix>> = mx0.iter().map(|mx| keep2.iter().map(|&c| mx[c]).collect()).collect();
+        // Zero gains: each column is the reading alone.
+        let ks2: Vec<usize> = keep2.iter().map(|&c| all[c]).collect();
+        let mx2 = mixes(pb, m, &shx, &ks2, fz, &vec![0.0; gains.len()]);
+        let gram2 = coupled_gram(grams, raw.len(), &mx2, &(0..ks2.len()).collect::<Vec<_>>());
         let plain = coupled_columns(st, &raw, &mx2);
         let nr2 = greedy_rss_with_gram(target, w, &base2, &plain, &gram2, GREEDY_STOP).ok()?;
         let k2 = bic_count(&nr2, base2.rank(), st.n);
