@@ -21,7 +21,6 @@ use gen::{draw, Draw, Effect, Family};
 use rayon::prelude::*;
 use serde_json::Value;
 use std::path::Path;
-use std::process::Command;
 
 /// The threshold on the normalised RMS after `add`: 1.3 (noise level plus room for the
 /// χ² scatter of a few hundred readings, ≈ ±0.1 at 2σ, and a fitted shape's small bias).
@@ -37,7 +36,7 @@ fn draws_for(default: u64) -> u64 {
 
 /// Run the CLI; the JSON on success, or the stderr (and exit code) on failure.
 fn vmt(args: &[&str]) -> Result<Value, String> {
-    let out = Command::new(env!("CARGO_BIN_EXE_vmt")).args(args).output().map_err(|e| e.to_string())?;
+    let out = crate::util::vmt().args(args).output().map_err(|e| e.to_string())?;
     if !out.status.success() {
         return Err(format!("exit {:?}: {}", out.status.code(), String::from_utf8_lossy(&out.stderr).trim()));
     }
@@ -1028,7 +1027,7 @@ fn a_bad_basis_order_is_a_clear_error() {
             &format!("[effects.positioning]\nfit = true\nbasis = \"{basis}\"\norder = {order}\n"),
         );
         std::fs::write(tmp.path().join("bad.toml"), model).unwrap();
-        let out = Command::new(env!("CARGO_BIN_EXE_vmt"))
+        let out = crate::util::vmt()
             .args(["compare", "--model", tmp.path().join("bad.toml").to_str().unwrap(), "--data"])
             .arg(tmp.path().join("data"))
             .output()

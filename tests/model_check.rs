@@ -487,7 +487,7 @@ fn real_data_loop_table() {
 }
 
 fn vmt_bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_vmt"))
+    crate::util::vmt()
 }
 
 /// The command line: simulate a lesson, compare/diagnose with --json (FORMAT.md §4 keys), add with

@@ -6,10 +6,9 @@
 use crate::gen_timeseries::*;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 fn vmt(args: &[&str]) -> Result<serde_json::Value, String> {
-    let out = Command::new(env!("CARGO_BIN_EXE_vmt")).args(args).output().map_err(|e| e.to_string())?;
+    let out = crate::util::vmt().args(args).output().map_err(|e| e.to_string())?;
     if !out.status.success() {
         return Err(format!("exit {:?}: {}", out.status.code(), String::from_utf8_lossy(&out.stderr).trim()));
     }
@@ -75,7 +74,7 @@ pub fn run_loop(dir: &Path, add: bool) -> Outcome {
                 // Outside the data directory: vmt refuses to write into its input.
                 let m2 = dir.with_extension("models").join("model2.toml");
                 std::fs::create_dir_all(m2.parent().unwrap()).unwrap();
-                let added = Command::new(env!("CARGO_BIN_EXE_vmt"))
+                let added = crate::util::vmt()
                     .args(["add", "--model", s(&model), "--effect", eff, "--from-diagnosis", "--data", s(dir)])
                     .args(["-o", s(&m2)])
                     .output()
@@ -456,7 +455,7 @@ fn run_loop_twice(dir: &Path) -> TwoRounds {
         let eff = first["effect"].as_str().unwrap_or("").to_string();
         let next = dir.with_extension("models").join(format!("model{}.toml", step + 2));
         std::fs::create_dir_all(next.parent().unwrap()).unwrap();
-        let out = Command::new(env!("CARGO_BIN_EXE_vmt"))
+        let out = crate::util::vmt()
             .args(["add", "--model", s(&model), "--effect", &eff, "--from-diagnosis", "--data", s(dir)])
             .args(["-o", s(&next)])
             .output()
