@@ -1278,7 +1278,7 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
     let entry = match (&set, from_diagnosis, data) {
         (Some(s), true, Some(d)) => {
             let diag = crate::modelcheck::diagnose(&m, s, d)?;
-            Some(diag.ranking.into_iter().find(|r| r.effect == name.as_str()).ok_or_else(|| {
+            Some(diag.ranking.into_iter().find(|r| r.effect == name).ok_or_else(|| {
                 VmtError::bad(d, "", format!("the diagnosis has no candidate `{name}` on these data"))
             })?)
         }

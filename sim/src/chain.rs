@@ -121,7 +121,27 @@ impl SquarenessAngles {
                     EffectName::SquarenessXy => s.xy = q.value,
                     EffectName::SquarenessXz => s.xz = q.value,
                     EffectName::SquarenessYz => s.yz = q.value,
-                    _ => {}
+                    // Squareness parameters under another name: not a squareness of the chain.
+                    EffectName::Positioning
+                    | EffectName::StraightnessY
+                    | EffectName::StraightnessZ
+                    | EffectName::Roll
+                    | EffectName::Pitch
+                    | EffectName::Yaw
+                    | EffectName::Backlash
+                    | EffectName::CyclicLead
+                    | EffectName::ScaleError
+                    | EffectName::ThermalExpansion
+                    | EffectName::ThermalDrift
+                    | EffectName::InterpolationError
+                    | EffectName::Coulomb
+                    | EffectName::Viscous
+                    | EffectName::Stribeck
+                    | EffectName::Lugre
+                    | EffectName::ServoLag
+                    | EffectName::Resonance
+                    | EffectName::GravityTilt
+                    | EffectName::AccelBiasDrift => {}
                 }
             }
         }

@@ -1172,7 +1172,15 @@ fn visit_means(spec: &SensorSpec, model: &AxisModel, clean: &[f64], visits: &[Vi
         SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => {
             spec.unit_direction().dot(model.axis) * target
         }
-        _ => 0.0,
+        // An angle, an acceleration, a force or an air reading: no nominal displacement.
+        SensorKind::Command
+        | SensorKind::LaserAngular
+        | SensorKind::Accelerometer
+        | SensorKind::MotorForce
+        | SensorKind::Velocity
+        | SensorKind::Temperature
+        | SensorKind::Pressure
+        | SensorKind::Humidity => 0.0,
     };
     visits
         .iter()

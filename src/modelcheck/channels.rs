@@ -58,8 +58,16 @@ impl Channel {
         }
         match self.kind {
             SensorKind::EncoderLinear => 1.0,
-            _ if self.is_laser() => self.u[0],
-            _ => 0.0,
+            SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => self.u[0],
+            SensorKind::Command
+            | SensorKind::EncoderRotary
+            | SensorKind::LaserAngular
+            | SensorKind::Accelerometer
+            | SensorKind::MotorForce
+            | SensorKind::Velocity
+            | SensorKind::Temperature
+            | SensorKind::Pressure
+            | SensorKind::Humidity => 0.0,
         }
     }
 
@@ -90,7 +98,7 @@ impl Channel {
     }
 
     pub(crate) fn is_laser(&self) -> bool {
-        matches!(self.kind, SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector)
+        self.kind.is_laser_line()
     }
 
     /// Sensitivity to error motion `name`: u_i for translations, (r × u)_i for rotations
