@@ -248,11 +248,10 @@ pub struct RankedEffect {
 impl RankedEffect {
     /// The estimator's entry with its names typed: effects by [`EffectName`]'s `FromStr`,
     /// hyper-parameters by [`Hyper::named`]. The estimator returns the names the candidates were
-    /// made with, so a name that is neither is an internal error (`Err` names it).
-    pub(crate) fn typed(r: RankingEntry) -> Result<RankedEffect, String> {
-        let effect = |s: &str| s.parse::<EffectName>().map_err(|e| format!("the estimator's ranking: {e}"));
-        let hyper =
-            |s: &str| Hyper::named(s).ok_or_else(|| format!("the estimator's ranking: no hyper-parameter `{s}`"));
+    /// made with, so a name that is neither is an internal error.
+    pub(crate) fn typed(r: RankingEntry) -> Result<RankedEffect, RankingNameError> {
+        let effect = |s: &str| s.parse::<EffectName>().map_err(|_| RankingNameError::Effect(s.to_string()));
+        let hyper = |s: &str| Hyper::named(s).ok_or_else(|| RankingNameError::Hyper(s.to_string()));
         Ok(RankedEffect {
             effect: effect(&r.effect)?,
             delta_bic: r.delta_bic,
@@ -265,9 +264,21 @@ impl RankedEffect {
             p_value: r.p_value,
             searched: r.searched,
             at_bound: r.at_bound.iter().map(|s| hyper(s)).collect::<Result<_, _>>()?,
-            shape_orders: r.shape_orders.iter().map(|(k, o)| Ok((effect(k)?, *o))).collect::<Result<_, String>>()?,
+            shape_orders: r.shape_orders.iter().map(|(k, o)| Ok((effect(k)?, *o))).collect::<Result<_, _>>()?,
         })
     }
+}
+
+/// A name in the estimator's ranking that is not one of vmt's ([`RankedEffect::typed`]): an
+/// internal error, the estimator returns the names the candidates were made with.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RankingNameError {
+    /// Not an effect of the catalogue.
+    #[error("the estimator's ranking names an effect `{0}` the catalogue does not have")]
+    Effect(String),
+    /// Not a hyper-parameter vmt searches ([`Hyper`]).
+    #[error("the estimator's ranking names a hyper-parameter `{0}` vmt does not search")]
+    Hyper(String),
 }
 
 /// Serde of a map keyed by effect in the order of the names, as the files have it (a
@@ -1152,7 +1163,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
                 // Bonferroni over all `total` candidates of this diagnosis, not the group's.
                 let scale = total as f64 / group.len() as f64;
                 for (r, fit) in d.ranking.into_iter().zip(d.fits) {
-                    let mut r = RankedEffect::typed(r).map_err(VmtError::Internal)?;
+                    let mut r = RankedEffect::typed(r).map_err(|e| VmtError::Internal(e.to_string()))?;
                     bonferroni(&mut r, scale, config.family_alpha);
                     // Marginally significant, then explained away by a better-ranked candidate.
                     let away = fit.conditional_delta_bic.is_some() && r.verdict == Verdict::Noise;
@@ -1449,7 +1460,7 @@ impl Reshape<'_, '_> {
             Err(e) => return Err(e),
         };
         let Some(r2) = d.ranking.into_iter().next() else { return Ok(()) };
-        let mut r2 = RankedEffect::typed(r2).map_err(ModelCheckError::Invalid)?;
+        let mut r2 = RankedEffect::typed(r2).map_err(|e| ModelCheckError::Invalid(e.to_string()))?;
         let nonzero = |fs: &FitState| fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
         bonferroni(&mut r2, self.total as f64, self.config.family_alpha);
         // What the first ranking found among the candidates stands: explained away by a better one,
