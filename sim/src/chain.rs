@@ -122,12 +122,7 @@ impl SquarenessAngles {
                     EffectName::SquarenessXz => s.xz = q.value,
                     EffectName::SquarenessYz => s.yz = q.value,
                     // Squareness parameters under another name: not a squareness of the chain.
-                    EffectName::Positioning
-                    | EffectName::StraightnessY
-                    | EffectName::StraightnessZ
-                    | EffectName::Roll
-                    | EffectName::Pitch
-                    | EffectName::Yaw
+                    crate::error_motions!()
                     | EffectName::Backlash
                     | EffectName::CyclicLead
                     | EffectName::ScaleError

@@ -376,12 +376,7 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                     .into(),
             ),
             // Given values the fit holds as they are: nothing to say.
-            EffectName::Positioning
-            | EffectName::StraightnessY
-            | EffectName::StraightnessZ
-            | EffectName::Roll
-            | EffectName::Pitch
-            | EffectName::Yaw
+            vmt_sim::error_motions!()
             | EffectName::SquarenessXy
             | EffectName::SquarenessXz
             | EffectName::SquarenessYz
