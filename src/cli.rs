@@ -250,7 +250,7 @@ pub fn summary_table(set: &MeasurementSet) -> String {
             .data
             .columns()
             .iter()
-            .filter(|(n, _)| n != "x_cmd")
+            .filter(|(n, _)| n != vmt_sim::procedures::COMMAND_COLUMN)
             .map(|(n, v)| {
                 let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
                 let rms = (v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / v.len().max(1) as f64).sqrt();
@@ -738,8 +738,7 @@ pub fn friction(path: &Path, sensor: Option<&str>, json: bool) -> Result<i32, Vm
         if !(feed.is_finite() && feed > 0.0) {
             return Err(bad(format!("expected `feed` > 0 (m/s), got {feed}")));
         }
-        let moved =
-            r.data.column("x_cmd").filter(|x| x.len() >= 2).map(|x| x[x.len() - 1] - x[0]).filter(|m| *m != 0.0);
+        let moved = r.data.command().filter(|x| x.len() >= 2).map(|x| x[x.len() - 1] - x[0]).filter(|m| *m != 0.0);
         let dir = match (r.direction, moved) {
             (Some(d), Some(m)) if f64::from(d) * m < 0.0 => {
                 return Err(bad(format!("`direction` = {d} but x_cmd moves by {m:.6e} m")));
@@ -1278,7 +1277,7 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
     let entry = match (&set, from_diagnosis, data) {
         (Some(s), true, Some(d)) => {
             let diag = crate::modelcheck::diagnose(&m, s, d)?;
-            Some(diag.ranking.into_iter().find(|r| r.effect == name.as_str()).ok_or_else(|| {
+            Some(diag.ranking.into_iter().find(|r| r.effect == name).ok_or_else(|| {
                 VmtError::bad(d, "", format!("the diagnosis has no candidate `{name}` on these data"))
             })?)
         }

@@ -83,7 +83,7 @@ fn step(model: &Model, set: &MeasurementSet, hidden: EffectName, label: &str) ->
     let data = Path::new("sim");
     let d = diagnose(model, set, data).unwrap();
     let first = &d.ranking[0];
-    assert_eq!(first.effect, hidden.as_str(), "{label}: ranking {:#?}", d.ranking);
+    assert_eq!(first.effect, hidden, "{label}: ranking {:#?}", d.ranking);
     assert_eq!(first.verdict, Verdict::Significant, "{label}: {first:?}");
     let m2 = add_effect(model, hidden, Some(first)).unwrap();
     let c = compare(&m2, set, data).unwrap();
@@ -169,7 +169,7 @@ fn lesson_two_hidden_effects_are_found_one_after_the_other() {
     let set = &sets(&sc, &[sc.seed])[0];
     let data = Path::new("sim");
     let d0 = diagnose(&m0, set, data).unwrap();
-    let first = d0.ranking[0].effect.parse::<EffectName>().unwrap();
+    let first = d0.ranking[0].effect;
     assert!(matches!(first, EffectName::CyclicLead | EffectName::ThermalDrift), "{:#?}", d0.ranking);
     let second = if first == EffectName::CyclicLead { EffectName::ThermalDrift } else { EffectName::CyclicLead };
     let (n0, n1, m1) = step(&m0, set, first, "drift_and_lead step 1");
@@ -239,11 +239,11 @@ fn thermal_expansion_and_scale_error_at_one_time_are_inseparable() {
             }
         }
         let d = diagnose(&model, &set, Path::new("sim")).unwrap();
-        let get = |e: &str| d.ranking.iter().find(|r| r.effect == e).unwrap();
-        let (s, th) = (get("scale_error"), get("thermal_expansion"));
+        let get = |e: EffectName| d.ranking.iter().find(|r| r.effect == e).unwrap();
+        let (s, th) = (get(EffectName::ScaleError), get(EffectName::ThermalExpansion));
         assert_eq!(s.verdict, Verdict::Inseparable, "{:#?}", d.ranking);
         assert_eq!(th.verdict, Verdict::Inseparable);
-        assert!(s.confused_with.contains(&"thermal_expansion".to_string()));
+        assert!(s.confused_with.contains(&EffectName::ThermalExpansion));
         assert!(d.advice.contains("warm"), "{}", d.advice);
     }
 }
@@ -260,7 +260,7 @@ fn interpolation_error_between_sparse_targets_is_not_searched() {
     let model = model_fitting(&[EffectName::ScaleError]);
     let set = &sets(&sc, &[1])[0];
     let d = diagnose(&model, set, Path::new("sim")).unwrap();
-    let e = d.ranking.iter().find(|r| r.effect == "interpolation_error").expect("listed");
+    let e = d.ranking.iter().find(|r| r.effect == EffectName::InterpolationError).expect("listed");
     assert_eq!(e.verdict, Verdict::Noise, "{e:?}");
     assert!(e.note.as_deref().is_some_and(|n| n.contains("not searched")), "{e:?}");
     for r in d.ranking.iter().filter(|r| r.verdict == Verdict::Significant) {
@@ -301,7 +301,7 @@ fn real_iso230_2_data_the_loop_reduces_the_residual() {
                 steps.push(format!("stop: {}", d.advice));
                 break;
             };
-            let name: EffectName = best.effect.parse().unwrap();
+            let name: EffectName = best.effect;
             model = add_effect(&model, name, Some(best)).unwrap();
             let c = compare(&model, &set, &path).unwrap();
             steps.push(format!(
@@ -381,7 +381,7 @@ fn real_loop(path: &Path) -> (MeasurementSet, Model, Vec<vmt::modelcheck::Diagno
         let top = d.ranking.iter().find(|r| r.verdict == Verdict::Significant).cloned();
         steps.push(d);
         let Some(top) = top else { break };
-        model = add_effect(&model, top.effect.parse().unwrap(), Some(&top)).unwrap();
+        model = add_effect(&model, top.effect, Some(&top)).unwrap();
     }
     (set, model, steps)
 }
@@ -813,7 +813,7 @@ fn accelerometer_hidden_resonance_is_found_at_its_frequency() {
         let t0 = std::time::Instant::now();
         let d = diagnose(&model, set, data).unwrap();
         let first = &d.ranking[0];
-        assert_eq!(first.effect, "resonance", "{label}: {:#?}", d.ranking);
+        assert_eq!(first.effect, EffectName::Resonance, "{label}: {:#?}", d.ranking);
         assert_eq!(first.verdict, Verdict::Significant, "{label}: {first:?}");
         let m1 = add_effect(&model, EffectName::Resonance, Some(first)).unwrap();
         let c = compare(&m1, set, data).unwrap();
@@ -1032,7 +1032,7 @@ fn real_rack_pinion_sweep_loop() {
             .collect();
         steps.push(format!("claims [{}]", claims.join("; ")));
         let Some(best) = d.ranking.iter().find(|r| r.verdict == Verdict::Significant) else { break };
-        let name: EffectName = best.effect.parse().unwrap();
+        let name: EffectName = best.effect;
         model = add_effect(&model, name, Some(best)).unwrap();
         let c = compare(&model, &set, &path).unwrap();
         let now = c.channels.iter().map(|c| c.rms.powi(2)).sum::<f64>();
@@ -1047,4 +1047,39 @@ fn real_rack_pinion_sweep_loop() {
     let fv = added.last().and_then(|(_, c)| c.fitted.get("viscous")?.get("fv").copied());
     eprintln!("final fv {fv:?} N·s/m");
     assert!(fv.is_some_and(|f| f > 40.0 && f < 100.0), "fv {fv:?}: {steps:?}");
+}
+
+/// A ranking entry carries its names as types (the effect, those it is confused with, the
+/// hyper-parameters at a bound, the shapes' orders) and writes them as the files always had them:
+/// the same keys and names, `shape_orders` in the order of the names (pitch before roll, though
+/// the catalogue has roll first); and it reads back to the same entry.
+#[test]
+fn ranking_entry_writes_names() {
+    use vmt::modelcheck::{Hyper, RankedEffect};
+    let e = RankedEffect {
+        effect: EffectName::CyclicLead,
+        delta_bic: -12.5,
+        explained: 0.25,
+        verdict: Verdict::Inseparable,
+        params: [("period".to_string(), 0.01)].into_iter().collect(),
+        confused_with: vec![EffectName::Roll, EffectName::Pitch],
+        note: None,
+        aliases: vec![],
+        p_value: Some(1e-4),
+        searched: Some(40),
+        at_bound: vec![Hyper::Period, Hyper::Vs],
+        shape_orders: [(EffectName::Roll, 3), (EffectName::Pitch, 2)].into_iter().collect(),
+    };
+    let json = serde_json::to_string(&e).unwrap();
+    assert_eq!(
+        json,
+        "{\"effect\":\"cyclic_lead\",\"delta_bic\":-12.5,\"explained\":0.25,\"verdict\":\"inseparable\",\
+         \"params\":{\"period\":0.01},\"confused_with\":[\"roll\",\"pitch\"],\"p_value\":0.0001,\"searched\":40,\
+         \"at_bound\":[\"period\",\"vs\"],\"shape_orders\":{\"pitch\":2,\"roll\":3}}"
+    );
+    assert_eq!(serde_json::from_str::<RankedEffect>(&json).unwrap(), e);
+    for h in Hyper::ALL {
+        assert_eq!(serde_json::to_string(&h).unwrap(), format!("\"{}\"", h.as_str()));
+        assert_eq!(Hyper::named(h.as_str()), Some(h));
+    }
 }

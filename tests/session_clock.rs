@@ -71,7 +71,7 @@ fn repeating_the_test_after_a_pause_separates_thermal_expansion_from_scale_error
             "seed {seed}: {:?}",
             d.ranking.iter().map(|r| (&r.effect, r.delta_bic, r.verdict)).collect::<Vec<_>>()
         );
-        assert_eq!(first.effect, "thermal_expansion", "{:#?}", d.ranking);
+        assert_eq!(first.effect, vmt_sim::effects::EffectName::ThermalExpansion, "{:#?}", d.ranking);
         assert_eq!(first.verdict, Verdict::Significant, "{first:?}");
         let tau = first.params["tau"];
         // τ from two tests half an hour apart: the rise between them pins ΔT∞·(1 − e^(−t/τ)) at two

@@ -601,8 +601,11 @@ impl<'a> AxisSim<'a> {
     /// (linear motor, closed loop) or the motor (semi-closed loop), plus the CNC's compensation c(x).
     fn raw_feedback(&self, q: f64) -> f64 {
         let fb = match &self.model.drive {
-            DriveConfig::BallScrew(b) if b.feedback == FeedbackKind::Rotary => self.motor.u,
-            _ => q,
+            DriveConfig::BallScrew(b) => match b.feedback {
+                FeedbackKind::Rotary => self.motor.u,
+                FeedbackKind::Linear => q,
+            },
+            DriveConfig::LinearMotor => q,
         };
         if self.model.compensation.is_zero() {
             fb

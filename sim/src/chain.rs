@@ -121,7 +121,22 @@ impl SquarenessAngles {
                     EffectName::SquarenessXy => s.xy = q.value,
                     EffectName::SquarenessXz => s.xz = q.value,
                     EffectName::SquarenessYz => s.yz = q.value,
-                    _ => {}
+                    // Squareness parameters under another name: not a squareness of the chain.
+                    crate::error_motions!()
+                    | EffectName::Backlash
+                    | EffectName::CyclicLead
+                    | EffectName::ScaleError
+                    | EffectName::ThermalExpansion
+                    | EffectName::ThermalDrift
+                    | EffectName::InterpolationError
+                    | EffectName::Coulomb
+                    | EffectName::Viscous
+                    | EffectName::Stribeck
+                    | EffectName::Lugre
+                    | EffectName::ServoLag
+                    | EffectName::Resonance
+                    | EffectName::GravityTilt
+                    | EffectName::AccelBiasDrift => {}
                 }
             }
         }

@@ -686,8 +686,12 @@ pub struct RunTruth {
     pub samples: Vec<Sample>,
 }
 
+/// The column of a single-axis time series that holds the commanded position along the axis, m
+/// (FORMAT.md §1: `x_cmd`, the axis's own coordinate; a chain's lines write one per axis).
+pub const COMMAND_COLUMN: &str = "x_cmd";
+
 /// A run's data as a measurement set holds it (FORMAT.md §1), SI units. Time series: `t` then
-/// columns (`x_cmd` and sensors). Point table (positioning): `target`, `run` (1..n), `direction`
+/// columns ([`COMMAND_COLUMN`] and sensors). Point table (positioning): `target`, `run` (1..n), `direction`
 /// (+1/−1), optional `t`, then the sensors' deviations or readings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum RunData {
@@ -737,6 +741,11 @@ impl RunData {
     /// A column by name.
     pub fn column(&self, name: &str) -> Option<&[f64]> {
         self.columns().iter().find(|(n, _)| n == name).map(|(_, v)| v.as_slice())
+    }
+
+    /// The commanded position of a single-axis time series ([`COMMAND_COLUMN`]), m.
+    pub fn command(&self) -> Option<&[f64]> {
+        self.column(COMMAND_COLUMN)
     }
 
     /// The time column, if any.
@@ -1137,7 +1146,7 @@ pub fn read_run_clean(
                 .find(|(s, _)| s.kind == SensorKind::Command)
                 .map(|(_, v)| v.clone())
                 .unwrap_or_else(|| truth.samples[1..].iter().map(|s| s.cmd.pos).collect());
-            let mut cols = vec![("x_cmd".to_string(), x_cmd)];
+            let mut cols = vec![(COMMAND_COLUMN.to_string(), x_cmd)];
             cols.extend(columns.into_iter().filter(|(s, _)| s.kind != SensorKind::Command).map(|(s, v)| (s.name, v)));
             RunData::TimeSeries { t, columns: cols }
         }
@@ -1172,7 +1181,15 @@ fn visit_means(spec: &SensorSpec, model: &AxisModel, clean: &[f64], visits: &[Vi
         SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => {
             spec.unit_direction().dot(model.axis) * target
         }
-        _ => 0.0,
+        // An angle, an acceleration, a force or an air reading: no nominal displacement.
+        SensorKind::Command
+        | SensorKind::LaserAngular
+        | SensorKind::Accelerometer
+        | SensorKind::MotorForce
+        | SensorKind::Velocity
+        | SensorKind::Temperature
+        | SensorKind::Pressure
+        | SensorKind::Humidity => 0.0,
     };
     visits
         .iter()

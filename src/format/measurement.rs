@@ -127,7 +127,7 @@ impl MeasurementSet {
     pub fn position_range(&self, axis: Axis) -> Option<(f64, f64)> {
         let positions = self.runs.iter().filter(|r| r.axis == axis).flat_map(|r| match &r.data {
             RunData::PointTable { target, .. } => target.as_slice(),
-            RunData::TimeSeries { .. } => r.data.column("x_cmd").unwrap_or(&[]),
+            RunData::TimeSeries { .. } => r.data.command().unwrap_or(&[]),
         });
         positions.filter(|x| x.is_finite()).fold(None, |acc, &x| match acc {
             None => Some((x, x)),

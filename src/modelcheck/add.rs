@@ -8,7 +8,7 @@ use super::*;
 /// The model with effect `name` (on the model's axis) added, `fit = true`; with `from` (a ranking
 /// entry of a diagnosis) its parameters are the starting values: error-motion polynomial
 /// coefficients `cK`, or the scalar parameters by key.
-pub fn add_effect(model: &Model, name: EffectName, from: Option<&RankingEntry>) -> Result<Model, AddError> {
+pub fn add_effect(model: &Model, name: EffectName, from: Option<&RankedEffect>) -> Result<Model, AddError> {
     if model.get(name, model.axis).is_some() {
         return Err(AddError::AlreadyInModel { name, axis: model.axis });
     }

@@ -2,6 +2,7 @@
 
 use super::*;
 use vmt_sim::effects::ErrorMotion;
+use vmt_sim::procedures::COMMAND_COLUMN;
 use vmt_sim::Axis;
 
 // ------------------------------------------------------------------------------------------
@@ -58,8 +59,16 @@ impl Channel {
         }
         match self.kind {
             SensorKind::EncoderLinear => 1.0,
-            _ if self.is_laser() => self.u[0],
-            _ => 0.0,
+            SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector => self.u[0],
+            SensorKind::Command
+            | SensorKind::EncoderRotary
+            | SensorKind::LaserAngular
+            | SensorKind::Accelerometer
+            | SensorKind::MotorForce
+            | SensorKind::Velocity
+            | SensorKind::Temperature
+            | SensorKind::Pressure
+            | SensorKind::Humidity => 0.0,
         }
     }
 
@@ -90,7 +99,7 @@ impl Channel {
     }
 
     pub(crate) fn is_laser(&self) -> bool {
-        matches!(self.kind, SensorKind::LaserLinear | SensorKind::LaserStraightness | SensorKind::LaserVector)
+        self.kind.is_laser_line()
     }
 
     /// Sensitivity to error motion `name`: u_i for translations, (r × u)_i for rotations
@@ -253,17 +262,16 @@ pub(crate) fn time_series_channels(
 ) {
     let RunData::TimeSeries { t, columns } = &run.data else { return };
     let steady = matches!(run.procedure, Procedure::FrictionSweep | Procedure::ConstantVelocity);
-    let x: Vec<f64> = run.data.column("x_cmd").map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; t.len()]);
-    if run.data.column("x_cmd").is_some() {
+    let x: Vec<f64> = run.data.command().map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; t.len()]);
+    if run.data.command().is_some() {
         out.extend(encoder_channels(set, run, &x, t, notes));
     }
     for (name, values) in columns {
-        if name == "x_cmd" {
+        if name == COMMAND_COLUMN {
             continue;
         }
         let Some(s) = set.sensor(name) else { continue };
-        if matches!(s.kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) && run.data.column("x_cmd").is_some()
-        {
+        if matches!(s.kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) && run.data.command().is_some() {
             continue;
         }
         match (s.kind, steady, run.feed) {

@@ -93,31 +93,25 @@ pub struct CompareReport {
     /// Per fitted effect, its searched hyper-parameters whose value ended at a limit of the range
     /// searched (optional `at_bound`, docs/formats.md): bounds of the search, not estimates.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub at_bound: BTreeMap<String, Vec<String>>,
+    pub at_bound: BTreeMap<String, Vec<Hyper>>,
 }
 
 /// The note of hyper-parameters `names` at a limit of the range searched: bounds, not estimates.
-pub(crate) fn bound_note(names: &[String]) -> String {
+pub(crate) fn bound_note(names: &[Hyper]) -> String {
     format!(
         "{} ended at a limit of the range searched: the fit still improves towards it, so the value is a bound of the \
          search, not an estimate (no standard error)",
-        names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(" and ")
+        names.iter().map(|n| format!("`{}`", n.as_str())).collect::<Vec<_>>().join(" and ")
     )
 }
 
-/// Per fitted term of `fs`, the names of its hyper-parameters at a limit of their search.
-pub(crate) fn fit_at_bound(fs: &FitState) -> BTreeMap<String, Vec<String>> {
+/// Per fitted term of `fs`, its hyper-parameters at a limit of their search.
+pub(crate) fn fit_at_bound(fs: &FitState) -> BTreeMap<String, Vec<Hyper>> {
     fs.terms
         .iter()
         .filter_map(|t| {
-            let names: Vec<String> = t
-                .shape
-                .hypers
-                .iter()
-                .zip(&t.at_bound)
-                .filter(|(_, b)| **b)
-                .map(|(h, _)| h.as_str().to_string())
-                .collect();
+            let names: Vec<Hyper> =
+                t.shape.hypers.iter().zip(&t.at_bound).filter(|(_, b)| **b).map(|(h, _)| *h).collect();
             (!names.is_empty()).then(|| (t.name.as_str().to_string(), names))
         })
         .collect()
@@ -197,7 +191,7 @@ pub struct DiagnoseReport {
     /// Normalised RMS of the model's residual.
     pub normalized_rms: f64,
     /// Candidates, best first.
-    pub ranking: Vec<RankingEntry>,
+    pub ranking: Vec<RankedEffect>,
     /// What to do next.
     pub advice: String,
     /// Notes (skipped channels, estimated σ).
@@ -208,6 +202,100 @@ pub struct DiagnoseReport {
     /// The stated σ checked against the repeated readings (FORMAT.md §4 `sigma`, optional).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma: Option<SigmaCheck>,
+}
+
+/// One candidate of a diagnosis, ranked (FORMAT.md §4 `ranking`): the estimator's
+/// [`vmt_estimators::modelcheck::RankingEntry`] with its names as the catalogue's types (the
+/// estimator knows candidates by name only). Written with the same keys and names.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RankedEffect {
+    /// The candidate effect.
+    pub effect: EffectName,
+    /// ΔBIC of adding the effect alone (negative favours the effect).
+    pub delta_bic: f64,
+    /// Explained fraction 1 − RSS_new/RSS_old (weighted by 1/σ² when σ is known).
+    pub explained: f64,
+    /// The verdict.
+    pub verdict: Verdict,
+    /// Fitted coefficients and hyper-parameters by name, SI units (error-motion series
+    /// coefficients `cK`, `p_K` and gains per sensor among them: no fixed set of keys).
+    pub params: BTreeMap<String, f64>,
+    /// Effects this one is inseparable from (other candidates, or the fitted shapes).
+    pub confused_with: Vec<EffectName>,
+    /// Why the candidate was not tried or cannot be seen in this data (optional `note`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+    /// Other periods (m) that fit exactly as well on these sample positions (optional `aliases`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub aliases: Vec<f64>,
+    /// Upper bound of the probability that noise alone gives some candidate of this diagnosis a
+    /// reduction this large, searches counted (optional `p_value`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub p_value: Option<f64>,
+    /// Number of hyper-parameter values searched for this candidate (optional `searched`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub searched: Option<usize>,
+    /// Searched hyper-parameters whose best value lies at an end of the range searched (optional
+    /// `at_bound`): a bound, not an estimate.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub at_bound: Vec<Hyper>,
+    /// The orders of the model's fitted shapes with this candidate in the model, re-chosen by BIC
+    /// (optional `shape_orders`), written in the order of the names (as the map of names it was).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty", with = "by_name")]
+    pub shape_orders: BTreeMap<EffectName, u32>,
+}
+
+impl RankedEffect {
+    /// The estimator's entry with its names typed: effects by [`EffectName`]'s `FromStr`,
+    /// hyper-parameters by [`Hyper::named`]. The estimator returns the names the candidates were
+    /// made with, so a name that is neither is an internal error.
+    pub(crate) fn typed(r: RankingEntry) -> Result<RankedEffect, RankingNameError> {
+        let effect = |s: &str| s.parse::<EffectName>().map_err(|_| RankingNameError::Effect(s.to_string()));
+        let hyper = |s: &str| Hyper::named(s).ok_or_else(|| RankingNameError::Hyper(s.to_string()));
+        Ok(RankedEffect {
+            effect: effect(&r.effect)?,
+            delta_bic: r.delta_bic,
+            explained: r.explained,
+            verdict: r.verdict,
+            params: r.params,
+            confused_with: r.confused_with.iter().map(|s| effect(s)).collect::<Result<_, _>>()?,
+            note: r.note,
+            aliases: r.aliases,
+            p_value: r.p_value,
+            searched: r.searched,
+            at_bound: r.at_bound.iter().map(|s| hyper(s)).collect::<Result<_, _>>()?,
+            shape_orders: r.shape_orders.iter().map(|(k, o)| Ok((effect(k)?, *o))).collect::<Result<_, _>>()?,
+        })
+    }
+}
+
+/// A name in the estimator's ranking that is not one of vmt's ([`RankedEffect::typed`]): an
+/// internal error, the estimator returns the names the candidates were made with.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RankingNameError {
+    /// Not an effect of the catalogue.
+    #[error("the estimator's ranking names an effect `{0}` the catalogue does not have")]
+    Effect(String),
+    /// Not a hyper-parameter vmt searches ([`Hyper`]).
+    #[error("the estimator's ranking names a hyper-parameter `{0}` vmt does not search")]
+    Hyper(String),
+}
+
+/// Serde of a map keyed by effect in the order of the names, as the files have it (a
+/// `BTreeMap<EffectName, _>` iterates in catalogue order).
+mod by_name {
+    use super::*;
+    use serde::{Deserializer, Serializer};
+
+    pub(super) fn serialize<V: Serialize, S: Serializer>(m: &BTreeMap<EffectName, V>, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_map(m.iter().map(|(k, v)| (k.as_str(), v)).collect::<BTreeMap<_, _>>())
+    }
+
+    pub(super) fn deserialize<'de, V: Deserialize<'de>, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<BTreeMap<EffectName, V>, D::Error> {
+        BTreeMap::deserialize(d)
+    }
 }
 
 /// Relative change of the loop gain kv below which a closed loop's fit is not repeated with the
@@ -287,7 +375,23 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                  tilt polynomial is fitted as with fit = true"
                     .into(),
             ),
-            _ => {}
+            // Given values the fit holds as they are: nothing to say.
+            vmt_sim::error_motions!()
+            | EffectName::SquarenessXy
+            | EffectName::SquarenessXz
+            | EffectName::SquarenessYz
+            | EffectName::Backlash
+            | EffectName::CyclicLead
+            | EffectName::ScaleError
+            | EffectName::ThermalExpansion
+            | EffectName::ThermalDrift
+            | EffectName::InterpolationError
+            | EffectName::Coulomb
+            | EffectName::Viscous
+            | EffectName::Stribeck
+            | EffectName::Lugre
+            | EffectName::ServoLag
+            | EffectName::AccelBiasDrift => {}
         }
     }
     let mut bare = model.clone();
@@ -675,7 +779,17 @@ fn channel_unit(c: &Channel) -> &'static str {
     match c.kind {
         SensorKind::MotorForce => "N",
         SensorKind::Accelerometer => "m/s²",
-        _ => "m",
+        SensorKind::Command
+        | SensorKind::EncoderRotary
+        | SensorKind::EncoderLinear
+        | SensorKind::LaserLinear
+        | SensorKind::LaserStraightness
+        | SensorKind::LaserAngular
+        | SensorKind::LaserVector
+        | SensorKind::Velocity
+        | SensorKind::Temperature
+        | SensorKind::Pressure
+        | SensorKind::Humidity => "m",
     }
 }
 
@@ -956,7 +1070,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         }
     };
     let cands: Vec<Candidate> = names.iter().map(|&n| make(n)).collect();
-    let mut ranking: Vec<RankingEntry> = Vec::new();
+    let mut ranking: Vec<RankedEffect> = Vec::new();
     let sig_vec = significance_sigma(&f, &per);
     let sigma = Sigma::PerSample(sig_vec.clone());
     let config = DiagnoseConfig::default();
@@ -1031,7 +1145,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         cands.into_iter().partition(|c| split && c.effect == EffectName::CyclicLead.as_str());
     // Per ranked candidate: its columns at the fitted hyper-parameters, its number of searched
     // hyper-parameters, and whether a better-ranked candidate explained it away.
-    let mut fitted: BTreeMap<String, (Vec<Vec<f64>>, usize, bool)> = BTreeMap::new();
+    let mut fitted: BTreeMap<EffectName, (Vec<Vec<f64>>, usize, bool)> = BTreeMap::new();
     for (group, fs) in [(other_cands, &f.fs), (lead_cands, capped.as_ref().unwrap_or(&f.fs))] {
         if group.is_empty() {
             continue;
@@ -1043,12 +1157,13 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             Ok(d) => {
                 // Bonferroni over all `total` candidates of this diagnosis, not the group's.
                 let scale = total as f64 / group.len() as f64;
-                for (mut r, fit) in d.ranking.into_iter().zip(d.fits) {
+                for (r, fit) in d.ranking.into_iter().zip(d.fits) {
+                    let mut r = RankedEffect::typed(r).map_err(|e| VmtError::Internal(e.to_string()))?;
                     bonferroni(&mut r, scale, config.family_alpha);
                     // Marginally significant, then explained away by a better-ranked candidate.
                     let away = fit.conditional_delta_bic.is_some() && r.verdict == Verdict::Noise;
                     let k_hyper = fit.k - fit.coefficients.len();
-                    fitted.insert(r.effect.clone(), (fit.columns, k_hyper, away));
+                    fitted.insert(r.effect, (fit.columns, k_hyper, away));
                     ranking.push(r);
                 }
             }
@@ -1059,7 +1174,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         }
     }
     if let (Some(cf), Some(orders)) = (&capped, &joint) {
-        if let Some(r) = ranking.iter_mut().find(|r| r.effect == EffectName::CyclicLead.as_str()) {
+        if let Some(r) = ranking.iter_mut().find(|r| r.effect == EffectName::CyclicLead) {
             let fit_bic = |fs: &FitState| {
                 let k = fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
                 (weighted_ss(&fs.residual, &w), k)
@@ -1083,10 +1198,9 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     // A significant mode over fitted shapes: its frequency, damping and gains refitted jointly with
     // the shapes that drive it (`refit_coupled`; the candidate's search held the shapes of the fit
     // without it, which have absorbed part of its response).
-    if let (Some(sm), Some(r)) = (
-        &st_mode,
-        ranking.iter_mut().find(|r| r.effect == EffectName::Resonance.as_str() && r.verdict == Verdict::Significant),
-    ) {
+    if let (Some(sm), Some(r)) =
+        (&st_mode, ranking.iter_mut().find(|r| r.effect == EffectName::Resonance && r.verdict == Verdict::Significant))
+    {
         if let Some((c, gains)) = joint_mode(st, sm, &f.fs, &r.params, &fit_sigma, &w) {
             let (fq, dz) = (c.frequency, c.damping);
             let mut note = format!(
@@ -1102,7 +1216,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
                 .iter()
                 .zip(c.at_bound)
                 .filter(|(_, b)| *b)
-                .map(|(h, _)| h.as_str().to_string())
+                .map(|(h, _)| *h)
                 .collect();
             if !r.at_bound.is_empty() {
                 note += &format!("; {}", bound_note(&r.at_bound));
@@ -1128,7 +1242,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         };
         for r in ranking.iter_mut() {
             let Some((cols, k_hyper, away)) = fitted.get(&r.effect) else { continue };
-            let Ok(name) = r.effect.parse::<EffectName>() else { continue };
+            let name = r.effect;
             let mut c = make(name);
             limit_lead(&mut c);
             ctx.apply(r, name, c, cols, *k_hyper, *away).map_err(|m| {
@@ -1153,23 +1267,23 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             ));
         }
     }
-    ranking.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic).then_with(|| a.effect.cmp(&b.effect)));
+    ranking.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic).then_with(|| a.effect.as_str().cmp(b.effect.as_str())));
     // A fitted period at an end of the range searched is a bound, not an estimate: the criterion
     // still improves beyond it, so the signal is not this candidate's in the range searched.
     for r in ranking.iter_mut().filter(|r| r.verdict == Verdict::Significant) {
-        if !r.at_bound.iter().any(|h| h == Hyper::Period.as_str()) {
+        if !r.at_bound.contains(&Hyper::Period) {
             continue;
         }
         let p = r.params.get("period").copied().unwrap_or(f64::NAN);
         // The long end: a wave longer than the candidate's periods, what the fitted shapes
         // represent; the short end: a misfit faster than the periods these positions resolve.
-        let long = r.effect.parse::<EffectName>().ok().and_then(period_range).is_some_and(|(lo, hi)| p * p > lo * hi);
-        let shapes: Vec<String> = f.fs.shapes.iter().map(|c| c.name.as_str().to_string()).collect();
+        let long = period_range(r.effect).is_some_and(|(lo, hi)| p * p > lo * hi);
+        let shapes: Vec<EffectName> = f.fs.shapes.iter().map(|c| c.name).collect();
         let beyond = match (long, shapes.is_empty()) {
             (true, false) => format!(
                 "a longer wave, what the fitted shapes ({}) represent; give the screw's lead, or measure a dense run over \
                  several leads",
-                shapes.join(", ")
+                shapes.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", ")
             ),
             (true, true) => "a longer wave than the candidate's periods".to_string(),
             (false, _) => "a misfit faster than the periods these sample positions resolve (per-target scatter)".into(),
@@ -1187,7 +1301,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     // claim is `inseparable` from its aliases (the data cannot say which one), with the advice.
     for r in ranking.iter_mut().filter(|r| r.verdict == Verdict::Significant) {
         let Some(&p) = r.params.get("period") else { continue };
-        let Some(range) = r.effect.parse::<EffectName>().ok().and_then(period_range) else { continue };
+        let Some(range) = period_range(r.effect) else { continue };
         let mut aliases = period_aliases(st, p, range);
         aliases.truncate(8);
         if aliases.is_empty() {
@@ -1205,14 +1319,14 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         r.aliases = aliases;
     }
     // The cyclic-lead entry says which periods were not searched (and why), unless it has a note.
-    if let Some(r) = ranking.iter_mut().find(|r| r.effect == EffectName::CyclicLead.as_str() && r.note.is_none()) {
+    if let Some(r) = ranking.iter_mut().find(|r| r.effect == EffectName::CyclicLead && r.note.is_none()) {
         r.note = restricted;
     }
     for n in unresolved {
         let note = unresolved_period_note(&f.st, n);
         notes.push(note.clone());
-        ranking.push(RankingEntry {
-            effect: n.as_str().to_string(),
+        ranking.push(RankedEffect {
+            effect: n,
             delta_bic: 0.0,
             explained: 0.0,
             verdict: Verdict::Noise,
@@ -1253,7 +1367,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
 
 /// Bonferroni over a diagnosis's candidates: the ranked group's p-value times `scale` (all
 /// candidates / the group's), capped at 1; a significant entry above `alpha` becomes noise.
-fn bonferroni(r: &mut RankingEntry, scale: f64, alpha: f64) {
+fn bonferroni(r: &mut RankedEffect, scale: f64, alpha: f64) {
     r.p_value = r.p_value.map(|p| (p * scale).min(1.0));
     if r.verdict == Verdict::Significant && r.p_value.is_some_and(|p| p > alpha) {
         r.verdict = Verdict::Noise;
@@ -1302,7 +1416,7 @@ impl Reshape<'_, '_> {
     /// candidate from the shapes' flexibility: `inseparable`, confused with the shapes it changed.
     fn apply(
         &self,
-        r: &mut RankingEntry,
+        r: &mut RankedEffect,
         name: EffectName,
         cand: Candidate,
         cols: &[Vec<f64>],
@@ -1323,7 +1437,7 @@ impl Reshape<'_, '_> {
         };
         let period = period_range(name).and(r.params.get("period").copied());
         let (orders, bic_c) = rechoose_orders(st, self.model, &f.fs, w, cols, k_hyper, period, &start)?;
-        r.shape_orders = orders.iter().map(|(m, o)| (m.as_str().to_string(), *o)).collect();
+        r.shape_orders = orders.iter().copied().collect();
         if orders == start {
             return Ok(());
         }
@@ -1340,7 +1454,8 @@ impl Reshape<'_, '_> {
             Err(ModelCheckError::NothingToExplain) => return Ok(()),
             Err(e) => return Err(e),
         };
-        let Some(mut r2) = d.ranking.into_iter().next() else { return Ok(()) };
+        let Some(r2) = d.ranking.into_iter().next() else { return Ok(()) };
+        let mut r2 = RankedEffect::typed(r2).map_err(|e| ModelCheckError::Invalid(e.to_string()))?;
         let nonzero = |fs: &FitState| fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
         bonferroni(&mut r2, self.total as f64, self.config.family_alpha);
         // What the first ranking found among the candidates stands: explained away by a better one,
@@ -1378,7 +1493,7 @@ impl Reshape<'_, '_> {
         }
         if r2.verdict == Verdict::Significant && delta_u >= -self.config.inseparable_margin && !changed.is_empty() {
             r2.verdict = Verdict::Inseparable;
-            r2.confused_with = changed.iter().map(|(m, _, _)| m.as_str().to_string()).collect();
+            r2.confused_with = changed.iter().map(|(m, _, _)| *m).collect();
             r2.note = Some(format!(
                 "{said}: `{name}` and the shapes' flexibility fit these data about as well, so the data cannot tell \
                  them apart"
@@ -1403,7 +1518,7 @@ impl Reshape<'_, '_> {
 /// σ unknown. Otherwise the data cannot tell a lead at that period from a more flexible shape:
 /// `inseparable`, confused with the shapes.
 pub(crate) fn weigh_lead_against_shapes(
-    r: &mut RankingEntry,
+    r: &mut RankedEffect,
     caps: &[(EffectName, LeadCap, u32)],
     delta: f64,
     margin: f64,
@@ -1430,7 +1545,7 @@ pub(crate) fn weigh_lead_against_shapes(
         r.note = Some(format!("{against}: a lead at {} mm is the better explanation", fmt_num(period * 1e3)));
     } else {
         r.verdict = Verdict::Inseparable;
-        r.confused_with = caps.iter().map(|(m, _, _)| m.as_str().to_string()).collect();
+        r.confused_with = caps.iter().map(|(m, _, _)| *m).collect();
         r.note = Some(format!(
             "{against}: a lead at {} mm and the shapes' higher orders, whose wavelengths reach that period, fit \
              these data about as well, so the data cannot tell them apart",
@@ -1559,9 +1674,9 @@ impl Recording {
 }
 
 /// The advice text of a diagnosis.
-pub(crate) fn advice(ranking: &[RankingEntry], nrms: f64, rec: Recording) -> String {
+pub(crate) fn advice(ranking: &[RankedEffect], nrms: f64, rec: Recording) -> String {
     let mut parts: Vec<String> = Vec::new();
-    let sig: Vec<&RankingEntry> = ranking.iter().filter(|r| r.verdict == Verdict::Significant).collect();
+    let sig: Vec<&RankedEffect> = ranking.iter().filter(|r| r.verdict == Verdict::Significant).collect();
     for r in &sig {
         parts.push(format!(
             "`{}` is significant (ΔBIC {:.1}, explains {:.0} % of the residual): add it with \
@@ -1572,10 +1687,11 @@ pub(crate) fn advice(ranking: &[RankingEntry], nrms: f64, rec: Recording) -> Str
             r.effect
         ));
     }
-    let mut seen: Vec<(String, String)> = Vec::new();
+    let mut seen: Vec<(EffectName, EffectName)> = Vec::new();
     for r in ranking.iter().filter(|r| r.verdict == Verdict::Inseparable) {
-        for o in &r.confused_with {
-            let key = if r.effect < *o { (r.effect.clone(), o.clone()) } else { (o.clone(), r.effect.clone()) };
+        for &o in &r.confused_with {
+            // The pair in the order of the names.
+            let key = if r.effect.as_str() < o.as_str() { (r.effect, o) } else { (o, r.effect) };
             if seen.contains(&key) {
                 continue;
             }
@@ -1583,7 +1699,7 @@ pub(crate) fn advice(ranking: &[RankingEntry], nrms: f64, rec: Recording) -> Str
                 "`{}` and `{}` explain the residual equally well on these data and cannot be told apart: {}.",
                 key.0,
                 key.1,
-                separating_measurement(&key.0, &key.1, rec)
+                separating_measurement(key.0.as_str(), key.1.as_str(), rec)
             ));
             seen.push(key);
         }

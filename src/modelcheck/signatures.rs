@@ -446,9 +446,11 @@ pub(crate) struct Shape {
 }
 
 /// A nonlinear hyper-parameter of a signature, searched on a grid ([`hyper_grid`]); named as the
-/// effect's parameter it fits (FORMAT.md §2), except the encoder play.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Hyper {
+/// effect's parameter it fits (FORMAT.md §2), except the encoder play; written by that name
+/// ([`Hyper::as_str`]) in reports' `at_bound`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Hyper {
     /// A periodic effect's period p, m (`cyclic_lead`, `interpolation_error`).
     Period,
     /// A thermal time constant τ, s.
@@ -468,8 +470,17 @@ pub(crate) enum Hyper {
 }
 
 impl Hyper {
+    /// Every hyper-parameter.
+    pub const ALL: [Hyper; 8] =
+        [Hyper::Period, Hyper::Tau, Hyper::Kv, Hyper::Play, Hyper::Vs, Hyper::Shape, Hyper::Frequency, Hyper::Damping];
+
+    /// The hyper-parameter named `name` ([`Hyper::as_str`]), if any.
+    pub fn named(name: &str) -> Option<Hyper> {
+        Hyper::ALL.into_iter().find(|h| h.as_str() == name)
+    }
+
     /// The name in reports and candidates, the effect's parameter key: `period`, `tau`, ….
-    pub(crate) fn as_str(self) -> &'static str {
+    pub fn as_str(self) -> &'static str {
         match self {
             Hyper::Period => "period",
             Hyper::Tau => "tau",
@@ -1220,7 +1231,7 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             for (a, k, _) in resonance_gains(st) {
                 cols.push(st.col_j(|c, i, j| match responses[j].get(k) {
                     Some(r) if c.sensor == a => r[i],
-                    _ => 0.0,
+                    Some(_) | None => 0.0,
                 }));
             }
             // Free vibration from the unknown state at t_{−1}, per excited channel.

@@ -72,7 +72,8 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
     // p: upper bound of the probability that noise alone gives any candidate a reduction this large.
     s += &format!("{:<22} {:>12} {:>9} {:>10} {:<12} params\n", "effect", "ΔBIC", "p", "explained", "verdict");
     for e in &r.ranking {
-        let kv: Vec<String> = e.params.iter().map(|(k, v)| format!("{k}={}", param_text(&e.effect, k, *v))).collect();
+        let kv: Vec<String> =
+            e.params.iter().map(|(k, v)| format!("{k}={}", param_text(e.effect.as_str(), k, *v))).collect();
         let v = match e.verdict {
             Verdict::Significant => "significant",
             Verdict::Noise => "noise",
@@ -89,7 +90,7 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
             kv.join(" ")
         );
         if !e.confused_with.is_empty() {
-            s += &format!("  (confused with {})", e.confused_with.join(", "));
+            s += &format!("  (confused with {})", effect_list(&e.confused_with));
         }
         s += "\n";
     }
@@ -100,6 +101,11 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
         s += &format!("note: {n}\n");
     }
     s
+}
+
+/// Effect names as written in files, separated by commas: `positioning, straightness_y`.
+pub(crate) fn effect_list(names: &[EffectName]) -> String {
+    names.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", ")
 }
 
 /// One line per fitted error motion: its basis, order and why, e.g. "positioning: Legendre order 11

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use vmt_sim::chain::{ChainModel, ChainProcedureSpec};
 use vmt_sim::effects::EffectName;
 use vmt_sim::machine::{AxisConfig, AxisModel, Fidelity, MachineError};
-use vmt_sim::procedures::{ProcedureSpec, MAX_SAMPLES, MAX_STEPS};
+use vmt_sim::procedures::{ProcedureSpec, COMMAND_COLUMN, MAX_SAMPLES, MAX_STEPS};
 use vmt_sim::sensors::{SensorKind, SensorSpec};
 use vmt_sim::urdf::{parse_urdf, MachineStructure, UrdfError};
 use vmt_sim::Axis;
@@ -287,7 +287,7 @@ pub(crate) fn validate_sensors(sensors: &[SensorSpec], axis: &AxisModel) -> Resu
         if s.name.is_empty()
             || s.name.contains(['[', ']', ',', '"'])
             || s.name == "t"
-            || s.name == "x_cmd" && s.kind != SensorKind::Command
+            || s.name == COMMAND_COLUMN && s.kind != SensorKind::Command
         {
             return Err((at("name"), "expected a column name without brackets, commas or quotes, not `t`".into()));
         }

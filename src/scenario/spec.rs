@@ -70,8 +70,8 @@ pub enum EstimatorSpec {
     ModelCheck {
         /// The starting model, a vmt-model/1 file relative to the scenario.
         model: String,
-        /// Effect names (as the model file writes them) the loop must find.
-        expected: Vec<String>,
+        /// Effects (named as the model file writes them) the loop must find.
+        expected: Vec<vmt_sim::effects::EffectName>,
         /// Most effects the loop adds before it stops.
         #[serde(default = "default_steps")]
         max_steps: usize,

@@ -234,7 +234,7 @@ pub fn model_check_report(
     cmp: &crate::modelcheck::CompareReport,
     diag: Option<&crate::modelcheck::DiagnoseReport>,
 ) -> Report {
-    use crate::modelcheck::{param_text, shapes_text, sigma_text};
+    use crate::modelcheck::{effect_list, param_text, shapes_text, sigma_text};
     use vmt_estimators::modelcheck::Verdict;
     let kind = if diag.is_some() { "diagnose" } else { "compare" };
     let unit_of = crate::modelcheck::display_unit;
@@ -321,18 +321,18 @@ pub fn model_check_report(
                 .map(|(i, e)| {
                     let mut v = verdict(e.verdict).to_string();
                     if !e.confused_with.is_empty() {
-                        v += &format!(" (confused with {})", e.confused_with.join(", "));
+                        v += &format!(" (confused with {})", effect_list(&e.confused_with));
                     }
                     vec![
                         (i + 1).to_string(),
-                        e.effect.clone(),
+                        e.effect.to_string(),
                         format!("{:.1}", e.delta_bic),
                         e.p_value.map_or("—".into(), |p| format!("{p:.1e}")),
                         format!("{:.1}", 100.0 * e.explained),
                         v,
                         e.params
                             .iter()
-                            .map(|(k, x)| format!("{k} = {}", param_text(&e.effect, k, *x)))
+                            .map(|(k, x)| format!("{k} = {}", param_text(e.effect.as_str(), k, *x)))
                             .collect::<Vec<_>>()
                             .join(", "),
                     ]

@@ -6,6 +6,7 @@ use crate::error::VmtError;
 use crate::measurement::MeasurementSet;
 use std::path::Path;
 use vmt_report::{Figure, FigureKind, Series, SeriesStyle};
+use vmt_sim::effects::EffectName;
 
 /// The model-check loop run to its end on a recording: from the model file `model` (beside the scenario
 /// `source`), compare → diagnose → add the top significant effect, at most `max_steps` times; a check per
@@ -15,7 +16,7 @@ pub(super) fn model_check_loop(
     source: &Path,
     set: &MeasurementSet,
     model: &str,
-    expected: &[String],
+    expected: &[EffectName],
     max_steps: usize,
     tolerance: f64,
 ) -> Result<(Vec<Check>, Vec<Figure>), VmtError> {
@@ -29,17 +30,15 @@ pub(super) fn model_check_loop(
     let mut history = vec![first.normalized_rms];
     // Every model's comparison with the recording: the starting model, then the model after each add.
     let mut models: Vec<(crate::modelcheck::CompareReport, String)> = vec![(first, "starting model".into())];
-    let mut added: Vec<String> = Vec::new();
-    let mut first_ranking: Option<Vec<vmt_estimators::modelcheck::RankingEntry>> = None;
+    let mut added: Vec<EffectName> = Vec::new();
+    let mut first_ranking: Option<Vec<crate::modelcheck::RankedEffect>> = None;
     for _ in 0..max_steps {
         let d = diagnose(&m, set, source)?;
         first_ranking.get_or_insert_with(|| d.ranking.clone());
         let Some(top) = d.ranking.iter().find(|r| r.verdict == Verdict::Significant) else { break };
-        let name: vmt_sim::effects::EffectName =
-            top.effect.parse().map_err(|e: vmt_sim::effects::UnknownEffect| VmtError::Internal(e.to_string()))?;
-        m = add_effect(&m, name, Some(top))
+        m = add_effect(&m, top.effect, Some(top))
             .map_err(|e| VmtError::bad(source, "estimators (model_check)", e.to_string()))?;
-        added.push(top.effect.clone());
+        added.push(top.effect);
         let after = compare(&m, set, source)?;
         history.push(after.normalized_rms);
         models.push((after, format!("after add {}", top.effect)));
@@ -74,7 +73,7 @@ pub(super) fn model_check_loop(
     let nrms = Figure {
         title: format!(
             "model-check loop: normalised residual RMS per iteration (added: {})",
-            if added.is_empty() { "nothing".into() } else { added.join(", ") }
+            if added.is_empty() { "nothing".into() } else { crate::modelcheck::effect_list(&added) }
         ),
         x_label: "iteration".into(),
         x_unit: vmt_report::DIMENSIONLESS.into(),
@@ -119,7 +118,7 @@ pub(super) fn model_check_loop(
 /// The diagnosis ranking as a bar chart: the share of the residual each candidate explains (%), one bar
 /// per candidate labelled `effect: verdict, ΔBIC` — the "which effect contributes how much" view. None
 /// for an empty ranking.
-pub(crate) fn ranking_figure(title: String, ranking: &[vmt_estimators::modelcheck::RankingEntry]) -> Option<Figure> {
+pub(crate) fn ranking_figure(title: String, ranking: &[crate::modelcheck::RankedEffect]) -> Option<Figure> {
     (!ranking.is_empty()).then(|| Figure {
         title,
         x_label: "rank".into(),

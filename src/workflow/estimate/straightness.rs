@@ -99,7 +99,7 @@ pub fn accel_passes(
         let RunData::TimeSeries { t, .. } = &r.data else {
             return Err(bad("expected a time series (t, x_cmd, sensor columns) for a constant-velocity pass".into()));
         };
-        let x = r.data.column("x_cmd").ok_or_else(|| bad("expected an `x_cmd` column (commanded position)".into()))?;
+        let x = r.data.command().ok_or_else(|| bad("expected an `x_cmd` column (commanded position)".into()))?;
         let n = t.len();
         if n < 16 {
             return Err(bad(format!("expected at least 16 samples in a pass, got {n}")));
