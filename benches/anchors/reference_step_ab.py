@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The rapier reference step of several versions of vmt-sim, measured in one run (issue 15: "the rapier
+"""The rapier reference step (or with --engine fast the fast step) of several versions of vmt-sim, measured in one run (issue 15: "the rapier
 reference step >= 1.2x faster than today", today being main when the issue was filed).
 
     python3 benches/anchors/reference_step_ab.py [--rounds 15] [--steps 20000] [--cases 0,1,2] \
@@ -73,6 +73,8 @@ def main():
     ap.add_argument("--rounds", type=int, default=15)
     ap.add_argument("--steps", type=int, default=20000)
     ap.add_argument("--cases", default="0,1,2")
+    ap.add_argument("--engine", default="reference", choices=["reference", "fast"],
+                    help="the engine stepped (fast: trees from ce7e26e on)")
     ap.add_argument("--keep", default=None, metavar="DIR",
                     help="keep the built servers in DIR (one per LABEL; e.g. for callgrind: printf '10000\\n0\\n' | valgrind --tool=callgrind DIR/LABEL 0)")
     ap.add_argument("--build-only", action="store_true", help="build (into --keep) and stop")
@@ -92,7 +94,7 @@ def main():
         return
     print("load before:", open("/proc/loadavg").read().split()[:3], flush=True)
     for case in cases:
-        procs = [(label, subprocess.Popen(["nice", b, str(case)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True))
+        procs = [(label, subprocess.Popen(["nice", b, str(case), a.engine], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True))
                  for label, b in bins]
         for _, p in procs:
             round_trip(p, a.steps)  # warm-up, untimed
@@ -107,7 +109,7 @@ def main():
             finals.append((label, p.stdout.readline().strip()))
             p.wait()
         name = finals[0][1].split(":")[0].removeprefix("final ")
-        print(f"\ncase {case} ({name}): {a.rounds} rounds of {a.steps} steps each, dt = 1e-4 s, rapier engine")
+        print(f"\ncase {case} ({name}): {a.rounds} rounds of {a.steps} steps each, dt = 1e-4 s, {a.engine} engine")
         last = procs[-1][0]
         for label, _ in procs:
             t = times[label]

@@ -1,5 +1,6 @@
 // The API of vmt-sim from ce7e26e (fidelity selectable) on, with LugreParams { steady: StribeckLaw }
-// (b1e61cf^ and main in session 16): the cases of benches/sim_step.rs, the model on the rapier engine.
+// (b1e61cf^ and main in session 16): the cases of benches/sim_step.rs (cases_now.rs), the model on
+// either engine.
 use vmt_sim::axis_sim::{AxisSim, AxisTruth, GuideFriction};
 use vmt_sim::drive::{BallScrewConfig, DriveConfig, FeedbackKind};
 use vmt_sim::friction::{LugreParams, StribeckLaw};
@@ -9,47 +10,9 @@ use vmt_sim::motion::Command;
 use vmt_sim::profile::{Harmonic, Profile};
 use vmt_sim::urdf::parse_urdf;
 
-fn six() -> AxisTruth {
-    let h = |a: f64, w: f64| Harmonic { amplitude: a, wavelength: w, phase: 0.0 };
-    AxisTruth::geometric(ErrorMotions {
-        positioning: Profile::poly(vec![0.0, 2e-5]),
-        straightness_y: Profile::harmonics(vec![h(2e-6, 0.5)]),
-        straightness_z: Profile::harmonics(vec![h(2e-6, 0.3)]),
-        roll: Profile::harmonics(vec![h(1e-5, 0.7)]),
-        pitch: Profile::harmonics(vec![h(1e-5, 0.9)]),
-        yaw: Profile::harmonics(vec![h(1e-5, 1.1)]),
-    })
-}
+include!("cases_now.rs");
 
-fn cases() -> Vec<Case> {
-    let lugre = LugreParams {
-        sigma0: 1e8,
-        sigma1: 2e4,
-        steady: StribeckLaw { fc: 150.0, fs: 250.0, vs: 1e-3, delta: 2.0, fv: 800.0 },
-    };
-    let semi = BallScrewConfig { feedback: FeedbackKind::Rotary, ..BallScrewConfig::default() };
-    vec![
-        Case { name: "linear motor, six error motions", cfg: AxisConfig::default(), truth: six(), feed: 0.1 },
-        Case {
-            name: "ball screw + backlash + LuGre",
-            cfg: AxisConfig { drive: DriveConfig::BallScrew(BallScrewConfig::default()), ..AxisConfig::default() },
-            truth: AxisTruth { backlash: 4e-6, friction: GuideFriction::LuGre(lugre), ..AxisTruth::default() },
-            feed: 0.01,
-        },
-        Case {
-            name: "semi-closed ball screw + backlash + Coulomb, six error motions",
-            cfg: AxisConfig { drive: DriveConfig::BallScrew(semi), ..AxisConfig::default() },
-            truth: AxisTruth {
-                backlash: 4e-6,
-                friction: GuideFriction::Stribeck(StribeckLaw::coulomb(100.0)),
-                ..six()
-            },
-            feed: 0.1,
-        },
-    ]
-}
-
-fn reference_model(text: &str, cfg: &AxisConfig) -> AxisModel {
-    let cfg = AxisConfig { fidelity: Fidelity::Reference, ..cfg.clone() };
-    AxisModel::build(&parse_urdf(text).unwrap(), &cfg).unwrap()
+fn model(text: &str, cfg: &AxisConfig, fast: bool) -> Option<AxisModel> {
+    let fidelity = if fast { Fidelity::Fast } else { Fidelity::Reference };
+    Some(AxisModel::build(&parse_urdf(text).unwrap(), &AxisConfig { fidelity, ..cfg.clone() }).unwrap())
 }
