@@ -7,7 +7,7 @@
 
 use crate::drive::{dead_zone_force, DriveConfig, FeedbackKind};
 use crate::feedback::FeedbackErrors;
-use crate::friction::{lugre_step, stick_slip_force, LugreParams, StepInput, StribeckLaw};
+use crate::friction::{lugre_step_unchecked, stick_slip_force, LugreParams, StepInput, StribeckLaw};
 use crate::geometry::{ErrorMotions, MotionsAt};
 use crate::machine::{AxisModel, Fidelity};
 use crate::motion::{Command, MotionPlan};
@@ -203,6 +203,83 @@ struct RapierBody {
     handle: RigidBodyHandle,
 }
 
+impl RapierBody {
+    /// A world of gravity −[`GRAVITY`]·ẑ and step dt (s) holding one dynamic body at pose `start` with the
+    /// mass properties `mprops`, which never sleeps; `prime`: [`prime_joint_buffers`] first (a speed
+    /// measure; false only to test that it leaves the trajectory unchanged).
+    fn new(dt: f64, start: Pose, mprops: MassProperties, prime: bool) -> RapierBody {
+        let mut world = PhysicsWorld::new();
+        world.gravity = DVec3::new(0.0, 0.0, -GRAVITY);
+        world.integration_parameters.dt = dt;
+        world.integration_parameters.num_solver_iterations = 1;
+        // The world holds this one body and nothing else (no collider, joint or contact; the priming
+        // bodies and joints are removed before it arrives), so
+        // the passes that act on constraints have nothing to act on and are switched off;
+        // none touches the body's state (the trajectory is bit-identical with and without
+        // them): continuous collision detection, the constraint solver's velocity passes (with
+        // and without bias) and its warm start, and the statistics counters (which otherwise
+        // sum the contacts of the solver's 129 colour buckets every step). The force, the
+        // gyroscopic correction and the pose update are integrated as before. A world given a
+        // collider or joint would need the defaults back.
+        world.integration_parameters.max_ccd_substeps = 0;
+        world.integration_parameters.num_internal_pgs_iterations = 0;
+        world.integration_parameters.num_internal_stabilization_iterations = 0;
+        world.integration_parameters.warmstart_coefficient = 0.0;
+        world.physics_pipeline.counters.disable();
+        if prime {
+            prime_joint_buffers(&mut world);
+        }
+        let rb = RigidBodyBuilder::dynamic().pose(start).additional_mass_properties(mprops).can_sleep(false).build();
+        let handle = world.bodies.insert(rb);
+        RapierBody { world, handle }
+    }
+}
+
+/// Number of body pairs joined in one colour by [`prime_joint_buffers`]: rapier3d-f64 0.36 lays out a joint
+/// colour as SIMD chunks from 64 joints on (`JOINT_BATCH · LAYOUT_REF_WORKERS / 2` = 16 · 8 / 2).
+const PRIMING_PAIRS: usize = 65;
+
+/// Gives rapier's joint-solver buffers an allocation before the world receives the moving body, so the
+/// reference step does not pay four microcode assists per step (a speed measure only: the trajectory is
+/// bit-identical with and without it, tested).
+///
+/// Why: every `&mut` access to a body makes rapier re-lay out its joints in the next step (the access
+/// bumps the island manager's active-set epoch, and the joint layout is reused only under an unchanged
+/// epoch), and the re-layout clears four joint buffers with `write_bytes(ptr, 0, len)`. With no joint
+/// ever seen, those buffers are unallocated, `ptr` is a dangling address in the unmapped first page, and
+/// glibc's AVX-512 `memset` of zero bytes there is a masked store whose fault suppression costs a
+/// microcode assist of ~100 ns (measured: 20 % of a lone-body rapier step; the step accesses the body
+/// once, to set the force and torque, which change every step). Once allocated, a buffer keeps its
+/// capacity (`clear` + `reserve`), so the same zero-byte stores hit mapped memory.
+///
+/// How: [`PRIMING_PAIRS`] fixed–dynamic body pairs far from the axis, each joined by a fixed joint (one
+/// colour of SIMD joints: the wide builder and constraint buffers), one more fixed joint on the first
+/// dynamic body (a second colour of one joint, solved serially: the scalar builder and constraint
+/// buffers), one step, then every priming body removed with its joints. The moving body is inserted
+/// after this, so it never shares a step with them; the priming joints are solved with the world's passes
+/// switched off (see [`RapierBody::new`]), which does not matter: only the buffers' allocation is kept.
+fn prime_joint_buffers(world: &mut PhysicsWorld) {
+    let unit = MassProperties::new(DVec3::ZERO, 1.0, DVec3::ONE);
+    let far = |i: usize, y: f64| DVec3::new(1e3 + i as f64, y, 0.0);
+    let mut bodies = Vec::with_capacity(2 * PRIMING_PAIRS + 1);
+    let joint = |y: f64| FixedJointBuilder::new().local_anchor1(DVec3::new(0.0, y, 0.0)).build();
+    for i in 0..PRIMING_PAIRS {
+        let a = world.bodies.insert(RigidBodyBuilder::fixed().translation(far(i, 0.0)).build());
+        let b = world
+            .bodies
+            .insert(RigidBodyBuilder::dynamic().translation(far(i, 1.0)).additional_mass_properties(unit).build());
+        world.impulse_joints.insert(a, b, joint(1.0), true);
+        bodies.extend([a, b]);
+    }
+    let extra = world.bodies.insert(RigidBodyBuilder::fixed().translation(far(0, 2.0)).build());
+    world.impulse_joints.insert(extra, bodies[1], joint(-1.0), true);
+    bodies.push(extra);
+    world.step();
+    for h in bodies {
+        world.remove_body(h);
+    }
+}
+
 /// The moving body integrated by vmt itself ([`Fidelity::Fast`]): the update rapier performs for a
 /// dynamic body with no collider, joint or contact, written out (semi-implicit Euler, step dt):
 ///
@@ -270,29 +347,7 @@ enum Body {
 impl Body {
     fn new(fidelity: Fidelity, dt: f64, start: Pose, mprops: MassProperties) -> Body {
         match fidelity {
-            Fidelity::Reference => {
-                let mut world = PhysicsWorld::new();
-                world.gravity = DVec3::new(0.0, 0.0, -GRAVITY);
-                world.integration_parameters.dt = dt;
-                world.integration_parameters.num_solver_iterations = 1;
-                // The world holds this one body and nothing else (no collider, joint or contact), so
-                // the passes that act on constraints have nothing to act on and are switched off;
-                // none touches the body's state (the trajectory is bit-identical with and without
-                // them): continuous collision detection, the constraint solver's velocity passes (with
-                // and without bias) and its warm start, and the statistics counters (which otherwise
-                // sum the contacts of the solver's 129 colour buckets every step). The force, the
-                // gyroscopic correction and the pose update are integrated as before. A world given a
-                // collider or joint would need the defaults back.
-                world.integration_parameters.max_ccd_substeps = 0;
-                world.integration_parameters.num_internal_pgs_iterations = 0;
-                world.integration_parameters.num_internal_stabilization_iterations = 0;
-                world.integration_parameters.warmstart_coefficient = 0.0;
-                world.physics_pipeline.counters.disable();
-                let rb =
-                    RigidBodyBuilder::dynamic().pose(start).additional_mass_properties(mprops).can_sleep(false).build();
-                let handle = world.bodies.insert(rb);
-                Body::Reference(Box::new(RapierBody { world, handle }))
-            }
+            Fidelity::Reference => Body::Reference(Box::new(RapierBody::new(dt, start, mprops, true))),
             Fidelity::Fast => Body::Fast(Box::new(FastBody {
                 principal_inertia: mprops.principal_inertia(),
                 rot: start.rotation,
@@ -389,8 +444,9 @@ pub struct AxisSim<'a> {
     bristle: f64,
     /// Friction force of the last step on the body along the axis, N.
     friction_force: f64,
-    /// The truth's guideway friction, its law checked once for the run ([`StribeckLaw::validate`]): a
-    /// Stribeck law that fails the check is no friction (the force stick_slip_step's error gave).
+    /// The truth's guideway friction, its law checked once for the run ([`StribeckLaw::validate`],
+    /// [`LugreParams::validate`]): a law that fails the check is no friction (the force stick_slip_step's
+    /// or lugre_step's error gave).
     friction: GuideFriction,
     /// Structural mode state (displacement, velocity) and the reference point's last velocity.
     mode: (DVec3, DVec3),
@@ -525,6 +581,7 @@ impl<'a> AxisSim<'a> {
             friction_force: 0.0,
             friction: match &truth.friction {
                 GuideFriction::Stribeck(p) if p.validate().is_err() => GuideFriction::None,
+                GuideFriction::LuGre(p) if p.validate().is_err() => GuideFriction::None,
                 f @ (GuideFriction::None | GuideFriction::Stribeck(_) | GuideFriction::LuGre(_)) => f.clone(),
             },
             mode: (DVec3::ZERO, DVec3::ZERO),
@@ -697,13 +754,19 @@ impl<'a> AxisSim<'a> {
                     0.0
                 }
             }
-            GuideFriction::LuGre(p) => match lugre_step(p, self.bristle, q_dot, m.dt) {
-                Ok(st) => {
+            // The parameters were checked when the run started (`friction`), dt > 0 (AxisModel::build) and
+            // the bristle state is finite (it starts at 0 and each step from finite inputs keeps it
+            // finite); a non-finite velocity gets no friction force and leaves the bristles as they are,
+            // as lugre_step's error did.
+            GuideFriction::LuGre(p) => {
+                if q_dot.is_finite() {
+                    let st = lugre_step_unchecked(p, self.bristle, q_dot, m.dt);
                     self.bristle = st.z_next;
                     st.force_on_body
+                } else {
+                    0.0
                 }
-                Err(_) => 0.0,
-            },
+            }
         };
         self.friction_force = f_friction;
         // Bearing block i at body point b_i pushes back along e_y and e_z by the spring-damper magnitudes
@@ -806,4 +869,42 @@ pub fn simulate_in_session(
         prev = Some(cur);
     }
     Trace { samples: out }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// [`prime_joint_buffers`] is a speed measure only: a primed and an unprimed rapier body given the same
+    /// forces and torques (varying every step, as the servo's and the bearings' do) stay bit-identical.
+    #[test]
+    fn priming_leaves_the_reference_trajectory_bit_identical() {
+        let mprops = MassProperties::with_inertia_matrix(
+            DVec3::new(0.01, -0.02, 0.3),
+            120.0,
+            DMat3::from_diagonal(DVec3::new(9.0, 7.0, 4.0)),
+        );
+        let start = Pose::from_parts(DVec3::new(0.2, 0.0, 0.5), DQuat::from_scaled_axis(DVec3::new(1e-5, -2e-5, 3e-5)));
+        let mut bodies =
+            [true, false].map(|prime| Body::Reference(Box::new(RapierBody::new(1e-4, start, mprops, prime))));
+        for i in 0..3000 {
+            let t = i as f64 * 1e-4;
+            let force =
+                DVec3::new(50.0 * (40.0 * t).sin(), 3.0 * (90.0 * t).cos(), 120.0 * GRAVITY + 5.0 * (7.0 * t).sin());
+            let torque = DVec3::new(0.2 * (30.0 * t).cos(), -0.1 * (11.0 * t).sin(), 0.05 * t);
+            for b in &mut bodies {
+                b.step(force, torque, 1e-4);
+            }
+        }
+        let [primed, plain] = bodies.map(|b| b.state());
+        let bits = |s: &BodyState| {
+            let p = s.pose.translation;
+            let q = s.pose.rotation;
+            [p.x, p.y, p.z, q.x, q.y, q.z, q.w, s.linvel.x, s.linvel.y, s.linvel.z, s.angvel.x, s.angvel.y, s.angvel.z]
+                .map(f64::to_bits)
+        };
+        assert_eq!(bits(&primed), bits(&plain));
+        // The body did move (the comparison is not of two resting states).
+        assert!((primed.pose.translation - start.translation).length() > 1e-3, "{:?}", primed.pose.translation);
+    }
 }

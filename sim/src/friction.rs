@@ -193,12 +193,29 @@ pub fn lugre_step(p: &LugreParams, z: f64, v: f64, dt: f64) -> Result<LugreStep,
     check("z", z, true, "a finite bristle deflection in m")?;
     check("v", v, true, "a finite velocity in m/s")?;
     check("dt", dt, dt > 0.0, "finite and > 0 s")?;
+    Ok(lugre_step_unchecked(p, z, v, dt))
+}
+
+/// The step of [`lugre_step`] for parameters and inputs its checks accept ([`LugreParams::validate`]; z, v
+/// finite, dt > 0), without checking them again: a simulator checks its law once per run instead of
+/// every step.
+///
+/// e^{−x} and 1 − e^{−x} (x = a·dt) come from one transcendental: below ln 2 from expm1, e^{−x} =
+/// 1 + expm1(−x) (≥ 1/2, within an ulp); from ln 2 on from exp, 1 − e^{−x} (≥ 1/2, within an ulp).
+/// Each is as accurate as evaluating both exp and expm1; the last bits of z and F can differ from that.
+pub(crate) fn lugre_step_unchecked(p: &LugreParams, z: f64, v: f64, dt: f64) -> LugreStep {
     let g = p.steady.level(v);
     let a = p.sigma0 * v.abs() / g;
     let x = a * dt;
+    let (decay, one_minus_decay) = if x < std::f64::consts::LN_2 {
+        let em = (-x).exp_m1();
+        (1.0 + em, -em)
+    } else {
+        let e = (-x).exp();
+        (e, 1.0 - e)
+    };
     // φ(x) = (1 − e^{−x})/x, accurate for small x.
-    let phi = if x < 1e-12 { 1.0 - 0.5 * x } else { -(-x).exp_m1() / x };
-    let decay = (-x).exp();
+    let phi = if x < 1e-12 { 1.0 - 0.5 * x } else { one_minus_decay / x };
     let z_next = z * decay + v * dt * phi;
     // Mean of z over the step: (1/dt)∫ z dt = z_ss + (z − z_ss)·φ; written without z_ss (a may be 0)
     // as z·φ + v·dt·(1 − φ)/x, and (1 − φ)/x → 1/2 for x → 0.
@@ -206,7 +223,7 @@ pub fn lugre_step(p: &LugreParams, z: f64, v: f64, dt: f64) -> Result<LugreStep,
     let z_mean = z * phi + v * dt * one_minus_phi_over_x;
     let dz_dt = (z_next - z) / dt;
     let force = p.sigma0 * z_mean + p.sigma1 * dz_dt + p.steady.fv * v;
-    Ok(LugreStep { z_next, dz_dt, force_on_body: -force })
+    LugreStep { z_next, dz_dt, force_on_body: -force }
 }
 
 /// A 1-DOF mass–spring–friction trajectory sample (the Canudas de Wit 1995 stick-slip experiment).
@@ -337,5 +354,56 @@ mod tests {
         let r = lugre_step(&q, 1e-6, 0.0, dt).unwrap();
         assert_eq!(r.z_next, 1e-6);
         assert!((r.force_on_body + 0.1).abs() < 1e-15);
+    }
+
+    /// The one-transcendental update (e^{−x} and 1 − e^{−x} from expm1 below ln 2, from exp above) agrees
+    /// with evaluating both exp and expm1 to within 4 ulp of the terms' scale in z_next (|z·e^{−x}| +
+    /// |v·dt·φ|) and in the force (σ0·(|z·φ| + |v·dt·(1 − φ)/x|) + σ1·(|z_next| + |z|)/dt + |σ2·v|: the
+    /// bristle rate is a difference of nearby deflections, so z_next's last bit moves it by more than
+    /// its own ulp), over a·dt from below 1e-8 to about 40 (velocities 1e-9 to 4 m/s both ways, bristles at rest,
+    /// with and against their steady state).
+    #[test]
+    fn lugre_step_with_one_transcendental_agrees_with_exp_and_expm1() {
+        let q = LugreParams::canudas1995();
+        let dt = 1e-4;
+        // (z_next, its scale, force, its scale, a·dt) from exp and expm1 both (the two-transcendental update).
+        let both = |z: f64, v: f64| {
+            let g = q.steady.level(v);
+            let x = q.sigma0 * v.abs() / g * dt;
+            let phi = if x < 1e-12 { 1.0 - 0.5 * x } else { -(-x).exp_m1() / x };
+            let (carried, driven) = (z * (-x).exp(), v * dt * phi);
+            let z_next = carried + driven;
+            let one_minus_phi_over_x = if x < 1e-6 { 0.5 - x / 6.0 } else { (1.0 - phi) / x };
+            let mean = [z * phi, v * dt * one_minus_phi_over_x];
+            let force = q.sigma0 * (mean[0] + mean[1]) + q.sigma1 * (z_next - z) / dt + q.steady.fv * v;
+            // The force's terms as the roundings of its inputs move them: σ1·ż through z_next and z.
+            let f_scale = q.sigma0 * (mean[0].abs() + mean[1].abs())
+                + q.sigma1 * (z_next.abs() + z.abs()) / dt
+                + (q.steady.fv * v).abs();
+            (z_next, carried.abs() + driven.abs(), force, f_scale, x)
+        };
+        let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+        for i in 0..=400 {
+            let speed = 1e-9 * 10f64.powf(i as f64 * 9.6 / 400.0);
+            for v in [speed, -speed] {
+                for z in [0.0, 3e-6, -2e-6] {
+                    let s = lugre_step_unchecked(&q, z, v, dt);
+                    let (z_ref, z_scale, f_ref, f_scale, x) = both(z, v);
+                    (lo, hi) = (lo.min(x), hi.max(x));
+                    let ulps = |a: f64, b: f64, scale: f64| (a - b).abs() / (f64::EPSILON * scale);
+                    assert!(
+                        ulps(s.z_next, z_ref, z_scale) <= 4.0,
+                        "z_next {} vs {z_ref} at z {z:e} m, v {v:e} m/s",
+                        s.z_next
+                    );
+                    let f = -s.force_on_body;
+                    assert!(
+                        ulps(f, f_ref, f_scale) <= 4.0,
+                        "F {f} vs {f_ref} N at z {z:e} m, v {v:e} m/s, scale {f_scale:e}, x {x:e}"
+                    );
+                }
+            }
+        }
+        assert!(lo < 1e-8 && hi > 30.0, "a·dt covered {lo:e} .. {hi:e}");
     }
 }
