@@ -774,17 +774,18 @@ pub(crate) fn needs(name: EffectName) -> &'static str {
     catalogue_row(name).needs
 }
 
-/// The SI unit of a channel's readings and residual: N (motor force), m/s² (accelerometer), else m.
+/// The SI unit of a channel's readings and residual: N (motor force), m/s² (accelerometer), rad
+/// (an angular laser's deviations: pitch, yaw, roll), else m.
 fn channel_unit(c: &Channel) -> &'static str {
     match c.kind {
         SensorKind::MotorForce => "N",
         SensorKind::Accelerometer => "m/s²",
+        SensorKind::LaserAngular => "rad",
         SensorKind::Command
         | SensorKind::EncoderRotary
         | SensorKind::EncoderLinear
         | SensorKind::LaserLinear
         | SensorKind::LaserStraightness
-        | SensorKind::LaserAngular
         | SensorKind::LaserVector
         | SensorKind::Velocity
         | SensorKind::Temperature
