@@ -934,31 +934,18 @@ pub(crate) fn resonance_segments(st: &Stack) -> Vec<(usize, usize, f64, f64)> {
     out
 }
 
-/// Names of the accelerometer sensors a tilt of the slide turns gravity into (to first order),
-/// in order of appearance: a small rotation ω changes the reading of a sensor along u by
-/// u·(ω × g), g = (0, 0, −9.80665) m/s² in the machine frame (FORMAT.md: directions are given in
-/// it), which vanishes for every ω only when u is vertical. A sensor within
-/// [`TILT_VERTICAL_DEG`] of the vertical is left out: its tilt signal is below sin 5° ≈ 9 % of a
-/// horizontal one's, and its columns would only give the candidate freedom to fit what the
-/// vertical channel carries for other reasons.
-pub(crate) fn tilt_sensors(st: &Stack) -> Vec<String> {
-    let horizontal = |c: &Channel| c.u[0].hypot(c.u[1]) >= TILT_VERTICAL_DEG.to_radians().sin() * norm3(c.u);
+/// Names of the accelerometer sensors among the channels, in order of appearance. (Each gets the
+/// gravity-tilt columns: a sensor gravity cannot reach through a tilt, one along the machine's
+/// vertical, would need the axis frame's vertical, which the stack does not carry — `Channel::u`
+/// is in the axis frame, where the vertical is z for X and Y axes but x for a Z axis.)
+pub(crate) fn accel_sensors(st: &Stack) -> Vec<String> {
     let mut out: Vec<String> = Vec::new();
-    for c in st.chans.iter().filter(|c| c.is_accel() && horizontal(c)) {
+    for c in st.chans.iter().filter(|c| c.is_accel()) {
         if !out.contains(&c.sensor) {
             out.push(c.sensor.clone());
         }
     }
     out
-}
-
-/// Angle from the vertical (degrees) within which an accelerometer does not see gravity through a
-/// tilt ([`tilt_sensors`]).
-pub(crate) const TILT_VERTICAL_DEG: f64 = 5.0;
-
-/// |u|.
-fn norm3(u: [f64; 3]) -> f64 {
-    (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()
 }
 
 /// Names of the accelerometer sensors with a predicted mode excitation on some channel, in order
@@ -1037,7 +1024,7 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
             (names, vec![Hyper::Frequency, Hyper::Damping])
         }
         EffectName::GravityTilt => {
-            (tilt_sensors(st).iter().flat_map(|a| (1..=order).map(move |k| format!("{a}_c{k}"))).collect(), vec![])
+            (accel_sensors(st).iter().flat_map(|a| (1..=order).map(move |k| format!("{a}_c{k}"))).collect(), vec![])
         }
         no_own_signature!() => (vec![], vec![]),
     };
@@ -1253,10 +1240,9 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             cols
         }
         EffectName::GravityTilt => {
-            // g·tilt(x) of each accelerometer's sensitive axis gravity reaches ([`tilt_sensors`]), a
-            // polynomial in x shared by its runs.
+            // g·tilt(x) of each accelerometer's sensitive axis, a polynomial in x shared by its runs.
             let mut cols = Vec::new();
-            for a in tilt_sensors(st) {
+            for a in accel_sensors(st) {
                 for k in 1..=sh.order {
                     cols.push(st.col(|c, i| {
                         if c.sensor == a && c.is_accel() {
