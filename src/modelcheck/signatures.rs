@@ -445,52 +445,36 @@ pub(crate) struct Shape {
     pub(crate) knots: Vec<f64>,
 }
 
-/// A nonlinear hyper-parameter of a signature, searched on a grid ([`hyper_grid`]); named as the
-/// effect's parameter it fits (FORMAT.md §2), except the encoder play; written by that name
-/// ([`Hyper::as_str`]) in reports' `at_bound`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Hyper {
-    /// A periodic effect's period p, m (`cyclic_lead`, `interpolation_error`).
-    Period,
-    /// A thermal time constant τ, s.
-    Tau,
-    /// The position-loop gain kv of the servo lag, 1/s.
-    Kv,
-    /// The play b of a backlash on encoder time series, m.
-    Play,
-    /// The Stribeck velocity vs, m/s.
-    Vs,
-    /// The Stribeck shape exponent δ (dimensionless).
-    Shape,
-    /// A structural mode's natural frequency f, Hz.
-    Frequency,
-    /// A structural mode's damping ratio ζ (dimensionless).
-    Damping,
+vmt_core::named_enum! {
+    /// A nonlinear hyper-parameter of a signature, searched on a grid ([`hyper_grid`]); named as the
+    /// effect's parameter it fits (FORMAT.md §2), except the encoder play; written by that name
+    /// ([`Hyper::as_str`]) in reports' `at_bound`.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+    pub enum Hyper {
+        /// A periodic effect's period p, m (`cyclic_lead`, `interpolation_error`).
+        Period = "period",
+        /// A thermal time constant τ, s.
+        Tau = "tau",
+        /// The position-loop gain kv of the servo lag, 1/s.
+        Kv = "kv",
+        /// The play b of a backlash on encoder time series, m.
+        Play = "play",
+        /// The Stribeck velocity vs, m/s.
+        Vs = "vs",
+        /// The Stribeck shape exponent δ (dimensionless).
+        Shape = "shape",
+        /// A structural mode's natural frequency f, Hz.
+        Frequency = "frequency",
+        /// A structural mode's damping ratio ζ (dimensionless).
+        Damping = "damping",
+    }
 }
 
 impl Hyper {
-    /// Every hyper-parameter.
-    pub const ALL: [Hyper; 8] =
-        [Hyper::Period, Hyper::Tau, Hyper::Kv, Hyper::Play, Hyper::Vs, Hyper::Shape, Hyper::Frequency, Hyper::Damping];
-
-    /// The hyper-parameter named `name` ([`Hyper::as_str`]), if any.
+    /// The hyper-parameter named `name` ([`Hyper::as_str`], the name in reports and candidates,
+    /// the effect's parameter key: `period`, `tau`, …), if any.
     pub fn named(name: &str) -> Option<Hyper> {
         Hyper::ALL.into_iter().find(|h| h.as_str() == name)
-    }
-
-    /// The name in reports and candidates, the effect's parameter key: `period`, `tau`, ….
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Hyper::Period => "period",
-            Hyper::Tau => "tau",
-            Hyper::Kv => "kv",
-            Hyper::Play => "play",
-            Hyper::Vs => "vs",
-            Hyper::Shape => "shape",
-            Hyper::Frequency => "frequency",
-            Hyper::Damping => "damping",
-        }
     }
 }
 
