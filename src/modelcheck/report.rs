@@ -122,10 +122,11 @@ pub(crate) fn fit_at_bound(fs: &FitState) -> EffectMap<Vec<Hyper>> {
 /// How a fitted error motion's shape was set (FORMAT.md §4 `shapes`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ShapeReport {
-    /// The basis: `legendre` (Legendre polynomials of the position mapped onto [−1, 1] over the
-    /// range of the sample positions, no constant term) or `cosine` (cos(kπ(x − a)/(b − a)),
-    /// k ≥ 1, for a motion seen only by accelerometers).
-    pub basis: String,
+    /// The basis, written by its name: `legendre` (Legendre polynomials of the position mapped onto
+    /// [−1, 1] over the range of the sample positions, no constant term), `cosine`
+    /// (cos(kπ(x − a)/(b − a)), k ≥ 1, for a motion seen only by accelerometers), or the model's
+    /// `bspline`, `harmonics`, `table`.
+    pub basis: ShapeBasis,
     /// Highest Legendre degree used.
     pub order: u32,
     /// Why this order: `BIC over 1..N`, `model` (the model's `order`) or `default`.
@@ -180,8 +181,7 @@ pub(crate) fn shape_reports(fs: &FitState) -> EffectMap<ShapeReport> {
                 Some(_) | None => {}
             }
             let bic_order = (c.given && c.max.is_some()).then_some(c.best);
-            let r =
-                ShapeReport { basis: c.basis.as_str().into(), order: c.order, chosen_by, bic_order, terms: c.terms };
+            let r = ShapeReport { basis: c.basis, order: c.order, chosen_by, bic_order, terms: c.terms };
             (c.name, r)
         })
         .collect()
@@ -1135,15 +1135,15 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             }
             // An interpolation error's period is chosen from the residual (the catalogue's periods
             // miss a real scale's by more than its likelihood peak is wide).
-            let c = match (n, &interp_scan) {
-                (EffectName::InterpolationError, Some((periods, independent))) => {
+            let c = match &interp_scan {
+                Some((periods, independent)) if n == EffectName::InterpolationError => {
                     for h in c.hyper_parameters.iter_mut() {
                         h.grid.clone_from(periods);
                         h.refine = true;
                     }
                     c.chosen_from(*independent)
                 }
-                _ => c,
+                Some(_) | None => c,
             };
             let sh3 = sh.clone();
             let mut start = EffectParams::default_for(n);
@@ -1522,11 +1522,11 @@ impl Reshape<'_, '_> {
         if free.is_empty() {
             return Ok(());
         }
-        let start: Vec<(EffectName, u32)> = match (self.joint, name) {
-            (Some(j), EffectName::CyclicLead) => {
+        let start: Vec<(EffectName, u32)> = match self.joint {
+            Some(j) if name == EffectName::CyclicLead => {
                 free.iter().map(|&(m, o)| (m, j.iter().find(|(jm, _)| *jm == m).map_or(o, |(_, jo)| *jo))).collect()
             }
-            _ => free.clone(),
+            Some(_) | None => free.clone(),
         };
         let period = period_range(name).and(r.params.get("period").copied());
         let (orders, bic_c) = rechoose_orders(st, self.model, &f.fs, w, cols, k_hyper, period, &start)?;

@@ -117,13 +117,12 @@ pub(crate) fn shapes_text(shapes: &EffectMap<ShapeReport>) -> String {
             ("model", None) => "given by the model".to_string(),
             (how, _) => format!("chosen by {how} (model gave none)"),
         };
-        let series = match sh.basis.as_str() {
-            "legendre" => format!("Legendre order {}", sh.order),
-            "cosine" => format!("cosine series order {}", sh.order),
-            "bspline" => format!("{} B-splines", sh.order),
-            "harmonics" => format!("{} harmonics", sh.order),
-            "table" => format!("table of {} values", sh.order),
-            other => format!("{other} order {}", sh.order),
+        let series = match sh.basis {
+            ShapeBasis::Legendre => format!("Legendre order {}", sh.order),
+            ShapeBasis::Cosine => format!("cosine series order {}", sh.order),
+            ShapeBasis::Bspline => format!("{} B-splines", sh.order),
+            ShapeBasis::Harmonics => format!("{} harmonics", sh.order),
+            ShapeBasis::Table => format!("table of {} values", sh.order),
         };
         s += &format!("{n}: {series} {why}\n");
     }
