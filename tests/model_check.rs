@@ -183,7 +183,7 @@ fn lesson_two_hidden_effects_are_found_one_after_the_other() {
     // The fitted lead is the screw's 16 mm; 1 % covers the period's scatter at 50 nm noise on a
     // 0.8 µm amplitude over ten leads (measured 0.02 %).
     let c = compare(&m2, set, data).unwrap();
-    let p = c.fitted["cyclic_lead"]["period"];
+    let p = c.fitted[EffectName::CyclicLead]["period"];
     assert!((p - 0.016).abs() < 0.016 * 0.01, "period {p}");
 }
 
@@ -609,10 +609,10 @@ fn friction_sweep_hidden_stribeck_and_viscous_are_found() {
         // leaves room for the simulator's small servo ripple in the cruise windows (measured
         // fc 150.1, fs 260.3, fv 798 against 150, 260, 800); vs to 5 % (measured 1.99 mm/s).
         let near = |v: f64, t: f64, rel: f64| (v - t).abs() <= rel * t;
-        assert!(near(f["coulomb"]["fc"], 150.0, 0.01), "{f:?}");
-        assert!(near(f["stribeck"]["fs"], 260.0, 0.01), "{f:?}");
-        assert!(near(f["viscous"]["fv"], 800.0, 0.01), "{f:?}");
-        assert!(near(f["stribeck"]["vs"], 2e-3, 0.05), "{f:?}");
+        assert!(near(f[EffectName::Coulomb]["fc"], 150.0, 0.01), "{f:?}");
+        assert!(near(f[EffectName::Stribeck]["fs"], 260.0, 0.01), "{f:?}");
+        assert!(near(f[EffectName::Viscous]["fv"], 800.0, 0.01), "{f:?}");
+        assert!(near(f[EffectName::Stribeck]["vs"], 2e-3, 0.05), "{f:?}");
     }
     let text = text.replace("[truth.effects.stribeck]", "#").replace("fs = 260.0", "").replace("vs = 2e-3", "");
     let sc = Scenario::parse(&text, Path::new("viscous.toml"), None).unwrap();
@@ -817,7 +817,7 @@ fn accelerometer_hidden_resonance_is_found_at_its_frequency() {
         assert_eq!(first.verdict, Verdict::Significant, "{label}: {first:?}");
         let m1 = add_effect(&model, EffectName::Resonance, Some(first)).unwrap();
         let c = compare(&m1, set, data).unwrap();
-        let fitted = &c.fitted["resonance"];
+        let fitted = &c.fitted[EffectName::Resonance];
         let (f, f1, z1, g1) = (first.params["frequency"], fitted["frequency"], fitted["damping"], fitted["gain_acc"]);
         eprintln!(
             "{label}: frequency {f:.3} Hz (after add {f1:.3} Hz, ζ {z1:.4}, gain {g1:.4}), normalised RMS {:.2} → \
@@ -871,7 +871,7 @@ fn accelerometer_hidden_gravity_tilt_is_found() {
         let (before, after, m1) = step(&model, &set, EffectName::GravityTilt, &label);
         // The fitted tilt of the y accelerometer is the roll EAX (reading g·EAX to first order), up
         // to a constant (the offsets carry it): compared relative to x = 0.5 m over the range.
-        let f = &compare(&m1, &set, Path::new("sim")).unwrap().fitted["gravity_tilt"];
+        let f = &compare(&m1, &set, Path::new("sim")).unwrap().fitted[EffectName::GravityTilt];
         let tau = |x: f64| (1..=3).map(|k| f[&format!("tilt_acc_c{k}")] * x.powi(k)).sum::<f64>();
         let roll = |x: f64| 20e-6 * (std::f64::consts::TAU * x / 0.5 + 0.3).sin();
         let err = (0..=40)
@@ -1044,7 +1044,7 @@ fn real_rack_pinion_sweep_loop() {
     eprintln!("rack-and-pinion: {}", steps.join(" → "));
     let viscous = added.iter().find(|(n, _)| *n == EffectName::Viscous);
     assert!(viscous.is_some(), "viscous friction not found: {steps:?}");
-    let fv = added.last().and_then(|(_, c)| c.fitted.get("viscous")?.get("fv").copied());
+    let fv = added.last().and_then(|(_, c)| c.fitted.get(EffectName::Viscous)?.get("fv").copied());
     eprintln!("final fv {fv:?} N·s/m");
     assert!(fv.is_some_and(|f| f > 40.0 && f < 100.0), "fv {fv:?}: {steps:?}");
 }

@@ -515,6 +515,35 @@ fn observation_row(model: &Model, layout: &Layout, r: &Reading, buf: &mut Vec<f6
     Ok(row)
 }
 
+/// A reported group of functionals: one error motion of an axis, or one squareness.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Group {
+    /// Error motion `component` of `axis` (0..3 translations along X, Y, Z; 3..6 rotations about
+    /// them), as [`motion_name`] numbers them.
+    Motion { axis: Axis, component: usize },
+    /// A squareness: the angle about direction `about` (0..3: X, Y, Z) of `axis`, the later axis
+    /// of the pair.
+    Squareness { about: usize, axis: Axis },
+}
+
+impl Group {
+    /// The ISO 230-1 name: `EBX` for the pitch of X, `EC0Y` for the squareness of Y to X.
+    fn name(self) -> String {
+        match self {
+            Group::Motion { axis, component } => motion_name(axis, component),
+            Group::Squareness { about, axis } => format!("E{}0{}", ROT[about], axis.iso_letter()),
+        }
+    }
+
+    /// True for an angle (a rotation or a squareness, rad), false for a translation (m).
+    fn is_angle(self) -> bool {
+        match self {
+            Group::Motion { component, .. } => component >= 3,
+            Group::Squareness { .. } => true,
+        }
+    }
+}
+
 /// A reported quantity as a linear functional of the parameters.
 struct Functional {
     group: usize,
@@ -522,10 +551,10 @@ struct Functional {
 }
 
 /// Reporting functionals (profiles at report positions and squareness) and gauge rows.
-fn functionals(model: &Model, layout: &Layout) -> (Vec<Functional>, Vec<Vec<f64>>, Vec<String>) {
+fn functionals(model: &Model, layout: &Layout) -> (Vec<Functional>, Vec<Vec<f64>>, Vec<Group>) {
     let mut out = Vec::new();
     let mut gauge = Vec::new();
-    let mut group_names = Vec::new();
+    let mut groups = Vec::new();
     let mut buf = Vec::new();
     let n = layout.n;
     // slope functional of motion (j, k) over the report positions
@@ -553,8 +582,8 @@ fn functionals(model: &Model, layout: &Layout) -> (Vec<Functional>, Vec<Vec<f64>
             if len == 0 {
                 continue;
             }
-            let group = group_names.len();
-            group_names.push(motion_name(ax.name, k));
+            let group = groups.len();
+            groups.push(Group::Motion { axis: ax.name, component: k });
             let straightness = k < 3 && k != ax.name.index();
             let mut refrow = vec![0.0; n];
             let (mean, slope, mean_p) = ls(j, k, &mut buf);
@@ -589,10 +618,10 @@ fn functionals(model: &Model, layout: &Layout) -> (Vec<Functional>, Vec<Vec<f64>
     }
     // squareness: θ'_ab = θ_ab + σ_ab [ê_a·dδ_b + ê_b·dδ_a]
     for &(a, b, c, col) in &layout.squareness {
-        let group = group_names.len();
+        let group = groups.len();
         let na = model.axes[a].name;
         let nb = model.axes[b].name;
-        group_names.push(format!("E{}0{}", ROT[c], nb.iso_letter()));
+        groups.push(Group::Squareness { about: c, axis: nb });
         let ea = unit(na.index());
         let eb = unit(nb.index());
         let sigma = dot(cross(unit(c), eb), ea);
@@ -634,7 +663,7 @@ fn functionals(model: &Model, layout: &Layout) -> (Vec<Functional>, Vec<Vec<f64>
         debug_assert!((coef[col] - 1.0).abs() < 1e-12);
         out.push(Functional { group, coef });
     }
-    (out, gauge, group_names)
+    (out, gauge, groups)
 }
 
 /// A thin SVD: (U (rows × n), singular values s (n), V (n × n)).
@@ -778,7 +807,7 @@ pub fn identify(readings: &[Reading], model: &Model, opts: &IdOptions) -> Result
     let mut l = Mat::<f64>::from_fn(n, rank, |jj, t| v[(jj, t)] / s[t]);
     let nul = Mat::<f64>::from_fn(n, nnull, |jj, t| v[(jj, rank + t)]);
     // gauge rows in scaled coordinates, normalised
-    let (funcs, gauge, group_names) = functionals(model, &layout);
+    let (funcs, gauge, groups) = functionals(model, &layout);
     let nc = gauge.len();
     let cs = Mat::<f64>::from_fn(nc, n, |i, jj| gauge[i][jj] * d[jj]);
     let cs = {
@@ -897,14 +926,14 @@ pub fn identify(readings: &[Reading], model: &Model, opts: &IdOptions) -> Result
         let mut pair = [model.axes[a].name.iso_letter(), model.axes[b].name.iso_letter()];
         pair.sort();
         squareness.push(SquarenessEstimate {
-            name: group_names[funcs[fi].group].clone(),
+            name: groups[funcs[fi].group].name(),
             effect: format!("squareness_{}{}", pair[0].to_ascii_lowercase(), pair[1].to_ascii_lowercase()),
             value: val,
             std_error: sd,
         });
         fi += 1;
     }
-    let unobservable = describe_unobservable(model, &layout, readings, &funcs, &gn_rows, &group_names, &free, &d);
+    let unobservable = describe_unobservable(model, &layout, readings, &funcs, &gn_rows, &groups, &free, &d);
     let mut param_names = vec![String::new(); n];
     for (j, ax) in model.axes.iter().enumerate() {
         for k in 0..6 {
@@ -955,11 +984,11 @@ fn describe_unobservable(
     readings: &[Reading],
     funcs: &[Functional],
     gn_rows: &[Vec<f64>],
-    group_names: &[String],
+    groups: &[Group],
     free: &Mat<f64>,
     d: &[f64],
 ) -> Vec<String> {
-    let ng = group_names.len();
+    let ng = groups.len();
     let nfree = free.ncols();
     if nfree == 0 {
         return Vec::new();
@@ -1043,7 +1072,7 @@ fn describe_unobservable(
                 .collect();
             rms
         });
-        let names: Vec<&str> = members.iter().map(|&h| group_names[h].as_str()).collect();
+        let names: Vec<String> = members.iter().map(|&h| groups[h].name()).collect();
         // reported degrees of freedom of a group: rank of its functionals (scaled coordinates)
         let reported_dofs = |h: usize| -> usize {
             let scaled: Vec<Vec<f64>> = funcs
@@ -1087,8 +1116,8 @@ fn describe_unobservable(
                     .zip(&rms)
                     .filter(|(_, r)| **r > 1e-3 * mx)
                     .map(|(&h, r)| {
-                        let unit = if is_angle_group(&group_names[h]) { "µrad" } else { "µm" };
-                        format!("{:.3} {unit} RMS of {}", r / mx, group_names[h])
+                        let unit = if groups[h].is_angle() { "µrad" } else { "µm" };
+                        format!("{:.3} {unit} RMS of {}", r / mx, groups[h].name())
                     })
                     .collect();
                 msg.push_str(&format!(
@@ -1099,7 +1128,7 @@ fn describe_unobservable(
         }
         // lever-arm hint for angular error motions
         for &h in &members {
-            if let Some(hint) = lever_hint(model, layout, readings, &group_names[h]) {
+            if let Some(hint) = lever_hint(model, layout, readings, groups[h]) {
                 msg.push_str(&format!("; {hint}"));
             }
         }
@@ -1108,22 +1137,13 @@ fn describe_unobservable(
     msgs
 }
 
-fn is_angle_group(name: &str) -> bool {
-    let c = name.as_bytes().get(1).copied().unwrap_or(b'X');
-    matches!(c, b'A' | b'B' | b'C')
-}
-
 /// For an angular error motion: which lever arms (ρ × u)_k the readings give it, per beam direction.
-fn lever_hint(model: &Model, _layout: &Layout, readings: &[Reading], name: &str) -> Option<String> {
-    if !is_angle_group(name) || name.contains('0') {
-        return None;
-    }
-    let b = name.as_bytes();
-    // index: is_angle_group above: byte 1 is A, B or C, so k is 0..3; the names are the model's own ISO names (E +
-    // two letters), not input.
-    let k = (b[1] - b'A') as usize;
-    let axis_letter = b[2] as char;
-    let j = model.axes.iter().position(|a| a.name.iso_letter() == axis_letter)?;
+fn lever_hint(model: &Model, _layout: &Layout, readings: &[Reading], group: Group) -> Option<String> {
+    let (axis, k) = match group {
+        Group::Motion { axis, component: c @ 3.. } => (axis, c - 3),
+        Group::Motion { .. } | Group::Squareness { .. } => return None,
+    };
+    let j = model.axes.iter().position(|a| a.name == axis)?;
     let na = model.axes.len();
     // distinct lever values per distinct beam direction
     let mut per_dir: Vec<([f64; 3], Vec<f64>)> = Vec::new();
@@ -1132,6 +1152,7 @@ fn lever_hint(model: &Model, _layout: &Layout, readings: &[Reading], name: &str)
         for i in (j + 1)..na {
             rho[model.axes[i].name.index()] += r.q[i];
         }
+        // index: k = component − 3 is 0..3, the motions' components being 0..6 (`functionals`).
         let lev = cross(rho, r.direction)[k];
         let entry = per_dir.iter_mut().find(|(u, _)| (0..3).all(|c| (u[c] - r.direction[c]).abs() < 1e-9));
         match entry {
@@ -1150,7 +1171,8 @@ fn lever_hint(model: &Model, _layout: &Layout, readings: &[Reading], name: &str)
         .collect();
     if single.len() == per_dir.len() {
         Some(format!(
-            "{name}'s lever arm (point × beam)·ê_{} has a single value per beam direction [{}], so its effect cannot be told from the translations and line offsets",
+            "{}'s lever arm (point × beam)·ê_{} has a single value per beam direction [{}], so its effect cannot be told from the translations and line offsets",
+            group.name(),
             ['x', 'y', 'z'][k],
             single.join("; ")
         ))

@@ -143,12 +143,12 @@ impl SquarenessAngles {
         s
     }
 
-    /// Angle θ_ab of the pair (a, b) in chain order and the index of its third direction ĉ.
-    pub fn pair(&self, a: Axis, b: Axis) -> Option<(f64, usize)> {
+    /// Angle θ_ab of the pair (a, b) in chain order and its third direction ĉ, the axis it turns about.
+    pub fn pair(&self, a: Axis, b: Axis) -> Option<(f64, Axis)> {
         match (a, b) {
-            (Axis::X, Axis::Y) => Some((self.xy, 2)),
-            (Axis::X, Axis::Z) => Some((self.xz, 1)),
-            (Axis::Y, Axis::Z) => Some((self.yz, 0)),
+            (Axis::X, Axis::Y) => Some((self.xy, Axis::Z)),
+            (Axis::X, Axis::Z) => Some((self.xz, Axis::Y)),
+            (Axis::Y, Axis::Z) => Some((self.yz, Axis::X)),
             // Not two different axes in chain order.
             (Axis::X, Axis::X)
             | (Axis::Y, Axis::Y)
@@ -246,12 +246,12 @@ fn to_axis_frame(m: &ErrorMotions, axis: Axis, axis_rotation: DQuat) -> ErrorMot
     }
 }
 
-/// Rotation by angle θ about coordinate axis `c` (0, 1, 2 = X, Y, Z).
-fn coordinate_rotation(c: usize, theta: f64) -> DQuat {
-    match c {
-        0 => DQuat::from_rotation_x(theta),
-        1 => DQuat::from_rotation_y(theta),
-        _ => DQuat::from_rotation_z(theta),
+/// Rotation by angle θ (rad) about the machine axis `about`.
+fn coordinate_rotation(about: Axis, theta: f64) -> DQuat {
+    match about {
+        Axis::X => DQuat::from_rotation_x(theta),
+        Axis::Y => DQuat::from_rotation_y(theta),
+        Axis::Z => DQuat::from_rotation_z(theta),
     }
 }
 
@@ -446,7 +446,7 @@ impl ChainModel {
             d += e + eps.cross(p - frames[j].translation);
             for b in self.axes.iter().enumerate().skip(j + 1) {
                 if let Some((theta, c)) = self.squareness.pair(a.axis, b.1.axis) {
-                    let cv = [DVec3::X, DVec3::Y, DVec3::Z][c];
+                    let cv = DVec3::from(c.unit());
                     d += cv.cross(b.1.model.axis) * (theta * q[b.0]);
                 }
             }
@@ -1026,9 +1026,9 @@ mod tests {
         let moved = coordinate_rotation(c, theta) * (DVec3::Y * 0.5);
         assert!((moved.x - (-0.5e-3)).abs() < 1e-9, "{moved:?}");
         // Z tilted by EB0Z about Y moves +x, by EA0Z about X moves −y.
-        let z = coordinate_rotation(1, 2e-3) * DVec3::Z;
+        let z = coordinate_rotation(Axis::Y, 2e-3) * DVec3::Z;
         assert!((z.x - 2e-3).abs() < 1e-8);
-        let z = coordinate_rotation(0, 3e-3) * DVec3::Z;
+        let z = coordinate_rotation(Axis::X, 3e-3) * DVec3::Z;
         assert!((z.y + 3e-3).abs() < 1e-8);
     }
 

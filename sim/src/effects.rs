@@ -13,78 +13,60 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
-/// Defines [`EffectName`] from the catalogue's rows (`Variant = "file_name"`, with its doc comment),
-/// and from the same rows [`EffectName::ALL`] (its length counted, not written) and
-/// [`EffectName::as_str`]: a new effect is one row here.
-macro_rules! catalogue {
-    ($($(#[$doc:meta])* $variant:ident = $name:literal,)*) => {
-        /// The name of a physical effect, as written in `[effects.NAME]` (FORMAT.md §2).
-        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-        pub enum EffectName {
-            $($(#[$doc])* #[serde(rename = $name)] $variant,)*
-        }
-
-        impl EffectName {
-            /// Every effect, in catalogue order (the order of FORMAT.md §2's table).
-            pub const ALL: [EffectName; [$($name),*].len()] = [$(EffectName::$variant),*];
-
-            /// The name as written in files (snake_case), e.g. `cyclic_lead`.
-            pub fn as_str(self) -> &'static str {
-                match self {
-                    $(EffectName::$variant => $name,)*
-                }
-            }
-        }
-    };
-}
-
-catalogue! {
-    /// Positioning error motion of the axis, ISO 230-1 EXX (m).
-    Positioning = "positioning",
-    /// Straightness error motion in the first transverse direction, EYX for the X axis (m).
-    StraightnessY = "straightness_y",
-    /// Straightness error motion in the second transverse direction, EZX for the X axis (m).
-    StraightnessZ = "straightness_z",
-    /// Roll: angular error motion about the axis itself, EAX for the X axis (rad).
-    Roll = "roll",
-    /// Pitch: angular error motion about the first transverse direction, EBX for X (rad).
-    Pitch = "pitch",
-    /// Yaw: angular error motion about the second transverse direction, ECX for X (rad).
-    Yaw = "yaw",
-    /// Squareness between the X and Y axes (rad).
-    SquarenessXy = "squareness_xy",
-    /// Squareness between the X and Z axes (rad).
-    SquarenessXz = "squareness_xz",
-    /// Squareness between the Y and Z axes (rad).
-    SquarenessYz = "squareness_yz",
-    /// Lost motion on reversal of the feed drive (m).
-    Backlash = "backlash",
-    /// Periodic lead error of the ball screw (m).
-    CyclicLead = "cyclic_lead",
-    /// Linear error of the feedback scale (m/m).
-    ScaleError = "scale_error",
-    /// Thermal expansion of the screw or scale, proportional to position and temperature rise.
-    ThermalExpansion = "thermal_expansion",
-    /// Thermal drift: a position-independent offset growing with time.
-    ThermalDrift = "thermal_drift",
-    /// Encoder interpolation error, periodic in the signal period.
-    InterpolationError = "interpolation_error",
-    /// Coulomb friction (N).
-    Coulomb = "coulomb",
-    /// Viscous friction (N·s/m).
-    Viscous = "viscous",
-    /// Stribeck friction curve.
-    Stribeck = "stribeck",
-    /// LuGre dynamic friction (Canudas de Wit et al. 1995).
-    Lugre = "lugre",
-    /// Following error from the servo loops.
-    ServoLag = "servo_lag",
-    /// A structural mode seen by accelerometers.
-    Resonance = "resonance",
-    /// Gravity seen by an accelerometer through the link's tilt (no parameters).
-    GravityTilt = "gravity_tilt",
-    /// Accelerometer bias random walk.
-    AccelBiasDrift = "accel_bias_drift",
+// The catalogue's rows (`Variant = "file_name"`, with its doc comment): [`EffectName`], and from
+// the same rows [`EffectName::ALL`] (catalogue order, the order of FORMAT.md §2's table) and
+// [`EffectName::as_str`] (snake_case, e.g. `cyclic_lead`): a new effect is one row here.
+vmt_core::named_enum! {
+    /// The name of a physical effect, as written in `[effects.NAME]` (FORMAT.md §2).
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+    pub enum EffectName {
+        /// Positioning error motion of the axis, ISO 230-1 EXX (m).
+        Positioning = "positioning",
+        /// Straightness error motion in the first transverse direction, EYX for the X axis (m).
+        StraightnessY = "straightness_y",
+        /// Straightness error motion in the second transverse direction, EZX for the X axis (m).
+        StraightnessZ = "straightness_z",
+        /// Roll: angular error motion about the axis itself, EAX for the X axis (rad).
+        Roll = "roll",
+        /// Pitch: angular error motion about the first transverse direction, EBX for X (rad).
+        Pitch = "pitch",
+        /// Yaw: angular error motion about the second transverse direction, ECX for X (rad).
+        Yaw = "yaw",
+        /// Squareness between the X and Y axes (rad).
+        SquarenessXy = "squareness_xy",
+        /// Squareness between the X and Z axes (rad).
+        SquarenessXz = "squareness_xz",
+        /// Squareness between the Y and Z axes (rad).
+        SquarenessYz = "squareness_yz",
+        /// Lost motion on reversal of the feed drive (m).
+        Backlash = "backlash",
+        /// Periodic lead error of the ball screw (m).
+        CyclicLead = "cyclic_lead",
+        /// Linear error of the feedback scale (m/m).
+        ScaleError = "scale_error",
+        /// Thermal expansion of the screw or scale, proportional to position and temperature rise.
+        ThermalExpansion = "thermal_expansion",
+        /// Thermal drift: a position-independent offset growing with time.
+        ThermalDrift = "thermal_drift",
+        /// Encoder interpolation error, periodic in the signal period.
+        InterpolationError = "interpolation_error",
+        /// Coulomb friction (N).
+        Coulomb = "coulomb",
+        /// Viscous friction (N·s/m).
+        Viscous = "viscous",
+        /// Stribeck friction curve.
+        Stribeck = "stribeck",
+        /// LuGre dynamic friction (Canudas de Wit et al. 1995).
+        Lugre = "lugre",
+        /// Following error from the servo loops.
+        ServoLag = "servo_lag",
+        /// A structural mode seen by accelerometers.
+        Resonance = "resonance",
+        /// Gravity seen by an accelerometer through the link's tilt (no parameters).
+        GravityTilt = "gravity_tilt",
+        /// Accelerometer bias random walk.
+        AccelBiasDrift = "accel_bias_drift",
+    }
 }
 
 /// The six error motions of an axis (ISO 230-1), the effects whose parameters are a [`Profile`] of
@@ -156,6 +138,12 @@ impl EffectName {
             self.error_motion(),
             Some(ErrorMotion::Positioning | ErrorMotion::StraightnessY | ErrorMotion::StraightnessZ)
         )
+    }
+
+    /// True for the angular error motions (roll, pitch, yaw: values in rad); false for everything
+    /// else.
+    pub fn is_angular(self) -> bool {
+        matches!(self.error_motion(), Some(ErrorMotion::Roll | ErrorMotion::Pitch | ErrorMotion::Yaw))
     }
 
     /// The error motion this effect is, `None` for every other effect. One arm per effect and no

@@ -274,8 +274,8 @@ pub(crate) fn time_series_channels(
         if matches!(s.kind, SensorKind::EncoderLinear | SensorKind::EncoderRotary) && run.data.command().is_some() {
             continue;
         }
-        match (s.kind, steady, run.feed) {
-            (SensorKind::Accelerometer, _, Some(feed)) if run.procedure == Procedure::ConstantVelocity => {
+        match (s.kind, run.feed) {
+            (SensorKind::Accelerometer, Some(feed)) if run.procedure == Procedure::ConstantVelocity => {
                 out.push(steady_channel(
                     run,
                     name,
@@ -288,10 +288,27 @@ pub(crate) fn time_series_channels(
                     values,
                 ));
             }
-            (SensorKind::MotorForce, true, Some(feed)) => {
+            (SensorKind::MotorForce, Some(feed)) if steady => {
                 out.push(steady_channel(run, name, s, [1.0, 0.0, 0.0], [0.0; 3], &x, t, feed, values));
             }
-            _ => notes.push(format!(
+            // Every other kind (named, so that a new one is decided here), and the two above
+            // outside their runs or without a feed.
+            (
+                SensorKind::Accelerometer
+                | SensorKind::MotorForce
+                | SensorKind::Command
+                | SensorKind::EncoderRotary
+                | SensorKind::EncoderLinear
+                | SensorKind::LaserLinear
+                | SensorKind::LaserStraightness
+                | SensorKind::LaserAngular
+                | SensorKind::LaserVector
+                | SensorKind::Velocity
+                | SensorKind::Temperature
+                | SensorKind::Pressure
+                | SensorKind::Humidity,
+                _,
+            ) => notes.push(format!(
                 "run `{}` ({}), sensor `{name}` ({}): not predicted (time series: only the motor force of \
                  constant-velocity and friction-sweep runs with a `feed`, and encoders against `x_cmd`)",
                 run.name,

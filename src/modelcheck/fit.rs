@@ -1211,21 +1211,21 @@ pub(crate) fn fitted_excitation(st: &Stack, fs: &FitState) -> Option<Vec<Vec<Exc
 }
 
 /// The fitted parameters of each term as effect parameters (FORMAT.md §2 keys).
-pub(crate) fn term_params(fs: &FitState, model: &Model) -> BTreeMap<String, BTreeMap<String, f64>> {
-    let mut out = BTreeMap::new();
+pub(crate) fn term_params(fs: &FitState, model: &Model) -> EffectMap<BTreeMap<String, f64>> {
+    let mut out = EffectMap::new();
     let mut j = fs.n_offsets;
     for t in &fs.terms {
         let k = t.shape.coefs.len();
         let c = &fs.coefs[j..j + k];
         j += k;
         let me = &model.effects[t.index];
-        out.insert(t.name.as_str().to_string(), describe(t.name, &t.shape, c, &t.hyper, &me.effect.params));
+        out.insert(t.name, describe(t.name, &t.shape, c, &t.hyper, &me.effect.params));
     }
     // A Stribeck term without its own Fc rides on the model's Coulomb level: fs = Fc + (Fs − Fc).
     if let Some(t) = fs.terms.iter().find(|t| t.name == EffectName::Stribeck && !t.shape.with_fc) {
         let own = model.effects[t.index].effect.params.get("fc").unwrap_or(0.0);
         let fc = coulomb_level(model, &out) - own;
-        if let Some(v) = out.get_mut("stribeck").and_then(|m| m.get_mut("fs")) {
+        if let Some(v) = out.get_mut(EffectName::Stribeck).and_then(|m| m.get_mut("fs")) {
             *v += fc;
         }
     }

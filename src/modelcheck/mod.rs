@@ -175,14 +175,16 @@ pub(crate) mod tests {
     #[test]
     fn separating_advice_fits_the_recording() {
         use super::report::{separating_measurement as sep, Recording};
-        assert!(sep("gravity_tilt", "roll", Recording::Accelerometer).contains("two or more speeds"));
-        assert!(sep("resonance", "straightness_y", Recording::Accelerometer).contains("another speed"));
-        assert!(sep("roll", "straightness_y", Recording::Accelerometer).contains("second accelerometer"));
-        assert!(sep("roll", "straightness_y", Recording::PointTable).contains("second laser"));
-        assert!(sep("backlash", "positioning", Recording::EncoderLog).contains("slow reversal"));
-        assert!(sep("cyclic_lead", "positioning", Recording::EncoderLog).contains("longer travel"));
-        assert!(sep("cyclic_lead", "positioning", Recording::PointTable).contains("dense runs"));
-        assert!(!sep("roll", "yaw", Recording::Accelerometer).contains("laser"), "a laser advised for accelerometers");
+        use vmt_sim::effects::EffectName::{Backlash, CyclicLead, GravityTilt, Positioning, Resonance, Roll};
+        use vmt_sim::effects::EffectName::{StraightnessY, Yaw};
+        assert!(sep(GravityTilt, Roll, Recording::Accelerometer).contains("two or more speeds"));
+        assert!(sep(Resonance, StraightnessY, Recording::Accelerometer).contains("another speed"));
+        assert!(sep(Roll, StraightnessY, Recording::Accelerometer).contains("second accelerometer"));
+        assert!(sep(Roll, StraightnessY, Recording::PointTable).contains("second laser"));
+        assert!(sep(Backlash, Positioning, Recording::EncoderLog).contains("slow reversal"));
+        assert!(sep(CyclicLead, Positioning, Recording::EncoderLog).contains("longer travel"));
+        assert!(sep(CyclicLead, Positioning, Recording::PointTable).contains("dense runs"));
+        assert!(!sep(Roll, Yaw, Recording::Accelerometer).contains("laser"), "a laser advised for accelerometers");
     }
 
     use super::*;

@@ -75,7 +75,9 @@ pub struct CompareReport {
     /// RMS of residual/σ over all samples of all channels.
     pub normalized_rms: f64,
     /// Fitted parameters by effect.
-    pub fitted: BTreeMap<String, BTreeMap<String, f64>>,
+    /// Inner keys are FORMAT.md §2 parameter keys and the series coefficients and per-sensor gains
+    /// (`p3`, `gain_acc`): no fixed set, as the ranking's `params`.
+    pub fitted: EffectMap<BTreeMap<String, f64>>,
     /// Number of samples.
     pub n: usize,
     /// Number of fitted parameters (offsets included).
@@ -85,15 +87,15 @@ pub struct CompareReport {
     /// Iterations so far (history.json beside the model), if any.
     pub history: Vec<HistoryEntry>,
     /// Per fitted error motion: basis, order and why (FORMAT.md §4 `shapes`, optional).
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub shapes: BTreeMap<String, ShapeReport>,
+    #[serde(default, skip_serializing_if = "EffectMap::is_empty")]
+    pub shapes: EffectMap<ShapeReport>,
     /// The stated σ checked against the repeated readings (FORMAT.md §4 `sigma`, optional).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma: Option<SigmaCheck>,
     /// Per fitted effect, its searched hyper-parameters whose value ended at a limit of the range
     /// searched (optional `at_bound`, docs/formats.md): bounds of the search, not estimates.
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub at_bound: BTreeMap<String, Vec<Hyper>>,
+    #[serde(default, skip_serializing_if = "EffectMap::is_empty")]
+    pub at_bound: EffectMap<Vec<Hyper>>,
 }
 
 /// The note of hyper-parameters `names` at a limit of the range searched: bounds, not estimates.
@@ -106,13 +108,13 @@ pub(crate) fn bound_note(names: &[Hyper]) -> String {
 }
 
 /// Per fitted term of `fs`, its hyper-parameters at a limit of their search.
-pub(crate) fn fit_at_bound(fs: &FitState) -> BTreeMap<String, Vec<Hyper>> {
+pub(crate) fn fit_at_bound(fs: &FitState) -> EffectMap<Vec<Hyper>> {
     fs.terms
         .iter()
         .filter_map(|t| {
             let names: Vec<Hyper> =
                 t.shape.hypers.iter().zip(&t.at_bound).filter(|(_, b)| **b).map(|(h, _)| *h).collect();
-            (!names.is_empty()).then(|| (t.name.as_str().to_string(), names))
+            (!names.is_empty()).then_some((t.name, names))
         })
         .collect()
 }
@@ -120,10 +122,11 @@ pub(crate) fn fit_at_bound(fs: &FitState) -> BTreeMap<String, Vec<Hyper>> {
 /// How a fitted error motion's shape was set (FORMAT.md §4 `shapes`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ShapeReport {
-    /// The basis: `legendre` (Legendre polynomials of the position mapped onto [−1, 1] over the
-    /// range of the sample positions, no constant term) or `cosine` (cos(kπ(x − a)/(b − a)),
-    /// k ≥ 1, for a motion seen only by accelerometers).
-    pub basis: String,
+    /// The basis, written by its name: `legendre` (Legendre polynomials of the position mapped onto
+    /// [−1, 1] over the range of the sample positions, no constant term), `cosine`
+    /// (cos(kπ(x − a)/(b − a)), k ≥ 1, for a motion seen only by accelerometers), or the model's
+    /// `bspline`, `harmonics`, `table`.
+    pub basis: ShapeBasis,
     /// Highest Legendre degree used.
     pub order: u32,
     /// Why this order: `BIC over 1..N`, `model` (the model's `order`) or `default`.
@@ -139,7 +142,7 @@ pub struct ShapeReport {
 }
 
 /// The `shapes` of a fit (see [`ShapeReport`]).
-pub(crate) fn shape_reports(fs: &FitState) -> BTreeMap<String, ShapeReport> {
+pub(crate) fn shape_reports(fs: &FitState) -> EffectMap<ShapeReport> {
     fs.shapes
         .iter()
         .map(|c| {
@@ -178,9 +181,8 @@ pub(crate) fn shape_reports(fs: &FitState) -> BTreeMap<String, ShapeReport> {
                 Some(_) | None => {}
             }
             let bic_order = (c.given && c.max.is_some()).then_some(c.best);
-            let r =
-                ShapeReport { basis: c.basis.as_str().into(), order: c.order, chosen_by, bic_order, terms: c.terms };
-            (c.name.as_str().to_string(), r)
+            let r = ShapeReport { basis: c.basis, order: c.order, chosen_by, bic_order, terms: c.terms };
+            (c.name, r)
         })
         .collect()
 }
@@ -197,8 +199,8 @@ pub struct DiagnoseReport {
     /// Notes (skipped channels, estimated σ).
     pub notes: Vec<String>,
     /// Per fitted error motion of the model: basis, order and why (FORMAT.md §4 `shapes`, optional).
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub shapes: BTreeMap<String, ShapeReport>,
+    #[serde(default, skip_serializing_if = "EffectMap::is_empty")]
+    pub shapes: EffectMap<ShapeReport>,
     /// The stated σ checked against the repeated readings (FORMAT.md §4 `sigma`, optional).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma: Option<SigmaCheck>,
@@ -240,9 +242,9 @@ pub struct RankedEffect {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub at_bound: Vec<Hyper>,
     /// The orders of the model's fitted shapes with this candidate in the model, re-chosen by BIC
-    /// (optional `shape_orders`), written in the order of the names (as the map of names it was).
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty", with = "by_name")]
-    pub shape_orders: BTreeMap<EffectName, u32>,
+    /// (optional `shape_orders`).
+    #[serde(default, skip_serializing_if = "EffectMap::is_empty")]
+    pub shape_orders: EffectMap<u32>,
 }
 
 impl RankedEffect {
@@ -281,20 +283,108 @@ pub enum RankingNameError {
     Hyper(String),
 }
 
-/// Serde of a map keyed by effect in the order of the names, as the files have it (a
-/// `BTreeMap<EffectName, _>` iterates in catalogue order).
-mod by_name {
-    use super::*;
-    use serde::{Deserializer, Serializer};
+/// A map keyed by effect that iterates, and is written, in the order of the effects' names, as the
+/// files have it (`pitch` before `roll`; a `BTreeMap<EffectName, _>` iterates in catalogue order).
+/// Serialised as a JSON object keyed by the names.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EffectMap<V>(Vec<(EffectName, V)>);
 
-    pub(super) fn serialize<V: Serialize, S: Serializer>(m: &BTreeMap<EffectName, V>, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_map(m.iter().map(|(k, v)| (k.as_str(), v)).collect::<BTreeMap<_, _>>())
+impl<V> Default for EffectMap<V> {
+    fn default() -> Self {
+        EffectMap(Vec::new())
+    }
+}
+
+impl<V> EffectMap<V> {
+    /// An empty map.
+    pub fn new() -> Self {
+        EffectMap::default()
     }
 
-    pub(super) fn deserialize<'de, V: Deserialize<'de>, D: Deserializer<'de>>(
-        d: D,
-    ) -> Result<BTreeMap<EffectName, V>, D::Error> {
-        BTreeMap::deserialize(d)
+    /// Where `name` is, or would be inserted, in the order of the names.
+    fn slot(&self, name: EffectName) -> Result<usize, usize> {
+        self.0.binary_search_by(|(k, _)| k.as_str().cmp(name.as_str()))
+    }
+
+    /// Sets the value of `name`; the value it had, if any.
+    pub fn insert(&mut self, name: EffectName, value: V) -> Option<V> {
+        match self.slot(name) {
+            Ok(i) => Some(std::mem::replace(&mut self.0[i].1, value)),
+            Err(i) => {
+                self.0.insert(i, (name, value));
+                None
+            }
+        }
+    }
+
+    /// The value of `name`, if any.
+    pub fn get(&self, name: EffectName) -> Option<&V> {
+        self.slot(name).ok().map(|i| &self.0[i].1)
+    }
+
+    /// The value of `name` to change, if any.
+    pub fn get_mut(&mut self, name: EffectName) -> Option<&mut V> {
+        self.slot(name).ok().map(|i| &mut self.0[i].1)
+    }
+
+    /// True without entries.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// Number of entries.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    /// The entries in the order of the names.
+    pub fn iter(&self) -> impl Iterator<Item = (EffectName, &V)> {
+        self.0.iter().map(|(k, v)| (*k, v))
+    }
+
+    /// The entries to change, in the order of the names.
+    pub fn iter_mut(&mut self) -> impl Iterator<Item = (EffectName, &mut V)> {
+        self.0.iter_mut().map(|(k, v)| (*k, v))
+    }
+}
+
+impl<V> FromIterator<(EffectName, V)> for EffectMap<V> {
+    /// Later entries of one name replace earlier ones (as a `BTreeMap`'s do).
+    fn from_iter<I: IntoIterator<Item = (EffectName, V)>>(entries: I) -> Self {
+        let mut m = EffectMap::new();
+        for (k, v) in entries {
+            m.insert(k, v);
+        }
+        m
+    }
+}
+
+impl<'a, V> IntoIterator for &'a EffectMap<V> {
+    type Item = (EffectName, &'a V);
+    type IntoIter =
+        std::iter::Map<std::slice::Iter<'a, (EffectName, V)>, fn(&'a (EffectName, V)) -> (EffectName, &'a V)>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.0.iter().map(|(k, v)| (*k, v))
+    }
+}
+
+/// The value of `name`; panics without one (as a `BTreeMap`'s index does).
+impl<V> std::ops::Index<EffectName> for EffectMap<V> {
+    type Output = V;
+    fn index(&self, name: EffectName) -> &V {
+        self.get(name).unwrap_or_else(|| panic!("no entry for `{name}`"))
+    }
+}
+
+impl<V: Serialize> Serialize for EffectMap<V> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_map(self.0.iter().map(|(k, v)| (k.as_str(), v)))
+    }
+}
+
+impl<'de, V: Deserialize<'de>> Deserialize<'de> for EffectMap<V> {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        Ok(BTreeMap::<EffectName, V>::deserialize(d)?.into_iter().collect())
     }
 }
 
@@ -968,9 +1058,9 @@ pub(crate) fn lacks_coulomb(model: &Model) -> bool {
 }
 
 /// The model's Coulomb level: fitted (`fitted`) or known, 0 without one, N.
-pub(crate) fn coulomb_level(model: &Model, fitted: &BTreeMap<String, BTreeMap<String, f64>>) -> f64 {
+pub(crate) fn coulomb_level(model: &Model, fitted: &EffectMap<BTreeMap<String, f64>>) -> f64 {
     fitted
-        .get("coulomb")
+        .get(EffectName::Coulomb)
         .and_then(|m| m.get("fc").copied())
         .or_else(|| model.get(EffectName::Coulomb, model.axis).and_then(|m| m.effect.params.get("fc")))
         .unwrap_or(0.0)
@@ -1045,15 +1135,15 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             }
             // An interpolation error's period is chosen from the residual (the catalogue's periods
             // miss a real scale's by more than its likelihood peak is wide).
-            let c = match (n, &interp_scan) {
-                (EffectName::InterpolationError, Some((periods, independent))) => {
+            let c = match &interp_scan {
+                Some((periods, independent)) if n == EffectName::InterpolationError => {
                     for h in c.hyper_parameters.iter_mut() {
                         h.grid.clone_from(periods);
                         h.refine = true;
                     }
                     c.chosen_from(*independent)
                 }
-                _ => c,
+                Some(_) | None => c,
             };
             let sh3 = sh.clone();
             let mut start = EffectParams::default_for(n);
@@ -1070,7 +1160,8 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             }
         }
     };
-    let cands: Vec<Candidate> = names.iter().map(|&n| make(n)).collect();
+    // Each candidate with its effect (the estimator's candidate knows it by name only).
+    let cands: Vec<(EffectName, Candidate)> = names.iter().map(|&n| (n, make(n))).collect();
     let mut ranking: Vec<RankedEffect> = Vec::new();
     let sig_vec = significance_sigma(&f, &per);
     let sigma = Sigma::PerSample(sig_vec.clone());
@@ -1131,19 +1222,19 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             .fold(f64::INFINITY, f64::min)
     });
     // The lead is searched only below the capped shapes' shortest wavelength.
-    let limit_lead = |c: &mut Candidate| {
-        if let (Some(lim), true) = (lead_limit, c.effect == EffectName::CyclicLead.as_str()) {
+    let limit_lead = |n: EffectName, c: &mut Candidate| {
+        if let (Some(lim), EffectName::CyclicLead) = (lead_limit, n) {
             for h in c.hyper_parameters.iter_mut() {
                 h.grid.retain(|p| *p < lim);
             }
         }
     };
     let mut cands = cands;
-    cands.iter_mut().for_each(limit_lead);
+    cands.iter_mut().for_each(|(n, c)| limit_lead(*n, c));
     let split = split && capped.is_some();
     let total = cands.len();
-    let (lead_cands, other_cands): (Vec<Candidate>, Vec<Candidate>) =
-        cands.into_iter().partition(|c| split && c.effect == EffectName::CyclicLead.as_str());
+    let (lead_cands, other_cands): (Vec<(EffectName, Candidate)>, Vec<_>) =
+        cands.into_iter().partition(|(n, _)| split && *n == EffectName::CyclicLead);
     // Per ranked candidate: its columns at the fitted hyper-parameters, its number of searched
     // hyper-parameters, and whether a better-ranked candidate explained it away.
     let mut fitted: BTreeMap<EffectName, (Vec<Vec<f64>>, usize, bool)> = BTreeMap::new();
@@ -1151,6 +1242,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
         if group.is_empty() {
             continue;
         }
+        let group: Vec<Candidate> = group.into_iter().map(|(_, c)| c).collect();
         let base: Vec<Vec<f64>> = fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
         let input =
             vmt_estimators::modelcheck::ResidualInput { residual: &fs.residual, sigma: &sigma, base_columns: &base };
@@ -1245,7 +1337,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             let Some((cols, k_hyper, away)) = fitted.get(&r.effect) else { continue };
             let name = r.effect;
             let mut c = make(name);
-            limit_lead(&mut c);
+            limit_lead(name, &mut c);
             ctx.apply(r, name, c, cols, *k_hyper, *away).map_err(|m| {
                 VmtError::bad(data, "", format!("re-choosing the shapes with `{}` in the model: {m}", r.effect))
             })?;
@@ -1338,7 +1430,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
             p_value: None,
             searched: None,
             at_bound: vec![],
-            shape_orders: BTreeMap::new(),
+            shape_orders: EffectMap::new(),
         });
     }
     let mut shapes = shape_reports(&f.fs);
@@ -1430,11 +1522,11 @@ impl Reshape<'_, '_> {
         if free.is_empty() {
             return Ok(());
         }
-        let start: Vec<(EffectName, u32)> = match (self.joint, name) {
-            (Some(j), EffectName::CyclicLead) => {
+        let start: Vec<(EffectName, u32)> = match self.joint {
+            Some(j) if name == EffectName::CyclicLead => {
                 free.iter().map(|&(m, o)| (m, j.iter().find(|(jm, _)| *jm == m).map_or(o, |(_, jo)| *jo))).collect()
             }
-            _ => free.clone(),
+            Some(_) | None => free.clone(),
         };
         let period = period_range(name).and(r.params.get("period").copied());
         let (orders, bic_c) = rechoose_orders(st, self.model, &f.fs, w, cols, k_hyper, period, &start)?;
@@ -1573,21 +1665,24 @@ pub(crate) fn unresolved_period_note(st: &Stack, name: EffectName) -> String {
 /// What measurement separates two effects that fit the same signature on these data, on the kind
 /// of recording `rec` they were diagnosed from (a second laser for point tables; another speed, a
 /// second sensor or a reversal for time series).
-pub fn separating_measurement(a: &str, b: &str, rec: Recording) -> String {
-    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
-    let one = |x: &str| a == x || b == x;
-    let angular = |e: &str| matches!(e, "roll" | "pitch" | "yaw");
-    let linear = |e: &str| matches!(e, "positioning" | "straightness_y" | "straightness_z" | "scale_error");
-    let motion = |e: &str| e.parse::<EffectName>().is_ok_and(|e| e.is_error_motion());
+pub fn separating_measurement(a: EffectName, b: EffectName, rec: Recording) -> String {
+    use EffectName::{Backlash, CyclicLead, GravityTilt, InterpolationError, Resonance, ServoLag};
+    use EffectName::{Positioning, ScaleError, ThermalDrift, ThermalExpansion};
+    let pair = |x: EffectName, y: EffectName| (a == x && b == y) || (a == y && b == x);
+    let one = |x: EffectName| a == x || b == x;
+    let angular = EffectName::is_angular;
+    // A translation along the axis or across it: a translational error motion or the scale's error.
+    let linear = |e: EffectName| e.is_translational() || e == ScaleError;
+    let motion = EffectName::is_error_motion;
     // Time series: what separates two effects is another speed, a second sensor or a reversal.
     match rec {
-        Recording::Accelerometer if one("gravity_tilt") => {
+        Recording::Accelerometer if one(GravityTilt) => {
             return "record constant-velocity passes at two or more speeds: a guideway's shape reaches an \
                     accelerometer as v²·E″(x), growing with the square of the speed, gravity through a tilt as \
                     g·tilt(x) at every speed"
                 .into();
         }
-        Recording::Accelerometer if one("resonance") => {
+        Recording::Accelerometer if one(Resonance) => {
             return "record passes at another speed: a structural mode rings at its own frequency in time whatever \
                     the speed, a guideway's wave at a fixed wavelength in position (its frequency moves with v)"
                 .into();
@@ -1597,50 +1692,48 @@ pub fn separating_measurement(a: &str, b: &str, rec: Recording) -> String {
                     moves it in proportion to the offset, a translation does not"
                 .into();
         }
-        Recording::EncoderLog if one("backlash") => {
+        Recording::EncoderLog if one(Backlash) => {
             return "log a slow reversal with the linear scale and the motor encoder together: the table stands \
                     while the motor takes up the clearance"
                 .into();
         }
-        Recording::EncoderLog if pair("cyclic_lead", "interpolation_error") => {
+        Recording::EncoderLog if pair(CyclicLead, InterpolationError) => {
             return "log the linear scale against the motor encoder at two speeds: a cyclic lead is in the \
                     transmission (scale − motor) at the screw's lead, an interpolation error in the scale alone at \
                     its signal period"
                 .into();
         }
-        Recording::EncoderLog if (one("cyclic_lead") || one("interpolation_error")) && (motion(a) || motion(b)) => {
+        Recording::EncoderLog if (one(CyclicLead) || one(InterpolationError)) && (motion(a) || motion(b)) => {
             return "log passes over a longer travel, or give the screw's lead (or the scale's signal period) as \
                     `period`: a periodic error repeats with the same period and phase along the whole travel, a \
                     shape's waves do not"
                 .into();
         }
-        Recording::EncoderLog if one("servo_lag") => {
+        Recording::EncoderLog if one(ServoLag) => {
             return "log passes at two or more speeds and both directions: a following error grows with the \
                     speed and changes sign with the direction, a position error does neither"
                 .into();
         }
         Recording::PointTable | Recording::Accelerometer | Recording::EncoderLog => {}
     }
-    if pair("thermal_expansion", "scale_error") || pair("thermal_expansion", "positioning") {
+    if pair(ThermalExpansion, ScaleError) || pair(ThermalExpansion, Positioning) {
         "repeat the positioning test later, when the machine is warm (runs at different times): thermal expansion \
          grows with time, a scale error does not"
             .into()
-    } else if a == "thermal_drift" || b == "thermal_drift" {
+    } else if one(ThermalDrift) {
         "record the readings over a longer time, or repeat the test after a pause: a drift grows with time".into()
     } else if (angular(a) && linear(b)) || (angular(b) && linear(a)) || (angular(a) && angular(b)) {
         "measure with a second laser at another height or lateral offset (a different Abbe offset), or with an \
          angular laser: an angular error motion scales with the offset, a translation does not"
             .into()
-    } else if (a == "cyclic_lead" && b.parse::<EffectName>().is_ok_and(|e| e.is_error_motion()))
-        || (b == "cyclic_lead" && a.parse::<EffectName>().is_ok_and(|e| e.is_error_motion()))
-    {
+    } else if (a == CyclicLead && motion(b)) || (b == CyclicLead && motion(a)) {
         "measure dense runs (targets every ≤ P/3 over at least three periods P) at two or more places along \
          the travel: a lead repeats with the same period and phase everywhere, a shape does not; or give the \
          screw's lead as `period` of a fitted `cyclic_lead`"
             .into()
-    } else if pair("cyclic_lead", "interpolation_error") {
+    } else if pair(CyclicLead, InterpolationError) {
         "measure at target spacings finer than the screw lead and than the scale's signal period".into()
-    } else if a == "backlash" || b == "backlash" {
+    } else if one(Backlash) {
         "approach every target from both directions (bidirectional ISO 230-2 cycle)".into()
     } else {
         "measure at more positions, at other times or with a sensor at another offset, so that the two \
@@ -1700,7 +1793,7 @@ pub(crate) fn advice(ranking: &[RankedEffect], nrms: f64, rec: Recording) -> Str
                 "`{}` and `{}` explain the residual equally well on these data and cannot be told apart: {}.",
                 key.0,
                 key.1,
-                separating_measurement(key.0.as_str(), key.1.as_str(), rec)
+                separating_measurement(key.0, key.1, rec)
             ));
             seen.push(key);
         }

@@ -95,12 +95,11 @@ impl Excitation {
             .effects
             .iter()
             .filter(|m| !m.fit && m.effect.axis == model.axis)
-            .filter_map(|m| match (&m.effect.params, m.effect.name) {
-                (EffectParams::ErrorMotion(p), n) if n.is_translational() => {
-                    let s = c.s_motion(n);
-                    (s != 0.0 && !p.is_zero()).then_some((s, p))
-                }
-                _ => None,
+            .filter_map(|m| {
+                let n = m.effect.name;
+                let p = m.effect.params.profile().filter(|_| n.is_translational())?;
+                let s = c.s_motion(n);
+                (s != 0.0 && !p.is_zero()).then_some((s, p))
             })
             .collect();
         if motions.is_empty() {
@@ -445,82 +444,69 @@ pub(crate) struct Shape {
     pub(crate) knots: Vec<f64>,
 }
 
-/// A nonlinear hyper-parameter of a signature, searched on a grid ([`hyper_grid`]); named as the
-/// effect's parameter it fits (FORMAT.md §2), except the encoder play; written by that name
-/// ([`Hyper::as_str`]) in reports' `at_bound`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Hyper {
-    /// A periodic effect's period p, m (`cyclic_lead`, `interpolation_error`).
-    Period,
-    /// A thermal time constant τ, s.
-    Tau,
-    /// The position-loop gain kv of the servo lag, 1/s.
-    Kv,
-    /// The play b of a backlash on encoder time series, m.
-    Play,
-    /// The Stribeck velocity vs, m/s.
-    Vs,
-    /// The Stribeck shape exponent δ (dimensionless).
-    Shape,
-    /// A structural mode's natural frequency f, Hz.
-    Frequency,
-    /// A structural mode's damping ratio ζ (dimensionless).
-    Damping,
+vmt_core::named_enum! {
+    /// A nonlinear hyper-parameter of a signature, searched on a grid ([`hyper_grid`]); named as the
+    /// effect's parameter it fits (FORMAT.md §2), except the encoder play; written by that name
+    /// ([`Hyper::as_str`]) in reports' `at_bound`.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+    pub enum Hyper {
+        /// A periodic effect's period p, m (`cyclic_lead`, `interpolation_error`).
+        Period = "period",
+        /// A thermal time constant τ, s.
+        Tau = "tau",
+        /// The position-loop gain kv of the servo lag, 1/s.
+        Kv = "kv",
+        /// The play b of a backlash on encoder time series, m.
+        Play = "play",
+        /// The Stribeck velocity vs, m/s.
+        Vs = "vs",
+        /// The Stribeck shape exponent δ (dimensionless).
+        Shape = "shape",
+        /// A structural mode's natural frequency f, Hz.
+        Frequency = "frequency",
+        /// A structural mode's damping ratio ζ (dimensionless).
+        Damping = "damping",
+    }
 }
 
 impl Hyper {
-    /// Every hyper-parameter.
-    pub const ALL: [Hyper; 8] =
-        [Hyper::Period, Hyper::Tau, Hyper::Kv, Hyper::Play, Hyper::Vs, Hyper::Shape, Hyper::Frequency, Hyper::Damping];
-
-    /// The hyper-parameter named `name` ([`Hyper::as_str`]), if any.
+    /// The hyper-parameter named `name` ([`Hyper::as_str`], the name in reports and candidates,
+    /// the effect's parameter key: `period`, `tau`, …), if any.
     pub fn named(name: &str) -> Option<Hyper> {
         Hyper::ALL.into_iter().find(|h| h.as_str() == name)
     }
-
-    /// The name in reports and candidates, the effect's parameter key: `period`, `tau`, ….
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Hyper::Period => "period",
-            Hyper::Tau => "tau",
-            Hyper::Kv => "kv",
-            Hyper::Play => "play",
-            Hyper::Vs => "vs",
-            Hyper::Shape => "shape",
-            Hyper::Frequency => "frequency",
-            Hyper::Damping => "damping",
-        }
-    }
 }
 
-/// The basis of a fitted error motion's series (over the range [a, b] of the sample positions).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum ShapeBasis {
-    /// Legendre polynomials P_k(u), u = (2x − a − b)/(b − a): lasers and encoders (point tables).
-    Legendre,
-    /// P_3, P_4, then pairs cos(jπ(x − a)/(b − a)), sin(jπ(x − a)/(b − a)) ([`Shape::basis_at`]): a
-    /// motion seen only by accelerometers. They see E'' alone,
-    /// and the cosine series of E'' converges on any smooth profile (its even extension is
-    /// continuous) with columns that stay independent to hundreds of terms (wavelengths 2(b − a)/k
-    /// down to the rail waviness), where Legendre columns of the sampled accelerations become
-    /// dependent (to 1e-9) near order 270 on 3 500 samples while the waviness needs more.
-    Cosine,
-    /// `basis = "bspline"`: N clamped B-splines of degree min(3, N − 1) on N − degree − 1 uniform
-    /// interior knots over [a, b] (de Boor 1978, Cox–de Boor recursion); index k = 0..N − 1, the
-    /// first left out (Σ B_k = 1: the offsets carry the constant). `order` = N.
-    Bspline,
-    /// `basis = "harmonics"`: a slope and H harmonics of the fundamental wavelength 2(b − a):
-    /// index 1 = x − a (m), 2h = sin(2πx/λ_h), 2h + 1 = cos(2πx/λ_h), λ_h = 2(b − a)/h, h = 1..H
-    /// (of x itself, so that the fitted terms are FORMAT.md §2 `poly = [0, slope]` and
-    /// `harmonics` entries A·sin(2πx/λ + φ)). The slope: without it a machine's linear positioning
-    /// error (the commonest part) needs many harmonics (its half-range series converges as 1/h).
-    /// `order` = H.
-    Harmonics,
-    /// `basis = "table"`: values at N positions ([`Shape::knots`]: the distinct targets when N is
-    /// their number, else N uniform points over [a, b]) joined by straight lines (hat functions,
-    /// a linear B-spline), the first value left out (the offsets carry the constant). `order` = N.
-    Table,
+vmt_core::named_enum! {
+    /// The basis of a fitted error motion's series (over the range [a, b] of the sample positions),
+    /// reported by its name ([`ShapeBasis::as_str`]) in `shapes` (FORMAT.md §4).
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+    pub enum ShapeBasis {
+        /// Legendre polynomials P_k(u), u = (2x − a − b)/(b − a): lasers and encoders (point tables).
+        Legendre = "legendre",
+        /// P_3, P_4, then pairs cos(jπ(x − a)/(b − a)), sin(jπ(x − a)/(b − a)) (`Shape::basis_at`): a
+        /// motion seen only by accelerometers. They see E'' alone,
+        /// and the cosine series of E'' converges on any smooth profile (its even extension is
+        /// continuous) with columns that stay independent to hundreds of terms (wavelengths 2(b − a)/k
+        /// down to the rail waviness), where Legendre columns of the sampled accelerations become
+        /// dependent (to 1e-9) near order 270 on 3 500 samples while the waviness needs more.
+        Cosine = "cosine",
+        /// `basis = "bspline"`: N clamped B-splines of degree min(3, N − 1) on N − degree − 1 uniform
+        /// interior knots over [a, b] (de Boor 1978, Cox–de Boor recursion); index k = 0..N − 1, the
+        /// first left out (Σ B_k = 1: the offsets carry the constant). `order` = N.
+        Bspline = "bspline",
+        /// `basis = "harmonics"`: a slope and H harmonics of the fundamental wavelength 2(b − a):
+        /// index 1 = x − a (m), 2h = sin(2πx/λ_h), 2h + 1 = cos(2πx/λ_h), λ_h = 2(b − a)/h, h = 1..H
+        /// (of x itself, so that the fitted terms are FORMAT.md §2 `poly = [0, slope]` and
+        /// `harmonics` entries A·sin(2πx/λ + φ)). The slope: without it a machine's linear positioning
+        /// error (the commonest part) needs many harmonics (its half-range series converges as 1/h).
+        /// `order` = H.
+        Harmonics = "harmonics",
+        /// `basis = "table"`: values at N positions (`Shape::knots`: the distinct targets when N is
+        /// their number, else N uniform points over [a, b]) joined by straight lines (hat functions,
+        /// a linear B-spline), the first value left out (the offsets carry the constant). `order` = N.
+        Table = "table",
+    }
 }
 
 impl ShapeBasis {
@@ -555,17 +541,6 @@ impl ShapeBasis {
             ShapeBasis::Cosine => order.saturating_sub(2).max(1) as f64,
         };
         2.0 * span / per
-    }
-
-    /// The name reported in `shapes` (FORMAT.md §4).
-    pub(crate) fn as_str(self) -> &'static str {
-        match self {
-            ShapeBasis::Legendre => "legendre",
-            ShapeBasis::Cosine => "cosine",
-            ShapeBasis::Bspline => "bspline",
-            ShapeBasis::Harmonics => "harmonics",
-            ShapeBasis::Table => "table",
-        }
     }
 }
 
@@ -1107,12 +1082,12 @@ pub(crate) fn legendre_to_monomials(first: u32, c: &[f64], range: (f64, f64)) ->
 pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>> {
     let mut cols = open_loop_columns(st, name, sh, h);
     if has_closed_loop(st.chans) {
-        match (name, cols.as_mut_slice()) {
+        match cols.as_mut_slice() {
             // A wave in the scale's reading, faster than the log samples it (`close_loop_wave`).
             // (A cyclic lead, 2–60 mm, is sampled densely and takes `close_loop`: passed as a wave
             // it was no longer found against a flexible positioning shape, draw 2007.)
-            (EffectName::InterpolationError, [sin, cos]) => close_loop_wave(st, h[0], sin, cos),
-            _ => cols.iter_mut().for_each(|c| close_loop(st, c)),
+            [sin, cos] if name == EffectName::InterpolationError => close_loop_wave(st, h[0], sin, cos),
+            cols => cols.iter_mut().for_each(|c| close_loop(st, c)),
         }
     }
     cols

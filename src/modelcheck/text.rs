@@ -72,8 +72,7 @@ pub fn diagnose_text(r: &DiagnoseReport) -> String {
     // p: upper bound of the probability that noise alone gives any candidate a reduction this large.
     s += &format!("{:<22} {:>12} {:>9} {:>10} {:<12} params\n", "effect", "ΔBIC", "p", "explained", "verdict");
     for e in &r.ranking {
-        let kv: Vec<String> =
-            e.params.iter().map(|(k, v)| format!("{k}={}", param_text(e.effect.as_str(), k, *v))).collect();
+        let kv: Vec<String> = e.params.iter().map(|(k, v)| format!("{k}={}", param_text(e.effect, k, *v))).collect();
         let v = match e.verdict {
             Verdict::Significant => "significant",
             Verdict::Noise => "noise",
@@ -110,7 +109,7 @@ pub(crate) fn effect_list(names: &[EffectName]) -> String {
 
 /// One line per fitted error motion: its basis, order and why, e.g. "positioning: Legendre order 11
 /// chosen by BIC over 1..20 (model gave none)".
-pub(crate) fn shapes_text(shapes: &BTreeMap<String, ShapeReport>) -> String {
+pub(crate) fn shapes_text(shapes: &EffectMap<ShapeReport>) -> String {
     let mut s = String::new();
     for (n, sh) in shapes {
         let why = match (sh.chosen_by.as_str(), sh.bic_order) {
@@ -118,13 +117,12 @@ pub(crate) fn shapes_text(shapes: &BTreeMap<String, ShapeReport>) -> String {
             ("model", None) => "given by the model".to_string(),
             (how, _) => format!("chosen by {how} (model gave none)"),
         };
-        let series = match sh.basis.as_str() {
-            "legendre" => format!("Legendre order {}", sh.order),
-            "cosine" => format!("cosine series order {}", sh.order),
-            "bspline" => format!("{} B-splines", sh.order),
-            "harmonics" => format!("{} harmonics", sh.order),
-            "table" => format!("table of {} values", sh.order),
-            other => format!("{other} order {}", sh.order),
+        let series = match sh.basis {
+            ShapeBasis::Legendre => format!("Legendre order {}", sh.order),
+            ShapeBasis::Cosine => format!("cosine series order {}", sh.order),
+            ShapeBasis::Bspline => format!("{} B-splines", sh.order),
+            ShapeBasis::Harmonics => format!("{} harmonics", sh.order),
+            ShapeBasis::Table => format!("table of {} values", sh.order),
         };
         s += &format!("{n}: {series} {why}\n");
     }
@@ -152,12 +150,8 @@ pub(crate) fn sigma_text(sc: Option<&SigmaCheck>) -> String {
 /// A fitted or diagnosed parameter in the unit of the effect catalogue
 /// (`vmt_sim::effects::ParamSpec::unit`): `value=25.37 µm`, `period=10.49 mm`; a key the catalogue
 /// does not list (a gain per sensor, a shape coefficient) in SI as written to files.
-pub(crate) fn param_text(effect: &str, key: &str, v: f64) -> String {
-    let unit = effect
-        .parse::<vmt_sim::effects::EffectName>()
-        .ok()
-        .and_then(|e| vmt_sim::effects::param_specs(e).iter().find(|s| s.key == key))
-        .map(|s| s.unit);
+pub(crate) fn param_text(effect: EffectName, key: &str, v: f64) -> String {
+    let unit = vmt_sim::effects::param_specs(effect).iter().find(|s| s.key == key).map(|s| s.unit);
     match unit {
         Some(u) => u.display(v),
         None => fmt_num(v),

@@ -277,7 +277,7 @@ pub fn model_check_report(
         rows: cmp
             .fitted
             .iter()
-            .flat_map(|(e, p)| p.iter().map(move |(k, v)| vec![e.clone(), k.clone(), param_text(e, k, *v)]))
+            .flat_map(|(e, p)| p.iter().map(move |(k, v)| vec![e.to_string(), k.clone(), param_text(e, k, *v)]))
             .collect(),
         highlight: Vec::new(),
     };
@@ -332,7 +332,7 @@ pub fn model_check_report(
                         v,
                         e.params
                             .iter()
-                            .map(|(k, x)| format!("{k} = {}", param_text(e.effect.as_str(), k, *x)))
+                            .map(|(k, x)| format!("{k} = {}", param_text(e.effect, k, *x)))
                             .collect::<Vec<_>>()
                             .join(", "),
                     ]
