@@ -1177,8 +1177,8 @@ fn refine_jointly(
             }
         }
     };
-    if let Some(r) = refine_projected(&resid, &start, &lo, &hi, 40) {
-        for (&(ti, hi), v) in free.iter().zip(&r.theta) {
+    if let Some((theta, _)) = refine_projected_point(&resid, &start, &lo, &hi, 40) {
+        for (&(ti, hi), v) in free.iter().zip(&theta) {
             terms[ti].hyper[hi] = *v;
         }
     }

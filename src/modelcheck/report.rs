@@ -853,7 +853,14 @@ pub(crate) fn visible(st: &Stack, name: EffectName, sh: &Shape, fixed: Option<f6
         (None, Some(&h)) => hyper_grid(st, name, h).0,
         (None, None) => vec![1.0],
     };
-    grid.iter().any(|g| {
+    // A grid is scanned only when some channel reads the effect's path at all: a periodic effect
+    // through its wave's path, a Stribeck curve through a force reading.
+    let read = match (catalogue_row(name).period, name) {
+        (Some(r), _) => st.chans.iter().any(|c| r.path.sensitivity(c) != 0.0),
+        (None, EffectName::Stribeck) => st.chans.iter().any(|c| c.s_force() != 0.0),
+        (None, _) => true,
+    };
+    read && grid.iter().any(|g| {
         let h: Vec<f64> = sh.hypers.iter().map(|_| *g).collect();
         columns(st, name, sh, &h).iter().any(|c| c.iter().any(|v| *v != 0.0))
     })

@@ -34,7 +34,7 @@ pub use diagnose::{
 };
 pub use lsq::{fit_signature, solve_normal, Columns, LinearFit};
 pub use ortho::{greedy_rss, greedy_rss_with_gram, lstsq_qr, nested_rss, NestedRss, OrthoBase};
-pub use refine::{refine_projected, ProjectedResidualFn, Refined};
+pub use refine::{refine_projected, refine_projected_point, ProjectedResidualFn, Refined};
 pub use spectrum::{
     amplitude_spectrum, frequency_grid, ls_periodogram, sinusoid_reductions, sparse_frequency_scan, AmplitudeSpectrum,
     FrequencyScan, Periodogram,

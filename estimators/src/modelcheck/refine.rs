@@ -45,8 +45,8 @@ pub struct Refined {
 /// The problem in the solver's unconstrained coordinates u (θ = c + h·tanh u).
 struct Problem<'a, 'f> {
     f: &'a ProjectedResidualFn<'f>,
-    centre: &'a [f64],
-    half: &'a [f64],
+    centre: Vec<f64>,
+    half: Vec<f64>,
     u: DVector<f64>,
     /// Residual at `u` (None: invalid θ).
     r: Option<DVector<f64>>,
@@ -55,7 +55,7 @@ struct Problem<'a, 'f> {
 
 impl Problem<'_, '_> {
     fn theta(&self, u: &DVector<f64>) -> Vec<f64> {
-        u.iter().zip(self.centre.iter().zip(self.half)).map(|(u, (c, h))| c + h * u.tanh()).collect()
+        u.iter().zip(self.centre.iter().zip(&self.half)).map(|(u, (c, h))| c + h * u.tanh()).collect()
     }
 
     fn eval(&mut self, u: &DVector<f64>) -> Option<DVector<f64>> {
@@ -117,29 +117,9 @@ pub fn refine_projected(
     hi: &[f64],
     max_evaluations: usize,
 ) -> Option<Refined> {
+    let (solved, cost) = minimise(f, start, lo, hi, max_evaluations)?;
     let dim = start.len();
-    if dim == 0 || lo.len() != dim || hi.len() != dim {
-        return None;
-    }
-    if (0..dim).any(|d| !(lo[d] < hi[d]) || !start[d].is_finite()) {
-        return None;
-    }
-    let centre: Vec<f64> = (0..dim).map(|d| 0.5 * (lo[d] + hi[d])).collect();
-    let half: Vec<f64> = (0..dim).map(|d| 0.5 * (hi[d] - lo[d])).collect();
-    // Start a hair inside the box: tanh saturates at its edges.
-    let u0 =
-        DVector::from_iterator(dim, (0..dim).map(|d| ((start[d] - centre[d]) / half[d]).clamp(-0.995, 0.995).atanh()));
-    let mut problem = Problem { f, centre: &centre, half: &half, u: u0.clone(), r: None, evaluations: 0 };
-    problem.set_params(&u0);
-    let cost0 = problem.r.as_ref()?.norm_squared();
-    let patience = (max_evaluations / (dim + 1)).max(1);
-    let (solved, _report) = LevenbergMarquardt::new().with_patience(patience).minimize(problem);
     let mut evaluations = solved.evaluations;
-    let r = solved.r.as_ref()?;
-    let cost = r.norm_squared();
-    if !(cost < cost0) {
-        return None;
-    }
     let theta = solved.theta(&solved.u);
     // Gauss–Newton covariance in θ: J_θ = J_u / (dθ/du), dθ/du = h·(1 − tanh² u).
     let std_errors = match solved.jacobian() {
@@ -147,7 +127,7 @@ pub fn refine_projected(
             evaluations += dim;
             let mut jt = ju;
             for d in 0..dim {
-                let dtheta = half[d] * (1.0 - solved.u[d].tanh().powi(2));
+                let dtheta = solved.half[d] * (1.0 - solved.u[d].tanh().powi(2));
                 let mut col = jt.column_mut(d);
                 if dtheta > 0.0 {
                     col /= dtheta;
@@ -164,6 +144,49 @@ pub fn refine_projected(
         None => vec![None; dim],
     };
     Some(Refined { theta, cost, std_errors, evaluations })
+}
+
+/// [`refine_projected`] without the standard errors (they cost dim(θ) more evaluations): the
+/// refined θ and its cost ‖P⊥(θ)W^{1/2}r‖², `None` as there.
+pub fn refine_projected_point(
+    f: &ProjectedResidualFn,
+    start: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    max_evaluations: usize,
+) -> Option<(Vec<f64>, f64)> {
+    let (solved, cost) = minimise(f, start, lo, hi, max_evaluations)?;
+    Some((solved.theta(&solved.u), cost))
+}
+
+/// The Levenberg–Marquardt solve of [`refine_projected`]: the solved problem and its cost, `None`
+/// for a degenerate box, an invalid start or no decrease.
+fn minimise<'a, 'f>(
+    f: &'a ProjectedResidualFn<'f>,
+    start: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    max_evaluations: usize,
+) -> Option<(Problem<'a, 'f>, f64)> {
+    let dim = start.len();
+    if dim == 0 || lo.len() != dim || hi.len() != dim {
+        return None;
+    }
+    if (0..dim).any(|d| !(lo[d] < hi[d]) || !start[d].is_finite()) {
+        return None;
+    }
+    let centre: Vec<f64> = (0..dim).map(|d| 0.5 * (lo[d] + hi[d])).collect();
+    let half: Vec<f64> = (0..dim).map(|d| 0.5 * (hi[d] - lo[d])).collect();
+    // Start a hair inside the box: tanh saturates at its edges.
+    let u0 =
+        DVector::from_iterator(dim, (0..dim).map(|d| ((start[d] - centre[d]) / half[d]).clamp(-0.995, 0.995).atanh()));
+    let mut problem = Problem { f, centre, half, u: u0.clone(), r: None, evaluations: 0 };
+    problem.set_params(&u0);
+    let cost0 = problem.r.as_ref()?.norm_squared();
+    let patience = (max_evaluations / (dim + 1)).max(1);
+    let (solved, _report) = LevenbergMarquardt::new().with_patience(patience).minimize(problem);
+    let cost = solved.r.as_ref()?.norm_squared();
+    (cost < cost0).then_some((solved, cost))
 }
 
 #[cfg(test)]
