@@ -126,8 +126,7 @@ impl Excitation {
             if last.get().0 == x {
                 return last.get().1;
             }
-            let (_, d) = sh.basis_at(x);
-            let v = coef.iter().zip(&ks).map(|(ck, k)| ck * d[*k]).sum();
+            let v = sh.slope_sum(x, &ks, coef);
             last.set((x, v));
             v
         };
@@ -692,6 +691,48 @@ impl Shape {
                 (vals, slopes)
             }
         }
+    }
+
+    /// E'(x) = Σ_j coef_j·φ'_{ks_j}(x) (1/m times the coefficients' unit): the slopes of
+    /// [`Shape::basis_at`] summed in the order of `ks`. A cosine series with `ks` ascending runs
+    /// its recurrence once without tabulating the basis (the same terms in the same order, so the
+    /// same bits); any other shape tabulates it.
+    pub(crate) fn slope_sum(&self, x: f64, ks: &[usize], coef: &[f64]) -> f64 {
+        let ascending = ks.windows(2).all(|w| w[0] < w[1]);
+        let mut acc: f64 = std::iter::empty::<f64>().sum();
+        if self.basis != ShapeBasis::Cosine || !ascending {
+            let (_, d) = self.basis_at(x);
+            return coef.iter().zip(ks).map(|(ck, k)| ck * d[*k]).sum();
+        }
+        let (a, b) = self.range;
+        let th = std::f64::consts::PI * (x - a) / (b - a);
+        let kx = std::f64::consts::PI / (b - a);
+        let (_, d) = legendre((2.0 * x - a - b) / (b - a), 4);
+        let (s1, c1) = th.sin_cos();
+        let (mut sm, mut cm) = (s1, c1);
+        let mut next = ks.iter().zip(coef).peekable();
+        // index: the last wanted basis index (ks is ascending), at most the shape's order.
+        let top = ks.last().copied().unwrap_or(0);
+        for k in 0..=top {
+            let slope = match k {
+                0 => 0.0,
+                1 | 2 => d[k + 2] * 2.0 / (b - a),
+                _ => {
+                    let j = ((k - 3) / 2 + 1) as f64;
+                    if (k - 3) % 2 == 0 {
+                        -j * kx * sm
+                    } else {
+                        let v = j * kx * cm;
+                        (sm, cm) = (sm * c1 + cm * s1, cm * c1 - sm * s1);
+                        v
+                    }
+                }
+            };
+            if let Some((_, ck)) = next.next_if(|(kk, _)| **kk == k) {
+                acc += ck * slope;
+            }
+        }
+        acc
     }
 
     /// This shape (an error motion's, from [`shape`]) in `basis` with user order `order`
