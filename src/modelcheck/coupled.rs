@@ -486,11 +486,6 @@ pub(crate) const HELD_GAIN_ROUNDS: usize = 4;
 pub(crate) const SEQUENTIAL_GAIN_ROUNDS: usize = 2;
 /// Starts refined after the joint frequency scan: its best points at least a box apart.
 pub(crate) const COUPLED_STARTS: usize = 3;
-/// Starts refined after the scans of the later rounds ([`COUPLED_ROUND_WINDOW`]), beside the last
-/// optimum: the best point only. On the 15 000-sample set of seed 12 the second round's winner
-/// came from its best scan point (cost 1.4e5 there, against 2.2e5 and 2.6e5 at the next two,
-/// whose refinements ran to the evaluation bound and ended higher).
-pub(crate) const COUPLED_LATER_STARTS: usize = 1;
 
 /// The translation terms of `terms` that drive the mode through `st`'s fitted excitation (every
 /// excited channel has one input per such term, [`fitted_excitation`]), or None when the mode is
@@ -693,17 +688,10 @@ impl Problem<'_> {
     }
 
     /// The joint optimum: a scan over `grid` ((frequency, Hz; damping ratio) points, [`COUPLED_SCAN_LEVELS`]:
-    /// gains from [`SEQUENTIAL_GAIN_ROUNDS`] of [`Problem::alternating_gains`] from the shapes `c`), its best `picks`
+    /// gains from [`SEQUENTIAL_GAIN_ROUNDS`] of [`Problem::alternating_gains`] from the shapes `c`), its best [`COUPLED_STARTS`]
     /// points at least a box apart and the `starts` (full θ) each refined ([`Problem::refine`]); the
     /// lowest cost wins. Returns (θ, cost).
-    fn search(
-        &self,
-        grid: &[(f64, f64)],
-        picks: usize,
-        c: &[Vec<f64>],
-        g: &[f64],
-        starts: &[Vec<f64>],
-    ) -> Option<(Vec<f64>, f64)> {
+    fn search(&self, grid: &[(f64, f64)], c: &[Vec<f64>], g: &[f64], starts: &[Vec<f64>]) -> Option<(Vec<f64>, f64)> {
         let scan: Vec<(f64, Vec<f64>, f64)> = grid
             .par_iter()
             .map(|&fz| {
@@ -723,7 +711,7 @@ impl Problem<'_> {
         let mut tries: Vec<Vec<f64>> = starts.to_vec();
         let mut taken: Vec<f64> = Vec::new();
         for k in order {
-            if taken.len() >= picks {
+            if taken.len() >= COUPLED_STARTS {
                 break;
             }
             if scan[k].2.is_finite() && taken.iter().all(|f| (scan[k].0 / f - 1.0).abs() > COUPLED_FREQUENCY_BOX) {
@@ -1095,8 +1083,7 @@ pub(crate) fn refit_coupled<'a>(
     };
     let mut own = vec![fz.0, fz.1];
     own.extend(&g0);
-    let mut theta1 =
-        if held { held_theta(&pb1, &c0, &g0) } else { pb1.search(&grid, COUPLED_STARTS, &c0, &g0, &[own])?.0 };
+    let mut theta1 = if held { held_theta(&pb1, &c0, &g0) } else { pb1.search(&grid, &c0, &g0, &[own])?.0 };
     let mut cache = RawGramCache::default();
     let mut terms2 = reselect(st_mode, &pb1, &fs.terms, &theta1, &fs.target, &mut cache)?;
     // Further rounds: the scan again with the re-chosen shapes (their coefficients and gains at
@@ -1108,11 +1095,7 @@ pub(crate) fn refit_coupled<'a>(
         // The later rounds scan around the last optimum (the first scanned the whole range).
         let near: Vec<(f64, f64)> =
             grid.iter().copied().filter(|(f, _)| (f / theta1[0]).ln().abs() <= COUPLED_ROUND_WINDOW.ln()).collect();
-        theta1 = if held {
-            held_theta(&pb, &c, &g)
-        } else {
-            pb.search(&near, COUPLED_LATER_STARTS, &c, &g, &[theta1.clone()])?.0
-        };
+        theta1 = if held { held_theta(&pb, &c, &g) } else { pb.search(&near, &c, &g, &[theta1.clone()])?.0 };
         terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target, &mut cache)?;
     }
     let pb2 = problem(st_mode, &terms2, &fs.target, w)?;
@@ -1120,7 +1103,7 @@ pub(crate) fn refit_coupled<'a>(
         let (beta, _) = pb2.coupled(&theta1).ok()?;
         (held_theta(&pb2, &pb2.shape_coefs(&beta), &theta1[2..]), [false; 2])
     } else {
-        let (theta, _) = pb2.search(&[], 0, &[], &[], &[theta1.clone()])?;
+        let (theta, _) = pb2.search(&[], &[], &[], &[theta1.clone()])?;
         let at_bound = box_limits(theta1[0], &theta);
         (theta, at_bound)
     };
