@@ -253,6 +253,11 @@ impl Problem<'_> {
         (a, p)
     }
 
+    /// [`Problem::mixing`] of every channel.
+    fn mixings(&self, fz: (f64, f64), gains: &[f64], excite: Option<&[Vec<f64>]>) -> Vec<(Vec<f64>, usize)> {
+        self.chans.iter().map(|ch| self.mixing(ch, fz, gains, excite)).collect()
+    }
+
     /// The free vibration of every excited channel at (f, ζ) ([`FreePart`]), in parallel over the
     /// channels; None for a channel the mode does not reach. It depends on (f, ζ) only, so the
     /// solves of one (f, ζ) (the rounds of [`Problem::alternating_gains`], a cost after them, the
@@ -412,7 +417,7 @@ impl Problem<'_> {
     /// ([`Problem::free_parts`]): coefficients and weighted residual.
     fn coupled_with(&self, theta: &[f64], free: &[Option<FreePart>]) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
         let fz = (theta[0], theta[1]);
-        let mix: Vec<(Vec<f64>, usize)> = self.chans.iter().map(|ch| self.mixing(ch, fz, &theta[2..], None)).collect();
+        let mix = self.mixings(fz, &theta[2..], None);
         self.solve(&mix, free, true)
     }
 
@@ -644,7 +649,7 @@ impl Problem<'_> {
     ) -> Vec<f64> {
         let (mut c, mut g) = (c.to_vec(), g.to_vec());
         for _ in 0..rounds {
-            let mix: Vec<(Vec<f64>, usize)> = self.chans.iter().map(|ch| self.mixing(ch, fz, &g, Some(&c))).collect();
+            let mix = self.mixings(fz, &g, Some(&c));
             let Ok((beta, _)) = self.solve(&mix, free, false) else { break };
             g = beta[self.n_shape()..self.n_shape() + self.n_gains].to_vec();
             c = self.shape_coefs(&beta);
@@ -700,9 +705,7 @@ impl Problem<'_> {
                 let gains = self.alternating_gains_with(fz, &free, c, g, SEQUENTIAL_GAIN_ROUNDS);
                 let mut th = vec![f, fz.1];
                 th.extend(&gains);
-                let mix: Vec<(Vec<f64>, usize)> =
-                    self.chans.iter().map(|ch| self.mixing(ch, fz, &gains, None)).collect();
-                let cost = self.rss(&mix, &free).unwrap_or(f64::INFINITY);
+                let cost = self.rss(&self.mixings(fz, &gains, None), &free).unwrap_or(f64::INFINITY);
                 (f, th, cost)
             })
             .collect();
@@ -781,10 +784,10 @@ type RawGrams = Vec<Vec<f64>>;
 /// longest raw series of each (motion, range) ([`RawGramCache::series`]); the motion is part of
 /// the keys only when a channel that is not an accelerometer reads it.
 #[derive(Default)]
-struct RawGramCache(
-    BTreeMap<(Option<EffectName>, [u64; 2], u32), RawGrams>,
-    BTreeMap<(Option<EffectName>, [u64; 2]), CachedSeries>,
-);
+struct RawGramCache {
+    grams: BTreeMap<(Option<EffectName>, [u64; 2], u32), RawGrams>,
+    series: BTreeMap<(Option<EffectName>, [u64; 2]), CachedSeries>,
+}
 
 /// A series' raw columns with the shape they were computed for (all its basis indices).
 type CachedSeries = (Shape, std::sync::Arc<RawSeries>);
@@ -800,7 +803,7 @@ impl RawGramCache {
         let key = (reads.then_some(name), [sh.range.0.to_bits(), sh.range.1.to_bits()]);
         // index: a shape's order is a u32, widened.
         let fits = |c: &CachedSeries| c.0.basis == sh.basis && c.0.order as usize >= top;
-        if let Some(c) = self.1.get(&key).filter(|c| fits(c)) {
+        if let Some(c) = self.series.get(&key).filter(|c| fits(c)) {
             return (c.0.clone(), c.1.clone());
         }
         let mut shx = sh.clone();
@@ -808,7 +811,7 @@ impl RawGramCache {
         // index: `top` is a basis index of a shape (a u32 order plus its partner), narrowed back.
         shx.order = top as u32;
         let raw = std::sync::Arc::new(raw_series(st, name, &shx));
-        self.1.insert(key, (shx.clone(), raw.clone()));
+        self.series.insert(key, (shx.clone(), raw.clone()));
         (shx, raw)
     }
 
@@ -817,7 +820,7 @@ impl RawGramCache {
     fn get(&mut self, st: &Stack, w: &[f64], name: EffectName, shx: &Shape, raw: &RawSeries) -> Option<&RawGrams> {
         let reads = st.chans.iter().any(|c| !c.is_accel());
         let key = (reads.then_some(name), [shx.range.0.to_bits(), shx.range.1.to_bits()], shx.order);
-        if let std::collections::btree_map::Entry::Vacant(slot) = self.0.entry(key) {
+        if let std::collections::btree_map::Entry::Vacant(slot) = self.grams.entry(key) {
             let mut grams = Vec::with_capacity(st.chans.len());
             let mut s0 = 0;
             for c in st.chans.iter() {
@@ -832,7 +835,7 @@ impl RawGramCache {
             }
             slot.insert(grams);
         }
-        self.0.get(&key)
+        self.grams.get(&key)
     }
 }
 

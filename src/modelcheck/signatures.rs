@@ -639,45 +639,8 @@ impl Shape {
                 let slope = d.iter().map(|dk| dk * 2.0 / (b - a)).collect();
                 (p, slope)
             }
-            ShapeBasis::Cosine => {
-                // φ_1 = P_3, φ_2 = P_4 (their E'' = P_3'', P_4'' carry the profile's third
-                // derivative at the ends, where a cosine series of E'' converges slowly), then
-                // the pairs φ_{2j+1} = cos(jπ(x − a)/(b − a)), φ_{2j+2} = sin(jπ(x − a)/(b − a)),
-                // j ≥ 1: sine and cosine of period 2(b − a)/j, so that a wave of any wavelength and
-                // phase (rail waviness between two of these frequencies) is a few neighbouring pairs
-                // (the family is overcomplete on [a, b]: a smooth periodic extension exists).
-                let th = std::f64::consts::PI * (x - a) / (b - a);
-                let kx = std::f64::consts::PI / (b - a);
-                let (p, d) = legendre((2.0 * x - a - b) / (b - a), 4);
-                let (mut vals, mut slopes) = (Vec::with_capacity(top + 1), Vec::with_capacity(top + 1));
-                // cos(jθ), sin(jθ) by the angle-addition recurrence (rounding grows ≈ j·ε).
-                let (s1, c1) = th.sin_cos();
-                let (mut sm, mut cm) = (s1, c1);
-                for k in 0..=top {
-                    match k {
-                        0 => {
-                            vals.push(1.0);
-                            slopes.push(0.0);
-                        }
-                        1 | 2 => {
-                            vals.push(p[k + 2]);
-                            slopes.push(d[k + 2] * 2.0 / (b - a));
-                        }
-                        _ => {
-                            let j = ((k - 3) / 2 + 1) as f64;
-                            if (k - 3) % 2 == 0 {
-                                vals.push(cm);
-                                slopes.push(-j * kx * sm);
-                            } else {
-                                vals.push(sm);
-                                slopes.push(j * kx * cm);
-                                (sm, cm) = (sm * c1 + cm * s1, cm * c1 - sm * s1);
-                            }
-                        }
-                    }
-                }
-                (vals, slopes)
-            }
+            // The series' terms one by one ([`Shape::cosine_basis`]).
+            ShapeBasis::Cosine => self.cosine_basis(x, top).unzip(),
             ShapeBasis::Bspline => bspline_basis(x, top + 1, (a, b)),
             ShapeBasis::Table => hat_basis(x, &self.knots),
             ShapeBasis::Harmonics => {
@@ -699,40 +662,51 @@ impl Shape {
     /// same bits); any other shape tabulates it.
     pub(crate) fn slope_sum(&self, x: f64, ks: &[usize], coef: &[f64]) -> f64 {
         let ascending = ks.windows(2).all(|w| w[0] < w[1]);
-        let mut acc: f64 = std::iter::empty::<f64>().sum();
         if self.basis != ShapeBasis::Cosine || !ascending {
             let (_, d) = self.basis_at(x);
             return coef.iter().zip(ks).map(|(ck, k)| ck * d[*k]).sum();
         }
-        let (a, b) = self.range;
-        let th = std::f64::consts::PI * (x - a) / (b - a);
-        let kx = std::f64::consts::PI / (b - a);
-        let (_, d) = legendre((2.0 * x - a - b) / (b - a), 4);
-        let (s1, c1) = th.sin_cos();
-        let (mut sm, mut cm) = (s1, c1);
+        let mut acc: f64 = std::iter::empty::<f64>().sum();
         let mut next = ks.iter().zip(coef).peekable();
         // index: the last wanted basis index (ks is ascending), at most the shape's order.
         let top = ks.last().copied().unwrap_or(0);
-        for k in 0..=top {
-            let slope = match k {
-                0 => 0.0,
-                1 | 2 => d[k + 2] * 2.0 / (b - a),
-                _ => {
-                    let j = ((k - 3) / 2 + 1) as f64;
-                    if (k - 3) % 2 == 0 {
-                        -j * kx * sm
-                    } else {
-                        let v = j * kx * cm;
-                        (sm, cm) = (sm * c1 + cm * s1, cm * c1 - sm * s1);
-                        v
-                    }
-                }
-            };
+        for (k, (_, slope)) in self.cosine_basis(x, top).enumerate() {
             if let Some((_, ck)) = next.next_if(|(kk, _)| **kk == k) {
                 acc += ck * slope;
             }
         }
         acc
+    }
+
+    /// (value, slope d/dx in 1/m) of the cosine series' basis functions 0..=`top` at x, index by
+    /// index ([`ShapeBasis::Cosine`]): φ_0 = 1, φ_1 = P_3, φ_2 = P_4 (their E'' = P_3'', P_4''
+    /// carry the profile's third derivative at the ends, where a cosine series of E'' converges
+    /// slowly), then the pairs φ_{2j+1} = cos(jπ(x − a)/(b − a)), φ_{2j+2} = sin(jπ(x − a)/(b − a)),
+    /// j ≥ 1: sine and cosine of period 2(b − a)/j, so that a wave of any wavelength and phase
+    /// (rail waviness between two of these frequencies) is a few neighbouring pairs (the family is
+    /// overcomplete on [a, b]: a smooth periodic extension exists). cos(jθ), sin(jθ) by the
+    /// angle-addition recurrence (rounding grows ≈ j·ε).
+    fn cosine_basis(&self, x: f64, top: usize) -> impl Iterator<Item = (f64, f64)> {
+        let (a, b) = self.range;
+        let th = std::f64::consts::PI * (x - a) / (b - a);
+        let kx = std::f64::consts::PI / (b - a);
+        let (p, d) = legendre((2.0 * x - a - b) / (b - a), 4);
+        let (s1, c1) = th.sin_cos();
+        let (mut sm, mut cm) = (s1, c1);
+        (0..=top).map(move |k| match k {
+            0 => (1.0, 0.0),
+            1 | 2 => (p[k + 2], d[k + 2] * 2.0 / (b - a)),
+            _ => {
+                let j = ((k - 3) / 2 + 1) as f64;
+                if (k - 3) % 2 == 0 {
+                    (cm, -j * kx * sm)
+                } else {
+                    let term = (sm, j * kx * cm);
+                    (sm, cm) = (sm * c1 + cm * s1, cm * c1 - sm * s1);
+                    term
+                }
+            }
+        })
     }
 
     /// This shape (an error motion's, from [`shape`]) in `basis` with user order `order`

@@ -259,7 +259,7 @@ fn largest_eigenvalue(m: &Mat<f64>) -> f64 {
     let mut lambda = 0.0_f64;
     for _ in 0..30 {
         // (M·v)_i = column i of M (symmetric) against v: contiguous columns of the column-major M.
-        let mv: Vec<f64> = (0..p).map(|i| dot_slices(m.col_as_slice(i), &v)).collect();
+        let mv: Vec<f64> = (0..p).map(|i| super::ortho::dot(m.col_as_slice(i), &v)).collect();
         lambda = v.iter().zip(&mv).map(|(a, b)| a * b).sum();
         let norm = mv.iter().map(|x| x * x).sum::<f64>().sqrt();
         if !(norm > 0.0) {
@@ -268,20 +268,6 @@ fn largest_eigenvalue(m: &Mat<f64>) -> f64 {
         v = mv.iter().map(|x| x / norm).collect();
     }
     lambda.max(top_diag)
-}
-
-/// Σ a_i·b_i over two slices of one length, in four interleaved sums (vectorised; the same order
-/// on every run).
-fn dot_slices(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0f64; 4];
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-    let tail: f64 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
-    for (x, y) in ca.zip(cb) {
-        for k in 0..4 {
-            acc[k] += x[k] * y[k];
-        }
-    }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Least squares from the normal equations: β̂ minimising ‖y − Xβ‖² given only the Gram matrix
