@@ -36,8 +36,8 @@ pub use lsq::{fit_signature, solve_normal, Columns, LinearFit};
 pub use ortho::{greedy_rss, greedy_rss_with_gram, lstsq_qr, nested_rss, NestedRss, OrthoBase};
 pub use refine::{refine_projected, refine_projected_point, ProjectedResidualFn, Refined};
 pub use spectrum::{
-    amplitude_spectrum, frequency_grid, ls_periodogram, sinusoid_reductions, sparse_frequency_scan, AmplitudeSpectrum,
-    FrequencyScan, Periodogram,
+    amplitude_spectrum, fourier_sums, frequency_grid, ls_periodogram, sinusoid_reductions, sparse_frequency_scan,
+    AmplitudeSpectrum, FrequencyScan, Periodogram,
 };
 pub use stats::{
     autocorrelation, bin_by_edges, bin_by_label, chi_square_isf, chi_square_sf, estimate_noise_sigma, fit_percent,
