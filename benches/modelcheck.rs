@@ -6,8 +6,12 @@
 //! - encoder logs of a ball-screw axis (two passes, two crawls, a slow reversal; scale and motor
 //!   encoder), a starting model with fitted positioning and servo lag.
 //!
+//! Also `vmt compare` of the complete models on the same accelerometer sets (its channel
+//! reports hold each residual's least-squares periodogram), and the periodogram itself on an
+//! evenly spaced grid (Fourier sums) against the explicit fit at each frequency, in one run.
+//!
 //! Run with `cargo bench --bench modelcheck` (quick: `-- --warm-up-time 1 --measurement-time 5
-//! --sample-size 10`).
+//! --sample-size 10`; one group: `-- periodogram`).
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::path::Path;
 
@@ -38,5 +42,46 @@ fn diagnose(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, diagnose);
+fn compare(c: &mut Criterion) {
+    let mut g = c.benchmark_group("compare");
+    g.sample_size(10);
+    let tmp = tempfile::tempdir().unwrap();
+    for samples in [15_000usize, 100_000] {
+        let dir = tmp.path().join(format!("acc{samples}"));
+        let t = accel_set_sized(&dir, 11, AccelHidden::None, 0.0, Some(samples));
+        let model = vmt::model::read_model(&dir.join("model.toml")).unwrap();
+        let set = vmt::measurement::read(&dir).unwrap();
+        g.bench_function(format!("accelerometer passes, complete, {} samples", t.samples), |b| {
+            b.iter(|| vmt::modelcheck::compare(&model, &set, &dir).unwrap())
+        });
+    }
+    g.finish();
+}
+
+/// `ls_periodogram` of 4 000 irregular samples (a sinusoid in noise) on `frequency_grid`'s 5×
+/// oversampled grid (about 10 000 frequencies): the evenly spaced grid (Fourier sums), and the
+/// same grid with its last frequency moved by a hundredth of a step, which is not evenly spaced
+/// and takes the explicit fit at every frequency (the reference).
+fn periodogram(c: &mut Criterion) {
+    use vmt_estimators::modelcheck::{frequency_grid, ls_periodogram, Sigma};
+    let mut g = c.benchmark_group("periodogram");
+    g.sample_size(10);
+    let n = 4_000;
+    let x: Vec<f64> = (0..n).map(|i| 1e-3 * (i as f64 + 0.6 * ((i as f64 * 0.618).fract() - 0.5))).collect();
+    let r: Vec<f64> =
+        x.iter().enumerate().map(|(i, x)| (x * 300.0).sin() + 0.3 * ((i as f64 * 0.377).fract() - 0.5)).collect();
+    let even = frequency_grid(&x, 5.0, None).unwrap();
+    let mut uneven = even.clone();
+    let last = uneven.len() - 1;
+    uneven[last] += 0.01 * (even[1] - even[0]);
+    g.bench_function(format!("{n} samples, {} frequencies, evenly spaced (Fourier sums)", even.len()), |b| {
+        b.iter(|| ls_periodogram(&x, &r, &Sigma::Unknown, &even).unwrap())
+    });
+    g.bench_function(format!("{n} samples, {} frequencies, explicit fit at each (reference)", uneven.len()), |b| {
+        b.iter(|| ls_periodogram(&x, &r, &Sigma::Unknown, &uneven).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(benches, diagnose, compare, periodogram);
 criterion_main!(benches);
