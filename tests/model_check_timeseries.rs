@@ -177,12 +177,13 @@ fn loop_rates<T: Send>(
             let t = make(&dir, seed);
             let o = run_loop(&dir, add);
             eprintln!(
-                "{label} draw {seed}: {}; nrms {:.2} first {:?} after {:?} ({:.1} s) {}",
+                "{label} draw {seed}: {}; nrms {:.2} first {:?} after {:?} ({:.1} s) fitted after {} {}",
                 describe(&t),
                 o.nrms_before,
                 o.first.as_ref().map(|f| (&f.0, &f.1)),
                 o.nrms_after,
                 o.seconds,
+                o.fitted_after.as_ref().map_or("-".to_string(), |v| v.to_string()),
                 o.error.clone().unwrap_or_default()
             );
             (t, o)
@@ -208,7 +209,12 @@ fn encoder_rates(hidden: EncoderHidden, draws: u64, add: bool) -> Vec<(EncoderTr
         draws,
         add,
         |dir, seed| encoder_set(dir, 2000 + seed, hidden),
-        |t| format!("{} samples, {:?}", t.samples, t.feedback),
+        |t| {
+            format!(
+                "{} samples, {:?}, backlash {:.4e} m, lead {:.4e} m, interpolation period {:.4e} m",
+                t.samples, t.feedback, t.backlash, t.lead, t.interp_period
+            )
+        },
     )
 }
 
