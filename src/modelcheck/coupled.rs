@@ -41,7 +41,7 @@
 
 use super::*;
 use rayon::prelude::*;
-use vmt_estimators::modelcheck::{greedy_rss_with_gram, solve_normal, Columns, NestedRss};
+use vmt_estimators::modelcheck::{greedy_rss_with_gram, solve_normal, Columns, NestedRss, NormalFactor};
 
 /// What a basis index of a fitted error motion's series is in time at constant velocity.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -317,16 +317,6 @@ impl Problem<'_> {
             }
         }
         Ok((beta, resid))
-    }
-
-    /// The weighted residual sum of squares of [`Problem::solve`] from its normal equations,
-    /// yᵀy − β̂ᵀb (N·β̂ = b), without forming the residual: for ranking the points of a scan (the
-    /// subtraction leaves about 16 − log10(yᵀy/RSS) digits, 10 or more on these data).
-    fn rss(&self, mix: &[(Vec<f64>, usize)], free: &[Option<FreePart>]) -> Result<f64, ModelCheckError> {
-        let (nm, b) = self.normal_equations(mix, free);
-        let beta = solve_normal(&nm, &b)?;
-        let yy: f64 = self.chans.iter().map(|c| c.yy).sum();
-        Ok((yy - beta.iter().zip(&b).map(|(x, y)| x * y).sum::<f64>()).max(0.0))
     }
 
     /// The normal equations (N, q × q row-major, and b) of [`Problem::solve`]'s unknowns, summed
@@ -668,34 +658,45 @@ impl Problem<'_> {
 
     /// The gains at (f, ζ) by up to `steps` Gauss–Newton steps under variable projection from `g`
     /// (the shapes, offsets, other terms and free vibration profiled out; `free`:
-    /// [`Problem::free_parts`] at (f, ζ)). With β̂ the coupled fit's coefficients at g and
-    /// r = y − A(g)·β̂ its weighted residual, the derivative of Aβ̂ in gain j is the column
-    /// d_j = Σ_k c_{m,k}·R_k on gain j's sensor and input (c the shapes in β̂; [`Problem::mixing`]
-    /// with `excite`), and Kaufman's Jacobian −P⊥·d_j gives the step
+    /// [`Problem::free_parts`] at (f, ζ)), and the weighted RSS of the coupled fit at them (∞ where
+    /// it cannot be solved). With β̂ the coupled fit's coefficients at g and r = y − A(g)·β̂ its
+    /// weighted residual, the derivative of Aβ̂ in gain j is the column d_j = Σ_k c_{m,k}·R_k on
+    /// gain j's sensor and input (c the shapes in β̂; [`Problem::mixing`] with `excite`), and
+    /// Kaufman's Jacobian −P⊥·d_j gives the step
     ///
     /// ```text
     /// Δg = (JᵀJ)⁻¹·(dᵀr),   (JᵀJ)_jk = d_jᵀd_k − (Aᵀd_j)ᵀ·N⁻¹·(Aᵀd_k),   N = AᵀA
     /// ```
     ///
     /// every product from the channels' Gram matrices. A step is kept only when it lowers the
-    /// weighted RSS; the first that does not ends the search.
-    fn projected_gains(&self, fz: (f64, f64), free: &[Option<FreePart>], g: &[f64], steps: usize) -> Vec<f64> {
-        let mut g = g.to_vec();
+    /// weighted RSS; the first that does not ends the search. The RSS comes from the normal
+    /// equations, yᵀy − β̂ᵀb (N·β̂ = b), without forming the residual: it ranks the points of a
+    /// scan (the subtraction leaves about 16 − log10(yᵀy/RSS) digits, 10 or more on these data).
+    fn projected_gains(&self, fz: (f64, f64), free: &[Option<FreePart>], g: &[f64], steps: usize) -> (Vec<f64>, f64) {
         let ng = self.n_gains;
         let ns = self.n_shape();
         let yy: f64 = self.chans.iter().map(|c| c.yy).sum();
-        for _ in 0..steps {
-            let mix = self.mixings(fz, &g, None);
+        // The coupled fit at gains g: its mixes, the factor of its normal equations, their
+        // right-hand side, its coefficients, and yᵀy − β̂ᵀb.
+        let fit = |g: &[f64]| {
+            let mix = self.mixings(fz, g, None);
             let (nm, b) = self.normal_equations(&mix, free);
-            let Ok(beta) = solve_normal(&nm, &b) else { break };
-            let before = yy - dot(&beta, &b);
-            let (p, q) = (mix.first().map_or(0, |m| m.1), b.len());
-            let c = self.shape_coefs(&beta);
+            let factor = NormalFactor::new(&nm, b.len()).ok()?;
+            let beta = factor.solve(&b).ok()?;
+            let left = yy - dot(&beta, &b);
+            Some((mix, factor, beta, left))
+        };
+        let mut g = g.to_vec();
+        let Some(mut at) = fit(&g) else { return (g, f64::INFINITY) };
+        for _ in 0..steps {
+            let (mix, factor, beta, before) = &at;
+            let (p, q) = (mix.first().map_or(0, |m| m.1), beta.len());
+            let c = self.shape_coefs(beta);
             // dᵀr (per gain), Aᵀd (per gain, q values) and dᵀd (ng × ng), summed over the channels.
             let mut dr = vec![0.0; ng];
             let mut ad = vec![vec![0.0; q]; ng];
             let mut dd = vec![0.0; ng * ng];
-            for ((ch, (a, _)), fp) in self.chans.iter().zip(&mix).zip(free) {
+            for ((ch, (a, _)), fp) in self.chans.iter().zip(mix).zip(free) {
                 if !ch.accel {
                     continue;
                 }
@@ -733,19 +734,22 @@ impl Problem<'_> {
             }
             let mut jtj = dd;
             for k in 0..ng {
-                let Ok(sol) = solve_normal(&nm, &ad[k]) else { return g };
+                let Ok(sol) = factor.solve(&ad[k]) else { return (g, at.3.max(0.0)) };
                 for j in 0..ng {
                     jtj[j * ng + k] -= dot(&ad[j], &sol);
                 }
             }
             let Ok(step) = solve_normal(&jtj, &dr) else { break };
             let trial: Vec<f64> = g.iter().zip(&step).map(|(x, s)| x + s).collect();
-            match self.rss(&self.mixings(fz, &trial, None), free) {
-                Ok(after) if after < before => g = trial,
+            match fit(&trial) {
+                Some(next) if next.3.max(0.0) < *before => {
+                    g = trial;
+                    at = next;
+                }
                 _ => break,
             }
         }
-        g
+        (g, at.3.max(0.0))
     }
 
     /// Weighted RSS of the coupled fit at θ (∞ where it cannot be solved).
@@ -795,10 +799,9 @@ impl Problem<'_> {
                 let f = fz.0;
                 let free = self.free_parts(fz);
                 let gains = self.alternating_gains_with(fz, &free, c, g, SEQUENTIAL_GAIN_ROUNDS);
-                let gains = self.projected_gains(fz, &free, &gains, SCAN_GAIN_STEPS);
+                let (gains, cost) = self.projected_gains(fz, &free, &gains, SCAN_GAIN_STEPS);
                 let mut th = vec![f, fz.1];
                 th.extend(&gains);
-                let cost = self.rss(&self.mixings(fz, &gains, None), &free).unwrap_or(f64::INFINITY);
                 (f, th, cost)
             })
             .collect();

@@ -286,54 +286,96 @@ fn largest_eigenvalue(m: &Mat<f64>) -> f64 {
 /// cheap to update while the columns themselves are not (many samples, few columns that change by
 /// small per-block transforms). Errors on a size mismatch or a non-finite entry.
 pub fn solve_normal(gram: &[f64], b: &[f64]) -> Result<Vec<f64>, ModelCheckError> {
-    use faer::dyn_stack::{MemBuffer, MemStack};
-    use faer::linalg::cholesky::llt_pivoting::factor::{cholesky_in_place, cholesky_in_place_scratch};
     let p = b.len();
     check_len("solve_normal: Gram matrix", p * p, gram.len())?;
     check_finite("solve_normal: Gram matrix", gram)?;
     check_finite("solve_normal: right-hand side", b)?;
-    let d: Vec<f64> = (0..p).map(|j| gram[j * p + j].max(0.0).sqrt()).collect();
-    let inv = |j: usize| if d[j] > 0.0 { 1.0 / d[j] } else { 0.0 };
-    let mut m = Mat::<f64>::from_fn(p, p, |i, j| gram[i * p + j] * inv(i) * inv(j));
-    let cut = DEPENDENT_PIVOT * largest_eigenvalue(&m);
-    let (mut perm, mut perm_inv) = (vec![0usize; p], vec![0usize; p]);
-    let par = faer::Par::Seq; // sequential: the same bits on any thread count
-    let mut buf = MemBuffer::new(cholesky_in_place_scratch::<usize, f64>(p, par, Default::default()));
-    let (info, _) =
-        cholesky_in_place(m.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut buf), Default::default())
-            .map_err(|e| ModelCheckError::Numerical(format!("solve_normal: pivoted Cholesky: {e:?}")))?;
-    // perm[j]: the column of M at step j; c = P·D⁻¹b.
-    let r = (0..info.rank).take_while(|&j| m[(j, j)] * m[(j, j)] >= cut).count();
-    let c: Vec<f64> = (0..p).map(|j| b[perm[j]] * inv(perm[j])).collect();
-    let z = if r == p {
-        // Full rank: L·Lᵀ·z = c by two triangular solves.
-        let mut z = c;
-        for j in 0..p {
-            let s: f64 = (0..j).map(|k| m[(j, k)] * z[k]).sum();
-            z[j] = (z[j] - s) / m[(j, j)];
-        }
-        for j in (0..p).rev() {
-            let s: f64 = (j + 1..p).map(|k| m[(k, j)] * z[k]).sum();
-            z[j] = (z[j] - s) / m[(j, j)];
-        }
-        z
-    } else {
-        // Rank r: P·M·Pᵀ ≈ L·Lᵀ with L the first r columns (p × r). The minimum-norm z of
-        // L·Lᵀ·z = c is z = L·G⁻¹·G⁻¹·Lᵀ·c, G = LᵀL (r × r, positive definite).
-        let l = Mat::<f64>::from_fn(p, r, |i, j| if i >= j { m[(i, j)] } else { 0.0 });
-        let g = gram_of(l.as_ref());
-        let g = nalgebra::DMatrix::from_fn(r, r, |i, j| g[(i, j)]);
-        let chol = nalgebra::Cholesky::new(g)
-            .ok_or_else(|| ModelCheckError::Numerical("solve_normal: LᵀL not positive definite".into()))?;
-        let ltc = nalgebra::DVector::from_fn(r, |j, _| (j..p).map(|i| l[(i, j)] * c[i]).sum::<f64>());
-        let y = chol.solve(&chol.solve(&ltc));
-        (0..p).map(|i| (0..r.min(i + 1)).map(|j| l[(i, j)] * y[j]).sum()).collect()
-    };
-    let mut beta = vec![0.0; p];
-    for (j, zj) in z.iter().enumerate() {
-        beta[perm[j]] = zj * inv(perm[j]);
+    NormalFactor::new(gram, p)?.solve(b)
+}
+
+/// The factor of one Gram matrix N (p × p) in [`solve_normal`], for several right-hand sides:
+/// each [`NormalFactor::solve`] gives the same bits as `solve_normal(N, b)`.
+pub struct NormalFactor {
+    /// 1/D_jj (0 for a column with zero norm).
+    inv: Vec<f64>,
+    /// The pivoted Cholesky factor L of P·M·Pᵀ in the lower triangle, and P (perm[j]: the column
+    /// of M at step j).
+    m: Mat<f64>,
+    perm: Vec<usize>,
+    /// Below full rank: the first r columns of L (p × r) and the Cholesky factor of G = LᵀL.
+    low: Option<(Mat<f64>, nalgebra::Cholesky<f64, nalgebra::Dyn>)>,
+}
+
+impl NormalFactor {
+    /// Factors `gram` (p × p, row-major, symmetric, finite; [`solve_normal`] for the method).
+    /// Errors on a size mismatch, a non-finite entry or a failed factorisation.
+    pub fn new(gram: &[f64], p: usize) -> Result<Self, ModelCheckError> {
+        use faer::dyn_stack::{MemBuffer, MemStack};
+        use faer::linalg::cholesky::llt_pivoting::factor::{cholesky_in_place, cholesky_in_place_scratch};
+        check_len("solve_normal: Gram matrix", p * p, gram.len())?;
+        check_finite("solve_normal: Gram matrix", gram)?;
+        let inv: Vec<f64> =
+            (0..p).map(|j| gram[j * p + j].max(0.0).sqrt()).map(|d| if d > 0.0 { 1.0 / d } else { 0.0 }).collect();
+        let mut m = Mat::<f64>::from_fn(p, p, |i, j| gram[i * p + j] * inv[i] * inv[j]);
+        let cut = DEPENDENT_PIVOT * largest_eigenvalue(&m);
+        let (mut perm, mut perm_inv) = (vec![0usize; p], vec![0usize; p]);
+        let par = faer::Par::Seq; // sequential: the same bits on any thread count
+        let mut buf = MemBuffer::new(cholesky_in_place_scratch::<usize, f64>(p, par, Default::default()));
+        let (info, _) =
+            cholesky_in_place(m.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut buf), Default::default())
+                .map_err(|e| ModelCheckError::Numerical(format!("solve_normal: pivoted Cholesky: {e:?}")))?;
+        let r = (0..info.rank).take_while(|&j| m[(j, j)] * m[(j, j)] >= cut).count();
+        let low = if r == p {
+            None
+        } else {
+            // Rank r: P·M·Pᵀ ≈ L·Lᵀ with L the first r columns (p × r), G = LᵀL (r × r, positive
+            // definite).
+            let l = Mat::<f64>::from_fn(p, r, |i, j| if i >= j { m[(i, j)] } else { 0.0 });
+            let g = gram_of(l.as_ref());
+            let g = nalgebra::DMatrix::from_fn(r, r, |i, j| g[(i, j)]);
+            let chol = nalgebra::Cholesky::new(g)
+                .ok_or_else(|| ModelCheckError::Numerical("solve_normal: LᵀL not positive definite".into()))?;
+            Some((l, chol))
+        };
+        Ok(Self { inv, m, perm, low })
     }
-    Ok(beta)
+
+    /// β̂ with N·β̂ = b ([`solve_normal`]). Errors on a size mismatch or a non-finite entry of b.
+    pub fn solve(&self, b: &[f64]) -> Result<Vec<f64>, ModelCheckError> {
+        let p = self.perm.len();
+        check_len("solve_normal: right-hand side", p, b.len())?;
+        check_finite("solve_normal: right-hand side", b)?;
+        let (m, perm, inv) = (&self.m, &self.perm, &self.inv);
+        // c = P·D⁻¹b.
+        let c: Vec<f64> = (0..p).map(|j| b[perm[j]] * inv[perm[j]]).collect();
+        let z = match &self.low {
+            None => {
+                // Full rank: L·Lᵀ·z = c by two triangular solves.
+                let mut z = c;
+                for j in 0..p {
+                    let s: f64 = (0..j).map(|k| m[(j, k)] * z[k]).sum();
+                    z[j] = (z[j] - s) / m[(j, j)];
+                }
+                for j in (0..p).rev() {
+                    let s: f64 = (j + 1..p).map(|k| m[(k, j)] * z[k]).sum();
+                    z[j] = (z[j] - s) / m[(j, j)];
+                }
+                z
+            }
+            Some((l, chol)) => {
+                // The minimum-norm z of L·Lᵀ·z = c is z = L·G⁻¹·G⁻¹·Lᵀ·c.
+                let r = l.ncols();
+                let ltc = nalgebra::DVector::from_fn(r, |j, _| (j..p).map(|i| l[(i, j)] * c[i]).sum::<f64>());
+                let y = chol.solve(&chol.solve(&ltc));
+                (0..p).map(|i| (0..r.min(i + 1)).map(|j| l[(i, j)] * y[j]).sum()).collect()
+            }
+        };
+        let mut beta = vec![0.0; p];
+        for (j, zj) in z.iter().enumerate() {
+            beta[perm[j]] = zj * inv[perm[j]];
+        }
+        Ok(beta)
+    }
 }
 
 /// Columns of one length stored together (column-major, `n` rows), for the products a least

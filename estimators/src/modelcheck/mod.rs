@@ -32,7 +32,7 @@ pub use diagnose::{
     fit_candidate, forward_select, golden_max, rank_candidates, Candidate, CandidateFit, DiagnoseConfig, Diagnosis,
     ForwardSelection, HyperParameter, RankingEntry, ResidualInput, Verdict,
 };
-pub use lsq::{fit_signature, solve_normal, Columns, LinearFit};
+pub use lsq::{fit_signature, solve_normal, Columns, LinearFit, NormalFactor};
 pub use ortho::{greedy_rss, greedy_rss_with_gram, lstsq_qr, nested_rss, NestedRss, OrthoBase};
 pub use refine::{refine_projected, refine_projected_point, ProjectedResidualFn, Refined};
 pub use spectrum::{

@@ -182,9 +182,8 @@ fn ls_periodogram_even(x: &[f64], r: &[f64], w: &[f64], chi0: f64, frequencies: 
     let q: Vec<f64> = w.iter().map(|v| v * v).collect();
     let sw: f64 = q.iter().sum();
     let ry: f64 = q.iter().zip(r).map(|(a, b)| a * b).sum();
-    let as_complex = |v: &mut dyn Iterator<Item = f64>| v.map(|re| Complex64::new(re, 0.0)).collect::<Vec<Complex64>>();
-    let qr = as_complex(&mut q.iter().zip(r).map(|(a, b)| a * b));
-    let qc = as_complex(&mut q.iter().copied());
+    let qr: Vec<Complex64> = q.iter().zip(r).map(|(a, b)| Complex64::new(a * b, 0.0)).collect();
+    let qc: Vec<Complex64> = q.iter().map(|a| Complex64::new(*a, 0.0)).collect();
     // e^{−iθ}: the real part is the cosine sum, minus the imaginary part the sine sum.
     let sum_r = fourier_sums(x, &qr, f0, df, m);
     let sum_1 = fourier_sums(x, &qc, f0, df, m);
@@ -286,7 +285,7 @@ pub fn fourier_sums(x: &[f64], a: &[Complex64], f0: f64, df: f64, m: usize) -> V
             grid[g] += v;
         }
         fft.process(&mut grid);
-        for (k, (o, c)) in out.iter_mut().zip(&coef).enumerate().take(m) {
+        for (k, (o, c)) in out.iter_mut().zip(&coef).enumerate() {
             *o += c * grid[k];
         }
         p += 1;
@@ -731,11 +730,7 @@ mod tests {
     /// fine step (1/(4·0.4 m)) on 20 random periods, with noise at 1/5 of the amplitude.
     #[test]
     fn sparse_scan_finds_a_short_period_from_a_crawl_and_sparse_passes() {
-        let mut seed = 12345u64;
-        let mut u = move || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut u = uniform(12345);
         for _ in 0..20 {
             let p = 10e-6 * 6f64.powf(u());
             let phi = TAU * u();
