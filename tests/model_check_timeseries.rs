@@ -693,34 +693,46 @@ fn accel_mode_at_its_damping_limit_is_flagged() {
 
 /// A given mode (`fit = false`, frequency and damping stated) is part of the prediction: its mode
 /// shape and free vibration are linear parts no model states, so `compare` fits them with the
-/// stated frequency and damping held (a note says so). Generator draw 1001 with a hidden mode;
-/// the model given the true mode must fit to the noise (normalised RMS ≤ 1.3, the issue's
+/// stated frequency and damping held (a note says so). Generator draws 1001 and 1012 with a hidden
+/// mode; the model given the true mode must fit to the noise (normalised RMS ≤ 1.3, the issue's
 /// threshold after `add`) and report the stated frequency unchanged, where the model without it
-/// leaves the mode in the residual (> 1.3 on this draw). Until this stop a given resonance was
-/// predicted as zero: the two compares gave the same RMS.
+/// leaves the mode in the residual (> 1.3 on these draws). Until session 12 a given resonance was
+/// predicted as zero: the two compares gave the same RMS. Until session 20 a given mode's gains
+/// came from four alternations of gains and shapes alone, which creep (`SCAN_GAIN_STEPS`): draw
+/// 1012 given its true mode (35.92 Hz, ζ 0.0136) ended at normalised RMS 11.07; with
+/// Gauss–Newton gains after them, 0.977.
 #[test]
 fn a_given_resonance_is_predicted_with_its_stated_frequency() {
     let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("r1001");
-    let t = accel_set(&dir, 1001, AccelHidden::Resonance, 200.0);
-    let (f, z) = t.mode.unwrap();
-    let text = std::fs::read_to_string(dir.join("model.toml")).unwrap();
-    let given = dir.with_extension("given.toml");
-    std::fs::write(&given, format!("{text}[effects.resonance]\nfit = false\nfrequency = {f:?}\ndamping = {z:?}\n"))
-        .unwrap();
-    let runs: Vec<Result<serde_json::Value, String>> = [dir.join("model.toml"), given]
+    let fails: Vec<String> = [1001, 1012]
         .into_par_iter()
-        .map(|m| vmt(&["compare", "--model", s(&m), "--data", s(&dir), "--json"]))
+        .filter_map(|seed| {
+            let dir = tmp.path().join(format!("r{seed}"));
+            let t = accel_set(&dir, seed, AccelHidden::Resonance, 200.0);
+            let (f, z) = t.mode.unwrap();
+            let text = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+            let given = dir.with_extension("given.toml");
+            std::fs::write(
+                &given,
+                format!("{text}[effects.resonance]\nfit = false\nfrequency = {f:?}\ndamping = {z:?}\n"),
+            )
+            .unwrap();
+            let without = vmt(&["compare", "--model", s(&dir.join("model.toml")), "--data", s(&dir), "--json"]);
+            let without = without.unwrap()["normalized_rms"].as_f64().unwrap_or(f64::NAN);
+            let c = vmt(&["compare", "--model", s(&given), "--data", s(&dir), "--json"]).unwrap();
+            let with = c["normalized_rms"].as_f64().unwrap_or(f64::NAN);
+            let line = format!(
+                "draw {seed}, mode {f:.3} Hz ζ {z:.4}: normalised RMS without {without:.3}, with the given mode {with:.3}"
+            );
+            eprintln!("{line}");
+            let notes = c["notes"].as_array().unwrap();
+            let noted = notes.iter().any(|n| n.as_str().unwrap_or("").contains("`resonance` is given"));
+            let fa = c["fitted"]["resonance"]["frequency"].as_f64();
+            let held = fa.is_none() || fa == Some(f);
+            (!(without > 1.3 && with <= 1.3 && noted && held)).then(|| format!("{line}; noted {noted}, frequency {fa:?}"))
+        })
         .collect();
-    let without = runs[0].as_ref().unwrap()["normalized_rms"].as_f64().unwrap_or(f64::NAN);
-    let c = runs[1].as_ref().unwrap();
-    let with = c["normalized_rms"].as_f64().unwrap_or(f64::NAN);
-    eprintln!("mode {f:.3} Hz ζ {z:.4}: normalised RMS without {without:.3}, with the given mode {with:.3}");
-    assert!(without > 1.3 && with <= 1.3, "without {without:.3}, with the given mode {with:.3}");
-    let notes = c["notes"].as_array().unwrap();
-    assert!(notes.iter().any(|n| n.as_str().unwrap_or("").contains("`resonance` is given")), "{notes:?}");
-    let fa = c["fitted"]["resonance"]["frequency"].as_f64();
-    assert!(fa.is_none() || fa == Some(f), "a given frequency moved: {fa:?} for {f}");
+    assert!(fails.is_empty(), "{fails:#?}");
 }
 
 /// A strong cyclic lead on an encoder log (generator draw 2003: semi-closed loop, lead 6.861 mm,
