@@ -1,6 +1,7 @@
 //! Reports: compare and diagnose.
 
 use super::*;
+use vmt_sim::effects::InterpolationError;
 
 // ------------------------------------------------------------------------------------------
 // Reports.
@@ -500,21 +501,31 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
         // absorbed it; kv is fixed far better than that by the lag v/kv of the passes).
         // A sampled loop passes the transmission with the gain g of [`Stack::loop_gain`]: one
         // Gauss–Newton step per refit, held once it moves less than LOOP_GAIN_HOLD.
+        // A fitted interpolation error is read at the table's position (`table_position`), which
+        // the fitted error itself sets: refit until the shift it gives moves less than
+        // INTERP_SHIFT_HOLD·σ on every sample (the first refit leaves an error of the order
+        // (2πA/p)²·A/8 in the shift: one or two refits).
         for _ in 0..LOOP_KV_REFITS {
-            if !has_closed_loop(chans) {
-                break;
-            }
+            let closed = has_closed_loop(chans);
             let kv = fs.terms.iter().find(|t| t.name == EffectName::ServoLag).and_then(|t| t.hyper.first().copied());
-            let kv_moved = kv.filter(|kv| *kv > 0.0 && (kv / st.loop_kv - 1.0).abs() > LOOP_KV_HOLD);
+            let kv_moved = kv.filter(|kv| closed && *kv > 0.0 && (kv / st.loop_kv - 1.0).abs() > LOOP_KV_HOLD);
             let prediction: Vec<f64> = st.y().iter().zip(&fs.residual).map(|(y, r)| y - r).collect();
             let g_moved = loop_gain_step(&st, &prediction, &fs.residual, &w)
+                .filter(|_| closed)
                 // clamp: LOOP_GAIN_RANGE is the constant (0.8, 2.0), ordered.
                 .map(|d| (st.loop_gain + d).clamp(LOOP_GAIN_RANGE.0, LOOP_GAIN_RANGE.1))
                 .filter(|g| (g - st.loop_gain).abs() > LOOP_GAIN_HOLD);
-            if kv_moved.is_none() && g_moved.is_none() {
+            let shift_moved = fitted_interpolation(&fs).map(|ie| interpolation_shift(&st, &ie)).filter(|sh| {
+                let before = |k: usize| st.interp_shift.get(k).copied().unwrap_or(0.0);
+                sh.iter().zip(&w).enumerate().any(|(k, (s, w))| (s - before(k)).abs() * w > INTERP_SHIFT_HOLD)
+            });
+            if kv_moved.is_none() && g_moved.is_none() && shift_moved.is_none() {
                 break;
             }
             st = st.with_loop(kv_moved.unwrap_or(st.loop_kv), g_moved.unwrap_or(st.loop_gain));
+            if let Some(sh) = shift_moved {
+                st = st.with_interpolation_shift(sh);
+            }
             fs = fit_model_on(&st, &bare, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
         }
         if pass == 0 && est.iter().any(|e| *e) {
@@ -614,6 +625,19 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
         return Ok(Fitted { st, fs, sig, est, notes, sigma });
     }
     Err(VmtError::Internal("fit loop ended".into()))
+}
+
+/// A fitted interpolation error's shift ([`Stack::interp_shift`]) is held once a refit moves it
+/// less than this many σ of its channel on every sample ([`fit_all`]'s loop).
+pub const INTERP_SHIFT_HOLD: f64 = 0.05;
+
+/// The interpolation error a fit holds (its period and the amplitude and phase of its sine and
+/// cosine coefficients, A·sin(2πx/p + φ) = A·cos φ·sin + A·sin φ·cos), if it has one.
+pub(crate) fn fitted_interpolation(fs: &FitState) -> Option<InterpolationError> {
+    let ti = fs.terms.iter().position(|t| t.name == EffectName::InterpolationError)?;
+    let (c, period) = (term_coefs(fs, ti), *fs.terms[ti].hyper.first()?);
+    let [a, b] = [*c.first()?, *c.get(1)?];
+    (period > 0.0).then(|| InterpolationError { period, amplitude: a.hypot(b), phase: b.atan2(a) })
 }
 
 /// Minimum degrees of freedom of the repeatability estimate of σ (relative error ≈ 1/√(2·dof) ≤ 22 %).
