@@ -902,6 +902,44 @@ pub(crate) fn fit_model_held(
     fit_model_orders(st, model, sigma, w, order_of, Some(held))
 }
 
+/// Whether a model effect's linear parts are fitted: every effect with `fit = true`, and a given
+/// resonance or gravity_tilt (a model states a mode's frequency and damping, a tilt has no
+/// parameter of its own, never their linear parts: the mode shape at each sensor, its free
+/// vibration, a sensor's tilt polynomial; those are fitted with the stated values held).
+fn linear_parts_fitted(me: &ModelEffect) -> bool {
+    me.fit || matches!(me.effect.name, EffectName::Resonance | EffectName::GravityTilt)
+}
+
+/// The prediction of a model's given effects (those whose linear parts are not fitted,
+/// [`linear_parts_fitted`]) at every sample of `st`, each through the stack's closed loop
+/// ([`known_prediction`]).
+pub(crate) fn given_prediction(st: &Stack, model: &Model) -> Vec<f64> {
+    let mut known = vec![0.0; st.n];
+    for me in &model.effects {
+        if me.effect.axis != model.axis || !predicts(me.effect.name) || linear_parts_fitted(me) {
+            continue;
+        }
+        // The simulator's friction law (`vmt_sim::effects::Model::friction`): a given Stribeck
+        // law carries the Coulomb level (its `fc`, unset: the coulomb effect's), so a given
+        // coulomb beside a given stribeck adds nothing of its own (it would count Fc twice).
+        let stribeck_known = model.get(EffectName::Stribeck, model.axis).is_some_and(|s| !s.fit);
+        if me.effect.name == EffectName::Coulomb && stribeck_known {
+            continue;
+        }
+        let mut e = me.effect.clone();
+        if let EffectParams::Stribeck(sp) = &mut e.params {
+            // The simulator's law: stribeck.fc unset takes the coulomb level.
+            if sp.fc.is_none() {
+                sp.fc = model.get(EffectName::Coulomb, model.axis).and_then(|c| c.effect.params.get("fc"));
+            }
+        }
+        for (k, v) in known_prediction(st, &e).into_iter().enumerate() {
+            known[k] += v;
+        }
+    }
+    known
+}
+
 fn fit_model_orders(
     st: &Stack,
     model: &Model,
@@ -910,34 +948,10 @@ fn fit_model_orders(
     order_of: &dyn Fn(usize, &ModelEffect) -> (u32, Option<Vec<u32>>),
     held: Option<&FitState>,
 ) -> Result<FitState, ModelCheckError> {
-    let mut known = vec![0.0; st.n];
+    let known = given_prediction(st, model);
     let mut terms: Vec<FitTerm> = Vec::new();
     for (index, me) in model.effects.iter().enumerate() {
-        if me.effect.axis != model.axis || !predicts(me.effect.name) {
-            continue;
-        }
-        // A given resonance or gravity_tilt: a model states a mode's frequency and damping (a tilt has
-        // no parameter of its own), never its linear parts (the mode shape at each sensor, its free
-        // vibration, a sensor's tilt polynomial). Those are fitted with the stated values held.
-        let linear_parts_fitted = matches!(me.effect.name, EffectName::Resonance | EffectName::GravityTilt);
-        if !me.fit && !linear_parts_fitted {
-            // The simulator's friction law (`vmt_sim::effects::Model::friction`): a given Stribeck
-            // law carries the Coulomb level (its `fc`, unset: the coulomb effect's), so a given
-            // coulomb beside a given stribeck adds nothing of its own (it would count Fc twice).
-            let stribeck_known = model.get(EffectName::Stribeck, model.axis).is_some_and(|s| !s.fit);
-            if me.effect.name == EffectName::Coulomb && stribeck_known {
-                continue;
-            }
-            let mut e = me.effect.clone();
-            if let EffectParams::Stribeck(sp) = &mut e.params {
-                // The simulator's law: stribeck.fc unset takes the coulomb level.
-                if sp.fc.is_none() {
-                    sp.fc = model.get(EffectName::Coulomb, model.axis).and_then(|c| c.effect.params.get("fc"));
-                }
-            }
-            for (k, v) in known_prediction(st, &e).into_iter().enumerate() {
-                known[k] += v;
-            }
+        if me.effect.axis != model.axis || !predicts(me.effect.name) || !linear_parts_fitted(me) {
             continue;
         }
         let (order, select) = order_of(index, me);

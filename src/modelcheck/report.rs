@@ -509,9 +509,7 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
             let closed = has_closed_loop(chans);
             let kv = fs.terms.iter().find(|t| t.name == EffectName::ServoLag).and_then(|t| t.hyper.first().copied());
             let kv_moved = kv.filter(|kv| closed && *kv > 0.0 && (kv / st.loop_kv - 1.0).abs() > LOOP_KV_HOLD);
-            let prediction: Vec<f64> = st.y().iter().zip(&fs.residual).map(|(y, r)| y - r).collect();
-            let g_moved = loop_gain_step(&st, &prediction, &fs.residual, &w)
-                .filter(|_| closed)
+            let g_moved = loop_gain_step(&st, &bare, &fs, &sigma, &w)
                 // clamp: LOOP_GAIN_RANGE is the constant (0.8, 2.0), ordered.
                 .map(|d| (st.loop_gain + d).clamp(LOOP_GAIN_RANGE.0, LOOP_GAIN_RANGE.1))
                 .filter(|g| (g - st.loop_gain).abs() > LOOP_GAIN_HOLD);
