@@ -773,6 +773,34 @@ fn an_interpolation_error_is_read_at_the_table_position() {
     assert!(fails.is_empty(), "{fails:#?}");
 }
 
+/// A controller's loop samples its scale: at speed an interpolation error is far above the
+/// servo's Nyquist rate and reaches the motor at its alias. Generator draw 2000 (closed loop, a
+/// 10.08 µm, 76 nm interpolation error at 21.3 mm/s: 2 115 Hz, 1 kHz servo): with the error in
+/// the model (its true period stated, `fit = true`), `diagnose` must name nothing significant —
+/// before the servo's sampling was modelled it claimed a 5.79 mm `cyclic_lead` (ΔBIC −418), the
+/// alias (115 Hz, seen by the 111 Hz pass log at 3.7 Hz) — and its fit must name the generator's
+/// servo period.
+#[test]
+fn a_sampled_servo_aliases_the_interpolation_error_and_nothing_else_is_claimed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("i2000");
+    let t = encoder_set(&dir, 2000, EncoderHidden::InterpolationError);
+    let text = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+    let stated = dir.with_extension("stated.toml");
+    let period = t.interp_period;
+    std::fs::write(&stated, format!("{text}[effects.interpolation_error]\nfit = true\nperiod = {period:?}\n")).unwrap();
+    let d = vmt(&["diagnose", "--model", s(&stated), "--data", s(&dir), "--json"]).unwrap();
+    let first = &d["ranking"][0];
+    let notes: Vec<&str> = d["notes"].as_array().unwrap().iter().filter_map(|n| n.as_str()).collect();
+    let servo = format!("the servo samples the scale every {:.4} ms", 1e3 / t.servo_rate);
+    eprintln!(
+        "servo {} Hz; first {} {} (ΔBIC {})",
+        t.servo_rate, first["effect"], first["verdict"], first["delta_bic"]
+    );
+    assert!(first["verdict"] != "significant", "{first}");
+    assert!(notes.iter().any(|n| n.contains(&servo)), "no `{servo}` in {notes:#?}");
+}
+
 /// A strong cyclic lead on an encoder log (generator draw 2003: semi-closed loop, lead 6.861 mm,
 /// 0.70 µm against 12 nm of scale noise, 87 leads over the travel) is named first and significant at
 /// its period within 1 % (the threshold). Last stop's lead scan refined only the grid's best

@@ -128,6 +128,15 @@ pub(crate) fn close_loop_wave(st: &Stack, p: f64, shift: &[f64], sin: &mut [f64]
         }
         let theta: Vec<f64> =
             (0..m).map(|i| TWO_PI * (tr.x[i] - shift.get(k0 + i).copied().unwrap_or(0.0)) / p).collect();
+        let h = st.servo_period;
+        if kv.is_finite() && h > 0.0 {
+            // The servo's own samples of the wave, through its discrete loop: the response itself.
+            for (i, (ls, lc)) in wave_lag_sampled(&tr.t, &theta, kv, h).into_iter().enumerate() {
+                sin[starts[j] + i] -= s * ls;
+                cos[starts[j] + i] -= s * lc;
+            }
+            continue;
+        }
         let lagged =
             if kv.is_finite() { wave_lag(&tr.t, &theta, kv) } else { theta.iter().map(|t| t.sin_cos()).collect() };
         for (i, (th, (ls, lc))) in theta.iter().zip(lagged).enumerate() {
@@ -248,6 +257,81 @@ pub(crate) fn gauss_newton_increment(z: &[f64], z_perp: &[f64], r: &[f64], w: &[
         den += w2 * z_perp[k] * z_perp[k];
     }
     (den > 0.0 && num.is_finite()).then(|| num / den)
+}
+
+/// [`wave_lag`] for a loop that samples its feedback every `h` seconds and holds the motor's
+/// velocity over each tick (module doc): z_{k+1} = a·z_k + (1 − a)·e^{iθ_k} at the ticks, with
+/// a = e^{−kv·h} (kv the continuous equivalent the fit holds, 1/s) and θ_k the wave's phase at
+/// tick k (linear in time between the log samples, which fall on ticks: a controller logs its own
+/// cycle). A wave faster than the servo's Nyquist rate 1/(2h) — an interpolation error at speed —
+/// reaches the motor at its alias, which the continuous law cannot show (generator draw 2000: a
+/// 10.08 µm wave at 21.3 mm/s is 2 115 Hz; a 1 kHz servo sees 115 Hz, which the loop follows by
+/// kv/ω ≈ 8 % and the 111 Hz log shows at 3.7 Hz, a 5.8 mm wave that `diagnose` took for a
+/// cyclic lead, ΔBIC −418). Per log interval of n ticks and phase step δ per tick, exactly:
+///
+/// ```text
+/// z_n = aⁿ·z₀ + (1 − a)·e^{iθ₀}·(e^{inδ} − aⁿ)/(e^{iδ} − a),   z₀ = (1 − a)/(e^{iδ₀} − a)·e^{iθ₀} (settled)
+/// ```
+///
+/// n = the interval over h, rounded (0: z held). Returns (Im z, Re z) at every sample: the
+/// responses to sin θ and cos θ.
+pub fn wave_lag_sampled(t: &[f64], theta: &[f64], kv: f64, h: f64) -> Vec<(f64, f64)> {
+    let n = t.len().min(theta.len());
+    let a = (-kv * h).exp();
+    let mul = |x: (f64, f64), y: (f64, f64)| (x.0 * y.0 - x.1 * y.1, x.0 * y.1 + x.1 * y.0);
+    let div = |x: (f64, f64), y: (f64, f64)| {
+        let d = y.0 * y.0 + y.1 * y.1;
+        ((x.0 * y.0 + x.1 * y.1) / d, (x.1 * y.0 - x.0 * y.1) / d)
+    };
+    let unit = |th: f64| {
+        let (s, c) = th.sin_cos();
+        (c, s)
+    };
+    // index: called with 1 ≤ i < n, n the shorter of the two lengths.
+    let ticks = |i: usize| ((t[i] - t[i - 1]) / h).round().max(0.0);
+    let mut out = Vec::with_capacity(n);
+    if n == 0 {
+        return out;
+    }
+    let d0 = if n > 1 && ticks(1) > 0.0 { (theta[1] - theta[0]) / ticks(1) } else { 0.0 };
+    let q0 = unit(d0);
+    let mut z = mul(div((1.0 - a, 0.0), (q0.0 - a, q0.1)), unit(theta[0]));
+    out.push((z.1, z.0));
+    for i in 1..n {
+        let m = ticks(i);
+        if m > 0.0 {
+            let q = unit((theta[i] - theta[i - 1]) / m);
+            let an = a.powf(m);
+            let qn = unit(theta[i] - theta[i - 1]);
+            let sum = div((qn.0 - an, qn.1), (q.0 - a, q.1));
+            let drive = mul(mul((1.0 - a, 0.0), unit(theta[i - 1])), sum);
+            z = (an * z.0 + drive.0, an * z.1 + drive.1);
+        }
+        out.push((z.1, z.0));
+    }
+    out
+}
+
+/// Shortest servo period considered, s (a 16 kHz servo).
+pub const SERVO_PERIOD_MIN: f64 = 1.0 / 16_000.0;
+
+/// The servo periods h (s) that the log times of the closed loop's following channels allow: a
+/// controller logs on its own ticks, so every log interval is a whole number of ticks (within
+/// 1 % of a tick). From the shortest interval Δ, h = Δ/m for m = 1, 2, … down to
+/// [`SERVO_PERIOD_MIN`], longest first.
+pub(crate) fn servo_period_candidates(st: &Stack) -> Vec<f64> {
+    let intervals: Vec<f64> = closed_pairs(st)
+        .into_iter()
+        .flat_map(|(j, _)| st.chans[j].t.windows(2).map(|w| w[1] - w[0]).collect::<Vec<f64>>())
+        .filter(|d| *d > 0.0)
+        .collect();
+    let Some(shortest) = intervals.iter().copied().reduce(f64::min) else { return Vec::new() };
+    // index: a count, at most 1 024 candidates (a log interval of 64 ms at 16 kHz).
+    let most = (shortest / SERVO_PERIOD_MIN + 1e-9).floor().min(1024.0) as usize;
+    (1..=most)
+        .map(|m| shortest / m as f64)
+        .filter(|h| intervals.iter().all(|d| ((d / h) - (d / h).round()).abs() <= 0.01))
+        .collect()
 }
 
 /// Whether any channel of `chans` is a following channel closed by the scale ([`close_loop`]).
@@ -726,6 +810,92 @@ mod tests {
             let s = xt + ie.value(xt);
             let got = table_position(&ie, s);
             assert!((got - xt).abs() <= 1e-14, "{got} vs {xt} (slope {slope})");
+        }
+    }
+
+    /// [`wave_lag_sampled`] is the servo's own recursion: z_{k+1} = a·z_k + (1 − a)·e^{iθ(t_k)} run
+    /// tick by tick from the settled state (a = e^{−kv·h}), over 30 random draws of kv (5–100 1/s),
+    /// servo rate (1, 2, 4, 8 kHz), log decimation (1–12 ticks), speed (1–120 mm/s, so the wave is
+    /// often far above the servo's Nyquist rate) and period (8–60 µm), at constant speed then a
+    /// reversal (x quadratic in time: the phase is linear between log samples only at constant
+    /// speed, so the reversal's part is checked at the log's own resolution, x linear between its
+    /// samples, as the function takes it). Closed-form sums against the recursion: agreement to
+    /// 1e-9 of the unit wave (rounding over up to 10⁵ ticks).
+    #[test]
+    fn wave_lag_sampled_is_the_servo_recursion() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2000);
+        for _ in 0..30 {
+            let kv: f64 = rng.gen_range(5.0..100.0);
+            let h = 1.0 / [1000.0, 2000.0, 4000.0, 8000.0][rng.gen_range(0..4)];
+            let every: usize = rng.gen_range(1..=12);
+            let v: f64 = rng.gen_range(1e-3..0.12);
+            let p: f64 = rng.gen_range(8e-6..60e-6);
+            let n_log = 400;
+            // Log positions: a cruise, then a turn (x linear between log samples).
+            let t: Vec<f64> = (0..n_log).map(|i| (i * every) as f64 * h).collect();
+            let x: Vec<f64> = t
+                .iter()
+                .map(|&ti| if ti < t[n_log / 2] { v * ti } else { v * ti - 3.0 * v * (ti - t[n_log / 2]).powi(2) })
+                .collect();
+            let theta: Vec<f64> = x.iter().map(|x| TWO_PI * x / p).collect();
+            let got = wave_lag_sampled(&t, &theta, kv, h);
+            let a = (-kv * h).exp();
+            let d0 = (theta[1] - theta[0]) / every as f64;
+            let q0 = (d0.cos() - a, d0.sin());
+            let g = ((1.0 - a) * q0.0 / (q0.0 * q0.0 + q0.1 * q0.1), -(1.0 - a) * q0.1 / (q0.0 * q0.0 + q0.1 * q0.1));
+            let mut z = (g.0 * theta[0].cos() - g.1 * theta[0].sin(), g.0 * theta[0].sin() + g.1 * theta[0].cos());
+            for i in 0..n_log {
+                if i > 0 {
+                    let step = (theta[i] - theta[i - 1]) / every as f64;
+                    for k in 0..every {
+                        let th = theta[i - 1] + k as f64 * step;
+                        z = (a * z.0 + (1.0 - a) * th.cos(), a * z.1 + (1.0 - a) * th.sin());
+                    }
+                }
+                let (im, re) = got[i];
+                assert!((im - z.1).hypot(re - z.0) <= 1e-9, "sample {i}: {:?} vs {:?}", (re, im), z);
+            }
+        }
+    }
+
+    /// The servo periods a log allows: intervals of 2 ms and 9 ms on the ticks of a 1 kHz servo
+    /// allow 1/k ms for k = 1 … 16 (2/m ms with m even, down to 1/16 ms), and never 2 ms (9 ms is
+    /// not a whole number of them).
+    #[test]
+    fn servo_periods_divide_every_log_interval() {
+        let n = 40;
+        let times = |dt: f64| (0..n).map(|i| i as f64 * dt).collect::<Vec<f64>>();
+        let chan = |t: Vec<f64>, role: EncoderRole, run: &str| Channel {
+            run: run.into(),
+            sensor: "s".into(),
+            kind: SensorKind::EncoderLinear,
+            u: [1.0, 0.0, 0.0],
+            r: [0.0; 3],
+            x: vec![0.0; n],
+            d: vec![1.0; n],
+            cycle: vec![1; n],
+            t,
+            v: vec![0.0; n],
+            y: vec![0.0; n],
+            sigma: None,
+            encoder: Some(role),
+        };
+        let follow = || EncoderRole::Following { command: vec![0.0; n], s_transmission: 0.0, closed: true };
+        let chans: Vec<Channel> = [("a", 2e-3), ("b", 9e-3)]
+            .iter()
+            .flat_map(|&(run, dt)| {
+                [
+                    chan(times(dt), EncoderRole::Transmission { drive: vec![0.0; n] }, run),
+                    chan(times(dt), follow(), run),
+                ]
+            })
+            .collect();
+        let got = servo_period_candidates(&Stack::new(&chans));
+        let want: Vec<f64> = (1..=16).map(|k| 2e-3 / (2 * k) as f64).collect();
+        assert_eq!(got.len(), want.len(), "{got:?}");
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() < 1e-15, "{got:?}");
         }
     }
 }

@@ -1,6 +1,7 @@
 //! Reports: compare and diagnose.
 
 use super::*;
+use rayon::prelude::*;
 use vmt_sim::effects::InterpolationError;
 
 // ------------------------------------------------------------------------------------------
@@ -517,12 +518,21 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                 let before = |k: usize| st.interp_shift.get(k).copied().unwrap_or(0.0);
                 sh.iter().zip(&w).enumerate().any(|(k, (s, w))| (s - before(k)).abs() * w > INTERP_SHIFT_HOLD)
             });
-            if kv_moved.is_none() && g_moved.is_none() && shift_moved.is_none() {
+            // The servo's period, where the interpolation error's alias fixes it: chosen with the
+            // first fit that shows the alias (the refits that follow settle kv, g and the shift
+            // with it), checked again once the rest holds.
+            let held = kv_moved.is_none() && g_moved.is_none() && shift_moved.is_none();
+            let servo_moved =
+                (held || st.servo_period.is_nan()).then(|| choose_servo_period(&st, &fs, &sigma, &w)).flatten();
+            if kv_moved.is_none() && g_moved.is_none() && shift_moved.is_none() && servo_moved.is_none() {
                 break;
             }
             st = st.with_loop(kv_moved.unwrap_or(st.loop_kv), g_moved.unwrap_or(st.loop_gain));
             if let Some(sh) = shift_moved {
                 st = st.with_interpolation_shift(sh);
+            }
+            if let Some(h) = servo_moved {
+                st = st.with_servo_period(h);
             }
             fs = fit_model_on(&st, &bare, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
         }
@@ -558,6 +568,14 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                 }
             }
             continue;
+        }
+        if has_closed_loop(chans) && st.servo_period > 0.0 {
+            notes.push(format!(
+                "closed loop: the servo samples the scale every {:.4} ms (a whole number of ticks in every log interval; \
+                 chosen by the fit of the interpolation error's response through the sampled loop, which at speed \
+                 reaches the motor at its alias)",
+                st.servo_period * 1e3
+            ));
         }
         if has_closed_loop(chans) && st.loop_kv.is_finite() {
             let g = st.loop_gain;
@@ -636,6 +654,44 @@ pub(crate) fn fitted_interpolation(fs: &FitState) -> Option<InterpolationError> 
     let (c, period) = (term_coefs(fs, ti), *fs.terms[ti].hyper.first()?);
     let [a, b] = [*c.first()?, *c.get(1)?];
     (period > 0.0).then(|| InterpolationError { period, amplitude: a.hypot(b), phase: b.atan2(a) })
+}
+
+/// Weighted χ² by which a servo period must lower the fit's residual for [`choose_servo_period`]
+/// to take it: about twice 2·ln(the candidates a log allows, 16–32 on the generator's logs), so
+/// that the choice among them is not made by the noise.
+pub const SERVO_PERIOD_MARGIN: f64 = 10.0;
+
+/// The servo period (s) among [`servo_period_candidates`] at which the fit `fs` on `st` — its
+/// design with the fitted interpolation error's columns through the sampled loop
+/// ([`wave_lag_sampled`]), every other column as it is — leaves the smallest weighted residual,
+/// when that is [`SERVO_PERIOD_MARGIN`] below the fit's own (weights `w` = 1/σ). None without a
+/// closed loop, a finite kv or a fitted interpolation error.
+pub(crate) fn choose_servo_period(st: &Stack, fs: &FitState, sigma: &Sigma, w: &[f64]) -> Option<f64> {
+    if !has_closed_loop(st.chans) || !st.loop_kv.is_finite() {
+        return None;
+    }
+    let ti = fs.terms.iter().position(|t| t.name == EffectName::InterpolationError)?;
+    if term_coefs(fs, ti).iter().all(|c| *c == 0.0) {
+        return None;
+    }
+    let start = fs.n_offsets + fs.terms[..ti].iter().map(|t| t.shape.coefs.len()).sum::<usize>();
+    let t = &fs.terms[ti];
+    let rss_at = |h: f64| {
+        let sh = st.with_servo_period(h);
+        let mut cols = fs.cols.clone();
+        for (k, c) in columns(&sh, t.name, &t.shape, &t.hyper).into_iter().enumerate() {
+            cols[start + k] = c;
+        }
+        solve_blocks(&sh, &fs.target, &cols, sigma).map_or(f64::INFINITY, |(_, r)| weighted_ss(&r, w))
+    };
+    let candidates = servo_period_candidates(st);
+    let rss: Vec<f64> = candidates.par_iter().map(|&h| rss_at(h)).collect();
+    let own = weighted_ss(&fs.residual, w);
+    // The lowest in candidate order (the same on any number of threads).
+    rss.iter()
+        .zip(&candidates)
+        .fold((own - SERVO_PERIOD_MARGIN, None), |b, (r, h)| if *r < b.0 { (*r, Some(*h)) } else { b })
+        .1
 }
 
 /// Minimum degrees of freedom of the repeatability estimate of σ (relative error ≈ 1/√(2·dof) ≤ 22 %).

@@ -32,6 +32,11 @@ pub(crate) struct Stack<'a> {
     /// scaled by g = kv·h/(1 − e^{−kv·h}) ≈ 1 + kv·h/2 (module doc of `encoder`). Fitted from the
     /// data ([`loop_gain_step`]).
     pub(crate) loop_gain: f64,
+    /// The servo's sampling period h (s) where the data fix it ([`choose_servo_period`]), else
+    /// NaN: a wave faster than the servo's Nyquist rate (an interpolation error at speed) reaches
+    /// the motor as the servo samples it, aliased ([`wave_lag_sampled`]); every other column passes
+    /// the loop by the continuous law with [`Stack::loop_gain`].
+    pub(crate) servo_period: f64,
     /// The distinct sample positions of all channels, sorted (m): computed on first use and
     /// shared by the stacks derived from this one (their channels are the same).
     distinct: std::sync::Arc<std::sync::OnceLock<Vec<f64>>>,
@@ -325,6 +330,18 @@ impl<'a> Stack<'a> {
         }
     }
 
+    /// The same stack with the servo's sampling period `h` (s, [`Stack::servo_period`]).
+    pub(crate) fn with_servo_period(&self, h: f64) -> Stack<'a> {
+        Stack {
+            servo_period: h,
+            excitation: self.excitation.clone(),
+            group: self.group.clone(),
+            distinct: self.distinct.clone(),
+            interp_shift: self.interp_shift.clone(),
+            ..*self
+        }
+    }
+
     /// The same stack with the interpolation error `shift` at the table's position on each sample
     /// ([`Stack::interp_shift`]).
     pub(crate) fn with_interpolation_shift(&self, shift: Vec<f64>) -> Stack<'a> {
@@ -379,6 +396,7 @@ impl<'a> Stack<'a> {
             excitation: vec![Vec::new(); chans.len()],
             loop_kv: f64::INFINITY,
             loop_gain: 1.0,
+            servo_period: f64::NAN,
             distinct: Default::default(),
             interp_shift: Default::default(),
         }

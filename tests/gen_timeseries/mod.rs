@@ -760,6 +760,8 @@ pub struct EncoderTruth {
     pub backlash: f64,
     pub sigma_scale: f64,
     pub sigma_motor: f64,
+    /// The controller's servo rate, Hz (its loop runs and its log samples on these ticks).
+    pub servo_rate: f64,
     pub samples: usize,
 }
 
@@ -1004,6 +1006,7 @@ pub fn encoder_set_sized(dir: &Path, seed: u64, hidden: EncoderHidden, samples: 
         backlash: b,
         sigma_scale,
         sigma_motor,
+        servo_rate,
         samples,
     }
 }
