@@ -590,8 +590,9 @@ fn write_encoder_draw() {
 }
 
 /// Writes one accelerometer draw to `VMT_OUT` (seed `VMT_SEED`, e.g. 1000 + k for the k-th draw of
-/// a hidden-mode study; hidden effect `VMT_HIDDEN` = none|mode|roll|mode+roll) and prints its truth:
-/// the accelerometer twin of [`write_encoder_draw`].
+/// a hidden-mode study; hidden effect `VMT_HIDDEN` = none|mode|roll|mode+roll; about `VMT_SAMPLES`
+/// samples when set, the benchmark's sizes) and prints its truth: the accelerometer twin of
+/// [`write_encoder_draw`].
 #[test]
 #[ignore = "tool: writes one accelerometer draw (see the doc comment)"]
 fn write_accel_draw() {
@@ -603,7 +604,8 @@ fn write_accel_draw() {
         "mode+roll" => AccelHidden::ResonanceAndRoll,
         _ => AccelHidden::None,
     };
-    let t = accel_set(&out, seed, hidden, 200.0);
+    let samples = std::env::var("VMT_SAMPLES").ok().and_then(|v| v.parse().ok());
+    let t = accel_set_sized(&out, seed, hidden, 200.0, samples);
     eprintln!("{t:?}");
 }
 
@@ -730,6 +732,51 @@ fn a_given_resonance_is_predicted_with_its_stated_frequency() {
             let fa = c["fitted"]["resonance"]["frequency"].as_f64();
             let held = fa.is_none() || fa == Some(f);
             (!(without > 1.3 && with <= 1.3 && noted && held)).then(|| format!("{line}; noted {noted}, frequency {fa:?}"))
+        })
+        .collect();
+    assert!(fails.is_empty(), "{fails:#?}");
+}
+
+/// A fitted mode whose model states its frequency and damping (as `add --from-diagnosis` writes
+/// them) is refined from there: `compare` holds the mode at the stated values while its gains and
+/// the shapes around it are fitted, then frees (f, ζ) and refines them with the shapes re-chosen in
+/// turn (`polish`). Generator draw 1012 of the mode + roll pair (38.04 Hz, ζ 0.0144, roll through
+/// gravity), with `gravity_tilt` in the model and the mode stated 1.8 % above and 1.5 % below its
+/// frequency (damping 18 % above, 15 % below): `compare` must end within 1 % of the frequency and
+/// 10 % of the damping (the issue's tolerances) and at normalised RMS ≤ 1.1 (the complete model's
+/// ideal is 1; the issue's threshold after `add` is 1.3). Session 20's `compare` ended at 39.14 Hz,
+/// normalised RMS 9.66–11.2, from either start and from the true values: its scan began from
+/// shapes that had absorbed the mode's response, and a stated start was scanned from there too.
+#[test]
+fn a_stated_mode_is_refined_from_where_the_model_states_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("pair1012");
+    let t = accel_set(&dir, 1012, AccelHidden::ResonanceAndRoll, 200.0);
+    let (f, z) = t.mode.unwrap();
+    let text = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+    let fails: Vec<String> = [(1.018, 1.18), (0.985, 0.85)]
+        .into_par_iter()
+        .filter_map(|(kf, kz)| {
+            let stated = dir.with_extension(format!("{kf}.toml"));
+            let (fs, zs) = (f * kf, z * kz);
+            std::fs::write(
+                &stated,
+                format!(
+                    "{text}[effects.resonance]\nfit = true\nfrequency = {fs:?}\ndamping = {zs:?}\n\n\
+                     [effects.gravity_tilt]\nfit = true\n"
+                ),
+            )
+            .unwrap();
+            let c = vmt(&["compare", "--model", s(&stated), "--data", s(&dir), "--json"]).unwrap();
+            let nrms = c["normalized_rms"].as_f64().unwrap_or(f64::NAN);
+            let fa = c["fitted"]["resonance"]["frequency"].as_f64().unwrap_or(f64::NAN);
+            let za = c["fitted"]["resonance"]["damping"].as_f64().unwrap_or(f64::NAN);
+            let line = format!(
+                "draw 1012 (mode {f:.3} Hz, ζ {z:.4}) stated {fs:.3} Hz ζ {zs:.4}: fitted {fa:.3} Hz ζ {za:.4}, \
+                 normalised RMS {nrms:.3}"
+            );
+            eprintln!("{line}");
+            (!((fa / f - 1.0).abs() <= 0.01 && (za / z - 1.0).abs() <= 0.10 && nrms <= 1.1)).then_some(line)
         })
         .collect();
     assert!(fails.is_empty(), "{fails:#?}");

@@ -1031,14 +1031,18 @@ fn fit_model_orders(
     // shapes, terms without a searched hyper-parameter) are factored once, and each evaluation
     // projects only the searched terms' columns (variable projection, `OrthoBase`).
     let moving = |t: &FitTerm| t.searched.iter().any(|s| *s);
-    let fixed_base = if n_searched > 0 && large_design(st.n, design(st, &terms).len()) {
-        let fixed: Vec<FitTerm> = terms.iter().filter(|t| !moving(t)).cloned().collect();
-        let base = OrthoBase::new(&design(st, &fixed), w)?;
-        let target = base.project_vector(&r0, w);
-        Some((base, target))
-    } else {
-        None
-    };
+    // Accelerometer passes are always searched so (a mode's columns are its response to the
+    // excitation; the shapes' columns, evaluated at every sample, do not change with it).
+    let accel = st.chans.iter().any(|c| c.is_accel());
+    let fixed_base =
+        if n_searched > 0 && (accel || st.n > LARGE_SAMPLES || large_design(st.n, design(st, &terms).len())) {
+            let fixed: Vec<FitTerm> = terms.iter().filter(|t| !moving(t)).cloned().collect();
+            let base = OrthoBase::new(&design(st, &fixed), w)?;
+            let target = base.project_vector(&r0, w);
+            Some((base, target))
+        } else {
+            None
+        };
     for _ in 0..sweeps {
         let before: Vec<Vec<f64>> = terms.iter().map(|t| t.hyper.clone()).collect();
         for ti in 0..terms.len() {
@@ -1098,7 +1102,7 @@ fn fit_model_orders(
             break;
         }
     }
-    if st.chans.iter().any(|c| c.is_accel()) {
+    if accel {
         refine_jointly(st, &mut terms, &grids, &r0, sigma, w, fixed_base.as_ref());
     }
     // A searched, refined value at an end of its grid is a bound, not an estimate.
@@ -1210,23 +1214,26 @@ pub(crate) fn term_coefs(fs: &FitState, ti: usize) -> &[f64] {
 /// gives an input.
 pub(crate) fn fitted_excitation(st: &Stack, fs: &FitState) -> Option<Vec<Vec<Excitation>>> {
     let translation = EffectName::is_translational;
-    let mut added = false;
-    let ex = st
+    // Each channel's tables in parallel (each is ≈ 10⁴ evaluations of the shapes' slopes per
+    // second of record, `mode_steps`); collected in channel order.
+    let ex: Vec<(Vec<Excitation>, bool)> = st
         .chans
-        .iter()
+        .par_iter()
         .zip(&st.excitation)
         .map(|(c, given)| {
             let mut list = given.clone();
+            let mut added = false;
             for (ti, t) in fs.terms.iter().enumerate().filter(|(_, t)| translation(t.name)) {
                 if let Some(e) = Excitation::of_fitted(c, &t.shape, term_coefs(fs, ti)) {
                     list.push(e);
                     added = true;
                 }
             }
-            list
+            (list, added)
         })
         .collect();
-    added.then_some(ex)
+    let added = ex.iter().any(|(_, a)| *a);
+    added.then(|| ex.into_iter().map(|(l, _)| l).collect())
 }
 
 /// The fitted parameters of each term as effect parameters (FORMAT.md §2 keys).

@@ -80,7 +80,8 @@
 //!   response; `compare` (and `diagnose` for a significant mode) then fit the mode jointly with
 //!   the shapes that drive it (`coupled.rs`: each shape column carries its closed-form steady mode
 //!   response, (f, ζ, gains) refined by variable projection after a scan of f, the shapes
-//!   re-chosen with the mode in the model).
+//!   re-chosen with the mode in the model, then refined and re-chosen in turn until (f, ζ) holds;
+//!   a model's stated (f, ζ) is a second start, the mode first held there).
 //!
 //! Not predicted in phase 3: the carriage's own dynamics on its bearing blocks (it follows the
 //! geometry only quasi-statically, with a relative error ≈ (f/f_b)² at frequency f below its

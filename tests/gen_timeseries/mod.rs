@@ -250,6 +250,9 @@ pub struct AccelTruth {
     /// RMS over the travel of the error of any unbiased estimate of the roll profile, its mean
     /// removed (an offset per pass hides it), rad ([`roll_crb`]).
     pub roll_crb: Option<f64>,
+    /// χ² of the roll left after each pass's offset and the straightness in its true family are
+    /// profiled out (when a roll is hidden; [`roll_profiled_chi2`]).
+    pub roll_chi2_profiled: Option<f64>,
 }
 
 /// Exact one-step map of q̈ + 2ζω q̇ + ω² q = −a (a constant over the step h): state (q, q̇).
@@ -281,24 +284,19 @@ impl Oscillator {
     }
 }
 
-/// Cramér–Rao bound of a roll profile `roll` seen through gravity by the y accelerometer
-/// ([`AccelTruth::roll_crb`]): the RMS over the travel `(x_lo, x_hi)` of the error of an unbiased
-/// estimate of the roll profile, its mean removed, for passes `(v, dir, x₀, Δt, n)` and noise σ.
-///
-/// The y channel reads μ_i = G·roll(x_i) + geo(E_y)_i + b_p. The roll is in its true family (the
-/// waves of `roll`, a cos and a sin coefficient each: θ); each pass's offset b_p and the straightness
-/// E_y in its true family (every wave of `straight_y` with amplitude and phase free) are profiled out.
-/// With D the roll columns left after the nuisance is projected out (D = U·S·Vᵀ), Cov(θ̂) ≥
-/// σ²·V·S⁻²·Vᵀ, and the mean-square error of the de-meaned profile is tr(Cov·M̃), M̃ the Gram matrix
-/// of the de-meaned basis over the travel (400 points). Directions with s below 1e-10 of the
-/// largest are left out (a wave the offsets absorb: its de-meaned profile is nil).
-fn roll_crb(roll: &Waves, passes: &[ModePass], straight_y: &Waves, travel: (f64, f64), sigma: f64) -> f64 {
+/// The cos and sin of every wave of `w`: (κ rad/m, is the sine).
+fn wave_list(w: &Waves) -> Vec<(f64, bool)> {
+    w.k.iter().flat_map(|&k| [(k, false), (k, true)]).collect()
+}
+
+/// The positions of the y channel's samples over passes `(v, dir, x₀, Δt, n)`, and an orthonormal
+/// basis of what hides a roll seen through gravity there: each pass's offset and the guideway
+/// acceleration of every wave of the straightness `straight_y` (amplitude and phase free).
+fn roll_nuisance(passes: &[ModePass], straight_y: &Waves) -> (Vec<f64>, Vec<Vec<f64>>) {
     let total: usize = passes.iter().map(|p| p.4).sum();
     let xs: Vec<f64> =
         passes.iter().flat_map(|&(v, dirn, x0, dt, n)| (0..n).map(move |i| x0 + dirn * v * i as f64 * dt)).collect();
-    let basis = |k: f64, sin: bool, x: f64| if sin { (k * x).sin() } else { (k * x).cos() };
-    let wave_list = |w: &Waves| w.k.iter().flat_map(|&k| [(k, false), (k, true)]).collect::<Vec<_>>();
-    let (theta, nuis_waves) = (wave_list(roll), wave_list(straight_y));
+    let nuis_waves = wave_list(straight_y);
     let mut nuisance: Vec<Vec<f64>> = Vec::new();
     let mut at = 0;
     for &(_, _, _, _, n) in passes {
@@ -320,7 +318,35 @@ fn roll_crb(roll: &Waves, passes: &[ModePass], straight_y: &Waves, travel: (f64,
                 .collect(),
         );
     }
-    let ortho = orthonormal(nuisance);
+    (xs, orthonormal(nuisance))
+}
+
+/// χ² of the roll seen through gravity on the y channel (G·roll(x)/σ, Σ over the samples) left
+/// after what [`roll_nuisance`] spans is projected out: what of the roll no pass offset and no
+/// straightness in its true family can take up.
+fn roll_profiled_chi2(roll: &Waves, passes: &[ModePass], straight_y: &Waves, sigma: f64) -> f64 {
+    let (xs, ortho) = roll_nuisance(passes, straight_y);
+    let mut c: Vec<f64> = xs.iter().map(|&x| G * roll.value(x)).collect();
+    project_out(&mut c, &ortho);
+    c.iter().map(|v| (v / sigma).powi(2)).sum()
+}
+
+/// Cramér–Rao bound of a roll profile `roll` seen through gravity by the y accelerometer
+/// ([`AccelTruth::roll_crb`]): the RMS over the travel `(x_lo, x_hi)` of the error of an unbiased
+/// estimate of the roll profile, its mean removed, for passes `(v, dir, x₀, Δt, n)` and noise σ.
+///
+/// The y channel reads μ_i = G·roll(x_i) + geo(E_y)_i + b_p. The roll is in its true family (the
+/// waves of `roll`, a cos and a sin coefficient each: θ); each pass's offset b_p and the straightness
+/// E_y in its true family (every wave of `straight_y` with amplitude and phase free) are profiled out.
+/// With D the roll columns left after the nuisance is projected out (D = U·S·Vᵀ), Cov(θ̂) ≥
+/// σ²·V·S⁻²·Vᵀ, and the mean-square error of the de-meaned profile is tr(Cov·M̃), M̃ the Gram matrix
+/// of the de-meaned basis over the travel (400 points). Directions with s below 1e-10 of the
+/// largest are left out (a wave the offsets absorb: its de-meaned profile is nil).
+fn roll_crb(roll: &Waves, passes: &[ModePass], straight_y: &Waves, travel: (f64, f64), sigma: f64) -> f64 {
+    let total: usize = passes.iter().map(|p| p.4).sum();
+    let (xs, ortho) = roll_nuisance(passes, straight_y);
+    let basis = |k: f64, sin: bool, x: f64| if sin { (k * x).sin() } else { (k * x).cos() };
+    let theta = wave_list(roll);
     let d: Vec<Vec<f64>> = theta
         .iter()
         .map(|&(k, sin)| {
@@ -696,6 +722,7 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
     };
     let sensors: Vec<SensorSpec> = sensors.into_iter().map(|s| SensorSpec { sigma, ..s }).collect();
     let has_roll = roll.is_some();
+    let roll_chi2_profiled = roll.as_ref().map(|r| roll_profiled_chi2(r, &layout, &straight[0], sigma));
     let _ = std::fs::remove_dir_all(dir);
     write_set(dir, "independent accelerometer passes (issue 19 generator)", &sensors, &runs);
     write_model(&dir.join("model.toml"), &["straightness_y", "straightness_z"]);
@@ -718,6 +745,7 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
         mode_crb,
         travel: (x_lo, x_lo + travel),
         roll_crb,
+        roll_chi2_profiled,
     }
 }
 
