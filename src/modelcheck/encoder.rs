@@ -40,6 +40,7 @@
 //! 10 nm, two to three times a rotary encoder's noise).
 
 use super::*;
+use vmt_estimators::modelcheck::Complex64;
 
 /// What an encoder channel of a time series holds (module doc).
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -159,32 +160,23 @@ pub(crate) fn close_loop_wave(st: &Stack, p: f64, shift: &[f64], sin: &mut [f64]
 /// real). Non-increasing times hold z.
 pub fn wave_lag(t: &[f64], theta: &[f64], kv: f64) -> Vec<(f64, f64)> {
     let n = t.len().min(theta.len());
-    let transfer = |om: f64| {
-        let d = kv * kv + om * om;
-        (kv * kv / d, -kv * om / d)
-    };
-    // (re, im) products.
-    let mul = |a: (f64, f64), b: (f64, f64)| (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0);
-    let unit = |th: f64| {
-        let (s, c) = th.sin_cos();
-        (c, s)
-    };
+    // The loop's response kv/(kv + iω) to a phasor of angular frequency ω.
+    let transfer = |om: f64| Complex64::new(kv, 0.0) / Complex64::new(kv, om);
     let mut out = Vec::with_capacity(n);
     if n == 0 {
         return out;
     }
     let om0 = if n > 1 && t[1] > t[0] { (theta[1] - theta[0]) / (t[1] - t[0]) } else { 0.0 };
-    let mut z = mul(transfer(om0), unit(theta[0]));
-    out.push((z.1, z.0));
+    let mut z = transfer(om0) * Complex64::cis(theta[0]);
+    out.push((z.im, z.re));
     for i in 1..n {
         let h = t[i] - t[i - 1];
         if h > 0.0 {
             let hw = transfer((theta[i] - theta[i - 1]) / h);
-            let (before, after) = (mul(hw, unit(theta[i - 1])), mul(hw, unit(theta[i])));
-            let decay = (-kv * h).exp();
-            z = (after.0 + (z.0 - before.0) * decay, after.1 + (z.1 - before.1) * decay);
+            let (before, after) = (hw * Complex64::cis(theta[i - 1]), hw * Complex64::cis(theta[i]));
+            z = after + (z - before) * (-kv * h).exp();
         }
-        out.push((z.1, z.0));
+        out.push((z.im, z.re));
     }
     out
 }
@@ -278,15 +270,6 @@ pub(crate) fn gauss_newton_increment(z: &[f64], z_perp: &[f64], r: &[f64], w: &[
 pub fn wave_lag_sampled(t: &[f64], theta: &[f64], kv: f64, h: f64) -> Vec<(f64, f64)> {
     let n = t.len().min(theta.len());
     let a = (-kv * h).exp();
-    let mul = |x: (f64, f64), y: (f64, f64)| (x.0 * y.0 - x.1 * y.1, x.0 * y.1 + x.1 * y.0);
-    let div = |x: (f64, f64), y: (f64, f64)| {
-        let d = y.0 * y.0 + y.1 * y.1;
-        ((x.0 * y.0 + x.1 * y.1) / d, (x.1 * y.0 - x.0 * y.1) / d)
-    };
-    let unit = |th: f64| {
-        let (s, c) = th.sin_cos();
-        (c, s)
-    };
     // index: called with 1 ≤ i < n, n the shorter of the two lengths.
     let ticks = |i: usize| ((t[i] - t[i - 1]) / h).round().max(0.0);
     let mut out = Vec::with_capacity(n);
@@ -294,20 +277,17 @@ pub fn wave_lag_sampled(t: &[f64], theta: &[f64], kv: f64, h: f64) -> Vec<(f64, 
         return out;
     }
     let d0 = if n > 1 && ticks(1) > 0.0 { (theta[1] - theta[0]) / ticks(1) } else { 0.0 };
-    let q0 = unit(d0);
-    let mut z = mul(div((1.0 - a, 0.0), (q0.0 - a, q0.1)), unit(theta[0]));
-    out.push((z.1, z.0));
+    let mut z = Complex64::new(1.0 - a, 0.0) / (Complex64::cis(d0) - a) * Complex64::cis(theta[0]);
+    out.push((z.im, z.re));
     for i in 1..n {
         let m = ticks(i);
         if m > 0.0 {
-            let q = unit((theta[i] - theta[i - 1]) / m);
+            let q = Complex64::cis((theta[i] - theta[i - 1]) / m);
             let an = a.powf(m);
-            let qn = unit(theta[i] - theta[i - 1]);
-            let sum = div((qn.0 - an, qn.1), (q.0 - a, q.1));
-            let drive = mul(mul((1.0 - a, 0.0), unit(theta[i - 1])), sum);
-            z = (an * z.0 + drive.0, an * z.1 + drive.1);
+            let sum = (Complex64::cis(theta[i] - theta[i - 1]) - an) / (q - a);
+            z = z * an + Complex64::cis(theta[i - 1]) * sum * (1.0 - a);
         }
-        out.push((z.1, z.0));
+        out.push((z.im, z.re));
     }
     out
 }

@@ -34,6 +34,8 @@ pub use diagnose::{
 };
 pub use lsq::{fit_signature, solve_normal, Columns, LinearFit, NormalFactor};
 pub use ortho::{greedy_rss, greedy_rss_with_gram, lstsq_qr, nested_rss, NestedRss, OrthoBase};
+/// The complex numbers of the spectra (num-complex, through realfft), for callers' phasors.
+pub use realfft::num_complex::Complex64;
 pub use refine::{refine_projected, refine_projected_point, ProjectedResidualFn, Refined};
 pub use spectrum::{
     amplitude_spectrum, fourier_sums, frequency_grid, ls_periodogram, sinusoid_reductions, sparse_frequency_scan,
