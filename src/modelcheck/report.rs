@@ -591,30 +591,42 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                 Some(ex) => st.with_excitation(ex),
                 None => st.with_excitation(st.excitation.clone()),
             };
-            let fs2 = fit_model_on(&st2, model, &sigma, &w).map_err(|m| bad(format!("fitting the model: {m}")))?;
-            // The mode refitted jointly with the shapes that drive it (`refit_coupled`); a given
-            // mode keeps its frequency and damping.
-            let first =
-                refit_coupled(&st, &st2, &fs2, &sigma, &w, if mode_fitted { ModeStart::Scan } else { ModeStart::Held });
+            // The mode refitted jointly with the shapes that drive it (`refit_coupled`) from the fit
+            // with it (`fs2`); a given mode keeps its frequency and damping.
+            //
             // A fitted mode whose model states (f, ζ) (a diagnosis's joint optimum, written by
             // `add`) is refitted from there too ([`ModeStart::Stated`]): the model fitted with the
             // mode held at the stated values, its gains and the shapes around it fitted as a given
-            // mode's are, then (f, ζ) freed. The scan above starts from shapes that absorbed the
-            // mode's response and can end at another optimum: on the mode + roll pair's generator
-            // draw 1012 (38.04 Hz, ζ 0.0144, with the roll in the model) it ended at 39.14 Hz,
+            // mode's are, then (f, ζ) freed. The scan starts from shapes that absorbed the mode's
+            // response and can end at another optimum: on the mode + roll pair's generator draw
+            // 1012 (38.04 Hz, ζ 0.0144, with the roll in the model) it ended at 39.14 Hz,
             // normalised RMS 11.2, even from the true (f, ζ), where this start from the
-            // diagnosis's 38.74 Hz ends at 38.04 Hz, normalised RMS 0.97. The lower weighted
-            // residual wins.
+            // diagnosis's 38.74 Hz ends at 38.04 Hz, normalised RMS 0.97. The two starts run side
+            // by side (rayon); the lower weighted residual wins.
             let stated_fz = resonance.filter(|m| m.fit).and_then(|m| {
                 let p = &m.effect.params;
                 Some([p.get("frequency")?, p.get("damping")?]).filter(|v| v.iter().all(|x| x.is_finite()))
             });
-            let second = stated_fz.and_then(|_| {
-                let mut held = model.clone();
-                held.effects.iter_mut().filter(|m| m.effect.name == EffectName::Resonance).for_each(|m| m.fit = false);
-                let fs_held = fit_model_on(&st2, &held, &sigma, &w).ok()?;
-                refit_coupled(&st, &st2, &fs_held, &sigma, &w, ModeStart::Stated)
-            });
+            let (scanned, second) = rayon::join(
+                || {
+                    let fs2 = fit_model_on(&st2, model, &sigma, &w)?;
+                    let start = if mode_fitted { ModeStart::Scan } else { ModeStart::Held };
+                    let first = refit_coupled(&st, &st2, &fs2, &sigma, &w, start);
+                    Ok::<_, ModelCheckError>((fs2, first))
+                },
+                || {
+                    stated_fz.and_then(|_| {
+                        let mut held = model.clone();
+                        held.effects
+                            .iter_mut()
+                            .filter(|m| m.effect.name == EffectName::Resonance)
+                            .for_each(|m| m.fit = false);
+                        let fs_held = fit_model_on(&st2, &held, &sigma, &w).ok()?;
+                        refit_coupled(&st, &st2, &fs_held, &sigma, &w, ModeStart::Stated)
+                    })
+                },
+            );
+            let (fs2, first) = scanned.map_err(|m| bad(format!("fitting the model: {m}")))?;
             let rss = |fs: &FitState| weighted_ss(&fs.residual, &w);
             match (first, second) {
                 (Some(a), Some(b)) if rss(&b.1) < rss(&a.1) => (b.0, b.1),
