@@ -1214,22 +1214,38 @@ pub(crate) fn term_coefs(fs: &FitState, ti: usize) -> &[f64] {
 /// gives an input.
 pub(crate) fn fitted_excitation(st: &Stack, fs: &FitState) -> Option<Vec<Vec<Excitation>>> {
     let translation = EffectName::is_translational;
-    // Each channel's tables in parallel (each is ≈ 10⁴ evaluations of the shapes' slopes per
-    // second of record, `mode_steps`); collected in channel order.
-    let ex: Vec<(Vec<Excitation>, bool)> = st
-        .chans
-        .par_iter()
-        .zip(&st.excitation)
-        .map(|(c, given)| {
-            let mut list = given.clone();
-            let mut added = false;
-            for (ti, t) in fs.terms.iter().enumerate().filter(|(_, t)| translation(t.name)) {
-                if let Some(e) = Excitation::of_fitted(c, &t.shape, term_coefs(fs, ti)) {
-                    list.push(e);
-                    added = true;
-                }
+    // A channel's tables depend on its times, positions and speeds only: the sensors of one pass
+    // share them, and the first of each such group computes them for all.
+    let same = |a: &Channel, b: &Channel| a.is_accel() && b.is_accel() && a.t == b.t && a.x == b.x && a.v == b.v;
+    let first_of: Vec<usize> =
+        (0..st.chans.len()).map(|j| (0..j).find(|&k| same(&st.chans[k], &st.chans[j])).unwrap_or(j)).collect();
+    // The groups' tables in parallel (each is ≈ 10⁴ evaluations of the shapes' slopes per second of
+    // record, `mode_steps`), collected in channel order.
+    let fitted: Vec<Vec<Excitation>> = (0..st.chans.len())
+        .into_par_iter()
+        .map(|j| {
+            if first_of[j] != j {
+                return Vec::new();
             }
-            (list, added)
+            fs.terms
+                .iter()
+                .enumerate()
+                .filter(|(_, t)| translation(t.name))
+                .filter_map(|(ti, t)| Excitation::of_fitted(&st.chans[j], &t.shape, term_coefs(fs, ti)))
+                .collect()
+        })
+        .collect();
+    let ex: Vec<(Vec<Excitation>, bool)> = st
+        .excitation
+        .iter()
+        .take(fitted.len())
+        .enumerate()
+        .map(|(j, given)| {
+            // index: first_of[j] ≤ j < the channel count.
+            let own = &fitted[first_of[j]];
+            let mut list = given.clone();
+            list.extend(own.iter().cloned());
+            (list, !own.is_empty())
         })
         .collect();
     let added = ex.iter().any(|(_, a)| *a);
