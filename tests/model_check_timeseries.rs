@@ -753,24 +753,12 @@ fn a_stated_mode_is_refined_from_where_the_model_states_it() {
     let dir = tmp.path().join("pair1012");
     let t = accel_set(&dir, 1012, AccelHidden::ResonanceAndRoll, 200.0);
     let (f, z) = t.mode.unwrap();
-    let text = std::fs::read_to_string(dir.join("model.toml")).unwrap();
     let fails: Vec<String> = [(1.018, 1.18), (0.985, 0.85)]
         .into_par_iter()
         .filter_map(|(kf, kz)| {
-            let stated = dir.with_extension(format!("{kf}.toml"));
             let (fs, zs) = (f * kf, z * kz);
-            std::fs::write(
-                &stated,
-                format!(
-                    "{text}[effects.resonance]\nfit = true\nfrequency = {fs:?}\ndamping = {zs:?}\n\n\
-                     [effects.gravity_tilt]\nfit = true\n"
-                ),
-            )
-            .unwrap();
-            let c = vmt(&["compare", "--model", s(&stated), "--data", s(&dir), "--json"]).unwrap();
-            let nrms = c["normalized_rms"].as_f64().unwrap_or(f64::NAN);
-            let fa = c["fitted"]["resonance"]["frequency"].as_f64().unwrap_or(f64::NAN);
-            let za = c["fitted"]["resonance"]["damping"].as_f64().unwrap_or(f64::NAN);
+            let tilt = "\n[effects.gravity_tilt]\nfit = true\n";
+            let (fa, za, nrms) = compare_with_stated_mode(&dir, &format!("{kf}"), fs, zs, tilt);
             let line = format!(
                 "draw 1012 (mode {f:.3} Hz, ζ {z:.4}) stated {fs:.3} Hz ζ {zs:.4}: fitted {fa:.3} Hz ζ {za:.4}, \
                  normalised RMS {nrms:.3}"
@@ -869,6 +857,22 @@ fn a_strong_cyclic_lead_on_an_encoder_log_is_found_at_its_period() {
     assert!((period / t.lead - 1.0).abs() <= 0.01, "period {period} for a lead of {}", t.lead);
 }
 
+/// `compare` of the set in `dir` with its model plus a fitted resonance stated at (`f` Hz, `z`)
+/// and the effects of `extra` (model text), written beside the set as `<dir>.<tag>.toml`: the
+/// fitted (frequency Hz, damping ratio, normalised RMS).
+fn compare_with_stated_mode(dir: &Path, tag: &str, f: f64, z: f64, extra: &str) -> (f64, f64, f64) {
+    let text = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+    let stated = dir.with_extension(format!("{tag}.toml"));
+    std::fs::write(
+        &stated,
+        format!("{text}[effects.resonance]\nfit = true\nfrequency = {f:?}\ndamping = {z:?}\n{extra}"),
+    )
+    .unwrap();
+    let c = vmt(&["compare", "--model", s(&stated), "--data", s(dir), "--json"]).unwrap();
+    let got = |k: &str| c["fitted"]["resonance"][k].as_f64().unwrap_or(f64::NAN);
+    (got("frequency"), got("damping"), c["normalized_rms"].as_f64().unwrap_or(f64::NAN))
+}
+
 /// A fitted resonance whose model states (f, ζ) — what `add --from-diagnosis` writes — is refitted
 /// from those values, not only from a ±5 % grid with shapes that do not carry the mode's
 /// coupling. Generator draw 1006 (58.669 Hz, ζ 0.0307, normalised RMS 39.9 without the mode), the
@@ -880,19 +884,7 @@ fn a_stated_mode_is_refitted_from_its_stated_values() {
     let dir = tmp.path().join("r1006");
     let t = accel_set(&dir, 1006, AccelHidden::Resonance, 200.0);
     let (f, z) = t.mode.unwrap();
-    let text = std::fs::read_to_string(dir.join("model.toml")).unwrap();
-    let stated = dir.with_extension("stated.toml");
-    std::fs::write(
-        &stated,
-        format!(
-            "{text}[effects.resonance]\nfit = true\nfrequency = 58.67257751247297\ndamping = 0.030651361098053595\n"
-        ),
-    )
-    .unwrap();
-    let c = vmt(&["compare", "--model", s(&stated), "--data", s(&dir), "--json"]).unwrap();
-    let nrms = c["normalized_rms"].as_f64().unwrap_or(f64::NAN);
-    let fa = c["fitted"]["resonance"]["frequency"].as_f64().unwrap_or(f64::NAN);
-    let za = c["fitted"]["resonance"]["damping"].as_f64().unwrap_or(f64::NAN);
+    let (fa, za, nrms) = compare_with_stated_mode(&dir, "stated", 58.67257751247297, 0.030651361098053595, "");
     eprintln!("mode {f:.3} Hz ζ {z:.4}: fitted {fa:.3} Hz ζ {za:.4}, normalised RMS {nrms:.3}");
     assert!((fa / f - 1.0).abs() <= 0.01 && (za / z - 1.0).abs() <= 0.10 && nrms <= 1.1);
 }
