@@ -1235,21 +1235,16 @@ pub(crate) fn fitted_excitation(st: &Stack, fs: &FitState) -> Option<Vec<Vec<Exc
                 .collect()
         })
         .collect();
-    let ex: Vec<(Vec<Excitation>, bool)> = st
-        .excitation
-        .iter()
-        .take(fitted.len())
-        .enumerate()
-        .map(|(j, given)| {
+    let added = fitted.iter().any(|f| !f.is_empty());
+    added.then(|| {
+        st.excitation
+            .iter()
+            .take(fitted.len())
+            .enumerate()
             // index: first_of[j] ≤ j < the channel count.
-            let own = &fitted[first_of[j]];
-            let mut list = given.clone();
-            list.extend(own.iter().cloned());
-            (list, !own.is_empty())
-        })
-        .collect();
-    let added = ex.iter().any(|(_, a)| *a);
-    added.then(|| ex.into_iter().map(|(l, _)| l).collect())
+            .map(|(j, given)| given.iter().chain(&fitted[first_of[j]]).cloned().collect())
+            .collect()
+    })
 }
 
 /// The fitted parameters of each term as effect parameters (FORMAT.md §2 keys).

@@ -603,9 +603,8 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
             // normalised RMS 11.2, even from the true (f, ζ), where this start from the
             // diagnosis's 38.74 Hz ends at 38.04 Hz, normalised RMS 0.97. The two starts run side
             // by side (rayon); the lower weighted residual wins.
-            let stated_fz = resonance.filter(|m| m.fit).and_then(|m| {
-                let p = &m.effect.params;
-                Some([p.get("frequency")?, p.get("damping")?]).filter(|v| v.iter().all(|x| x.is_finite()))
+            let states_mode = resonance.is_some_and(|m| {
+                m.fit && ["frequency", "damping"].iter().all(|k| m.effect.params.get(k).is_some_and(|v| v.is_finite()))
             });
             let (scanned, second) = rayon::join(
                 || {
@@ -615,15 +614,16 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                     Ok::<_, ModelCheckError>((fs2, first))
                 },
                 || {
-                    stated_fz.and_then(|_| {
-                        let mut held = model.clone();
-                        held.effects
-                            .iter_mut()
-                            .filter(|m| m.effect.name == EffectName::Resonance)
-                            .for_each(|m| m.fit = false);
-                        let fs_held = fit_model_on(&st2, &held, &sigma, &w).ok()?;
-                        refit_coupled(&st, &st2, &fs_held, &sigma, &w, ModeStart::Stated)
-                    })
+                    if !states_mode {
+                        return None;
+                    }
+                    let mut held = model.clone();
+                    held.effects
+                        .iter_mut()
+                        .filter(|m| m.effect.name == EffectName::Resonance)
+                        .for_each(|m| m.fit = false);
+                    let fs_held = fit_model_on(&st2, &held, &sigma, &w).ok()?;
+                    refit_coupled(&st, &st2, &fs_held, &sigma, &w, ModeStart::Stated)
                 },
             );
             let (fs2, first) = scanned.map_err(|m| bad(format!("fitting the model: {m}")))?;
