@@ -600,6 +600,8 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
             sh
         })
         .collect();
+    // Each input's raw basis indices, ascending (`raw_of`'s keys).
+    let raw_ks: Vec<Vec<usize>> = inputs.iter().map(|i| i.raw_of.keys().copied().collect()).collect();
     let starts_at: Vec<usize> = st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect();
     let mut free_slots = 0;
     let frees: Vec<Option<usize>> = st
@@ -621,7 +623,7 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
             let wch = &w[s0..s0 + len];
             let mut raw = vec![vec![0.0; len]; raw_count];
             for i in 0..len {
-                for (inp, sh) in inputs.iter().zip(&raw_shapes) {
+                for ((inp, sh), ks) in inputs.iter().zip(&raw_shapes).zip(&raw_ks) {
                     if c.is_accel() {
                         let dt = sample_interval(c, i);
                         let v = c.v[i];
@@ -629,14 +631,14 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
                             continue;
                         }
                         let (xb, xa) = (c.x[i], c.x[i] - v * dt);
-                        let ((_, d1), (_, d0)) = (sh.basis_at(xb), sh.basis_at(xa));
-                        for (&k, &rk) in &inp.raw_of {
-                            raw[rk][i] = wch[i] * v * (d1[k] - d0[k]) / dt;
+                        let ((_, d1), (_, d0)) = (sh.terms_at(xb, ks), sh.terms_at(xa, ks));
+                        for (e, &rk) in inp.raw_of.values().enumerate() {
+                            raw[rk][i] = wch[i] * v * (d1[e] - d0[e]) / dt;
                         }
                     } else if let MotionRead::Value { s, x } = c.motion_read(i, inp.name) {
-                        let (p, _) = sh.basis_at(x);
-                        for (&k, &rk) in &inp.raw_of {
-                            raw[rk][i] = wch[i] * s * p[k];
+                        let (p, _) = sh.terms_at(x, ks);
+                        for (e, &rk) in inp.raw_of.values().enumerate() {
+                            raw[rk][i] = wch[i] * s * p[e];
                         }
                     }
                 }
@@ -895,34 +897,41 @@ type RawSeries = Vec<Vec<f64>>;
 fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
     // index: the shape's order, a u32 bounded by `resolvable_order`, widened.
     let top = shx.order as usize;
-    let mut cols: RawSeries = (0..=top).map(|_| Vec::with_capacity(st.n)).collect();
-    for c in st.chans.iter() {
-        for i in 0..c.y.len() {
-            if c.is_accel() {
-                let dt = sample_interval(c, i);
-                let v = c.v[i];
-                if !(dt > 0.0) || v == 0.0 {
-                    cols.iter_mut().for_each(|col| col.push(0.0));
-                    continue;
-                }
-                let (xb, xa) = (c.x[i], c.x[i] - v * dt);
-                let ((_, d1), (_, d0)) = (shx.basis_at(xb), shx.basis_at(xa));
-                for ((col, b), a) in cols.iter_mut().zip(&d1).zip(&d0) {
-                    col.push(v * (b - a) / dt);
-                }
-            } else {
-                match c.motion_read(i, name) {
-                    MotionRead::Value { s, x } => {
-                        for (col, p) in cols.iter_mut().zip(shx.basis_at(x).0) {
-                            col.push(s * p);
-                        }
+    // Each channel's part on its own thread, then joined in the stack's order.
+    let parts: Vec<RawSeries> = st
+        .chans
+        .par_iter()
+        .map(|c| {
+            let len = c.y.len();
+            let mut cols: RawSeries = (0..=top).map(|_| Vec::with_capacity(len)).collect();
+            for i in 0..len {
+                if c.is_accel() {
+                    let dt = sample_interval(c, i);
+                    let v = c.v[i];
+                    if !(dt > 0.0) || v == 0.0 {
+                        cols.iter_mut().for_each(|col| col.push(0.0));
+                        continue;
                     }
-                    _ => cols.iter_mut().for_each(|col| col.push(0.0)),
+                    let (xb, xa) = (c.x[i], c.x[i] - v * dt);
+                    let ((_, d1), (_, d0)) = (shx.basis_at(xb), shx.basis_at(xa));
+                    for ((col, b), a) in cols.iter_mut().zip(&d1).zip(&d0) {
+                        col.push(v * (b - a) / dt);
+                    }
+                } else {
+                    match c.motion_read(i, name) {
+                        MotionRead::Value { s, x } => {
+                            for (col, p) in cols.iter_mut().zip(shx.basis_at(x).0) {
+                                col.push(s * p);
+                            }
+                        }
+                        _ => cols.iter_mut().for_each(|col| col.push(0.0)),
+                    }
                 }
             }
-        }
-    }
-    cols
+            cols
+        })
+        .collect();
+    (0..=top).map(|k| parts.iter().flat_map(|p| p[k].iter().copied()).collect()).collect()
 }
 
 /// Per channel of the stack, the weighted Gram matrix Σ_i w_i²·u_a(i)·u_b(i) of a series' raw
@@ -971,18 +980,23 @@ impl RawGramCache {
         let reads = st.chans.iter().any(|c| !c.is_accel());
         let key = (reads.then_some(name), [shx.range.0.to_bits(), shx.range.1.to_bits()], shx.order);
         if let std::collections::btree_map::Entry::Vacant(slot) = self.grams.entry(key) {
-            let mut grams = Vec::with_capacity(st.chans.len());
-            let mut s0 = 0;
-            for c in st.chans.iter() {
-                let len = c.y.len();
-                let wc: Vec<Vec<f64>> = raw
-                    .iter()
-                    .map(|col| col[s0..s0 + len].iter().zip(&w[s0..s0 + len]).map(|(x, w)| x * w).collect())
-                    .collect();
-                let refs: Vec<&[f64]> = wc.iter().map(Vec::as_slice).collect();
-                grams.push(Columns::new(len, &refs).ok()?.gram());
-                s0 += len;
-            }
+            let starts: Vec<usize> =
+                st.chans.iter().scan(0, |s0, c| Some(std::mem::replace(s0, *s0 + c.y.len()))).collect();
+            // One channel per thread.
+            let grams = st
+                .chans
+                .par_iter()
+                .zip(&starts)
+                .map(|(c, &s0)| {
+                    let len = c.y.len();
+                    let wc: Vec<Vec<f64>> = raw
+                        .iter()
+                        .map(|col| col[s0..s0 + len].iter().zip(&w[s0..s0 + len]).map(|(x, w)| x * w).collect())
+                        .collect();
+                    let refs: Vec<&[f64]> = wc.iter().map(Vec::as_slice).collect();
+                    Some(Columns::new(len, &refs).ok()?.gram())
+                })
+                .collect::<Option<RawGrams>>()?;
             slot.insert(grams);
         }
         self.grams.get(&key)

@@ -802,58 +802,74 @@ fn fit_orders_nested(
         }
         out
     };
-    for _ in 0..sweeps {
-        for &ti in motions {
-            let name = terms[ti].name;
-            let rows = rows_of(name);
-            let range = shape(st, name, 1, 1, false).range;
-            let top = resolvable_order(st, name, range);
-            let series = columns(st, name, &shape(st, name, 1, top, false), &[]);
-            let others: Vec<FitTerm> =
-                terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
-            let pick = |v: &[f64]| rows.iter().map(|&i| v[i]).collect::<Vec<f64>>();
-            let fixed: Vec<Vec<f64>> =
-                design(st, &others).iter().map(|c| pick(c)).filter(|c| c.iter().any(|v| *v != 0.0)).collect();
-            let (orders, nested): (Vec<u32>, Vec<Vec<f64>>) = series
-                .iter()
-                .enumerate()
-                .map(|(k, c)| (k as u32 + 1, pick(c)))
-                .filter(|(_, c)| c.iter().any(|v| *v != 0.0))
-                .unzip();
-            let wr = pick(w);
-            let y = pick(&first.target);
-            let base = OrthoBase::new(&fixed, &wr)?;
-            let me = &model.effects[terms[ti].index];
-            let sparse = shape(st, name, 1, top, false).basis == ShapeBasis::Cosine && me.order.is_none();
-            // The order in which the series enters: by degree (nested orders), or for a cosine series
-            // greedily, each step the term that explains most of what is left (rail waviness puts the
-            // signal at a few high orders, where nesting by degree would charge every order below
-            // it; at the fast pass the short waves alias, so the terms are not orthogonal there).
-            let nr = if sparse {
-                greedy_rss(&y, &wr, &base, &nested, GREEDY_STOP)?
-            } else {
-                nested_rss(&y, &wr, &base, &nested)?
-            };
-            let nm = rows.len() as f64;
-            let bic = |k: usize| nm * (nr.rss[k].max(1e-300) / nm).ln() + (base.rank() + k) as f64 * nm.ln();
-            let k = (0..nr.rss.len()).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0);
-            let searched = orders.iter().copied().max().unwrap_or(1);
-            if sparse {
-                // The terms taken (at least the best one), in ascending order.
-                let mut sel: Vec<u32> = nr.used[..k.max(1).min(nr.used.len())].iter().map(|&j| orders[j]).collect();
-                sel.sort_unstable();
-                if sel.is_empty() {
-                    sel.push(1);
-                }
-                let chosen = *sel.last().unwrap_or(&1);
+    // Motion `ti`'s order chosen against the other terms of `terms`: (the order chosen, the
+    // highest searched, its shape).
+    let choose = |terms: &[FitTerm], ti: usize| -> Result<(u32, u32, Shape), ModelCheckError> {
+        let name = terms[ti].name;
+        let rows = rows_of(name);
+        let range = shape(st, name, 1, 1, false).range;
+        let top = resolvable_order(st, name, range);
+        let series = columns(st, name, &shape(st, name, 1, top, false), &[]);
+        let others: Vec<FitTerm> = terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
+        let pick = |v: &[f64]| rows.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+        let fixed: Vec<Vec<f64>> =
+            design(st, &others).iter().map(|c| pick(c)).filter(|c| c.iter().any(|v| *v != 0.0)).collect();
+        // Each column of the whole stack dropped once its rows are picked.
+        let (orders, nested): (Vec<u32>, Vec<Vec<f64>>) = series
+            .into_iter()
+            .enumerate()
+            .map(|(k, c)| (k as u32 + 1, pick(&c)))
+            .filter(|(_, c)| c.iter().any(|v| *v != 0.0))
+            .unzip();
+        let wr = pick(w);
+        let y = pick(&first.target);
+        let base = OrthoBase::new(&fixed, &wr)?;
+        let me = &model.effects[terms[ti].index];
+        let sparse = shape(st, name, 1, top, false).basis == ShapeBasis::Cosine && me.order.is_none();
+        // The order in which the series enters: by degree (nested orders), or for a cosine series
+        // greedily, each step the term that explains most of what is left (rail waviness puts the
+        // signal at a few high orders, where nesting by degree would charge every order below
+        // it; at the fast pass the short waves alias, so the terms are not orthogonal there).
+        let nr = if sparse {
+            greedy_rss(&y, &wr, &base, &nested, GREEDY_STOP)?
+        } else {
+            nested_rss(&y, &wr, &base, &nested)?
+        };
+        let nm = rows.len() as f64;
+        let bic = |k: usize| nm * (nr.rss[k].max(1e-300) / nm).ln() + (base.rank() + k) as f64 * nm.ln();
+        let k = (0..nr.rss.len()).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0);
+        let searched = orders.iter().copied().max().unwrap_or(1);
+        if sparse {
+            // The terms taken (at least the best one), in ascending order.
+            let mut sel: Vec<u32> = nr.used[..k.max(1).min(nr.used.len())].iter().map(|&j| orders[j]).collect();
+            sel.sort_unstable();
+            if sel.is_empty() {
+                sel.push(1);
+            }
+            let chosen = *sel.last().unwrap_or(&1);
+            Ok((chosen, searched, shape(st, name, 1, chosen, false).selected(sel)))
+        } else {
+            // k series columns taken: the order of the k-th (1 when none is needed); the columns
+            // the offsets span (P_2 per pass on accelerometers) are skipped but kept in the series.
+            let chosen = if k == 0 { 1 } else { orders[nr.used[k - 1]] };
+            Ok((chosen, searched, shape(st, name, 1, me.order.unwrap_or(chosen), false)))
+        }
+    };
+    if sweeps == 1 {
+        // Independent choices (no channel sees two of the motions): each on its own thread.
+        let out: Vec<Result<(u32, u32, Shape), ModelCheckError>> =
+            motions.par_iter().map(|&ti| choose(&terms, ti)).collect();
+        for (&ti, r) in motions.iter().zip(out) {
+            let (chosen, searched, sh) = r?;
+            best.insert(ti, (chosen, searched));
+            terms[ti].shape = sh;
+        }
+    } else {
+        for _ in 0..sweeps {
+            for &ti in motions {
+                let (chosen, searched, sh) = choose(&terms, ti)?;
                 best.insert(ti, (chosen, searched));
-                terms[ti].shape = shape(st, name, 1, chosen, false).selected(sel);
-            } else {
-                // k series columns taken: the order of the k-th (1 when none is needed); the columns
-                // the offsets span (P_2 per pass on accelerometers) are skipped but kept in the series.
-                let chosen = if k == 0 { 1 } else { orders[nr.used[k - 1]] };
-                best.insert(ti, (chosen, searched));
-                terms[ti].shape = shape(st, name, 1, me.order.unwrap_or(chosen), false);
+                terms[ti].shape = sh;
             }
         }
     }

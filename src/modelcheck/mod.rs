@@ -350,7 +350,7 @@ pub(crate) mod tests {
                 (m, vals)
             })
             .unzip();
-        let ex = Excitation { steps, input };
+        let ex = Excitation::new(steps, input);
         let r = mode_response(&c, Some(&ex), f, z, (0.0, 0.0));
         for i in 200..300 {
             // Interval i runs from τ = t_i to t_i + Δt (τ from t_{−1}); mean of −A·cos(ωτ)/(2ζ).

@@ -60,10 +60,13 @@ pub(crate) const MODE_STEP: f64 = 1e-4;
 /// before the first, whose velocity the first reading is differenced against): interval i
 /// (t_{i−1} → t_i) holds `steps[i]` steps of length Δt_i/steps[i] and the input's mean over each
 /// step, v²·u·Ē''(x_k, x_{k+1}) (`Profile::mean_second_derivative`: a table's slope jumps count).
+///
+/// The tables are shared (a clone is another handle on the same tables): the sensors of one pass
+/// are driven by the same tables ([`Excitation::shares`]).
 #[derive(Clone, Debug)]
 pub(crate) struct Excitation {
-    pub(crate) steps: Vec<usize>,
-    pub(crate) input: Vec<Vec<f64>>,
+    pub(crate) steps: std::sync::Arc<Vec<usize>>,
+    pub(crate) input: std::sync::Arc<Vec<Vec<f64>>>,
 }
 
 /// Sample interval before sample i of a channel, s (the first sample takes the second's).
@@ -94,6 +97,16 @@ pub(crate) fn mode_steps(dt: f64) -> usize {
 pub(crate) const MODE_STEPS_MAX: usize = 4096;
 
 impl Excitation {
+    /// The tables `steps` (steps per sample interval) and `input` (the input's mean over each).
+    pub(crate) fn new(steps: Vec<usize>, input: Vec<Vec<f64>>) -> Excitation {
+        Excitation { steps: std::sync::Arc::new(steps), input: std::sync::Arc::new(input) }
+    }
+
+    /// The same tables as `other` (a clone of it, not equal values).
+    pub(crate) fn shares(&self, other: &Excitation) -> bool {
+        std::sync::Arc::ptr_eq(&self.steps, &other.steps) && std::sync::Arc::ptr_eq(&self.input, &other.input)
+    }
+
     /// The excitation of channel `c` by the given (not fitted) translation error motions of
     /// `model` (EXX, EYX, EZX with their profiles); None for a non-accelerometer channel, a channel
     /// without velocity or a non-increasing time, or when no given translation reaches u.
@@ -163,7 +176,7 @@ impl Excitation {
             steps.push(m);
             input.push(vals);
         }
-        Some(Excitation { steps, input })
+        Some(Excitation::new(steps, input))
     }
 }
 
@@ -683,7 +696,7 @@ impl Shape {
                 (p, slope)
             }
             // The series' terms one by one ([`Shape::cosine_basis`]).
-            ShapeBasis::Cosine => self.cosine_basis(x, top).unzip(),
+            ShapeBasis::Cosine => self.cosine_basis(x, top),
             ShapeBasis::Bspline => bspline_basis(x, top + 1, (a, b)),
             ShapeBasis::Table => hat_basis(x, &self.knots),
             ShapeBasis::Harmonics => {
@@ -710,15 +723,23 @@ impl Shape {
             return coef.iter().zip(ks).map(|(ck, k)| ck * d[*k]).sum();
         }
         let mut acc: f64 = std::iter::empty::<f64>().sum();
-        let mut next = ks.iter().zip(coef).peekable();
-        // index: the last wanted basis index (ks is ascending), at most the shape's order.
-        let top = ks.last().copied().unwrap_or(0);
-        for (k, (_, slope)) in self.cosine_basis(x, top).enumerate() {
-            if let Some((_, ck)) = next.next_if(|(kk, _)| **kk == k) {
-                acc += ck * slope;
-            }
+        for ((_, slope), ck) in CosineAt::new(self.range, x).walk(ks.iter().copied()).zip(coef) {
+            acc += ck * slope;
         }
         acc
+    }
+
+    /// (values, slopes d/dx in 1/m) of the basis indices `ks` at x: [`Shape::basis_at`]'s entries
+    /// at `ks`, the same bits. A cosine series with `ks` ascending walks its recurrence once up to
+    /// the last of `ks` without tabulating the others ([`CosineAt::walk`]).
+    pub(crate) fn terms_at(&self, x: f64, ks: &[usize]) -> (Vec<f64>, Vec<f64>) {
+        let ascending = ks.windows(2).all(|w| w[0] < w[1]);
+        if self.basis != ShapeBasis::Cosine || !ascending {
+            let (p, d) = self.basis_at(x);
+            // index: each of `ks` is a basis index of this shape, at most its order.
+            return ks.iter().map(|&k| (p[k], d[k])).unzip();
+        }
+        CosineAt::new(self.range, x).walk(ks.iter().copied()).unzip()
     }
 
     /// (value, slope d/dx in 1/m) of the cosine series' basis functions 0..=`top` at x, index by
@@ -728,28 +749,9 @@ impl Shape {
     /// j ≥ 1: sine and cosine of period 2(b − a)/j, so that a wave of any wavelength and phase
     /// (rail waviness between two of these frequencies) is a few neighbouring pairs (the family is
     /// overcomplete on [a, b]: a smooth periodic extension exists). cos(jθ), sin(jθ) by the
-    /// angle-addition recurrence (rounding grows ≈ j·ε).
-    fn cosine_basis(&self, x: f64, top: usize) -> impl Iterator<Item = (f64, f64)> {
-        let (a, b) = self.range;
-        let th = std::f64::consts::PI * (x - a) / (b - a);
-        let kx = std::f64::consts::PI / (b - a);
-        let (p, d) = legendre((2.0 * x - a - b) / (b - a), 4);
-        let (s1, c1) = th.sin_cos();
-        let (mut sm, mut cm) = (s1, c1);
-        (0..=top).map(move |k| match k {
-            0 => (1.0, 0.0),
-            1 | 2 => (p[k + 2], d[k + 2] * 2.0 / (b - a)),
-            _ => {
-                let j = ((k - 3) / 2 + 1) as f64;
-                if (k - 3) % 2 == 0 {
-                    (cm, -j * kx * sm)
-                } else {
-                    let term = (sm, j * kx * cm);
-                    (sm, cm) = (sm * c1 + cm * s1, cm * c1 - sm * s1);
-                    term
-                }
-            }
-        })
+    /// angle-addition recurrence (rounding grows ≈ j·ε; [`CosineAt`]).
+    fn cosine_basis(&self, x: f64, top: usize) -> (Vec<f64>, Vec<f64>) {
+        CosineAt::new(self.range, x).walk(0..=top).unzip()
     }
 
     /// This shape (an error motion's, from [`shape`]) in `basis` with user order `order`
@@ -1159,21 +1161,23 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
         n if n.is_error_motion() => {
             // c_k·P_k(u(x)): the same coefficient for lasers (P_k) and accelerometers (its slope
             // P'_k·2/(b − a), differenced over the sample interval); every order at once per
-            // position ([`Shape::basis_at`]; cosines for a motion only accelerometers see).
+            // position ([`Shape::terms_at`]; cosines for a motion only accelerometers see).
             let ks = sh.ks();
             let mut cols: Vec<Vec<f64>> = ks.iter().map(|_| Vec::with_capacity(st.n)).collect();
-            let at = |x: f64| sh.basis_at(x);
+            let at = |x: f64| sh.terms_at(x, &ks);
             for c in st.chans {
                 for i in 0..c.y.len() {
                     match c.motion_read(i, n) {
                         MotionRead::Blind => cols.iter_mut().for_each(|col| col.push(0.0)),
                         MotionRead::Value { s, x } => {
                             let (p, _) = at(x);
-                            cols.iter_mut().zip(&ks).for_each(|(col, &k)| col.push(s * p[k]));
+                            cols.iter_mut().zip(&p).for_each(|(col, pk)| col.push(s * pk));
                         }
                         MotionRead::SlopeDifference { s, v, dt, xa, xb } => {
                             let ((_, d1), (_, d0)) = (at(xb), at(xa));
-                            cols.iter_mut().zip(&ks).for_each(|(col, &k)| col.push(s * v * (d1[k] - d0[k]) / dt));
+                            cols.iter_mut()
+                                .zip(d1.iter().zip(&d0))
+                                .for_each(|(col, (b, a))| col.push(s * v * (b - a) / dt));
                         }
                     }
                 }
@@ -1247,17 +1251,31 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             // Forced response to each predicted base acceleration, gain φ (the mode shape at the
             // sensor, times the input's share of the drive) per sensor and input: φ·mean q̈ with q
             // driven by −a_ref from rest at t_{−1}.
-            let responses: Vec<Vec<Vec<f64>>> = st
-                .chans
-                .iter()
-                .zip(&st.excitation)
-                .map(|(c, es)| es.iter().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))).collect())
-                .collect();
+            // The sensors of one pass (the same times, the same tables) share their responses.
+            let same = |k: usize, j: usize| {
+                let (ek, ej) = (&st.excitation[k], &st.excitation[j]);
+                ek.len() == ej.len() && ek.iter().zip(ej).all(|(a, b)| a.shares(b)) && st.chans[k].t == st.chans[j].t
+            };
+            let mut responses: Vec<std::sync::Arc<Vec<Vec<f64>>>> = Vec::with_capacity(st.chans.len());
+            for (j, (c, es)) in st.chans.iter().zip(&st.excitation).enumerate() {
+                let r = match (0..j).find(|&k| !es.is_empty() && same(k, j)) {
+                    Some(k) => responses[k].clone(),
+                    None => {
+                        std::sync::Arc::new(es.iter().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))).collect())
+                    }
+                };
+                responses.push(r);
+            }
             for (a, k, _) in resonance_gains(st) {
-                cols.push(st.col_j(|c, i, j| match responses[j].get(k) {
-                    Some(r) if c.sensor == a => r[i],
-                    Some(_) | None => 0.0,
-                }));
+                // Channel by channel: sensor `a`'s response to input k, zero elsewhere.
+                let mut col = Vec::with_capacity(st.n);
+                for (c, r) in st.chans.iter().zip(&responses) {
+                    match r.get(k) {
+                        Some(r) if c.sensor == a => col.extend_from_slice(r),
+                        Some(_) | None => col.resize(col.len() + c.y.len(), 0.0),
+                    }
+                }
+                cols.push(col);
             }
             // Free vibration from the unknown state at t_{−1}, per excited channel.
             for (j, c) in st.chans.iter().enumerate() {
@@ -1646,6 +1664,73 @@ mod resolvability_tests {
         dense.extend((1..20).map(|k| 0.101 + k as f64 * 1e-3));
         dense.sort_by(f64::total_cmp);
         assert!(resolvable_on(&dense, 2.1e-3) && resolvable_on(&dense, 19e-3) && !resolvable_on(&dense, 1.9e-3));
+    }
+}
+
+/// The cosine series ([`Shape::cosine_basis`]) at one position x of range (a, b): θ = π(x − a)/(b − a),
+/// its sine and cosine, and P_3, P_4 with their slopes.
+struct CosineAt {
+    /// π/(b − a), 1/m: the slope of θ.
+    kx: f64,
+    /// sin θ, cos θ.
+    s1: f64,
+    c1: f64,
+    /// b − a, m (u = (2x − a − b)/(b − a) has the slope 2/(b − a)).
+    span: f64,
+    /// P_0..P_4 at u and their slopes in u.
+    p: Vec<f64>,
+    d: Vec<f64>,
+}
+
+impl CosineAt {
+    fn new(range: (f64, f64), x: f64) -> CosineAt {
+        let (a, b) = range;
+        let th = std::f64::consts::PI * (x - a) / (b - a);
+        let (p, d) = legendre((2.0 * x - a - b) / (b - a), 4);
+        let (s1, c1) = th.sin_cos();
+        CosineAt { kx: std::f64::consts::PI / (b - a), s1, c1, span: b - a, p, d }
+    }
+
+    /// (value, slope) of basis index k < 3: 1, P_3, P_4.
+    fn low(&self, k: usize) -> (f64, f64) {
+        match k {
+            0 => (1.0, 0.0),
+            // index: k is 1 or 2, so k + 2 ≤ 4, the last Legendre order computed.
+            _ => (self.p[k + 2], self.d[k + 2] * 2.0 / self.span),
+        }
+    }
+
+    /// (value, slope) of basis index k ≥ 3, of pair j, from (sin jθ, cos jθ): cos jθ and its
+    /// slope −j·kx·sin jθ at even k − 3, sin jθ and j·kx·cos jθ at odd.
+    fn pair(&self, k: usize, j: f64, (sm, cm): (f64, f64)) -> (f64, f64) {
+        if (k - 3).is_multiple_of(2) {
+            (cm, -j * self.kx * sm)
+        } else {
+            (sm, j * self.kx * cm)
+        }
+    }
+
+    /// (value, slope) of each of the basis indices `ks` (ascending) in turn, the recurrence
+    /// turned only as far as the last: the same bits as [`Shape::cosine_basis`]'s entries.
+    fn walk<'k>(&'k self, ks: impl Iterator<Item = usize> + 'k) -> impl Iterator<Item = (f64, f64)> + 'k {
+        // The walk's pair j (its sine and cosine at jθ).
+        let (mut j, mut sc) = (1, (self.s1, self.c1));
+        ks.map(move |k| {
+            if k < 3 {
+                return self.low(k);
+            }
+            let jk = (k - 3) / 2 + 1;
+            while j < jk {
+                sc = self.turn(sc);
+                j += 1;
+            }
+            self.pair(k, jk as f64, sc)
+        })
+    }
+
+    /// (sin (j+1)θ, cos (j+1)θ) from (sin jθ, cos jθ) by angle addition.
+    fn turn(&self, (sm, cm): (f64, f64)) -> (f64, f64) {
+        (sm * self.c1 + cm * self.s1, cm * self.c1 - sm * self.s1)
     }
 }
 

@@ -23,6 +23,7 @@
 use super::ModelCheckError;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use rayon::prelude::*;
 
 /// The projected residual θ ↦ P⊥(θ)·W^{1/2}·r (module doc), length n for every θ; `Err` marks θ
 /// as invalid (the solver then stops and the starting point stands).
@@ -86,19 +87,24 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
     fn jacobian(&self) -> Option<DMatrix<f64>> {
         // Forward differences, step √ε·max(1, |u|) (Dennis & Schnabel 1983, §5.4). `jacobian`
         // takes &self, so the evaluations of the differences are counted by the caller's bound.
+        // The columns on their own threads (each the same bits on any number of them).
         let r0 = self.r.as_ref()?;
+        let cols: Vec<Option<Vec<f64>>> = (0..self.u.len())
+            .into_par_iter()
+            .map(|d| {
+                let step = 1.5e-8 * self.u[d].abs().max(1.0);
+                let mut u = self.u.clone();
+                u[d] += step;
+                let r = (self.f)(&self.theta(&u)).ok()?;
+                if r.len() != r0.len() || r.iter().any(|x| !x.is_finite()) {
+                    return None;
+                }
+                Some(r.iter().zip(r0.iter()).map(|(a, b)| (a - b) / step).collect())
+            })
+            .collect();
         let mut j = DMatrix::zeros(r0.len(), self.u.len());
-        for d in 0..self.u.len() {
-            let step = 1.5e-8 * self.u[d].abs().max(1.0);
-            let mut u = self.u.clone();
-            u[d] += step;
-            let r = (self.f)(&self.theta(&u)).ok()?;
-            if r.len() != r0.len() || r.iter().any(|x| !x.is_finite()) {
-                return None;
-            }
-            for (i, (a, b)) in r.iter().zip(r0.iter()).enumerate() {
-                j[(i, d)] = (a - b) / step;
-            }
+        for (d, col) in cols.into_iter().enumerate() {
+            j.column_mut(d).copy_from_slice(&col?);
         }
         Some(j)
     }
