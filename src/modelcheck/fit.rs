@@ -809,16 +809,26 @@ fn fit_orders_nested(
         let rows = rows_of(name);
         let range = shape(st, name, 1, 1, false).range;
         let top = resolvable_order(st, name, range);
-        let series = columns(st, name, &shape(st, name, 1, top, false), &[]);
         let others: Vec<FitTerm> = terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
         let pick = |v: &[f64]| rows.iter().map(|&i| v[i]).collect::<Vec<f64>>();
         let fixed: Vec<Vec<f64>> =
             design(st, &others).iter().map(|c| pick(c)).filter(|c| c.iter().any(|v| *v != 0.0)).collect();
-        // Each column of the whole stack dropped once its rows are picked.
+        // The series on the rows that see the motion. Seen by accelerometers alone, its columns
+        // read each sample and nothing of the stack (no loop): they are built on a stack of those
+        // channels (half the values of the whole stack's columns with two sensors); else the whole
+        // stack's columns, each dropped once its rows are picked.
+        let sh = shape(st, name, 1, top, false);
+        let seeing: Vec<Channel> = st.chans.iter().filter(|c| c.s_motion(name) != 0.0).cloned().collect();
+        let series: Vec<Vec<f64>> = if !seeing.is_empty() && seeing.iter().all(|c| c.is_accel()) {
+            columns(&Stack::new(&seeing), name, &sh, &[])
+        } else {
+            columns(st, name, &sh, &[]).into_iter().map(|c| pick(&c)).collect()
+        };
+        drop(seeing);
         let (orders, nested): (Vec<u32>, Vec<Vec<f64>>) = series
             .into_iter()
             .enumerate()
-            .map(|(k, c)| (k as u32 + 1, pick(&c)))
+            .map(|(k, c)| (k as u32 + 1, c))
             .filter(|(_, c)| c.iter().any(|v| *v != 0.0))
             .unzip();
         let wr = pick(w);
