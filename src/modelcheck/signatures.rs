@@ -1277,14 +1277,27 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
                 }
                 cols.push(col);
             }
-            // Free vibration from the unknown state at t_{−1}, per excited channel.
+            // Free vibration from the unknown state at t_{−1}, per excited channel (on its rows,
+            // zero elsewhere; channels with the same times share it).
+            let starts: Vec<usize> =
+                st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect();
+            let mut free: Vec<(usize, std::sync::Arc<[Vec<f64>; 2]>)> = Vec::new();
             for (j, c) in st.chans.iter().enumerate() {
                 if st.excitation[j].is_empty() {
                     continue;
                 }
-                for r in free_vibration(c, f, zeta) {
-                    cols.push(st.col_j(|_, i, jj| if jj == j { r[i] } else { 0.0 }));
+                let rs = match free.iter().find(|(k, _)| st.chans[*k].t == c.t) {
+                    Some((_, rs)) => rs.clone(),
+                    None => std::sync::Arc::new(free_vibration(c, f, zeta)),
+                };
+                for r in rs.iter() {
+                    let mut col = vec![0.0; st.n];
+                    // index: channel j's rows of the stack, starts[j] + its length ≤ n; a response
+                    // has one value per sample of the channel.
+                    col[starts[j]..starts[j] + c.y.len()].copy_from_slice(r);
+                    cols.push(col);
                 }
+                free.push((j, rs));
             }
             // Channels without a predicted excitation: narrow band at the temporal frequency f,
             // sin/cos of 2πf·t per segment.
