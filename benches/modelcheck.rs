@@ -11,7 +11,9 @@
 //! evenly spaced grid (Fourier sums) against the explicit fit at each frequency, in one run.
 //!
 //! Run with `cargo bench --bench modelcheck` (quick: `-- --warm-up-time 1 --measurement-time 5
-//! --sample-size 10`; one group: `-- periodogram`).
+//! --sample-size 10`; one group: `-- periodogram`). With `VMT_BENCH_SETS=DIR` the `diagnose` group
+//! writes its sets under DIR (kept, for timing another build's `vmt diagnose` on the same data)
+//! instead of a temporary directory.
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::path::Path;
 
@@ -23,19 +25,20 @@ fn diagnose(c: &mut Criterion) {
     let mut g = c.benchmark_group("diagnose");
     g.sample_size(10);
     let tmp = tempfile::tempdir().unwrap();
+    let root = std::env::var_os("VMT_BENCH_SETS").map_or_else(|| tmp.path().to_path_buf(), std::path::PathBuf::from);
     let bench = |g: &mut criterion::BenchmarkGroup<_>, label: String, dir: &Path| {
         let model = vmt::model::read_model(&dir.join("model.toml")).unwrap();
         let set = vmt::measurement::read(dir).unwrap();
         g.bench_function(label, |b| b.iter(|| vmt::modelcheck::diagnose(&model, &set, dir).unwrap()));
     };
     for samples in [15_000usize, 100_000] {
-        let dir = tmp.path().join(format!("acc{samples}"));
+        let dir = root.join(format!("acc{samples}"));
         let t = accel_set_sized(&dir, 11, AccelHidden::None, 0.0, Some(samples));
         bench(&mut g, format!("accelerometer passes, complete, {} samples", t.samples), &dir);
-        let dir = tmp.path().join(format!("res{samples}"));
+        let dir = root.join(format!("res{samples}"));
         let t = accel_set_sized(&dir, 12, AccelHidden::Resonance, 200.0, Some(samples));
         bench(&mut g, format!("accelerometer passes, hidden mode, {} samples", t.samples), &dir);
-        let dir = tmp.path().join(format!("enc{samples}"));
+        let dir = root.join(format!("enc{samples}"));
         let t = encoder_set_sized(&dir, 13, EncoderHidden::None, Some(samples));
         bench(&mut g, format!("encoder logs, complete, {} samples", t.samples), &dir);
     }
