@@ -602,7 +602,7 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
         .collect();
     // Each input's raw basis indices, ascending (`raw_of`'s keys).
     let raw_ks: Vec<Vec<usize>> = inputs.iter().map(|i| i.raw_of.keys().copied().collect()).collect();
-    let starts_at: Vec<usize> = st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect();
+    let starts_at: Vec<usize> = st.channel_starts();
     let mut free_slots = 0;
     let frees: Vec<Option<usize>> = st
         .excitation
@@ -980,8 +980,7 @@ impl RawGramCache {
         let reads = st.chans.iter().any(|c| !c.is_accel());
         let key = (reads.then_some(name), [shx.range.0.to_bits(), shx.range.1.to_bits()], shx.order);
         if let std::collections::btree_map::Entry::Vacant(slot) = self.grams.entry(key) {
-            let starts: Vec<usize> =
-                st.chans.iter().scan(0, |s0, c| Some(std::mem::replace(s0, *s0 + c.y.len()))).collect();
+            let starts: Vec<usize> = st.channel_starts();
             // One channel per thread.
             let grams = st
                 .chans

@@ -83,7 +83,7 @@ pub(crate) fn following_error(c: &Channel, kv: f64) -> Vec<f64> {
 /// [`Stack::loop_kv`] (∞: the identity). Columns zero on the transmission (offsets, servo_lag)
 /// pass unchanged.
 pub(crate) fn close_loop(st: &Stack, col: &mut [f64]) {
-    let starts = channel_starts(st);
+    let starts = st.channel_starts();
     for (j, k) in closed_pairs(st) {
         let c = &st.chans[j];
         let t = &col[starts[k]..starts[k] + c.y.len()];
@@ -118,7 +118,7 @@ pub(crate) fn close_loop(st: &Stack, col: &mut [f64]) {
 /// [`close_loop`]). A servo that samples the scale at its own rate aliases such a wave too, which
 /// no log column can show.
 pub(crate) fn close_loop_wave(st: &Stack, p: f64, shift: &[f64], sin: &mut [f64], cos: &mut [f64]) {
-    let starts = channel_starts(st);
+    let starts = st.channel_starts();
     let (kv, g) = (st.loop_kv, st.loop_gain);
     for (j, k) in closed_pairs(st) {
         let tr = &st.chans[k];
@@ -179,11 +179,6 @@ pub fn wave_lag(t: &[f64], theta: &[f64], kv: f64) -> Vec<(f64, f64)> {
         out.push((z.im, z.re));
     }
     out
-}
-
-/// The first row of each channel of a stack.
-fn channel_starts(st: &Stack) -> Vec<usize> {
-    st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect()
 }
 
 /// (following channel closed by the scale, its run's transmission channel of the same length):

@@ -96,7 +96,7 @@ pub(crate) fn solve_blocks(
     cols: &[Vec<f64>],
     sigma: &Sigma,
 ) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
-    let starts: Vec<usize> = st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect();
+    let starts: Vec<usize> = st.channel_starts();
     let m = st.chans.len();
     let seen = |col: &[f64], j: usize| col[starts[j]..starts[j] + st.chans[j].y.len()].iter().any(|v| *v != 0.0);
     // Union-find over channels.
@@ -835,7 +835,7 @@ fn fit_orders_nested(
         let y = pick(&first.target);
         let base = OrthoBase::new(&fixed, &wr)?;
         let me = &model.effects[terms[ti].index];
-        let sparse = shape(st, name, 1, top, false).basis == ShapeBasis::Cosine && me.order.is_none();
+        let sparse = sh.basis == ShapeBasis::Cosine && me.order.is_none();
         // The order in which the series enters: by degree (nested orders), or for a cosine series
         // greedily, each step the term that explains most of what is left (rail waviness puts the
         // signal at a few high orders, where nesting by degree would charge every order below

@@ -332,6 +332,11 @@ impl<'a> Stack<'a> {
         st
     }
 
+    /// The first row of each channel in the stack's order.
+    pub(crate) fn channel_starts(&self) -> Vec<usize> {
+        self.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect()
+    }
+
     /// The same stack with these mode excitations (one list per channel).
     pub(crate) fn with_excitation(&self, excitation: Vec<Vec<Excitation>>) -> Stack<'a> {
         Stack {
@@ -713,20 +718,9 @@ impl Shape {
     }
 
     /// E'(x) = Σ_j coef_j·φ'_{ks_j}(x) (1/m times the coefficients' unit): the slopes of
-    /// [`Shape::basis_at`] summed in the order of `ks`. A cosine series with `ks` ascending runs
-    /// its recurrence once without tabulating the basis (the same terms in the same order, so the
-    /// same bits); any other shape tabulates it.
+    /// [`Shape::terms_at`] (the same bits as [`Shape::basis_at`]'s) summed in the order of `ks`.
     pub(crate) fn slope_sum(&self, x: f64, ks: &[usize], coef: &[f64]) -> f64 {
-        let ascending = ks.windows(2).all(|w| w[0] < w[1]);
-        if self.basis != ShapeBasis::Cosine || !ascending {
-            let (_, d) = self.basis_at(x);
-            return coef.iter().zip(ks).map(|(ck, k)| ck * d[*k]).sum();
-        }
-        let mut acc: f64 = std::iter::empty::<f64>().sum();
-        for ((_, slope), ck) in CosineAt::new(self.range, x).walk(ks.iter().copied()).zip(coef) {
-            acc += ck * slope;
-        }
-        acc
+        coef.iter().zip(&self.terms_at(x, ks).1).map(|(ck, slope)| ck * slope).sum()
     }
 
     /// (values, slopes d/dx in 1/m) of the basis indices `ks` at x: [`Shape::basis_at`]'s entries
@@ -1279,8 +1273,7 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             }
             // Free vibration from the unknown state at t_{−1}, per excited channel (on its rows,
             // zero elsewhere; channels with the same times share it).
-            let starts: Vec<usize> =
-                st.chans.iter().scan(0, |k, c| Some(std::mem::replace(k, *k + c.y.len()))).collect();
+            let starts = st.channel_starts();
             let mut free: Vec<(usize, std::sync::Arc<[Vec<f64>; 2]>)> = Vec::new();
             for (j, c) in st.chans.iter().enumerate() {
                 if st.excitation[j].is_empty() {
