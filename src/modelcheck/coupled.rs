@@ -140,6 +140,16 @@ struct ChannelGram {
     yy: f64,
     /// Excited channels: the position of its two free-vibration unknowns among the free ones.
     free: Option<usize>,
+    /// The thin QR of `cols` ([`Columns::thin_qr`]), computed on first use ([`ChannelGram::qr`]).
+    qr: std::sync::OnceLock<Option<(Columns, Vec<f64>)>>,
+}
+
+impl ChannelGram {
+    /// `cols` = Q·R ([`Columns::thin_qr`]), factored on the first call; None when the channel has
+    /// fewer samples than columns.
+    fn qr(&self) -> Option<&(Columns, Vec<f64>)> {
+        self.qr.get_or_init(|| self.cols.thin_qr()).as_ref()
+    }
 }
 
 /// One excited channel's free vibration at one (f, ζ) ([`Problem::free_parts`]): its two weighted
@@ -152,6 +162,16 @@ struct FreePart {
     fphi: Vec<Vec<f64>>,
     gram: Vec<Vec<f64>>,
     by: Vec<f64>,
+    /// With the channel's QR ([`Problem::free_parts`] `in_q`): the columns against its Q.
+    in_q: Option<FreeInQ>,
+}
+
+/// A channel's free-vibration columns φ against the orthonormal Q of its columns C = Q·R
+/// ([`ChannelGram::qr`]): z = Qᵀφ (k × 2, row-major) and the upper triangular r2 = (r00, r01, r11)
+/// with r2ᵀ·r2 = φ⊥ᵀφ⊥, φ⊥ = φ − Q·z the part of φ off C's span.
+struct FreeInQ {
+    z: Vec<f64>,
+    r2: [f64; 3],
 }
 
 /// Where [`refit_coupled`] starts the mode.
@@ -218,32 +238,52 @@ pub(crate) struct Coupled {
     pub(crate) at_bound: [bool; 2],
 }
 
-/// Adds to column `col` of A (R × p, row-major) `scale` times the steady mode response R_k of raw
-/// basis column k of wave `wave` (module doc), at velocity v.
-#[allow(clippy::too_many_arguments)]
-fn add_response(
-    a: &mut [f64],
-    p: usize,
-    col: usize,
-    inp: &Input,
-    k: usize,
-    wave: Wave,
-    scale: f64,
-    fz: (f64, f64),
-    v: f64,
-) {
+/// The steady mode response R_k of raw basis column k of wave `wave` (module doc) at velocity v in
+/// the raw columns, times `scale`: (its own raw column, the in-phase part) and (its partner's, the
+/// quadrature part); None for a still wave.
+fn response(inp: &Input, k: usize, wave: Wave, scale: f64, fz: (f64, f64), v: f64) -> Option<[(usize, f64); 2]> {
     match wave {
-        Wave::Still => {}
+        Wave::Still => None,
         Wave::Cos { kappa, partner } => {
             let (tr, ti) = mode_ratio(fz.0, fz.1, kappa * v);
-            a[inp.raw_of[&k] * p + col] += scale * tr;
-            a[inp.raw_of[&partner] * p + col] -= scale * ti;
+            Some([(inp.raw_of[&k], scale * tr), (inp.raw_of[&partner], -(scale * ti))])
         }
         Wave::Sin { kappa, partner } => {
             let (tr, ti) = mode_ratio(fz.0, fz.1, kappa * v);
-            a[inp.raw_of[&k] * p + col] += scale * tr;
-            a[inp.raw_of[&partner] * p + col] += scale * ti;
+            Some([(inp.raw_of[&k], scale * tr), (inp.raw_of[&partner], scale * ti)])
         }
+    }
+}
+
+/// One channel's mixing A (R × p, [`Problem::mixing`]) by columns: each column's non-zero entries
+/// (raw column, value), ascending in the raw column.
+struct Mixing {
+    p: usize,
+    cols: Vec<Vec<(usize, f64)>>,
+}
+
+impl Mixing {
+    /// A as a dense R × p matrix, row-major.
+    fn dense(&self, r: usize) -> Vec<f64> {
+        let mut a = vec![0.0; r * self.p];
+        for (j, col) in self.cols.iter().enumerate() {
+            for &(k, v) in col {
+                a[k * self.p + j] = v;
+            }
+        }
+        a
+    }
+
+    /// The raw coefficients A·β of the first p entries of β (one per raw column, R of them), each
+    /// summed over the columns in their order.
+    fn times(&self, r: usize, beta: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; r];
+        for (col, b) in self.cols.iter().zip(beta) {
+            for &(k, v) in col {
+                out[k] += v * b;
+            }
+        }
+        out
     }
 }
 
@@ -265,58 +305,61 @@ impl Problem<'_> {
         self.inputs.iter().map(|i| i.ks.len()).sum()
     }
 
-    /// A (R × p, row-major): channel `ch`'s unknown shape columns (and gain columns) as
+    /// A (R × p, [`Mixing`]): channel `ch`'s unknown shape columns (and gain columns) as
     /// combinations of its raw columns. `excite` None: coupled shape columns u·X + g·R(f, ζ) with
     /// `gains`; Some(c): plain shape columns u·X and one unknown column per gain, Σ_k c_{m,k}·R_k on
     /// the gain's sensor (the sequential fit with the excitation c held).
-    fn mixing(
-        &self,
-        ch: &ChannelGram,
-        fz: (f64, f64),
-        gains: &[f64],
-        excite: Option<&[Vec<f64>]>,
-    ) -> (Vec<f64>, usize) {
-        let r = ch.r;
+    fn mixing(&self, ch: &ChannelGram, fz: (f64, f64), gains: &[f64], excite: Option<&[Vec<f64>]>) -> Mixing {
         let p = self.n_shape() + excite.map_or(0, |_| self.n_gains);
-        let mut a = vec![0.0; r * p];
-        let mut col = 0;
+        let mut cols: Vec<Vec<(usize, f64)>> = Vec::with_capacity(p);
         for (m, inp) in self.inputs.iter().enumerate() {
             let g = ch.gain[m].map_or(0.0, |i| gains.get(i).copied().unwrap_or(0.0));
             for (&k, &wave) in inp.ks.iter().zip(&inp.waves) {
                 let rk = inp.raw_of[&k];
-                if !ch.accel {
-                    a[rk * p + col] = 1.0;
+                let mut col = if !ch.accel {
+                    vec![(rk, 1.0)]
                 } else {
-                    a[rk * p + col] += ch.sens[m];
-                    if excite.is_none() && g != 0.0 {
-                        add_response(&mut a, p, col, inp, k, wave, g, fz, ch.v);
+                    match (excite.is_none() && g != 0.0).then(|| response(inp, k, wave, g, fz, ch.v)).flatten() {
+                        None => vec![(rk, ch.sens[m])],
+                        Some([(_, own), other]) => vec![(rk, ch.sens[m] + own), other],
                     }
-                }
-                col += 1;
+                };
+                col.sort_by_key(|e| e.0);
+                col.retain(|e| e.1 != 0.0);
+                cols.push(col);
             }
         }
         if let Some(cs) = excite {
+            // Each gain's column summed in a dense one over the waves in their order.
+            let mut gcols = vec![vec![0.0; ch.r]; self.n_gains];
             for (m, inp) in self.inputs.iter().enumerate() {
                 let Some(gi) = ch.gain[m].filter(|_| ch.accel) else { continue };
-                let gcol = self.n_shape() + gi;
                 for ((&k, &wave), cv) in inp.ks.iter().zip(&inp.waves).zip(&cs[m]) {
-                    add_response(&mut a, p, gcol, inp, k, wave, *cv, fz, ch.v);
+                    for (row, v) in response(inp, k, wave, *cv, fz, ch.v).into_iter().flatten() {
+                        gcols[gi][row] += v;
+                    }
                 }
             }
+            cols.extend(
+                gcols.iter().map(|c| c.iter().enumerate().filter(|(_, v)| **v != 0.0).map(|(k, v)| (k, *v)).collect()),
+            );
         }
-        (a, p)
+        Mixing { p, cols }
     }
 
     /// [`Problem::mixing`] of every channel.
-    fn mixings(&self, fz: (f64, f64), gains: &[f64], excite: Option<&[Vec<f64>]>) -> Vec<(Vec<f64>, usize)> {
+    fn mixings(&self, fz: (f64, f64), gains: &[f64], excite: Option<&[Vec<f64>]>) -> Vec<Mixing> {
         self.chans.iter().map(|ch| self.mixing(ch, fz, gains, excite)).collect()
     }
 
     /// The free vibration of every excited channel at (f, ζ) ([`FreePart`]), in parallel over the
     /// channels; None for a channel the mode does not reach. It depends on (f, ζ) only, so the
     /// solves of one (f, ζ) (the rounds of [`Problem::alternating_gains`], a cost after them, the
-    /// gain differences of a Jacobian) share it.
-    fn free_parts(&self, fz: (f64, f64)) -> Vec<Option<FreePart>> {
+    /// gain differences of a Jacobian) share it. With `in_q` (every channel's [`ChannelGram::qr`]
+    /// computed) its products with the columns come from z = Qᵀφ (Cᵀφ = Rᵀ·z), and its part off
+    /// the columns' span, φ − Q·z, is kept as a 2 × 2 factor ([`FreeInQ`],
+    /// [`Problem::coupled_compressed`]).
+    fn free_parts(&self, fz: (f64, f64), in_q: bool) -> Vec<Option<FreePart>> {
         self.chans
             .par_iter()
             .map(|ch| {
@@ -327,14 +370,33 @@ impl Problem<'_> {
                     .iter()
                     .map(|resp| resp.iter().zip(wch).map(|(x, w)| x * w).collect())
                     .collect();
-                // [U | F | y]ᵀ[φ_0 φ_1], row-major.
-                let t = ch.cols.t_mul(&[&cols[0], &cols[1]]).ok()?;
+                let gram: Vec<Vec<f64>> =
+                    cols.iter().map(|phi| cols.iter().map(|psi| dot(psi, phi)).collect()).collect();
+                // [U | F | y]ᵀ[φ_0 φ_1] (k × 2, row-major): directly, or Rᵀ·(Qᵀφ).
+                let (t, in_q) = match ch.qr().filter(|_| in_q) {
+                    None => (ch.cols.t_mul(&[&cols[0], &cols[1]]).ok()?, None),
+                    Some((q, rr)) => {
+                        let z = q.t_mul(&[&cols[0], &cols[1]]).ok()?;
+                        let k = q.count();
+                        let t = (0..k * 2)
+                            .map(|e| (0..=e / 2).map(|b| rr[b * k + e / 2] * z[b * 2 + e % 2]).sum())
+                            .collect();
+                        // φ⊥ = φ − Q·z, its Gram matrix and Cholesky factor (zero where φ lies in C's span).
+                        let zs: Vec<Vec<f64>> = (0..2).map(|j| (0..k).map(|b| z[b * 2 + j]).collect()).collect();
+                        let qz = q.combine_each(&[&zs[0], &zs[1]]).ok()?;
+                        let perp: Vec<Vec<f64>> =
+                            (0..2).map(|j| cols[j].iter().zip(&qz[j]).map(|(a, b)| a - b).collect()).collect();
+                        let r00 = dot(&perp[0], &perp[0]).sqrt();
+                        let r01 = if r00 > 0.0 { dot(&perp[0], &perp[1]) / r00 } else { 0.0 };
+                        let r11 = (dot(&perp[1], &perp[1]) - r01 * r01).max(0.0).sqrt();
+                        (t, Some(FreeInQ { z, r2: [r00, r01, r11] }))
+                    }
+                };
                 let (r, nf) = (ch.r, ch.fixed.len());
                 let uphi = (0..2).map(|j| (0..r).map(|a| t[a * 2 + j]).collect()).collect();
                 let fphi = (0..2).map(|j| (r..r + nf).map(|a| t[a * 2 + j]).collect()).collect();
-                let gram = cols.iter().map(|phi| cols.iter().map(|psi| dot(psi, phi)).collect()).collect();
                 let by = (0..2).map(|j| t[(r + nf) * 2 + j]).collect();
-                Some(FreePart { cols, uphi, fphi, gram, by })
+                Some(FreePart { cols, uphi, fphi, gram, by, in_q })
             })
             .collect()
     }
@@ -345,7 +407,7 @@ impl Problem<'_> {
     /// n, stack order; empty otherwise).
     fn solve(
         &self,
-        mix: &[(Vec<f64>, usize)],
+        mix: &[Mixing],
         free: &[Option<FreePart>],
         residual: bool,
     ) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
@@ -354,15 +416,11 @@ impl Problem<'_> {
         if !residual {
             return Ok((beta, Vec::new()));
         }
-        let p = mix.first().map_or(0, |m| m.1);
+        let p = mix.first().map_or(0, |m| m.p);
         let mut resid = vec![0.0; self.n];
-        for ((ch, (a, _)), fp) in self.chans.iter().zip(mix).zip(free) {
-            // y − U·γ − F·β_F = [U | F | y]·[−γ | −β_F | 1], γ = A·β_p.
-            let mut coef: Vec<f64> = (0..ch.r).map(|k| -(0..p).map(|j| a[k * p + j] * beta[j]).sum::<f64>()).collect();
-            coef.extend(ch.fixed.iter().map(|g| -beta[p + g]));
-            coef.push(1.0);
+        for ((ch, a), fp) in self.chans.iter().zip(mix).zip(free) {
             let out = &mut resid[ch.start..ch.start + ch.cols.rows()];
-            out.copy_from_slice(&ch.cols.combine(&coef)?);
+            out.copy_from_slice(&ch.cols.combine(&residual_coef(ch, a, &beta))?);
             if let (Some(slot), Some(fp)) = (ch.free, fp) {
                 for (j, phi) in fp.cols.iter().enumerate() {
                     let bj = beta[p + self.n_fixed + slot + j];
@@ -373,10 +431,44 @@ impl Problem<'_> {
         Ok((beta, resid))
     }
 
+    /// The coupled fit at θ = (f, ζ, gains…) with `free` from [`Problem::free_parts`] with `in_q`: its
+    /// weighted residual r compressed, per channel Qᵀr (k values; C = Q·R, [`ChannelGram::qr`]) and,
+    /// on an excited channel, r2·c (its part off C's span: r = C·x − φ·c, x from
+    /// [`residual_coef`], c the free vibration's coefficients, so Qᵀr = R·x − z·c and
+    /// ‖(I − QQᵀ)r‖ = ‖r2·c‖, [`FreeInQ`]). The same norm as the residual, through a map that
+    /// does not change with θ, so its differences are the residual's: Levenberg–Marquardt on it
+    /// takes the residual's steps ([`Problem::refine`]) at a few hundred values in place of one
+    /// per sample.
+    fn coupled_compressed(&self, theta: &[f64], free: &[Option<FreePart>]) -> Result<Vec<f64>, ModelCheckError> {
+        let mix = self.mixings((theta[0], theta[1]), &theta[2..], None);
+        let (nm, b) = self.normal_equations(&mix, free);
+        let beta = solve_normal(&nm, &b)?;
+        let p = mix.first().map_or(0, |m| m.p);
+        let missing = || ModelCheckError::Numerical("coupled fit: a channel's QR is missing".into());
+        let mut out = Vec::new();
+        for ((ch, a), fp) in self.chans.iter().zip(&mix).zip(free) {
+            let x = residual_coef(ch, a, &beta);
+            let (_, rr) = ch.qr().ok_or_else(missing)?;
+            let k = x.len();
+            // index: x has the k = count columns of `cols`, R is k × k.
+            let mut rho: Vec<f64> = (0..k).map(|i| (i..k).map(|j| rr[i * k + j] * x[j]).sum()).collect();
+            if let (Some(slot), Some(fp)) = (ch.free, fp) {
+                let fq = fp.in_q.as_ref().ok_or_else(missing)?;
+                let at = p + self.n_fixed + slot;
+                let c = [beta[at], beta[at + 1]];
+                rho.iter_mut().enumerate().for_each(|(i, v)| *v -= fq.z[i * 2] * c[0] + fq.z[i * 2 + 1] * c[1]);
+                rho.push(-(fq.r2[0] * c[0] + fq.r2[1] * c[1]));
+                rho.push(-fq.r2[2] * c[1]);
+            }
+            out.extend(rho);
+        }
+        Ok(out)
+    }
+
     /// The normal equations (N, q × q row-major, and b) of [`Problem::solve`]'s unknowns, summed
     /// over the channels' Gram matrices.
-    fn normal_equations(&self, mix: &[(Vec<f64>, usize)], free: &[Option<FreePart>]) -> (Vec<f64>, Vec<f64>) {
-        let p = mix.first().map_or(0, |m| m.1);
+    fn normal_equations(&self, mix: &[Mixing], free: &[Option<FreePart>]) -> (Vec<f64>, Vec<f64>) {
+        let p = mix.first().map_or(0, |m| m.p);
         let q = p + self.n_fixed + self.n_free;
         // Per channel (in parallel), its share of the normal equations.
         let parts: Vec<(Vec<f64>, Vec<f64>)> = self
@@ -384,17 +476,12 @@ impl Problem<'_> {
             .par_iter()
             .zip(mix)
             .zip(free)
-            .map(|((ch, (a, _)), fp)| {
+            .map(|((ch, a), fp)| {
                 let r = ch.r;
                 let mut nm = vec![0.0; q * q];
                 let mut b = vec![0.0; q];
-                // The non-zero entries of each column of A (row by row: A is row-major).
-                let mut nz: Vec<Vec<(usize, f64)>> = vec![Vec::new(); p];
-                for (k, row) in a.chunks_exact(p.max(1)).enumerate().take(r) {
-                    for (j, &v) in row.iter().enumerate().filter(|(_, v)| **v != 0.0) {
-                        nz[j].push((k, v));
-                    }
-                }
+                // The non-zero entries of each column of A.
+                let nz = &a.cols;
                 // AᵀGA, Aᵀb.
                 let mut ag = vec![0.0; r];
                 for i in 0..p {
@@ -467,7 +554,7 @@ impl Problem<'_> {
 
     /// The coupled fit at θ = (f, ζ, gains…): coefficients and weighted residual.
     fn coupled(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
-        self.coupled_with(theta, &self.free_parts((theta[0], theta[1])))
+        self.coupled_with(theta, &self.free_parts((theta[0], theta[1]), false))
     }
 
     /// The shape coefficients per input from the first unknowns of a solve.
@@ -510,8 +597,12 @@ pub(crate) const COUPLED_FREQUENCY_BOX: f64 = 0.04;
 /// The damping ratios the joint refinement may reach: 0.1 % to 30 %, far outside the catalogue's
 /// search grid (0.5–10 %), so that a grid edge is never reported as an estimate.
 pub(crate) const COUPLED_DAMPING_BOX: (f64, f64) = (0.001, 0.3);
-/// Residual evaluations of each start's Levenberg–Marquardt refinement.
-pub(crate) const COUPLED_EVALUATIONS: usize = 60;
+/// The bound on each start's Levenberg–Marquardt refinement ([`refine_projected_point`]'s
+/// `max_evaluations`): its steps end after about this many residual evaluations beside the
+/// Jacobian's differences (dim θ more each step). At 60, one start of the benchmark's
+/// 15 000-sample mode set took 53 steps (386 evaluations, 3.8 s of its 11) crawling 31.15 → 31.48 Hz,
+/// a start that did not win. A winner cut short is refined again: [`polish`] continues from it.
+pub(crate) const COUPLED_EVALUATIONS: usize = 21;
 /// The joint frequency scan's levels: (damping ratio, relative frequency step). The refinement
 /// then frees the damping. A mode's response to a wave changes most within its half-power band,
 /// ±ζ around f, so each level steps by about 2ζ: 3 % at ζ = 2 %, 1 % at ζ = 0.5 % (a 55.05 Hz mode
@@ -546,6 +637,11 @@ pub(crate) const SEQUENTIAL_GAIN_ROUNDS: usize = 2;
 /// ended at 34.55 Hz (NRMS 2.45 after `add`); with these steps the diagnosis gives 35.918 Hz,
 /// ζ 0.01355. Draw 1022 (62.31 Hz, ζ 0.0050): 66.51 Hz before, 62.37 Hz after.
 pub(crate) const SCAN_GAIN_STEPS: usize = 3;
+/// The free vibrations ([`Problem::free_parts`]) [`Problem::refine`] keeps, by (f, ζ), the least
+/// recently used dropped first. A Jacobian's columns are computed in parallel: its differences in
+/// f and ζ each need their own, while the gains' differences read the point's, which one kept
+/// copy lost to the others.
+pub(crate) const FREE_PARTS_KEPT: usize = 4;
 /// Starts refined after the joint frequency scan: its best points at least a box apart.
 pub(crate) const COUPLED_STARTS: usize = 3;
 
@@ -684,6 +780,7 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
                 bf,
                 yy,
                 free: frees[j],
+                qr: std::sync::OnceLock::new(),
             })
         })
         .collect::<Option<Vec<ChannelGram>>>()?;
@@ -746,20 +843,28 @@ impl Problem<'_> {
         let Some(mut at) = fit(&g) else { return (g, f64::INFINITY) };
         for _ in 0..steps {
             let (mix, factor, beta, before) = &at;
-            let (p, q) = (mix.first().map_or(0, |m| m.1), beta.len());
+            let (p, q) = (mix.first().map_or(0, |m| m.p), beta.len());
             let c = self.shape_coefs(beta);
             // dᵀr (per gain), Aᵀd (per gain, q values) and dᵀd (ng × ng), summed over the channels.
             let mut dr = vec![0.0; ng];
             let mut ad = vec![vec![0.0; q]; ng];
             let mut dd = vec![0.0; ng * ng];
-            for ((ch, (a, _)), fp) in self.chans.iter().zip(mix).zip(free) {
+            for ((ch, mixing), fp) in self.chans.iter().zip(mix).zip(free) {
                 if !ch.accel {
                     continue;
                 }
                 let (r, nf) = (ch.r, ch.fixed.len());
-                let (ax, px) = self.mixing(ch, fz, &[], Some(&c));
+                let a = mixing.dense(r);
+                let ax = self.mixing(ch, fz, &[], Some(&c));
                 // Each gain's d_j in this channel's raw columns (zero off its sensor), and G·d_j.
-                let ds: Vec<Vec<f64>> = (0..ng).map(|j| (0..r).map(|k| ax[k * px + ns + j]).collect()).collect();
+                let ds: Vec<Vec<f64>> = ax.cols[ns..ns + ng]
+                    .iter()
+                    .map(|col| {
+                        let mut d = vec![0.0; r];
+                        col.iter().for_each(|&(k, v)| d[k] = v);
+                        d
+                    })
+                    .collect();
                 let gds: Vec<Vec<f64>> =
                     ds.iter().map(|d| (0..r).map(|k| dot(&ch.guu[k * r..(k + 1) * r], d)).collect()).collect();
                 // The raw coefficients of the shapes' part of Aβ̂.
@@ -824,21 +929,38 @@ impl Problem<'_> {
         let mut s = start.to_vec();
         // clamp: the box's constants are ordered (0.001·1.01 < 0.3·0.99): the start strictly inside it.
         s[1] = s[1].clamp(COUPLED_DAMPING_BOX.0 * 1.01, COUPLED_DAMPING_BOX.1 * 0.99);
+        // The residual compressed by each channel's QR ([`Problem::coupled_compressed`]) when every
+        // channel has one, else in full.
+        let in_q = self.chans.par_iter().all(|c| c.qr().is_some());
         // The Jacobian's differences in the gains keep (f, ζ) to the bit: their free vibration is
-        // the last one computed.
-        let last: std::sync::Mutex<Option<([u64; 2], std::sync::Arc<Vec<Option<FreePart>>>)>> =
-            std::sync::Mutex::new(None);
+        // one of the last [`FREE_PARTS_KEPT`] computed.
+        #[allow(clippy::type_complexity)]
+        let recent: std::sync::Mutex<Vec<([u64; 2], std::sync::Arc<Vec<Option<FreePart>>>)>> =
+            std::sync::Mutex::new(Vec::new());
         let resid = |th: &[f64]| {
             let key = [th[0].to_bits(), th[1].to_bits()];
-            let cached = last.lock().ok().and_then(|l| l.as_ref().filter(|(k, _)| *k == key).map(|(_, f)| f.clone()));
+            // The least recently used goes first.
+            let cached = recent.lock().ok().and_then(|mut l| {
+                let at = l.iter().position(|(k, _)| *k == key)?;
+                let hit = l.remove(at);
+                l.push(hit.clone());
+                Some(hit.1)
+            });
             let free = cached.unwrap_or_else(|| {
-                let f = std::sync::Arc::new(self.free_parts((th[0], th[1])));
-                if let Ok(mut l) = last.lock() {
-                    *l = Some((key, f.clone()));
+                let f = std::sync::Arc::new(self.free_parts((th[0], th[1]), in_q));
+                if let Ok(mut l) = recent.lock() {
+                    if l.len() >= FREE_PARTS_KEPT {
+                        l.remove(0);
+                    }
+                    l.push((key, f.clone()));
                 }
                 f
             });
-            self.coupled_with(th, &free).map(|(_, r)| r)
+            if in_q {
+                self.coupled_compressed(th, &free)
+            } else {
+                self.coupled_with(th, &free).map(|(_, r)| r)
+            }
         };
         refine_projected_point(&resid, &s, &lo, &hi, COUPLED_EVALUATIONS).map_or(s, |r| r.0)
     }
@@ -853,7 +975,7 @@ impl Problem<'_> {
             .par_iter()
             .map(|&fz| {
                 let f = fz.0;
-                let free = self.free_parts(fz);
+                let free = self.free_parts(fz, false);
                 let gains = self.alternating_gains(fz, &free, c, g, SEQUENTIAL_GAIN_ROUNDS);
                 let (gains, cost) = self.projected_gains(fz, &free, &gains, SCAN_GAIN_STEPS);
                 let mut th = vec![f, fz.1];
@@ -1068,8 +1190,10 @@ fn coupled_columns(st: &Stack, raw: &RawSeries, mixes: &[Vec<Mix>]) -> Vec<Vec<f
 fn coupled_gram(grams: &RawGrams, r: usize, mixes: &[Vec<Mix>], keep: &[usize]) -> Vec<f64> {
     let n = keep.len();
     let mut g = vec![0.0; n * n];
-    for (rg, mx) in grams.iter().zip(mixes) {
-        for (a, &c) in keep.iter().enumerate() {
+    // One row of the upper triangle per task; each entry summed over the channels in their order.
+    g.par_chunks_mut(n.max(1)).enumerate().for_each(|(a, row)| {
+        let c = keep[a];
+        for (rg, mx) in grams.iter().zip(mixes) {
             let x = mx[c];
             for (b, &d) in keep.iter().enumerate().skip(a) {
                 let y = mx[d];
@@ -1077,10 +1201,10 @@ fn coupled_gram(grams: &RawGrams, r: usize, mixes: &[Vec<Mix>], keep: &[usize]) 
                     + x.alpha * y.beta * rg[x.k * r + y.partner]
                     + x.beta * y.alpha * rg[x.partner * r + y.k]
                     + x.beta * y.beta * rg[x.partner * r + y.partner];
-                g[a * n + b] += v;
+                row[b] += v;
             }
         }
-    }
+    });
     for a in 0..n {
         for b in 0..a {
             g[a * n + b] = g[b * n + a];
@@ -1167,10 +1291,11 @@ fn reselect(
         // Skipped (`plain` false) once the gains are right: the plain columns then take up the
         // misfit of a mode a little off its frequency and hold it there ([`polish`]).
         if plain {
-            base_cols.extend(used.iter().map(|&j| nested[j].clone()));
-            drop(nested);
-            let base2 = OrthoBase::new(&base_cols, w).ok()?;
             drop(base_cols);
+            let used_cols: Vec<Vec<f64>> = used.iter().map(|&j| nested[j].clone()).collect();
+            drop(nested);
+            let base2 = base.extended(&used_cols, w).ok()?;
+            drop(used_cols);
             let keep2: Vec<usize> = keep.iter().copied().filter(|c| !picked.contains(c)).collect();
             // Zero gains: each column is the reading alone.
             let ks2: Vec<usize> = keep2.iter().map(|&c| all[c]).collect();
@@ -1255,7 +1380,7 @@ pub(crate) fn refit_coupled<'a>(
     let fz = (fs.terms[ti_r].hyper[0], fs.terms[ti_r].hyper[1]);
     let held_theta = |pb: &Problem, c: &[Vec<f64>], g: &[f64]| -> Vec<f64> {
         let mut th = vec![fz.0, fz.1];
-        let free = pb.free_parts(fz);
+        let free = pb.free_parts(fz, false);
         let g = pb.alternating_gains(fz, &free, c, g, SEQUENTIAL_GAIN_ROUNDS);
         th.extend(pb.projected_gains(fz, &free, &g, HELD_GAIN_STEPS).0);
         th
@@ -1384,6 +1509,17 @@ pub(crate) fn with_mode(st_mode: &Stack, base: &FitState, term: FitTerm, sigma: 
         target: base.target.clone(),
         shapes: base.shapes.clone(),
     })
+}
+
+/// The coefficients x of channel `ch`'s columns [U | F | y] in its weighted residual y − U·γ − F·β_F
+/// = [U | F | y]·x, x = [−γ | −β_F | 1], γ = A·β_p (A: its mixing, R × p row-major; β: a solve's
+/// coefficients); the free vibration is not among them.
+fn residual_coef(ch: &ChannelGram, a: &Mixing, beta: &[f64]) -> Vec<f64> {
+    let p = a.p;
+    let mut x: Vec<f64> = a.times(ch.r, beta).into_iter().map(|v| -v).collect();
+    x.extend(ch.fixed.iter().map(|g| -beta[p + g]));
+    x.push(1.0);
+    x
 }
 
 /// Σ a_i·b_i.

@@ -278,9 +278,10 @@ fn largest_eigenvalue(m: &Mat<f64>) -> f64 {
 /// their span (relative to its own norm); the pivots do not increase, and the first below
 /// [`DEPENDENT_PIVOT`]·λ_max(M) ends the factor at rank r. At full rank, L·Lᵀ·z = P·D⁻¹b by two triangular
 /// solves; at rank r < p, with L the first r columns of the factor (p × r), the minimum-norm
-/// z = L·G⁻¹·G⁻¹·Lᵀ·P·D⁻¹b, G = LᵀL (the pseudo-inverse of the scaled matrix restricted to what the
-/// chosen columns span, as an eigendecomposition's cut would give, at a tenth of its work); β̂ =
-/// D⁻¹Pᵀz. The minimum norm matters to a caller that feeds the coefficients back into the next
+/// z = (L·Lᵀ)⁺·P·D⁻¹b (the pseudo-inverse of the scaled matrix restricted to what the chosen
+/// columns span, as an eigendecomposition's cut would give), from two triangular solves with the
+/// leading r × r block and a projection on the p − r null directions of Lᵀ ([`NormalFactor`]): work
+/// r²·(p − r) beyond the factor, where forming LᵀL took p·r²; β̂ = D⁻¹Pᵀz. The minimum norm matters to a caller that feeds the coefficients back into the next
 /// design (alternating fits): a component along a dependency of this design need not be one of
 /// the next. A column with zero norm gets β = 0. For designs whose Gram matrix is
 /// cheap to update while the columns themselves are not (many samples, few columns that change by
@@ -302,7 +303,9 @@ pub struct NormalFactor {
     /// of M at step j).
     m: Mat<f64>,
     perm: Vec<usize>,
-    /// Below full rank: the first r columns of L (p × r) and the Cholesky factor of G = LᵀL.
+    /// Below full rank r (d = p − r dependent columns): N₁ = −L₁⁻ᵀ·L₂ᵀ (r × d; L₁ the leading r × r
+    /// block of L, L₂ the d × r block below it), so that the columns of N = [N₁; I_d] span the null
+    /// space of Lᵀ, and the Cholesky factor of NᵀN = I_d + N₁ᵀN₁.
     low: Option<(Mat<f64>, nalgebra::Cholesky<f64, nalgebra::Dyn>)>,
 }
 
@@ -328,14 +331,22 @@ impl NormalFactor {
         let low = if r == p {
             None
         } else {
-            // Rank r: P·M·Pᵀ ≈ L·Lᵀ with L the first r columns (p × r), G = LᵀL (r × r, positive
-            // definite).
-            let l = Mat::<f64>::from_fn(p, r, |i, j| if i >= j { m[(i, j)] } else { 0.0 });
-            let g = gram_of(l.as_ref());
-            let g = nalgebra::DMatrix::from_fn(r, r, |i, j| g[(i, j)]);
+            // Rank r: P·M·Pᵀ ≈ L·Lᵀ with L the first r columns (p × r). N₁ by back substitution
+            // with L₁ᵀ, one null direction (a row of L₂) at a time.
+            let d = p - r;
+            let mut n1 = Mat::<f64>::zeros(r, d);
+            for e in 0..d {
+                for j in (0..r).rev() {
+                    let s: f64 = (j + 1..r).map(|k| m[(k, j)] * n1[(k, e)]).sum();
+                    n1[(j, e)] = (-m[(r + e, j)] - s) / m[(j, j)];
+                }
+            }
+            let g = nalgebra::DMatrix::from_fn(d, d, |a, b| {
+                f64::from(u8::from(a == b)) + (0..r).map(|k| n1[(k, a)] * n1[(k, b)]).sum::<f64>()
+            });
             let chol = nalgebra::Cholesky::new(g)
-                .ok_or_else(|| ModelCheckError::Numerical("solve_normal: LᵀL not positive definite".into()))?;
-            Some((l, chol))
+                .ok_or_else(|| ModelCheckError::Numerical("solve_normal: NᵀN not positive definite".into()))?;
+            Some((n1, chol))
         };
         Ok(Self { inv, m, perm, low })
     }
@@ -348,26 +359,48 @@ impl NormalFactor {
         let (m, perm, inv) = (&self.m, &self.perm, &self.inv);
         // c = P·D⁻¹b.
         let c: Vec<f64> = (0..p).map(|j| b[perm[j]] * inv[perm[j]]).collect();
+        // L₁·L₁ᵀ·z = c over the first r entries by two triangular solves (L₁: the leading r × r
+        // block of L).
+        let solve_l1 = |z: &mut [f64], r: usize| {
+            for j in 0..r {
+                let s: f64 = (0..j).map(|k| m[(j, k)] * z[k]).sum();
+                z[j] = (z[j] - s) / m[(j, j)];
+            }
+            for j in (0..r).rev() {
+                let s: f64 = (j + 1..r).map(|k| m[(k, j)] * z[k]).sum();
+                z[j] = (z[j] - s) / m[(j, j)];
+            }
+        };
         let z = match &self.low {
             None => {
-                // Full rank: L·Lᵀ·z = c by two triangular solves.
+                // Full rank: L·Lᵀ·z = c.
                 let mut z = c;
-                for j in 0..p {
-                    let s: f64 = (0..j).map(|k| m[(j, k)] * z[k]).sum();
-                    z[j] = (z[j] - s) / m[(j, j)];
-                }
-                for j in (0..p).rev() {
-                    let s: f64 = (j + 1..p).map(|k| m[(k, j)] * z[k]).sum();
-                    z[j] = (z[j] - s) / m[(j, j)];
-                }
+                solve_l1(&mut z, p);
                 z
             }
-            Some((l, chol)) => {
-                // The minimum-norm z of L·Lᵀ·z = c is z = L·G⁻¹·G⁻¹·Lᵀ·c.
-                let r = l.ncols();
-                let ltc = nalgebra::DVector::from_fn(r, |j, _| (j..p).map(|i| l[(i, j)] * c[i]).sum::<f64>());
-                let y = chol.solve(&chol.solve(&ltc));
-                (0..p).map(|i| (0..r.min(i + 1)).map(|j| l[(i, j)] * y[j]).sum()).collect()
+            Some((n1, chol)) => {
+                // The minimum-norm z of L·Lᵀ·z = c, (L·Lᵀ)⁺·c: with Π = I − N·(NᵀN)⁻¹·Nᵀ the
+                // projection onto the span of L, z₀ = [(L₁·L₁ᵀ)⁻¹·(Π·c)₁; 0] solves L·Lᵀ·z₀ = Π·c
+                // (Π·c = L·a gives (Π·c)₂ = L₂·L₁⁻¹·(Π·c)₁), and z = Π·z₀ is the solution in the
+                // span of L.
+                let (r, d) = (n1.nrows(), n1.ncols());
+                let project = |v: &mut [f64]| {
+                    let nv =
+                        nalgebra::DVector::from_fn(d, |e, _| (0..r).map(|k| n1[(k, e)] * v[k]).sum::<f64>() + v[r + e]);
+                    let s = chol.solve(&nv);
+                    for (k, x) in v.iter_mut().enumerate().take(r) {
+                        *x -= (0..d).map(|e| n1[(k, e)] * s[e]).sum::<f64>();
+                    }
+                    for (e, x) in v[r..].iter_mut().enumerate() {
+                        *x -= s[e];
+                    }
+                };
+                let mut z = c;
+                project(&mut z);
+                z[r..].fill(0.0);
+                solve_l1(&mut z, r);
+                project(&mut z);
+                z
             }
         };
         let mut beta = vec![0.0; p];
@@ -430,6 +463,41 @@ impl Columns {
             faer::Par::Seq,
         );
         Ok((0..k * m).map(|e| p[(e / m, e % m)]).collect())
+    }
+
+    /// The thin QR factorisation C = Q·R (Householder, faer, sequential): Q (rows × count, orthonormal
+    /// columns) and R (count × count, upper triangular, row-major). ‖C·β‖ = ‖R·β‖ for every β, so
+    /// R·β stands in for C·β wherever only norms and inner products of combinations matter (a
+    /// compressed residual: count values in place of rows). None when there are fewer rows than
+    /// columns.
+    pub fn thin_qr(&self) -> Option<(Columns, Vec<f64>)> {
+        let (n, k) = (self.rows(), self.count());
+        if n < k {
+            return None;
+        }
+        let qr = self.m.qr();
+        let r = qr.thin_R();
+        let rv = (0..k * k).map(|e| if e % k >= e / k { r[(e / k, e % k)] } else { 0.0 }).collect();
+        Some((Columns { m: qr.compute_thin_Q() }, rv))
+    }
+
+    /// C·[β_1 … β_m] by one product: each β's combination (one value per row), as [`Columns::combine`]
+    /// gives one. Errors when a β's length is not the number of columns.
+    pub fn combine_each(&self, betas: &[&[f64]]) -> Result<Vec<Vec<f64>>, ModelCheckError> {
+        for (j, b) in betas.iter().enumerate() {
+            check_len(&format!("coefficients {j}"), self.count(), b.len())?;
+        }
+        let b = Mat::<f64>::from_fn(self.count(), betas.len(), |i, j| betas[j][i]);
+        let mut out = Mat::<f64>::zeros(self.rows(), betas.len());
+        faer::linalg::matmul::matmul(
+            out.as_mut(),
+            faer::Accum::Replace,
+            self.m.as_ref(),
+            b.as_ref(),
+            1.0,
+            faer::Par::Seq,
+        );
+        Ok((0..betas.len()).map(|j| out.col_as_slice(j).to_vec()).collect())
     }
 
     /// C·β = Σ_j β_j·c_j (one value per row). Errors when β's length is not the number of columns.
@@ -500,8 +568,50 @@ mod columns_tests {
         for i in 0..n {
             assert!(close(y[i], cs[0][i] - 2.0 * cs[1][i] + 0.5 * cs[2][i]));
         }
+        let ys = c.combine_each(&[&[1.0, -2.0, 0.5], &[0.0, 3.0, -1.0]]).unwrap();
+        for i in 0..n {
+            assert!(close(ys[0][i], y[i]) && close(ys[1][i], 3.0 * cs[1][i] - cs[2][i]));
+        }
+        assert!(c.combine_each(&[&[1.0, 2.0, 3.0], &[1.0]]).is_err());
         assert!(c.combine(&[1.0]).is_err());
         assert!(c.t_mul(&[&[1.0, 2.0]]).is_err());
+    }
+
+    /// The thin QR of four columns of 300 values, one a combination of two others: Q has
+    /// orthonormal columns (QᵀQ = I to 1e-12), R is upper triangular, Q·R gives the columns back
+    /// (1e-12 of their largest value) and ‖R·β‖ = ‖C·β‖ for a β (1e-12 relative); fewer rows than
+    /// columns give None.
+    #[test]
+    fn thin_qr_of_stored_columns_is_an_isometry() {
+        let n = 300;
+        let col = |a: f64| -> Vec<f64> { (0..n).map(|i| (i as f64 * a).sin() * (1.0 + a) + a).collect() };
+        let mut cs = vec![col(0.1), col(0.37), col(1.3)];
+        cs.push(cs[0].iter().zip(&cs[2]).map(|(a, b)| 2.0 * a - b).collect());
+        let refs: Vec<&[f64]> = cs.iter().map(|c| c.as_slice()).collect();
+        let c = Columns::new(n, &refs).unwrap();
+        let (q, r) = c.thin_qr().unwrap();
+        assert_eq!((q.rows(), q.count(), r.len()), (n, 4, 16));
+        let g = q.gram();
+        for j in 0..4 {
+            for k in 0..4 {
+                let e = if j == k { 1.0 } else { 0.0 };
+                assert!((g[j * 4 + k] - e).abs() <= 1e-12, "QᵀQ[{j},{k}] = {}", g[j * 4 + k]);
+                if k < j {
+                    assert_eq!(r[j * 4 + k], 0.0);
+                }
+            }
+        }
+        let top = cs.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
+        for k in 0..4 {
+            let back = q.combine(&(0..4).map(|j| r[j * 4 + k]).collect::<Vec<f64>>()).unwrap();
+            assert!(back.iter().zip(&cs[k]).all(|(a, b)| (a - b).abs() <= 1e-12 * top), "column {k}");
+        }
+        let beta = [0.3, -1.1, 2.0, 0.7];
+        let cb: f64 = c.combine(&beta).unwrap().iter().map(|v| v * v).sum::<f64>().sqrt();
+        let rb: f64 = (0..4).map(|j| (0..4).map(|k| r[j * 4 + k] * beta[k]).sum::<f64>().powi(2)).sum::<f64>().sqrt();
+        assert!((cb - rb).abs() <= 1e-12 * cb, "{cb} vs {rb}");
+        let short = Columns::new(3, &[&[1.0, 2.0, 3.0], &[0.0, 1.0, 0.0], &[1.0, 1.0, 1.0], &[2.0, 0.0, 1.0]]).unwrap();
+        assert!(short.thin_qr().is_none());
     }
 }
 
@@ -531,6 +641,38 @@ mod normal_tests {
         let along = d2[0] * beta[0] + d2[1] * beta[1] - d2[2] * beta[2];
         let scale = (0..3).map(|j| d2[j] * beta[j].abs()).sum::<f64>();
         assert!(along.abs() <= 1e-9 * scale, "{beta:?}: component {along} of {scale}");
+    }
+
+    /// Several dependencies and a target off the columns' span: 9 columns of very different
+    /// scales, 3 of them combinations of the others, y with a part off their span. β̂ is the
+    /// minimum-norm least squares in the unit-norm columns, z = (X·D⁻¹)⁺·y from nalgebra's SVD
+    /// (singular values below 1e-9 of the largest cut), β̂ = D⁻¹z, to 1e-8 of ‖z‖.
+    #[test]
+    fn normal_equations_with_dependencies_give_the_minimum_norm_least_squares() {
+        let n = 80;
+        let scales = [1.0, 1e3, 1e-2, 5.0, 1e-4, 30.0];
+        let mut cols: Vec<Vec<f64>> = scales
+            .iter()
+            .enumerate()
+            .map(|(j, s)| (0..n).map(|i| s * ((i as f64) * (0.13 + 0.071 * j as f64) + j as f64).sin()).collect())
+            .collect();
+        for (a, b, wa, wb) in [(0, 1, 2.0, -0.5), (2, 3, 1.0, 3.0), (4, 0, -1.0, 1e-3)] {
+            let c: Vec<f64> = (0..n).map(|i| wa * cols[a][i] + wb * cols[b][i]).collect();
+            cols.push(c);
+        }
+        let p = cols.len();
+        let y: Vec<f64> = (0..n).map(|i| cols[1][i] - 4.0 * cols[3][i] + (i as f64 * 1.91).cos() * 7.0).collect();
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let gram: Vec<f64> = (0..p * p).map(|k| dot(&cols[k / p], &cols[k % p])).collect();
+        let b: Vec<f64> = cols.iter().map(|c| dot(c, &y)).collect();
+        let beta = solve_normal(&gram, &b).unwrap();
+        let d: Vec<f64> = (0..p).map(|j| gram[j * p + j].sqrt()).collect();
+        let xs = nalgebra::DMatrix::from_fn(n, p, |i, j| cols[j][i] / d[j]);
+        let z = xs.svd(true, true).solve(&nalgebra::DVector::from_vec(y.clone()), 1e-9 * 3.0).unwrap();
+        let zn = z.norm();
+        for j in 0..p {
+            assert!((beta[j] * d[j] - z[j]).abs() <= 1e-8 * zn, "column {j}: {} vs {}", beta[j] * d[j], z[j]);
+        }
     }
 
     /// Independent columns of very different scales: y = 2·x₁ − 3·x₂ + 0.5·x₃
