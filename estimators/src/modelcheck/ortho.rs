@@ -55,6 +55,7 @@ impl OrthoBase {
         let f = PivotedQr::factor(a, 1.0);
         let (n, r0) = (self.nrows(), self.rank());
         let extra = thin_q(f.a, &f.coeff, f.rank);
+        // index: j − r0 only where j ≥ r0; both bases have n rows (the weights' length, checked above).
         let q = Mat::<f64>::from_fn(n, r0 + f.rank, |i, j| if j < r0 { self.q[(i, j)] } else { extra[(i, j - r0)] });
         Ok(OrthoBase { q })
     }
