@@ -373,7 +373,7 @@ impl Problem<'_> {
                 let gram: Vec<Vec<f64>> =
                     cols.iter().map(|phi| cols.iter().map(|psi| dot(psi, phi)).collect()).collect();
                 // [U | F | y]ᵀ[φ_0 φ_1] (k × 2, row-major): directly, or Rᵀ·(Qᵀφ).
-                let (t, in_q) = match ch.qr().filter(|_| in_q) {
+                let (t, in_q) = match in_q.then(|| ch.qr()).flatten() {
                     None => (ch.cols.t_mul(&[&cols[0], &cols[1]]).ok()?, None),
                     Some((q, rr)) => {
                         let z = q.t_mul(&[&cols[0], &cols[1]]).ok()?;
@@ -1512,8 +1512,8 @@ pub(crate) fn with_mode(st_mode: &Stack, base: &FitState, term: FitTerm, sigma: 
 }
 
 /// The coefficients x of channel `ch`'s columns [U | F | y] in its weighted residual y − U·γ − F·β_F
-/// = [U | F | y]·x, x = [−γ | −β_F | 1], γ = A·β_p (A: its mixing, R × p row-major; β: a solve's
-/// coefficients); the free vibration is not among them.
+/// = [U | F | y]·x, x = [−γ | −β_F | 1], γ = A·β_p (A: its [`Mixing`]; β: a solve's coefficients);
+/// the free vibration is not among them.
 fn residual_coef(ch: &ChannelGram, a: &Mixing, beta: &[f64]) -> Vec<f64> {
     let p = a.p;
     let mut x: Vec<f64> = a.times(ch.r, beta).into_iter().map(|v| -v).collect();

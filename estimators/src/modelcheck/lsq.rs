@@ -281,7 +281,8 @@ fn largest_eigenvalue(m: &Mat<f64>) -> f64 {
 /// z = (L·Lᵀ)⁺·P·D⁻¹b (the pseudo-inverse of the scaled matrix restricted to what the chosen
 /// columns span, as an eigendecomposition's cut would give), from two triangular solves with the
 /// leading r × r block and a projection on the p − r null directions of Lᵀ ([`NormalFactor`]): work
-/// r²·(p − r) beyond the factor, where forming LᵀL took p·r²; β̂ = D⁻¹Pᵀz. The minimum norm matters to a caller that feeds the coefficients back into the next
+/// r²·(p − r) beyond the factor, where forming LᵀL took p·r²; β̂ = D⁻¹Pᵀz. The minimum norm
+/// matters to a caller that feeds the coefficients back into the next
 /// design (alternating fits): a component along a dependency of this design need not be one of
 /// the next. A column with zero norm gets β = 0. For designs whose Gram matrix is
 /// cheap to update while the columns themselves are not (many samples, few columns that change by
