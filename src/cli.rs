@@ -181,17 +181,20 @@ fn spinner(message: &str) -> indicatif::ProgressBar {
 }
 
 /// A spinner on stderr that appears only when the work lasts more than a second and stderr is a
-/// terminal (the model-check commands: most runs answer at once); `finish_and_clear` removes it.
+/// terminal (the model-check commands: most runs answer at once), with the time since the start;
+/// `set_message` changes what it says (a stage), `finish_and_clear` removes it.
 fn slow_spinner(message: &str) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::with_draw_target(None, indicatif::ProgressDrawTarget::hidden());
+    bar.set_message(message.to_string());
     if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
-        let (b, message) = (bar.clone(), message.to_string());
+        let b = bar.clone();
         std::thread::spawn(move || {
             std::thread::sleep(std::time::Duration::from_secs(1));
             if !b.is_finished() {
                 b.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-                b.set_style(indicatif::ProgressStyle::default_spinner());
-                b.set_message(message);
+                let style = indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner());
+                b.set_style(style);
                 b.enable_steady_tick(std::time::Duration::from_millis(200));
             }
         });
@@ -1232,8 +1235,9 @@ pub fn diagnose(model: &Path, data: &Path, json: bool, report: Option<&Path>) ->
         crate::output::refuse_input_overwrite(out, &[model, data])?;
     }
     let (m, set) = model_and_data(model, data)?;
-    let bar = slow_spinner("diagnose: fitting the model and every candidate it lacks");
-    let r = crate::modelcheck::diagnose(&m, &set, data);
+    let bar = slow_spinner("diagnose: starting");
+    let stage = |st: crate::modelcheck::Stage| bar.set_message(format!("diagnose: {st}"));
+    let r = crate::modelcheck::diagnose_with(&m, &set, data, &stage);
     let cmp = match (&r, report) {
         (Ok(_), Some(_)) => Some(crate::modelcheck::compare(&m, &set, data)),
         _ => None,

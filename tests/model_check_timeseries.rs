@@ -888,3 +888,35 @@ fn a_stated_mode_is_refitted_from_its_stated_values() {
     eprintln!("mode {f:.3} Hz ζ {z:.4}: fitted {fa:.3} Hz ζ {za:.4}, normalised RMS {nrms:.3}");
     assert!((fa / f - 1.0).abs() <= 0.01 && (za / z - 1.0).abs() <= 0.10 && nrms <= 1.1);
 }
+
+/// `diagnose_with` tells its stages in the order it runs them, and telling them changes nothing:
+/// on a draw of the generator with a hidden mode (seed 1001, as `accel_mode_fitted_with_its_shapes`)
+/// the stages are the model's fit, the ranking, then the joint mode fit's two scans each followed by
+/// the shapes re-chosen, then at least one polishing round numbered from 1; the report is the one
+/// `diagnose` gives, to the byte of its JSON.
+#[test]
+fn diagnose_tells_its_stages_in_order_and_they_change_nothing() {
+    use vmt::modelcheck::Stage;
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("r1001");
+    accel_set(&dir, 1001, AccelHidden::Resonance, 200.0);
+    let model = vmt::model::read_model(&dir.join("model.toml")).unwrap();
+    let set = vmt::measurement::read(&dir).unwrap();
+    let seen = std::sync::Mutex::new(Vec::new());
+    let told = vmt::modelcheck::diagnose_with(&model, &set, &dir, &|s| seen.lock().unwrap().push(s)).unwrap();
+    let plain = vmt::modelcheck::diagnose(&model, &set, &dir).unwrap();
+    assert_eq!(serde_json::to_string(&told).unwrap(), serde_json::to_string(&plain).unwrap());
+    let seen = seen.into_inner().unwrap();
+    let head = [
+        Stage::FittingModel,
+        Stage::RankingCandidates,
+        Stage::ModeScan { round: 1, rounds: 2 },
+        Stage::ModeShapes { round: 1 },
+        Stage::ModeScan { round: 2, rounds: 2 },
+        Stage::ModeShapes { round: 2 },
+    ];
+    assert!(seen.len() > head.len() && seen[..head.len()] == head, "{seen:?}");
+    for (k, s) in seen[head.len()..].iter().enumerate() {
+        assert!(matches!(s, Stage::ModePolish { round, most: 6 } if *round == k + 1), "{seen:?}");
+    }
+}

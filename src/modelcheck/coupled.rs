@@ -206,6 +206,8 @@ pub(crate) const POLISH_HOLD_DAMPING: f64 = 5e-4;
 /// it then stays where it is. On the pair's draw 1012 a start at 38.74 Hz crept 38.67 → 38.46 →
 /// 38.35 → 38.29 Hz over five rounds with them (normalised RMS 3.4), and reached 38.05 then
 /// 38.038 Hz in two rounds without them (normalised RMS 0.97; truth 38.038 Hz).
+///
+/// `progress` is told each round as it starts ([`Stage::ModePolish`]).
 fn polish(
     st: &Stack,
     mut terms: Vec<FitTerm>,
@@ -213,8 +215,10 @@ fn polish(
     target: &[f64],
     w: &[f64],
     cache: &mut RawGramCache,
+    progress: &(dyn Fn(Stage) + Sync),
 ) -> Option<(Vec<FitTerm>, Vec<f64>)> {
-    for _ in 0..POLISH_ROUNDS {
+    for round in 1..=POLISH_ROUNDS {
+        progress(Stage::ModePolish { round, most: POLISH_ROUNDS });
         let pb = problem(st, &terms, target, w)?;
         let (next, _) = pb.search(&[], &[], &[], &[theta.clone()])?;
         let held = (next[0] / theta[0] - 1.0).abs() < POLISH_HOLD_FREQUENCY
@@ -1351,6 +1355,8 @@ fn input_coefs(pb: &Problem, fs: &FitState) -> Vec<Vec<f64>> {
 ///
 /// A scanned or stated mode ends with [`polish`]: (f, ζ, gains) refined and the shapes re-chosen
 /// without the plain columns, in turn, until (f, ζ) holds.
+///
+/// `progress` is told each scan, re-choice and polishing round as it starts ([`Stage`]).
 pub(crate) fn refit_coupled<'a>(
     st: &Stack<'a>,
     st_mode: &Stack<'a>,
@@ -1358,6 +1364,7 @@ pub(crate) fn refit_coupled<'a>(
     sigma: &Sigma,
     w: &[f64],
     start: ModeStart,
+    progress: &(dyn Fn(Stage) + Sync),
 ) -> Option<(Stack<'a>, FitState, Coupled)> {
     // Rounds at the fit's own (f, ζ) (held, or a stated start), not a scan.
     let at_start = start != ModeStart::Scan;
@@ -1387,12 +1394,15 @@ pub(crate) fn refit_coupled<'a>(
     };
     let mut own = vec![fz.0, fz.1];
     own.extend(&g0);
+    progress(Stage::ModeScan { round: 1, rounds: COUPLED_ROUNDS });
     let mut theta1 = if at_start { held_theta(&pb1, &c0, &g0) } else { pb1.search(&grid, &c0, &g0, &[own])?.0 };
     let mut cache = RawGramCache::default();
+    progress(Stage::ModeShapes { round: 1 });
     let mut terms2 = reselect(st_mode, &pb1, &fs.terms, &theta1, &fs.target, &mut cache, true)?;
     // Further rounds: the scan again with the re-chosen shapes (their coefficients and gains at
     // the last optimum), then the shapes re-chosen at its optimum.
-    for _ in 1..COUPLED_ROUNDS {
+    for round in 2..=COUPLED_ROUNDS {
+        progress(Stage::ModeScan { round, rounds: COUPLED_ROUNDS });
         let pb = problem(st_mode, &terms2, &fs.target, w)?;
         let (beta, _) = pb.coupled(&theta1).ok()?;
         let (c, g) = (pb.shape_coefs(&beta), theta1[2..].to_vec());
@@ -1400,10 +1410,11 @@ pub(crate) fn refit_coupled<'a>(
         let near: Vec<(f64, f64)> =
             grid.iter().copied().filter(|(f, _)| (f / theta1[0]).ln().abs() <= COUPLED_ROUND_WINDOW.ln()).collect();
         theta1 = if at_start { held_theta(&pb, &c, &g) } else { pb.search(&near, &c, &g, &[theta1.clone()])?.0 };
+        progress(Stage::ModeShapes { round });
         terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target, &mut cache, true)?;
     }
     if start != ModeStart::Held {
-        (terms2, theta1) = polish(st_mode, terms2, theta1, &fs.target, w, &mut cache)?;
+        (terms2, theta1) = polish(st_mode, terms2, theta1, &fs.target, w, &mut cache, progress)?;
     }
     let pb2 = problem(st_mode, &terms2, &fs.target, w)?;
     let (theta, at_bound) = if start == ModeStart::Held {
@@ -1455,7 +1466,8 @@ pub(crate) fn refit_coupled<'a>(
 /// `base` on stack `st`, `st_mode` with the excitation of `base`'s shapes) refitted jointly with the
 /// shapes ([`refit_coupled`]): the joint optimum (frequency, Hz; damping ratio; which ended at a
 /// limit of the search) and the gains by their `params` keys.
-/// None when the joint fit does not apply or does not lower the residual.
+/// None when the joint fit does not apply or does not lower the residual. `progress` is told its
+/// stages ([`refit_coupled`]).
 pub(crate) fn joint_mode(
     st: &Stack,
     st_mode: &Stack,
@@ -1463,6 +1475,7 @@ pub(crate) fn joint_mode(
     params: &BTreeMap<String, f64>,
     sigma: &Sigma,
     w: &[f64],
+    progress: &(dyn Fn(Stage) + Sync),
 ) -> Option<(Coupled, BTreeMap<String, f64>)> {
     let (fq, dz) = (*params.get("frequency")?, *params.get("damping")?);
     // Not a model effect: `index` is never read for it.
@@ -1476,7 +1489,7 @@ pub(crate) fn joint_mode(
         at_bound: vec![false; 2],
     };
     let seq = with_mode(st_mode, base, term, sigma)?;
-    let (_, fit, c) = refit_coupled(st, st_mode, &seq, sigma, w, ModeStart::Scan)?;
+    let (_, fit, c) = refit_coupled(st, st_mode, &seq, sigma, w, ModeStart::Scan, progress)?;
     // index: `terms` holds at least the resonance term pushed above, and the refit keeps its terms.
     let ti = fit.terms.len() - 1;
     let gains = fit.terms[ti]

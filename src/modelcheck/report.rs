@@ -610,7 +610,7 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                 || {
                     let fs2 = fit_model_on(&st2, model, &sigma, &w)?;
                     let start = if mode_fitted { ModeStart::Scan } else { ModeStart::Held };
-                    let first = refit_coupled(&st, &st2, &fs2, &sigma, &w, start);
+                    let first = refit_coupled(&st, &st2, &fs2, &sigma, &w, start, &quiet);
                     Ok::<_, ModelCheckError>((fs2, first))
                 },
                 || {
@@ -623,7 +623,7 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
                         .filter(|m| m.effect.name == EffectName::Resonance)
                         .for_each(|m| m.fit = false);
                     let fs_held = fit_model_on(&st2, &held, &sigma, &w).ok()?;
-                    refit_coupled(&st, &st2, &fs_held, &sigma, &w, ModeStart::Stated)
+                    refit_coupled(&st, &st2, &fs_held, &sigma, &w, ModeStart::Stated, &quiet)
                 },
             );
             let (fs2, first) = scanned.map_err(|m| bad(format!("fitting the model: {m}")))?;
@@ -1165,11 +1165,70 @@ pub(crate) fn coulomb_level(model: &Model, fitted: &EffectMap<BTreeMap<String, f
 /// Grid points of a screened resonance search evaluated exactly (of ≈ 200 frequencies × 6 dampings).
 pub(crate) const RESONANCE_SCREEN: usize = 12;
 
+/// A stage of [`diagnose_with`], for a progress display: what the diagnosis is doing now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// Fitting the model to the data.
+    FittingModel,
+    /// Fitting and ranking every candidate effect the model lacks.
+    RankingCandidates,
+    /// A significant mode refitted jointly with the shapes that drive it: the frequency scan of
+    /// `round` (from 1) of `rounds`, each start then refined.
+    ModeScan {
+        /// This round, from 1.
+        round: usize,
+        /// The rounds in all.
+        rounds: usize,
+    },
+    /// The joint mode fit: the shapes re-chosen with the mode in the model, after scan `round`.
+    ModeShapes {
+        /// The scan round they follow, from 1.
+        round: usize,
+    },
+    /// The joint mode fit: refinement and shapes in turn until the frequency holds, round `round`
+    /// (from 1) of at most `most`.
+    ModePolish {
+        /// This round, from 1.
+        round: usize,
+        /// The rounds at most.
+        most: usize,
+    },
+}
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Stage::FittingModel => write!(f, "fitting the model"),
+            Stage::RankingCandidates => write!(f, "ranking the candidates the model lacks"),
+            Stage::ModeScan { round, rounds } => write!(f, "mode with its shapes: frequency scan {round} of {rounds}"),
+            Stage::ModeShapes { round } => write!(f, "mode with its shapes: shapes re-chosen after scan {round}"),
+            Stage::ModePolish { round, most } => {
+                write!(f, "mode with its shapes: polishing, round {round} (of at most {most})")
+            }
+        }
+    }
+}
+
+/// Where a stage goes when nobody watches ([`diagnose`], `compare`).
+pub(crate) fn quiet(_: Stage) {}
+
 /// `vmt diagnose` on in-memory inputs: fits the model, then every catalogue effect the model lacks
 /// that these channels can show is fitted to the weighted residual together with the model's own
 /// linear columns, ranked by ΔBIC with verdicts (`vmt_estimators::modelcheck::rank_candidates`).
 pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<DiagnoseReport, VmtError> {
+    diagnose_with(model, set, data, &quiet)
+}
+
+/// [`diagnose`], telling `progress` each [`Stage`] as it starts (a progress display; the result
+/// does not depend on it).
+pub fn diagnose_with(
+    model: &Model,
+    set: &MeasurementSet,
+    data: &Path,
+    progress: &(dyn Fn(Stage) + Sync),
+) -> Result<DiagnoseReport, VmtError> {
     let (chans, mut notes) = load_channels(model, set, data)?;
+    progress(Stage::FittingModel);
     let f = fit_all(model, &chans, data)?;
     notes.extend(f.notes.iter().cloned());
     let per = st_sigma(&f.st, &f.sig);
@@ -1334,6 +1393,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     // Per ranked candidate: its columns at the fitted hyper-parameters, its number of searched
     // hyper-parameters, and whether a better-ranked candidate explained it away.
     let mut fitted: BTreeMap<EffectName, (Vec<Vec<f64>>, usize, bool)> = BTreeMap::new();
+    progress(Stage::RankingCandidates);
     for (group, fs) in [(other_cands, &f.fs), (lead_cands, capped.as_ref().unwrap_or(&f.fs))] {
         if group.is_empty() {
             continue;
@@ -1390,7 +1450,7 @@ pub fn diagnose(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Diag
     if let (Some(sm), Some(r)) =
         (&st_mode, ranking.iter_mut().find(|r| r.effect == EffectName::Resonance && r.verdict == Verdict::Significant))
     {
-        if let Some((c, gains)) = joint_mode(st, sm, &f.fs, &r.params, &fit_sigma, &w) {
+        if let Some((c, gains)) = joint_mode(st, sm, &f.fs, &r.params, &fit_sigma, &w, progress) {
             let (fq, dz) = (c.frequency, c.damping);
             let mut note = format!(
                 "frequency and damping refitted jointly with the shapes that drive the mode: {} Hz → {} Hz, \
