@@ -1230,6 +1230,9 @@ pub fn diagnose_with(
     let (chans, mut notes) = load_channels(model, set, data)?;
     progress(Stage::FittingModel);
     let f = fit_all(model, &chans, data)?;
+    // From here on, the candidates: built, searched against the fit (a lead against capped
+    // shapes too), ranked.
+    progress(Stage::RankingCandidates);
     notes.extend(f.notes.iter().cloned());
     let per = st_sigma(&f.st, &f.sig);
     let nrms = (f.fs.residual.iter().zip(&per).map(|(r, s)| (r / s).powi(2)).sum::<f64>() / f.st.n as f64).sqrt();
@@ -1393,7 +1396,6 @@ pub fn diagnose_with(
     // Per ranked candidate: its columns at the fitted hyper-parameters, its number of searched
     // hyper-parameters, and whether a better-ranked candidate explained it away.
     let mut fitted: BTreeMap<EffectName, (Vec<Vec<f64>>, usize, bool)> = BTreeMap::new();
-    progress(Stage::RankingCandidates);
     for (group, fs) in [(other_cands, &f.fs), (lead_cands, capped.as_ref().unwrap_or(&f.fs))] {
         if group.is_empty() {
             continue;
