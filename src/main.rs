@@ -254,6 +254,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    vmt::cli::keep_freed_memory();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run { scenario, out, json, units } => vmt::cli::run(scenario.as_deref(), out.as_deref(), json, &units),

@@ -364,45 +364,95 @@ impl Problem<'_> {
     /// the columns' span, φ − Q·z, is kept as a 2 × 2 factor ([`FreeInQ`],
     /// [`Problem::coupled_compressed`]).
     fn free_parts(&self, fz: (f64, f64), in_q: bool) -> Vec<Option<FreePart>> {
-        self.chans
+        self.free_parts_each(&[fz], in_q).pop().unwrap_or_default()
+    }
+
+    /// [`Problem::free_parts`] at each of `fzs` (per (f, ζ), per channel): on each channel the
+    /// products of all their free-vibration columns with its columns in one product (its columns
+    /// read and packed once for all the points of a scan's chunk); each point's parts are those of
+    /// [`Problem::free_parts`] at it alone.
+    fn free_parts_each(&self, fzs: &[(f64, f64)], in_q: bool) -> Vec<Vec<Option<FreePart>>> {
+        let per_channel: Vec<Vec<Option<FreePart>>> = self
+            .chans
             .par_iter()
             .map(|ch| {
-                ch.free?;
+                if ch.free.is_none() {
+                    return fzs.iter().map(|_| None).collect();
+                }
                 let c = &self.st.chans[ch.index];
                 let wch = &self.w[ch.start..ch.start + ch.cols.rows()];
-                let cols: Vec<Vec<f64>> = free_vibration(c, fz.0, fz.1)
+                // Each point's two weighted columns φ_0, φ_1, side by side.
+                let cols: Vec<Vec<f64>> = fzs
                     .iter()
+                    .flat_map(|fz| free_vibration(c, fz.0, fz.1))
                     .map(|resp| resp.iter().zip(wch).map(|(x, w)| x * w).collect())
                     .collect();
-                let gram: Vec<Vec<f64>> =
-                    cols.iter().map(|phi| cols.iter().map(|psi| dot(psi, phi)).collect()).collect();
-                // [U | F | y]ᵀ[φ_0 φ_1] (k × 2, row-major): directly, or Rᵀ·(Qᵀφ).
-                let (t, in_q) = match in_q.then(|| ch.qr()).flatten() {
-                    None => (ch.cols.t_mul(&[&cols[0], &cols[1]]).ok()?, None),
-                    Some((q, rr)) => {
-                        let z = q.t_mul(&[&cols[0], &cols[1]]).ok()?;
-                        let k = q.count();
-                        let t = (0..k * 2)
-                            .map(|e| (0..=e / 2).map(|b| rr[b * k + e / 2] * z[b * 2 + e % 2]).sum())
-                            .collect();
-                        // φ⊥ = φ − Q·z, its Gram matrix and Cholesky factor (zero where φ lies in C's span).
-                        let zs: Vec<Vec<f64>> = (0..2).map(|j| (0..k).map(|b| z[b * 2 + j]).collect()).collect();
-                        let qz = q.combine_each(&[&zs[0], &zs[1]]).ok()?;
-                        let perp: Vec<Vec<f64>> =
-                            (0..2).map(|j| cols[j].iter().zip(&qz[j]).map(|(a, b)| a - b).collect()).collect();
-                        let r00 = dot(&perp[0], &perp[0]).sqrt();
-                        let r01 = if r00 > 0.0 { dot(&perp[0], &perp[1]) / r00 } else { 0.0 };
-                        let r11 = (dot(&perp[1], &perp[1]) - r01 * r01).max(0.0).sqrt();
-                        (t, Some(FreeInQ { z, r2: [r00, r01, r11] }))
+                let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+                let m = refs.len();
+                let (r, nf) = (ch.r, ch.fixed.len());
+                // [U | F | y]ᵀ[φ…] (k × m, row-major): directly, or Rᵀ·(Qᵀφ).
+                let parts = || -> Option<Vec<(Vec<f64>, Option<FreeInQ>)>> {
+                    match in_q.then(|| ch.qr()).flatten() {
+                        None => {
+                            let t = ch.cols.t_mul(&refs).ok()?;
+                            let k = ch.cols.count();
+                            Some(
+                                (0..fzs.len())
+                                    .map(|p| ((0..k * 2).map(|e| t[(e / 2) * m + 2 * p + e % 2]).collect(), None))
+                                    .collect(),
+                            )
+                        }
+                        Some((q, rr)) => {
+                            let z_all = q.t_mul(&refs).ok()?;
+                            let k = q.count();
+                            // index: z_all is k × m (row-major), m = 2 per point.
+                            let zs: Vec<Vec<f64>> =
+                                (0..m).map(|j| (0..k).map(|b| z_all[b * m + j]).collect()).collect();
+                            let zrefs: Vec<&[f64]> = zs.iter().map(Vec::as_slice).collect();
+                            let qz = q.combine_each(&zrefs).ok()?;
+                            Some(
+                                (0..fzs.len())
+                                    .map(|p| {
+                                        let z: Vec<f64> = (0..k * 2).map(|e| zs[2 * p + e % 2][e / 2]).collect();
+                                        let t = (0..k * 2)
+                                            .map(|e| (0..=e / 2).map(|b| rr[b * k + e / 2] * z[b * 2 + e % 2]).sum())
+                                            .collect();
+                                        // φ⊥ = φ − Q·z, its Gram matrix and Cholesky factor (zero where φ
+                                        // lies in C's span).
+                                        let perp: Vec<Vec<f64>> = (0..2)
+                                            .map(|j| {
+                                                cols[2 * p + j].iter().zip(&qz[2 * p + j]).map(|(a, b)| a - b).collect()
+                                            })
+                                            .collect();
+                                        let r00 = dot(&perp[0], &perp[0]).sqrt();
+                                        let r01 = if r00 > 0.0 { dot(&perp[0], &perp[1]) / r00 } else { 0.0 };
+                                        let r11 = (dot(&perp[1], &perp[1]) - r01 * r01).max(0.0).sqrt();
+                                        (t, Some(FreeInQ { z, r2: [r00, r01, r11] }))
+                                    })
+                                    .collect(),
+                            )
+                        }
                     }
                 };
-                let (r, nf) = (ch.r, ch.fixed.len());
-                let uphi = (0..2).map(|j| (0..r).map(|a| t[a * 2 + j]).collect()).collect();
-                let fphi = (0..2).map(|j| (r..r + nf).map(|a| t[a * 2 + j]).collect()).collect();
-                let by = (0..2).map(|j| t[(r + nf) * 2 + j]).collect();
-                Some(FreePart { cols, uphi, fphi, gram, by, in_q })
+                let Some(parts) = parts() else { return fzs.iter().map(|_| None).collect() };
+                let mut cols = cols.into_iter();
+                parts
+                    .into_iter()
+                    .map(|(t, in_q)| {
+                        let cols: Vec<Vec<f64>> = cols.by_ref().take(2).collect();
+                        let gram: Vec<Vec<f64>> =
+                            cols.iter().map(|phi| cols.iter().map(|psi| dot(psi, phi)).collect()).collect();
+                        let uphi = (0..2).map(|j| (0..r).map(|a| t[a * 2 + j]).collect()).collect();
+                        let fphi = (0..2).map(|j| (r..r + nf).map(|a| t[a * 2 + j]).collect()).collect();
+                        let by = (0..2).map(|j| t[(r + nf) * 2 + j]).collect();
+                        Some(FreePart { cols, uphi, fphi, gram, by, in_q })
+                    })
+                    .collect()
             })
-            .collect()
+            .collect();
+        // Per point, per channel.
+        let mut each: Vec<_> = per_channel.into_iter().map(Vec::into_iter).collect();
+        (0..fzs.len()).map(|_| each.iter_mut().map(|c| c.next().flatten()).collect()).collect()
     }
 
     /// The weighted least squares whose unknowns are [the p mixed columns | the fixed columns | the
@@ -648,6 +698,10 @@ pub(crate) const SCAN_GAIN_STEPS: usize = 3;
 pub(crate) const FREE_PARTS_KEPT: usize = 4;
 /// Starts refined after the joint frequency scan: its best points at least a box apart.
 pub(crate) const COUPLED_STARTS: usize = 3;
+
+/// Points of a joint scan whose free vibrations are projected on the channels' columns together
+/// ([`Problem::free_parts_each`]: each channel's columns read once per chunk, not once per point).
+const SCAN_CHUNK: usize = 8;
 
 /// The translation terms of `terms` that drive the mode through `st`'s fitted excitation (every
 /// excited channel has one input per such term, [`fitted_excitation`]), or None when the mode is
@@ -975,16 +1029,23 @@ impl Problem<'_> {
     /// points at least a box apart and the `starts` (full θ) each refined ([`Problem::refine`]); the
     /// lowest cost wins. Returns (θ, cost).
     fn search(&self, grid: &[(f64, f64)], c: &[Vec<f64>], g: &[f64], starts: &[Vec<f64>]) -> Option<(Vec<f64>, f64)> {
+        // In chunks of SCAN_CHUNK points whose free vibrations are projected together
+        // ([`Problem::free_parts_each`]), the chunks fixed by the grid alone.
         let scan: Vec<(f64, Vec<f64>, f64)> = grid
-            .par_iter()
-            .map(|&fz| {
-                let f = fz.0;
-                let free = self.free_parts(fz, false);
-                let gains = self.alternating_gains(fz, &free, c, g, SEQUENTIAL_GAIN_ROUNDS);
-                let (gains, cost) = self.projected_gains(fz, &free, &gains, SCAN_GAIN_STEPS);
-                let mut th = vec![f, fz.1];
-                th.extend(&gains);
-                (f, th, cost)
+            .par_chunks(SCAN_CHUNK)
+            .flat_map_iter(|fzs| {
+                let frees = self.free_parts_each(fzs, false);
+                fzs.iter()
+                    .zip(frees)
+                    .map(|(&fz, free)| {
+                        let f = fz.0;
+                        let gains = self.alternating_gains(fz, &free, c, g, SEQUENTIAL_GAIN_ROUNDS);
+                        let (gains, cost) = self.projected_gains(fz, &free, &gains, SCAN_GAIN_STEPS);
+                        let mut th = vec![f, fz.1];
+                        th.extend(&gains);
+                        (f, th, cost)
+                    })
+                    .collect::<Vec<_>>()
             })
             .collect();
         let mut order: Vec<usize> = (0..scan.len()).collect();

@@ -1309,6 +1309,20 @@ pub fn diagnose_with(
                 start.set("fc", fc_ref);
             }
             let c = c.with_describe(move |coefs: &[f64], h: &[f64]| describe(n, &sh3, coefs, h, &start));
+            // A mode's columns live on a few channels each: the grid search takes them as runs
+            // (the same values; open loop only, where the columns are the runs placed in full).
+            let c = if n == EffectName::Resonance && !has_closed_loop(st.chans) {
+                c.with_sparse(move |h: &[f64]| {
+                    let cols = resonance_runs(st, h[0], h[1]);
+                    if cols.iter().all(|c| c.runs.iter().all(|(_, v)| v.iter().all(|x| *x == 0.0))) {
+                        Err(ModelCheckError::VanishingSignature)
+                    } else {
+                        Ok(cols)
+                    }
+                })
+            } else {
+                c
+            };
             // A mode over a large base (flexible shapes): the (f, ζ) grid is screened
             // (`Candidate::with_screen`), the best RESONANCE_SCREEN points evaluated exactly.
             if n == EffectName::Resonance && f.fs.cols.len() > LARGE_DESIGN {

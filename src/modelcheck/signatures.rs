@@ -1003,6 +1003,85 @@ pub(crate) fn resonance_gains(st: &Stack) -> Vec<(String, usize, String)> {
     out
 }
 
+/// The columns of a structural mode at frequency `f` (Hz) and damping ratio `zeta` as runs of rows
+/// ([`SparseColumn`]; [`open_loop_columns`] places them in full columns): each lives on a few
+/// channels of the stack, so a search over (f, ζ) need not write or read the zeros
+/// ([`vmt_estimators::modelcheck::Candidate::with_sparse`]).
+///
+/// - Forced response to each predicted base acceleration, gain φ (the mode shape at the sensor,
+///   times the input's share of the drive) per sensor and input: φ·mean q̈ with q driven by −a_ref
+///   from rest at t_{−1}, a run on each of the sensor's channels that the input reaches.
+/// - Free vibration from the unknown state at t_{−1}, two columns per excited channel (one run on
+///   its rows).
+/// - Channels without a predicted excitation: a narrow band at the temporal frequency f, sin/cos of
+///   2πf·t per segment ([`resonance_segments`]), a run per stretch of the segment's rows.
+pub(crate) fn resonance_runs(st: &Stack, f: f64, zeta: f64) -> Vec<SparseColumn> {
+    let mut cols = Vec::new();
+    let starts = st.channel_starts();
+    // The sensors of one pass (the same times, the same tables) share their responses.
+    let same = |k: usize, j: usize| {
+        let (ek, ej) = (&st.excitation[k], &st.excitation[j]);
+        ek.len() == ej.len() && ek.iter().zip(ej).all(|(a, b)| a.shares(b)) && st.chans[k].t == st.chans[j].t
+    };
+    let mut responses: Vec<std::sync::Arc<Vec<Vec<f64>>>> = Vec::with_capacity(st.chans.len());
+    for (j, (c, es)) in st.chans.iter().zip(&st.excitation).enumerate() {
+        let r = match (0..j).find(|&k| !es.is_empty() && same(k, j)) {
+            Some(k) => responses[k].clone(),
+            None => std::sync::Arc::new(es.iter().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))).collect()),
+        };
+        responses.push(r);
+    }
+    for (a, k, _) in resonance_gains(st) {
+        // Sensor `a`'s response to input k on each of its channels.
+        let runs = st
+            .chans
+            .iter()
+            .zip(&responses)
+            .zip(&starts)
+            .filter(|((c, _), _)| c.sensor == a)
+            .filter_map(|((_, r), &s0)| r.get(k).map(|r| (s0, r.clone())))
+            .collect();
+        cols.push(SparseColumn { runs });
+    }
+    let mut free: Vec<(usize, std::sync::Arc<[Vec<f64>; 2]>)> = Vec::new();
+    for (j, c) in st.chans.iter().enumerate() {
+        if st.excitation[j].is_empty() {
+            continue;
+        }
+        // Channels with the same times share it.
+        let rs = match free.iter().find(|(k, _)| st.chans[*k].t == c.t) {
+            Some((_, rs)) => rs.clone(),
+            None => std::sync::Arc::new(free_vibration(c, f, zeta)),
+        };
+        for r in rs.iter() {
+            cols.push(SparseColumn { runs: vec![(starts[j], r.clone())] });
+        }
+        free.push((j, rs));
+    }
+    for (j, _, a, b) in resonance_segments(st) {
+        let c = &st.chans[j];
+        let inside = |i: usize| c.t[i] >= a && c.t[i] < b;
+        let (mut sin, mut cos) = (SparseColumn::default(), SparseColumn::default());
+        let mut i = 0;
+        while i < c.t.len() {
+            if !inside(i) {
+                i += 1;
+                continue;
+            }
+            let i0 = i;
+            while i < c.t.len() && inside(i) {
+                i += 1;
+            }
+            let (s, co): (Vec<f64>, Vec<f64>) = (i0..i).map(|i| (TWO_PI * f * c.t[i]).sin_cos()).unzip();
+            sin.runs.push((starts[j] + i0, s));
+            cos.runs.push((starts[j] + i0, co));
+        }
+        cols.push(sin);
+        cols.push(cos);
+    }
+    cols
+}
+
 /// Sampling rate of the slowest accelerometer channel, Hz (median sample interval); None without one.
 pub(crate) fn accel_min_rate(st: &Stack) -> Option<f64> {
     st.chans
@@ -1239,68 +1318,7 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             }
             cols
         }
-        EffectName::Resonance => {
-            let (f, zeta) = (h[0], h[1]);
-            let mut cols = Vec::new();
-            // Forced response to each predicted base acceleration, gain φ (the mode shape at the
-            // sensor, times the input's share of the drive) per sensor and input: φ·mean q̈ with q
-            // driven by −a_ref from rest at t_{−1}.
-            // The sensors of one pass (the same times, the same tables) share their responses.
-            let same = |k: usize, j: usize| {
-                let (ek, ej) = (&st.excitation[k], &st.excitation[j]);
-                ek.len() == ej.len() && ek.iter().zip(ej).all(|(a, b)| a.shares(b)) && st.chans[k].t == st.chans[j].t
-            };
-            let mut responses: Vec<std::sync::Arc<Vec<Vec<f64>>>> = Vec::with_capacity(st.chans.len());
-            for (j, (c, es)) in st.chans.iter().zip(&st.excitation).enumerate() {
-                let r = match (0..j).find(|&k| !es.is_empty() && same(k, j)) {
-                    Some(k) => responses[k].clone(),
-                    None => {
-                        std::sync::Arc::new(es.iter().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))).collect())
-                    }
-                };
-                responses.push(r);
-            }
-            for (a, k, _) in resonance_gains(st) {
-                // Channel by channel: sensor `a`'s response to input k, zero elsewhere.
-                let mut col = Vec::with_capacity(st.n);
-                for (c, r) in st.chans.iter().zip(&responses) {
-                    match r.get(k) {
-                        Some(r) if c.sensor == a => col.extend_from_slice(r),
-                        Some(_) | None => col.resize(col.len() + c.y.len(), 0.0),
-                    }
-                }
-                cols.push(col);
-            }
-            // Free vibration from the unknown state at t_{−1}, per excited channel (on its rows,
-            // zero elsewhere; channels with the same times share it).
-            let starts = st.channel_starts();
-            let mut free: Vec<(usize, std::sync::Arc<[Vec<f64>; 2]>)> = Vec::new();
-            for (j, c) in st.chans.iter().enumerate() {
-                if st.excitation[j].is_empty() {
-                    continue;
-                }
-                let rs = match free.iter().find(|(k, _)| st.chans[*k].t == c.t) {
-                    Some((_, rs)) => rs.clone(),
-                    None => std::sync::Arc::new(free_vibration(c, f, zeta)),
-                };
-                for r in rs.iter() {
-                    let mut col = vec![0.0; st.n];
-                    // index: channel j's rows of the stack, starts[j] + its length ≤ n; a response
-                    // has one value per sample of the channel.
-                    col[starts[j]..starts[j] + c.y.len()].copy_from_slice(r);
-                    cols.push(col);
-                }
-                free.push((j, rs));
-            }
-            // Channels without a predicted excitation: narrow band at the temporal frequency f,
-            // sin/cos of 2πf·t per segment.
-            for (j, _, a, b) in resonance_segments(st) {
-                let inside = move |c: &Channel, i: usize, jj: usize| jj == j && c.t[i] >= a && c.t[i] < b;
-                cols.push(st.col_j(|c, i, jj| if inside(c, i, jj) { (TWO_PI * f * c.t[i]).sin() } else { 0.0 }));
-                cols.push(st.col_j(|c, i, jj| if inside(c, i, jj) { (TWO_PI * f * c.t[i]).cos() } else { 0.0 }));
-            }
-            cols
-        }
+        EffectName::Resonance => resonance_runs(st, h[0], h[1]).iter().map(|c| c.dense(st.n)).collect(),
         EffectName::GravityTilt => {
             // g·tilt(x) of each accelerometer's sensitive axis, a polynomial in x shared by its runs.
             let mut cols = Vec::new();

@@ -37,7 +37,7 @@
 //! closer than 10; `noise` otherwise.
 
 use super::lsq::{fit_signature, Basis};
-use super::ortho::OrthoBase;
+use super::ortho::{OrthoBase, SparseColumn};
 use super::{check_finite, check_len, ModelCheckError, Sigma};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -47,6 +47,10 @@ use std::collections::BTreeMap;
 /// [`Candidate::hyper_parameters`]) → design columns, one `Vec` of n values per linear
 /// coefficient. An `Err` marks a hyper-parameter value as invalid (it is skipped in the search).
 pub type SignatureFn<'a> = dyn Fn(&[f64]) -> Result<Vec<Vec<f64>>, ModelCheckError> + Send + Sync + 'a;
+
+/// A signature's columns as runs ([`Candidate::with_sparse`]): the same values as the
+/// [`SignatureFn`]'s, zero outside the runs.
+pub type SparseSignatureFn<'a> = dyn Fn(&[f64]) -> Result<Vec<SparseColumn>, ModelCheckError> + Send + Sync + 'a;
 
 /// Optional conversion of (coefficients, hyper-parameters) into the reported `params` (e.g. a
 /// sine and cosine coefficient into amplitude and phase).
@@ -77,6 +81,8 @@ pub struct Candidate<'a> {
     pub signature: Box<SignatureFn<'a>>,
     /// Optional conversion of the fitted numbers into `params`.
     pub describe: Option<Box<DescribeFn<'a>>>,
+    /// The signature's columns as runs ([`Candidate::with_sparse`]), for the grid search.
+    pub sparse: Option<Box<SparseSignatureFn<'a>>>,
     /// Screened search ([`Candidate::with_screen`]): the number of grid points evaluated exactly.
     pub screen: Option<usize>,
     /// A grid chosen from the data ([`Candidate::chosen_from`]): the number of independent
@@ -98,6 +104,7 @@ impl<'a> Candidate<'a> {
             hyper_parameters: Vec::new(),
             signature: Box::new(signature),
             describe: None,
+            sparse: None,
             screen: None,
             chosen_from: None,
         }
@@ -112,6 +119,17 @@ impl<'a> Candidate<'a> {
     /// Sets the conversion of (coefficients, hyper-parameters) into the reported `params`.
     pub fn with_describe(mut self, f: impl Fn(&[f64], &[f64]) -> BTreeMap<String, f64> + Send + Sync + 'a) -> Self {
         self.describe = Some(Box::new(f));
+        self
+    }
+
+    /// Gives the signature's columns also as runs ([`SparseColumn`]: the same values, zero outside
+    /// the runs), which the exact grid search then evaluates without the zeros. For a candidate
+    /// whose columns each live on a few channels of a long stack (a structural mode).
+    pub fn with_sparse(
+        mut self,
+        f: impl Fn(&[f64]) -> Result<Vec<SparseColumn>, ModelCheckError> + Send + Sync + 'a,
+    ) -> Self {
+        self.sparse = Some(Box::new(f));
         self
     }
 
@@ -320,6 +338,12 @@ pub struct Diagnosis {
     pub n: usize,
 }
 
+/// The most grid points whose columns are projected together ([`OrthoBase::explained_each`]).
+const GRID_CHUNK_POINTS: usize = 32;
+
+/// The most column values (points × columns × samples) a chunk of grid points holds (64 MB).
+const GRID_CHUNK_VALUES: usize = 8_000_000;
+
 /// Prepared residual: weights, orthonormal weighted base (one QR, reused for every candidate and
 /// hyper-parameter value: variable projection), weighted residual with base removed.
 struct Prepared {
@@ -392,6 +416,40 @@ fn checked_columns(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<Vec<Vec<
     Ok(cols)
 }
 
+/// The candidate's signature at `h` as runs ([`Candidate::with_sparse`]; None without one),
+/// checked: one column per coefficient name, each run inside the n rows, after the one before it,
+/// its values finite.
+fn checked_sparse(p: &Prepared, cand: &Candidate, h: &[f64]) -> Option<Result<Vec<SparseColumn>, ModelCheckError>> {
+    let f = cand.sparse.as_ref()?;
+    let check = |cols: Vec<SparseColumn>| -> Result<Vec<SparseColumn>, ModelCheckError> {
+        check_len("signature columns (one per coefficient name)", cand.coefficient_names.len(), cols.len())?;
+        for (j, c) in cols.iter().enumerate() {
+            let mut next = 0;
+            for (lo, v) in &c.runs {
+                let hi = lo.checked_add(v.len()).filter(|hi| *lo >= next && *hi <= p.n);
+                let Some(hi) = hi else {
+                    return Err(ModelCheckError::Invalid(format!(
+                        "signature column {j}: a run at rows {lo}..{} is not after the one before it (row {next}) \
+                         inside the {} rows",
+                        lo.saturating_add(v.len()),
+                        p.n
+                    )));
+                };
+                if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                    return Err(ModelCheckError::NotFinite {
+                        what: format!("signature column {j}"),
+                        index: lo + i,
+                        value: v[i],
+                    });
+                }
+                next = hi;
+            }
+        }
+        Ok(cols)
+    };
+    Some(f(h).and_then(check))
+}
+
 /// Evaluates a candidate's signature at `h` and returns (χ² or RSS reduction, columns).
 fn reduction(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<(f64, Vec<Vec<f64>>), ModelCheckError> {
     let cols = checked_columns(p, cand, h)?;
@@ -430,6 +488,20 @@ fn span_projection(cols: &[Vec<f64>], w: &[f64], r: &[f64]) -> f64 {
 /// fit at its best values is the exact one (projected columns, orthogonalised, SVD).
 fn reduction_of(p: &Prepared, cols: &[Vec<f64>]) -> f64 {
     p.base.projected_fit(&p.r_t, cols, &p.w, false).0
+}
+
+/// A chunk of grid points `gs` scored together: each point's columns by `make`, the sets made
+/// scored by `score` in one call (one score per set, in order), a point whose columns could not be
+/// made keeping its error.
+fn score_chunk<C>(
+    gs: &[usize],
+    make: impl Fn(usize) -> Result<Vec<C>, ModelCheckError>,
+    score: impl Fn(&[&[C]]) -> Vec<f64>,
+) -> Vec<(usize, Result<f64, ModelCheckError>)> {
+    let cols: Vec<Result<Vec<C>, ModelCheckError>> = gs.iter().map(|&g| make(g)).collect();
+    let sets: Vec<&[C]> = cols.iter().filter_map(|c| c.as_deref().ok()).collect();
+    let mut scores = score(&sets).into_iter();
+    gs.iter().zip(cols).map(|(&g, c)| (g, c.map(|_| scores.next().unwrap_or(f64::NEG_INFINITY)))).collect()
 }
 
 /// Fits one candidate: grid search of its hyper-parameters, joint refinement, weighted
@@ -492,8 +564,25 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
             order
         }
     };
-    let reds: Vec<(usize, Result<f64, ModelCheckError>)> =
-        exact_points.into_par_iter().map(|g| (g, reduction(p, cand, &point(g)).map(|r| r.0))).collect();
+    // In chunks of grid points whose columns are projected together ([`OrthoBase::explained_each`]:
+    // Q is read once per chunk, not once per point), the chunks fixed by the grid alone (the same
+    // bits on any number of threads) and sized to hold at most GRID_CHUNK_VALUES column values.
+    let per_point = cand.coefficient_names.len().max(1).saturating_mul(p.n.max(1));
+    // clamp: GRID_CHUNK_POINTS is 32, above 1.
+    let chunk = (GRID_CHUNK_VALUES / per_point).clamp(1, GRID_CHUNK_POINTS);
+    let reds: Vec<(usize, Result<f64, ModelCheckError>)> = exact_points
+        .par_chunks(chunk)
+        .flat_map_iter(|gs| {
+            // The runs where the candidate gives them, else the dense columns.
+            if cand.sparse.is_some() {
+                let make = |g: usize| checked_sparse(p, cand, &point(g)).unwrap_or_else(|| Ok(Vec::new()));
+                score_chunk(gs, make, |sets| p.base.explained_each_sparse(&p.r_t, sets, &p.w))
+            } else {
+                let make = |g: usize| checked_columns(p, cand, &point(g));
+                score_chunk(gs, make, |sets| p.base.explained_each(&p.r_t, sets, &p.w))
+            }
+        })
+        .collect();
     let mut best: Option<(f64, Vec<f64>)> = None;
     let mut first_error: Option<ModelCheckError> = None;
     let mut evaluations = reds.len();
@@ -964,6 +1053,39 @@ mod tests {
         let bad = vec![Candidate::new("bad", &["a"], |_| Ok(vec![vec![1.0; 3]]))];
         let e = rank_candidates(&inp, &bad, &DiagnoseConfig::default()).unwrap_err();
         assert!(e.to_string().contains("must have 40 values (one per sample), got 3"), "{e}");
+    }
+
+    /// A candidate that also gives its columns as runs ([`Candidate::with_sparse`]) is searched on
+    /// them to the same best grid point and fit as from its dense columns alone (a pulse of unknown
+    /// start on 60 samples, its grid of 40 starts); runs that do not fit the rows are an error
+    /// naming the column and rows, not a panic.
+    #[test]
+    fn sparse_signature_searches_as_the_dense_one() {
+        let n = 60;
+        let pulse = |at: f64| -> Vec<f64> {
+            (0..n).map(|i| if (i as f64) >= at && (i as f64) < at + 12.0 { 1.0 } else { 0.0 }).collect()
+        };
+        let r: Vec<f64> =
+            pulse(23.0).iter().enumerate().map(|(i, p)| 3e-6 * p + 1e-8 * ((i * 7 % 5) as f64 - 2.0)).collect();
+        let base = vec![vec![1.0; n]];
+        let inp = ResidualInput { residual: &r, sigma: &Sigma::Constant(1e-8), base_columns: &base };
+        let grid: Vec<f64> = (0..40).map(|k| k as f64 + 0.5).collect();
+        let dense = || {
+            Candidate::new("pulse", &["height"], move |h: &[f64]| Ok(vec![pulse(h[0])])).with_hyper("at", grid.clone())
+        };
+        let runs = |h: &[f64]| -> Vec<SparseColumn> {
+            let lo = h[0].ceil() as usize;
+            vec![SparseColumn { runs: vec![(lo, vec![1.0; 12.min(n - lo)])] }]
+        };
+        let config = DiagnoseConfig::default();
+        let a = rank_candidates(&inp, &[dense()], &config).unwrap();
+        let b = rank_candidates(&inp, &[dense().with_sparse(move |h: &[f64]| Ok(runs(h)))], &config).unwrap();
+        assert_eq!(a.ranking[0].params, b.ranking[0].params);
+        assert_eq!(a.ranking[0].delta_bic, b.ranking[0].delta_bic);
+        assert!((a.ranking[0].params["at"] - 23.0).abs() <= 1.0, "{:?}", a.ranking[0].params);
+        let past = dense().with_sparse(|_: &[f64]| Ok(vec![SparseColumn { runs: vec![(55, vec![1.0; 12])] }]));
+        let e = rank_candidates(&inp, &[past], &config).unwrap_err();
+        assert!(e.to_string().contains("signature column 0: a run at rows 55..67"), "{e}");
     }
 
     /// The Gram-matrix projection of the screen equals the orthogonalised one (MGS, `Basis`) to

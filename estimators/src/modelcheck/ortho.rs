@@ -140,68 +140,130 @@ impl OrthoBase {
         w: &[f64],
         want_residual: bool,
     ) -> (f64, Option<Vec<f64>>) {
-        let (k, rank) = (cols.len(), self.rank());
-        let support: Vec<(usize, usize)> = cols.iter().map(|c| nonzero_rows(c)).collect();
-        let wc: Vec<Vec<f64>> =
-            cols.iter().zip(&support).map(|(c, &(lo, hi))| (lo..hi).map(|i| c[i] * w[i]).collect()).collect();
-        let norm: Vec<f64> = wc.iter().map(|v| dot(v, v).sqrt()).collect();
-        let mut m = vec![vec![0.0; rank]; k];
-        // M = Qᵀ(WC): a column on a few rows by its own product with those rows of Q; the columns
-        // on more than an eighth of the rows together, by one product over the rows they span
-        // (Q read once for all of them).
-        let n = w.len();
-        let wide: Vec<usize> =
-            (0..k).filter(|&j| norm[j] > 0.0 && rank > 0 && 8 * (support[j].1 - support[j].0) > n).collect();
-        if !wide.is_empty() {
-            let lo = wide.iter().map(|&j| support[j].0).min().unwrap_or(0);
-            let hi = wide.iter().map(|&j| support[j].1).max().unwrap_or(lo);
-            // Each column's non-zero rows copied into its place, zero elsewhere.
-            let mut block = Mat::<f64>::zeros(hi - lo, wide.len());
-            for (c, &j) in wide.iter().enumerate() {
-                let (a, b) = support[j];
-                block.col_as_slice_mut(c)[a - lo..b - lo].copy_from_slice(&wc[j]);
-            }
-            let mut out = Mat::<f64>::zeros(rank, wide.len());
-            matmul(
-                out.as_mut(),
-                Accum::Replace,
-                self.q.as_ref().subrows(lo, hi - lo).transpose(),
-                block.as_ref(),
-                1.0,
-                Par::Seq,
-            );
-            for (c, &j) in wide.iter().enumerate() {
-                m[j] = (0..rank).map(|a| out[(a, c)]).collect();
+        let x = Weighted::of(cols, w);
+        let m = self.products(std::slice::from_ref(&x)).pop().unwrap_or_default();
+        self.fit_weighted(target, &x, &m, want_residual)
+    }
+
+    /// [`OrthoBase::explained`] of several column sets (each the columns of one value of a
+    /// candidate's hyper-parameters): the products M = Qᵀ(WC) of all the sets' columns are formed
+    /// together (the columns with the same non-zero rows in one product over those rows only, Q's
+    /// rows read and packed once for all of them), then each set's Gram-form fit on its own. Each
+    /// set's result is [`OrthoBase::projected_fit`]'s on that set alone up to rounding (a product's
+    /// order of summation depends on how many columns share it), and is the same whatever the
+    /// number of threads (it calls no other thread).
+    pub fn explained_each(&self, target: &[f64], sets: &[&[Vec<f64>]], w: &[f64]) -> Vec<f64> {
+        let xs: Vec<Weighted> = sets.iter().map(|c| Weighted::of(c, w)).collect();
+        self.explained_weighted(target, &xs)
+    }
+
+    /// [`OrthoBase::explained_each`] of column sets given as runs ([`SparseColumn`]; each run in
+    /// row order inside the n rows of `w`, as [`SparseColumn::dense`] would place it): each
+    /// product over a run's rows only.
+    pub fn explained_each_sparse(&self, target: &[f64], sets: &[&[SparseColumn]], w: &[f64]) -> Vec<f64> {
+        let xs: Vec<Weighted> = sets.iter().map(|c| Weighted::of_sparse(c, w)).collect();
+        self.explained_weighted(target, &xs)
+    }
+
+    fn explained_weighted(&self, target: &[f64], xs: &[Weighted]) -> Vec<f64> {
+        let ms = self.products(xs);
+        xs.iter().zip(&ms).map(|(x, m)| self.fit_weighted(target, x, m, false).0).collect()
+    }
+
+    /// M = Qᵀ(WC) (rank values per column) for every column of every set, a group of columns by
+    /// one product over the group's rows [lo, hi) (each column in its place, zero elsewhere; Q's rows
+    /// read and packed once for the group):
+    ///
+    /// - one set (one evaluation): the columns on more than an eighth of the rows in one group over
+    ///   the rows they span, each other column alone over its own rows;
+    /// - several sets (a batch of a search's evaluations): the columns with the same non-zero rows
+    ///   (a mode's response on one pass, a sensor's channels) in one group, over those rows only.
+    fn products(&self, sets: &[Weighted]) -> Vec<Vec<Vec<f64>>> {
+        let (rank, n) = (self.rank(), self.nrows());
+        let mut m: Vec<Vec<Vec<f64>>> = sets.iter().map(|x| vec![vec![0.0; rank]; x.runs.len()]).collect();
+        // Groups by (lo, hi, the run alone): their members (set, column, run).
+        type Key = (usize, usize, Option<(usize, usize, usize)>);
+        let mut groups: std::collections::BTreeMap<Key, Vec<(usize, usize, usize)>> = Default::default();
+        let one = sets.len() == 1;
+        for (s, x) in sets.iter().enumerate() {
+            let wide = |v: &[f64]| 8 * v.len() > n;
+            let span = (0..x.runs.len())
+                .filter(|&j| x.norm[j] > 0.0)
+                .flat_map(|j| x.runs[j].iter().filter(|(_, v)| wide(v)).map(|(lo, v)| (*lo, lo + v.len())))
+                .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)));
+            for j in (0..x.runs.len()).filter(|&j| x.norm[j] > 0.0 && rank > 0) {
+                for (r, (lo, v)) in x.runs[j].iter().enumerate().filter(|(_, (_, v))| !v.is_empty()) {
+                    let key = match span {
+                        Some((a, b)) if one && wide(v) => (a, b, None),
+                        Some(_) | None if one => (*lo, lo + v.len(), Some((s, j, r))),
+                        Some(_) | None => (*lo, lo + v.len(), None),
+                    };
+                    groups.entry(key).or_default().push((s, j, r));
+                }
             }
         }
-        for j in 0..k {
-            let (lo, hi) = support[j];
-            if norm[j] == 0.0 || rank == 0 || wide.contains(&j) {
-                continue;
+        // A column's M: its first run's product, then each other run's added (one run: the product).
+        let mut started: Vec<Vec<bool>> = sets.iter().map(|x| vec![false; x.runs.len()]).collect();
+        for ((lo, hi, _), members) in groups {
+            let q = self.q.as_ref().subrows(lo, hi - lo);
+            let mut out = Mat::<f64>::zeros(rank, members.len());
+            if let [(s, j, r)] = members[..] {
+                // index: the run's hi − lo values (the group is the run's own rows).
+                let v = faer::MatRef::from_column_major_slice(&sets[s].runs[j][r].1, hi - lo, 1);
+                matmul(out.as_mut(), Accum::Replace, q.transpose(), v, 1.0, Par::Seq);
+            } else {
+                let mut block = Mat::<f64>::zeros(hi - lo, members.len());
+                for (c, &(s, j, r)) in members.iter().enumerate() {
+                    let (a, v) = &sets[s].runs[j][r];
+                    // index: the run's rows lie inside the group's rows [lo, hi).
+                    block.col_as_slice_mut(c)[a - lo..a - lo + v.len()].copy_from_slice(v);
+                }
+                matmul(out.as_mut(), Accum::Replace, q.transpose(), block.as_ref(), 1.0, Par::Seq);
             }
-            let mut out = Mat::<f64>::zeros(rank, 1);
-            let v = faer::MatRef::from_column_major_slice(&wc[j], hi - lo, 1);
-            matmul(out.as_mut(), Accum::Replace, self.q.as_ref().subrows(lo, hi - lo).transpose(), v, 1.0, Par::Seq);
-            m[j] = (0..rank).map(|a| out[(a, 0)]).collect();
+            for (c, &(s, j, _)) in members.iter().enumerate() {
+                let col = &mut m[s][j];
+                if std::mem::replace(&mut started[s][j], true) {
+                    col.iter_mut().enumerate().for_each(|(a, x)| *x += out[(a, c)]);
+                } else {
+                    col.iter_mut().enumerate().for_each(|(a, x)| *x = out[(a, c)]);
+                }
+            }
         }
+        m
+    }
+
+    /// The Gram-form least squares of [`OrthoBase::projected_fit`] from the weighted columns `x`
+    /// and their products `m` with Q ([`OrthoBase::products`]).
+    fn fit_weighted(
+        &self,
+        target: &[f64],
+        x: &Weighted,
+        m: &[Vec<f64>],
+        want_residual: bool,
+    ) -> (f64, Option<Vec<f64>>) {
+        let (k, rank) = (x.runs.len(), self.rank());
+        let (runs, norm) = (&x.runs, &x.norm);
+        // Sums over a column's runs (or pairs of runs): the first term, then the others added.
+        let sum = |it: &mut dyn Iterator<Item = f64>| it.reduce(|a, b| a + b).unwrap_or(0.0);
         let mut g = vec![vec![0.0; k]; k];
         let mut b = vec![0.0; k];
         for i in 0..k {
             if norm[i] == 0.0 {
                 continue;
             }
-            let (lo, hi) = support[i];
-            b[i] = dot(&wc[i], &target[lo..hi]) / norm[i];
+            // index: a run's rows lie inside the n rows (`Weighted::of`, checked for sparse columns).
+            b[i] = sum(&mut runs[i].iter().map(|(lo, v)| dot(v, &target[*lo..lo + v.len()]))) / norm[i];
             for j in 0..=i {
                 if norm[j] == 0.0 {
                     continue;
                 }
-                let (l2, h2) = (lo.max(support[j].0), hi.min(support[j].1));
-                let own = if l2 < h2 {
-                    dot(&wc[i][l2 - lo..h2 - lo], &wc[j][l2 - support[j].0..h2 - support[j].0])
-                } else {
-                    0.0
-                };
+                let mut overlaps = runs[i].iter().flat_map(|(li, vi)| {
+                    runs[j].iter().filter_map(move |(lj, vj)| {
+                        let (l2, h2) = (*li.max(lj), (li + vi.len()).min(lj + vj.len()));
+                        (l2 < h2).then(|| dot(&vi[l2 - li..h2 - li], &vj[l2 - lj..h2 - lj]))
+                    })
+                });
+                let own = sum(&mut overlaps);
                 let v = (own - dot(&m[i], &m[j])) / (norm[i] * norm[j]);
                 g[i][j] = v;
                 g[j][i] = v;
@@ -223,9 +285,10 @@ impl OrthoBase {
         let mut mb = vec![0.0; rank];
         for j in (0..k).filter(|&j| beta[j] != 0.0) {
             let bj = beta[j] / norm[j];
-            let lo = support[j].0;
-            for (t, v) in wc[j].iter().enumerate() {
-                residual[lo + t] -= bj * v;
+            for (lo, v) in &runs[j] {
+                for (t, v) in v.iter().enumerate() {
+                    residual[lo + t] -= bj * v;
+                }
             }
             for (acc, mj) in mb.iter_mut().zip(&m[j]) {
                 *acc += bj * mj;
@@ -255,6 +318,69 @@ pub const GREEDY_LEFT: f64 = 1e-8;
 /// product by [`dot`] on one thread: the same bits on any number of threads.
 fn columns_dot(a: &Mat<f64>, v: &[f64]) -> Vec<f64> {
     (0..a.ncols()).into_par_iter().with_min_len(16).map(|j| dot(a.col_as_slice(j), v)).collect()
+}
+
+/// A column that is zero outside its runs of rows: (first row, values) per run, the runs in row
+/// order and not overlapping. A candidate whose columns live on a few channels of a long stack (a
+/// structural mode's response on each pass) gives them so, and a search over its hyper-parameters
+/// then never writes, reads or multiplies the zeros ([`OrthoBase::explained_each_sparse`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SparseColumn {
+    /// (first row, values) of each run.
+    pub runs: Vec<(usize, Vec<f64>)>,
+}
+
+impl SparseColumn {
+    /// The column as n values (zero outside its runs). Runs that reach past n are cut at n.
+    pub fn dense(&self, n: usize) -> Vec<f64> {
+        let mut out = vec![0.0; n];
+        for (lo, v) in &self.runs {
+            let hi = lo.saturating_add(v.len()).min(n);
+            if *lo < hi {
+                // index: lo < hi ≤ n and hi − lo ≤ the run's length (both cut above).
+                out[*lo..hi].copy_from_slice(&v[..hi - lo]);
+            }
+        }
+        out
+    }
+}
+
+/// Columns weighted, each as its runs of rows (the inputs of [`OrthoBase::products`]).
+struct Weighted {
+    /// Per column, its runs: (first row, W·c over the run's rows), in row order.
+    runs: Vec<Vec<(usize, Vec<f64>)>>,
+    /// ‖W·c_j‖.
+    norm: Vec<f64>,
+}
+
+impl Weighted {
+    /// Dense columns, each cut to one run over its non-zero rows ([`nonzero_rows`]).
+    fn of(cols: &[Vec<f64>], w: &[f64]) -> Weighted {
+        let runs: Vec<Vec<(usize, Vec<f64>)>> = cols
+            .iter()
+            .map(|c| {
+                let (lo, hi) = nonzero_rows(c);
+                vec![(lo, (lo..hi).map(|i| c[i] * w[i]).collect())]
+            })
+            .collect();
+        Weighted::with_norms(runs)
+    }
+
+    /// Columns given as runs (checked by the caller: in row order, inside the n rows of `w`).
+    fn of_sparse(cols: &[SparseColumn], w: &[f64]) -> Weighted {
+        let runs: Vec<Vec<(usize, Vec<f64>)>> = cols
+            .iter()
+            .map(|c| {
+                c.runs.iter().map(|(lo, v)| (*lo, v.iter().zip(&w[*lo..]).map(|(x, w)| x * w).collect())).collect()
+            })
+            .collect();
+        Weighted::with_norms(runs)
+    }
+
+    fn with_norms(runs: Vec<Vec<(usize, Vec<f64>)>>) -> Weighted {
+        let norm = runs.iter().map(|r| r.iter().map(|(_, v)| dot(v, v)).sum::<f64>().sqrt()).collect();
+        Weighted { runs, norm }
+    }
 }
 
 /// The rows [lo, hi) outside which a column is zero (lo = hi for an all-zero column).
@@ -591,8 +717,14 @@ pub fn greedy_rss(
     Ok(greedy_steps(&g, left, corr, rss, n, stop))
 }
 
-/// Columns per block of [`greedy_rss_with_gram`]'s products with the base.
+/// Columns per block of [`greedy_rss_with_gram`]'s products with the base, at most.
 const GRAM_BLOCK: usize = 64;
+
+/// Values (samples × columns) per block of [`greedy_rss_with_gram`]'s products, at most (28 MB):
+/// fewer columns per block on long series, so that a block stays below the size from which the
+/// allocator maps it fresh from the kernel (32 MB with `vmt`'s `keep_freed_memory`), a page fault
+/// per 4 kB each time.
+const GRAM_BLOCK_VALUES: usize = 3_500_000;
 
 /// [`greedy_rss`] with the series' weighted Gram matrix given: `gram` = (WS)ᵀ(WS) (k × k,
 /// row-major, W = diag(`w`)), for a caller that has it more cheaply than from the columns (the
@@ -627,15 +759,16 @@ pub fn greedy_rss_with_gram(
     check_finite("series Gram matrix", gram)?;
     let r = base.project_vector(y, w);
     let rss: f64 = r.iter().map(|v| v * v).sum();
-    // M = Qᵀ(WS) and (WS)ᵀr a block of GRAM_BLOCK columns at a time (WS is never held whole: at
+    // M = Qᵀ(WS) and (WS)ᵀr a block of columns at a time (GRAM_BLOCK, GRAM_BLOCK_VALUES; WS is never held whole: at
     // 15 000 samples × 1 200 columns it would be 144 MB), the blocks shared out over threads.
     let rank = base.rank();
     // Per block: (its columns of M, their products with r).
     type Block = (Mat<f64>, Vec<f64>);
-    let blocks: Vec<Result<Block, ModelCheckError>> = (0..k.div_ceil(GRAM_BLOCK))
+    let block = GRAM_BLOCK.min(GRAM_BLOCK_VALUES / n.max(1)).max(1);
+    let blocks: Vec<Result<Block, ModelCheckError>> = (0..k.div_ceil(block))
         .into_par_iter()
         .map(|b| {
-            let (lo, hi) = (b * GRAM_BLOCK, ((b + 1) * GRAM_BLOCK).min(k));
+            let (lo, hi) = (b * block, ((b + 1) * block).min(k));
             let mut ws = Mat::<f64>::zeros(n, hi - lo);
             for j in lo..hi {
                 check_finite(&format!("series column {j}"), &series[j])?;
@@ -653,7 +786,7 @@ pub fn greedy_rss_with_gram(
         .collect();
     // The first block in error, in the series' order.
     let blocks = blocks.into_iter().collect::<Result<Vec<_>, _>>()?;
-    let m = Mat::<f64>::from_fn(rank, k, |i, j| blocks[j / GRAM_BLOCK].0[(i, j % GRAM_BLOCK)]);
+    let m = Mat::<f64>::from_fn(rank, k, |i, j| blocks[j / block].0[(i, j % block)]);
     let raw_corr: Vec<f64> = blocks.iter().flat_map(|b| b.1.iter().copied()).collect();
     let mut mtm = Mat::<f64>::zeros(k, k);
     matmul(mtm.as_mut(), Accum::Replace, m.transpose(), m.as_ref(), 1.0, Par::Seq);
@@ -864,6 +997,48 @@ mod tests {
         assert!((explained - want).abs() <= 1e-9 * scale, "explained {explained} against {want}");
         let dr = residual.iter().zip(&r).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
         assert!(dr <= 1e-9 * scale.sqrt(), "residual differs by {dr}");
+    }
+
+    /// A batch of column sets at once ([`OrthoBase::explained_each`], dense, and
+    /// [`OrthoBase::explained_each_sparse`], the same columns as runs, one of them on three runs
+    /// with gaps, as a sensor's response over interleaved channels): each set's explained sum of
+    /// squares is [`OrthoBase::projected_fit`]'s on that set alone to 1e-12 of the target's squared
+    /// norm (the products' order of summation differs), in the order given, on 600 weighted samples.
+    #[test]
+    fn batched_and_sparse_projected_fits_match_one_at_a_time() {
+        let n = 600;
+        let x: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
+        let w: Vec<f64> = (0..n).map(|i| 1.0 + 0.4 * (i as f64 * 0.23).cos()).collect();
+        let base = OrthoBase::new(&[vec![1.0; n], x.clone(), x.iter().map(|v| v * v).collect()], &w).unwrap();
+        let y: Vec<f64> = (0..n).map(|i| (31.0 * x[i]).sin() + 0.2 * (i as f64 * 1.3).cos()).collect();
+        let target = base.project_vector(&y, &w);
+        let run = |lo: usize, hi: usize, f: f64| (lo, (lo..hi).map(|i| (f * x[i]).sin() + 0.1).collect::<Vec<f64>>());
+        let sparse_sets: Vec<Vec<SparseColumn>> = (0..5)
+            .map(|s| {
+                let f = 20.0 + 7.0 * s as f64;
+                vec![
+                    SparseColumn { runs: vec![run(0, 100, f), run(200, 300, f), run(400, 500, f)] },
+                    SparseColumn { runs: vec![run(100, 200, 1.3 * f)] },
+                    SparseColumn { runs: vec![run(0, 600, 0.5 * f)] },
+                    SparseColumn::default(),
+                ]
+            })
+            .collect();
+        let dense_sets: Vec<Vec<Vec<f64>>> =
+            sparse_sets.iter().map(|set| set.iter().map(|c| c.dense(n)).collect()).collect();
+        let dense_refs: Vec<&[Vec<f64>]> = dense_sets.iter().map(Vec::as_slice).collect();
+        let sparse_refs: Vec<&[SparseColumn]> = sparse_sets.iter().map(Vec::as_slice).collect();
+        let batch = base.explained_each(&target, &dense_refs, &w);
+        let batch_sparse = base.explained_each_sparse(&target, &sparse_refs, &w);
+        let scale: f64 = target.iter().map(|v| v * v).sum();
+        assert_eq!(batch.len(), 5);
+        assert_eq!(batch_sparse.len(), 5);
+        for (s, set) in dense_sets.iter().enumerate() {
+            let one = base.projected_fit(&target, set, &w, false).0;
+            assert!(one > 1e-3 * scale, "set {s} explains {one} of {scale}");
+            assert!((batch[s] - one).abs() <= 1e-12 * scale, "set {s}: batch {} against {one}", batch[s]);
+            assert!((batch_sparse[s] - one).abs() <= 1e-12 * scale, "set {s}: runs {} against {one}", batch_sparse[s]);
+        }
     }
 
     /// The span of (1, x, 2x + 1) on 6 points has rank 2; projecting x² off it leaves x² minus its
