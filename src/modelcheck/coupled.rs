@@ -372,13 +372,12 @@ impl Problem<'_> {
     /// read and packed once for all the points of a scan's chunk); each point's parts are those of
     /// [`Problem::free_parts`] at it alone.
     fn free_parts_each(&self, fzs: &[(f64, f64)], in_q: bool) -> Vec<Vec<Option<FreePart>>> {
-        let per_channel: Vec<Vec<Option<FreePart>>> = self
+        // Per channel, each point's parts (None for a channel the mode does not reach).
+        let per_channel: Vec<Option<Vec<FreePart>>> = self
             .chans
             .par_iter()
             .map(|ch| {
-                if ch.free.is_none() {
-                    return fzs.iter().map(|_| None).collect();
-                }
+                ch.free?;
                 let c = &self.st.chans[ch.index];
                 let wch = &self.w[ch.start..ch.start + ch.cols.rows()];
                 // Each point's two weighted columns φ_0, φ_1, side by side.
@@ -434,9 +433,9 @@ impl Problem<'_> {
                         }
                     }
                 };
-                let Some(parts) = parts() else { return fzs.iter().map(|_| None).collect() };
+                let parts = parts()?;
                 let mut cols = cols.into_iter();
-                parts
+                let parts = parts
                     .into_iter()
                     .map(|(t, in_q)| {
                         let cols: Vec<Vec<f64>> = cols.by_ref().take(2).collect();
@@ -445,14 +444,15 @@ impl Problem<'_> {
                         let uphi = (0..2).map(|j| (0..r).map(|a| t[a * 2 + j]).collect()).collect();
                         let fphi = (0..2).map(|j| (r..r + nf).map(|a| t[a * 2 + j]).collect()).collect();
                         let by = (0..2).map(|j| t[(r + nf) * 2 + j]).collect();
-                        Some(FreePart { cols, uphi, fphi, gram, by, in_q })
+                        FreePart { cols, uphi, fphi, gram, by, in_q }
                     })
-                    .collect()
+                    .collect();
+                Some(parts)
             })
             .collect();
         // Per point, per channel.
-        let mut each: Vec<_> = per_channel.into_iter().map(Vec::into_iter).collect();
-        (0..fzs.len()).map(|_| each.iter_mut().map(|c| c.next().flatten()).collect()).collect()
+        let mut each: Vec<_> = per_channel.into_iter().map(|c| c.map(Vec::into_iter)).collect();
+        (0..fzs.len()).map(|_| each.iter_mut().map(|c| c.as_mut().and_then(Iterator::next)).collect()).collect()
     }
 
     /// The weighted least squares whose unknowns are [the p mixed columns | the fixed columns | the

@@ -416,38 +416,40 @@ fn checked_columns(p: &Prepared, cand: &Candidate, h: &[f64]) -> Result<Vec<Vec<
     Ok(cols)
 }
 
-/// The candidate's signature at `h` as runs ([`Candidate::with_sparse`]; None without one),
-/// checked: one column per coefficient name, each run inside the n rows, after the one before it,
-/// its values finite.
-fn checked_sparse(p: &Prepared, cand: &Candidate, h: &[f64]) -> Option<Result<Vec<SparseColumn>, ModelCheckError>> {
-    let f = cand.sparse.as_ref()?;
-    let check = |cols: Vec<SparseColumn>| -> Result<Vec<SparseColumn>, ModelCheckError> {
-        check_len("signature columns (one per coefficient name)", cand.coefficient_names.len(), cols.len())?;
-        for (j, c) in cols.iter().enumerate() {
-            let mut next = 0;
-            for (lo, v) in &c.runs {
-                let hi = lo.checked_add(v.len()).filter(|hi| *lo >= next && *hi <= p.n);
-                let Some(hi) = hi else {
-                    return Err(ModelCheckError::Invalid(format!(
-                        "signature column {j}: a run at rows {lo}..{} is not after the one before it (row {next}) \
-                         inside the {} rows",
-                        lo.saturating_add(v.len()),
-                        p.n
-                    )));
-                };
-                if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-                    return Err(ModelCheckError::NotFinite {
-                        what: format!("signature column {j}"),
-                        index: lo + i,
-                        value: v[i],
-                    });
-                }
-                next = hi;
+/// The candidate's signature at `h` as runs (its [`Candidate::with_sparse`] `sparse`), checked: one
+/// column per coefficient name, each run inside the n rows, after the one before it, its values
+/// finite.
+fn checked_sparse(
+    p: &Prepared,
+    cand: &Candidate,
+    sparse: &SparseSignatureFn,
+    h: &[f64],
+) -> Result<Vec<SparseColumn>, ModelCheckError> {
+    let cols = sparse(h)?;
+    check_len("signature columns (one per coefficient name)", cand.coefficient_names.len(), cols.len())?;
+    for (j, c) in cols.iter().enumerate() {
+        let mut next = 0;
+        for (lo, v) in &c.runs {
+            let hi = lo.checked_add(v.len()).filter(|hi| *lo >= next && *hi <= p.n);
+            let Some(hi) = hi else {
+                return Err(ModelCheckError::Invalid(format!(
+                    "signature column {j}: a run at rows {lo}..{} is not after the one before it (row {next}) \
+                     inside the {} rows",
+                    lo.saturating_add(v.len()),
+                    p.n
+                )));
+            };
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(ModelCheckError::NotFinite {
+                    what: format!("signature column {j}"),
+                    index: lo + i,
+                    value: v[i],
+                });
             }
+            next = hi;
         }
-        Ok(cols)
-    };
-    Some(f(h).and_then(check))
+    }
+    Ok(cols)
 }
 
 /// Evaluates a candidate's signature at `h` and returns (χ² or RSS reduction, columns).
@@ -574,8 +576,8 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
         .par_chunks(chunk)
         .flat_map_iter(|gs| {
             // The runs where the candidate gives them, else the dense columns.
-            if cand.sparse.is_some() {
-                let make = |g: usize| checked_sparse(p, cand, &point(g)).unwrap_or_else(|| Ok(Vec::new()));
+            if let Some(sparse) = &cand.sparse {
+                let make = |g: usize| checked_sparse(p, cand, sparse.as_ref(), &point(g));
                 score_chunk(gs, make, |sets| p.base.explained_each_sparse(&p.r_t, sets, &p.w))
             } else {
                 let make = |g: usize| checked_columns(p, cand, &point(g));

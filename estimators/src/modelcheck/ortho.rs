@@ -180,7 +180,8 @@ impl OrthoBase {
     ///   (a mode's response on one pass, a sensor's channels) in one group, over those rows only.
     fn products(&self, sets: &[Weighted]) -> Vec<Vec<Vec<f64>>> {
         let (rank, n) = (self.rank(), self.nrows());
-        let mut m: Vec<Vec<Vec<f64>>> = sets.iter().map(|x| vec![vec![0.0; rank]; x.runs.len()]).collect();
+        // Empty until a column's first run is multiplied.
+        let mut m: Vec<Vec<Vec<f64>>> = sets.iter().map(|x| vec![Vec::new(); x.runs.len()]).collect();
         // Groups by (lo, hi, the run alone): their members (set, column, run).
         type Key = (usize, usize, Option<(usize, usize, usize)>);
         let mut groups: std::collections::BTreeMap<Key, Vec<(usize, usize, usize)>> = Default::default();
@@ -202,8 +203,6 @@ impl OrthoBase {
                 }
             }
         }
-        // A column's M: its first run's product, then each other run's added (one run: the product).
-        let mut started: Vec<Vec<bool>> = sets.iter().map(|x| vec![false; x.runs.len()]).collect();
         for ((lo, hi, _), members) in groups {
             let q = self.q.as_ref().subrows(lo, hi - lo);
             let mut out = Mat::<f64>::zeros(rank, members.len());
@@ -220,15 +219,19 @@ impl OrthoBase {
                 }
                 matmul(out.as_mut(), Accum::Replace, q.transpose(), block.as_ref(), 1.0, Par::Seq);
             }
+            // A column's M: its first run's product, then each other run's added (one run: the
+            // product).
             for (c, &(s, j, _)) in members.iter().enumerate() {
                 let col = &mut m[s][j];
-                if std::mem::replace(&mut started[s][j], true) {
-                    col.iter_mut().enumerate().for_each(|(a, x)| *x += out[(a, c)]);
+                if col.is_empty() {
+                    *col = (0..rank).map(|a| out[(a, c)]).collect();
                 } else {
-                    col.iter_mut().enumerate().for_each(|(a, x)| *x = out[(a, c)]);
+                    col.iter_mut().enumerate().for_each(|(a, x)| *x += out[(a, c)]);
                 }
             }
         }
+        // A column with no product (zero, or a base of rank 0): zeros.
+        m.iter_mut().flatten().filter(|col| col.is_empty()).for_each(|col| col.resize(rank, 0.0));
         m
     }
 
@@ -759,8 +762,9 @@ pub fn greedy_rss_with_gram(
     check_finite("series Gram matrix", gram)?;
     let r = base.project_vector(y, w);
     let rss: f64 = r.iter().map(|v| v * v).sum();
-    // M = Qᵀ(WS) and (WS)ᵀr a block of columns at a time (GRAM_BLOCK, GRAM_BLOCK_VALUES; WS is never held whole: at
-    // 15 000 samples × 1 200 columns it would be 144 MB), the blocks shared out over threads.
+    // M = Qᵀ(WS) and (WS)ᵀr a block of columns at a time (GRAM_BLOCK, GRAM_BLOCK_VALUES; WS is never
+    // held whole: at 15 000 samples × 1 200 columns it would be 144 MB), the blocks shared out over
+    // threads.
     let rank = base.rank();
     // Per block: (its columns of M, their products with r).
     type Block = (Mat<f64>, Vec<f64>);
