@@ -255,7 +255,8 @@ pub(crate) fn free_map(f: f64, zeta: f64, h: f64) -> [[f64; 2]; 2] {
 /// columns of an unknown starting state.
 pub(crate) fn free_vibration(c: &Channel, f: f64, zeta: f64) -> [Vec<f64>; 2] {
     let w = TWO_PI * f;
-    [(1.0 / (w * w), 0.0), (0.0, 1.0 / w)].map(|start| mode_response(c, None, f, zeta, start))
+    let mut both = mode_lanes(c, None, f, zeta, &[(1.0 / (w * w), 0.0), (0.0, 1.0 / w)]).into_iter();
+    [both.next().unwrap_or_default(), both.next().unwrap_or_default()]
 }
 
 /// Interval means of q̈ of a mode q̈ + 2ζω·q̇ + ω²·q = −a(τ) over each sample interval of channel
@@ -263,33 +264,61 @@ pub(crate) fn free_vibration(c: &Channel, f: f64, zeta: f64) -> [Vec<f64>; 2] {
 /// the state (q, q̇) = `start` at t_{−1}, with the input a from `ex` (None: free vibration) held at
 /// its mean over each step ([`StepMap`], [`MODE_STEP`]). ω = 2πf, f in Hz.
 pub(crate) fn mode_response(c: &Channel, ex: Option<&Excitation>, f: f64, zeta: f64, start: (f64, f64)) -> Vec<f64> {
-    let mut x = [start.0, start.1];
+    let exs = ex.map(|e| [e]);
+    mode_lanes(c, exs.as_ref().map(|e| e.as_slice()), f, zeta, &[start]).pop().unwrap_or_default()
+}
+
+/// [`mode_response`] of each excitation in `exs` from rest: the same values, to the bit, as one
+/// call per excitation. Excitations with the same steps per sample run together ([`mode_lanes`]).
+pub(crate) fn mode_responses(c: &Channel, exs: &[Excitation], f: f64, zeta: f64) -> Vec<Vec<f64>> {
+    let Some(first) = exs.first() else { return Vec::new() };
+    if exs.iter().all(|e| e.steps == first.steps) {
+        let refs: Vec<&Excitation> = exs.iter().collect();
+        mode_lanes(c, Some(&refs), f, zeta, &vec![(0.0, 0.0); exs.len()])
+    } else {
+        exs.iter().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))).collect()
+    }
+}
+
+/// The recursion of [`mode_response`] for several lanes at once, lane l from the state `starts[l]`
+/// with the input of `exs[l]` (None: free vibration). With inputs, every lane must have the same
+/// steps per sample (the caller's check; [`mode_responses`]). The lanes' recursions are
+/// independent chains of additions run side by side, so the processor overlaps them; each lane's
+/// arithmetic, in its order, is that of a run alone.
+fn mode_lanes(c: &Channel, exs: Option<&[&Excitation]>, f: f64, zeta: f64, starts: &[(f64, f64)]) -> Vec<Vec<f64>> {
+    let lanes = starts.len();
+    let mut xs: Vec<[f64; 2]> = starts.iter().map(|s| [s.0, s.1]).collect();
     let mut map: Option<(StepMap, [[f64; 2]; 2], Vec<[f64; 2]>)> = None;
-    let mut out = Vec::with_capacity(c.t.len());
+    let mut outs: Vec<Vec<f64>> = (0..lanes).map(|_| Vec::with_capacity(c.t.len())).collect();
     // Free vibration of an underdamped mode: one exact step per sample interval.
     let mut free: Option<(f64, [[f64; 2]; 2])> = None;
+    // Each lane's q̇ at the start of the interval.
+    let mut before = vec![0.0; lanes];
     for i in 0..c.t.len() {
         let dt = sample_interval(c, i);
         if !(dt > 0.0) {
-            out.push(0.0);
+            outs.iter_mut().for_each(|o| o.push(0.0));
             continue;
         }
-        if ex.is_none() && zeta < 1.0 {
+        if exs.is_none() && zeta < 1.0 {
             let phi = match free {
                 Some((h, phi)) if (h - dt).abs() <= 1e-9 * dt => phi,
                 _ => free.insert((dt, free_map(f, zeta, dt))).1,
             };
-            let v0 = x[1];
-            x = [phi[0][0] * x[0] + phi[0][1] * x[1], phi[1][0] * x[0] + phi[1][1] * x[1]];
-            out.push((x[1] - v0) / dt);
+            for (x, out) in xs.iter_mut().zip(outs.iter_mut()) {
+                let v0 = x[1];
+                *x = [phi[0][0] * x[0] + phi[0][1] * x[1], phi[1][0] * x[0] + phi[1][1] * x[1]];
+                out.push((x[1] - v0) / dt);
+            }
             continue;
         }
-        let m = ex.map_or(mode_steps(dt), |e| e.steps[i]);
+        // index: the lanes share their steps (the caller's check), so the first lane's is every lane's.
+        let m = exs.and_then(|e| e.first()).map_or(mode_steps(dt), |e| e.steps[i]);
         let h = dt / m as f64;
         // Sample intervals repeat: the map is rebuilt only when the step changes (≥ 1 ppb). The m
         // steps of an interval compose to x ← Φᵐ·x + Σ_k Φ^{m−1−k}·(g₀ + g₁)·a_k.
-        let (mp, phi_m, gk) = match &map {
-            Some((mp, phi_m, gk)) if (mp.h - h).abs() <= 1e-9 * h && gk.len() == m => (*mp, *phi_m, gk),
+        let (phi_m, gk) = match &map {
+            Some((mp, phi_m, gk)) if (mp.h - h).abs() <= 1e-9 * h && gk.len() == m => (*phi_m, gk),
             _ => {
                 let mp = StepMap::new(f, zeta, h);
                 let mut gk = vec![[0.0; 2]; m];
@@ -300,23 +329,30 @@ pub(crate) fn mode_response(c: &Channel, ex: Option<&Excitation>, f: f64, zeta: 
                     g = mp.step(g, 0.0, 0.0);
                     phi_m = mat2(mp.phi, phi_m);
                 }
-                let (_, _, gk) = map.insert((mp, phi_m, gk));
-                (mp, phi_m, &*gk)
+                let (_, phi_m, gk) = map.insert((mp, phi_m, gk));
+                (*phi_m, &*gk)
             }
         };
-        let _ = mp;
-        let v0 = x[1];
-        let mut nx = [phi_m[0][0] * x[0] + phi_m[0][1] * x[1], phi_m[1][0] * x[0] + phi_m[1][1] * x[1]];
-        if let Some(e) = ex {
-            for (a, g) in e.input[i].iter().zip(gk) {
-                nx[0] += g[0] * a;
-                nx[1] += g[1] * a;
+        for (x, v) in xs.iter_mut().zip(before.iter_mut()) {
+            *v = x[1];
+            *x = [phi_m[0][0] * x[0] + phi_m[0][1] * x[1], phi_m[1][0] * x[0] + phi_m[1][1] * x[1]];
+        }
+        if let Some(exs) = exs {
+            // The lanes' sums side by side, each in its own order over the steps.
+            for (k, g) in gk.iter().enumerate() {
+                for (x, e) in xs.iter_mut().zip(exs) {
+                    if let Some(&a) = e.input[i].get(k) {
+                        x[0] += g[0] * a;
+                        x[1] += g[1] * a;
+                    }
+                }
             }
         }
-        x = nx;
-        out.push((x[1] - v0) / dt);
+        for ((x, v), out) in xs.iter().zip(&before).zip(outs.iter_mut()) {
+            out.push((x[1] - v) / dt);
+        }
     }
-    out
+    outs
 }
 
 impl<'a> Stack<'a> {
@@ -1027,7 +1063,7 @@ pub(crate) fn resonance_runs(st: &Stack, f: f64, zeta: f64) -> Vec<SparseColumn>
     for (j, (c, es)) in st.chans.iter().zip(&st.excitation).enumerate() {
         let r = match (0..j).find(|&k| !es.is_empty() && same(k, j)) {
             Some(k) => responses[k].clone(),
-            None => std::sync::Arc::new(es.iter().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))).collect()),
+            None => std::sync::Arc::new(mode_responses(c, es, f, zeta)),
         };
         responses.push(r);
     }
