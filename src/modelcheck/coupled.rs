@@ -41,7 +41,7 @@
 
 use super::*;
 use rayon::prelude::*;
-use vmt_estimators::modelcheck::{greedy_rss_with_gram, solve_normal, Columns, NestedRss, NormalFactor};
+use vmt_estimators::modelcheck::{greedy_rss_with_gram_of, solve_normal, Columns, NestedRss, NormalFactor};
 
 /// What a basis index of a fitted error motion's series is in time at constant velocity.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -1250,18 +1250,36 @@ fn coupled_columns(st: &Stack, raw: &RawSeries, mixes: &[Vec<Mix>]) -> Vec<Vec<f
     let k = mixes.first().map_or(0, Vec::len);
     (0..k)
         .map(|c| {
-            let mut col = Vec::with_capacity(st.n);
-            let mut s0 = 0;
-            for (ch, mx) in st.chans.iter().zip(mixes) {
-                let len = ch.y.len();
-                let Mix { k, alpha, partner, beta } = mx[c];
-                let (a, b) = (&raw[k][s0..s0 + len], &raw[partner][s0..s0 + len]);
-                col.extend(a.iter().zip(b).map(|(x, y)| alpha * x + beta * y));
-                s0 += len;
-            }
+            let mut col = vec![0.0; st.n];
+            coupled_column(st, raw, mixes, c, &mut col);
             col
         })
         .collect()
+}
+
+/// Coupled column `c` of `mixes` over the raw columns `raw`, written into `out` (one value per
+/// sample of the stack): on each channel α·u_k + β·u_partner ([`Mix`]).
+fn coupled_column(st: &Stack, raw: &RawSeries, mixes: &[Vec<Mix>], c: usize, out: &mut [f64]) {
+    let mut s0 = 0;
+    for (ch, mx) in st.chans.iter().zip(mixes) {
+        let len = ch.y.len();
+        let Mix { k, alpha, partner, beta } = mx[c];
+        let (a, b) = (&raw[k][s0..s0 + len], &raw[partner][s0..s0 + len]);
+        out[s0..s0 + len].iter_mut().zip(a.iter().zip(b)).for_each(|(o, (x, y))| *o = alpha * x + beta * y);
+        s0 += len;
+    }
+}
+
+/// Whether coupled column `c` of `mixes` ([`coupled_column`]) has a non-zero value.
+fn coupled_nonzero(st: &Stack, raw: &RawSeries, mixes: &[Vec<Mix>], c: usize) -> bool {
+    let mut s0 = 0;
+    st.chans.iter().zip(mixes).any(|(ch, mx)| {
+        let len = ch.y.len();
+        let Mix { k, alpha, partner, beta } = mx[c];
+        let (a, b) = (&raw[k][s0..s0 + len], &raw[partner][s0..s0 + len]);
+        s0 += len;
+        a.iter().zip(b).any(|(x, y)| alpha * x + beta * y != 0.0)
+    })
 }
 
 /// The weighted Gram matrix of the coupled columns `mixes` (those at `keep`) from the channels' raw
@@ -1294,7 +1312,7 @@ fn coupled_gram(grams: &RawGrams, r: usize, mixes: &[Vec<Mix>], keep: &[usize]) 
 }
 
 /// The shapes of the driving translations re-chosen with the mode in the model at θ = (f, ζ,
-/// gains…): for each input in turn, the greedy forward selection ([`greedy_rss_with_gram`], BIC
+/// gains…): for each input in turn, the greedy forward selection ([`greedy_rss_with_gram_of`], BIC
 /// with σ unknown on all samples) over its whole series up to what the passes resolve
 /// ([`resolvable_order`]), each series column coupled (its own reading plus the mode's response to
 /// it, module doc), on top of the offsets, the other terms, the free vibration and the other
@@ -1335,7 +1353,6 @@ fn reselect(
         let all: Vec<usize> = (1..=top).collect();
         let (shx, raw) = series(cache, m, &sh, &all);
         let mx = mixes(pb, m, &shx, &all, fz, gains);
-        let dict = coupled_columns(st, &raw, &mx);
         let mut base_cols: Vec<Vec<f64>> = design(
             st,
             &terms
@@ -1353,11 +1370,13 @@ fn reselect(
         }
         base_cols.retain(|c| c.iter().any(|v| *v != 0.0));
         let base = OrthoBase::new(&base_cols, w).ok()?;
-        let keep: Vec<usize> = (0..all.len()).filter(|&c| dict[c].iter().any(|v| *v != 0.0)).collect();
+        // The series' coupled columns with a non-zero value, made as the greedy selection reads
+        // them (never held together: 640 columns of 100 000 samples are 512 MB).
+        let keep: Vec<usize> = (0..all.len()).into_par_iter().filter(|&c| coupled_nonzero(st, &raw, &mx, c)).collect();
         let grams = cache.get(st, w, pb.inputs[m].name, &shx, &raw)?;
         let gram = coupled_gram(grams, raw.len(), &mx, &keep);
-        let nested: Vec<Vec<f64>> = dict.into_iter().filter(|col| col.iter().any(|v| *v != 0.0)).collect();
-        let nr = greedy_rss_with_gram(target, w, &base, &nested, &gram, GREEDY_STOP).ok()?;
+        let nested = |j: usize, out: &mut [f64]| coupled_column(st, &raw, &mx, keep[j], out);
+        let nr = greedy_rss_with_gram_of(target, w, &base, keep.len(), &nested, &gram, GREEDY_STOP).ok()?;
         let k = bic_count(&nr, base.rank(), st.n);
         let used = &nr.used[..k.max(1).min(nr.used.len())];
         // Indices (into `all`) of the coupled selection.
@@ -1372,8 +1391,14 @@ fn reselect(
         // misfit of a mode a little off its frequency and hold it there ([`polish`]).
         if plain {
             drop(base_cols);
-            let used_cols: Vec<Vec<f64>> = used.iter().map(|&j| nested[j].clone()).collect();
-            drop(nested);
+            let used_cols: Vec<Vec<f64>> = used
+                .iter()
+                .map(|&j| {
+                    let mut col = vec![0.0; st.n];
+                    nested(j, &mut col);
+                    col
+                })
+                .collect();
             let base2 = base.extended(&used_cols, w).ok()?;
             drop(used_cols);
             let keep2: Vec<usize> = keep.iter().copied().filter(|c| !picked.contains(c)).collect();
@@ -1381,8 +1406,9 @@ fn reselect(
             let ks2: Vec<usize> = keep2.iter().map(|&c| all[c]).collect();
             let mx2 = mixes(pb, m, &shx, &ks2, fz, &vec![0.0; gains.len()]);
             let gram2 = coupled_gram(grams, raw.len(), &mx2, &(0..ks2.len()).collect::<Vec<_>>());
-            let plain_cols = coupled_columns(st, &raw, &mx2);
-            let nr2 = greedy_rss_with_gram(target, w, &base2, &plain_cols, &gram2, GREEDY_STOP).ok()?;
+            let plain_cols = |j: usize, out: &mut [f64]| coupled_column(st, &raw, &mx2, j, out);
+            let nr2 =
+                greedy_rss_with_gram_of(target, w, &base2, ks2.len(), &plain_cols, &gram2, GREEDY_STOP).ok()?;
             let k2 = bic_count(&nr2, base2.rank(), st.n);
             picked.extend(nr2.used[..k2].iter().map(|&j| keep2[j]));
         }

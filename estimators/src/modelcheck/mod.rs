@@ -33,7 +33,10 @@ pub use diagnose::{
     ForwardSelection, HyperParameter, RankingEntry, ResidualInput, Verdict,
 };
 pub use lsq::{fit_signature, solve_normal, Columns, LinearFit, NormalFactor};
-pub use ortho::{greedy_rss, greedy_rss_with_gram, lstsq_qr, nested_rss, NestedRss, OrthoBase, SparseColumn};
+pub use ortho::{
+    greedy_rss, greedy_rss_with_gram, greedy_rss_with_gram_of, lstsq_qr, nested_rss, ColumnFn, NestedRss, OrthoBase,
+    SparseColumn,
+};
 /// The complex numbers of the spectra (num-complex, through realfft), for callers' phasors.
 pub use realfft::num_complex::Complex64;
 pub use refine::{refine_projected, refine_projected_point, ProjectedResidualFn, Refined};

@@ -749,15 +749,34 @@ pub fn greedy_rss_with_gram(
     gram: &[f64],
     stop: f64,
 ) -> Result<NestedRss, ModelCheckError> {
-    // The series' lengths here, their values as each block is read.
+    for (j, c) in series.iter().enumerate() {
+        check_len(&format!("series column {j}"), w.len(), c.len())?;
+    }
+    greedy_rss_with_gram_of(y, w, base, series.len(), &|j, out| out.copy_from_slice(&series[j]), gram, stop)
+}
+
+/// A series' column j written into `out` (one value per sample, unweighted), for
+/// [`greedy_rss_with_gram_of`].
+pub type ColumnFn<'a> = dyn Fn(usize, &mut [f64]) + Sync + 'a;
+
+/// [`greedy_rss_with_gram`] over `k` series columns made one block at a time by `column` (each
+/// written into the block, then weighted) and never held together: the same result, to the bit,
+/// as the columns given whole, for a caller whose columns are cheap combinations of others (at
+/// 100 000 samples × 640 columns the whole series would be 512 MB, each page of it first touched).
+pub fn greedy_rss_with_gram_of(
+    y: &[f64],
+    w: &[f64],
+    base: &OrthoBase,
+    k: usize,
+    column: &ColumnFn,
+    gram: &[f64],
+    stop: f64,
+) -> Result<NestedRss, ModelCheckError> {
+    // The series' values as each block is made.
     let n = w.len();
     check_len("y", n, y.len())?;
     check_finite("y", y)?;
-    for (j, c) in series.iter().enumerate() {
-        check_len(&format!("series column {j}"), n, c.len())?;
-    }
     check_len("base rows", n, base.nrows())?;
-    let k = series.len();
     check_len("series Gram matrix", k * k, gram.len())?;
     check_finite("series Gram matrix", gram)?;
     let r = base.project_vector(y, w);
@@ -775,9 +794,11 @@ pub fn greedy_rss_with_gram(
             let (lo, hi) = (b * block, ((b + 1) * block).min(k));
             let mut ws = Mat::<f64>::zeros(n, hi - lo);
             for j in lo..hi {
-                check_finite(&format!("series column {j}"), &series[j])?;
-                for ((o, x), wi) in ws.col_as_slice_mut(j - lo).iter_mut().zip(&series[j]).zip(w) {
-                    *o = x * wi;
+                let col = ws.col_as_slice_mut(j - lo);
+                column(j, col);
+                check_finite(&format!("series column {j}"), col)?;
+                for (o, wi) in col.iter_mut().zip(w) {
+                    *o *= wi;
                 }
             }
             let mut m = Mat::<f64>::zeros(rank, hi - lo);
