@@ -793,7 +793,7 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
                             continue;
                         }
                         let (xb, xa) = (c.x[i], c.x[i] - v * dt);
-                        let ((_, d1), (_, d0)) = (sh.terms_at(xb, ks), sh.terms_at(xa, ks));
+                        let (d1, d0) = sh.slopes_at_two(xb, xa, Some(ks));
                         for (e, &rk) in inp.raw_of.values().enumerate() {
                             raw[rk][i] = wch[i] * v * (d1[e] - d0[e]) / dt;
                         }
@@ -1115,7 +1115,7 @@ fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
                         continue;
                     }
                     let (xb, xa) = (c.x[i], c.x[i] - v * dt);
-                    let ((_, d1), (_, d0)) = (shx.basis_at(xb), shx.basis_at(xa));
+                    let (d1, d0) = shx.slopes_at_two(xb, xa, None);
                     for ((col, b), a) in cols.iter_mut().zip(&d1).zip(&d0) {
                         col.push(v * (b - a) / dt);
                     }
@@ -1407,8 +1407,7 @@ fn reselect(
             let mx2 = mixes(pb, m, &shx, &ks2, fz, &vec![0.0; gains.len()]);
             let gram2 = coupled_gram(grams, raw.len(), &mx2, &(0..ks2.len()).collect::<Vec<_>>());
             let plain_cols = |j: usize, out: &mut [f64]| coupled_column(st, &raw, &mx2, j, out);
-            let nr2 =
-                greedy_rss_with_gram_of(target, w, &base2, ks2.len(), &plain_cols, &gram2, GREEDY_STOP).ok()?;
+            let nr2 = greedy_rss_with_gram_of(target, w, &base2, ks2.len(), &plain_cols, &gram2, GREEDY_STOP).ok()?;
             let k2 = bic_count(&nr2, base2.rank(), st.n);
             picked.extend(nr2.used[..k2].iter().map(|&j| keep2[j]));
         }
@@ -1497,7 +1496,8 @@ pub(crate) fn refit_coupled<'a>(
     let mut own = vec![fz.0, fz.1];
     own.extend(&g0);
     progress(Stage::ModeScan { round: 1, rounds: COUPLED_ROUNDS });
-    let mut theta1 = if at_start { held_theta(&pb1, &c0, &g0) } else { pb1.search(&grid, COUPLED_STARTS, &c0, &g0, &[own])?.0 };
+    let mut theta1 =
+        if at_start { held_theta(&pb1, &c0, &g0) } else { pb1.search(&grid, COUPLED_STARTS, &c0, &g0, &[own])?.0 };
     let mut cache = RawGramCache::default();
     progress(Stage::ModeShapes { round: 1 });
     let mut terms2 = reselect(st_mode, &pb1, &fs.terms, &theta1, &fs.target, &mut cache, true)?;
@@ -1511,7 +1511,11 @@ pub(crate) fn refit_coupled<'a>(
         // The later rounds scan around the last optimum (the first scanned the whole range).
         let near: Vec<(f64, f64)> =
             grid.iter().copied().filter(|(f, _)| (f / theta1[0]).ln().abs() <= COUPLED_ROUND_WINDOW.ln()).collect();
-        theta1 = if at_start { held_theta(&pb, &c, &g) } else { pb.search(&near, COUPLED_ROUND_STARTS, &c, &g, &[theta1.clone()])?.0 };
+        theta1 = if at_start {
+            held_theta(&pb, &c, &g)
+        } else {
+            pb.search(&near, COUPLED_ROUND_STARTS, &c, &g, &[theta1.clone()])?.0
+        };
         progress(Stage::ModeShapes { round });
         terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target, &mut cache, true)?;
     }

@@ -360,6 +360,38 @@ pub(crate) mod tests {
         }
     }
 
+    /// Responses run side by side are those run alone, to the bit: six inputs with the same steps
+    /// (two groups of lanes, 4 + 2) against one call each, and the two free vibrations against
+    /// their starts run alone; with a jittered clock (the step map rebuilt at every sample).
+    #[test]
+    fn mode_responses_side_by_side_are_each_alone() {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut c = accel("a", 400);
+        for i in 1..c.t.len() {
+            c.t[i] = c.t[i - 1] + 0.01 * (1.0 + 0.02 * rand::Rng::gen_range(&mut rng, -1.0..1.0));
+        }
+        let steps: Vec<usize> = (0..c.t.len()).map(|i| mode_steps(sample_interval(&c, i))).collect();
+        let exs: Vec<Excitation> = (0..6)
+            .map(|_| {
+                let input = steps.iter().map(|&m| (0..m).map(|_| rand::Rng::gen_range(&mut rng, -1.0..1.0)).collect());
+                Excitation::new(steps.clone(), input.collect())
+            })
+            .collect();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+        for (f, z) in [(23.7, 0.013), (61.0, 0.4)] {
+            let together = mode_responses(&c, &exs, f, z);
+            assert_eq!(together.len(), 6);
+            for (e, r) in exs.iter().zip(&together) {
+                assert_eq!(bits(r), bits(&mode_response(&c, Some(e), f, z, (0.0, 0.0))));
+            }
+            let w = TWO_PI * f;
+            let [f0, f1] = free_vibration(&c, f, z);
+            assert_eq!(bits(&f0), bits(&mode_response(&c, None, f, z, (1.0 / (w * w), 0.0))));
+            assert_eq!(bits(&f1), bits(&mode_response(&c, None, f, z, (0.0, 1.0 / w))));
+        }
+    }
+
     /// The gravity-tilt column of x^k on an accelerometer is g·x^k (g = 9.80665 m/s²), shared by the
     /// sensor's runs; a laser channel gets 0.
     #[test]

@@ -255,7 +255,8 @@ pub(crate) fn free_map(f: f64, zeta: f64, h: f64) -> [[f64; 2]; 2] {
 /// columns of an unknown starting state.
 pub(crate) fn free_vibration(c: &Channel, f: f64, zeta: f64) -> [Vec<f64>; 2] {
     let w = TWO_PI * f;
-    let mut both = mode_lanes(c, None, f, zeta, &[(1.0 / (w * w), 0.0), (0.0, 1.0 / w)]).into_iter();
+    let lanes = [(1.0 / (w * w), 0.0), (0.0, 1.0 / w)].map(|start| Lane { start, input: None });
+    let mut both = mode_lanes(c, &lanes, f, zeta).into_iter();
     [both.next().unwrap_or_default(), both.next().unwrap_or_default()]
 }
 
@@ -264,8 +265,7 @@ pub(crate) fn free_vibration(c: &Channel, f: f64, zeta: f64) -> [Vec<f64>; 2] {
 /// the state (q, q̇) = `start` at t_{−1}, with the input a from `ex` (None: free vibration) held at
 /// its mean over each step ([`StepMap`], [`MODE_STEP`]). ω = 2πf, f in Hz.
 pub(crate) fn mode_response(c: &Channel, ex: Option<&Excitation>, f: f64, zeta: f64, start: (f64, f64)) -> Vec<f64> {
-    let exs = ex.map(|e| [e]);
-    mode_lanes(c, exs.as_ref().map(|e| e.as_slice()), f, zeta, &[start]).pop().unwrap_or_default()
+    mode_lanes(c, &[Lane { start, input: ex }], f, zeta).pop().unwrap_or_default()
 }
 
 /// [`mode_response`] of each excitation in `exs` from rest: the same values, to the bit, as one
@@ -273,34 +273,76 @@ pub(crate) fn mode_response(c: &Channel, ex: Option<&Excitation>, f: f64, zeta: 
 pub(crate) fn mode_responses(c: &Channel, exs: &[Excitation], f: f64, zeta: f64) -> Vec<Vec<f64>> {
     let Some(first) = exs.first() else { return Vec::new() };
     if exs.iter().all(|e| e.steps == first.steps) {
-        let refs: Vec<&Excitation> = exs.iter().collect();
-        mode_lanes(c, Some(&refs), f, zeta, &vec![(0.0, 0.0); exs.len()])
+        let lanes: Vec<Lane> = exs.iter().map(|e| Lane { start: (0.0, 0.0), input: Some(e) }).collect();
+        mode_lanes(c, &lanes, f, zeta)
     } else {
         exs.iter().map(|e| mode_response(c, Some(e), f, zeta, (0.0, 0.0))).collect()
     }
 }
 
-/// The recursion of [`mode_response`] for several lanes at once, lane l from the state `starts[l]`
-/// with the input of `exs[l]` (None: free vibration). With inputs, every lane must have the same
-/// steps per sample (the caller's check; [`mode_responses`]). The lanes' recursions are
-/// independent chains of additions run side by side, so the processor overlaps them; each lane's
-/// arithmetic, in its order, is that of a run alone.
-fn mode_lanes(c: &Channel, exs: Option<&[&Excitation]>, f: f64, zeta: f64, starts: &[(f64, f64)]) -> Vec<Vec<f64>> {
-    let lanes = starts.len();
-    let mut xs: Vec<[f64; 2]> = starts.iter().map(|s| [s.0, s.1]).collect();
+/// One run of [`mode_lanes`]: the state (q, q̇) at t_{−1} and the input (None: none).
+#[derive(Clone, Copy)]
+struct Lane<'a> {
+    start: (f64, f64),
+    input: Option<&'a Excitation>,
+}
+
+/// The recursion of [`mode_response`] for several lanes at once. The lanes with an input must have
+/// the same steps per sample (the caller's check, [`mode_responses`]): the first's are used. When
+/// no lane has one and ζ < 1, each sample interval is one exact free step; otherwise a lane
+/// without an input has none over the steps. Up to [`MODE_LANES`] lanes run together
+/// ([`mode_lanes_of`]), more in groups of that many.
+fn mode_lanes(c: &Channel, lanes: &[Lane], f: f64, zeta: f64) -> Vec<Vec<f64>> {
+    let free = lanes.iter().all(|l| l.input.is_none()) && zeta < 1.0;
+    let steps = lanes.iter().find_map(|l| l.input).map(|e| e.steps.as_slice());
+    let mut outs = Vec::with_capacity(lanes.len());
+    for group in lanes.chunks(MODE_LANES) {
+        outs.extend(match group.len() {
+            1 => mode_lanes_of::<1>(c, group, steps, free, f, zeta),
+            2 => mode_lanes_of::<2>(c, group, steps, free, f, zeta),
+            3 => mode_lanes_of::<3>(c, group, steps, free, f, zeta),
+            _ => mode_lanes_of::<MODE_LANES>(c, group, steps, free, f, zeta),
+        });
+    }
+    outs
+}
+
+/// Lanes [`mode_lanes`] runs together at most.
+const MODE_LANES: usize = 4;
+
+/// [`mode_lanes`] for the L lanes of `lanes` (L of them; `steps` the steps per sample of their
+/// inputs, `free` the exact free steps): the lanes' states are held in registers and their
+/// recursions, independent chains of additions, run side by side so that the processor overlaps
+/// them. Each lane's arithmetic, in its order, is that of a run alone. Each lane's change of q̇
+/// over an interval is divided by the interval after the recursion, in one pass (the same
+/// quotients, off the recursion's path).
+fn mode_lanes_of<const L: usize>(
+    c: &Channel,
+    lanes: &[Lane],
+    steps: Option<&[usize]>,
+    free_steps: bool,
+    f: f64,
+    zeta: f64,
+) -> Vec<Vec<f64>> {
+    let n = c.t.len();
+    let mut xs = [[0.0; 2]; L];
+    for (x, l) in xs.iter_mut().zip(lanes) {
+        *x = [l.start.0, l.start.1];
+    }
+    let ins: [Option<&Excitation>; L] = std::array::from_fn(|l| lanes.get(l).and_then(|l| l.input));
     let mut map: Option<(StepMap, [[f64; 2]; 2], Vec<[f64; 2]>)> = None;
-    let mut outs: Vec<Vec<f64>> = (0..lanes).map(|_| Vec::with_capacity(c.t.len())).collect();
+    // The (interval's bits, steps) the map was last found good for: an interval the same to the
+    // bit as the one before needs no new check.
+    let mut checked: Option<(u64, usize)> = None;
+    let mut outs: Vec<Vec<f64>> = (0..L.min(lanes.len())).map(|_| vec![0.0; n]).collect();
     // Free vibration of an underdamped mode: one exact step per sample interval.
     let mut free: Option<(f64, [[f64; 2]; 2])> = None;
-    // Each lane's q̇ at the start of the interval.
-    let mut before = vec![0.0; lanes];
-    for i in 0..c.t.len() {
+    for i in 0..n {
         let dt = sample_interval(c, i);
         if !(dt > 0.0) {
-            outs.iter_mut().for_each(|o| o.push(0.0));
             continue;
         }
-        if exs.is_none() && zeta < 1.0 {
+        if free_steps {
             let phi = match free {
                 Some((h, phi)) if (h - dt).abs() <= 1e-9 * dt => phi,
                 _ => free.insert((dt, free_map(f, zeta, dt))).1,
@@ -308,18 +350,23 @@ fn mode_lanes(c: &Channel, exs: Option<&[&Excitation]>, f: f64, zeta: f64, start
             for (x, out) in xs.iter_mut().zip(outs.iter_mut()) {
                 let v0 = x[1];
                 *x = [phi[0][0] * x[0] + phi[0][1] * x[1], phi[1][0] * x[0] + phi[1][1] * x[1]];
-                out.push((x[1] - v0) / dt);
+                // index: i < n, the length of each output.
+                out[i] = x[1] - v0;
             }
             continue;
         }
         // index: the lanes share their steps (the caller's check), so the first lane's is every lane's.
-        let m = exs.and_then(|e| e.first()).map_or(mode_steps(dt), |e| e.steps[i]);
-        let h = dt / m as f64;
+        let m = steps.map_or(mode_steps(dt), |s| s[i]);
         // Sample intervals repeat: the map is rebuilt only when the step changes (≥ 1 ppb). The m
         // steps of an interval compose to x ← Φᵐ·x + Σ_k Φ^{m−1−k}·(g₀ + g₁)·a_k.
+        let same = checked == Some((dt.to_bits(), m));
         let (phi_m, gk) = match &map {
-            Some((mp, phi_m, gk)) if (mp.h - h).abs() <= 1e-9 * h && gk.len() == m => (*phi_m, gk),
+            Some((_, phi_m, gk)) if same => (*phi_m, gk),
+            Some((mp, phi_m, gk)) if (mp.h - dt / m as f64).abs() <= 1e-9 * (dt / m as f64) && gk.len() == m => {
+                (*phi_m, gk)
+            }
             _ => {
+                let h = dt / m as f64;
                 let mp = StepMap::new(f, zeta, h);
                 let mut gk = vec![[0.0; 2]; m];
                 let mut g = [mp.g0[0] + mp.g1[0], mp.g0[1] + mp.g1[1]];
@@ -333,15 +380,18 @@ fn mode_lanes(c: &Channel, exs: Option<&[&Excitation]>, f: f64, zeta: f64, start
                 (*phi_m, &*gk)
             }
         };
-        for (x, v) in xs.iter_mut().zip(before.iter_mut()) {
-            *v = x[1];
+        checked = Some((dt.to_bits(), m));
+        let before: [f64; L] = std::array::from_fn(|l| xs[l][1]);
+        for x in xs.iter_mut() {
             *x = [phi_m[0][0] * x[0] + phi_m[0][1] * x[1], phi_m[1][0] * x[0] + phi_m[1][1] * x[1]];
         }
-        if let Some(exs) = exs {
+        if steps.is_some() {
+            // index: sample i of each input (one entry per sample, as its steps).
+            let a: [&[f64]; L] = std::array::from_fn(|l| ins[l].map_or(&[][..], |e| e.input[i].as_slice()));
             // The lanes' sums side by side, each in its own order over the steps.
             for (k, g) in gk.iter().enumerate() {
-                for (x, e) in xs.iter_mut().zip(exs) {
-                    if let Some(&a) = e.input[i].get(k) {
+                for (x, a) in xs.iter_mut().zip(&a) {
+                    if let Some(&a) = a.get(k) {
                         x[0] += g[0] * a;
                         x[1] += g[1] * a;
                     }
@@ -349,8 +399,14 @@ fn mode_lanes(c: &Channel, exs: Option<&[&Excitation]>, f: f64, zeta: f64, start
             }
         }
         for ((x, v), out) in xs.iter().zip(&before).zip(outs.iter_mut()) {
-            out.push((x[1] - v) / dt);
+            // index: i < n, the length of each output.
+            out[i] = x[1] - v;
         }
+    }
+    // (q̇_i − q̇_{i−1})/Δt_i where the interval is positive (zero stays zero elsewhere: ÷ 1).
+    let divisor: Vec<f64> = (0..n).map(|i| sample_interval(c, i)).map(|d| if d > 0.0 { d } else { 1.0 }).collect();
+    for out in outs.iter_mut() {
+        out.iter_mut().zip(&divisor).for_each(|(y, d)| *y /= d);
     }
     outs
 }
@@ -770,6 +826,28 @@ impl Shape {
             return ks.iter().map(|&k| (p[k], d[k])).unzip();
         }
         CosineAt::new(self.range, x).walk(ks.iter().copied()).unzip()
+    }
+
+    /// The slopes d/dx (1/m) at two positions x0 and x1: of the basis indices `ks`
+    /// ([`Shape::terms_at`]) or, with None, of every index of [`Shape::basis_at`]; the same bits as
+    /// those, position by position. A cosine series (with `ks` ascending) walks the two positions'
+    /// recurrences side by side ([`CosineAt::walk_two`]).
+    pub(crate) fn slopes_at_two(&self, x0: f64, x1: f64, ks: Option<&[usize]>) -> (Vec<f64>, Vec<f64>) {
+        let ascending = ks.is_none_or(|ks| ks.windows(2).all(|w| w[0] < w[1]));
+        if self.basis != ShapeBasis::Cosine || !ascending {
+            return match ks {
+                Some(ks) => (self.terms_at(x0, ks).1, self.terms_at(x1, ks).1),
+                None => (self.basis_at(x0).1, self.basis_at(x1).1),
+            };
+        }
+        let (a, b) = (CosineAt::new(self.range, x0), CosineAt::new(self.range, x1));
+        // index: the shape's order, a u32 bounded by `check_basis`/`resolvable_order`, widened.
+        let all = 0..=self.order as usize;
+        let pairs: Vec<((f64, f64), (f64, f64))> = match ks {
+            Some(ks) => CosineAt::walk_two(&a, &b, ks.iter().copied()).collect(),
+            None => CosineAt::walk_two(&a, &b, all).collect(),
+        };
+        pairs.into_iter().map(|(p, q)| (p.1, q.1)).unzip()
     }
 
     /// (value, slope d/dx in 1/m) of the cosine series' basis functions 0..=`top` at x, index by
@@ -1283,7 +1361,7 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
                             cols.iter_mut().zip(&p).for_each(|(col, pk)| col.push(s * pk));
                         }
                         MotionRead::SlopeDifference { s, v, dt, xa, xb } => {
-                            let ((_, d1), (_, d0)) = (at(xb), at(xa));
+                            let (d1, d0) = sh.slopes_at_two(xb, xa, Some(&ks));
                             cols.iter_mut()
                                 .zip(d1.iter().zip(&d0))
                                 .for_each(|(col, (b, a))| col.push(s * v * (b - a) / dt));
@@ -1760,6 +1838,29 @@ impl CosineAt {
         }
     }
 
+    /// [`CosineAt::walk`] at two positions `a` and `b` side by side (one index's pair of
+    /// (value, slope) at a time): each position's values the same bits as its walk alone, the two
+    /// recurrences independent chains the processor overlaps.
+    fn walk_two<'k>(
+        a: &'k CosineAt,
+        b: &'k CosineAt,
+        ks: impl Iterator<Item = usize> + 'k,
+    ) -> impl Iterator<Item = ((f64, f64), (f64, f64))> + 'k {
+        let (mut j, mut sa, mut sb) = (1, (a.s1, a.c1), (b.s1, b.c1));
+        ks.map(move |k| {
+            if k < 3 {
+                return (a.low(k), b.low(k));
+            }
+            let jk = (k - 3) / 2 + 1;
+            while j < jk {
+                sa = a.turn(sa);
+                sb = b.turn(sb);
+                j += 1;
+            }
+            (a.pair(k, jk as f64, sa), b.pair(k, jk as f64, sb))
+        })
+    }
+
     /// (value, slope) of basis index k ≥ 3, of pair j, from (sin jθ, cos jθ): cos jθ and its
     /// slope −j·kx·sin jθ at even k − 3, sin jθ and j·kx·cos jθ at odd.
     fn pair(&self, k: usize, j: f64, (sm, cm): (f64, f64)) -> (f64, f64) {
@@ -1800,7 +1901,8 @@ mod slope_tests {
     use rand::{Rng, SeedableRng};
 
     /// [`Shape::slope_sum`] gives the same bits as the sum over [`Shape::basis_at`]'s tabulated
-    /// slopes, for cosine series (its one-pass recurrence) and Legendre series (tabulated), over 200
+    /// slopes, and [`Shape::slopes_at_two`] the same bits as its slopes at each of two positions,
+    /// for cosine series (its one-pass recurrence) and Legendre series (tabulated), over 200
     /// random ranges, orders up to 1 200, sparse ascending selections, coefficients and positions.
     #[test]
     fn slope_sum_is_the_tabulated_sum_to_the_bit() {
@@ -1831,6 +1933,15 @@ mod slope_tests {
                 let want: f64 = coef.iter().zip(&ks).map(|(c, k)| c * d[*k]).sum();
                 let got = sh.slope_sum(x, &ks, &coef);
                 assert_eq!(got.to_bits(), want.to_bits(), "draw {draw} x {x}: {got} vs {want}");
+                // Two positions walked side by side: each the tabulated slopes, to the bit.
+                let x1 = rng.gen_range(a..b);
+                let (_, d1) = sh.basis_at(x1);
+                let bits = |v: &[f64]| v.iter().map(|s| s.to_bits()).collect::<Vec<u64>>();
+                let (s0, s1) = sh.slopes_at_two(x, x1, Some(&ks));
+                let picked = |d: &[f64]| ks.iter().map(|&k| d[k]).collect::<Vec<f64>>();
+                assert_eq!((bits(&s0), bits(&s1)), (bits(&picked(&d)), bits(&picked(&d1))), "draw {draw}");
+                let (a0, a1) = sh.slopes_at_two(x, x1, None);
+                assert_eq!((bits(&a0), bits(&a1)), (bits(&d), bits(&d1)), "draw {draw}, every index");
             }
         }
     }
