@@ -1245,40 +1245,44 @@ fn mixes(pb: &Problem, m: usize, shx: &Shape, ks: &[usize], fz: (f64, f64), gain
         .collect()
 }
 
-/// The coupled columns (one value per sample) of `mixes` over the raw columns `raw`.
-fn coupled_columns(st: &Stack, raw: &RawSeries, mixes: &[Vec<Mix>]) -> Vec<Vec<f64>> {
-    let k = mixes.first().map_or(0, Vec::len);
-    (0..k)
-        .map(|c| {
-            let mut col = vec![0.0; st.n];
-            coupled_column(st, raw, mixes, c, &mut col);
-            col
-        })
-        .collect()
+/// The coupled columns (one value per sample) of `mixes` over the raw columns `raw`, those at
+/// `cs` ([`coupled_column`]).
+fn coupled_columns(st: &Stack, raw: &RawSeries, mixes: &[Vec<Mix>], cs: impl Iterator<Item = usize>) -> Vec<Vec<f64>> {
+    cs.map(|c| {
+        let mut col = vec![0.0; st.n];
+        coupled_column(st, raw, mixes, c, &mut col);
+        col
+    })
+    .collect()
 }
 
 /// Coupled column `c` of `mixes` over the raw columns `raw`, written into `out` (one value per
-/// sample of the stack): on each channel α·u_k + β·u_partner ([`Mix`]).
+/// sample of the stack): on each channel α·u_k + β·u_partner ([`Mix`], [`coupled_values`]).
 fn coupled_column(st: &Stack, raw: &RawSeries, mixes: &[Vec<Mix>], c: usize, out: &mut [f64]) {
-    let mut s0 = 0;
-    for (ch, mx) in st.chans.iter().zip(mixes) {
-        let len = ch.y.len();
-        let Mix { k, alpha, partner, beta } = mx[c];
-        let (a, b) = (&raw[k][s0..s0 + len], &raw[partner][s0..s0 + len]);
-        out[s0..s0 + len].iter_mut().zip(a.iter().zip(b)).for_each(|(o, (x, y))| *o = alpha * x + beta * y);
-        s0 += len;
+    for (rows, values) in coupled_values(st, raw, mixes, c) {
+        out[rows].iter_mut().zip(values).for_each(|(o, v)| *o = v);
     }
 }
 
 /// Whether coupled column `c` of `mixes` ([`coupled_column`]) has a non-zero value.
 fn coupled_nonzero(st: &Stack, raw: &RawSeries, mixes: &[Vec<Mix>], c: usize) -> bool {
-    let mut s0 = 0;
-    st.chans.iter().zip(mixes).any(|(ch, mx)| {
-        let len = ch.y.len();
+    coupled_values(st, raw, mixes, c).any(|(_, mut values)| values.any(|v| v != 0.0))
+}
+
+/// Coupled column `c` of `mixes` channel by channel: its rows in the stack and its values there,
+/// α·u_k + β·u_partner.
+fn coupled_values<'r>(
+    st: &'r Stack,
+    raw: &'r RawSeries,
+    mixes: &'r [Vec<Mix>],
+    c: usize,
+) -> impl Iterator<Item = (std::ops::Range<usize>, impl Iterator<Item = f64> + 'r)> + 'r {
+    st.chans.iter().zip(mixes).scan(0, move |s0, (ch, mx)| {
+        let rows = *s0..*s0 + ch.y.len();
+        *s0 = rows.end;
         let Mix { k, alpha, partner, beta } = mx[c];
-        let (a, b) = (&raw[k][s0..s0 + len], &raw[partner][s0..s0 + len]);
-        s0 += len;
-        a.iter().zip(b).any(|(x, y)| alpha * x + beta * y != 0.0)
+        let (a, b) = (&raw[k][rows.clone()], &raw[partner][rows.clone()]);
+        Some((rows, a.iter().zip(b).map(move |(x, y)| alpha * x + beta * y)))
     })
 }
 
@@ -1366,7 +1370,7 @@ fn reselect(
         for (o, inp) in pb.inputs.iter().enumerate().filter(|(o, _)| *o != m) {
             let ks = terms[inp.term].shape.ks();
             let (shx_o, raw_o) = series(cache, o, &terms[inp.term].shape, &ks);
-            base_cols.extend(coupled_columns(st, &raw_o, &mixes(pb, o, &shx_o, &ks, fz, gains)));
+            base_cols.extend(coupled_columns(st, &raw_o, &mixes(pb, o, &shx_o, &ks, fz, gains), 0..ks.len()));
         }
         base_cols.retain(|c| c.iter().any(|v| *v != 0.0));
         let base = OrthoBase::new(&base_cols, w).ok()?;
@@ -1391,14 +1395,7 @@ fn reselect(
         // misfit of a mode a little off its frequency and hold it there ([`polish`]).
         if plain {
             drop(base_cols);
-            let used_cols: Vec<Vec<f64>> = used
-                .iter()
-                .map(|&j| {
-                    let mut col = vec![0.0; st.n];
-                    nested(j, &mut col);
-                    col
-                })
-                .collect();
+            let used_cols = coupled_columns(st, &raw, &mx, used.iter().map(|&j| keep[j]));
             let base2 = base.extended(&used_cols, w).ok()?;
             drop(used_cols);
             let keep2: Vec<usize> = keep.iter().copied().filter(|c| !picked.contains(c)).collect();

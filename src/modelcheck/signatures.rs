@@ -831,7 +831,7 @@ impl Shape {
     /// The slopes d/dx (1/m) at two positions x0 and x1: of the basis indices `ks`
     /// ([`Shape::terms_at`]) or, with None, of every index of [`Shape::basis_at`]; the same bits as
     /// those, position by position. A cosine series (with `ks` ascending) walks the two positions'
-    /// recurrences side by side ([`CosineAt::walk_two`]).
+    /// recurrences side by side ([`CosineAt::walk_at`]).
     pub(crate) fn slopes_at_two(&self, x0: f64, x1: f64, ks: Option<&[usize]>) -> (Vec<f64>, Vec<f64>) {
         let ascending = ks.is_none_or(|ks| ks.windows(2).all(|w| w[0] < w[1]));
         if self.basis != ShapeBasis::Cosine || !ascending {
@@ -842,12 +842,9 @@ impl Shape {
         }
         let (a, b) = (CosineAt::new(self.range, x0), CosineAt::new(self.range, x1));
         // index: the shape's order, a u32 bounded by `check_basis`/`resolvable_order`, widened.
-        let all = 0..=self.order as usize;
-        let pairs: Vec<((f64, f64), (f64, f64))> = match ks {
-            Some(ks) => CosineAt::walk_two(&a, &b, ks.iter().copied()).collect(),
-            None => CosineAt::walk_two(&a, &b, all).collect(),
-        };
-        pairs.into_iter().map(|(p, q)| (p.1, q.1)).unzip()
+        let all: Vec<usize> = if ks.is_none() { (0..=self.order as usize).collect() } else { Vec::new() };
+        let ks = ks.unwrap_or(&all);
+        CosineAt::walk_at([&a, &b], ks.iter().copied()).map(|[p, q]| (p.1, q.1)).unzip()
     }
 
     /// (value, slope d/dx in 1/m) of the cosine series' basis functions 0..=`top` at x, index by
@@ -1838,29 +1835,6 @@ impl CosineAt {
         }
     }
 
-    /// [`CosineAt::walk`] at two positions `a` and `b` side by side (one index's pair of
-    /// (value, slope) at a time): each position's values the same bits as its walk alone, the two
-    /// recurrences independent chains the processor overlaps.
-    fn walk_two<'k>(
-        a: &'k CosineAt,
-        b: &'k CosineAt,
-        ks: impl Iterator<Item = usize> + 'k,
-    ) -> impl Iterator<Item = ((f64, f64), (f64, f64))> + 'k {
-        let (mut j, mut sa, mut sb) = (1, (a.s1, a.c1), (b.s1, b.c1));
-        ks.map(move |k| {
-            if k < 3 {
-                return (a.low(k), b.low(k));
-            }
-            let jk = (k - 3) / 2 + 1;
-            while j < jk {
-                sa = a.turn(sa);
-                sb = b.turn(sb);
-                j += 1;
-            }
-            (a.pair(k, jk as f64, sa), b.pair(k, jk as f64, sb))
-        })
-    }
-
     /// (value, slope) of basis index k ≥ 3, of pair j, from (sin jθ, cos jθ): cos jθ and its
     /// slope −j·kx·sin jθ at even k − 3, sin jθ and j·kx·cos jθ at odd.
     fn pair(&self, k: usize, j: f64, (sm, cm): (f64, f64)) -> (f64, f64) {
@@ -1874,18 +1848,28 @@ impl CosineAt {
     /// (value, slope) of each of the basis indices `ks` (ascending) in turn, the recurrence
     /// turned only as far as the last: the same bits as [`Shape::cosine_basis`]'s entries.
     fn walk<'k>(&'k self, ks: impl Iterator<Item = usize> + 'k) -> impl Iterator<Item = (f64, f64)> + 'k {
-        // The walk's pair j (its sine and cosine at jθ).
-        let (mut j, mut sc) = (1, (self.s1, self.c1));
+        CosineAt::walk_at([self], ks).map(|[v]| v)
+    }
+
+    /// [`CosineAt::walk`] at N positions side by side (one index's (value, slope) at each position
+    /// at a time): each position's values the same bits as its walk alone, the N recurrences
+    /// independent chains the processor overlaps.
+    fn walk_at<'k, const N: usize>(
+        ats: [&'k CosineAt; N],
+        ks: impl Iterator<Item = usize> + 'k,
+    ) -> impl Iterator<Item = [(f64, f64); N]> + 'k {
+        // The walk's pair j (its sine and cosine at jθ, at each position).
+        let (mut j, mut sc) = (1, ats.map(|a| (a.s1, a.c1)));
         ks.map(move |k| {
             if k < 3 {
-                return self.low(k);
+                return ats.map(|a| a.low(k));
             }
             let jk = (k - 3) / 2 + 1;
             while j < jk {
-                sc = self.turn(sc);
+                sc = std::array::from_fn(|p| ats[p].turn(sc[p]));
                 j += 1;
             }
-            self.pair(k, jk as f64, sc)
+            std::array::from_fn(|p| ats[p].pair(k, jk as f64, sc[p]))
         })
     }
 
