@@ -34,7 +34,7 @@ pub use diagnose::{
 };
 pub use lsq::{fit_signature, solve_normal, Columns, LinearFit, NormalFactor};
 pub use ortho::{
-    greedy_rss, greedy_rss_with_gram, greedy_rss_with_gram_of, lstsq_qr, nested_rss, ColumnFn, NestedRss, OrthoBase,
+    greedy_rss, greedy_rss_from_products, greedy_rss_with_gram, lstsq_qr, nested_rss, NestedRss, OrthoBase,
     SparseColumn,
 };
 /// The complex numbers of the spectra (num-complex, through realfft), for callers' phasors.
