@@ -33,11 +33,7 @@ impl OrthoBase {
     /// scaled to unit norm, Householder QR with column pivoting, the pivots above
     /// [`RANK_TOLERANCE`] × the largest kept (all-zero columns are skipped).
     pub fn new(cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
-        check_finite("weights", w)?;
-        Ok(match PivotedQr::of(cols, w)? {
-            Some(f) => OrthoBase { q: thin_q(f.a, &f.coeff, f.rank) },
-            None => OrthoBase { q: Mat::zeros(w.len(), 0) },
-        })
+        OrthoBase::of_columns(cols, w, Factoring::Whole)
     }
 
     /// The basis of this span and the weighted columns `cols` (each n values, times `w`) together,
@@ -48,12 +44,7 @@ impl OrthoBase {
     /// work of the new ones: about 2·n·k·(rank + k) for k new columns, where the pivoted QR of all of
     /// them takes 2·n·(rank + k)² at a lower speed.
     pub fn extended(&self, cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
-        check_finite("weights", w)?;
-        check_len("weights", self.nrows(), w.len())?;
-        let Some((mut a, _)) = unit_columns(cols, w)? else { return Ok(self.clone()) };
-        self.project_out(&mut a);
-        let f = PivotedQr::factor(a, 1.0);
-        Ok(self.joined(&thin_q(f.a, &f.coeff, f.rank)))
+        self.extended_as(cols, w, Factoring::Whole)
     }
 
     /// [`OrthoBase::new`] by blocks of rows: the span of the same columns and the same rank rule,
@@ -67,21 +58,31 @@ impl OrthoBase {
     /// [`OrthoBase::new`]'s at the rounding level and do not depend on the number of threads
     /// (fixed blocks, each sequential inside).
     pub fn by_row_blocks(cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
-        check_finite("weights", w)?;
-        Ok(match unit_columns(cols, w)? {
-            Some((a, _)) => OrthoBase { q: tall_thin_q(a, 0.0) },
-            None => OrthoBase { q: Mat::zeros(w.len(), 0) },
-        })
+        OrthoBase::of_columns(cols, w, Factoring::RowBlocks)
     }
 
     /// [`OrthoBase::extended`] with the new columns' parts off this span factored by blocks of
     /// rows ([`OrthoBase::by_row_blocks`]).
     pub fn extended_by_row_blocks(&self, cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
+        self.extended_as(cols, w, Factoring::RowBlocks)
+    }
+
+    /// [`OrthoBase::new`] or [`OrthoBase::by_row_blocks`], as `how` says.
+    fn of_columns(cols: &[Vec<f64>], w: &[f64], how: Factoring) -> Result<OrthoBase, ModelCheckError> {
+        check_finite("weights", w)?;
+        Ok(match unit_columns(cols, w)? {
+            Some((a, _)) => OrthoBase { q: how.thin_q(a, 0.0) },
+            None => OrthoBase { q: Mat::zeros(w.len(), 0) },
+        })
+    }
+
+    /// [`OrthoBase::extended`] or [`OrthoBase::extended_by_row_blocks`], as `how` says.
+    fn extended_as(&self, cols: &[Vec<f64>], w: &[f64], how: Factoring) -> Result<OrthoBase, ModelCheckError> {
         check_finite("weights", w)?;
         check_len("weights", self.nrows(), w.len())?;
         let Some((mut a, _)) = unit_columns(cols, w)? else { return Ok(self.clone()) };
         self.project_out(&mut a);
-        Ok(self.joined(&tall_thin_q(a, 1.0)))
+        Ok(self.joined(&how.thin_q(a, 1.0)))
     }
 
     /// This basis followed by the columns of `extra` (n × k, orthonormal and orthogonal to it).
@@ -650,6 +651,47 @@ fn apply_reflectors(mut a: Mat<f64>, coeff: &Mat<f64>, x: &mut Mat<f64>) {
     );
 }
 
+/// The unpivoted blocked Householder QR of `a` (n × p) in place, sequential (R on and above the
+/// diagonal, the reflectors' essentials below it); returns the block coefficients.
+fn householder_qr(a: &mut Mat<f64>) -> Mat<f64> {
+    let (n, p) = a.shape();
+    let bs = qr::no_pivoting::factor::recommended_block_size::<f64>(n, p);
+    let mut coeff = Mat::<f64>::zeros(bs, n.min(p));
+    let mut mem =
+        MemBuffer::new(qr::no_pivoting::factor::qr_in_place_scratch::<f64>(n, p, bs, Par::Seq, Default::default()));
+    qr::no_pivoting::factor::qr_in_place(
+        a.as_mut(),
+        coeff.as_mut(),
+        Par::Seq,
+        MemStack::new(&mut mem),
+        Default::default(),
+    );
+    coeff
+}
+
+/// How an [`OrthoBase`] factors its columns.
+#[derive(Clone, Copy)]
+enum Factoring {
+    /// One Householder QR with column pivoting over all rows ([`OrthoBase::new`]).
+    Whole,
+    /// A tall-skinny QR by blocks of rows ([`OrthoBase::by_row_blocks`]).
+    RowBlocks,
+}
+
+impl Factoring {
+    /// The thin Q (n × rank) of the unit columns `a` (n × p, p ≥ 1), the rank counted by the
+    /// pivots above [`RANK_TOLERANCE`] × `reference` (0: × the largest pivot).
+    fn thin_q(self, a: Mat<f64>, reference: f64) -> Mat<f64> {
+        match self {
+            Factoring::Whole => {
+                let f = PivotedQr::factor(a, reference);
+                thin_q(f.a, &f.coeff, f.rank)
+            }
+            Factoring::RowBlocks => tall_thin_q(a, reference),
+        }
+    }
+}
+
 /// Rows per block of [`OrthoBase::by_row_blocks`]' factorisation: 16 384 (at 165 columns a block
 /// is 22 MB; a 15 000-sample stack is one block).
 pub const QR_ROW_BLOCK: usize = 16_384;
@@ -667,23 +709,7 @@ fn tall_thin_q(a: Mat<f64>, reference: f64) -> Mat<f64> {
         .par_iter()
         .map(|&(lo, hi)| {
             let mut blk = a.as_ref().subrows(lo, hi - lo).to_owned();
-            let len = hi - lo;
-            let bs = qr::no_pivoting::factor::recommended_block_size::<f64>(len, p);
-            let mut coeff = Mat::<f64>::zeros(bs, len.min(p));
-            let mut mem = MemBuffer::new(qr::no_pivoting::factor::qr_in_place_scratch::<f64>(
-                len,
-                p,
-                bs,
-                Par::Seq,
-                Default::default(),
-            ));
-            qr::no_pivoting::factor::qr_in_place(
-                blk.as_mut(),
-                coeff.as_mut(),
-                Par::Seq,
-                MemStack::new(&mut mem),
-                Default::default(),
-            );
+            let coeff = householder_qr(&mut blk);
             (blk, coeff)
         })
         .collect();
@@ -766,17 +792,7 @@ pub fn nested_rss(y: &[f64], w: &[f64], base: &OrthoBase, series: &[Vec<f64>]) -
     if k == 0 || n <= k {
         return Ok(out);
     }
-    let bs = qr::no_pivoting::factor::recommended_block_size::<f64>(n, k + 1);
-    let mut coeff = Mat::<f64>::zeros(bs, (k + 1).min(n));
-    let mut mem =
-        MemBuffer::new(qr::no_pivoting::factor::qr_in_place_scratch::<f64>(n, k + 1, bs, Par::Seq, Default::default()));
-    qr::no_pivoting::factor::qr_in_place(
-        m.as_mut(),
-        coeff.as_mut(),
-        Par::Seq,
-        MemStack::new(&mut mem),
-        Default::default(),
-    );
+    householder_qr(&mut m);
     // R[j][j]: the part of unit column j left after the base and the columns before it;
     // R[j][k] = q_jᵀ(Wy).
     let mut rss = rss0;
