@@ -1339,20 +1339,14 @@ const PRODUCT_BLOCK: usize = 64;
 
 /// A series' raw columns U (unweighted) against a basis Q (n × rank, in the weighted space: its
 /// columns span weighted columns) and a weighted vector r, per channel of the stack (each on the
-/// channel's rows): P_ch = (W_ch·Q_ch)ᵀ·U_ch (`base`, rank × (top + 1)) and
-/// c_ch = U_chᵀ·(W_ch·r_ch) (`target`, top + 1 values). A coupled column s_c is α·u_k + β·u_p on
-/// each channel ([`Mix`]), so its products Qᵀ(W·s_c) and (W·s_c)ᵀr are Σ_ch α·P_ch[:, k] +
-/// β·P_ch[:, p] and the same of c_ch ([`mixed_base`], [`mixed_target`]): one level-3 product
-/// over the raw columns serves every mix of them, and the coupled columns are never made.
-struct RawProducts {
-    base: Vec<Mat<f64>>,
-    target: Vec<Vec<f64>>,
-}
-
-/// The [`RawProducts`] of the raw columns `raw` with the basis `q` and the weighted vector `r`:
-/// [W·Q | W·r]ᵀ·U per channel, each task a channel and a block of [`PRODUCT_BLOCK`] raw columns,
-/// sequential inside (the same bits on any number of threads).
-fn raw_products(st: &Stack, raw: &RawSeries, q: MatRef<'_, f64>, r: &[f64], w: &[f64]) -> RawProducts {
+/// channel's rows): [W_ch·Q_ch | W_ch·r_ch]ᵀ·U_ch ((rank + 1) × (top + 1)), rows 0..rank the
+/// products P_ch with the basis and row `rank` the products c_ch with r. A coupled column s_c is
+/// α·u_k + β·u_p on each channel ([`Mix`]), so its products Qᵀ(W·s_c) and (W·s_c)ᵀr are
+/// Σ_ch α·P_ch[:, k] + β·P_ch[:, p] and the same of c_ch ([`mixed`]): one level-3 product over the
+/// raw columns serves every mix of them, and the coupled columns are never made. Each task a
+/// channel and a block of [`PRODUCT_BLOCK`] raw columns, sequential inside (the same bits on any
+/// number of threads).
+fn raw_products(st: &Stack, raw: &RawSeries, q: MatRef<'_, f64>, r: &[f64], w: &[f64]) -> Vec<Mat<f64>> {
     let (rank, width) = (q.ncols(), raw.ncols());
     let spans: Vec<(usize, usize)> = st.channel_starts().into_iter().zip(st.chans.iter().map(|c| c.y.len())).collect();
     // [W_ch·Q_ch | W_ch·r_ch] per channel.
@@ -1377,22 +1371,22 @@ fn raw_products(st: &Stack, raw: &RawSeries, q: MatRef<'_, f64>, r: &[f64], w: &
             out
         })
         .collect();
-    let at = |j: usize, a: usize, k: usize| blocks[j * per + k / PRODUCT_BLOCK][(a, k % PRODUCT_BLOCK)];
-    RawProducts {
-        base: (0..spans.len()).map(|j| Mat::<f64>::from_fn(rank, width, |a, k| at(j, a, k))).collect(),
-        target: (0..spans.len()).map(|j| (0..width).map(|k| at(j, rank, k)).collect()).collect(),
-    }
+    (0..spans.len())
+        .map(|j| {
+            Mat::<f64>::from_fn(rank + 1, width, |a, k| blocks[j * per + k / PRODUCT_BLOCK][(a, k % PRODUCT_BLOCK)])
+        })
+        .collect()
 }
 
-/// M = Qᵀ(W·S) (rank × |cols|) of the coupled columns `cols` of `mixes` from the channels' raw
-/// products `p` with the basis ([`RawProducts`]): column c is Σ_ch α·P_ch[:, k] + β·P_ch[:, p]
-/// ([`Mix`]), the channels summed in their order.
-fn mixed_base(p: &[Mat<f64>], mixes: &[Vec<Mix>], cols: &[usize]) -> Mat<f64> {
-    let rank = p.first().map_or(0, |m| m.nrows());
+/// The products of the coupled columns `cols` of `mixes` from the channels' raw products `p`
+/// ([`raw_products`], each (rank + 1) rows): column c is Σ_ch α·p_ch[:, k] + β·p_ch[:, p] ([`Mix`]),
+/// the channels summed in their order; rows 0..rank are M = Qᵀ(W·S), row `rank` is (W·S)ᵀr.
+fn mixed(p: &[Mat<f64>], mixes: &[Vec<Mix>], cols: &[usize]) -> Mat<f64> {
+    let rows = p.first().map_or(0, |m| m.nrows());
     let each: Vec<Vec<f64>> = cols
         .par_iter()
         .map(|&c| {
-            let mut v = vec![0.0; rank];
+            let mut v = vec![0.0; rows];
             for (pc, mx) in p.iter().zip(mixes) {
                 let Mix { k, alpha, partner, beta } = mx[c];
                 for (a, o) in v.iter_mut().enumerate() {
@@ -1402,20 +1396,12 @@ fn mixed_base(p: &[Mat<f64>], mixes: &[Vec<Mix>], cols: &[usize]) -> Mat<f64> {
             v
         })
         .collect();
-    Mat::<f64>::from_fn(rank, cols.len(), |a, j| each[j][a])
+    Mat::<f64>::from_fn(rows, cols.len(), |a, j| each[j][a])
 }
 
-/// (W·S)ᵀr (|cols| values) of the coupled columns `cols` of `mixes` from the channels' raw
-/// products `c` with r ([`RawProducts`]), as in [`mixed_base`].
-fn mixed_target(c: &[Vec<f64>], mixes: &[Vec<Mix>], cols: &[usize]) -> Vec<f64> {
-    cols.iter()
-        .map(|&j| {
-            c.iter().zip(mixes).fold(0.0, |acc, (cc, mx)| {
-                let Mix { k, alpha, partner, beta } = mx[j];
-                acc + alpha * cc[k] + beta * cc[partner]
-            })
-        })
-        .collect()
+/// The last row of `m` ([`mixed`]'s products with r).
+fn last_row(m: &Mat<f64>) -> Vec<f64> {
+    (0..m.ncols()).map(|j| m[(m.nrows() - 1, j)]).collect()
 }
 
 /// The shapes of the driving translations re-chosen with the mode in the model at θ = (f, ζ,
@@ -1477,16 +1463,18 @@ fn reselect(
         }
         base_cols.retain(|c| c.iter().any(|v| *v != 0.0));
         let base = OrthoBase::by_row_blocks(&base_cols, w).ok()?;
-        // The series' coupled columns with a non-zero value, made as the greedy selection reads
-        // them (never held together: 640 columns of 100 000 samples are 512 MB).
+        // The series' coupled columns with a non-zero value (never made: the greedy selection
+        // reads their products from the raw columns', [`raw_products`]).
         let keep: Vec<usize> = (0..all.len()).into_par_iter().filter(|&c| coupled_nonzero(st, &raw, &mx, c)).collect();
         let grams = cache.get(st, w, pb.inputs[m].name, &shx, &raw)?;
         let gram = coupled_gram(grams, raw.ncols(), &mx, &keep);
         // M = Qᵀ(WS) and (WS)ᵀr from the raw columns' products (the coupled columns never made).
         let r = base.project_vector(target, w);
         let pq = raw_products(st, &raw, base.q(), &r, w);
-        let (m1, c1) = (mixed_base(&pq.base, &mx, &keep), mixed_target(&pq.target, &mx, &keep));
-        let nr = greedy_rss_from_products(dot(&r, &r), m1.as_ref(), &c1, &gram, st.n, GREEDY_STOP).ok()?;
+        let m1 = mixed(&pq, &mx, &keep);
+        let nr =
+            greedy_rss_from_products(dot(&r, &r), m1.subrows(0, base.rank()), &last_row(&m1), &gram, st.n, GREEDY_STOP)
+                .ok()?;
         let k = bic_count(&nr, base.rank(), st.n);
         let used = &nr.used[..k.max(1).min(nr.used.len())];
         // Indices (into `all`) of the coupled selection.
@@ -1515,10 +1503,10 @@ fn reselect(
             let r2 = base2.project_vector(target, w);
             let (r0, rank2) = (base.rank(), base2.rank());
             let px = raw_products(st, &raw, base2.q().subcols(r0, rank2 - r0), &r2, w);
-            let (top2, below2) = (mixed_base(&pq.base, &mx2, &cols2), mixed_base(&px.base, &mx2, &cols2));
+            let (top2, below2) = (mixed(&pq, &mx2, &cols2), mixed(&px, &mx2, &cols2));
             let m2 =
                 Mat::<f64>::from_fn(rank2, cols2.len(), |a, j| if a < r0 { top2[(a, j)] } else { below2[(a - r0, j)] });
-            let c2 = mixed_target(&px.target, &mx2, &cols2);
+            let c2 = last_row(&below2);
             let nr2 = greedy_rss_from_products(dot(&r2, &r2), m2.as_ref(), &c2, &gram2, st.n, GREEDY_STOP).ok()?;
             let k2 = bic_count(&nr2, base2.rank(), st.n);
             picked.extend(nr2.used[..k2].iter().map(|&j| keep2[j]));
@@ -1778,7 +1766,7 @@ mod tests {
     }
 
     /// The products of coupled columns with a basis and a target from the raw columns' products
-    /// ([`raw_products`], [`mixed_base`], [`mixed_target`]) against the coupled columns made
+    /// ([`raw_products`], [`mixed`]) against the coupled columns made
     /// ([`coupled_column`]) and multiplied out: 3 channels of 700, 130 and 300 samples (so a
     /// channel spans several blocks of [`PRODUCT_BLOCK`] columns and ends mid-block), 150 random
     /// raw columns, a basis of 12 random weighted columns, random weights, α, β and partners per
@@ -1817,7 +1805,8 @@ mod tests {
             let base = OrthoBase::new(&base_cols, &w).unwrap();
             assert_eq!(base.rank(), rank);
             let pr = raw_products(&st, &raw, base.q(), &r, &w);
-            let (m, c) = (mixed_base(&pr.base, &mixes, &cols), mixed_target(&pr.target, &mixes, &cols));
+            let all = mixed(&pr, &mixes, &cols);
+            let (m, c) = (all.subrows(0, rank), last_row(&all));
             assert_eq!((m.nrows(), m.ncols(), c.len()), (rank, cols.len(), cols.len()));
             for (j, &col) in cols.iter().enumerate() {
                 let mut s = vec![0.0; n];
