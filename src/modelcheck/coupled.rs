@@ -1399,9 +1399,13 @@ fn mixed(p: &[Mat<f64>], mixes: &[Vec<Mix>], cols: &[usize]) -> Mat<f64> {
     Mat::<f64>::from_fn(rows, cols.len(), |a, j| each[j][a])
 }
 
-/// The last row of `m` ([`mixed`]'s products with r).
+/// The last row of `m` ([`mixed`]'s products with r; zeros when `m` has no rows: a stack without
+/// channels).
 fn last_row(m: &Mat<f64>) -> Vec<f64> {
-    (0..m.ncols()).map(|j| m[(m.nrows() - 1, j)]).collect()
+    match m.nrows().checked_sub(1) {
+        Some(last) => (0..m.ncols()).map(|j| m[(last, j)]).collect(),
+        None => vec![0.0; m.ncols()],
+    }
 }
 
 /// The shapes of the driving translations re-chosen with the mode in the model at θ = (f, ζ,
