@@ -281,6 +281,12 @@ fn largest_eigenvalue(m: &Mat<f64>) -> f64 {
     lambda.max(top_diag)
 }
 
+/// Gershgorin's bound on the eigenvalues of the symmetric `m`: max_i Σ_j |m_ij| ≥ λ_max (each
+/// column read contiguously; M is symmetric, so its columns' sums are its rows').
+fn row_sum_bound(m: &Mat<f64>) -> f64 {
+    (0..m.ncols()).map(|j| m.col_as_slice(j).iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max)
+}
+
 /// Least squares from the normal equations: β̂ minimising ‖y − Xβ‖² given only the Gram matrix
 /// N = XᵀX (`gram`, p × p, row-major, symmetric) and b = Xᵀy. Solved by faer's Cholesky
 /// factorisation with diagonal pivoting (LAPACK's `dpstrf`) of the Jacobi-scaled M = D⁻¹ND⁻¹
@@ -332,14 +338,23 @@ impl NormalFactor {
         let inv: Vec<f64> =
             (0..p).map(|j| gram[j * p + j].max(0.0).sqrt()).map(|d| if d > 0.0 { 1.0 / d } else { 0.0 }).collect();
         let mut m = Mat::<f64>::from_fn(p, p, |i, j| gram[i * p + j] * inv[i] * inv[j]);
-        let cut = DEPENDENT_PIVOT * largest_eigenvalue(&m);
+        // The cut's estimate of λ_max(M) lies between M's largest diagonal entry and Gershgorin's
+        // bound ([`largest_eigenvalue`]): when the cuts at both ends keep the same leading
+        // pivots, that is the rank at any estimate, and the power iterations are skipped.
+        let top_diag = (0..p).map(|i| m[(i, i)]).fold(0.0_f64, f64::max);
+        let above = row_sum_bound(&m) * (1.0 + 1e-12);
+        let scaled = m.clone();
         let (mut perm, mut perm_inv) = (vec![0usize; p], vec![0usize; p]);
         let par = faer::Par::Seq; // sequential: the same bits on any thread count
         let mut buf = MemBuffer::new(cholesky_in_place_scratch::<usize, f64>(p, par, Default::default()));
         let (info, _) =
             cholesky_in_place(m.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut buf), Default::default())
                 .map_err(|e| ModelCheckError::Numerical(format!("solve_normal: pivoted Cholesky: {e:?}")))?;
-        let r = (0..info.rank).take_while(|&j| m[(j, j)] * m[(j, j)] >= cut).count();
+        let kept = |cut: f64| (0..info.rank).take_while(|&j| m[(j, j)] * m[(j, j)] >= cut).count();
+        let r = match kept(DEPENDENT_PIVOT * top_diag) {
+            r if r == kept(DEPENDENT_PIVOT * above) => r,
+            _ => kept(DEPENDENT_PIVOT * largest_eigenvalue(&scaled)),
+        };
         let low = if r == p {
             None
         } else {
