@@ -278,17 +278,6 @@ struct Mixing {
 }
 
 impl Mixing {
-    /// A as a dense R × p matrix, row-major.
-    fn dense(&self, r: usize) -> Vec<f64> {
-        let mut a = vec![0.0; r * self.p];
-        for (j, col) in self.cols.iter().enumerate() {
-            for &(k, v) in col {
-                a[k * self.p + j] = v;
-            }
-        }
-        a
-    }
-
     /// The raw coefficients A·β of the first p entries of β (one per raw column, R of them), each
     /// summed over the columns in their order.
     fn times(&self, r: usize, beta: &[f64]) -> Vec<f64> {
@@ -531,75 +520,69 @@ impl Problem<'_> {
     }
 
     /// The normal equations (N, q × q row-major, and b) of [`Problem::solve`]'s unknowns, summed
-    /// over the channels' Gram matrices.
+    /// over the channels' Gram matrices: each entry gets one share per channel, added in the
+    /// channels' order. The rows of the shape unknowns, most of N, are formed in parallel.
     fn normal_equations(&self, mix: &[Mixing], free: &[Option<FreePart>]) -> (Vec<f64>, Vec<f64>) {
         let p = mix.first().map_or(0, |m| m.p);
         let q = p + self.n_fixed + self.n_free;
-        // Per channel (in parallel), its share of the normal equations.
-        let parts: Vec<(Vec<f64>, Vec<f64>)> = self
-            .chans
-            .par_iter()
-            .zip(mix)
-            .zip(free)
-            .map(|((ch, a), fp)| {
-                let r = ch.r;
-                let mut nm = vec![0.0; q * q];
-                let mut b = vec![0.0; q];
-                // The non-zero entries of each column of A.
-                let nz = &a.cols;
-                // AᵀGA, Aᵀb.
-                let mut ag = vec![0.0; r];
-                for i in 0..p {
-                    if nz[i].is_empty() {
-                        continue;
-                    }
-                    // (Aᵀ G)_i = Σ_k a_ki·G_k (rows of G).
-                    ag.fill(0.0);
-                    for &(k, v) in &nz[i] {
-                        ag.iter_mut().zip(&ch.guu[k * r..(k + 1) * r]).for_each(|(x, g)| *x += v * g);
-                    }
-                    for j in i..p {
-                        let v: f64 = nz[j].iter().map(|&(s, a)| ag[s] * a).sum();
-                        nm[i * q + j] += v;
-                    }
-                    b[i] += nz[i].iter().map(|&(k, v)| v * ch.bu[k]).sum::<f64>();
-                    let nf = ch.fixed.len();
-                    for (fi, g) in ch.fixed.iter().enumerate() {
-                        nm[i * q + p + g] += nz[i].iter().map(|&(k, v)| v * ch.guf[k * nf + fi]).sum::<f64>();
-                    }
+        let mut nm = vec![0.0; q * q];
+        let mut b = vec![0.0; q];
+        // Row i < p from j = i on: A's column i against each channel's [U | F | φ] through its
+        // Gram matrix, (AᵀG)_i = Σ_k a_ki·G_k (rows of G) with A's columns sparse.
+        nm[..p * q].par_chunks_mut(q.max(1)).enumerate().for_each(|(i, row)| {
+            let mut ag = Vec::new();
+            for ((ch, a), fp) in self.chans.iter().zip(mix).zip(free) {
+                let (nz, r) = (&a.cols, ch.r);
+                if nz[i].is_empty() {
+                    continue;
+                }
+                ag.clear();
+                ag.resize(r, 0.0);
+                for &(k, v) in &nz[i] {
+                    ag.iter_mut().zip(&ch.guu[k * r..(k + 1) * r]).for_each(|(x, g)| *x += v * g);
+                }
+                for (x, col) in row[i..p].iter_mut().zip(&nz[i..p]) {
+                    *x += col.iter().map(|&(s, a)| ag[s] * a).sum::<f64>();
                 }
                 let nf = ch.fixed.len();
                 for (fi, g) in ch.fixed.iter().enumerate() {
-                    b[p + g] += ch.bf[fi];
-                    for (fj, h) in ch.fixed.iter().enumerate() {
-                        if h >= g {
-                            nm[(p + g) * q + p + h] += ch.gff[fi * nf + fj];
-                        }
-                    }
+                    row[p + g] += nz[i].iter().map(|&(k, v)| v * ch.guf[k * nf + fi]).sum::<f64>();
                 }
                 if let (Some(slot), Some(fp)) = (ch.free, fp) {
-                    for j in 0..fp.cols.len() {
-                        let col = p + self.n_fixed + slot + j;
-                        for i in 0..p {
-                            nm[i * q + col] += nz[i].iter().map(|&(k, v)| v * fp.uphi[j][k]).sum::<f64>();
-                        }
-                        for (g, v) in ch.fixed.iter().zip(&fp.fphi[j]) {
-                            nm[(p + g) * q + col] += v;
-                        }
-                        for jj in 0..=j {
-                            nm[(p + self.n_fixed + slot + jj) * q + col] += fp.gram[j][jj];
-                        }
-                        b[col] += fp.by[j];
+                    for (j, uphi) in fp.uphi.iter().enumerate() {
+                        row[p + self.n_fixed + slot + j] += nz[i].iter().map(|&(k, v)| v * uphi[k]).sum::<f64>();
                     }
                 }
-                (nm, b)
-            })
-            .collect();
-        let mut nm = vec![0.0; q * q];
-        let mut b = vec![0.0; q];
-        for (pn, pb) in &parts {
-            nm.iter_mut().zip(pn).for_each(|(x, y)| *x += y);
-            b.iter_mut().zip(pb).for_each(|(x, y)| *x += y);
+            }
+        });
+        // The right-hand side, and the rows of the fixed columns and the free vibration.
+        for ((ch, a), fp) in self.chans.iter().zip(mix).zip(free) {
+            for (x, col) in b[..p].iter_mut().zip(&a.cols) {
+                if !col.is_empty() {
+                    *x += col.iter().map(|&(k, v)| v * ch.bu[k]).sum::<f64>();
+                }
+            }
+            let nf = ch.fixed.len();
+            for (fi, g) in ch.fixed.iter().enumerate() {
+                b[p + g] += ch.bf[fi];
+                for (fj, h) in ch.fixed.iter().enumerate() {
+                    if h >= g {
+                        nm[(p + g) * q + p + h] += ch.gff[fi * nf + fj];
+                    }
+                }
+            }
+            if let (Some(slot), Some(fp)) = (ch.free, fp) {
+                for j in 0..fp.cols.len() {
+                    let col = p + self.n_fixed + slot + j;
+                    for (g, v) in ch.fixed.iter().zip(&fp.fphi[j]) {
+                        nm[(p + g) * q + col] += v;
+                    }
+                    for jj in 0..=j {
+                        nm[(p + self.n_fixed + slot + jj) * q + col] += fp.gram[j][jj];
+                    }
+                    b[col] += fp.by[j];
+                }
+            }
         }
         for i in 0..q {
             for j in 0..i {
@@ -931,9 +914,8 @@ impl Problem<'_> {
                     continue;
                 }
                 let (r, nf) = (ch.r, ch.fixed.len());
-                let a = mixing.dense(r);
                 let ax = self.mixing(ch, fz, &[], Some(&c));
-                // Each gain's d_j in this channel's raw columns (zero off its sensor), and G·d_j.
+                // Each gain's d_j in this channel's raw columns (zero off its sensor).
                 let ds: Vec<Vec<f64>> = ax.cols[ns..ns + ng]
                     .iter()
                     .map(|col| {
@@ -942,13 +924,15 @@ impl Problem<'_> {
                         d
                     })
                     .collect();
-                let gds: Vec<Vec<f64>> =
-                    ds.iter().map(|d| (0..r).map(|k| dot(&ch.guu[k * r..(k + 1) * r], d)).collect()).collect();
-                // The raw coefficients of the shapes' part of Aβ̂.
-                let gamma: Vec<f64> = (0..r).map(|k| dot(&a[k * p..(k + 1) * p], &beta[..p])).collect();
+                // The raw coefficients of the shapes' part of Aβ̂ (A's columns are sparse: a raw
+                // column in its wave's column and its partner's, so a row of A has at most two
+                // entries).
+                let gamma = mixing.times(r, &beta[..p]);
                 for j in (0..ng).filter(|&j| ds[j].iter().any(|v| *v != 0.0)) {
-                    let (d, gd) = (&ds[j], &gds[j]);
-                    dr[j] += dot(d, &ch.bu) - dot(&gamma, gd);
+                    let d = &ds[j];
+                    // G·d_j.
+                    let gd: Vec<f64> = (0..r).map(|k| dot(&ch.guu[k * r..(k + 1) * r], d)).collect();
+                    dr[j] += dot(d, &ch.bu) - dot(&gamma, &gd);
                     for (fi, &gi) in ch.fixed.iter().enumerate() {
                         let fd: f64 = (0..r).map(|k| ch.guf[k * nf + fi] * d[k]).sum();
                         dr[j] -= beta[p + gi] * fd;
@@ -962,11 +946,11 @@ impl Problem<'_> {
                             ad[j][at] += pd;
                         }
                     }
-                    for (i, x) in ad[j].iter_mut().enumerate().take(p) {
-                        *x += (0..r).map(|k| a[k * p + i] * gd[k]).sum::<f64>();
+                    for (x, col) in ad[j].iter_mut().zip(&mixing.cols) {
+                        *x += col.iter().map(|&(k, v)| v * gd[k]).sum::<f64>();
                     }
                     for k in 0..ng {
-                        dd[j * ng + k] += dot(&ds[k], gd);
+                        dd[j * ng + k] += dot(&ds[k], &gd);
                     }
                 }
             }
