@@ -210,19 +210,21 @@ pub(crate) const POLISH_HOLD_DAMPING: f64 = 5e-4;
 /// 38.35 → 38.29 Hz over five rounds with them (normalised RMS 3.4), and reached 38.05 then
 /// 38.038 Hz in two rounds without them (normalised RMS 0.97; truth 38.038 Hz).
 ///
-/// `progress` is told each round as it starts ([`Stage::ModePolish`]).
-fn polish(
-    st: &Stack,
+/// `progress` is told each round as it starts ([`Stage::ModePolish`]). Returns the terms, θ and the
+/// problem of those terms (a round whose re-choice keeps the selection keeps its problem: the same
+/// columns, Gram matrices and QR factors).
+fn polish<'a>(
+    st: &'a Stack<'a>,
     mut terms: Vec<FitTerm>,
     mut theta: Vec<f64>,
     target: &[f64],
-    w: &[f64],
+    w: &'a [f64],
     cache: &mut RawGramCache,
     progress: &(dyn Fn(Stage) + Sync),
-) -> Option<(Vec<FitTerm>, Vec<f64>)> {
+) -> Option<(Vec<FitTerm>, Vec<f64>, Problem<'a>)> {
+    let mut pb = problem(st, &terms, target, w)?;
     for round in 1..=POLISH_ROUNDS {
         progress(Stage::ModePolish { round, most: POLISH_ROUNDS });
-        let pb = problem(st, &terms, target, w)?;
         let (next, _) = pb.search(&[], 0, &[], &[], &[theta.clone()])?;
         let held = (next[0] / theta[0] - 1.0).abs() < POLISH_HOLD_FREQUENCY
             && (next[1] / theta[1] - 1.0).abs() < POLISH_HOLD_DAMPING;
@@ -235,12 +237,16 @@ fn polish(
         if held && round > 1 {
             break;
         }
-        terms = reselect(st, &pb, &terms, &theta, target, cache, false)?;
+        let chosen = reselect(st, &pb, &terms, &theta, target, cache, false)?;
+        if chosen != terms {
+            pb = problem(st, &chosen, target, w)?;
+            terms = chosen;
+        }
         if held {
             break;
         }
     }
-    Some((terms, theta))
+    Some((terms, theta, pb))
 }
 
 /// The joint optimum of the mode and the shapes ([`refit_coupled`]).
@@ -1607,10 +1613,13 @@ pub(crate) fn refit_coupled<'a>(
         progress(Stage::ModeShapes { round });
         terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target, &mut cache, true)?;
     }
-    if start != ModeStart::Held {
-        (terms2, theta1) = polish(st_mode, terms2, theta1, &fs.target, w, &mut cache, progress)?;
-    }
-    let pb2 = problem(st_mode, &terms2, &fs.target, w)?;
+    let pb2 = if start == ModeStart::Held {
+        problem(st_mode, &terms2, &fs.target, w)?
+    } else {
+        let pb;
+        (terms2, theta1, pb) = polish(st_mode, terms2, theta1, &fs.target, w, &mut cache, progress)?;
+        pb
+    };
     let (theta, at_bound) = if start == ModeStart::Held {
         let (beta, _) = pb2.coupled(&theta1).ok()?;
         (held_theta(&pb2, &pb2.shape_coefs(&beta), &theta1[2..]), [false; 2])

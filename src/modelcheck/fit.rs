@@ -7,7 +7,7 @@ use rayon::prelude::*;
 // Fitting a model.
 
 /// A fitted effect of the model: its shape, hyper-parameters and where its columns sit.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub(crate) struct FitTerm {
     pub(crate) index: usize,
     pub(crate) name: EffectName,
