@@ -1100,48 +1100,49 @@ type RawSeries = Mat<f64>;
 fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
     // index: the shape's order, a u32 bounded by `resolvable_order`, widened.
     let top = shx.order as usize;
-    // Each channel's part on its own thread, then joined in the stack's order.
-    let parts: Vec<Vec<Vec<f64>>> = st
-        .chans
-        .par_iter()
-        .map(|c| {
-            let len = c.y.len();
-            let mut cols: Vec<Vec<f64>> = (0..=top).map(|_| Vec::with_capacity(len)).collect();
-            for i in 0..len {
-                if c.is_accel() {
-                    let dt = sample_interval(c, i);
-                    let v = c.v[i];
-                    if !(dt > 0.0) || v == 0.0 {
-                        cols.iter_mut().for_each(|col| col.push(0.0));
-                        continue;
-                    }
-                    let (xb, xa) = (c.x[i], c.x[i] - v * dt);
-                    let (d1, d0) = shx.slopes_at_two(xb, xa, None);
-                    for ((col, b), a) in cols.iter_mut().zip(&d1).zip(&d0) {
-                        col.push(v * (b - a) / dt);
-                    }
-                } else {
-                    match c.motion_read(i, name) {
-                        MotionRead::Value { s, x } => {
-                            for (col, p) in cols.iter_mut().zip(shx.basis_at(x).0) {
-                                col.push(s * p);
-                            }
-                        }
-                        _ => cols.iter_mut().for_each(|col| col.push(0.0)),
-                    }
-                }
-            }
-            cols
-        })
-        .collect();
     let mut raw = Mat::<f64>::zeros(st.n, top + 1);
-    for (p, s0) in parts.iter().zip(st.channel_starts()) {
-        for (k, col) in p.iter().enumerate() {
-            raw.col_as_slice_mut(k)[s0..s0 + col.len()].copy_from_slice(col);
+    // Blocks of at most RAW_SERIES_ROWS rows of one channel each: (channel, its first sample, the
+    // block's rows of `raw`), in the stack's order.
+    let mut blocks = Vec::new();
+    let mut rest = raw.as_mut();
+    for c in st.chans.iter() {
+        let mut i0 = 0;
+        while i0 < c.y.len() {
+            // index: i0 < the channel's length; the stack's n is the sum of its channels' lengths.
+            let (mine, others) = rest.split_at_row_mut(RAW_SERIES_ROWS.min(c.y.len() - i0));
+            blocks.push((c, i0, mine));
+            rest = others;
+            i0 += RAW_SERIES_ROWS;
         }
     }
+    // The blocks in parallel, each row's values written in place (a row stays zero where the
+    // channel stands or has no reading).
+    blocks.into_par_iter().for_each(|(c, i0, mut block)| {
+        for r in 0..block.nrows() {
+            let i = i0 + r;
+            if c.is_accel() {
+                let dt = sample_interval(c, i);
+                let v = c.v[i];
+                if !(dt > 0.0) || v == 0.0 {
+                    continue;
+                }
+                let (xb, xa) = (c.x[i], c.x[i] - v * dt);
+                let (d1, d0) = shx.slopes_at_two(xb, xa, None);
+                for (k, (b1, a0)) in d1.iter().zip(&d0).enumerate().take(top + 1) {
+                    block[(r, k)] = v * (b1 - a0) / dt;
+                }
+            } else if let MotionRead::Value { s, x } = c.motion_read(i, name) {
+                for (k, p) in shx.basis_at(x).0.iter().enumerate().take(top + 1) {
+                    block[(r, k)] = s * p;
+                }
+            }
+        }
+    });
     raw
 }
+
+/// Rows of a channel per task of [`raw_series`].
+const RAW_SERIES_ROWS: usize = 1024;
 
 /// Per channel of the stack, the weighted Gram matrix Σ_i w_i²·u_a(i)·u_b(i) of a series' raw
 /// columns over the channel's samples (row-major, (top + 1)²). It does not change with the mode,
