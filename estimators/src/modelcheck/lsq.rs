@@ -646,6 +646,87 @@ mod columns_tests {
 mod normal_tests {
     use super::solve_normal;
 
+    /// The rank [`super::NormalFactor`] keeps is the rank at the cut from the power iterations
+    /// whether or not it ran them. 300 random Gram matrices: p = 12–40 columns on 3p samples,
+    /// families of strongly correlated columns (λ_max of the scaled matrix from about 1 to p/2),
+    /// and one to three near-dependent columns whose squared distance from the others' span, as a
+    /// fraction of their norm, is log-uniform over 10⁻¹⁴–10⁻⁸: across the band [10⁻¹¹·1,
+    /// 10⁻¹¹·Gershgorin] where the rank depends on λ_max. Reference: faer's pivoted Cholesky of the
+    /// same scaled matrix cut at [`super::DEPENDENT_PIVOT`] × [`super::largest_eigenvalue`], as
+    /// before the power iterations were skipped. At least 10 draws must land in the band (the
+    /// branch that runs them) and at least 10 outside it with a dependent column cut (the branch
+    /// that skips them).
+    #[test]
+    fn the_rank_kept_is_the_rank_at_the_power_iterations_cut() {
+        use faer::dyn_stack::{MemBuffer, MemStack};
+        use faer::linalg::cholesky::llt_pivoting::factor::{cholesky_in_place, cholesky_in_place_scratch};
+        use rand::{Rng, SeedableRng};
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2026);
+        let (mut in_band, mut skipped_cut) = (0, 0);
+        for draw in 0..300 {
+            let p = rng.gen_range(12..=40usize);
+            let n = 3 * p;
+            let normal = |r: &mut rand_chacha::ChaCha8Rng| -> f64 { StandardNormal.sample(r) };
+            let mut cols: Vec<Vec<f64>> = Vec::new();
+            // Families of correlated columns: a shared part plus a little of their own.
+            while cols.len() < p - 3 {
+                let size = 1 + (normal(&mut rng).abs() * 4.0) as usize;
+                let shared: Vec<f64> = (0..n).map(|_| normal(&mut rng)).collect();
+                let own = 10f64.powf(-2.0 * normal(&mut rng).abs());
+                for _ in 0..size.min(p - 3 - cols.len()) {
+                    cols.push(shared.iter().map(|s| s + own * normal(&mut rng)).collect());
+                }
+            }
+            let near = 1 + rng.gen_range(0..3usize);
+            while cols.len() < p {
+                let comb: Vec<f64> = (0..n).map(|i| cols.iter().take(5).map(|c| c[i]).sum::<f64>()).collect();
+                let noise: Vec<f64> = (0..n).map(|_| normal(&mut rng)).collect();
+                let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+                let frac = 10f64.powf(-14.0 + 6.0 * rng.gen::<f64>());
+                let delta = frac.sqrt() * norm(&comb) / norm(&noise);
+                cols.push(comb.iter().zip(&noise).map(|(c, e)| c + delta * e).collect());
+                if cols.len() >= p - 3 + near {
+                    break;
+                }
+            }
+            let p = cols.len();
+            let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+            let gram: Vec<f64> = (0..p * p).map(|k| dot(&cols[k / p], &cols[k % p])).collect();
+            // The reference: the cut at the power iterations' λ_max.
+            let inv: Vec<f64> = (0..p).map(|j| 1.0 / gram[j * p + j].sqrt()).collect();
+            let scaled = faer::Mat::<f64>::from_fn(p, p, |i, j| gram[i * p + j] * inv[i] * inv[j]);
+            let mut m = scaled.clone();
+            let (mut perm, mut perm_inv) = (vec![0usize; p], vec![0usize; p]);
+            let par = faer::Par::Seq;
+            let mut buf = MemBuffer::new(cholesky_in_place_scratch::<usize, f64>(p, par, Default::default()));
+            let (info, _) = cholesky_in_place(
+                m.as_mut(),
+                &mut perm,
+                &mut perm_inv,
+                par,
+                MemStack::new(&mut buf),
+                Default::default(),
+            )
+            .unwrap();
+            let kept = |cut: f64| (0..info.rank).take_while(|&j| m[(j, j)] * m[(j, j)] >= cut).count();
+            let want = kept(super::DEPENDENT_PIVOT * super::largest_eigenvalue(&scaled));
+            let factor = super::NormalFactor::new(&gram, p).unwrap();
+            let got = factor.low.as_ref().map_or(p, |(n1, _)| n1.nrows());
+            assert_eq!(got, want, "draw {draw}: p {p}, rank {got} kept, {want} at the power iterations' cut");
+            let bound = super::row_sum_bound(&scaled) * (1.0 + 1e-12);
+            if kept(super::DEPENDENT_PIVOT) != kept(super::DEPENDENT_PIVOT * bound) {
+                in_band += 1;
+            } else if want < p {
+                skipped_cut += 1;
+            }
+        }
+        assert!(in_band >= 10 && skipped_cut >= 10, "{in_band} draws in the band, {skipped_cut} cut without it");
+        eprintln!(
+            "rank decided by the power iterations in {in_band} of 300 draws; a cut without them in {skipped_cut}"
+        );
+    }
+
     /// y = 2·x₁ − 3·x₂ exactly on 50 samples, with a third column equal to x₁ + x₂ (dependent):
     /// the minimum-norm solution (in the columns scaled to unit norm, z_j = ‖x_j‖·β_j) reproduces y
     /// (residual ≤ 1e-9 of |y|) and has no component along the dependency, z ⊥ (‖x₁‖, ‖x₂‖, −‖x₃‖).
