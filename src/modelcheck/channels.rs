@@ -161,13 +161,23 @@ impl Channel {
         if self.is_laser() || self.encoder.is_some() {
             return MotionRead::Value { s, x: self.x[i] };
         }
+        match self.interval_ends(i) {
+            Some((xb, xa, v, dt)) => MotionRead::SlopeDifference { s, v, dt, xa, xb },
+            None => MotionRead::Blind,
+        }
+    }
+
+    /// Where the reference point moves over sample `i`'s interval: (x_i, x_i − v·Δt, v in m/s, Δt
+    /// in s), what an accelerometer's sample reads a motion's slopes at ([`Channel::motion_read`]);
+    /// None where it stands or the interval is not positive.
+    pub(crate) fn interval_ends(&self, i: usize) -> Option<(f64, f64, f64, f64)> {
         let dt = sample_interval(self, i);
         let v = self.v[i];
         if !(dt > 0.0) || v == 0.0 {
-            return MotionRead::Blind;
+            return None;
         }
         let xb = self.x[i];
-        MotionRead::SlopeDifference { s, v, dt, xa: xb - v * dt, xb }
+        Some((xb, xb - v * dt, v, dt))
     }
 
     /// Response of sample `i` to an error motion `name` whose profile has value `value(x)` and slope

@@ -787,12 +787,7 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
             for i in 0..len {
                 for ((inp, sh), ks) in inputs.iter().zip(&raw_shapes).zip(&raw_ks) {
                     if c.is_accel() {
-                        let dt = sample_interval(c, i);
-                        let v = c.v[i];
-                        if !(dt > 0.0) || v == 0.0 {
-                            continue;
-                        }
-                        let (xb, xa) = (c.x[i], c.x[i] - v * dt);
+                        let Some((xb, xa, v, dt)) = c.interval_ends(i) else { continue };
                         let (d1, d0) = sh.slopes_at_two(xb, xa, Some(ks));
                         for (e, &rk) in inp.raw_of.values().enumerate() {
                             raw[rk][i] = wch[i] * v * (d1[e] - d0[e]) / dt;
@@ -1121,12 +1116,7 @@ fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
         for r in 0..block.nrows() {
             let i = i0 + r;
             if c.is_accel() {
-                let dt = sample_interval(c, i);
-                let v = c.v[i];
-                if !(dt > 0.0) || v == 0.0 {
-                    continue;
-                }
-                let (xb, xa) = (c.x[i], c.x[i] - v * dt);
+                let Some((xb, xa, v, dt)) = c.interval_ends(i) else { continue };
                 let (d1, d0) = shx.slopes_at_two(xb, xa, None);
                 for (k, (b1, a0)) in d1.iter().zip(&d0).enumerate().take(top + 1) {
                     block[(r, k)] = v * (b1 - a0) / dt;
