@@ -1604,20 +1604,17 @@ pub(crate) fn refit_coupled<'a>(
         progress(Stage::ModeShapes { round });
         terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target, &mut cache, true)?;
     }
-    let pb2 = if start == ModeStart::Held {
-        problem(st_mode, &terms2, &fs.target, w)?
-    } else {
-        let pb;
-        (terms2, theta1, pb) = polish(st_mode, terms2, theta1, &fs.target, w, &mut cache, progress)?;
-        pb
-    };
-    let (theta, at_bound) = if start == ModeStart::Held {
+    let (pb2, theta, at_bound) = if start == ModeStart::Held {
+        let pb2 = problem(st_mode, &terms2, &fs.target, w)?;
         let (beta, _) = pb2.coupled(&theta1).ok()?;
-        (held_theta(&pb2, &pb2.shape_coefs(&beta), &theta1[2..]), [false; 2])
+        let theta = held_theta(&pb2, &pb2.shape_coefs(&beta), &theta1[2..]);
+        (pb2, theta, [false; 2])
     } else {
+        let pb2;
+        (terms2, theta1, pb2) = polish(st_mode, terms2, theta1, &fs.target, w, &mut cache, progress)?;
         let (theta, _) = pb2.search(&[], 0, &[], &[], &[theta1.clone()])?;
         let at_bound = box_limits(theta1[0], &theta);
-        (theta, at_bound)
+        (pb2, theta, at_bound)
     };
     let (beta, _) = pb2.coupled(&theta).ok()?;
     // The coefficient vector of a fit over `terms2` with the joint shapes in their slots (the

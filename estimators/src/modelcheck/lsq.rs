@@ -337,13 +337,14 @@ impl NormalFactor {
         check_finite("solve_normal: Gram matrix", gram)?;
         let inv: Vec<f64> =
             (0..p).map(|j| gram[j * p + j].max(0.0).sqrt()).map(|d| if d > 0.0 { 1.0 / d } else { 0.0 }).collect();
-        let mut m = Mat::<f64>::from_fn(p, p, |i, j| gram[i * p + j] * inv[i] * inv[j]);
+        let scaled = || Mat::<f64>::from_fn(p, p, |i, j| gram[i * p + j] * inv[i] * inv[j]);
+        let mut m = scaled();
         // The cut's estimate of λ_max(M) lies between M's largest diagonal entry and Gershgorin's
         // bound ([`largest_eigenvalue`]): when the cuts at both ends keep the same leading
-        // pivots, that is the rank at any estimate, and the power iterations are skipped.
+        // pivots, that is the rank at any estimate, and the power iterations (on M formed again:
+        // the factor overwrites it) are skipped.
         let top_diag = (0..p).map(|i| m[(i, i)]).fold(0.0_f64, f64::max);
         let above = row_sum_bound(&m) * (1.0 + 1e-12);
-        let scaled = m.clone();
         let (mut perm, mut perm_inv) = (vec![0usize; p], vec![0usize; p]);
         let par = faer::Par::Seq; // sequential: the same bits on any thread count
         let mut buf = MemBuffer::new(cholesky_in_place_scratch::<usize, f64>(p, par, Default::default()));
@@ -353,7 +354,7 @@ impl NormalFactor {
         let kept = |cut: f64| (0..info.rank).take_while(|&j| m[(j, j)] * m[(j, j)] >= cut).count();
         let r = match kept(DEPENDENT_PIVOT * top_diag) {
             r if r == kept(DEPENDENT_PIVOT * above) => r,
-            _ => kept(DEPENDENT_PIVOT * largest_eigenvalue(&scaled)),
+            _ => kept(DEPENDENT_PIVOT * largest_eigenvalue(&scaled())),
         };
         let low = if r == p {
             None
