@@ -176,6 +176,62 @@ struct FreeInQ {
     r2: [f64; 3],
 }
 
+/// The free vibrations ([`Problem::free_parts`]) one [`Problem::refine`] keeps, by the bits of
+/// (f, ζ): at most [`FREE_PARTS_KEPT`], the least recently used dropped first.
+#[derive(Default)]
+struct FreeKept {
+    #[allow(clippy::type_complexity)]
+    recent: std::sync::Mutex<Vec<([u64; 2], std::sync::Arc<Vec<Option<FreePart>>>)>>,
+}
+
+impl FreeKept {
+    /// The key of θ = (f, ζ, …).
+    fn key(theta: &[f64]) -> [u64; 2] {
+        [theta[0].to_bits(), theta[1].to_bits()]
+    }
+
+    /// The parts kept at `key`, now the most recently used.
+    fn get(&self, key: [u64; 2]) -> Option<std::sync::Arc<Vec<Option<FreePart>>>> {
+        let mut l = self.recent.lock().ok()?;
+        let at = l.iter().position(|(k, _)| *k == key)?;
+        let hit = l.remove(at);
+        l.push(hit.clone());
+        Some(hit.1)
+    }
+
+    /// Keeps `parts` at `key`.
+    fn put(&self, key: [u64; 2], parts: std::sync::Arc<Vec<Option<FreePart>>>) {
+        if let Ok(mut l) = self.recent.lock() {
+            if l.len() >= FREE_PARTS_KEPT {
+                l.remove(0);
+            }
+            l.push((key, parts));
+        }
+    }
+
+    /// The parts at each (f, ζ) of the points `pts` not kept, computed together
+    /// ([`Problem::free_parts_each`]: each channel's factors read once for all of them; each
+    /// point's parts the same bits as alone), and kept.
+    fn ahead(&self, pb: &Problem, pts: &[Vec<f64>], in_q: bool) {
+        let mut keys: Vec<[u64; 2]> = Vec::new();
+        let mut fzs = Vec::new();
+        for th in pts {
+            let key = Self::key(th);
+            let known = self.recent.lock().is_ok_and(|l| l.iter().any(|(k, _)| *k == key));
+            if !known && !keys.contains(&key) {
+                keys.push(key);
+                fzs.push((th[0], th[1]));
+            }
+        }
+        if fzs.is_empty() {
+            return;
+        }
+        for (key, parts) in keys.into_iter().zip(pb.free_parts_each(&fzs, in_q)) {
+            self.put(key, std::sync::Arc::new(parts));
+        }
+    }
+}
+
 /// Where [`refit_coupled`] starts the mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum ModeStart {
@@ -692,8 +748,8 @@ pub(crate) const SEQUENTIAL_GAIN_ROUNDS: usize = 2;
 /// ζ 0.01355. Draw 1022 (62.31 Hz, ζ 0.0050): 66.51 Hz before, 62.37 Hz after.
 pub(crate) const SCAN_GAIN_STEPS: usize = 3;
 /// The free vibrations ([`Problem::free_parts`]) [`Problem::refine`] keeps, by (f, ζ), the least
-/// recently used dropped first. A Jacobian's columns are computed in parallel: its differences in
-/// f and ζ each need their own, while the gains' differences read the point's, which one kept
+/// recently used dropped first. A Jacobian's differences in f and ζ each need their own (computed
+/// together, [`FreeKept::ahead`]), while the gains' differences read the point's, which one kept
 /// copy lost to the others.
 pub(crate) const FREE_PARTS_KEPT: usize = 4;
 /// Starts refined after the first joint frequency scan (the catalogue's whole range): its best
@@ -995,27 +1051,14 @@ impl Problem<'_> {
         // channel has one, else in full.
         let in_q = self.chans.par_iter().all(|c| c.qr().is_some());
         // The Jacobian's differences in the gains keep (f, ζ) to the bit: their free vibration is
-        // one of the last [`FREE_PARTS_KEPT`] computed.
-        #[allow(clippy::type_complexity)]
-        let recent: std::sync::Mutex<Vec<([u64; 2], std::sync::Arc<Vec<Option<FreePart>>>)>> =
-            std::sync::Mutex::new(Vec::new());
+        // one of the last [`FREE_PARTS_KEPT`] computed. Those of its differences in f and ζ are
+        // computed together, told ahead ([`FreeKept::ahead`]).
+        let kept = FreeKept::default();
         let resid = |th: &[f64]| {
-            let key = [th[0].to_bits(), th[1].to_bits()];
-            // The least recently used goes first.
-            let cached = recent.lock().ok().and_then(|mut l| {
-                let at = l.iter().position(|(k, _)| *k == key)?;
-                let hit = l.remove(at);
-                l.push(hit.clone());
-                Some(hit.1)
-            });
-            let free = cached.unwrap_or_else(|| {
+            let key = FreeKept::key(th);
+            let free = kept.get(key).unwrap_or_else(|| {
                 let f = std::sync::Arc::new(self.free_parts((th[0], th[1]), in_q));
-                if let Ok(mut l) = recent.lock() {
-                    if l.len() >= FREE_PARTS_KEPT {
-                        l.remove(0);
-                    }
-                    l.push((key, f.clone()));
-                }
+                kept.put(key, f.clone());
                 f
             });
             if in_q {
@@ -1024,7 +1067,8 @@ impl Problem<'_> {
                 self.coupled_with(th, &free).map(|(_, r)| r)
             }
         };
-        refine_projected_point(&resid, &s, &lo, &hi, COUPLED_EVALUATIONS).map_or(s, |r| r.0)
+        let ahead = |pts: &[Vec<f64>]| kept.ahead(self, pts, in_q);
+        refine_projected_point(&resid, Some(&ahead), &s, &lo, &hi, COUPLED_EVALUATIONS).map_or(s, |r| r.0)
     }
 
     /// The joint optimum: a scan over `grid` ((frequency, Hz; damping ratio) points, [`COUPLED_SCAN_LEVELS`]:

@@ -1221,7 +1221,7 @@ fn refine_jointly(
             }
         }
     };
-    if let Some((theta, _)) = refine_projected_point(&resid, &start, &lo, &hi, 40) {
+    if let Some((theta, _)) = refine_projected_point(&resid, None, &start, &lo, &hi, 40) {
         for (&(ti, hi), v) in free.iter().zip(&theta) {
             terms[ti].hyper[hi] = *v;
         }

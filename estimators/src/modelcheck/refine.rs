@@ -29,6 +29,12 @@ use rayon::prelude::*;
 /// as invalid (the solver then stops and the starting point stands).
 pub type ProjectedResidualFn<'a> = dyn Fn(&[f64]) -> Result<Vec<f64>, ModelCheckError> + Sync + 'a;
 
+/// Told, before a Jacobian's differences are evaluated, all their points θ at once: a caller whose
+/// evaluations share work between points (the coupled mode fit's free vibration at each (f, ζ),
+/// one pass over its factors for both differences) prepares it for all of them together. It must
+/// not change what the residual gives at any point.
+pub type AheadFn<'a> = dyn Fn(&[Vec<f64>]) + Sync + 'a;
+
 /// Result of [`refine_projected`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Refined {
@@ -46,6 +52,7 @@ pub struct Refined {
 /// The problem in the solver's unconstrained coordinates u (θ = c + h·tanh u).
 struct Problem<'a, 'f> {
     f: &'a ProjectedResidualFn<'f>,
+    ahead: Option<&'a AheadFn<'f>>,
     centre: Vec<f64>,
     half: Vec<f64>,
     u: DVector<f64>,
@@ -57,6 +64,15 @@ struct Problem<'a, 'f> {
 impl Problem<'_, '_> {
     fn theta(&self, u: &DVector<f64>) -> Vec<f64> {
         u.iter().zip(self.centre.iter().zip(&self.half)).map(|(u, (c, h))| c + h * u.tanh()).collect()
+    }
+
+    /// The point of the Jacobian's forward difference in u_d: its step, √ε·max(1, |u_d|) (Dennis &
+    /// Schnabel 1983, §5.4), and the shifted u.
+    fn shifted(&self, d: usize) -> (f64, DVector<f64>) {
+        let step = 1.5e-8 * self.u[d].abs().max(1.0);
+        let mut u = self.u.clone();
+        u[d] += step;
+        (step, u)
     }
 
     fn eval(&mut self, u: &DVector<f64>) -> Option<DVector<f64>> {
@@ -85,16 +101,17 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        // Forward differences, step √ε·max(1, |u|) (Dennis & Schnabel 1983, §5.4). `jacobian`
-        // takes &self, so the evaluations of the differences are counted by the caller's bound.
-        // The columns on their own threads (each the same bits on any number of them).
+        // Forward differences ([`Problem::shifted`]). `jacobian` takes &self, so the evaluations
+        // of the differences are counted by the caller's bound. Their points told ahead, then the
+        // columns on their own threads (each the same bits on any number of them).
         let r0 = self.r.as_ref()?;
+        if let Some(ahead) = self.ahead {
+            ahead(&(0..self.u.len()).map(|d| self.theta(&self.shifted(d).1)).collect::<Vec<_>>());
+        }
         let cols: Vec<Option<Vec<f64>>> = (0..self.u.len())
             .into_par_iter()
             .map(|d| {
-                let step = 1.5e-8 * self.u[d].abs().max(1.0);
-                let mut u = self.u.clone();
-                u[d] += step;
+                let (step, u) = self.shifted(d);
                 let r = (self.f)(&self.theta(&u)).ok()?;
                 if r.len() != r0.len() || r.iter().any(|x| !x.is_finite()) {
                     return None;
@@ -123,7 +140,7 @@ pub fn refine_projected(
     hi: &[f64],
     max_evaluations: usize,
 ) -> Option<Refined> {
-    let (solved, cost) = minimise(f, start, lo, hi, max_evaluations)?;
+    let (solved, cost) = minimise(f, None, start, lo, hi, max_evaluations)?;
     let dim = start.len();
     let mut evaluations = solved.evaluations;
     let theta = solved.theta(&solved.u);
@@ -153,15 +170,17 @@ pub fn refine_projected(
 }
 
 /// [`refine_projected`] without the standard errors (they cost dim(θ) more evaluations): the
-/// refined θ and its cost ‖P⊥(θ)W^{1/2}r‖², `None` as there.
+/// refined θ and its cost ‖P⊥(θ)W^{1/2}r‖², `None` as there. `ahead`, when given, is told each
+/// Jacobian's points before they are evaluated ([`AheadFn`]).
 pub fn refine_projected_point(
     f: &ProjectedResidualFn,
+    ahead: Option<&AheadFn>,
     start: &[f64],
     lo: &[f64],
     hi: &[f64],
     max_evaluations: usize,
 ) -> Option<(Vec<f64>, f64)> {
-    let (solved, cost) = minimise(f, start, lo, hi, max_evaluations)?;
+    let (solved, cost) = minimise(f, ahead, start, lo, hi, max_evaluations)?;
     Some((solved.theta(&solved.u), cost))
 }
 
@@ -169,6 +188,7 @@ pub fn refine_projected_point(
 /// for a degenerate box, an invalid start or no decrease.
 fn minimise<'a, 'f>(
     f: &'a ProjectedResidualFn<'f>,
+    ahead: Option<&'a AheadFn<'f>>,
     start: &[f64],
     lo: &[f64],
     hi: &[f64],
@@ -186,7 +206,7 @@ fn minimise<'a, 'f>(
     // Start a hair inside the box: tanh saturates at its edges.
     let u0 =
         DVector::from_iterator(dim, (0..dim).map(|d| ((start[d] - centre[d]) / half[d]).clamp(-0.995, 0.995).atanh()));
-    let mut problem = Problem { f, centre, half, u: u0.clone(), r: None, evaluations: 0 };
+    let mut problem = Problem { f, ahead, centre, half, u: u0.clone(), r: None, evaluations: 0 };
     problem.set_params(&u0);
     let cost0 = problem.r.as_ref()?.norm_squared();
     let patience = (max_evaluations / (dim + 1)).max(1);
@@ -272,6 +292,43 @@ mod tests {
         for (name, m) in ["frequency", "decay"].iter().zip(z2) {
             eprintln!("{name}: mean z² = {m:.3} over {draws} draws");
             assert!((0.75..1.3).contains(&m), "{name}: mean z² = {m:.3} over {draws} draws");
+        }
+    }
+
+    /// The points told ahead are the Jacobian's differences: after each telling, the next
+    /// evaluations are exactly the points told (one per parameter, in some order); and telling
+    /// them changes nothing (the same θ and cost to the bit as without).
+    #[test]
+    fn the_points_told_ahead_are_the_jacobians_differences() {
+        let t: Vec<f64> = (0..300).map(|i| i as f64 * 1e-3).collect();
+        let y = damped(&t, 41.7, 5.3, (0.4, -0.9));
+        let bits = |th: &[f64]| th.iter().map(|v| v.to_bits()).collect::<Vec<u64>>();
+        let evaluated = std::sync::Mutex::new(Vec::<Vec<u64>>::new());
+        // (evaluations before the telling, the points told).
+        let told = std::sync::Mutex::new(Vec::<(usize, Vec<Vec<u64>>)>::new());
+        let inner = projected(&t, &y);
+        let f = |th: &[f64]| {
+            evaluated.lock().unwrap().push(bits(th));
+            inner(th)
+        };
+        let ahead = |pts: &[Vec<f64>]| {
+            let before = evaluated.lock().unwrap().len();
+            told.lock().unwrap().push((before, pts.iter().map(|p| bits(p)).collect()));
+        };
+        let (lo, hi, start) = ([35.0, 1.0], [50.0, 20.0], [41.7 * 1.02, 5.3 * 1.3]);
+        let with = refine_projected_point(&f, Some(&ahead), &start, &lo, &hi, 60).expect("refined");
+        let without = refine_projected_point(&inner, None, &start, &lo, &hi, 60).expect("refined");
+        assert_eq!(bits(&with.0), bits(&without.0));
+        assert_eq!(with.1.to_bits(), without.1.to_bits());
+        let (told, evaluated) = (told.into_inner().unwrap(), evaluated.into_inner().unwrap());
+        assert!(told.len() >= 2, "{} tellings", told.len());
+        for (before, pts) in &told {
+            assert_eq!(pts.len(), 2, "one point per parameter");
+            let mut next = evaluated[*before..*before + 2].to_vec();
+            let mut pts = pts.clone();
+            next.sort();
+            pts.sort();
+            assert_eq!(next, pts, "the evaluations after telling at {before}");
         }
     }
 
