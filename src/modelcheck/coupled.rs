@@ -142,6 +142,9 @@ struct ChannelGram {
     yy: f64,
     /// Excited channels: the position of its two free-vibration unknowns among the free ones.
     free: Option<usize>,
+    /// The first excited channel with this channel's sample times (itself when none before it
+    /// has them): its free vibration is this one's ([`free_vibration`] reads the times alone).
+    twin: usize,
     /// The thin QR of `cols` ([`Columns::thin_qr`]), computed on first use ([`ChannelGram::qr`]).
     qr: std::sync::OnceLock<Option<(Columns, Vec<f64>)>>,
 }
@@ -434,18 +437,30 @@ impl Problem<'_> {
     /// read and packed once for all the points of a scan's chunk); each point's parts are those of
     /// [`Problem::free_parts`] at it alone.
     fn free_parts_each(&self, fzs: &[(f64, f64)], in_q: bool) -> Vec<Vec<Option<FreePart>>> {
+        // Each point's free vibration on each excited channel that is its own twin (unweighted).
+        let vibs: Vec<Option<Vec<[Vec<f64>; 2]>>> = self
+            .chans
+            .par_iter()
+            .enumerate()
+            .map(|(j, ch)| {
+                let c = &self.st.chans[ch.index];
+                (ch.free.is_some() && ch.twin == j)
+                    .then(|| fzs.iter().map(|fz| free_vibration(c, fz.0, fz.1)).collect())
+            })
+            .collect();
         // Per channel, each point's parts (None for a channel the mode does not reach).
         let per_channel: Vec<Option<Vec<FreePart>>> = self
             .chans
             .par_iter()
             .map(|ch| {
                 ch.free?;
-                let c = &self.st.chans[ch.index];
+                // index: a twin is a channel's index (`problem`).
+                let vib = vibs[ch.twin].as_ref()?;
                 let wch = &self.w[ch.start..ch.start + ch.cols.rows()];
                 // Each point's two weighted columns φ_0, φ_1, side by side.
-                let cols: Vec<Vec<f64>> = fzs
+                let cols: Vec<Vec<f64>> = vib
                     .iter()
-                    .flat_map(|fz| free_vibration(c, fz.0, fz.1))
+                    .flat_map(|pair| pair.iter())
                     .map(|resp| resp.iter().zip(wch).map(|(x, w)| x * w).collect())
                     .collect();
                 let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
@@ -897,6 +912,8 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
                 bf,
                 yy,
                 free: frees[j],
+                // index: k ≤ j < the number of channels, as `frees`.
+                twin: (0..=j).find(|&k| frees[k].is_some() && st.chans[k].t == c.t).unwrap_or(j),
                 qr: std::sync::OnceLock::new(),
             })
         })
