@@ -327,6 +327,21 @@ pub(crate) mod tests {
         }
     }
 
+    /// A clock at a round rate gives every interval the same number of mode steps: over 100 000
+    /// samples t_i = i/f_s (each interval a few ulps either side of a whole number of steps at
+    /// 500 Hz – 10 kHz), one count per rate, the whole number; and an interval 10⁻⁶ above a whole
+    /// number takes one step more.
+    #[test]
+    fn intervals_of_a_round_clock_take_one_number_of_mode_steps() {
+        for (fs, whole) in [(500.0, 20), (1000.0, 10), (2000.0, 5), (2500.0, 4), (5000.0, 4), (10_000.0, 4)] {
+            let t: Vec<f64> = (0..100_000).map(|i| i as f64 / fs).collect();
+            let counts: std::collections::BTreeSet<usize> = t.windows(2).map(|p| mode_steps(p[1] - p[0])).collect();
+            assert_eq!(counts.into_iter().collect::<Vec<_>>(), vec![whole], "{fs} Hz");
+        }
+        assert_eq!(mode_steps(1e-3 * (1.0 + 1e-6)), 11);
+        assert_eq!(mode_steps(6.653345189819e-4), 7);
+    }
+
     /// Forced at resonance by a(τ) = A·sin(ωτ) with ζ = 0.2: after the transient (e^{−ζω·2 s} ≈
     /// e^{−25}) q̈ = −A·cos(ωτ)/(2ζ) (|H| = 1/(2ζω²) at ω, q = A·cos(ωτ)/(2ζω²)), read as the mean
     /// of q̈ over each 10 ms interval: the exact mean of that cosine, to 1e-5 of A/(2ζ) (the input
