@@ -375,6 +375,41 @@ pub(crate) mod tests {
         }
     }
 
+    /// The forced response at resonance on a clock that rounds its times to 1 µs (intervals of
+    /// 665 and 666 µs in turn, each with its own step map, kept and reused): after the transient,
+    /// the exact interval means of −A·cos(ωt)/(2ζ) to 1e-5 of A/(2ζ) (as on an even clock). A map reused for the other
+    /// interval advances the state by 1 µs too much or too little, about 10⁻³ of A/(2ζ) in phase.
+    #[test]
+    fn forced_mode_response_on_a_rounded_clock_uses_each_intervals_map() {
+        let n = 4000;
+        let mut c = accel("a", n);
+        c.t = (0..n).map(|i| (i as f64 / 1503.0 * 1e6).round() / 1e6).collect();
+        let (f, z, amp): (f64, f64, f64) = (10.0, 0.2, 1.0);
+        let w = TWO_PI * f;
+        let (steps, input): (Vec<usize>, Vec<Vec<f64>>) = (0..n)
+            .map(|i| {
+                let dt = sample_interval(&c, i);
+                let m = mode_steps(dt);
+                // Interval i runs from t_i − Δt_i to t_i; the mean of A·sin(ωt) over each step.
+                let tk = |k: usize| c.t[i] - dt + dt * k as f64 / m as f64;
+                let vals = (0..m)
+                    .map(|k| amp * ((w * tk(k)).cos() - (w * tk(k + 1)).cos()) / (w * (tk(k + 1) - tk(k))))
+                    .collect();
+                (m, vals)
+            })
+            .unzip();
+        let distinct: std::collections::BTreeSet<u64> =
+            (1..n).map(|i| (sample_interval(&c, i) * 1e6).round() as u64).collect();
+        assert_eq!(distinct.into_iter().collect::<Vec<_>>(), vec![665, 666]);
+        let ex = Excitation::new(steps, input);
+        let r = mode_response(&c, Some(&ex), f, z, (0.0, 0.0));
+        for i in 3500..n {
+            let (a, b) = (c.t[i] - sample_interval(&c, i), c.t[i]);
+            let want = -amp / (2.0 * z) * ((w * b).sin() - (w * a).sin()) / (w * (b - a));
+            assert!((r[i] - want).abs() < 1e-5 * amp / (2.0 * z), "sample {i}: {} {want}", r[i]);
+        }
+    }
+
     /// Responses run side by side are those run alone, to the bit: six inputs with the same steps
     /// (two groups of lanes, 4 + 2) against one call each, and the two free vibrations against
     /// their starts run alone; with a jittered clock (the step map rebuilt at every sample).
