@@ -6,6 +6,10 @@
 //! - encoder logs of a ball-screw axis (two passes, two crawls, a slow reversal; scale and motor
 //!   encoder), a starting model with fitted positioning and servo lag.
 //!
+//! The 15 000-sample hidden-mode set also with its clock as loggers keep it: its times rounded to
+//! 1 µs (intervals of 665 and 666 µs in turn), and with Gaussian jitter of 0.5 µs on each (no two
+//! intervals alike): the mode's step maps are then kept and reused, or had from a near one.
+//!
 //! Also `vmt compare` of the complete models on the same accelerometer sets (its channel
 //! reports hold each residual's least-squares periodogram), and the periodogram itself on an
 //! evenly spaced grid (Fourier sums) against the explicit fit at each frequency, in one run.
@@ -15,6 +19,8 @@
 //! writes its sets under DIR (kept, for timing another build's `vmt diagnose` on the same data)
 //! instead of a temporary directory.
 use criterion::{criterion_group, criterion_main, Criterion};
+use rand::SeedableRng;
+use rand_distr::Distribution;
 use std::path::Path;
 
 #[path = "../tests/gen_timeseries/mod.rs"]
@@ -40,11 +46,51 @@ fn diagnose(c: &mut Criterion) {
         let dir = root.join(format!("res{samples}"));
         let t = accel_set_sized(&dir, 12, AccelHidden::Resonance, 200.0, Some(samples));
         bench(&mut g, format!("accelerometer passes, hidden mode, {} samples", t.samples), &dir);
+        if samples == 15_000 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(14);
+            let jitter = rand_distr::Normal::new(0.0, 0.5e-6).unwrap();
+            let mut rounded = |t: f64| (t * 1e6).round() / 1e6;
+            let mut jittered = |t: f64| if t > 0.0 { t + jitter.sample(&mut rng) } else { t };
+            let clocks: [(&str, &str, Clock); 2] = [
+                ("res15000_us", "times rounded to 1 µs", &mut rounded),
+                ("res15000_jitter", "0.5 µs jitter on each time", &mut jittered),
+            ];
+            for (name, what, clock) in clocks {
+                let to = root.join(name);
+                retimed(&dir, &to, clock);
+                bench(&mut g, format!("accelerometer passes, hidden mode, {} samples, {what}", t.samples), &to);
+            }
+        }
         let dir = root.join(format!("enc{samples}"));
         let t = encoder_set_sized(&dir, 13, EncoderHidden::None, Some(samples));
         bench(&mut g, format!("encoder logs, complete, {} samples", t.samples), &dir);
     }
     g.finish();
+}
+
+/// A set's clock: its times (s) rewritten.
+type Clock<'a> = &'a mut dyn FnMut(f64) -> f64;
+
+/// The set in `from` copied to `to` with each CSV's first column (the time, s) rewritten by `clock`.
+fn retimed(from: &Path, to: &Path, clock: &mut dyn FnMut(f64) -> f64) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let out = if path.extension().is_some_and(|e| e == "csv") {
+            let mut lines = text.lines();
+            let mut out = format!("{}\n", lines.next().unwrap_or(""));
+            for line in lines {
+                let (t, rest) = line.split_once(',').unwrap();
+                out.push_str(&format!("{:?},{rest}\n", clock(t.parse::<f64>().unwrap())));
+            }
+            out
+        } else {
+            text
+        };
+        std::fs::write(to.join(name), out).unwrap();
+    }
 }
 
 fn compare(c: &mut Criterion) {
