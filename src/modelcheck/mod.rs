@@ -349,48 +349,24 @@ pub(crate) mod tests {
     /// 10 Hz).
     #[test]
     fn forced_mode_response_at_resonance_has_gain_one_over_two_zeta() {
-        let c = accel("a", 300);
-        let (f, z, amp): (f64, f64, f64) = (10.0, 0.2, 1.0);
-        let w = TWO_PI * f;
-        let (steps, input): (Vec<usize>, Vec<Vec<f64>>) = (0..300)
-            .map(|i| {
-                let m = mode_steps(0.01);
-                // τ counts from t_{−1} = −Δt: interval i (t_i − Δt → t_i) starts at τ = t_i.
-                let t0 = c.t[i];
-                // The mean of A·sin(ωτ) over each step.
-                let tk = |k: usize| t0 + 0.01 * k as f64 / m as f64;
-                let vals = (0..m)
-                    .map(|k| amp * ((w * tk(k)).cos() - (w * tk(k + 1)).cos()) / (w * (tk(k + 1) - tk(k))))
-                    .collect();
-                (m, vals)
-            })
-            .unzip();
-        let ex = Excitation::new(steps, input);
-        let r = mode_response(&c, Some(&ex), f, z, (0.0, 0.0));
-        for i in 200..300 {
-            // Interval i runs from τ = t_i to t_i + Δt (τ from t_{−1}); mean of −A·cos(ωτ)/(2ζ).
-            let (a, b) = (c.t[i], c.t[i] + 0.01);
-            let want = -amp / (2.0 * z) * ((w * b).sin() - (w * a).sin()) / (w * 0.01);
-            assert!((r[i] - want).abs() < 1e-5 * amp / (2.0 * z), "sample {i}: {} {want}", r[i]);
-        }
+        assert_steady_resonance_on((0..300).map(|i| i as f64 / 100.0).collect(), 200);
     }
 
-    /// The forced response at resonance on a clock that rounds its times to 1 µs (intervals of
-    /// 665 and 666 µs in turn, each with its own step map, kept and reused): after the transient,
-    /// the exact interval means of −A·cos(ωt)/(2ζ) to 1e-5 of A/(2ζ) (as on an even clock). A map reused for the other
-    /// interval advances the state by 1 µs too much or too little, about 10⁻³ of A/(2ζ) in phase.
-    #[test]
-    fn forced_mode_response_on_a_rounded_clock_uses_each_intervals_map() {
-        let n = 4000;
+    /// The forced response at resonance of a 10 Hz mode with ζ = 0.2 driven by a(t) = A·sin(ωt) on
+    /// the clock `t`, against its steady state from sample `from` on (after the transient, at
+    /// t ≥ 2 s: e^{−ζω·t} ≤ e^{−25}): the exact interval means of −A·cos(ωt)/(2ζ), to 1e-5 of
+    /// A/(2ζ), interval i running from t_i − Δt_i to t_i.
+    fn assert_steady_resonance_on(t: Vec<f64>, from: usize) {
+        let n = t.len();
         let mut c = accel("a", n);
-        c.t = (0..n).map(|i| (i as f64 / 1503.0 * 1e6).round() / 1e6).collect();
+        c.t = t;
         let (f, z, amp): (f64, f64, f64) = (10.0, 0.2, 1.0);
         let w = TWO_PI * f;
         let (steps, input): (Vec<usize>, Vec<Vec<f64>>) = (0..n)
             .map(|i| {
                 let dt = sample_interval(&c, i);
                 let m = mode_steps(dt);
-                // Interval i runs from t_i − Δt_i to t_i; the mean of A·sin(ωt) over each step.
+                // The mean of A·sin(ωt) over each step.
                 let tk = |k: usize| c.t[i] - dt + dt * k as f64 / m as f64;
                 let vals = (0..m)
                     .map(|k| amp * ((w * tk(k)).cos() - (w * tk(k + 1)).cos()) / (w * (tk(k + 1) - tk(k))))
@@ -398,50 +374,41 @@ pub(crate) mod tests {
                 (m, vals)
             })
             .unzip();
-        let distinct: std::collections::BTreeSet<u64> =
-            (1..n).map(|i| (sample_interval(&c, i) * 1e6).round() as u64).collect();
-        assert_eq!(distinct.into_iter().collect::<Vec<_>>(), vec![665, 666]);
         let ex = Excitation::new(steps, input);
         let r = mode_response(&c, Some(&ex), f, z, (0.0, 0.0));
-        for i in 3500..n {
+        assert!(c.t[from] >= 2.0);
+        for i in from..n {
             let (a, b) = (c.t[i] - sample_interval(&c, i), c.t[i]);
             let want = -amp / (2.0 * z) * ((w * b).sin() - (w * a).sin()) / (w * (b - a));
             assert!((r[i] - want).abs() < 1e-5 * amp / (2.0 * z), "sample {i}: {} {want}", r[i]);
         }
     }
 
-    /// The same on a jittered clock (each interval 665 µs with Gaussian jitter of 0.3 µs, none
-    /// alike): most step maps are had from a kept one ([`super::signatures`]' `HeldStep::near`),
-    /// and the response stays the exact interval means to 1e-5 of A/(2ζ).
+    /// [`assert_steady_resonance_on`] a clock that rounds its times to 1 µs (intervals of 665 and
+    /// 666 µs in turn, each with its own step map, kept and reused). A map reused for the other
+    /// interval advances the state by 1 µs too much or too little: an error of about 10⁻³ of
+    /// A/(2ζ) (it fails).
+    #[test]
+    fn forced_mode_response_on_a_rounded_clock_uses_each_intervals_map() {
+        let t: Vec<f64> = (0..4000).map(|i| (i as f64 / 1503.0 * 1e6).round() / 1e6).collect();
+        let distinct: std::collections::BTreeSet<u64> =
+            t.windows(2).map(|p| ((p[1] - p[0]) * 1e6).round() as u64).collect();
+        assert_eq!(distinct.into_iter().collect::<Vec<_>>(), vec![665, 666]);
+        assert_steady_resonance_on(t, 3100);
+    }
+
+    /// [`assert_steady_resonance_on`] a jittered clock (each interval 665 µs with Gaussian jitter
+    /// of 0.3 µs, none alike): most step maps are had from a kept one (`HeldStep::near`).
     #[test]
     fn forced_mode_response_on_a_jittered_clock_is_exact() {
         use rand::SeedableRng;
         use rand_distr::Distribution;
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(29);
         let jitter = rand_distr::Normal::new(0.0, 0.3e-6).unwrap();
-        let n = 4000;
-        let mut c = accel("a", n);
-        c.t = (0..n).map(|i| i as f64 * 665e-6 + if i > 0 { jitter.sample(&mut rng) } else { 0.0 }).collect();
-        let (f, z, amp): (f64, f64, f64) = (10.0, 0.2, 1.0);
-        let w = TWO_PI * f;
-        let (steps, input): (Vec<usize>, Vec<Vec<f64>>) = (0..n)
-            .map(|i| {
-                let dt = sample_interval(&c, i);
-                let m = mode_steps(dt);
-                let tk = |k: usize| c.t[i] - dt + dt * k as f64 / m as f64;
-                let vals = (0..m)
-                    .map(|k| amp * ((w * tk(k)).cos() - (w * tk(k + 1)).cos()) / (w * (tk(k + 1) - tk(k))))
-                    .collect();
-                (m, vals)
-            })
-            .unzip();
-        let ex = Excitation::new(steps, input);
-        let r = mode_response(&c, Some(&ex), f, z, (0.0, 0.0));
-        for i in 3500..n {
-            let (a, b) = (c.t[i] - sample_interval(&c, i), c.t[i]);
-            let want = -amp / (2.0 * z) * ((w * b).sin() - (w * a).sin()) / (w * (b - a));
-            assert!((r[i] - want).abs() < 1e-5 * amp / (2.0 * z), "sample {i}: {} {want}", r[i]);
-        }
+        assert_steady_resonance_on(
+            (0..4000).map(|i| i as f64 * 665e-6 + if i > 0 { jitter.sample(&mut rng) } else { 0.0 }).collect(),
+            3100,
+        );
     }
 
     /// Responses run side by side are those run alone, to the bit: six inputs with the same steps
