@@ -191,13 +191,17 @@ fn loop_rates<T: Send>(
         .collect()
 }
 
-fn accel_rates(hidden: AccelHidden, draws: u64, add: bool) -> Vec<(AccelTruth, Outcome)> {
+/// A logger's clock ([`Clock::Logger`]): 0.5 µs of jitter on each sampling instant, stamps of 1 µs.
+const LOGGER: Clock = Clock::Logger { jitter: 0.5e-6, resolution: 1e-6 };
+
+fn accel_rates(hidden: AccelHidden, draws: u64, add: bool, clock: Clock) -> Vec<(AccelTruth, Outcome)> {
+    let on = if clock == Clock::Even { String::new() } else { "Logger".to_string() };
     loop_rates(
-        &format!("acc{hidden:?}"),
-        &format!("{hidden:?}"),
+        &format!("acc{hidden:?}{on}"),
+        &format!("{hidden:?}{on}"),
         draws,
         add,
-        |dir, seed| accel_set(dir, 1000 + seed, hidden, 200.0),
+        |dir, seed| accel_set_clocked(dir, 1000 + seed, hidden, 200.0, None, clock),
         |t| format!("{} samples, ρ {:.2} µg/√Hz, mode {:?}", t.samples, t.density / G * 1e6, t.mode),
     )
 }
@@ -289,12 +293,23 @@ fn accel_mode_fitted_with_its_shapes() {
 #[test]
 #[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
 fn accel_complete_model_false_alarms() {
+    complete_accel(Clock::Even);
+}
+
+/// [`accel_complete_model_false_alarms`] on a logger's clock ([`LOGGER`]: every interval its own).
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn accel_complete_model_false_alarms_on_a_loggers_clock() {
+    complete_accel(LOGGER);
+}
+
+fn complete_accel(clock: Clock) {
     let n = draws(100);
-    let r = accel_rates(AccelHidden::None, n, false);
+    let r = accel_rates(AccelHidden::None, n, false, clock);
     let errors = r.iter().filter(|x| x.1.error.is_some()).count();
     let fa = r.iter().filter(|x| x.1.any_significant).count();
     eprintln!(
-        "accelerometer complete: {fa}/{n} with a significant claim ({:.1} %), {errors} errors",
+        "accelerometer complete, clock {clock:?}: {fa}/{n} with a significant claim ({:.1} %), {errors} errors",
         rate(fa, n as usize)
     );
     assert_eq!(errors, 0);
@@ -314,9 +329,9 @@ fn draw_range(n: u64) -> std::ops::Range<u64> {
     from..from + n
 }
 
-fn hidden_accel(h: AccelHidden, expect: &str) {
+fn hidden_accel(h: AccelHidden, expect: &str, clock: Clock) {
     let n = draws(30);
-    let r = accel_rates(h, n, true);
+    let r = accel_rates(h, n, true, clock);
     let named = r.iter().filter(|x| x.1.first.as_ref().is_some_and(|f| f.0 == expect && f.1 == "significant")).count();
     let low = r.iter().filter(|x| x.1.nrms_after.is_some_and(|v| v <= 1.3)).count();
     // The mode fitted after `add` (compare's refined values) against the generator's: frequency
@@ -378,7 +393,7 @@ fn hidden_accel(h: AccelHidden, expect: &str) {
     }
     let roll_in = rolls.iter().filter(|(e, b)| e <= &(2.0 * b)).count();
     eprintln!(
-        "accelerometer {h:?}: `{expect}` first & significant {named}/{n} ({:.0} %), nrms ≤ 1.3 after add {low}/{n}, \
+        "accelerometer {h:?}, clock {clock:?}: `{expect}` first & significant {named}/{n} ({:.0} %), nrms ≤ 1.3 after add {low}/{n}, \
          mode within 1 % / 10 % {fitted}/{n}; f within 1 % on {f_fit} of the {n_f} draws whose bound allows it, ζ \
          within 10 % on {z_fit} of {n_z}; roll within 2 × its bound {roll_in}/{}",
         rate(named, n as usize),
@@ -540,8 +555,9 @@ macro_rules! rate_studies {
 }
 
 rate_studies! {
-    accel_hidden_resonance => hidden_accel(AccelHidden::Resonance, "resonance");
-    accel_hidden_roll => hidden_accel(AccelHidden::Roll, "gravity_tilt");
+    accel_hidden_resonance => hidden_accel(AccelHidden::Resonance, "resonance", Clock::Even);
+    accel_hidden_resonance_on_a_loggers_clock => hidden_accel(AccelHidden::Resonance, "resonance", LOGGER);
+    accel_hidden_roll => hidden_accel(AccelHidden::Roll, "gravity_tilt", Clock::Even);
     encoder_hidden_interpolation_error => hidden_encoder(EncoderHidden::InterpolationError, "interpolation_error");
     encoder_hidden_cyclic_lead => hidden_encoder(EncoderHidden::CyclicLead, "cyclic_lead");
     encoder_hidden_backlash => hidden_encoder(EncoderHidden::Backlash, "backlash");

@@ -207,6 +207,17 @@ pub fn write_model(path: &Path, effects: &[&str]) {
 // ------------------------------------------------------------------------------------------
 // Accelerometer passes.
 
+/// The clock that stamps an accelerometer draw's samples.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Clock {
+    /// t_i = i/f_s exactly (to rounding).
+    Even,
+    /// A logger's: each instant i/f_s moved by Gaussian jitter of σ `jitter` (s), then rounded to
+    /// the stamp's `resolution` (s). The samples are taken at the stamped instants (the data are
+    /// exact at the times the file gives), so every interval is its own.
+    Logger { jitter: f64, resolution: f64 },
+}
+
 /// What an accelerometer draw hides from its starting model (straightness_y + straightness_z).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum AccelHidden {
@@ -555,9 +566,22 @@ pub fn accel_set_sized(
     min_chi2: f64,
     samples: Option<usize>,
 ) -> AccelTruth {
+    accel_set_clocked(dir, seed, hidden, min_chi2, samples, Clock::Even)
+}
+
+/// [`accel_set_sized`] with its samples stamped by `clock` (the same draw otherwise: the clock's
+/// jitter comes from its own stream).
+pub fn accel_set_clocked(
+    dir: &Path,
+    seed: u64,
+    hidden: AccelHidden,
+    min_chi2: f64,
+    samples: Option<usize>,
+    clock: Clock,
+) -> AccelTruth {
     let mut attempt = 0u64;
     loop {
-        let t = accel_try(dir, seed.wrapping_mul(1_000_003).wrapping_add(attempt), hidden, samples);
+        let t = accel_try(dir, seed.wrapping_mul(1_000_003).wrapping_add(attempt), hidden, samples, clock);
         // Each hidden effect visible (χ² ≥ min_chi2) and worth adding by diagnose's own floor: it
         // must explain ≥ 1 % of the residual (`explained_floor`), whose χ² is about the sample
         // count, so the generator asks 2 % of the samples (a margin for what the offsets, the
@@ -574,8 +598,9 @@ pub fn accel_set_sized(
     }
 }
 
-fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>) -> AccelTruth {
+fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>, clock: Clock) -> AccelTruth {
     let mut d = Draw::new(seed);
+    let mut jitter = Draw::new(seed ^ 0x6c6f_6767_6572);
     let travel = d.uniform(0.25, 0.6);
     let x_lo = d.uniform(-0.1, 0.3);
     // Straightness: two or three smooth components of different correlation lengths + waviness.
@@ -653,12 +678,30 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
         let mut hy = Vec::with_capacity(n);
         let mut hz = Vec::with_capacity(n);
         let mut qd_prev = 0.0;
+        // The stamped instant of the sample before (a logger's clock; the lead-in is even).
+        let mut t_prev = -dt;
         for i in 0..(lead + n) as i64 {
-            let ti = (i - lead as i64) as f64 * dt;
+            let even = (i - lead as i64) as f64 * dt;
+            // This interval (t_{i−1}, t_i]: its ends and length.
+            let (ti, tp, dt) = match clock {
+                Clock::Logger { jitter: sj, resolution } if i >= lead as i64 => {
+                    let at = ((even + sj * jitter.normal()) / resolution).round() * resolution;
+                    // A stamp that does not advance (jitter beyond half an interval) is not kept.
+                    let at = at.max(t_prev + resolution);
+                    (at, t_prev, at - t_prev)
+                }
+                Clock::Even | Clock::Logger { .. } => (even, even - dt, dt),
+            };
+            t_prev = ti;
+            let own = match clock {
+                Clock::Logger { .. } => mode.map(|(f, z)| Oscillator::new(f, z, dt / sub as f64)),
+                Clock::Even => None,
+            };
+            let h = dt / sub as f64;
             // Integrate the mode over (t_{i−1}, t_i].
-            if let Some(o) = &osc {
+            if let Some(o) = own.as_ref().or(osc.as_ref()) {
                 for s in 0..sub {
-                    let tm = ti - dt + (s as f64 + 0.5) * h;
+                    let tm = tp + (s as f64 + 0.5) * h;
                     let b = base(x_at(tm));
                     let a = m_shape[1] * b[1] + m_shape[2] * b[2];
                     q = o.step(q, a);
@@ -670,7 +713,7 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>)
                 continue;
             }
             let x = x_at(ti);
-            let xp = x_at(ti - dt);
+            let xp = x_at(tp);
             tcol.push(t0 + ti);
             xcol.push(x);
             // Interval mean of the guideway acceleration: (v·E'(x_i) − v·E'(x_{i−1}))/Δt, signed
