@@ -531,6 +531,18 @@ fn accel_hidden_resonance_and_roll() {
     );
 }
 
+/// [`accel_hidden_resonance_and_roll`] on a logger's clock ([`LOGGER`]).
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn accel_hidden_resonance_and_roll_on_a_loggers_clock() {
+    hidden_pair(
+        draws(30),
+        |dir, seed| accel_set_clocked(dir, 1000 + seed, AccelHidden::ResonanceAndRoll, 200.0, None, LOGGER),
+        ["resonance", "gravity_tilt"],
+        "accel_resonance_and_roll_logger",
+    );
+}
+
 #[test]
 #[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
 fn encoder_hidden_cyclic_lead_and_backlash() {
@@ -558,6 +570,7 @@ rate_studies! {
     accel_hidden_resonance => hidden_accel(AccelHidden::Resonance, "resonance", Clock::Even);
     accel_hidden_resonance_on_a_loggers_clock => hidden_accel(AccelHidden::Resonance, "resonance", LOGGER);
     accel_hidden_roll => hidden_accel(AccelHidden::Roll, "gravity_tilt", Clock::Even);
+    accel_hidden_roll_on_a_loggers_clock => hidden_accel(AccelHidden::Roll, "gravity_tilt", LOGGER);
     encoder_hidden_interpolation_error => hidden_encoder(EncoderHidden::InterpolationError, "interpolation_error");
     encoder_hidden_cyclic_lead => hidden_encoder(EncoderHidden::CyclicLead, "cyclic_lead");
     encoder_hidden_backlash => hidden_encoder(EncoderHidden::Backlash, "backlash");
