@@ -260,7 +260,6 @@ impl HeldStep {
         let w = TWO_PI * f;
         let d = h - self.h;
         let a = [[0.0, 1.0], [-w * w, -2.0 * zeta * w]];
-        let times = |m: [[f64; 2]; 2], x: [f64; 2]| [m[0][0] * x[0] + m[0][1] * x[1], m[1][0] * x[0] + m[1][1] * x[1]];
         let (mut term, mut phi_d) = ([[1.0, 0.0], [0.0, 1.0]], [[1.0, 0.0], [0.0, 1.0]]);
         let mut term_g = [0.0, -d];
         let mut g_d = term_g;
@@ -271,10 +270,10 @@ impl HeldStep {
                 [phi_d[0][0] + term[0][0], phi_d[0][1] + term[0][1]],
                 [phi_d[1][0] + term[1][0], phi_d[1][1] + term[1][1]],
             ];
-            term_g = times(a, term_g).map(|v| v * d / (k + 1) as f64);
+            term_g = mat2_times(a, term_g).map(|v| v * d / (k + 1) as f64);
             g_d = [g_d[0] + term_g[0], g_d[1] + term_g[1]];
         }
-        let g = times(phi_d, self.g);
+        let g = mat2_times(phi_d, self.g);
         HeldStep { h, phi: mat2(phi_d, self.phi), g: [g[0] + g_d[0], g[1] + g_d[1]] }
     }
 }
@@ -284,6 +283,11 @@ impl HeldStep {
 const STEP_NEAR: f64 = 1e-3;
 /// Terms of [`HeldStep::near`]'s series beyond the first.
 const STEP_NEAR_TERMS: usize = 6;
+
+/// The product m·x of a 2 × 2 matrix and a 2-vector.
+fn mat2_times(m: [[f64; 2]; 2], x: [f64; 2]) -> [f64; 2] {
+    [m[0][0] * x[0] + m[0][1] * x[1], m[1][0] * x[0] + m[1][1] * x[1]]
+}
 
 /// The 2 × 2 product a·b.
 fn mat2(a: [[f64; 2]; 2], b: [[f64; 2]; 2]) -> [[f64; 2]; 2] {
@@ -362,6 +366,10 @@ fn mode_lanes(c: &Channel, lanes: &[Lane], f: f64, zeta: f64) -> Vec<Vec<f64>> {
     outs
 }
 
+/// A step map [`mode_lanes_of`] keeps, with Φᵐ and the m input gains Φ^{m−1−k}·g of an interval of
+/// m steps.
+type KeptMap = (HeldStep, [[f64; 2]; 2], Vec<[f64; 2]>);
+
 /// Step maps [`mode_lanes_of`] keeps: a log whose clock rounds its times (to µs, say) has a few
 /// distinct intervals in turn, each with its own map (the benchmark's res15000 with its times
 /// rounded to 1 µs: intervals of 665 and 666 µs).
@@ -392,7 +400,7 @@ fn mode_lanes_of<const L: usize>(
     let ins: [Option<&Excitation>; L] = std::array::from_fn(|l| lanes.get(l).and_then(|l| l.input));
     // The step maps built (each with Φᵐ and the m input gains), the one in use last; at most
     // [`STEP_MAPS_KEPT`], the least recently used dropped first.
-    let mut maps: Vec<(HeldStep, [[f64; 2]; 2], Vec<[f64; 2]>)> = Vec::new();
+    let mut maps: Vec<KeptMap> = Vec::new();
     // The (interval's bits, steps) the last map was found good for: an interval the same to the
     // bit as the one before needs no new check.
     let mut checked: Option<(u64, usize)> = None;
@@ -411,7 +419,7 @@ fn mode_lanes_of<const L: usize>(
             };
             for (x, out) in xs.iter_mut().zip(outs.iter_mut()) {
                 let v0 = x[1];
-                *x = [phi[0][0] * x[0] + phi[0][1] * x[1], phi[1][0] * x[0] + phi[1][1] * x[1]];
+                *x = mat2_times(phi, *x);
                 // index: i < n, the length of each output.
                 out[i] = x[1] - v0;
             }
@@ -426,9 +434,8 @@ fn mode_lanes_of<const L: usize>(
         // kept one (a clock that rounds to µs alternates between a few intervals), else one had
         // from the most recent kept one within STEP_NEAR (a jittered clock), else a new one.
         let h = dt / m as f64;
-        let within =
-            |e: &(HeldStep, [[f64; 2]; 2], Vec<[f64; 2]>), tol: f64| (e.0.h - h).abs() <= tol * h && e.2.len() == m;
-        let good = |e: &(HeldStep, [[f64; 2]; 2], Vec<[f64; 2]>)| within(e, 1e-9);
+        let within = |e: &KeptMap, tol: f64| (e.0.h - h).abs() <= tol * h && e.2.len() == m;
+        let good = |e: &KeptMap| within(e, 1e-9);
         if !same && !maps.last().is_some_and(good) {
             match maps.iter().rposition(good) {
                 Some(at) => {
@@ -445,7 +452,7 @@ fn mode_lanes_of<const L: usize>(
                     let mut phi_m = [[1.0, 0.0], [0.0, 1.0]];
                     for k in (0..m).rev() {
                         gk[k] = g;
-                        g = [mp.phi[0][0] * g[0] + mp.phi[0][1] * g[1], mp.phi[1][0] * g[0] + mp.phi[1][1] * g[1]];
+                        g = mat2_times(mp.phi, g);
                         phi_m = mat2(mp.phi, phi_m);
                     }
                     if maps.len() >= STEP_MAPS_KEPT {
@@ -460,7 +467,7 @@ fn mode_lanes_of<const L: usize>(
         checked = Some((dt.to_bits(), m));
         let before: [f64; L] = std::array::from_fn(|l| xs[l][1]);
         for x in xs.iter_mut() {
-            *x = [phi_m[0][0] * x[0] + phi_m[0][1] * x[1], phi_m[1][0] * x[0] + phi_m[1][1] * x[1]];
+            *x = mat2_times(phi_m, *x);
         }
         if steps.is_some() {
             // index: sample i of each input (one entry per sample, as its steps).
