@@ -49,7 +49,7 @@ impl OrthoBase {
 
     /// [`OrthoBase::new`] by blocks of rows: the span of the same columns and the same rank rule,
     /// factored as a tall-skinny QR (Demmel et al. 2012, SIAM J. Sci. Comput. 34:A206): each block of
-    /// [`QR_ROW_BLOCK`] rows by an unpivoted blocked Householder QR (level 3, the blocks in
+    /// [`qr_block_rows`] rows by an unpivoted blocked Householder QR (level 3, the blocks in
     /// parallel), then the stacked R factors by the pivoted QR that counts the rank (their Gram
     /// matrix is the columns', so its pivots are those of the pivoted QR of all rows in exact
     /// arithmetic), and Q as each block's reflectors applied to its rows of the small Q. On
@@ -692,17 +692,35 @@ impl Factoring {
     }
 }
 
-/// Rows per block of [`OrthoBase::by_row_blocks`]' factorisation: 16 384 (at 165 columns a block
-/// is 22 MB; a 15 000-sample stack is one block).
+/// Rows per block of [`OrthoBase::by_row_blocks`]' factorisation above this many rows: 16 384 (at
+/// 165 columns a block is 22 MB).
 pub const QR_ROW_BLOCK: usize = 16_384;
+
+/// The fewest rows of each half when [`OrthoBase::by_row_blocks`] splits a stack of at most
+/// [`QR_ROW_BLOCK`] rows in two (so that the halves are factored side by side): 4 096. A
+/// 15 000-sample stack is two blocks of 7 500 rows; one of fewer than 8 192 rows stays whole.
+pub const QR_HALF_BLOCK: usize = 4_096;
+
+/// Rows per block of the tall-skinny QR of `n` rows ([`tall_thin_q`]): [`QR_ROW_BLOCK`] above it,
+/// two halves (the first the longer) from 2 × [`QR_HALF_BLOCK`] rows up to it, else all `n`. It
+/// depends on `n` alone, so the bits do not depend on the number of threads.
+pub fn qr_block_rows(n: usize) -> usize {
+    if n > QR_ROW_BLOCK {
+        QR_ROW_BLOCK
+    } else if n >= 2 * QR_HALF_BLOCK {
+        n.div_ceil(2)
+    } else {
+        n.max(1)
+    }
+}
 
 /// The thin Q (n × rank) of the columns `a` (n × p, p ≥ 1) by blocks of [`QR_ROW_BLOCK`] rows
 /// ([`OrthoBase::by_row_blocks`]), the rank counted by the pivots of the stacked R factors above
 /// [`RANK_TOLERANCE`] × `reference` (0: × the largest pivot), as [`PivotedQr::factor`] counts it.
 fn tall_thin_q(a: Mat<f64>, reference: f64) -> Mat<f64> {
     let (n, p) = a.shape();
-    let blocks: Vec<(usize, usize)> =
-        (0..n.div_ceil(QR_ROW_BLOCK)).map(|b| (b * QR_ROW_BLOCK, ((b + 1) * QR_ROW_BLOCK).min(n))).collect();
+    let rows = qr_block_rows(n);
+    let blocks: Vec<(usize, usize)> = (0..n.div_ceil(rows)).map(|b| (b * rows, ((b + 1) * rows).min(n))).collect();
     // Each block's unpivoted Householder QR in place (R on and above the diagonal, reflectors
     // below) and its block coefficients.
     let local: Vec<(Mat<f64>, Mat<f64>)> = blocks
@@ -743,8 +761,8 @@ fn tall_thin_q(a: Mat<f64>, reference: f64) -> Mat<f64> {
             x
         })
         .collect();
-    // index: row i lies in block i / QR_ROW_BLOCK (the blocks are QR_ROW_BLOCK rows but the last).
-    Mat::<f64>::from_fn(n, rank, |i, j| parts[i / QR_ROW_BLOCK][(i % QR_ROW_BLOCK, j)])
+    // index: row i lies in block i / rows (the blocks are `rows` rows but the last).
+    Mat::<f64>::from_fn(n, rank, |i, j| parts[i / rows][(i % rows, j)])
 }
 
 /// Residual sums of squares of nested column sets ([`nested_rss`]).
@@ -926,8 +944,7 @@ pub fn greedy_rss_from_products(
             }
         }
     }
-    let mut mtm = Mat::<f64>::zeros(k, k);
-    matmul(mtm.as_mut(), Accum::Replace, m.transpose(), m.as_ref(), 1.0, Par::Seq);
+    let mtm = t_times_self(m);
     let n0: Vec<f64> = (0..k).map(|j| gram[j * k + j].max(0.0).sqrt()).collect();
     let mut left = vec![0.0; k];
     for j in 0..k {
@@ -946,6 +963,28 @@ pub fn greedy_rss_from_products(
     }
     let corr: Vec<f64> = (0..k).map(|j| raw_corr[j] * unit(j)).collect();
     Ok(greedy_steps(&g, left, corr, rss0, n, stop))
+}
+
+/// Columns of each task of [`t_times_self`].
+const GRAM_COLUMNS_PER_TASK: usize = 64;
+
+/// MᵀM (k × k) of `m` (r × k), blocks of [`GRAM_COLUMNS_PER_TASK`] columns side by side (rayon),
+/// each block's product sequential: a column of a product has the same bits whatever the other
+/// columns beside it, so these are the bits of one sequential product on any number of threads.
+fn t_times_self(m: faer::MatRef<'_, f64>) -> Mat<f64> {
+    let k = m.ncols();
+    let blocks: Vec<Mat<f64>> = (0..k.div_ceil(GRAM_COLUMNS_PER_TASK))
+        .into_par_iter()
+        .map(|b| {
+            let lo = b * GRAM_COLUMNS_PER_TASK;
+            let width = GRAM_COLUMNS_PER_TASK.min(k - lo);
+            let mut out = Mat::<f64>::zeros(k, width);
+            matmul(out.as_mut(), Accum::Replace, m.transpose(), m.subcols(lo, width), 1.0, Par::Seq);
+            out
+        })
+        .collect();
+    // index: column j lies in block j / GRAM_COLUMNS_PER_TASK.
+    Mat::<f64>::from_fn(k, k, |i, j| blocks[j / GRAM_COLUMNS_PER_TASK][(i, j % GRAM_COLUMNS_PER_TASK)])
 }
 
 /// The steps of [`greedy_rss`] on the Gram matrix `g` of the projected unit columns, each
@@ -1099,13 +1138,13 @@ mod tests {
     /// The factorisation by blocks of rows ([`OrthoBase::by_row_blocks`],
     /// [`OrthoBase::extended_by_row_blocks`]) against the whole one ([`OrthoBase::new`],
     /// [`OrthoBase::extended`]): 2 × [`QR_ROW_BLOCK`] + 50 weighted samples (three blocks, the
-    /// last with fewer rows than columns), 70 columns of which 3 are combinations of others and one
+    /// last with fewer rows than columns), 2 × [`QR_HALF_BLOCK`] + 1 (two halves), 70 columns of which 3 are combinations of others and one
     /// is zero on all but the last 40 rows, one column all-zero; then 30 more columns, 2 of them in
     /// the span. The same ranks (66, then 94), orthonormal columns (QᵀQ = I to 1e-12) and the same
     /// projection of a test vector (to 1e-10 of its norm); a one-block stack too (500 rows).
     #[test]
     fn a_basis_by_blocks_of_rows_spans_what_the_whole_basis_spans() {
-        for n in [2 * QR_ROW_BLOCK + 50, 500] {
+        for n in [2 * QR_ROW_BLOCK + 50, 2 * QR_HALF_BLOCK + 1, 500] {
             let x: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
             let w: Vec<f64> = (0..n).map(|i| 0.5 + (i as f64 * 0.37).sin().abs()).collect();
             let wave = |k: f64| x.iter().map(|v| (std::f64::consts::PI * k * v + 0.3 * k).cos()).collect::<Vec<f64>>();
