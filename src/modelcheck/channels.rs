@@ -167,11 +167,12 @@ impl Channel {
         }
     }
 
-    /// Where the reference point moves over sample `i`'s interval: (x_i, x_i − v·Δt, v in m/s, Δt
-    /// in s), what an accelerometer's sample reads a motion's slopes at ([`Channel::motion_read`]);
-    /// None where it stands or the interval is not positive.
+    /// Where the reference point moves over sample `i`'s window: (x_i, x_i − v·Δt, v in m/s, Δt
+    /// in s; the window is the interval but at a gap, [`sample_window`]), what an accelerometer's
+    /// sample reads a motion's slopes at ([`Channel::motion_read`]); None where it stands or the
+    /// window is not positive.
     pub(crate) fn interval_ends(&self, i: usize) -> Option<(f64, f64, f64, f64)> {
-        let dt = sample_interval(self, i);
+        let dt = sample_window(self, i);
         let v = self.v[i];
         if !(dt > 0.0) || v == 0.0 {
             return None;

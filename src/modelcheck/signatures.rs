@@ -60,6 +60,8 @@ pub(crate) const MODE_STEP: f64 = 1e-4;
 /// before the first, whose velocity the first reading is differenced against): interval i
 /// (t_{i−1} → t_i) holds `steps[i]` steps of length Δt_i/steps[i] and the input's mean over each
 /// step, v²·u·Ē''(x_k, x_{k+1}) (`Profile::mean_second_derivative`: a table's slope jumps count).
+/// At a gap ([`sample_span`]) the lost stretch's steps come first, then the window's, each part
+/// in steps of its own length.
 ///
 /// The tables are shared (a clone is another handle on the same tables): the sensors of one pass
 /// are driven by the same tables ([`Excitation::shares`]).
@@ -75,6 +77,52 @@ pub(crate) fn sample_interval(c: &Channel, i: usize) -> f64 {
         0 if c.t.len() > 1 => c.t[1] - c.t[0],
         0 => 0.0,
         _ => c.t[i] - c.t[i - 1],
+    }
+}
+
+/// An interval longer than this many times the shorter of its neighbours is a gap: samples the
+/// logger lost (a wireless or USB logger drops packets), not a longer average. A jittered or
+/// rounded clock moves intervals by far less; a rate that changes does so between runs, which
+/// are channels of their own.
+pub(crate) const GAP_FACTOR: f64 = 1.5;
+
+/// The time sample i of an accelerometer channel averages over, s: its interval
+/// ([`sample_interval`]), or at a gap ([`GAP_FACTOR`]) the shorter neighbouring interval, the
+/// logger's own interval (a sample averages over its own interval, whatever was lost before it).
+/// With 2 % of the samples of a complete model's generator draw dropped, averaging over the whole
+/// gap made the normalised RMS 7.2 and a `resonance` significant.
+pub(crate) fn sample_window(c: &Channel, i: usize) -> f64 {
+    let dt = sample_interval(c, i);
+    let n = c.t.len();
+    // The interval index (sample 0 takes sample 1's) and its neighbours.
+    let j = i.max(1);
+    let interval = |k: usize| (k >= 1 && k < n).then(|| c.t[k] - c.t[k - 1]).filter(|d| *d > 0.0);
+    let near =
+        [j.checked_sub(1).and_then(interval), interval(j + 1)].into_iter().flatten().fold(f64::INFINITY, f64::min);
+    if dt > GAP_FACTOR * near {
+        near
+    } else {
+        dt
+    }
+}
+
+/// How sample i's interval is integrated: the stretch lost before its window at a gap (its
+/// length in s and steps; None when the window is the whole interval) and the window
+/// ([`sample_window`]: its length and steps), each part in [`mode_steps`] equal steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct SampleSpan {
+    pub(crate) lost: Option<(f64, usize)>,
+    pub(crate) window: (f64, usize),
+}
+
+/// [`SampleSpan`] of sample i of channel `c` (a non-positive interval: a window of it, none lost).
+pub(crate) fn sample_span(c: &Channel, i: usize) -> SampleSpan {
+    let dt = sample_interval(c, i);
+    let w = sample_window(c, i);
+    if w < dt {
+        SampleSpan { lost: Some((dt - w, mode_steps(dt - w))), window: (w, mode_steps(w)) }
+    } else {
+        SampleSpan { lost: None, window: (dt, mode_steps(dt)) }
     }
 }
 
@@ -179,9 +227,24 @@ impl Excitation {
             if !(dt > 0.0) || !dt.is_finite() || v == 0.0 {
                 return None;
             }
-            let m = mode_steps(dt);
-            let x = |k: usize| c.x[i] - v * dt * (1.0 - k as f64 / m as f64);
-            let vals: Vec<f64> = (0..m).map(|k| v * v * mean_e2(x(k), x(k + 1))).collect();
+            let (m, vals) = match sample_span(c, i).lost {
+                None => {
+                    let m = mode_steps(dt);
+                    let x = |k: usize| c.x[i] - v * dt * (1.0 - k as f64 / m as f64);
+                    (m, (0..m).map(|k| v * v * mean_e2(x(k), x(k + 1))).collect::<Vec<f64>>())
+                }
+                // A gap: the lost stretch's steps, then the window's.
+                Some((lost, ma)) => {
+                    let (w, mb) = sample_span(c, i).window;
+                    let xa = |k: usize| c.x[i] - v * dt + v * lost * k as f64 / ma as f64;
+                    let xb = |k: usize| c.x[i] - v * w + v * w * k as f64 / mb as f64;
+                    let vals = (0..ma)
+                        .map(|k| v * v * mean_e2(xa(k), xa(k + 1)))
+                        .chain((0..mb).map(|k| v * v * mean_e2(xb(k), xb(k + 1))))
+                        .collect();
+                    (ma + mb, vals)
+                }
+            };
             steps.push(m);
             input.push(vals);
         }
@@ -412,6 +475,18 @@ fn mode_lanes_of<const L: usize>(
         if !(dt > 0.0) {
             continue;
         }
+        if sample_window(c, i) < dt {
+            let span = sample_span(c, i);
+            let lost = span.lost.unwrap_or((0.0, 0));
+            // A gap: the state carried over the lost stretch, the sample the change of q̇ over its
+            // window (a path of its own: gaps are rare, and the maps of the steady intervals stay).
+            for ((x, l), out) in xs.iter_mut().zip(&ins).zip(outs.iter_mut()) {
+                let a = l.map_or(&[][..], |e| e.input[i].as_slice());
+                // index: i < n, the length of each output.
+                out[i] = gap_step(x, lost, span.window, a, free_steps, f, zeta);
+            }
+            continue;
+        }
         if free_steps {
             let phi = match free {
                 Some((h, phi)) if (h - dt).abs() <= 1e-9 * dt => phi,
@@ -488,11 +563,43 @@ fn mode_lanes_of<const L: usize>(
         }
     }
     // (q̇_i − q̇_{i−1})/Δt_i where the interval is positive (zero stays zero elsewhere: ÷ 1).
-    let divisor: Vec<f64> = (0..n).map(|i| sample_interval(c, i)).map(|d| if d > 0.0 { d } else { 1.0 }).collect();
+    let divisor: Vec<f64> = (0..n).map(|i| sample_window(c, i)).map(|d| if d > 0.0 { d } else { 1.0 }).collect();
     for out in outs.iter_mut() {
         out.iter_mut().zip(&divisor).for_each(|(y, d)| *y /= d);
     }
     outs
+}
+
+/// One gap sample of [`mode_lanes_of`]: the state `x` carried over the `lost` stretch (s, steps),
+/// then over the `window`, with the input `a` (its means over the lost stretch's steps, then the
+/// window's; empty: none) held over each step, or (`free`) by the exact free map over each part.
+/// Returns the change of q̇ over the window (the caller divides it by the window).
+fn gap_step(
+    x: &mut [f64; 2],
+    lost: (f64, usize),
+    window: (f64, usize),
+    a: &[f64],
+    free: bool,
+    f: f64,
+    zeta: f64,
+) -> f64 {
+    let part = |x: &mut [f64; 2], (len, m): (f64, usize), a: &[f64]| {
+        if free {
+            *x = mat2_times(free_map(f, zeta, len), *x);
+            return;
+        }
+        let step = HeldStep::new(f, zeta, len / m as f64);
+        for k in 0..m {
+            let next = mat2_times(step.phi, *x);
+            let ak = a.get(k).copied().unwrap_or(0.0);
+            *x = [next[0] + step.g[0] * ak, next[1] + step.g[1] * ak];
+        }
+    };
+    let (a_lost, a_window) = a.split_at(lost.1.min(a.len()));
+    part(x, lost, a_lost);
+    let before = x[1];
+    part(x, window, a_window);
+    x[1] - before
 }
 
 impl<'a> Stack<'a> {

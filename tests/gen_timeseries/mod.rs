@@ -214,8 +214,10 @@ pub enum Clock {
     Even,
     /// A logger's: each instant i/f_s moved by Gaussian jitter of σ `jitter` (s), then rounded to
     /// the stamp's `resolution` (s). The samples are taken at the stamped instants (the data are
-    /// exact at the times the file gives), so every interval is its own.
-    Logger { jitter: f64, resolution: f64 },
+    /// exact at the times the file gives), so every interval is its own. Each sample is then lost
+    /// with probability `lost` (a wireless or USB logger dropping packets): its row is not written,
+    /// and the next sample is still the mean over its own interval.
+    Logger { jitter: f64, resolution: f64, lost: f64 },
 }
 
 /// What an accelerometer draw hides from its starting model (straightness_y + straightness_z).
@@ -684,7 +686,7 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>,
             let even = (i - lead as i64) as f64 * dt;
             // This interval (t_{i−1}, t_i]: its ends and length.
             let (ti, tp, dt) = match clock {
-                Clock::Logger { jitter: sj, resolution } if i >= lead as i64 => {
+                Clock::Logger { jitter: sj, resolution, .. } if i >= lead as i64 => {
                     let at = ((even + sj * jitter.normal()) / resolution).round() * resolution;
                     // A stamp that does not advance (jitter beyond half an interval) is not kept.
                     let at = at.max(t_prev + resolution);
@@ -712,6 +714,13 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>,
             if i < lead as i64 {
                 continue;
             }
+            // A lost sample (drawn from the clock's own stream, and only when samples are lost:
+            // the draws of a clock that loses none are unchanged).
+            if let Clock::Logger { lost, .. } = clock {
+                if lost > 0.0 && jitter.uniform(0.0, 1.0) < lost {
+                    continue;
+                }
+            }
             let x = x_at(ti);
             let xp = x_at(tp);
             tcol.push(t0 + ti);
@@ -738,7 +747,7 @@ fn accel_try(dir: &Path, seed: u64, hidden: AccelHidden, samples: Option<usize>,
         chi2_roll += demeaned_chi2(&roll_y);
         chi2_mode += demeaned_chi2(&mode_y);
         chi2_mode += demeaned_chi2(&hz);
-        samples += 2 * n;
+        samples += 2 * tcol.len();
         let dur = n as f64 * dt;
         runs.push(RunSpec {
             name: format!("pass_{}", k + 1),
