@@ -476,15 +476,35 @@ fn mode_lanes_of<const L: usize>(
             continue;
         }
         if sample_window(c, i) < dt {
+            // A gap: the state carried over the lost stretch, then over the window, whose change
+            // of q̇ is the sample; each part's map from the kept ones ([`use_map`]).
             let span = sample_span(c, i);
             let lost = span.lost.unwrap_or((0.0, 0));
-            // A gap: the state carried over the lost stretch, the sample the change of q̇ over its
-            // window (a path of its own: gaps are rare, and the maps of the steady intervals stay).
-            for ((x, l), out) in xs.iter_mut().zip(&ins).zip(outs.iter_mut()) {
-                let a = l.map_or(&[][..], |e| e.input[i].as_slice());
-                // index: i < n, the length of each output.
-                out[i] = gap_step(x, lost, span.window, a, free_steps, f, zeta);
+            // index: sample i of each input (one entry per sample, as its steps).
+            let a: [&[f64]; L] = std::array::from_fn(|l| ins[l].map_or(&[][..], |e| e.input[i].as_slice()));
+            let mut before = [0.0; L];
+            for (part, (len, m)) in [lost, span.window].into_iter().enumerate() {
+                before = std::array::from_fn(|l| xs[l][1]);
+                if free_steps {
+                    let phi = free_map(f, zeta, len);
+                    xs.iter_mut().for_each(|x| *x = mat2_times(phi, *x));
+                    continue;
+                }
+                use_map(&mut maps, f, zeta, len, m);
+                let Some((_, phi_m, gk)) = maps.last() else { continue };
+                // index: the lost stretch's inputs come first, then the window's (`sample_span`).
+                let own: [&[f64]; L] = std::array::from_fn(|l| {
+                    let (lo, hi) = if part == 0 { (0, lost.1) } else { (lost.1, a[l].len()) };
+                    a[l].get(lo.min(hi)..hi).unwrap_or(&[])
+                });
+                advance(&mut xs, *phi_m, gk, &own);
             }
+            for ((x, v), out) in xs.iter().zip(&before).zip(outs.iter_mut()) {
+                // index: i < n, the length of each output.
+                out[i] = x[1] - v;
+            }
+            // The last map is a part's now: the next interval looks its own up.
+            checked = None;
             continue;
         }
         if free_steps {
@@ -504,59 +524,18 @@ fn mode_lanes_of<const L: usize>(
         let m = steps.map_or(mode_steps(dt), |s| s[i]);
         // Sample intervals repeat: the map is rebuilt only when the step changes (≥ 1 ppb). The m
         // steps of an interval compose to x ← Φᵐ·x + Σ_k Φ^{m−1−k}·(g₀ + g₁)·a_k.
-        let same = checked == Some((dt.to_bits(), m));
-        // A map is good for steps within 1 ppb of its own: the last one, else the most recent
-        // kept one (a clock that rounds to µs alternates between a few intervals), else one had
-        // from the most recent kept one within STEP_NEAR (a jittered clock), else a new one.
-        let h = dt / m as f64;
-        let within = |e: &KeptMap, tol: f64| (e.0.h - h).abs() <= tol * h && e.2.len() == m;
-        let good = |e: &KeptMap| within(e, 1e-9);
-        if !same && !maps.last().is_some_and(good) {
-            match maps.iter().rposition(good) {
-                Some(at) => {
-                    let e = maps.remove(at);
-                    maps.push(e);
-                }
-                None => {
-                    let mp = match maps.iter().rposition(|e| within(e, STEP_NEAR)) {
-                        Some(at) => maps[at].0.near(f, zeta, h),
-                        None => HeldStep::new(f, zeta, h),
-                    };
-                    let mut gk = vec![[0.0; 2]; m];
-                    let mut g = mp.g;
-                    let mut phi_m = [[1.0, 0.0], [0.0, 1.0]];
-                    for k in (0..m).rev() {
-                        gk[k] = g;
-                        g = mat2_times(mp.phi, g);
-                        phi_m = mat2(mp.phi, phi_m);
-                    }
-                    if maps.len() >= STEP_MAPS_KEPT {
-                        maps.remove(0);
-                    }
-                    maps.push((mp, phi_m, gk));
-                }
-            }
+        if checked != Some((dt.to_bits(), m)) {
+            use_map(&mut maps, f, zeta, dt, m);
         }
         let Some((_, phi_m, gk)) = maps.last() else { continue };
-        let phi_m = *phi_m;
         checked = Some((dt.to_bits(), m));
         let before: [f64; L] = std::array::from_fn(|l| xs[l][1]);
-        for x in xs.iter_mut() {
-            *x = mat2_times(phi_m, *x);
-        }
-        if steps.is_some() {
-            // index: sample i of each input (one entry per sample, as its steps).
-            let a: [&[f64]; L] = std::array::from_fn(|l| ins[l].map_or(&[][..], |e| e.input[i].as_slice()));
-            // The lanes' sums side by side, each in its own order over the steps.
-            for (k, g) in gk.iter().enumerate() {
-                for (x, a) in xs.iter_mut().zip(&a) {
-                    if let Some(&a) = a.get(k) {
-                        x[0] += g[0] * a;
-                        x[1] += g[1] * a;
-                    }
-                }
-            }
-        }
+        // index: sample i of each input (one entry per sample, as its steps; none without steps).
+        let a: [&[f64]; L] = std::array::from_fn(|l| match steps {
+            Some(_) => ins[l].map_or(&[][..], |e| e.input[i].as_slice()),
+            None => &[][..],
+        });
+        advance(&mut xs, *phi_m, gk, &a);
         for ((x, v), out) in xs.iter().zip(&before).zip(outs.iter_mut()) {
             // index: i < n, the length of each output.
             out[i] = x[1] - v;
@@ -570,36 +549,63 @@ fn mode_lanes_of<const L: usize>(
     outs
 }
 
-/// One gap sample of [`mode_lanes_of`]: the state `x` carried over the `lost` stretch (s, steps),
-/// then over the `window`, with the input `a` (its means over the lost stretch's steps, then the
-/// window's; empty: none) held over each step, or (`free`) by the exact free map over each part.
-/// Returns the change of q̇ over the window (the caller divides it by the window).
-fn gap_step(
-    x: &mut [f64; 2],
-    lost: (f64, usize),
-    window: (f64, usize),
-    a: &[f64],
-    free: bool,
-    f: f64,
-    zeta: f64,
-) -> f64 {
-    let part = |x: &mut [f64; 2], (len, m): (f64, usize), a: &[f64]| {
-        if free {
-            *x = mat2_times(free_map(f, zeta, len), *x);
-            return;
+/// Makes the last of the kept step maps `maps` the map of `m` steps over `dt` (s) for the mode
+/// (`f` in Hz, `zeta`). A map is good for steps within 1 ppb of its own: the last one, else the
+/// most recent kept one (a clock that rounds to µs alternates between a few intervals), else one
+/// had from the most recent kept one within [`STEP_NEAR`] (a jittered clock), else a new one; at
+/// most [`STEP_MAPS_KEPT`] kept, the least recently used dropped first.
+fn use_map(maps: &mut Vec<KeptMap>, f: f64, zeta: f64, dt: f64, m: usize) {
+    let h = dt / m as f64;
+    let within = |e: &KeptMap, tol: f64| (e.0.h - h).abs() <= tol * h && e.2.len() == m;
+    let good = |e: &KeptMap| within(e, 1e-9);
+    if maps.last().is_some_and(good) {
+        return;
+    }
+    match maps.iter().rposition(good) {
+        Some(at) => {
+            let e = maps.remove(at);
+            maps.push(e);
         }
-        let step = HeldStep::new(f, zeta, len / m as f64);
-        for k in 0..m {
-            let next = mat2_times(step.phi, *x);
-            let ak = a.get(k).copied().unwrap_or(0.0);
-            *x = [next[0] + step.g[0] * ak, next[1] + step.g[1] * ak];
+        None => {
+            let mp = match maps.iter().rposition(|e| within(e, STEP_NEAR)) {
+                Some(at) => maps[at].0.near(f, zeta, h),
+                None => HeldStep::new(f, zeta, h),
+            };
+            let mut gk = vec![[0.0; 2]; m];
+            let mut g = mp.g;
+            let mut phi_m = [[1.0, 0.0], [0.0, 1.0]];
+            for k in (0..m).rev() {
+                gk[k] = g;
+                g = mat2_times(mp.phi, g);
+                phi_m = mat2(mp.phi, phi_m);
+            }
+            if maps.len() >= STEP_MAPS_KEPT {
+                maps.remove(0);
+            }
+            maps.push((mp, phi_m, gk));
         }
-    };
-    let (a_lost, a_window) = a.split_at(lost.1.min(a.len()));
-    part(x, lost, a_lost);
-    let before = x[1];
-    part(x, window, a_window);
-    x[1] - before
+    }
+}
+
+/// The lanes' states `xs` over one interval's map (Φᵐ `phi_m` and the input gains `gk`,
+/// [`use_map`]): x ← Φᵐ·x + Σ_k gk[k]·a_k with each lane's inputs `a` (its means over the steps;
+/// empty: none), the lanes' sums side by side, each in its own order over the steps.
+#[inline]
+fn advance<const L: usize>(xs: &mut [[f64; 2]; L], phi_m: [[f64; 2]; 2], gk: &[[f64; 2]], a: &[&[f64]; L]) {
+    for x in xs.iter_mut() {
+        *x = mat2_times(phi_m, *x);
+    }
+    if a.iter().all(|a| a.is_empty()) {
+        return;
+    }
+    for (k, g) in gk.iter().enumerate() {
+        for (x, a) in xs.iter_mut().zip(a) {
+            if let Some(&a) = a.get(k) {
+                x[0] += g[0] * a;
+                x[1] += g[1] * a;
+            }
+        }
+    }
 }
 
 impl<'a> Stack<'a> {
