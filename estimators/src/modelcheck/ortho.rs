@@ -49,7 +49,8 @@ impl OrthoBase {
 
     /// [`OrthoBase::new`] by blocks of rows: the span of the same columns and the same rank rule,
     /// factored as a tall-skinny QR (Demmel et al. 2012, SIAM J. Sci. Comput. 34:A206): each block of
-    /// [`qr_block_rows`] rows by an unpivoted blocked Householder QR (level 3, the blocks in
+    /// [`QR_ROW_BLOCK`] rows (two halves from 2 × [`QR_HALF_BLOCK`] rows up to [`QR_ROW_BLOCK`], one
+    /// block below) by an unpivoted blocked Householder QR (level 3, the blocks in
     /// parallel), then the stacked R factors by the pivoted QR that counts the rank (their Gram
     /// matrix is the columns', so its pivots are those of the pivoted QR of all rows in exact
     /// arithmetic), and Q as each block's reflectors applied to its rows of the small Q. On
@@ -704,7 +705,7 @@ pub const QR_HALF_BLOCK: usize = 4_096;
 /// Rows per block of the tall-skinny QR of `n` rows ([`tall_thin_q`]): [`QR_ROW_BLOCK`] above it,
 /// two halves (the first the longer) from 2 × [`QR_HALF_BLOCK`] rows up to it, else all `n`. It
 /// depends on `n` alone, so the bits do not depend on the number of threads.
-pub fn qr_block_rows(n: usize) -> usize {
+fn qr_block_rows(n: usize) -> usize {
     if n > QR_ROW_BLOCK {
         QR_ROW_BLOCK
     } else if n >= 2 * QR_HALF_BLOCK {
