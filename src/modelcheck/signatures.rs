@@ -227,7 +227,8 @@ impl Excitation {
             if !(dt > 0.0) || !dt.is_finite() || v == 0.0 {
                 return None;
             }
-            let (m, vals) = match sample_span(c, i).lost {
+            let span = sample_span(c, i);
+            let (m, vals) = match span.lost {
                 None => {
                     let m = mode_steps(dt);
                     let x = |k: usize| c.x[i] - v * dt * (1.0 - k as f64 / m as f64);
@@ -235,7 +236,7 @@ impl Excitation {
                 }
                 // A gap: the lost stretch's steps, then the window's.
                 Some((lost, ma)) => {
-                    let (w, mb) = sample_span(c, i).window;
+                    let (w, mb) = span.window;
                     let xa = |k: usize| c.x[i] - v * dt + v * lost * k as f64 / ma as f64;
                     let xb = |k: usize| c.x[i] - v * w + v * w * k as f64 / mb as f64;
                     let vals = (0..ma)
