@@ -818,6 +818,19 @@ pub enum EncoderHidden {
     CyclicLeadAndBacklash,
 }
 
+/// How an encoder draw's controller trace writes its rows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Trace {
+    /// Each row at its servo tick, the time as computed.
+    Exact,
+    /// The readings still at their servo ticks, the times written to a decimal resolution q (the
+    /// coarsest of 1 ms, 0.1 ms, 10 µs and 1 µs at most a quarter of the draw's shortest log
+    /// interval: a CSV export that prints its seconds to 3–6 decimals), and each row after the
+    /// first lost with probability `lost` (drawn from the trace's own stream, and only when rows
+    /// are lost: the rest of the draw is the exact trace's).
+    Rounded { lost: f64 },
+}
+
 /// Feedback of the position loop.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Loop {
@@ -843,6 +856,8 @@ pub struct EncoderTruth {
     /// The controller's servo rate, Hz (its loop runs and its log samples on these ticks).
     pub servo_rate: f64,
     pub samples: usize,
+    /// The times' resolution, s ([`Trace::Rounded`]; None for an exact trace).
+    pub stamp_resolution: Option<f64>,
 }
 
 /// One encoder draw, written to `dir` (manifest.toml, runs, model.toml).
@@ -855,7 +870,19 @@ pub fn encoder_set(dir: &Path, seed: u64, hidden: EncoderHidden) -> EncoderTruth
 /// drawn log rate), instead of its draw of 1500–3000 rows (the benchmark's sizes). A pass cannot
 /// log more rows than its cruise has servo ticks.
 pub fn encoder_set_sized(dir: &Path, seed: u64, hidden: EncoderHidden, samples: Option<usize>) -> EncoderTruth {
+    encoder_set_traced(dir, seed, hidden, samples, Trace::Exact)
+}
+
+/// [`encoder_set_sized`] with its rows written by `trace` (the same draw otherwise).
+pub fn encoder_set_traced(
+    dir: &Path,
+    seed: u64,
+    hidden: EncoderHidden,
+    samples: Option<usize>,
+    trace: Trace,
+) -> EncoderTruth {
     let mut d = Draw::new(seed ^ 0x9e37_79b9_7f4a_7c15);
+    let mut lose = Draw::new(seed ^ 0x7472_6163_6521);
     let feedback = if d.chance(0.5) { Loop::SemiClosed } else { Loop::Closed };
     let kv = d.uniform(15.0, 60.0);
     let lead = d.log_uniform(4e-3, 25e-3);
@@ -1007,6 +1034,12 @@ pub fn encoder_set_sized(dir: &Path, seed: u64, hidden: EncoderHidden, samples: 
         Loop::SemiClosed => "motor",
         Loop::Closed => "scale",
     };
+    let shortest = plans.iter().map(|p| p.every as f64 * h).fold(f64::INFINITY, f64::min);
+    let stamp_resolution = match trace {
+        Trace::Exact => None,
+        Trace::Rounded { .. } => [1e-3, 1e-4, 1e-5, 1e-6].into_iter().find(|q| *q <= shortest / 4.0),
+    };
+    let stamp = |t: f64| stamp_resolution.map_or(t, |q| (t / q).round() * q);
     for p in &plans {
         let (x_start, v_start) = p.cmd[0];
         let first_v = p.cmd.iter().map(|c| c.1).find(|v| *v != 0.0).unwrap_or(1.0);
@@ -1017,10 +1050,17 @@ pub fn encoder_set_sized(dir: &Path, seed: u64, hidden: EncoderHidden, samples: 
             // Readings at the tick (before the loop's output acts over the next period).
             let scale = xt + interp(xt);
             if i >= p.log_from && i < p.log_to && (i - p.log_from) % p.every == 0 {
-                tc.push(i as f64 * h);
-                xc.push(xcmd);
-                sc.push(scale + sigma_scale * d.normal());
-                mc.push(xm + sigma_motor * d.normal());
+                let (s_read, m_read) = (scale + sigma_scale * d.normal(), xm + sigma_motor * d.normal());
+                let lost = match trace {
+                    Trace::Rounded { lost } => lost > 0.0 && !tc.is_empty() && lose.chance(lost),
+                    Trace::Exact => false,
+                };
+                if !lost {
+                    tc.push(i as f64 * h);
+                    xc.push(xcmd);
+                    sc.push(s_read);
+                    mc.push(m_read);
+                }
             }
             let fb = match feedback {
                 Loop::SemiClosed => xm,
@@ -1050,7 +1090,7 @@ pub fn encoder_set_sized(dir: &Path, seed: u64, hidden: EncoderHidden, samples: 
             direction: p.direction,
             start_time: t0,
             columns: vec![
-                ("t".into(), tc.iter().map(|t| t - t_first).collect()),
+                ("t".into(), tc.iter().map(|t| stamp(t - t_first)).collect()),
                 ("x_cmd[mm]".into(), xc.iter().map(|v| v * 1e3).collect()),
                 ("scale[um]".into(), sc.iter().map(|v| v * 1e6).collect()),
                 ("motor[um]".into(), mc.iter().map(|v| v * 1e6).collect()),
@@ -1088,6 +1128,7 @@ pub fn encoder_set_sized(dir: &Path, seed: u64, hidden: EncoderHidden, samples: 
         sigma_motor,
         servo_rate,
         samples,
+        stamp_resolution,
     }
 }
 
