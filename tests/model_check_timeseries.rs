@@ -360,16 +360,28 @@ fn accel_complete_model_false_alarms_on_a_lossy_logger() {
 }
 
 fn complete_accel(clock: Clock) {
-    let n = draws(100);
-    let r = accel_rates(AccelHidden::None, n, false, clock);
-    let errors = r.iter().filter(|x| x.1.error.is_some()).count();
-    let fa = r.iter().filter(|x| x.1.any_significant).count();
+    let r = accel_rates(AccelHidden::None, draws(100), false, clock);
+    assert_complete_rates(&format!("accelerometer complete, clock {clock:?}"), r.iter().map(|x| &x.1).collect());
+}
+
+/// Complete models' outcomes: the share with any `significant` claim (at most 2 %, the issue's
+/// rate) and no errors; printed with the normalised RMS of each complete model (its mean, its
+/// largest, and how many exceed 1.1, the issue's 1.1 × an ideal that is ≤ 1 here).
+fn assert_complete_rates(what: &str, r: Vec<&Outcome>) {
+    let n = r.len();
+    let errors = r.iter().filter(|o| o.error.is_some()).count();
+    let fa = r.iter().filter(|o| o.any_significant).count();
+    let nrms: Vec<f64> = r.iter().map(|o| o.nrms_before).collect();
+    let high = nrms.iter().filter(|v| **v > 1.1).count();
     eprintln!(
-        "accelerometer complete, clock {clock:?}: {fa}/{n} with a significant claim ({:.1} %), {errors} errors",
-        rate(fa, n as usize)
+        "{what}: {fa}/{n} with a significant claim ({:.1} %), {errors} errors; normalised RMS mean {:.3}, largest \
+         {:.3}, {high}/{n} above 1.1",
+        rate(fa, n),
+        nrms.iter().sum::<f64>() / n.max(1) as f64,
+        nrms.iter().copied().fold(0.0, f64::max)
     );
     assert_eq!(errors, 0);
-    assert!(rate(fa, n as usize) <= 2.0);
+    assert!(rate(fa, n) <= 2.0);
 }
 
 /// The number of draws of a rate study: `VMT_DRAWS`, else `default`.
@@ -477,21 +489,8 @@ fn encoder_complete_model_false_alarms_on_a_rounded_trace() {
 }
 
 fn complete_encoder(trace: Trace) {
-    let n = draws(100);
-    let r = encoder_rates(EncoderHidden::None, n, false, trace);
-    let errors = r.iter().filter(|x| x.1.error.is_some()).count();
-    let fa = r.iter().filter(|x| x.1.any_significant).count();
-    let nrms: Vec<f64> = r.iter().map(|x| x.1.nrms_before).collect();
-    let high = nrms.iter().filter(|v| **v > 1.1).count();
-    eprintln!(
-        "encoder complete, trace {trace:?}: {fa}/{n} with a significant claim ({:.1} %), {errors} errors; \
-         normalised RMS mean {:.3}, largest {:.3}, {high}/{n} above 1.1",
-        rate(fa, n as usize),
-        nrms.iter().sum::<f64>() / nrms.len().max(1) as f64,
-        nrms.iter().copied().fold(0.0, f64::max)
-    );
-    assert_eq!(errors, 0);
-    assert!(rate(fa, n as usize) <= 2.0);
+    let r = encoder_rates(EncoderHidden::None, draws(100), false, trace);
+    assert_complete_rates(&format!("encoder complete, trace {trace:?}"), r.iter().map(|x| &x.1).collect());
 }
 
 /// The value an encoder draw's hidden effect must be fitted to after `add` + `compare`, and the

@@ -230,7 +230,7 @@ impl Excitation {
             let span = sample_span(c, i);
             let (m, vals) = match span.lost {
                 None => {
-                    let m = mode_steps(dt);
+                    let (_, m) = span.window;
                     let x = |k: usize| c.x[i] - v * dt * (1.0 - k as f64 / m as f64);
                     (m, (0..m).map(|k| v * v * mean_e2(x(k), x(k + 1))).collect::<Vec<f64>>())
                 }
@@ -476,11 +476,10 @@ fn mode_lanes_of<const L: usize>(
         if !(dt > 0.0) {
             continue;
         }
-        if sample_window(c, i) < dt {
+        let span = sample_span(c, i);
+        if let Some(lost) = span.lost {
             // A gap: the state carried over the lost stretch, then over the window, whose change
             // of q̇ is the sample; each part's map from the kept ones ([`use_map`]).
-            let span = sample_span(c, i);
-            let lost = span.lost.unwrap_or((0.0, 0));
             // index: sample i of each input (one entry per sample, as its steps).
             let a: [&[f64]; L] = std::array::from_fn(|l| ins[l].map_or(&[][..], |e| e.input[i].as_slice()));
             let mut before = [0.0; L];
