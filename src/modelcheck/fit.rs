@@ -371,15 +371,48 @@ pub(crate) fn order_curve(
 /// computed (a shape too stiff for the data is a finding). Data with accelerometer channels:
 /// [`fit_orders_nested`].
 pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) -> Result<FitState, ModelCheckError> {
+    fit_model_from(st, model, sigma, w, None)
+}
+
+/// [`fit_model_on`] again on a stack whose loop gains or interpolation shift an earlier fit
+/// `earlier` of the same model set ([`fit_all`]'s refits): the same order search, started from
+/// that fit's orders instead of [`DEFAULT_ORDER`] (on point tables and encoder logs; data with
+/// accelerometer channels start as [`fit_model_on`]). The first fit of the search sets the terms
+/// the orders are chosen against: at the default order a closed loop's kv comes out biased by the
+/// stiff shape, and BIC then climbs to a few hundred orders before the next round brings them
+/// back (generator draw 2046: orders up to 512 searched in each of four refits of 2 s, the
+/// chosen order 6 each time; from order 6 each refit takes about 0.2 s).
+pub(crate) fn refit_model_on(
+    st: &Stack,
+    model: &Model,
+    sigma: &Sigma,
+    w: &[f64],
+    earlier: &FitState,
+) -> Result<FitState, ModelCheckError> {
+    fit_model_from(st, model, sigma, w, Some(earlier))
+}
+
+fn fit_model_from(
+    st: &Stack,
+    model: &Model,
+    sigma: &Sigma,
+    w: &[f64],
+    earlier: Option<&FitState>,
+) -> Result<FitState, ModelCheckError> {
     let default = |me: &ModelEffect| me.order.unwrap_or(DEFAULT_ORDER);
-    let first = fit_model_fixed(st, model, sigma, w, &|_, me: &ModelEffect| (default(me), None))?;
+    let accel = st.chans.iter().any(|c| c.is_accel());
+    let start = |me: &ModelEffect| match earlier.filter(|_| !accel && me.order.is_none()) {
+        Some(e) => e.shapes.iter().find(|c| c.name == me.effect.name).map_or(default(me), |c| c.order),
+        None => default(me),
+    };
+    let first = fit_model_fixed(st, model, sigma, w, &|_, me: &ModelEffect| (start(me), None))?;
     let m = distinct_positions(st).len() as u32;
     let top = m.saturating_sub(1).max(1);
     let motions: Vec<usize> = (0..first.terms.len()).filter(|&t| first.terms[t].name.is_error_motion()).collect();
     if motions.is_empty() {
         return Ok(first);
     }
-    if st.chans.iter().any(|c| c.is_accel()) {
+    if accel {
         return fit_orders_nested(st, model, sigma, w, first, &motions);
     }
     let lead = lead_period(st, model, &first);
@@ -388,9 +421,19 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
     // the default orders, which a stiff shape biases: the orders are chosen again once against the
     // fit at the chosen orders, and the model refitted if they move (a closed loop's coupling
     // through a biased kv made BIC take hundreds of orders that the refitted model rejected).
+    // With such terms, the first round from the default orders searches the first block of a
+    // doubling series' orders only (ORDER_BLOCK): against a fit at the default orders, a closed
+    // loop's kv is far off (generator draw 2054: 38.6/s for 51.3) and BIC soaked up the lag's
+    // misfit with 317 orders, searched to 1 024 (6.8 s of a 9.8 s diagnose), which the next round
+    // brought back to 14. A refit from an earlier fit's orders searches them all: its kv is that
+    // fit's (capped there, a hidden cyclic lead's 199 orders went to 64 and back up to 386 in
+    // every refit, draw 2000: 58 s against 30 s).
+    let others_searched =
+        |fs: &FitState| fs.terms.iter().any(|t| !t.name.is_error_motion() && t.searched.iter().any(|s| *s));
+    let first_block = earlier.is_none() && others_searched(&first);
     let mut round_fit = first;
     let mut last: Option<BTreeMap<usize, u32>> = None;
-    for _round in 0..2 {
+    for round in 0..2 {
         let mut terms = round_fit.terms.clone();
         // Per motion: (order BIC prefers within the searched range, highest searched, lead cap).
         let mut best: BTreeMap<usize, (u32, u32, Option<LeadCap>)> = BTreeMap::new();
@@ -402,7 +445,15 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
                 fixed.retain(|c| c.iter().any(|v| *v != 0.0));
                 let base = OrthoBase::new(&fixed, w)?;
                 // (user order, weighted RSS, linear parameters) of every order BIC may choose.
-                let curve = order_curve(st, name, basis, top, &round_fit.target, w, &base)?;
+                let round_top = match basis {
+                    ShapeBasis::Legendre | ShapeBasis::Cosine if round == 0 && first_block => top.min(ORDER_BLOCK),
+                    ShapeBasis::Legendre
+                    | ShapeBasis::Cosine
+                    | ShapeBasis::Harmonics
+                    | ShapeBasis::Bspline
+                    | ShapeBasis::Table => top,
+                };
+                let curve = order_curve(st, name, basis, round_top, &round_fit.target, w, &base)?;
                 let bic = |k: usize| bic_unknown_sigma(curve[k].1, n, curve[k].2);
                 let argmin = |upto: u32| {
                     (0..curve.len())
@@ -462,9 +513,7 @@ pub(crate) fn fit_model_on(st: &Stack, model: &Model, sigma: &Sigma, w: &[f64]) 
             }
         }
         // Nothing else searched: the other terms do not move with the orders.
-        let others_searched =
-            round_fit.terms.iter().any(|t| !t.name.is_error_motion() && t.searched.iter().any(|s| *s));
-        if unchanged || !others_searched {
+        if unchanged || !others_searched(&round_fit) {
             break;
         }
         last = Some(chosen);
@@ -1085,8 +1134,7 @@ fn fit_model_orders(
                             .filter(|t| moving(t))
                             .flat_map(|t| columns(st, t.name, &t.shape, &t.hyper))
                             .collect();
-                        let ss: f64 = target.iter().map(|v| v * v).sum();
-                        return ss - base.explained(target, &cols, w);
+                        return base.residual_ss(target, &cols, w);
                     }
                     match solve(&r0, &design(st, terms), sigma) {
                         Ok((_, r)) => weighted_ss(&r, w),
