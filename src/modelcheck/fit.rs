@@ -1,6 +1,8 @@
 //! Fitting a model: linear parameters by weighted least squares, hyper-parameters searched.
 
 use super::*;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, Par};
 use rayon::prelude::*;
 
 // ------------------------------------------------------------------------------------------
@@ -431,8 +433,13 @@ fn fit_model_from(
     let others_searched =
         |fs: &FitState| fs.terms.iter().any(|t| !t.name.is_error_motion() && t.searched.iter().any(|s| *s));
     let first_block = earlier.is_none() && others_searched(&first);
+    // The orders the first fit holds: a round that chooses them again keeps that fit (a refit at
+    // them would be the same fit, and the next round the same choice).
+    let user_orders = |terms: &[FitTerm]| -> BTreeMap<usize, u32> {
+        motions.iter().map(|&ti| (terms[ti].index, terms[ti].shape.basis.user_order(terms[ti].shape.order))).collect()
+    };
+    let mut last: Option<BTreeMap<usize, u32>> = Some(user_orders(&first.terms));
     let mut round_fit = first;
-    let mut last: Option<BTreeMap<usize, u32>> = None;
     for round in 0..2 {
         let mut terms = round_fit.terms.clone();
         // Per motion: (order BIC prefers within the searched range, highest searched, lead cap).
@@ -495,10 +502,7 @@ fn fit_model_from(
                 };
             }
         }
-        let chosen: BTreeMap<usize, u32> = motions
-            .iter()
-            .map(|&ti| (terms[ti].index, terms[ti].shape.basis.user_order(terms[ti].shape.order)))
-            .collect();
+        let chosen = user_orders(&terms);
         let unchanged = last.as_ref() == Some(&chosen);
         if !unchanged {
             round_fit = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| {
@@ -617,6 +621,10 @@ pub(crate) const LEAD_SCAN_MINIMA: usize = 8;
 /// over 25 periods drifts by at most 25·2π·0.00125 ≈ 0.2 rad between a grid point and the truth.
 pub(crate) const LEAD_SCAN_PER_E: f64 = 400.0;
 
+/// Periods of the lead scan ([`lead_shape_scan`]) whose products with the nested series are formed
+/// together: 16 periods (32 columns) per read of the series.
+pub(crate) const LEAD_SCAN_CHUNK: usize = 16;
+
 /// Scans the cyclic lead's periods P over [p_lo, p_hi] (m) jointly with the order of the first
 /// binding motion's series (a nested basis: Legendre or harmonics): for every P, every order K with
 /// shortest wavelength > P ([`LeadCap::order_below`]) is scored by BIC with σ unknown,
@@ -691,19 +699,18 @@ pub(crate) fn lead_shape_scan(
     let t_dot = |a: &[f64]| a.iter().zip(&t).map(|(x, y)| x * y).sum::<f64>();
     // The order below the cap at the longest period: a base every period shares.
     let k_long = (0..rss.len()).rev().find(|&k| order_of(k) <= cap0.order_below(p_hi)).unwrap_or(0);
-    // (BIC, K) of the lead at period p with the best order K below its cap, and the weighted sum of
-    // squares the lead explains over the orders up to `k_long` (a periodogram with these columns).
-    let joint_and_power = |p: f64| -> ((f64, usize), f64) {
-        let cp = base.project_columns(&columns(st, EffectName::CyclicLead, &lead_shape, &[p]), w);
+    // One period's (BIC, K) and power from its projected columns (cp0, cp1) and their products with
+    // the series (columns j and j + 1 of m).
+    let joint_at = |p: f64, cp0: &[f64], cp1: &[f64], m: &Mat<f64>, j: usize| -> ((f64, usize), f64) {
         let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-        let (mut g00, mut g01, mut g11) = (dot(&cp[0], &cp[0]), dot(&cp[0], &cp[1]), dot(&cp[1], &cp[1]));
-        let (mut b0, mut b1) = (t_dot(&cp[0]), t_dot(&cp[1]));
+        let (mut g00, mut g01, mut g11) = (dot(cp0, cp0), dot(cp0, cp1), dot(cp1, cp1));
+        let (mut b0, mut b1) = (t_dot(cp0), t_dot(cp1));
         let limit = cap0.order_below(p);
         let mut best = (f64::INFINITY, 0);
         let mut power = 0.0;
         for k in 0..rss.len() {
             if k > 0 {
-                let (c0, c1) = (dot(&q[k - 1], &cp[0]), dot(&q[k - 1], &cp[1]));
+                let (c0, c1) = (m[(k - 1, j)], m[(k - 1, j + 1)]);
                 g00 -= c0 * c0;
                 g01 -= c0 * c1;
                 g11 -= c1 * c1;
@@ -732,12 +739,34 @@ pub(crate) fn lead_shape_scan(
         }
         (best, power)
     };
-    let joint = |p: f64| joint_and_power(p).0;
+    // The nested series as one n × K matrix: a chunk of periods' products with it, c_k = q_kᵀ·cp,
+    // come from one matrix product (the series read once per chunk: per period, K dot products
+    // of n values each read it all, and the scan spent half of a hidden lead's diagnose there).
+    let qm = Mat::<f64>::from_fn(w.len(), q.len(), |i, j| q[j][i]);
+    // Per period p of `ps`: (BIC, K) of the lead at p with the best order K below its cap, and the
+    // weighted sum of squares the lead explains over the orders up to `k_long` (a periodogram with
+    // these columns).
+    let joint_and_power = |ps: &[f64]| -> Vec<((f64, usize), f64)> {
+        // The sine and cosine columns of each period.
+        let raw: Vec<Vec<f64>> = ps
+            .iter()
+            .flat_map(|&p| columns(st, EffectName::CyclicLead, &lead_shape, &[p]).into_iter().take(2))
+            .collect();
+        let cp = base.projected_independent(&raw, w);
+        let mut m = Mat::<f64>::zeros(q.len(), raw.len());
+        matmul(m.as_mut(), Accum::Replace, qm.transpose(), cp.as_ref(), 1.0, Par::Seq);
+        ps.iter()
+            .enumerate()
+            .map(|(i, &p)| joint_at(p, cp.col_as_slice(2 * i), cp.col_as_slice(2 * i + 1), &m, 2 * i))
+            .collect()
+    };
+    let joint = |p: f64| joint_and_power(&[p])[0].0;
     // index: (p_lo, p_hi) is the catalogue's lead range (`period_range`: 2–60 mm, ratio ≤ 30), so at most
     // ln(30)·400 ≈ 1 361 periods.
     let count = (((p_hi / p_lo).ln() * LEAD_SCAN_PER_E).ceil() as usize).max(2);
     let grid = log_grid(p_lo, p_hi, count);
-    let scored: Vec<((f64, usize), f64)> = grid.par_iter().map(|&p| joint_and_power(p)).collect();
+    // In fixed chunks of periods (the same bits on any number of threads).
+    let scored: Vec<((f64, usize), f64)> = grid.par_chunks(LEAD_SCAN_CHUNK).flat_map_iter(joint_and_power).collect();
     let scores: Vec<(f64, usize)> = scored.iter().map(|s| s.0).collect();
     let power: Vec<f64> = scored.iter().map(|s| s.1).collect();
     // The grid's lowest local minima, each refined by golden-section search between its neighbours: a

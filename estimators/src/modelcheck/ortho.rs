@@ -135,20 +135,21 @@ impl OrthoBase {
     /// [`OrthoBase::projected`] as columns; a column with less than 1e-9 of its weighted norm left
     /// is dependent on the span and returned as zeros.
     pub fn project_columns(&self, cols: &[Vec<f64>], w: &[f64]) -> Vec<Vec<f64>> {
-        let m = self.projected(cols, w);
-        cols.iter()
-            .enumerate()
-            .map(|(j, c)| {
-                let n0 = c.iter().zip(w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt();
-                let v: Vec<f64> = (0..w.len()).map(|i| m[(i, j)]).collect();
-                let n1 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-                if n0 > 0.0 && n1 > 1e-9 * n0 {
-                    v
-                } else {
-                    vec![0.0; w.len()]
-                }
-            })
-            .collect()
+        let m = self.projected_independent(cols, w);
+        (0..cols.len()).map(|j| m.col_as_slice(j).to_vec()).collect()
+    }
+
+    /// [`OrthoBase::project_columns`] as an n × k matrix (for products with other bases).
+    pub fn projected_independent(&self, cols: &[Vec<f64>], w: &[f64]) -> Mat<f64> {
+        let mut m = self.projected(cols, w);
+        for (j, c) in cols.iter().enumerate() {
+            let n0 = c.iter().zip(w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt();
+            let n1 = m.col_as_slice(j).iter().map(|x| x * x).sum::<f64>().sqrt();
+            if !(n0 > 0.0 && n1 > 1e-9 * n0) {
+                m.col_as_slice_mut(j).iter_mut().for_each(|x| *x = 0.0);
+            }
+        }
+        m
     }
 
     /// The weighted sum of squares that `cols` explain beyond the span: ‖P_C·r‖² with r =
