@@ -37,6 +37,19 @@ pub(crate) struct FitState {
     pub(crate) shapes: Vec<ShapeChoice>,
 }
 
+impl FitState {
+    /// The linear columns that are not all zero: the parameters the fit has.
+    pub(crate) fn nonzero_columns(&self) -> usize {
+        self.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count()
+    }
+
+    /// BIC with σ unknown ([`bic_unknown_sigma`]) of this fit over n samples weighted by `w`,
+    /// with its [`FitState::nonzero_columns`] as the linear parameters.
+    pub(crate) fn bic_unknown_sigma(&self, w: &[f64], n: usize) -> f64 {
+        bic_unknown_sigma(weighted_ss(&self.residual, w), n, self.nonzero_columns())
+    }
+}
+
 /// The setup of an order search for the fitted motion `terms[ti]`: its model entry, the basis it asks
 /// for (Legendre unless given), the span of its shape's range (m), and the design columns of every other
 /// term (held while this motion's order is searched).

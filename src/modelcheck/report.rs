@@ -526,13 +526,8 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
         // (2πA/p)²·A/8 in the shift: one or two refits).
         //
         // A kv that does not settle (`loop_kv_diverges`) stops the refits; the fit with the lowest
-        // BIC of those tried is kept, and a note says so.
-        let n = st.n;
-        let bic = |fs: &FitState| {
-            let p = fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
-            bic_unknown_sigma(weighted_ss(&fs.residual, &w), n, p)
-        };
-        let mut best: Option<(Stack, FitState)> = None;
+        // BIC of those tried is kept (`best`, with its BIC), and a note says so.
+        let mut best: Option<(Stack, FitState, f64)> = None;
         let mut last_step = f64::INFINITY;
         let mut unsettled = None;
         for _ in 0..LOOP_KV_REFITS {
@@ -578,17 +573,18 @@ pub(crate) fn fit_all<'a>(model: &Model, chans: &'a [Channel], data: &Path) -> R
             }
             let refit =
                 refit_model_on(&next, &bare, &sigma, &w, &fs).map_err(|m| bad(format!("fitting the model: {m}")))?;
-            let tried = (std::mem::replace(&mut st, next), std::mem::replace(&mut fs, refit));
-            if best.as_ref().is_none_or(|b| bic(&tried.1) < bic(&b.1)) {
+            let bic = fs.bic_unknown_sigma(&w, st.n);
+            let tried = (std::mem::replace(&mut st, next), std::mem::replace(&mut fs, refit), bic);
+            if best.as_ref().is_none_or(|b| bic < b.2) {
                 best = Some(tried);
             }
         }
         if let Some((held, fitted)) = unsettled {
-            let kept = match best {
-                Some(b) if bic(&b.1) < bic(&fs) => b,
-                _ => (st, fs),
-            };
-            (st, fs) = kept;
+            if let Some((b_st, b_fs, bic)) = best {
+                if bic < fs.bic_unknown_sigma(&w, st.n) {
+                    (st, fs) = (b_st, b_fs);
+                }
+            }
             if pass == 1 || !est.iter().any(|e| *e) {
                 notes.push(format!(
                     "closed loop: the loop gain kv did not settle: the fit with the loop at kv = {:.4} 1/s found {:.4} 1/s, \
@@ -1787,7 +1783,6 @@ impl Reshape<'_, '_> {
         };
         let Some(r2) = d.ranking.into_iter().next() else { return Ok(()) };
         let mut r2 = RankedEffect::typed(r2).map_err(|e| ModelCheckError::Invalid(e.to_string()))?;
-        let nonzero = |fs: &FitState| fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count();
         bonferroni(&mut r2, self.total as f64, self.config.family_alpha);
         // What the first ranking found among the candidates stands: explained away by a better one,
         // or inseparable from another candidate (the collinearity test compares candidates).
@@ -1799,9 +1794,9 @@ impl Reshape<'_, '_> {
             r2.confused_with = r.confused_with.clone();
         }
         let chi2 = |fs: &FitState| fs.residual.iter().zip(self.sig).map(|(r, s)| (r / s).powi(2)).sum::<f64>();
-        r2.delta_bic +=
-            chi2(&fs_c) - chi2(&f.fs) + (nonzero(&fs_c) as f64 - nonzero(&f.fs) as f64) * (st.n as f64).ln();
-        let delta_u = bic_c - bic_unknown_sigma(weighted_ss(&f.fs.residual, w), st.n, nonzero(&f.fs));
+        r2.delta_bic += chi2(&fs_c) - chi2(&f.fs)
+            + (fs_c.nonzero_columns() as f64 - f.fs.nonzero_columns() as f64) * (st.n as f64).ln();
+        let delta_u = bic_c - f.fs.bic_unknown_sigma(w, st.n);
         let changed: Vec<(EffectName, u32, u32)> = free
             .iter()
             .filter_map(|&(m, o)| orders.iter().find(|(om, oo)| *om == m && *oo != o).map(|(_, oo)| (m, o, *oo)))
