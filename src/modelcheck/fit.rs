@@ -43,6 +43,11 @@ impl FitState {
         self.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).count()
     }
 
+    /// The fitted error motions whose order BIC chose (the model gives none), with those orders.
+    pub(crate) fn free_orders(&self) -> Vec<(EffectName, u32)> {
+        self.shapes.iter().filter(|c| !c.given && c.max.is_some()).map(|c| (c.name, c.order)).collect()
+    }
+
     /// BIC with σ unknown ([`bic_unknown_sigma`]) of this fit over n samples weighted by `w`,
     /// with its [`FitState::nonzero_columns`] as the linear parameters.
     pub(crate) fn bic_unknown_sigma(&self, w: &[f64], n: usize) -> f64 {
@@ -315,44 +320,10 @@ pub(crate) fn order_curve(
     w: &[f64],
     base: &OrthoBase,
 ) -> Result<Vec<(u32, f64, usize)>, ModelCheckError> {
-    let series = |order: u32| {
-        let sh = shape(st, name, 1, order, false);
-        let sh = if basis == ShapeBasis::Legendre { sh } else { sh.in_basis(st, basis, order) };
-        columns(st, name, &sh, &[])
-    };
-    let nested = |order: u32| -> Result<Vec<(u32, f64, usize)>, ModelCheckError> {
-        let nr = nested_rss(target, w, base, &series(order))?;
-        // k series columns taken: the order of the k-th (the lowest when none is needed).
-        Ok((0..nr.rss.len())
-            .filter_map(|k| {
-                let index = if k == 0 { basis.top_index(1) } else { nr.used[k - 1] as u32 + 1 };
-                // Harmonics: the slope, then complete sine–cosine pairs (a cosine's odd index).
-                let complete = k == 0 || basis != ShapeBasis::Harmonics || (index % 2 == 1 && index >= 3);
-                complete.then(|| (basis.user_order(index).max(1), nr.rss[k], base.rank() + k))
-            })
-            .collect())
-    };
     match basis {
-        // Orders in doubling blocks (64, 128, …, `top`), one QR each: the search stops at a block
-        // where BIC's best order lies in its first half (the orders after it, at least half the
-        // block, each cost ln n and none brought BIC back below). On an encoder log every sample
-        // is a distinct position, so `top` = m − 1 is thousands of orders: one QR of all of them
-        // (n × m) took minutes and gigabytes, where BIC's choice sits at tens.
-        ShapeBasis::Legendre | ShapeBasis::Cosine => {
-            let mut k = ORDER_BLOCK.min(top);
-            loop {
-                let curve = nested(k)?;
-                let bic = |c: &(u32, f64, usize)| bic_unknown_sigma(c.1, st.n, c.2);
-                let best = curve.iter().min_by(|a, b| bic(a).total_cmp(&bic(b))).map_or(1, |c| c.0);
-                // Done at `top`, where the nesting stopped on a dependent column, or when the best
-                // order is in the block's first half.
-                if k >= top || curve.last().is_some_and(|c| c.0 < k) || 2 * best <= k {
-                    return Ok(curve);
-                }
-                k = (2 * k).min(top);
-            }
+        ShapeBasis::Legendre | ShapeBasis::Cosine | ShapeBasis::Harmonics => {
+            Ok(FactoredCurve::new(st, name, basis, top, target, w, base)?.curve)
         }
-        ShapeBasis::Harmonics => nested((top.saturating_sub(1) / 2).max(1)),
         ShapeBasis::Bspline | ShapeBasis::Table => {
             let orders: Vec<u32> = match basis {
                 ShapeBasis::Table => vec![top + 1],
@@ -363,12 +334,142 @@ pub(crate) fn order_curve(
             orders
                 .into_par_iter()
                 .map(|o| {
-                    let nr = nested_rss(target, w, base, &series(o))?;
+                    let nr = nested_rss(target, w, base, &series_columns(st, name, basis, o))?;
+                    // index: `nested_rss` gives at least rss[0], the base alone.
                     Ok((o, nr.rss[nr.rss.len() - 1], base.rank() + nr.used.len()))
                 })
                 .collect()
         }
     }
+}
+
+/// The columns of error motion `name`'s series of user order `order` in `basis`.
+fn series_columns(st: &Stack, name: EffectName, basis: ShapeBasis, order: u32) -> Vec<Vec<f64>> {
+    let sh = shape(st, name, 1, order, false);
+    let sh = if basis == ShapeBasis::Legendre { sh } else { sh.in_basis(st, basis, order) };
+    columns(st, name, &sh, &[])
+}
+
+/// An [`order_curve`] of a nested series (Legendre, cosine, harmonics) with its last QR kept
+/// ([`NestedSeries`]): the curve with other columns in the model — a diagnose candidate's, with
+/// which the orders are chosen again ([`rechoose_orders`]) — then costs the candidate's columns
+/// through the kept reflectors (O(n·k·c)), not another QR of n × k series columns (O(n·k²); about
+/// 1.7 s at 512 orders on 19 910 samples, once per candidate).
+pub(crate) struct FactoredCurve {
+    /// The motion and its basis.
+    name: EffectName,
+    basis: ShapeBasis,
+    /// m − 1, m the distinct positions: the highest order searched.
+    top: u32,
+    /// The series' columns factored: the block where the search stopped.
+    block: u32,
+    /// Rank of the base (offsets and the other terms).
+    base_rank: usize,
+    /// The other fitted motions' orders in the base (the curve serves a search with these only).
+    others: Vec<(EffectName, u32)>,
+    /// The series' QR after the base.
+    series: NestedSeries,
+    /// The curve with nothing else in the model.
+    pub(crate) curve: Vec<(u32, f64, usize)>,
+}
+
+impl FactoredCurve {
+    /// [`order_curve`] of a nested series, its QR kept: for Legendre and cosine series, the orders
+    /// in doubling blocks (64, 128, …, `top`), one QR each: the search stops at a block where BIC's
+    /// best order lies in its first half (the orders after it, at least half the block, each cost
+    /// ln n and none brought BIC back below). On an encoder log every sample is a distinct
+    /// position, so `top` = m − 1 is thousands of orders: one QR of all of them (n × m) took
+    /// minutes and gigabytes, where BIC's choice sits at tens. Harmonics: all of them at once.
+    fn new(
+        st: &Stack,
+        name: EffectName,
+        basis: ShapeBasis,
+        top: u32,
+        target: &[f64],
+        w: &[f64],
+        base: &OrthoBase,
+    ) -> Result<FactoredCurve, ModelCheckError> {
+        let mut k = match basis {
+            ShapeBasis::Harmonics => (top.saturating_sub(1) / 2).max(1),
+            _ => ORDER_BLOCK.min(top),
+        };
+        loop {
+            let series = NestedSeries::new(target, w, base, &series_columns(st, name, basis, k))?;
+            let nr = &series.nested;
+            let curve = curve_entries(basis, &nr.rss, &nr.used, |m| base.rank() + m);
+            if basis == ShapeBasis::Harmonics || block_ends(&curve, k, top, st.n) {
+                return Ok(FactoredCurve {
+                    name,
+                    basis,
+                    top,
+                    block: k,
+                    base_rank: base.rank(),
+                    others: Vec::new(),
+                    series,
+                    curve,
+                });
+            }
+            k = (2 * k).min(top);
+        }
+    }
+
+    /// The curve with the columns `extra` in the model as well (weighted by `w`), the blocks
+    /// searched as [`FactoredCurve::new`] does up to order `top` (at most the curve's); `None`
+    /// where that search goes past the block factored (the caller then searches with a QR of its
+    /// own).
+    fn with_extra(
+        &self,
+        extra: &[Vec<f64>],
+        w: &[f64],
+        n: usize,
+        top: u32,
+    ) -> Result<Option<Vec<(u32, f64, usize)>>, ModelCheckError> {
+        let nr = self.series.with_extra(extra, w)?;
+        let params = |m: usize| self.base_rank + m + nr.rank[m];
+        if self.basis == ShapeBasis::Harmonics {
+            return Ok(Some(curve_entries(self.basis, &nr.rss, &nr.used, params)));
+        }
+        let top = top.min(self.top);
+        let mut k = ORDER_BLOCK.min(top);
+        while k <= self.block {
+            // The series of order k: the block's first k columns.
+            // index: column indices compared with the order k (≤ top, a u32); nothing indexed.
+            let taken = nr.used.iter().take_while(|&&u| u < k as usize).count();
+            let curve = curve_entries(self.basis, &nr.rss[..=taken], &nr.used[..taken], params);
+            if block_ends(&curve, k, top, n) {
+                return Ok(Some(curve));
+            }
+            k = (2 * k).min(top);
+        }
+        Ok(None)
+    }
+}
+
+/// The orders of a nested series' curve: per number m of series columns taken, (the order of the
+/// m-th column taken, the lowest when none is, rss[m], `params(m)`); for harmonics only the
+/// slope and complete sine–cosine pairs.
+fn curve_entries(
+    basis: ShapeBasis,
+    rss: &[f64],
+    used: &[usize],
+    params: impl Fn(usize) -> usize,
+) -> Vec<(u32, f64, usize)> {
+    (0..rss.len())
+        .filter_map(|k| {
+            let index = if k == 0 { basis.top_index(1) } else { used[k - 1] as u32 + 1 };
+            // Harmonics: the slope, then complete sine–cosine pairs (a cosine's odd index).
+            let complete = k == 0 || basis != ShapeBasis::Harmonics || (index % 2 == 1 && index >= 3);
+            complete.then(|| (basis.user_order(index).max(1), rss[k], params(k)))
+        })
+        .collect()
+}
+
+/// Whether a doubling order search stops at block `k` with `curve`: at `top`, where the nesting
+/// stopped on a dependent column, or when BIC's best order is in the block's first half.
+fn block_ends(curve: &[(u32, f64, usize)], k: u32, top: u32, n: usize) -> bool {
+    let bic = |c: &(u32, f64, usize)| bic_unknown_sigma(c.1, n, c.2);
+    let best = curve.iter().min_by(|a, b| bic(a).total_cmp(&bic(b))).map_or(1, |c| c.0);
+    k >= top || curve.last().is_some_and(|c| c.0 < k) || 2 * best <= k
 }
 
 /// Fits the model (see [`fit_model_fixed`]); each fitted error motion whose model gives no `order`
@@ -558,19 +659,11 @@ pub(crate) fn rechoose_orders(
     k_extra: usize,
     period: Option<f64>,
     start: &[(EffectName, u32)],
+    factored: &[FactoredCurve],
 ) -> Result<(Vec<(EffectName, u32)>, f64), ModelCheckError> {
     let top = (distinct_positions(st).len() as u32).saturating_sub(1).max(1);
-    let mut terms = fs.terms.clone();
     let mut orders: Vec<(EffectName, u32)> = start.to_vec();
-    let at_order = |t: &FitTerm, me: &ModelEffect, o: u32| match requested_basis(me) {
-        Some(b) => shape(st, t.name, 1, o, false).in_basis(st, b, o),
-        None => shape(st, t.name, 1, o, false),
-    };
-    for t in terms.iter_mut() {
-        if let Some((_, o)) = orders.iter().find(|(m, _)| *m == t.name) {
-            t.shape = at_order(t, &model.effects[t.index], *o);
-        }
-    }
+    let mut terms = terms_at(st, model, fs, &orders);
     let sweeps = if orders.len() > 1 { 2 } else { 1 };
     let mut bic = bic_unknown_sigma(weighted_ss(&fs.residual, w), st.n, fs.cols.len() + extra.len() + k_extra);
     for _ in 0..sweeps {
@@ -578,12 +671,28 @@ pub(crate) fn rechoose_orders(
             let name = orders[slot].0;
             let Some(ti) = terms.iter().position(|t| t.name == name) else { continue };
             let (me, basis, span, mut fixed) = order_search_setup(st, model, &terms, ti);
-            fixed.extend(extra.iter().cloned());
-            fixed.retain(|c| c.iter().any(|v| *v != 0.0));
-            let base = OrthoBase::new(&fixed, w)?;
-            let curve = order_curve(st, name, basis, top, &fs.target, w, &base)?;
+            // The motion's curve with the same other orders factored already: the candidate's
+            // columns through its QR; else a QR of the series after the base holding them.
             let allowed = |o: u32| {
                 basis == ShapeBasis::Table || period.is_none_or(|p| basis.shortest_wavelength(span, o) > p) || o == 1
+            };
+            // The orders of a series in doubling blocks (Legendre, cosine: user order = columns)
+            // above the highest allowed are not searched: the blocks below it end as they would
+            // without the limit, and BIC's choice is among the allowed orders.
+            let top_allowed = match basis {
+                ShapeBasis::Legendre | ShapeBasis::Cosine => (1..=top).take_while(|&o| allowed(o)).last().unwrap_or(1),
+                ShapeBasis::Harmonics | ShapeBasis::Bspline | ShapeBasis::Table => top,
+            };
+            let others: Vec<(EffectName, u32)> = orders.iter().filter(|(m, _)| *m != name).copied().collect();
+            let shared = factored.iter().find(|c| c.name == name && c.basis == basis && c.others == others);
+            let curve = match shared.map(|c| c.with_extra(extra, w, st.n, top_allowed)).transpose()?.flatten() {
+                Some(curve) => curve,
+                None => {
+                    fixed.extend(extra.iter().cloned());
+                    fixed.retain(|c| c.iter().any(|v| *v != 0.0));
+                    let base = OrthoBase::new(&fixed, w)?;
+                    order_curve(st, name, basis, top_allowed, &fs.target, w, &base)?
+                }
             };
             let score = |k: usize| bic_unknown_sigma(curve[k].1, st.n, curve[k].2 + k_extra);
             let Some(k) =
@@ -593,10 +702,60 @@ pub(crate) fn rechoose_orders(
             };
             bic = score(k);
             orders[slot].1 = curve[k].0;
-            terms[ti].shape = at_order(&terms[ti], me, curve[k].0);
+            terms[ti].shape = shape_at(st, me, curve[k].0);
         }
     }
     Ok((orders, bic))
+}
+
+/// The fit's terms with the motions `orders` names at those orders (in the basis their model entry
+/// asks for).
+fn terms_at(st: &Stack, model: &Model, fs: &FitState, orders: &[(EffectName, u32)]) -> Vec<FitTerm> {
+    let mut terms = fs.terms.clone();
+    for t in terms.iter_mut() {
+        if let Some((_, o)) = orders.iter().find(|(m, _)| *m == t.name) {
+            t.shape = shape_at(st, &model.effects[t.index], *o);
+        }
+    }
+    terms
+}
+
+/// The shape of model entry `me`'s motion at user order `order`, in the basis the entry asks for.
+fn shape_at(st: &Stack, me: &ModelEffect, order: u32) -> Shape {
+    match requested_basis(me) {
+        Some(b) => shape(st, me.effect.name, 1, order, false).in_basis(st, b, order),
+        None => shape(st, me.effect.name, 1, order, false),
+    }
+}
+
+/// Per fitted motion of `orders` (motion, order: the model's fitted error motions whose order it
+/// does not give), its [`order_curve`] after the offsets and the other terms at `orders`, factored
+/// ([`FactoredCurve`]) for [`rechoose_orders`] with each candidate of a diagnosis: the curves of
+/// its first sweep (and of later ones where the other orders stay) then cost no QR of a series.
+/// Series that are not nested (B-splines, a table) have none.
+pub(crate) fn factored_curves(
+    st: &Stack,
+    model: &Model,
+    fs: &FitState,
+    w: &[f64],
+    orders: &[(EffectName, u32)],
+) -> Result<Vec<FactoredCurve>, ModelCheckError> {
+    let top = (distinct_positions(st).len() as u32).saturating_sub(1).max(1);
+    let terms = terms_at(st, model, fs, orders);
+    let mut out = Vec::new();
+    for &(name, _) in orders {
+        let Some(ti) = terms.iter().position(|t| t.name == name) else { continue };
+        let (_, basis, _, mut fixed) = order_search_setup(st, model, &terms, ti);
+        if matches!(basis, ShapeBasis::Bspline | ShapeBasis::Table) {
+            continue;
+        }
+        fixed.retain(|c| c.iter().any(|v| *v != 0.0));
+        let base = OrthoBase::new(&fixed, w)?;
+        let mut curve = FactoredCurve::new(st, name, basis, top, &fs.target, w, &base)?;
+        curve.others = orders.iter().filter(|(m, _)| *m != name).copied().collect();
+        out.push(curve);
+    }
+    Ok(out)
 }
 
 /// The greedy selection of a cosine series ([`greedy_rss`]) stops after 20 terms in a row that

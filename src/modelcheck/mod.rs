@@ -131,8 +131,8 @@ use vmt_estimators::modelcheck::diagnose::at_grid_end;
 use vmt_estimators::modelcheck::{
     autocorrelation, bin_by_edges, bin_by_label, estimate_noise_sigma, fit_percent, fit_signature, frequency_grid,
     golden_max, greedy_rss, ljung_box, ls_periodogram, lstsq_qr, nested_rss, rank_candidates, refine_projected_point,
-    sparse_frequency_scan, uniform_edges, Candidate, DiagnoseConfig, HyperParameter, ModelCheckError, OrthoBase,
-    RankingEntry, Sigma, SparseColumn, Verdict,
+    sparse_frequency_scan, uniform_edges, Candidate, DiagnoseConfig, HyperParameter, ModelCheckError, NestedSeries,
+    OrthoBase, RankingEntry, Sigma, SparseColumn, Verdict,
 };
 use vmt_sim::axis_sim::GRAVITY;
 use vmt_sim::effects::{Effect, EffectName, EffectParams};

@@ -1556,6 +1556,11 @@ pub fn diagnose_with(
     }
     // Shapes re-chosen for every candidate model (fit.rs `rechoose_orders`).
     if !st.chans.iter().any(|c| c.is_accel()) {
+        let curves = match ranking.is_empty() {
+            true => Vec::new(),
+            false => factored_curves(st, model, &f.fs, &w, &f.fs.free_orders())
+                .map_err(|m| VmtError::bad(data, "", format!("re-choosing the shapes: {m}")))?,
+        };
         let ctx = Reshape {
             st,
             model,
@@ -1566,16 +1571,23 @@ pub fn diagnose_with(
             config: &config,
             total,
             joint: if split { joint.as_deref() } else { None },
+            curves: &curves,
         };
-        for r in ranking.iter_mut() {
-            let Some((cols, k_hyper, away)) = fitted.get(&r.effect) else { continue };
-            let name = r.effect;
-            let mut c = make(name);
-            limit_lead(name, &mut c);
-            ctx.apply(r, name, c, cols, *k_hyper, *away).map_err(|m| {
-                VmtError::bad(data, "", format!("re-choosing the shapes with `{}` in the model: {m}", r.effect))
-            })?;
-        }
+        // Each candidate's re-choice is independent of the others': side by side (rayon), the
+        // first error in ranking order reported.
+        let done: Vec<Result<(), VmtError>> = ranking
+            .par_iter_mut()
+            .map(|r| {
+                let Some((cols, k_hyper, away)) = fitted.get(&r.effect) else { return Ok(()) };
+                let name = r.effect;
+                let mut c = make(name);
+                limit_lead(name, &mut c);
+                ctx.apply(r, name, c, cols, *k_hyper, *away).map_err(|m| {
+                    VmtError::bad(data, "", format!("re-choosing the shapes with `{name}` in the model: {m}"))
+                })
+            })
+            .collect();
+        done.into_iter().collect::<Result<(), VmtError>>()?;
     }
     // Detectable but negligible: say why such an entry is `noise` (with very many samples a tiny
     // misfit passes ΔBIC and the search-corrected p).
@@ -1715,6 +1727,8 @@ struct Reshape<'s, 'a> {
     total: usize,
     /// The shapes' orders the cyclic lead was ranked against (the joint scan's), when capped.
     joint: Option<&'s [(EffectName, u32)]>,
+    /// The free motions' order curves at the fitted orders, factored once for every candidate.
+    curves: &'s [FactoredCurve],
 }
 
 impl Reshape<'_, '_> {
@@ -1751,8 +1765,7 @@ impl Reshape<'_, '_> {
         away: bool,
     ) -> Result<(), ModelCheckError> {
         let (st, f, w) = (self.st, self.f, self.w);
-        let free: Vec<(EffectName, u32)> =
-            f.fs.shapes.iter().filter(|c| !c.given && c.max.is_some()).map(|c| (c.name, c.order)).collect();
+        let free = f.fs.free_orders();
         if free.is_empty() {
             return Ok(());
         }
@@ -1763,7 +1776,7 @@ impl Reshape<'_, '_> {
             Some(_) | None => free.clone(),
         };
         let period = period_range(name).and(r.params.get("period").copied());
-        let (orders, bic_c) = rechoose_orders(st, self.model, &f.fs, w, cols, k_hyper, period, &start)?;
+        let (orders, bic_c) = rechoose_orders(st, self.model, &f.fs, w, cols, k_hyper, period, &start, self.curves)?;
         r.shape_orders = orders.iter().copied().collect();
         if orders == start {
             return Ok(());

@@ -34,8 +34,8 @@ pub use diagnose::{
 };
 pub use lsq::{fit_signature, solve_normal, Columns, LinearFit, NormalFactor};
 pub use ortho::{
-    greedy_rss, greedy_rss_from_products, greedy_rss_with_gram, lstsq_qr, nested_rss, NestedRss, OrthoBase,
-    SparseColumn,
+    greedy_rss, greedy_rss_from_products, greedy_rss_with_gram, lstsq_qr, nested_rss, NestedRss, NestedRssWith,
+    NestedSeries, OrthoBase, SparseColumn,
 };
 /// The complex numbers of the spectra (num-complex, through realfft), for callers' phasors.
 pub use realfft::num_complex::Complex64;

@@ -825,34 +825,163 @@ fn check_series(y: &[f64], w: &[f64], base: &OrthoBase, series: &[Vec<f64>]) -> 
 /// the base and the series columns before it (its part left ≤ 1e-9), so that the caller cannot
 /// choose an order these samples cannot determine.
 pub fn nested_rss(y: &[f64], w: &[f64], base: &OrthoBase, series: &[Vec<f64>]) -> Result<NestedRss, ModelCheckError> {
-    let n = check_series(y, w, base, series)?;
-    // The series columns the base does not span (projected, unit weighted norm before), then W·y.
-    let projected = base.project_columns(series, w);
-    let used: Vec<usize> = (0..series.len()).filter(|&j| projected[j].iter().any(|v| *v != 0.0)).collect();
-    let norms: Vec<f64> =
-        series.iter().map(|c| c.iter().zip(w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt()).collect();
-    let k = used.len();
-    let yp = base.project_vector(y, w);
-    let mut m =
-        Mat::<f64>::from_fn(n, k + 1, |i, j| if j < k { projected[used[j]][i] / norms[used[j]] } else { yp[i] });
-    let rss0: f64 = yp.iter().map(|v| v * v).sum();
-    let mut out = NestedRss { rss: vec![rss0], used: Vec::new() };
-    if k == 0 || n <= k {
-        return Ok(out);
-    }
-    householder_qr(&mut m);
-    // R[j][j]: the part of unit column j left after the base and the columns before it;
-    // R[j][k] = q_jᵀ(Wy).
-    let mut rss = rss0;
-    for j in 0..k {
-        if m[(j, j)].abs() <= 1e-9 {
-            break;
+    Ok(NestedSeries::new(y, w, base, series)?.nested)
+}
+
+/// [`nested_rss`] kept factored, so that the nested sums with other columns added to the base come
+/// without a second QR of the series ([`NestedSeries::with_extra`]): a model's error motion whose
+/// order is chosen again with each of several candidates in the model (`diagnose`) shares the
+/// series' QR, the candidates' few columns each costing O(n·k·c) (Qᵀ applied to c columns) where
+/// the QR of the series after a base holding them costs O(n·k²).
+#[derive(Debug, Clone)]
+pub struct NestedSeries {
+    /// The sums without other columns ([`nested_rss`]'s result).
+    pub nested: NestedRss,
+    /// The base the series and the data were projected off.
+    base: OrthoBase,
+    /// The Householder reflectors of the QR of [unit projected series | projected W·y] (n × (k + 1),
+    /// essentials below a unit diagonal, zeros above), and their block coefficients; empty when
+    /// the series is not factored (no column off the base, or n ≤ k).
+    basis: Mat<f64>,
+    coeff: Mat<f64>,
+    /// Qᵀ of the projected W·y: R's last column, rows 0..=k (the rows below are zero); the
+    /// projected W·y itself (n values) when the series is not factored.
+    zy: Vec<f64>,
+}
+
+/// [`NestedRss`] with other columns in the base ([`NestedSeries::with_extra`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NestedRssWith {
+    /// rss[m]: the weighted RSS with the base, the other columns and the series columns `used[..m]`.
+    pub rss: Vec<f64>,
+    /// Indices of the series columns taken, in order ([`NestedSeries::nested`]'s).
+    pub used: Vec<usize>,
+    /// rank[m]: how many of the other columns' directions are left outside the base and the series
+    /// columns `used[..m]` (the parameters they add to that fit).
+    pub rank: Vec<usize>,
+}
+
+impl NestedSeries {
+    /// The QR of the series after `base` and the nested sums ([`nested_rss`]).
+    pub fn new(y: &[f64], w: &[f64], base: &OrthoBase, series: &[Vec<f64>]) -> Result<NestedSeries, ModelCheckError> {
+        let n = check_series(y, w, base, series)?;
+        // The series columns the base does not span (projected, unit weighted norm before), then W·y.
+        let projected = base.project_columns(series, w);
+        let used: Vec<usize> = (0..series.len()).filter(|&j| projected[j].iter().any(|v| *v != 0.0)).collect();
+        let norms: Vec<f64> =
+            series.iter().map(|c| c.iter().zip(w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt()).collect();
+        let k = used.len();
+        let yp = base.project_vector(y, w);
+        let rss0: f64 = yp.iter().map(|v| v * v).sum();
+        let mut out = NestedSeries {
+            nested: NestedRss { rss: vec![rss0], used: Vec::new() },
+            base: base.clone(),
+            basis: Mat::zeros(0, 0),
+            coeff: Mat::zeros(0, 0),
+            zy: Vec::new(),
+        };
+        if k == 0 || n <= k {
+            out.zy = yp;
+            return Ok(out);
         }
-        rss = (rss - m[(j, k)].powi(2)).max(0.0);
-        out.rss.push(rss);
-        out.used.push(used[j]);
+        let mut m =
+            Mat::<f64>::from_fn(n, k + 1, |i, j| if j < k { projected[used[j]][i] / norms[used[j]] } else { yp[i] });
+        let coeff = householder_qr(&mut m);
+        // R[j][j]: the part of unit column j left after the base and the columns before it;
+        // R[j][k] = q_jᵀ(Wy).
+        let mut rss = rss0;
+        for j in 0..k {
+            if m[(j, j)].abs() <= 1e-9 {
+                break;
+            }
+            rss = (rss - m[(j, k)].powi(2)).max(0.0);
+            out.nested.rss.push(rss);
+            out.nested.used.push(used[j]);
+        }
+        out.zy = (0..=k).map(|i| m[(i, k)]).collect();
+        for j in 0..=k {
+            for i in 0..=j {
+                m[(i, j)] = if i == j { 1.0 } else { 0.0 };
+            }
+        }
+        out.basis = m;
+        out.coeff = coeff;
+        Ok(out)
     }
-    Ok(out)
+
+    /// The nested sums with the columns `extra` (each n values, weighted by `w`) in the base as
+    /// well: rss[m] = min ‖W(y − Bβ − Eγ − S_mδ)‖², B the base, E `extra`, S_m the series columns
+    /// `used[..m]`, each from the parts of W·E (unit norm before the projection) and W·y left
+    /// outside B and S_m — the rows of Qᵀ(W·E) and Qᵀ(W·y) from m on, their rows below the series
+    /// compressed to a triangle — by a pivoted QR of those few columns (a direction counts where
+    /// its pivot is above [`RANK_TOLERANCE`] × the largest and above 1e-9 of its unit norm, the rule
+    /// of [`OrthoBase::projected_independent`]). Equal to [`nested_rss`] with E in the base up to
+    /// rounding, except that a series column E makes dependent adds nothing and is not skipped
+    /// (its entry repeats the one before).
+    pub fn with_extra(&self, extra: &[Vec<f64>], w: &[f64]) -> Result<NestedRssWith, ModelCheckError> {
+        let n = self.base.nrows();
+        check_len("weights", n, w.len())?;
+        for (j, c) in extra.iter().enumerate() {
+            check_len(&format!("extra column {j}"), n, c.len())?;
+            check_finite(&format!("extra column {j}"), c)?;
+        }
+        // W·E off the base, unit weighted norm before the projection (a part ≤ 1e-9 of it is zero).
+        let mut z = self.base.projected_independent(extra, w);
+        for (j, c) in extra.iter().enumerate() {
+            let norm = c.iter().zip(w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt();
+            let scale = if norm > 0.0 { 1.0 / norm } else { 0.0 };
+            z.col_as_slice_mut(j).iter_mut().for_each(|x| *x *= scale);
+        }
+        // Qᵀ(W·E): rows 0..k along the series' directions, row k along the data's remainder; the
+        // rows below hold no data and are compressed to a triangle (an orthogonal change of them).
+        let lead = self.zy.len();
+        let tail = if self.basis.ncols() > 0 {
+            let mut mem =
+                MemBuffer::new(householder::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<
+                    f64,
+                >(n, self.coeff.nrows(), z.ncols()));
+            householder::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+                self.basis.as_ref(),
+                self.coeff.as_ref(),
+                Conj::No,
+                z.as_mut(),
+                Par::Seq,
+                MemStack::new(&mut mem),
+            );
+            let mut t = z.get(lead.., ..).to_owned();
+            let rows = t.nrows().min(t.ncols());
+            if rows > 0 {
+                householder_qr(&mut t);
+            }
+            Mat::<f64>::from_fn(rows, t.ncols(), |i, j| if i <= j { t[(i, j)] } else { 0.0 })
+        } else {
+            Mat::zeros(0, z.ncols())
+        };
+        // Unfactored (nothing of the series off the base): every row holds data.
+        let (lead, zy) = if self.basis.ncols() > 0 { (lead, self.zy.clone()) } else { (n, self.zy.clone()) };
+        let mut out = NestedRssWith { rss: Vec::new(), used: self.nested.used.clone(), rank: Vec::new() };
+        for m in 0..self.nested.rss.len() {
+            let rows = lead - m + tail.nrows();
+            let at = |i: usize, j: usize| if i < lead - m { z[(m + i, j)] } else { tail[(i - (lead - m), j)] };
+            let cols: Vec<Vec<f64>> = (0..z.ncols())
+                .map(|j| {
+                    let c: Vec<f64> = (0..rows).map(|i| at(i, j)).collect();
+                    let left = c.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    if left > 1e-9 {
+                        c
+                    } else {
+                        vec![0.0; rows]
+                    }
+                })
+                .collect();
+            let beta: Vec<f64> = (0..rows).map(|i| if i < lead - m { zy[m + i] } else { 0.0 }).collect();
+            let ones = vec![1.0; rows];
+            let small = OrthoBase::new(&cols, &ones)?;
+            out.rss.push(small.project_vector(&beta, &ones).iter().map(|v| v * v).sum());
+            out.rank.push(small.rank());
+        }
+        Ok(out)
+    }
 }
 
 /// Weighted residual sums of squares along a greedy forward selection of `series` columns on
@@ -1441,6 +1570,49 @@ mod tests {
             let (_, r) = lstsq_qr(&y, &cols, &w).unwrap();
             let direct: f64 = r.iter().zip(&w).map(|(r, w)| (r * w).powi(2)).sum();
             assert!((nr.rss[m] - direct).abs() <= 1e-9 * nr.rss[0], "m {m}: {} vs {direct}", nr.rss[m]);
+        }
+    }
+
+    /// The nested sums with other columns in the base from the series' one QR
+    /// ([`NestedSeries::with_extra`]) are those of [`nested_rss`] with them in the base: a few
+    /// columns off the series (a ramp times a step, a wave), and one the series spans (x itself,
+    /// its first column), which adds nothing from there on and leaves one direction fewer.
+    #[test]
+    fn nested_sums_with_extra_columns_match_a_qr_with_them_in_the_base() {
+        let n = 1500;
+        let x: Vec<f64> = (0..n).map(|i| (i as f64 + 0.3 * ((i * 7) % 5) as f64) / n as f64).collect();
+        let y: Vec<f64> = x
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (5.0 * v).sin() + 0.2 * (61.0 * v).cos() + if i % 2 == 0 { 0.05 } else { -0.02 })
+            .collect();
+        let w: Vec<f64> = (0..n).map(|i| 1.0 + 0.25 * (i % 4) as f64).collect();
+        let base_cols: Vec<Vec<f64>> = vec![vec![1.0; n], (0..n).map(|i| (i % 2) as f64).collect()];
+        let series: Vec<Vec<f64>> =
+            (1..=60).map(|k| x.iter().map(|v| (k as f64 * std::f64::consts::PI * v).cos()).collect()).collect();
+        let b = OrthoBase::new(&base_cols, &w).unwrap();
+        let ns = NestedSeries::new(&y, &w, &b, &series).unwrap();
+        assert_eq!(ns.nested, nested_rss(&y, &w, &b, &series).unwrap());
+        let step: Vec<f64> = x.iter().enumerate().map(|(i, v)| if i % 2 == 0 { v * v } else { 0.0 }).collect();
+        let wave: Vec<f64> = x.iter().map(|v| (97.0 * v).sin()).collect();
+        for extra in [vec![step.clone(), wave.clone()], vec![series[0].clone(), wave]] {
+            let with = ns.with_extra(&extra, &w).unwrap();
+            let mut cols = base_cols.clone();
+            cols.extend(extra.iter().cloned());
+            let joint = OrthoBase::new(&cols, &w).unwrap();
+            let direct = nested_rss(&y, &w, &joint, &series).unwrap();
+            // Pair the direct nesting's entries with the shared one's by the last column taken.
+            for (m, used) in std::iter::once(None).chain(direct.used.iter().map(Some)).enumerate() {
+                let k = used.map_or(0, |u| with.used.iter().position(|v| v == u).unwrap() + 1);
+                let scale = direct.rss[0];
+                assert!(
+                    (with.rss[k] - direct.rss[m]).abs() <= 1e-9 * scale,
+                    "{m}: {} vs {}",
+                    with.rss[k],
+                    direct.rss[m]
+                );
+                assert_eq!(b.rank() + k + with.rank[k], joint.rank() + m, "parameters at {m}");
+            }
         }
     }
 }
