@@ -840,9 +840,10 @@ pub struct NestedSeries {
     /// The base the series and the data were projected off.
     base: OrthoBase,
     /// The Householder reflectors of the QR of [unit projected series | projected W·y] (n × (k + 1),
-    /// essentials below a unit diagonal, zeros above), and their block coefficients; empty when
-    /// the series is not factored (no column off the base, or n ≤ k).
+    /// essentials below a unit diagonal, zeros above); empty when the series is not factored (no
+    /// column off the base, or n ≤ k).
     basis: Mat<f64>,
+    /// The reflectors' block coefficients.
     coeff: Mat<f64>,
     /// Qᵀ of the projected W·y: R's last column, rows 0..=k (the rows below are zero); the
     /// projected W·y itself (n values) when the series is not factored.
