@@ -935,6 +935,7 @@ impl NestedSeries {
         }
         // Qᵀ(W·E): rows 0..k along the series' directions, row k along the data's remainder; the
         // rows below hold no data and are compressed to a triangle (an orthogonal change of them).
+        // `lead`: the rows that hold data (k + 1 when factored, else n).
         let lead = self.zy.len();
         let tail = if self.basis.ncols() > 0 {
             let mut mem =
@@ -958,8 +959,8 @@ impl NestedSeries {
         } else {
             Mat::zeros(0, z.ncols())
         };
-        // Unfactored (nothing of the series off the base): every row holds data.
-        let (lead, zy) = if self.basis.ncols() > 0 { (lead, self.zy.clone()) } else { (n, self.zy.clone()) };
+        // Unfactored (nothing of the series off the base): `zy` is W·y off the base, every row data.
+        let zy = &self.zy;
         let mut out = NestedRssWith { rss: Vec::new(), used: self.nested.used.clone(), rank: Vec::new() };
         for m in 0..self.nested.rss.len() {
             let rows = lead - m + tail.nrows();
