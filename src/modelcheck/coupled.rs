@@ -1508,7 +1508,7 @@ fn reselect(
             base_cols.extend(coupled_columns(st, &raw_o, &mixes(pb, o, &shx_o, &ks, fz, gains), 0..ks.len()));
         }
         base_cols.retain(|c| c.iter().any(|v| *v != 0.0));
-        let base = OrthoBase::by_row_blocks(&base_cols, w).ok()?;
+        let base = OrthoBase::new(&base_cols, w).ok()?;
         // The series' coupled columns with a non-zero value (never made: the greedy selection
         // reads their products from the raw columns', [`raw_products`]).
         let keep: Vec<usize> = (0..all.len()).into_par_iter().filter(|&c| coupled_nonzero(st, &raw, &mx, c)).collect();
@@ -1536,7 +1536,7 @@ fn reselect(
         if plain {
             drop(base_cols);
             let used_cols = coupled_columns(st, &raw, &mx, used.iter().map(|&j| keep[j]));
-            let base2 = base.extended_by_row_blocks(&used_cols, w).ok()?;
+            let base2 = base.extended(&used_cols, w).ok()?;
             drop(used_cols);
             let keep2: Vec<usize> = keep.iter().copied().filter(|c| !picked.contains(c)).collect();
             // Zero gains: each column is the reading alone.

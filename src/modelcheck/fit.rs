@@ -189,6 +189,18 @@ pub(crate) fn golden(a: f64, b: f64, iters: usize, f: &mut dyn FnMut(f64) -> f64
     golden_max(&mut |l: f64| -f(l.exp()), a.ln(), b.ln(), iters).0.exp()
 }
 
+/// [`golden`] on several intervals `ranges` in lockstep (`golden_max_each`): `f` gets the next
+/// point of every search still running together and returns their values in order. Each search
+/// ends where [`golden`] alone would.
+pub(crate) fn golden_each(ranges: &[(f64, f64)], iters: usize, f: &mut dyn FnMut(&[f64]) -> Vec<f64>) -> Vec<f64> {
+    let logs: Vec<(f64, f64)> = ranges.iter().map(|&(a, b)| (a.ln(), b.ln())).collect();
+    let mut neg = |ls: &[f64]| -> Vec<f64> {
+        let xs: Vec<f64> = ls.iter().map(|l| l.exp()).collect();
+        f(&xs).into_iter().map(|v| -v).collect()
+    };
+    golden_max_each(&mut neg, &logs, iters).into_iter().map(|(l, _)| l.exp()).collect()
+}
+
 /// How a fitted error motion's shape was set (FORMAT.md §4 `shapes`).
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct ShapeChoice {
@@ -801,11 +813,12 @@ pub(crate) const LEAD_SCAN_CHUNK: usize = 16;
 /// binding motion's series (a nested basis: Legendre or harmonics): for every P, every order K with
 /// shortest wavelength > P ([`LeadCap::order_below`]) is scored by BIC with σ unknown,
 /// n·ln(RSS/n) + (rank + K + 3)·ln n (the lead's sine, cosine and period), where the RSS comes from
-/// one orthonormal nested basis of the series (modified Gram–Schmidt off the other columns, the
-/// other binding motions held at their orders below the cap at p_hi) and a 2 × 2 solve per (P, K)
-/// (variable projection). The best grid period is refined by golden-section search between its
-/// neighbours. Compared with the shapes alone at their free BIC order. None when the motion's basis
-/// is not nested (B-splines, table) or nothing is scanned.
+/// one orthonormal nested basis of the series (its Householder QR off the other columns,
+/// [`NestedSeries`], the other binding motions held at their orders below the cap at p_hi) and a
+/// 2 × 2 solve per (P, K) (variable projection). The grid's best minima are refined by
+/// golden-section searches between their neighbours, run in lockstep ([`golden_each`]: one matrix
+/// product per round for all of them). Compared with the shapes alone at their free BIC order.
+/// None when the motion's basis is not nested (B-splines, table) or nothing is scanned.
 pub(crate) fn lead_shape_scan(
     st: &Stack,
     fs: &FitState,
@@ -831,32 +844,16 @@ pub(crate) fn lead_shape_scan(
     let top = cap0.free_best;
     let sh = shape(st, m0, 1, top, false);
     let sh = if cap0.basis == ShapeBasis::Legendre { sh } else { sh.in_basis(st, cap0.basis, top) };
-    // Nested orthonormal series q_j (weighted, off the base), with the user order each one completes.
-    let mut q: Vec<Vec<f64>> = Vec::new();
-    let mut q_order: Vec<u32> = Vec::new();
-    let mut q_index: Vec<u32> = Vec::new();
-    for (j, mut v) in base.project_columns(&columns(st, m0, &sh, &[]), w).into_iter().enumerate() {
-        let n0 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        for _ in 0..2 {
-            for qk in &q {
-                let d: f64 = qk.iter().zip(&v).map(|(a, b)| a * b).sum();
-                v.iter_mut().zip(qk).for_each(|(x, a)| *x -= d * a);
-            }
-        }
-        let n1 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if n0 > 0.0 && n1 > 1e-9 * n0 {
-            v.iter_mut().for_each(|x| *x /= n1);
-            q.push(v);
-            q_order.push(cap0.basis.user_order(j as u32 + 1));
-            q_index.push(j as u32 + 1);
-        }
-    }
+    // The series' nested orthonormal directions q_j (weighted, off the base: `NestedSeries`), with
+    // the user order each one completes; t = W·target off the base, qt_j = q_jᵀt, rss the nested sums.
+    let series = NestedSeries::new(&fs.target, w, &base, &columns(st, m0, &sh, &[]))?;
+    let q_index: Vec<u32> = series.nested.used.iter().map(|&j| j as u32 + 1).collect();
+    let q_order: Vec<u32> = q_index.iter().map(|&j| cap0.basis.user_order(j)).collect();
+    let qt = series.qty().to_vec();
+    let rss = series.nested.rss.clone();
+    let qm = series.q();
+    drop(series);
     let t = base.project_vector(&fs.target, w);
-    let qt: Vec<f64> = q.iter().map(|qk| qk.iter().zip(&t).map(|(a, b)| a * b).sum()).collect();
-    let mut rss = vec![t.iter().map(|x| x * x).sum::<f64>()];
-    for v in &qt {
-        rss.push((rss[rss.len() - 1] - v * v).max(0.0));
-    }
     let n = st.n;
     let rb = base.rank();
     // A basis vector completes an order only at a harmonic's cosine (complete pairs, odd index ≥ 3).
@@ -911,10 +908,14 @@ pub(crate) fn lead_shape_scan(
         }
         (best, power)
     };
-    // The nested series as one n × K matrix: a chunk of periods' products with it, c_k = q_kᵀ·cp,
-    // come from one matrix product (the series read once per chunk: per period, K dot products
-    // of n values each read it all, and the scan spent half of a hidden lead's diagnose there).
-    let qm = Mat::<f64>::from_fn(w.len(), q.len(), |i, j| q[j][i]);
+    // The directions' products with a chunk of periods' columns, c_k = q_kᵀ·cp, come from one
+    // matrix product (the series read once per chunk: per period, K dot products of n values each
+    // read it all, and the scan spent half of a hidden lead's diagnose there), over the directions
+    // the chunk's periods reach: below each one's cap, and all up to `k_long`.
+    let reach = |p: f64| {
+        let limit = cap0.order_below(p);
+        (1..rss.len()).find(|&k| order_of(k) > limit && k > k_long).unwrap_or(rss.len() - 1)
+    };
     // Per period p of `ps`: (BIC, K) of the lead at p with the best order K below its cap, and the
     // weighted sum of squares the lead explains over the orders up to `k_long` (a periodogram with
     // these columns).
@@ -925,14 +926,14 @@ pub(crate) fn lead_shape_scan(
             .flat_map(|&p| columns(st, EffectName::CyclicLead, &lead_shape, &[p]).into_iter().take(2))
             .collect();
         let cp = base.projected_independent(&raw, w);
-        let mut m = Mat::<f64>::zeros(q.len(), raw.len());
-        matmul(m.as_mut(), Accum::Replace, qm.transpose(), cp.as_ref(), 1.0, Par::Seq);
+        let rows = ps.iter().map(|&p| reach(p)).max().unwrap_or(0);
+        let mut m = Mat::<f64>::zeros(rows, raw.len());
+        matmul(m.as_mut(), Accum::Replace, qm.get(.., ..rows).transpose(), cp.as_ref(), 1.0, Par::Seq);
         ps.iter()
             .enumerate()
             .map(|(i, &p)| joint_at(p, cp.col_as_slice(2 * i), cp.col_as_slice(2 * i + 1), &m, 2 * i))
             .collect()
     };
-    let joint = |p: f64| joint_and_power(&[p])[0].0;
     // index: (p_lo, p_hi) is the catalogue's lead range (`period_range`: 2–60 mm, ratio ≤ 30), so at most
     // ln(30)·400 ≈ 1 361 periods.
     let count = (((p_hi / p_lo).ln() * LEAD_SCAN_PER_E).ceil() as usize).max(2);
@@ -965,18 +966,20 @@ pub(crate) fn lead_shape_scan(
             minima.push(i);
         }
     }
+    // The searches in lockstep (`golden_each`): each round's periods in one batch, so that the
+    // series is read once per round instead of once per search and period.
+    let ranges: Vec<(f64, f64)> =
+        minima.iter().map(|&i| (grid[i.saturating_sub(1)], grid[(i + 1).min(grid.len() - 1)])).collect();
+    // In fixed chunks of LEAD_SCAN_CHUNK / 4 periods side by side (the same bits on any number of
+    // threads).
+    let joint_each = |ps: &[f64]| -> Vec<(f64, usize)> {
+        ps.par_chunks(LEAD_SCAN_CHUNK / 4).flat_map_iter(|c| joint_and_power(c).into_iter().map(|s| s.0)).collect()
+    };
+    let ps = golden_each(&ranges, 30, &mut |ps| joint_each(ps).into_iter().map(|s| s.0).collect());
     let refined: Vec<(f64, (f64, usize))> = minima
-        .par_iter()
-        .map(|&i| {
-            let (a, b) = (grid[i.saturating_sub(1)], grid[(i + 1).min(grid.len() - 1)]);
-            let p = golden(a, b, 30, &mut |p| joint(p).0);
-            let jp = joint(p);
-            if jp.0 < scores[i].0 {
-                (p, jp)
-            } else {
-                (grid[i], scores[i])
-            }
-        })
+        .iter()
+        .zip(ps.iter().zip(joint_each(&ps)))
+        .map(|(&i, (&p, jp))| if jp.0 < scores[i].0 { (p, jp) } else { (grid[i], scores[i]) })
         .collect();
     let Some(&(p, (bic, k))) = refined.iter().min_by(|a, b| a.1 .0.total_cmp(&b.1 .0)) else { return Ok(None) };
     let mut orders = vec![(m0, order_of(k))];

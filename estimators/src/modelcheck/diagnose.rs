@@ -368,6 +368,13 @@ fn prepare(input: &ResidualInput) -> Result<Prepared, ModelCheckError> {
         check_finite(&format!("base column {j}"), c)?;
     }
     let base = OrthoBase::new(input.base_columns, &w)?;
+    prepared_on(input, w, base)
+}
+
+/// [`prepare`]'s statistics of `input`'s residual on the basis `base` of its base columns (and
+/// any columns added to them), weights `w`.
+fn prepared_on(input: &ResidualInput, w: Vec<f64>, base: OrthoBase) -> Result<Prepared, ModelCheckError> {
+    let n = input.residual.len();
     let total: f64 = input.residual.iter().zip(&w).map(|(r, w)| (r * w).powi(2)).sum();
     let r_t = base.project_vector(input.residual, &w);
     let stat_old: f64 = r_t.iter().map(|x| x * x).sum();
@@ -765,37 +772,76 @@ fn search_p_value(p: &Prepared, stat_new: f64, q: usize, nb: usize, searched: us
 /// new evaluation per iteration, at most `iters`); returns (x, f(x)) of the best point evaluated.
 /// The one line search of the model-check loop (`vmt::modelcheck` uses it on log scales).
 pub fn golden_max(f: &mut impl FnMut(f64) -> f64, lo: f64, hi: f64, iters: usize) -> (f64, f64) {
+    golden_max_each(&mut |xs: &[f64]| xs.iter().map(|&x| f(x)).collect(), &[(lo, hi)], iters)[0]
+}
+
+/// [`golden_max`] over several intervals `ranges` in lockstep: each round asks `f` for the values
+/// at the next point of every search still running, together (a batch whose evaluations can share
+/// work, such as one matrix product for all of them). Each search takes the points and returns
+/// the (argmax, max) that [`golden_max`] would on its interval alone; `f` must return one value
+/// per point, in order.
+pub fn golden_max_each(f: &mut impl FnMut(&[f64]) -> Vec<f64>, ranges: &[(f64, f64)], iters: usize) -> Vec<(f64, f64)> {
+    /// One search: its bracket [a, b], inner points c < d with their values, best so far.
+    struct Search {
+        a: f64,
+        b: f64,
+        c: f64,
+        d: f64,
+        fc: f64,
+        fd: f64,
+        best: (f64, f64),
+    }
     let gr = (5f64.sqrt() - 1.0) / 2.0;
-    let (mut a, mut b) = (lo, hi);
-    let mut c = b - gr * (b - a);
-    let mut d = a + gr * (b - a);
-    let (mut fc, mut fd) = (f(c), f(d));
-    let mut best = if fc >= fd { (c, fc) } else { (d, fd) };
+    let ends: Vec<(f64, f64, f64, f64)> =
+        ranges.iter().map(|&(a, b)| (a, b, b - gr * (b - a), a + gr * (b - a))).collect();
+    let first = f(&ends.iter().flat_map(|e| [e.2, e.3]).collect::<Vec<f64>>());
+    let mut s: Vec<Search> = ends
+        .iter()
+        .enumerate()
+        .map(|(k, &(a, b, c, d))| {
+            // index: `first` holds two values per range, in order (f's contract).
+            let (fc, fd) = (first[2 * k], first[2 * k + 1]);
+            let best = if fc >= fd { (c, fc) } else { (d, fd) };
+            Search { a, b, c, d, fc, fd, best }
+        })
+        .collect();
+    let mut running: Vec<usize> = (0..s.len()).collect();
     for _ in 0..iters {
-        if (b - a).abs() <= 1e-12 * (a.abs() + b.abs()) {
+        running.retain(|&k| (s[k].b - s[k].a).abs() > 1e-12 * (s[k].a.abs() + s[k].b.abs()));
+        if running.is_empty() {
             break;
         }
-        if fc >= fd {
-            b = d;
-            d = c;
-            fd = fc;
-            c = b - gr * (b - a);
-            fc = f(c);
-            if fc > best.1 {
-                best = (c, fc);
+        // Each search's next point: a new c after moving b down (fc ≥ fd), else a new d after
+        // moving a up; `lower` says which.
+        let (points, lower): (Vec<f64>, Vec<bool>) = running
+            .iter()
+            .map(|&k| {
+                let t = &mut s[k];
+                if t.fc >= t.fd {
+                    (t.b, t.d, t.fd) = (t.d, t.c, t.fc);
+                    t.c = t.b - gr * (t.b - t.a);
+                    (t.c, true)
+                } else {
+                    (t.a, t.c, t.fc) = (t.c, t.d, t.fd);
+                    t.d = t.a + gr * (t.b - t.a);
+                    (t.d, false)
+                }
+            })
+            .unzip();
+        let values = f(&points);
+        for (((&k, &x), &v), &low) in running.iter().zip(&points).zip(&values).zip(&lower) {
+            let t = &mut s[k];
+            if low {
+                t.fc = v;
+            } else {
+                t.fd = v;
             }
-        } else {
-            a = c;
-            c = d;
-            fc = fd;
-            d = a + gr * (b - a);
-            fd = f(d);
-            if fd > best.1 {
-                best = (d, fd);
+            if v > t.best.1 {
+                t.best = (x, v);
             }
         }
     }
-    best
+    s.iter().map(|t| t.best).collect()
 }
 
 fn cosine(a: &[f64], b: &[f64]) -> f64 {
@@ -874,8 +920,9 @@ fn rank_refs(
         }
     }
     let mut verdicts = vec![Verdict::Noise; m];
-    // Columns accepted so far (base + significant + inseparable representatives).
-    let mut accepted: Vec<Vec<f64>> = input.base_columns.to_vec();
+    // Columns accepted so far beyond the base (significant + inseparable representatives); the
+    // conditional fits extend the base's factorisation by them (`OrthoBase::extended`).
+    let mut accepted: Vec<Vec<f64>> = Vec::new();
     let mut represented: Vec<bool> = vec![false; m];
     for a in 0..m {
         if !marginal[a] {
@@ -891,11 +938,10 @@ fn rank_refs(
             }
             continue;
         }
-        let cond = if accepted.len() == input.base_columns.len() {
+        let cond = if accepted.is_empty() {
             fits[a].delta_bic
         } else {
-            let cinput = ResidualInput { residual: input.residual, sigma: input.sigma, base_columns: &accepted };
-            match prepare(&cinput) {
+            match prepared_on(input, p.w.clone(), p.base.extended(&accepted, &p.w)?) {
                 // The accepted candidates explain everything: this one adds only its penalty.
                 Err(ModelCheckError::NothingToExplain) => fits[a].k as f64 * (p.n as f64).ln(),
                 Err(e) => return Err(e),
@@ -1027,6 +1073,42 @@ mod tests {
         let (x, fx) = golden_max(&mut |x| -(x - 0.3).powi(2), 0.0, 1.0, 60);
         // 60 iterations shrink the bracket by 0.618^60 ≈ 3e-13.
         assert!((x - 0.3).abs() < 1e-7 && fx <= 0.0);
+    }
+
+    /// Searches in lockstep ([`golden_max_each`]) end where each alone ends ([`golden_max`]), to the
+    /// bit: five intervals of different widths, functions with their maximum inside and at an end,
+    /// one interval so narrow that its search stops before the others; one batch per round.
+    #[test]
+    fn golden_searches_in_lockstep_end_where_each_alone_ends() {
+        // Disjoint, so that each point names its search.
+        let ranges = [(0.0, 1.0), (-3.0, -0.5), (10.0, 10.0 + 1e-9), (1.2, 1.9), (20.0, 60.0)];
+        let f = |k: usize, x: f64| -> f64 {
+            match k {
+                0 => -(x - 0.3).powi(2),
+                1 => (x * 1.7).sin() - 0.1 * x * x + x,
+                2 => -(x - 10.0).abs(),
+                3 => x.powi(3),
+                _ => -(x.ln() - 3.5).powi(2) + 0.01 * (5.0 * x).cos(),
+            }
+        };
+        let alone: Vec<(f64, f64)> =
+            ranges.iter().enumerate().map(|(k, &(a, b))| golden_max(&mut |x| f(k, x), a, b, 40)).collect();
+        let mut calls = 0;
+        let together = golden_max_each(
+            &mut |xs: &[f64]| {
+                calls += 1;
+                xs.iter()
+                    .map(|&x| {
+                        let k = ranges.iter().position(|&(a, b)| x >= a && x <= b).unwrap();
+                        f(k, x)
+                    })
+                    .collect()
+            },
+            &ranges,
+            40,
+        );
+        assert_eq!(alone, together);
+        assert!(calls <= 41, "{calls} batches");
     }
 
     #[test]

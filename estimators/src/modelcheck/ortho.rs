@@ -30,60 +30,36 @@ pub struct OrthoBase {
 
 impl OrthoBase {
     /// The basis of the columns `cols` (each n values) weighted by `w` (n values, 1/σ): columns
-    /// scaled to unit norm, Householder QR with column pivoting, the pivots above
-    /// [`RANK_TOLERANCE`] × the largest kept (all-zero columns are skipped).
-    pub fn new(cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
-        OrthoBase::of_columns(cols, w, Factoring::Whole)
-    }
-
-    /// The basis of this span and the weighted columns `cols` (each n values, times `w`) together,
-    /// built on this one: each column scaled to unit norm and its part in this span removed
-    /// ([`OrthoBase::project_out`]), then those parts' Householder QR with column pivoting, the
-    /// pivots above [`RANK_TOLERANCE`] kept (the tolerance of [`OrthoBase::new`], whose largest
-    /// pivot is a unit-norm column's). The basis of [`OrthoBase::new`] over all the columns at the
-    /// work of the new ones: about 2·n·k·(rank + k) for k new columns, where the pivoted QR of all of
-    /// them takes 2·n·(rank + k)² at a lower speed.
-    pub fn extended(&self, cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
-        self.extended_as(cols, w, Factoring::Whole)
-    }
-
-    /// [`OrthoBase::new`] by blocks of rows: the span of the same columns and the same rank rule,
-    /// factored as a tall-skinny QR (Demmel et al. 2012, SIAM J. Sci. Comput. 34:A206): each block of
-    /// [`QR_ROW_BLOCK`] rows (two halves from 2 × [`QR_HALF_BLOCK`] rows up to [`QR_ROW_BLOCK`], one
-    /// block below) by an unpivoted blocked Householder QR (level 3, the blocks in
-    /// parallel), then the stacked R factors by the pivoted QR that counts the rank (their Gram
-    /// matrix is the columns', so its pivots are those of the pivoted QR of all rows in exact
-    /// arithmetic), and Q as each block's reflectors applied to its rows of the small Q. On
-    /// 100 000 × 165 random columns it took 1.04 s on one thread and 0.68 s on two, where
-    /// [`OrthoBase::new`] took 1.45 s (its pivoted QR runs on one). The bits differ from
-    /// [`OrthoBase::new`]'s at the rounding level and do not depend on the number of threads
+    /// scaled to unit norm (all-zero columns skipped), factored as a tall-skinny QR (Demmel et al.
+    /// 2012, SIAM J. Sci. Comput. 34:A206): each block of rows ([`QR_ROW_BLOCK`]; two halves from
+    /// 2 × [`QR_HALF_BLOCK`] rows up to it, one block below) by an unpivoted blocked Householder QR
+    /// (level 3, the blocks side by side), then the stacked R factors by a Householder QR with
+    /// column pivoting, whose pivots above [`RANK_TOLERANCE`] × the largest count the rank (the
+    /// stacked R's Gram matrix is the columns', so these are the pivots of the pivoted QR of all
+    /// rows in exact arithmetic), and Q as each block's reflectors applied to its rows of the small
+    /// Q. The pivoted QR of all rows (level 2) took 0.40–0.48 s for 19 910 × 203–209 unit columns,
+    /// where the unpivoted one of 257 took 0.22 s. The bits do not depend on the number of threads
     /// (fixed blocks, each sequential inside).
-    pub fn by_row_blocks(cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
-        OrthoBase::of_columns(cols, w, Factoring::RowBlocks)
-    }
-
-    /// [`OrthoBase::extended`] with the new columns' parts off this span factored by blocks of
-    /// rows ([`OrthoBase::by_row_blocks`]).
-    pub fn extended_by_row_blocks(&self, cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
-        self.extended_as(cols, w, Factoring::RowBlocks)
-    }
-
-    /// [`OrthoBase::new`] or [`OrthoBase::by_row_blocks`], as `how` says.
-    fn of_columns(cols: &[Vec<f64>], w: &[f64], how: Factoring) -> Result<OrthoBase, ModelCheckError> {
+    pub fn new(cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
         check_finite("weights", w)?;
         Ok(match unit_columns(cols, w)? {
-            Some((a, _)) => OrthoBase { q: how.thin_q(a, 0.0) },
+            Some((a, _)) => OrthoBase { q: tall_thin_q(a, 0.0) },
             None => OrthoBase { q: Mat::zeros(w.len(), 0) },
         })
     }
 
-    /// [`OrthoBase::extended`] or [`OrthoBase::extended_by_row_blocks`], as `how` says.
-    fn extended_as(&self, cols: &[Vec<f64>], w: &[f64], how: Factoring) -> Result<OrthoBase, ModelCheckError> {
+    /// The basis of this span and the weighted columns `cols` (each n values, times `w`) together,
+    /// built on this one: each column scaled to unit norm and its part in this span removed
+    /// ([`OrthoBase::project_out`]), then those parts factored as [`OrthoBase::new`] factors its
+    /// columns, the pivots above [`RANK_TOLERANCE`] kept (the tolerance of [`OrthoBase::new`], whose
+    /// largest pivot is a unit-norm column's). The basis of [`OrthoBase::new`] over all the columns
+    /// at the work of the new ones: about 2·n·k·(rank + k) for k new columns.
+    pub fn extended(&self, cols: &[Vec<f64>], w: &[f64]) -> Result<OrthoBase, ModelCheckError> {
         check_finite("weights", w)?;
         check_len("weights", self.nrows(), w.len())?;
         let Some((mut a, _)) = unit_columns(cols, w)? else { return Ok(self.clone()) };
         self.project_out(&mut a);
-        Ok(self.joined(&how.thin_q(a, 1.0)))
+        Ok(self.joined(&tall_thin_q(a, 1.0)))
     }
 
     /// This basis followed by the columns of `extra` (n × k, orthonormal and orthogonal to it).
@@ -528,32 +504,41 @@ fn cholesky_with_dropping(g: &[Vec<f64>], b: &[f64]) -> DroppingCholesky {
 }
 
 /// Weighted linear least squares for designs with many columns: β̂ = argmin Σ_i (w_i·(y_i −
-/// Σ_j X_ij β_j))² by Householder QR with column pivoting of the unit-norm weighted columns
-/// (faer, sequential). Columns whose pivot is below [`RANK_TOLERANCE`] × the largest are dependent
-/// on the others and get β_j = 0 (a basic solution; all-zero columns too). Returns (β, y − Xβ).
-/// Costs about 2np² flops against the SVD's ≈ 4np² + 8p³ (`fit_signature`), which also gives
-/// standard errors and the condition number; use this one where only the fit is needed.
+/// Σ_j X_ij β_j))² by QR of the unit-norm weighted columns with the weighted data beside them,
+/// [W·X/‖W·X‖ | W·y], factored by blocks of rows as [`OrthoBase::new`] factors its columns (each
+/// block's unpivoted Householder QR, then the stacked R factors' columns of X by a QR with column
+/// pivoting, whose reflectors take the stacked data column along): ‖W(y − Xβ)‖² = ‖z − R_X β‖² +
+/// a constant, so β̂ solves the small pivoted system (Golub & Van Loan, Matrix Computations, 4th
+/// ed., §5.4.1). Columns whose pivot is below [`RANK_TOLERANCE`] × the largest are dependent on
+/// the others and get β_j = 0 (a basic solution; all-zero columns too). Returns (β, y − Xβ).
+/// Costs about 2np² flops at level-3 speed against the SVD's ≈ 4np² + 8p³ (`fit_signature`),
+/// which also gives standard errors and the condition number; use this one where only the fit is
+/// needed.
 pub fn lstsq_qr(y: &[f64], cols: &[Vec<f64>], w: &[f64]) -> Result<(Vec<f64>, Vec<f64>), ModelCheckError> {
     let n = w.len();
     check_len("y", n, y.len())?;
     check_finite("y", y)?;
     let mut beta = vec![0.0; cols.len()];
-    if let Some(PivotedQr { a, coeff, perm, keep, rank }) = PivotedQr::of(cols, w)? {
-        let r = Mat::<f64>::from_fn(rank, rank, |i, j| if i <= j { a[(i, j)] } else { 0.0 });
-        let q = thin_q(a, &coeff, rank);
-        let mut qty = vec![0.0; rank];
-        for (k, v) in qty.iter_mut().enumerate() {
-            *v = (0..n).map(|i| q[(i, k)] * y[i] * w[i]).sum();
-        }
-        // Back substitution R z = Qᵀ(Wy); z_k belongs to the pivoted column perm[k].
-        let mut z = vec![0.0; rank];
+    if let Some((a, keep)) = unit_columns(cols, w)? {
+        let p = a.ncols();
+        // index: j < p + 1 columns, the last the weighted data.
+        let aug = Mat::<f64>::from_fn(n, p + 1, |i, j| if j < p { a[(i, j)] } else { y[i] * w[i] });
+        drop(a);
+        let stacked = RowBlockQr::of(aug).stacked;
+        let mut z = stacked.get(.., p..).to_owned();
+        let PivotedQr { a: mut f, coeff, perm, rank } = PivotedQr::factor(stacked.get(.., ..p).to_owned(), 0.0);
+        let r = Mat::<f64>::from_fn(rank, rank, |i, j| if i <= j { f[(i, j)] } else { 0.0 });
+        let size = unit_reflectors(&mut f);
+        apply_reflectors(f.get(.., ..size), &coeff, &mut z, Reflect::Transposed);
+        // Back substitution R δ = Qᵀz; δ_k belongs to the pivoted column perm[k].
+        let mut d = vec![0.0; rank];
         for i in (0..rank).rev() {
-            let s: f64 = qty[i] - (i + 1..rank).map(|j| r[(i, j)] * z[j]).sum::<f64>();
-            z[i] = s / r[(i, i)];
+            let s: f64 = z[(i, 0)] - (i + 1..rank).map(|j| r[(i, j)] * d[j]).sum::<f64>();
+            d[i] = s / r[(i, i)];
         }
-        for (k, zk) in z.iter().enumerate() {
+        for (k, dk) in d.iter().enumerate() {
             let (j, norm) = keep[perm[k]];
-            beta[j] = zk / norm;
+            beta[j] = dk / norm;
         }
     }
     let residual: Vec<f64> = (0..n)
@@ -584,33 +569,22 @@ fn unit_columns(cols: &[Vec<f64>], w: &[f64]) -> Result<Option<(Mat<f64>, Vec<(u
     Ok(Some((a, keep)))
 }
 
-/// A Householder QR with column pivoting of the unit-norm weighted columns W·c_j/‖W·c_j‖ (all-zero
-/// columns left out), in place as faer stores it, with the numerical rank: the pivots above
-/// [`RANK_TOLERANCE`] × the largest.
+/// A Householder QR with column pivoting, in place as faer stores it, with the numerical rank:
+/// the pivots above [`RANK_TOLERANCE`] × a reference ([`PivotedQr::factor`]).
 struct PivotedQr {
     /// R on and above the diagonal, the Householder essentials below it.
     a: Mat<f64>,
     /// Block Householder coefficients.
     coeff: Mat<f64>,
-    /// Column k of the factorisation is kept column `perm[k]`.
+    /// Column k of the factorisation is column `perm[k]` of the input.
     perm: Vec<usize>,
-    /// Kept columns: (index into the input columns, weighted norm).
-    keep: Vec<(usize, f64)>,
     /// Numerical rank.
     rank: usize,
 }
 
 impl PivotedQr {
-    /// The factorisation of `cols` weighted by `w`, or `None` when no column is nonzero (or n = 0).
-    fn of(cols: &[Vec<f64>], w: &[f64]) -> Result<Option<PivotedQr>, ModelCheckError> {
-        let Some((a, keep)) = unit_columns(cols, w)? else { return Ok(None) };
-        let mut f = PivotedQr::factor(a, 0.0);
-        f.keep = keep;
-        Ok(Some(f))
-    }
-
     /// The factorisation of `a` (n × p, p ≥ 1) in place, its rank counted by the pivots above
-    /// [`RANK_TOLERANCE`] × `reference` (0: × the largest pivot); `keep` is left empty.
+    /// [`RANK_TOLERANCE`] × `reference` (0: × the largest pivot).
     fn factor(mut a: Mat<f64>, reference: f64) -> PivotedQr {
         let (n, p) = a.shape();
         let size = n.min(p);
@@ -636,49 +610,58 @@ impl PivotedQr {
         );
         let d0 = if reference > 0.0 { reference } else { a[(0, 0)].abs() };
         let rank = (0..size).take_while(|&j| a[(j, j)].abs() > RANK_TOLERANCE * d0).count();
-        PivotedQr { a, coeff, perm, keep: Vec::new(), rank }
+        PivotedQr { a, coeff, perm, rank }
     }
 }
 
 /// The first `rank` columns of Q of a Householder QR stored in place in `a` (essentials below the
 /// diagonal, unit diagonal implied) with block coefficients `coeff`.
-fn thin_q(a: Mat<f64>, coeff: &Mat<f64>, rank: usize) -> Mat<f64> {
+fn thin_q(mut a: Mat<f64>, coeff: &Mat<f64>, rank: usize) -> Mat<f64> {
     let n = a.nrows();
+    let size = unit_reflectors(&mut a);
     let mut q = Mat::<f64>::from_fn(n, rank, |i, j| if i == j { 1.0 } else { 0.0 });
-    apply_reflectors(a, coeff, &mut q);
+    apply_reflectors(a.get(.., ..size), coeff, &mut q, Reflect::H);
     q
 }
 
-/// x ← H·x, H the product of the Householder reflectors stored in place in `a` (essentials below
-/// the diagonal, unit diagonal implied; n × p) with block coefficients `coeff`, x n × k.
-fn apply_reflectors(mut a: Mat<f64>, coeff: &Mat<f64>, x: &mut Mat<f64>) {
-    let (n, p) = a.shape();
-    let rank = x.ncols();
-    for j in 0..p.min(n) {
+/// Which product with the reflectors [`apply_reflectors`] takes.
+#[derive(Clone, Copy)]
+enum Reflect {
+    /// x ← H·x.
+    H,
+    /// x ← Hᵀ·x.
+    Transposed,
+}
+
+/// x ← H·x or Hᵀ·x (`how`), H the product of the Householder reflectors `basis` (n × p, made as
+/// faer applies them: [`unit_reflectors`]) with block coefficients `coeff`, x n × k.
+fn apply_reflectors(basis: faer::MatRef<'_, f64>, coeff: &Mat<f64>, x: &mut Mat<f64>, how: Reflect) {
+    use householder::*;
+    type Apply = fn(faer::MatRef<'_, f64>, faer::MatRef<'_, f64>, Conj, faer::MatMut<'_, f64>, Par, &mut MemStack);
+    let (scratch, apply): (fn(usize, usize, usize) -> faer::dyn_stack::StackReq, Apply) = match how {
+        Reflect::H => (
+            apply_block_householder_sequence_on_the_left_in_place_scratch::<f64>,
+            apply_block_householder_sequence_on_the_left_in_place_with_conj::<f64>,
+        ),
+        Reflect::Transposed => (
+            apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>,
+            apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj::<f64>,
+        ),
+    };
+    let mut mem = MemBuffer::new(scratch(basis.nrows(), coeff.nrows(), x.ncols()));
+    apply(basis, coeff.as_ref(), Conj::No, x.as_mut(), Par::Seq, MemStack::new(&mut mem));
+}
+
+/// The reflectors of a Householder QR stored in place in `a` (n × p) made as faer applies them:
+/// unit diagonal and zeros above it in the first min(n, p) columns, their number returned.
+fn unit_reflectors(a: &mut Mat<f64>) -> usize {
+    let size = a.nrows().min(a.ncols());
+    for j in 0..size {
         for i in 0..=j {
             a[(i, j)] = if i == j { 1.0 } else { 0.0 };
         }
     }
-    for j in n.min(p)..p {
-        for i in 0..n {
-            a[(i, j)] = 0.0;
-        }
-    }
-    let size = n.min(p);
-    let basis = a.get(.., ..size);
-    let mut mem = MemBuffer::new(householder::apply_block_householder_sequence_on_the_left_in_place_scratch::<f64>(
-        n,
-        coeff.nrows(),
-        rank,
-    ));
-    householder::apply_block_householder_sequence_on_the_left_in_place_with_conj(
-        basis,
-        coeff.as_ref(),
-        Conj::No,
-        x.as_mut(),
-        Par::Seq,
-        MemStack::new(&mut mem),
-    );
+    size
 }
 
 /// The unpivoted blocked Householder QR of `a` (n × p) in place, sequential (R on and above the
@@ -699,34 +682,11 @@ fn householder_qr(a: &mut Mat<f64>) -> Mat<f64> {
     coeff
 }
 
-/// How an [`OrthoBase`] factors its columns.
-#[derive(Clone, Copy)]
-enum Factoring {
-    /// One Householder QR with column pivoting over all rows ([`OrthoBase::new`]).
-    Whole,
-    /// A tall-skinny QR by blocks of rows ([`OrthoBase::by_row_blocks`]).
-    RowBlocks,
-}
-
-impl Factoring {
-    /// The thin Q (n × rank) of the unit columns `a` (n × p, p ≥ 1), the rank counted by the
-    /// pivots above [`RANK_TOLERANCE`] × `reference` (0: × the largest pivot).
-    fn thin_q(self, a: Mat<f64>, reference: f64) -> Mat<f64> {
-        match self {
-            Factoring::Whole => {
-                let f = PivotedQr::factor(a, reference);
-                thin_q(f.a, &f.coeff, f.rank)
-            }
-            Factoring::RowBlocks => tall_thin_q(a, reference),
-        }
-    }
-}
-
-/// Rows per block of [`OrthoBase::by_row_blocks`]' factorisation above this many rows: 16 384 (at
+/// Rows per block of [`OrthoBase::new`]'s factorisation above this many rows: 16 384 (at
 /// 165 columns a block is 22 MB).
 pub const QR_ROW_BLOCK: usize = 16_384;
 
-/// The fewest rows of each half when [`OrthoBase::by_row_blocks`] splits a stack of at most
+/// The fewest rows of each half when [`OrthoBase::new`] splits a stack of at most
 /// [`QR_ROW_BLOCK`] rows in two (so that the halves are factored side by side): 4 096. A
 /// 15 000-sample stack is two blocks of 7 500 rows; one of fewer than 8 192 rows stays whole.
 pub const QR_HALF_BLOCK: usize = 4_096;
@@ -744,35 +704,60 @@ fn qr_block_rows(n: usize) -> usize {
     }
 }
 
-/// The thin Q (n × rank) of the columns `a` (n × p, p ≥ 1) by blocks of [`QR_ROW_BLOCK`] rows
-/// ([`OrthoBase::by_row_blocks`]), the rank counted by the pivots of the stacked R factors above
-/// [`RANK_TOLERANCE`] × `reference` (0: × the largest pivot), as [`PivotedQr::factor`] counts it.
-fn tall_thin_q(a: Mat<f64>, reference: f64) -> Mat<f64> {
-    let (n, p) = a.shape();
-    let rows = qr_block_rows(n);
-    let blocks: Vec<(usize, usize)> = (0..n.div_ceil(rows)).map(|b| (b * rows, ((b + 1) * rows).min(n))).collect();
-    // Each block's unpivoted Householder QR in place (R on and above the diagonal, reflectors
-    // below) and its block coefficients.
-    let local: Vec<(Mat<f64>, Mat<f64>)> = blocks
-        .par_iter()
-        .map(|&(lo, hi)| {
-            let mut blk = a.as_ref().subrows(lo, hi - lo).to_owned();
-            let coeff = householder_qr(&mut blk);
-            (blk, coeff)
-        })
-        .collect();
-    drop(a);
-    // The R factors stacked (each block's min(rows, p) rows), and their pivoted QR.
-    let sizes: Vec<usize> = blocks.iter().map(|(lo, hi)| (hi - lo).min(p)).collect();
-    let offsets: Vec<usize> = sizes.iter().scan(0, |o, s| Some(std::mem::replace(o, *o + s))).collect();
-    let mut stacked = Mat::<f64>::zeros(sizes.iter().sum(), p);
-    for ((blk, _), (&off, &size)) in local.iter().zip(offsets.iter().zip(&sizes)) {
-        for j in 0..p {
-            for i in 0..size.min(j + 1) {
-                stacked[(off + i, j)] = blk[(i, j)];
+/// The unpivoted Householder QR of `a` (n × p, p ≥ 1) by blocks of rows ([`qr_block_rows`]), the
+/// blocks side by side (rayon), each sequential inside: the bits depend on n alone.
+struct RowBlockQr {
+    /// Rows per block (the last may have fewer).
+    rows: usize,
+    /// Each block's first row and end.
+    blocks: Vec<(usize, usize)>,
+    /// Each block factored in place (R on and above the diagonal, reflectors below) and its block
+    /// coefficients.
+    local: Vec<(Mat<f64>, Mat<f64>)>,
+    /// Each block's first row in `stacked`.
+    offsets: Vec<usize>,
+    /// Each block's rows in `stacked`: min(its rows, p).
+    sizes: Vec<usize>,
+    /// The blocks' R factors stacked (Σ sizes × p): its Gram matrix is aᵀa.
+    stacked: Mat<f64>,
+}
+
+impl RowBlockQr {
+    fn of(a: Mat<f64>) -> RowBlockQr {
+        let (n, p) = a.shape();
+        let rows = qr_block_rows(n);
+        let blocks: Vec<(usize, usize)> = (0..n.div_ceil(rows)).map(|b| (b * rows, ((b + 1) * rows).min(n))).collect();
+        let local: Vec<(Mat<f64>, Mat<f64>)> = blocks
+            .par_iter()
+            .map(|&(lo, hi)| {
+                let mut blk = a.as_ref().subrows(lo, hi - lo).to_owned();
+                let coeff = householder_qr(&mut blk);
+                (blk, coeff)
+            })
+            .collect();
+        drop(a);
+        let sizes: Vec<usize> = blocks.iter().map(|(lo, hi)| (hi - lo).min(p)).collect();
+        let offsets: Vec<usize> = sizes.iter().scan(0, |o, s| Some(std::mem::replace(o, *o + s))).collect();
+        let mut stacked = Mat::<f64>::zeros(sizes.iter().sum(), p);
+        for ((blk, _), (&off, &size)) in local.iter().zip(offsets.iter().zip(&sizes)) {
+            for j in 0..p {
+                for i in 0..size.min(j + 1) {
+                    stacked[(off + i, j)] = blk[(i, j)];
+                }
             }
         }
+        RowBlockQr { rows, blocks, local, offsets, sizes, stacked }
     }
+}
+
+/// The thin Q (n × rank) of the columns `a` (n × p, p ≥ 1) by blocks of rows ([`RowBlockQr`],
+/// Demmel et al. 2012, SIAM J. Sci. Comput. 34:A206), the rank counted by the pivots of the
+/// stacked R factors' pivoted QR above [`RANK_TOLERANCE`] × `reference` (0: × the largest pivot):
+/// their Gram matrix is the columns', so the pivots are those of the pivoted QR of all rows in
+/// exact arithmetic.
+fn tall_thin_q(a: Mat<f64>, reference: f64) -> Mat<f64> {
+    let n = a.nrows();
+    let RowBlockQr { rows, blocks, local, offsets, sizes, stacked } = RowBlockQr::of(a);
     let f = PivotedQr::factor(stacked, reference);
     let small = thin_q(f.a, &f.coeff, f.rank);
     let rank = small.ncols();
@@ -780,14 +765,15 @@ fn tall_thin_q(a: Mat<f64>, reference: f64) -> Mat<f64> {
     let parts: Vec<Mat<f64>> = local
         .into_par_iter()
         .zip(blocks.par_iter().zip(offsets.par_iter().zip(&sizes)))
-        .map(|((blk, coeff), (&(lo, hi), (&off, &size)))| {
+        .map(|((mut blk, coeff), (&(lo, hi), (&off, &size)))| {
             let mut x = Mat::<f64>::zeros(hi - lo, rank);
             for j in 0..rank {
                 for i in 0..size {
                     x[(i, j)] = small[(off + i, j)];
                 }
             }
-            apply_reflectors(blk, &coeff, &mut x);
+            let reflectors = unit_reflectors(&mut blk);
+            apply_reflectors(blk.get(.., ..reflectors), &coeff, &mut x, Reflect::H);
             x
         })
         .collect();
@@ -900,14 +886,27 @@ impl NestedSeries {
             out.nested.used.push(used[j]);
         }
         out.zy = (0..=k).map(|i| m[(i, k)]).collect();
-        for j in 0..=k {
-            for i in 0..=j {
-                m[(i, j)] = if i == j { 1.0 } else { 0.0 };
-            }
-        }
+        unit_reflectors(&mut m);
         out.basis = m;
         out.coeff = coeff;
         Ok(out)
+    }
+
+    /// The series' orthonormal directions q_0.., one per column taken (`nested.used`, in order), as
+    /// an n × m matrix: the weighted series columns off the base and the ones before.
+    pub fn q(&self) -> Mat<f64> {
+        let m = self.nested.used.len();
+        let mut q = Mat::<f64>::from_fn(self.base.nrows(), m, |i, j| if i == j { 1.0 } else { 0.0 });
+        if m > 0 {
+            apply_reflectors(self.basis.as_ref(), &self.coeff, &mut q, Reflect::H);
+        }
+        q
+    }
+
+    /// q_jᵀ(W·y) for each direction of [`NestedSeries::q`] (the data's W·y off the base):
+    /// rss[j] − rss[j + 1] = (q_jᵀ(W·y))².
+    pub fn qty(&self) -> &[f64] {
+        &self.zy[..self.nested.used.len()]
     }
 
     /// The nested sums with the columns `extra` (each n values, weighted by `w`) in the base as
@@ -938,18 +937,7 @@ impl NestedSeries {
         // `lead`: the rows that hold data (k + 1 when factored, else n).
         let lead = self.zy.len();
         let tail = if self.basis.ncols() > 0 {
-            let mut mem =
-                MemBuffer::new(householder::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<
-                    f64,
-                >(n, self.coeff.nrows(), z.ncols()));
-            householder::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
-                self.basis.as_ref(),
-                self.coeff.as_ref(),
-                Conj::No,
-                z.as_mut(),
-                Par::Seq,
-                MemStack::new(&mut mem),
-            );
+            apply_reflectors(self.basis.as_ref(), &self.coeff, &mut z, Reflect::Transposed);
             let mut t = z.get(lead.., ..).to_owned();
             let rows = t.nrows().min(t.ncols());
             if rows > 0 {
@@ -1296,13 +1284,14 @@ mod tests {
         assert!(diff <= 1e-10 * norm, "projections differ by {diff} of {norm}");
     }
 
-    /// The factorisation by blocks of rows ([`OrthoBase::by_row_blocks`],
-    /// [`OrthoBase::extended_by_row_blocks`]) against the whole one ([`OrthoBase::new`],
-    /// [`OrthoBase::extended`]): 2 × [`QR_ROW_BLOCK`] + 50 weighted samples (three blocks, the
-    /// last with fewer rows than columns), 2 × [`QR_HALF_BLOCK`] + 1 (two halves), 70 columns of which 3 are combinations of others and one
-    /// is zero on all but the last 40 rows, one column all-zero; then 30 more columns, 2 of them in
-    /// the span. The same ranks (66, then 94), orthonormal columns (QᵀQ = I to 1e-12) and the same
-    /// projection of a test vector (to 1e-10 of its norm); a one-block stack too (500 rows).
+    /// The factorisation by blocks of rows ([`OrthoBase::new`], [`OrthoBase::extended`]) against
+    /// one Householder QR with column pivoting over all rows (`whole_rows`, the factorisation
+    /// before the blocks): 2 × [`QR_ROW_BLOCK`] + 50 weighted samples (three blocks, the last with
+    /// fewer rows than columns), 2 × [`QR_HALF_BLOCK`] + 1 (two halves), 70 columns of which 3 are
+    /// combinations of others and one is zero on all but the last 40 rows, one column all-zero;
+    /// then 30 more columns, 2 of them in the span. The same ranks (66, then 94), orthonormal
+    /// columns (QᵀQ = I to 1e-12) and the same projection of a test vector (to 1e-10 of its norm);
+    /// a one-block stack too (500 rows).
     #[test]
     fn a_basis_by_blocks_of_rows_spans_what_the_whole_basis_spans() {
         for n in [2 * QR_ROW_BLOCK + 50, 2 * QR_HALF_BLOCK + 1, 500] {
@@ -1322,10 +1311,18 @@ mod tests {
             more.push(combo(&first[7], &first[9], 0.5));
             let v: Vec<f64> = (0..n).map(|i| (i as f64 * 0.071).sin() + x[i].powi(3)).collect();
             let norm = v.iter().zip(&w).map(|(p, q)| (p * q).powi(2)).sum::<f64>().sqrt();
-            let whole = OrthoBase::new(&first, &w).unwrap();
-            let blocked = OrthoBase::by_row_blocks(&first, &w).unwrap();
-            let (ext_whole, ext_blocked) =
-                (whole.extended(&more, &w).unwrap(), blocked.extended_by_row_blocks(&more, &w).unwrap());
+            // The pivoted QR of all rows at once: of the unit columns, then of the new ones' parts
+            // off that span (pivots counted against 1, a unit column's).
+            let whole_rows = |a: Mat<f64>, reference: f64| {
+                let f = PivotedQr::factor(a, reference);
+                thin_q(f.a, &f.coeff, f.rank)
+            };
+            let whole = OrthoBase { q: whole_rows(unit_columns(&first, &w).unwrap().unwrap().0, 0.0) };
+            let mut parts = unit_columns(&more, &w).unwrap().unwrap().0;
+            whole.project_out(&mut parts);
+            let ext_whole = whole.joined(&whole_rows(parts, 1.0));
+            let blocked = OrthoBase::new(&first, &w).unwrap();
+            let ext_blocked = blocked.extended(&more, &w).unwrap();
             for (a, b, rank) in [(&whole, &blocked, 66), (&ext_whole, &ext_blocked, 94)] {
                 assert_eq!((a.rank(), b.rank()), (rank, rank), "{n} rows");
                 let gram = super::super::lsq::gram_of(b.q.as_ref());
@@ -1519,6 +1516,34 @@ mod tests {
     /// The QR least squares agrees with the SVD one (`fit_signature`) on a weighted cubic with a
     /// duplicated and an all-zero column: the same fitted values to 1e-12, and the duplicate's
     /// pair of coefficients sums to the SVD's pair sum.
+    /// [`lstsq_qr`] by blocks of rows (2 × [`QR_ROW_BLOCK`] + 50 weighted samples: three blocks,
+    /// the last with fewer rows than columns + 1) leaves the residual of the projection off the
+    /// columns' basis ([`OrthoBase::new`], Q formed and applied) to 1e-10 of the data's weighted
+    /// norm, with 40 well-conditioned columns (cosines of whole half-periods) of which two are
+    /// combinations of others and one all-zero, and its coefficients reproduce the fitted values.
+    #[test]
+    fn least_squares_by_blocks_of_rows_leaves_the_projection_residual() {
+        let n = 2 * QR_ROW_BLOCK + 50;
+        let x: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
+        let w: Vec<f64> = (0..n).map(|i| 0.5 + (i as f64 * 0.37).sin().abs()).collect();
+        let mut cols: Vec<Vec<f64>> = (0..37)
+            .map(|k| x.iter().map(|v| (std::f64::consts::PI * k as f64 * v + 0.2 * k as f64).cos()).collect())
+            .collect();
+        cols.push(cols[3].iter().zip(&cols[30]).map(|(a, b)| a - 2.0 * b).collect());
+        cols.push(cols[7].iter().map(|a| 3.0 * a).collect());
+        cols.push(vec![0.0; n]);
+        let y: Vec<f64> = (0..n).map(|i| (x[i] * 40.0).sin() + x[i].powi(3) + 0.01 * ((i * 7) % 5) as f64).collect();
+        let (beta, r) = lstsq_qr(&y, &cols, &w).unwrap();
+        let projected = OrthoBase::new(&cols, &w).unwrap().project_vector(&y, &w);
+        let norm = y.iter().zip(&w).map(|(a, b)| (a * b).powi(2)).sum::<f64>().sqrt();
+        let diff = (0..n).map(|i| (r[i] * w[i] - projected[i]).powi(2)).sum::<f64>().sqrt();
+        assert!(diff <= 1e-10 * norm, "residuals differ by {diff} of {norm}");
+        let refit = (0..n).map(|i| y[i] - cols.iter().zip(&beta).map(|(c, b)| c[i] * b).sum::<f64>() - r[i]);
+        assert!(refit.map(f64::abs).fold(0.0, f64::max) <= 1e-10 * norm);
+        assert_eq!(beta[39], 0.0);
+        assert_eq!(beta.iter().filter(|b| **b == 0.0).count(), 3, "one zero column, two dependent");
+    }
+
     #[test]
     fn qr_least_squares_matches_the_svd_fit() {
         use crate::modelcheck::{fit_signature, Sigma};
