@@ -184,9 +184,10 @@ pub(crate) fn weighted_ss(r: &[f64], w: &[f64]) -> f64 {
 }
 
 /// Golden-section minimum of f on [a, b] searched on a log scale, `iters` iterations: the shared
-/// line search (`vmt_estimators::modelcheck::golden_max`) on −f(eˡ), l ∈ [ln a, ln b].
+/// line search (`vmt_estimators::modelcheck::golden_max`) on −f(eˡ), l ∈ [ln a, ln b]
+/// ([`golden_each`] on one interval).
 pub(crate) fn golden(a: f64, b: f64, iters: usize, f: &mut dyn FnMut(f64) -> f64) -> f64 {
-    golden_max(&mut |l: f64| -f(l.exp()), a.ln(), b.ln(), iters).0.exp()
+    golden_each(&[(a, b)], iters, &mut |xs| xs.iter().map(|&x| f(x)).collect())[0]
 }
 
 /// [`golden`] on several intervals `ranges` in lockstep (`golden_max_each`): `f` gets the next

@@ -130,7 +130,7 @@ use std::path::{Path, PathBuf};
 use vmt_estimators::modelcheck::diagnose::at_grid_end;
 use vmt_estimators::modelcheck::{
     autocorrelation, bin_by_edges, bin_by_label, estimate_noise_sigma, fit_percent, fit_signature, frequency_grid,
-    golden_max, golden_max_each, greedy_rss, ljung_box, ls_periodogram, lstsq_qr, nested_rss, rank_candidates,
+    golden_max_each, greedy_rss, ljung_box, ls_periodogram, lstsq_qr, nested_rss, rank_candidates,
     refine_projected_point, sparse_frequency_scan, uniform_edges, Candidate, DiagnoseConfig, HyperParameter,
     ModelCheckError, NestedSeries, OrthoBase, RankingEntry, Sigma, SparseColumn, Verdict,
 };
