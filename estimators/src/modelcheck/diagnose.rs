@@ -134,10 +134,13 @@ impl<'a> Candidate<'a> {
     }
 
     /// Screens the grid: every grid point is scored by the reduction of the base-projected
-    /// residual on the candidate's weighted columns *without* their projection on the base (an
-    /// upper bound of the exact reduction, cheap when the base is large), and only the `top` best
-    /// of those are evaluated exactly; the refinement and the reported fit are exact. For
-    /// candidates with many columns over a large base (a structural mode over flexible shapes).
+    /// residual on the candidate's weighted columns *without* their projection on the base (cheap
+    /// when the base is large), and only the `top` best of those are evaluated exactly; the
+    /// refinement and the reported fit are exact. For candidates with many columns over a large
+    /// base (a structural mode over flexible shapes). The score is a lower bound of the exact
+    /// reduction, not an upper one: with r off the base, projecting the columns C off the base
+    /// leaves Cᵀr as it is and only shrinks CᵀC, so a point whose columns the base partly spans
+    /// scores below its exact reduction.
     pub fn with_screen(mut self, top: usize) -> Self {
         self.screen = Some(top.max(1));
         self
@@ -574,9 +577,19 @@ fn fit_prepared(p: &Prepared, cand: &Candidate, config: &DiagnoseConfig) -> Resu
         }
     };
     // In chunks of grid points whose columns are projected together ([`OrthoBase::explained_each`]:
-    // Q is read once per chunk, not once per point), the chunks fixed by the grid alone (the same
-    // bits on any number of threads) and sized to hold at most GRID_CHUNK_VALUES column values.
-    let per_point = cand.coefficient_names.len().max(1).saturating_mul(p.n.max(1));
+    // Q is read once per chunk, not once per point), the chunks fixed by the grid and the
+    // candidate's columns alone (the same bits on any number of threads) and sized to hold about
+    // GRID_CHUNK_VALUES column values.
+    // Values per point: dense, a column per coefficient over all rows; as runs, the values of the
+    // first exact point's runs (a mode's responses lie on the channels its sensors read, whatever
+    // its frequency and damping; a chunk holds at most GRID_CHUNK_POINTS dense points whatever the
+    // runs of the others).
+    let dense = cand.coefficient_names.len().max(1).saturating_mul(p.n.max(1));
+    let per_point = match (&cand.sparse, exact_points.first()) {
+        (Some(sparse), Some(&g)) => checked_sparse(p, cand, sparse.as_ref(), &point(g))
+            .map_or(dense, |cols| cols.iter().flat_map(|c| &c.runs).map(|(_, v)| v.len()).sum::<usize>().max(1)),
+        _ => dense,
+    };
     // clamp: GRID_CHUNK_POINTS is 32, above 1.
     let chunk = (GRID_CHUNK_VALUES / per_point).clamp(1, GRID_CHUNK_POINTS);
     let reds: Vec<(usize, Result<f64, ModelCheckError>)> = exact_points
