@@ -22,6 +22,9 @@ use rayon::prelude::*;
 /// dependent on the others.
 pub const RANK_TOLERANCE: f64 = 1e-10;
 
+/// Columns per task of [`OrthoBase::project_out`].
+const PROJECT_COLUMNS: usize = 16;
+
 /// An orthonormal basis Q (n × rank) of the span of weighted columns W·c_j.
 #[derive(Debug, Clone)]
 pub struct OrthoBase {
@@ -88,16 +91,29 @@ impl OrthoBase {
     }
 
     /// Removes from every column of `m` (n × k) its part in the span: m − Q(Qᵀm), twice ("twice is
-    /// enough", Giraud et al. 2005) for orthogonality to rounding.
+    /// enough", Giraud et al. 2005) for orthogonality to rounding. Blocks of 16 columns side by
+    /// side (rayon), each block's products sequential: a column's result does not
+    /// depend on the columns beside it, so these are the bits of one sequential product on any
+    /// number of threads.
     pub fn project_out(&self, m: &mut Mat<f64>) {
         if self.rank() == 0 || m.ncols() == 0 {
             return;
         }
-        let mut c = Mat::<f64>::zeros(self.rank(), m.ncols());
-        for _ in 0..2 {
-            matmul(c.as_mut(), Accum::Replace, self.q.transpose(), m.as_ref(), 1.0, Par::Seq);
-            matmul(m.as_mut(), Accum::Add, self.q.as_ref(), c.as_ref(), -1.0, Par::Seq);
+        let mut blocks = Vec::new();
+        let mut rest = m.as_mut();
+        while rest.ncols() > 0 {
+            let width = PROJECT_COLUMNS.min(rest.ncols());
+            let (block, others) = rest.split_at_col_mut(width);
+            blocks.push(block);
+            rest = others;
         }
+        blocks.into_par_iter().for_each(|mut block| {
+            let mut c = Mat::<f64>::zeros(self.rank(), block.ncols());
+            for _ in 0..2 {
+                matmul(c.as_mut(), Accum::Replace, self.q.transpose(), block.as_ref(), 1.0, Par::Seq);
+                matmul(block.as_mut(), Accum::Add, self.q.as_ref(), c.as_ref(), -1.0, Par::Seq);
+            }
+        });
     }
 
     /// Weighted columns `cols` (each n values, times `w`) with their part in the span removed, as an
@@ -1202,6 +1218,36 @@ fn greedy_steps(g: &Mat<f64>, mut left: Vec<f64>, mut corr: Vec<f64>, rss0: f64,
 mod tests {
     use super::super::lsq::Basis;
     use super::*;
+
+    /// [`OrthoBase::project_out`] by blocks of columns against the two products over all the
+    /// columns at once, written here: 20 000 samples, a base of 70 cosine columns, 53 columns to
+    /// project (three full blocks and a part): the same bits, and each column orthogonal to the
+    /// base within 1e-12 of its norm.
+    #[test]
+    fn projection_by_blocks_of_columns_keeps_the_bits_of_one_product() {
+        let n = 20_000;
+        let w: Vec<f64> = (0..n).map(|i| 1.0 + 0.3 * (i as f64 * 0.011).sin()).collect();
+        let cos = |a: f64, b: f64| (0..n).map(|i| (a * i as f64 / n as f64 + b).cos()).collect::<Vec<f64>>();
+        let cols: Vec<Vec<f64>> = (0..70).map(|j| cos(3.1 * j as f64, 0.2 * j as f64)).collect();
+        let base = OrthoBase::new(&cols, &w).unwrap();
+        let m0 = Mat::<f64>::from_fn(n, 53, |i, j| ((i * (j + 3)) as f64 * 1e-3).sin() + (i as f64 * 1e-4) * j as f64);
+        let mut by_blocks = m0.clone();
+        base.project_out(&mut by_blocks);
+        let mut whole = m0.clone();
+        let mut c = Mat::<f64>::zeros(base.rank(), whole.ncols());
+        for _ in 0..2 {
+            matmul(c.as_mut(), Accum::Replace, base.q().transpose(), whole.as_ref(), 1.0, Par::Seq);
+            matmul(whole.as_mut(), Accum::Add, base.q(), c.as_ref(), -1.0, Par::Seq);
+        }
+        for j in 0..53 {
+            assert_eq!(by_blocks.col_as_slice(j), whole.col_as_slice(j), "column {j}");
+            let norm = m0.col_as_slice(j).iter().map(|x| x * x).sum::<f64>().sqrt();
+            for a in 0..base.rank() {
+                let along: f64 = base.q().col(a).iter().zip(by_blocks.col_as_slice(j)).map(|(q, x)| q * x).sum();
+                assert!(along.abs() <= 1e-12 * norm, "column {j} along {a}: {along:e}");
+            }
+        }
+    }
 
     /// The Gram form of the greedy selection ([`greedy_rss_with_gram`]) against the column form
     /// ([`greedy_rss`]): 600 weighted samples, a polynomial base of rank 3, 40 cosine columns of
