@@ -1275,11 +1275,81 @@ fn write_report_html(out: &Path, report: &vmt_report::Report) -> Result<(), VmtE
     Ok(())
 }
 
-/// `vmt add --model M --effect NAME [--from-diagnosis] [--data D] -o M2`: writes the model with the
-/// effect added (`fit = true`; with `--from-diagnosis` starting from the diagnosed parameters, which
-/// needs `--data`). With `--data`, appends (model, normalised RMS) of the input model (if the history
-/// is empty) and of the new model to `history.json` beside M2.
-pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>, out: &Path) -> Result<i32, VmtError> {
+/// Where `vmt add` takes the added effect's starting parameters from.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum FromDiagnosis {
+    /// The catalogue's defaults.
+    No,
+    /// A diagnosis of the model on `--data`, computed (`--from-diagnosis`).
+    Computed,
+    /// A diagnosis `vmt diagnose --json` wrote (`--diagnosis FILE`), checked to belong to the model
+    /// and `--data` by its normalised RMS ([`DIAGNOSIS_RMS_MATCH`]).
+    File(std::path::PathBuf),
+}
+
+/// A diagnosis file ([`FromDiagnosis::File`]) belongs to the model and data when its
+/// `normalized_rms` and the model's on the data (`compare`) agree within this fraction. The two
+/// are the same fit's by different sums (`diagnose` and `compare` differ in the last digits:
+/// 4e-16 and 2e-15 relative on the benchmark's sets `res15000` and `enc_backlash`), and any change
+/// of the model's fitted terms or of the data moves it by far more.
+pub const DIAGNOSIS_RMS_MATCH: f64 = 1e-9;
+
+/// Largest diagnosis file `vmt add --diagnosis` reads, bytes (a diagnosis is a few kB).
+const DIAGNOSIS_MAX_BYTES: u64 = 16 << 20;
+
+/// The diagnosis file `file` (`vmt-diagnose/1`, read whole: at most [`DIAGNOSIS_MAX_BYTES`]).
+fn read_diagnosis(file: &Path) -> Result<crate::modelcheck::DiagnoseReport, VmtError> {
+    let text = VmtError::read_bounded(file, DIAGNOSIS_MAX_BYTES, "a diagnosis (vmt diagnose --json)")?;
+    let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
+        VmtError::bad(file, format!("line {}", e.line()), format!("expected JSON (vmt diagnose --json): {e}"))
+    })?;
+    let format = value.get("format").and_then(|f| f.as_str());
+    if format != Some("vmt-diagnose/1") {
+        return Err(VmtError::bad(
+            file,
+            "format",
+            format!(
+                "expected \"vmt-diagnose/1\" (the output of vmt diagnose --json), found {}",
+                format.unwrap_or("none")
+            ),
+        ));
+    }
+    serde_json::from_value(value).map_err(|e| VmtError::bad(file, "", format!("not a vmt-diagnose/1 report: {e}")))
+}
+
+/// The ranking entry of `name` in the diagnosis `diag` read from `file`, after checking that its
+/// normalised RMS is the model's on the data (`rms`, from `compare`; [`DIAGNOSIS_RMS_MATCH`]).
+fn diagnosis_entry(
+    file: &Path,
+    diag: crate::modelcheck::DiagnoseReport,
+    name: vmt_sim::effects::EffectName,
+    rms: f64,
+) -> Result<crate::modelcheck::RankedEffect, VmtError> {
+    let matches = diag.normalized_rms == rms || (diag.normalized_rms / rms - 1.0).abs() <= DIAGNOSIS_RMS_MATCH;
+    if !matches {
+        return Err(VmtError::bad(
+            file,
+            "normalized_rms",
+            format!(
+                "the diagnosis was not made for this model on these data: its normalised RMS is {}, the model's on \
+                 --data is {rms} (run vmt diagnose --json again, or use --from-diagnosis)",
+                diag.normalized_rms
+            ),
+        ));
+    }
+    diag.ranking
+        .into_iter()
+        .find(|r| r.effect == name)
+        .ok_or_else(|| VmtError::bad(file, "ranking", format!("the diagnosis has no candidate `{name}`")))
+}
+
+/// `vmt add --model M --effect NAME [--from-diagnosis | --diagnosis FILE] [--data D] -o M2`: writes the
+/// model with the effect added (`fit = true`; with `--from-diagnosis` starting from the diagnosed
+/// parameters, computed again, or with `--diagnosis FILE` from those of a diagnosis `vmt diagnose
+/// --json` wrote for this model and data; both need `--data`). With `--data`, appends (model,
+/// normalised RMS) of the input model (if the history is empty) and of the new model to
+/// `history.json` beside M2.
+pub fn add(model: &Path, effect: &str, from: &FromDiagnosis, data: Option<&Path>, out: &Path) -> Result<i32, VmtError> {
     use vmt_sim::effects::EffectName;
     let m = crate::model::read_model(model)?;
     let name: EffectName =
@@ -1290,19 +1360,37 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
             check_model_on_data(&m, &set, model)?;
             Some(set)
         }
-        None if from_diagnosis => {
+        None if *from == FromDiagnosis::Computed => {
             return Err(VmtError::Usage("--from-diagnosis needs --data (the diagnosis is computed again)".into()))
+        }
+        None if *from != FromDiagnosis::No => {
+            return Err(VmtError::Usage("--diagnosis needs --data (the diagnosis is checked against them)".into()))
         }
         None => None,
     };
-    let entry = match (&set, from_diagnosis, data) {
-        (Some(s), true, Some(d)) => {
+    // A diagnosis file, read before anything is computed; the input model on the data (the
+    // history's first entry) checks it.
+    let given = match from {
+        FromDiagnosis::File(file) => Some((file, read_diagnosis(file)?)),
+        FromDiagnosis::No | FromDiagnosis::Computed => None,
+    };
+    let r0 = match (&set, data) {
+        (Some(s), Some(d)) if given.is_some() => Some(crate::modelcheck::compare(&m, s, d)?),
+        _ => None,
+    };
+    let entry = match (&set, from, data) {
+        (Some(s), FromDiagnosis::Computed, Some(d)) => {
             let diag = crate::modelcheck::diagnose(&m, s, d)?;
             Some(diag.ranking.into_iter().find(|r| r.effect == name).ok_or_else(|| {
                 VmtError::bad(d, "", format!("the diagnosis has no candidate `{name}` on these data"))
             })?)
         }
-        _ => None,
+        _ => match given {
+            Some((file, diag)) => {
+                Some(diagnosis_entry(file, diag, name, r0.as_ref().map_or(f64::NAN, |r| r.normalized_rms))?)
+            }
+            None => None,
+        },
     };
     let hpath = crate::modelcheck::history_path(out);
     if data.is_some() && hpath.exists() && crate::modelcheck::read_history(&hpath).is_none() {
@@ -1317,6 +1405,9 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
     if let Some(d) = data {
         crate::output::refuse_input_overwrite(out, &[d])?;
     }
+    if let FromDiagnosis::File(file) = from {
+        crate::output::refuse_input_overwrite(out, &[file])?;
+    }
     let mut m2 =
         crate::modelcheck::add_effect(&m, name, entry.as_ref()).map_err(|e| VmtError::bad(model, "", e.to_string()))?;
     m2.source = out.to_path_buf();
@@ -1325,7 +1416,10 @@ pub fn add(model: &Path, effect: &str, from_diagnosis: bool, data: Option<&Path>
     if let (Some(s), Some(d)) = (&set, data) {
         let mut entries = Vec::new();
         if crate::modelcheck::read_history(&hpath).unwrap_or_default().is_empty() {
-            let r0 = crate::modelcheck::compare(&m, s, d)?;
+            let r0 = match r0 {
+                Some(r) => r,
+                None => crate::modelcheck::compare(&m, s, d)?,
+            };
             entries.push(crate::modelcheck::HistoryEntry {
                 model: model.display().to_string(),
                 data: d.display().to_string(),

@@ -244,6 +244,10 @@ enum Command {
         /// Start from the parameters the diagnosis found (needs --data).
         #[arg(long)]
         from_diagnosis: bool,
+        /// Start from the parameters of this diagnosis (what `vmt diagnose --json` printed for this
+        /// model and --data) instead of computing it again; implies --from-diagnosis, needs --data.
+        #[arg(long, value_name = "FILE")]
+        diagnosis: Option<PathBuf>,
         /// Measurement set the diagnosis and the history's normalised RMS are computed on.
         #[arg(long)]
         data: Option<PathBuf>,
@@ -297,8 +301,13 @@ fn main() -> ExitCode {
         }
         Command::Compare(a) => vmt::cli::compare(&a.model, &a.data, a.json, a.report.as_deref()),
         Command::Diagnose(a) => vmt::cli::diagnose(&a.model, &a.data, a.json, a.report.as_deref()),
-        Command::Add { model, effect, from_diagnosis, data, out } => {
-            vmt::cli::add(&model, &effect, from_diagnosis, data.as_deref(), &out)
+        Command::Add { model, effect, from_diagnosis, diagnosis, data, out } => {
+            let from = match diagnosis {
+                Some(file) => vmt::cli::FromDiagnosis::File(file),
+                None if from_diagnosis => vmt::cli::FromDiagnosis::Computed,
+                None => vmt::cli::FromDiagnosis::No,
+            };
+            vmt::cli::add(&model, &effect, &from, data.as_deref(), &out)
         }
     };
     match result {

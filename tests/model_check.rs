@@ -537,6 +537,45 @@ fn cli_json_contract_history_and_bad_input() {
     let c1 = run_json(&["compare", "--model", m1.to_str().unwrap(), "--data", data.to_str().unwrap(), "--json"]);
     assert_eq!(c1["history"].as_array().unwrap().len(), 2);
     assert!(c1["normalized_rms"].as_f64().unwrap() <= NOISE_LEVEL_NRMS);
+    // The diagnosis printed above given as a file (`--diagnosis`, not computed again): the same
+    // model written. A diagnosis of other data, or a file that is not one, exits 2 naming it.
+    let dfile = tmp.path().join("diagnosis.json");
+    std::fs::write(&dfile, serde_json::to_string_pretty(&d).unwrap()).unwrap();
+    let add_with = |file: &Path, out: &Path| {
+        vmt_bin()
+            .args([
+                "add",
+                "--model",
+                m0.to_str().unwrap(),
+                "--effect",
+                "backlash",
+                "--diagnosis",
+                file.to_str().unwrap(),
+            ])
+            .args(["--data", data.to_str().unwrap(), "-o", out.to_str().unwrap()])
+            .output()
+            .unwrap()
+    };
+    let m1f = tmp.path().join("it_file/m1.toml");
+    let out = add_with(&dfile, &m1f);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let model_text = |p: &Path| {
+        std::fs::read_to_string(p).unwrap().lines().filter(|l| !l.starts_with('#')).collect::<Vec<_>>().join("\n")
+    };
+    assert_eq!(model_text(&m1f), model_text(&m1));
+    let mut other = d.clone();
+    other["normalized_rms"] = serde_json::json!(d["normalized_rms"].as_f64().unwrap() * 1.001);
+    let ofile = tmp.path().join("other.json");
+    std::fs::write(&ofile, serde_json::to_string(&other).unwrap()).unwrap();
+    let cfile = tmp.path().join("compare.json");
+    std::fs::write(&cfile, serde_json::to_string(&c).unwrap()).unwrap();
+    for (file, expect) in [(&ofile, "was not made for this model"), (&cfile, "vmt-diagnose/1")] {
+        let out = add_with(file, &tmp.path().join("it_bad/m1.toml"));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains(expect) && err.contains(file.file_name().unwrap().to_str().unwrap()), "{err}");
+    }
+    assert!(!tmp.path().join("it_bad/m1.toml").exists());
 
     // Bad input: exit 2 and a message naming the problem.
     let bad = |model_text: &str, data_dir: &Path, expect: &str| {

@@ -257,15 +257,7 @@ fn fanuc_increments(c: &[f64]) -> Result<(i64, Vec<i64>), TableFitError> {
 /// deviations they remove (m).
 pub fn read_table(path: &Path) -> Result<CompensationTable, VmtError> {
     const MAX_BYTES: u64 = 64 << 20;
-    let meta = std::fs::metadata(path).map_err(|e| VmtError::io(path, "reading the compensation table", e))?;
-    if meta.len() > MAX_BYTES {
-        return Err(VmtError::bad(
-            path,
-            "",
-            format!("{} bytes; a compensation table is at most {MAX_BYTES}", meta.len()),
-        ));
-    }
-    let text = std::fs::read_to_string(path).map_err(|e| VmtError::io(path, "reading the compensation table", e))?;
+    let text = VmtError::read_bounded(path, MAX_BYTES, "a compensation table")?;
     let (x, c) = if text.contains("$AA_ENC_COMP") {
         read_siemens(path, &text)?
     } else if assignments(&text).any(|(_, k, _)| {

@@ -84,6 +84,18 @@ impl VmtError {
         VmtError::Io { file: file.to_path_buf(), action: action.to_string(), source }
     }
 
+    /// The text of `file`, refused as bad input when it is larger than `max_bytes` (checked before
+    /// reading: the size a file states bounds what is allocated); `what` names it in the messages
+    /// ("a compensation table").
+    pub fn read_bounded(file: &Path, max_bytes: u64, what: &str) -> Result<String, VmtError> {
+        let action = format!("reading {what}");
+        let meta = std::fs::metadata(file).map_err(|e| VmtError::io(file, &action, e))?;
+        if meta.len() > max_bytes {
+            return Err(VmtError::bad(file, "", format!("{} bytes; {what} is at most {max_bytes}", meta.len())));
+        }
+        std::fs::read_to_string(file).map_err(|e| VmtError::io(file, &action, e))
+    }
+
     /// Process exit code: 2 for bad input and bad usage (DESIGN.md §2), 3 for I/O failures of the
     /// machine (disk full, permission denied; 1 is reserved for an estimate that missed its
     /// tolerance), 70 (EX_SOFTWARE) for internal errors.
