@@ -244,8 +244,9 @@ enum Command {
         /// Start from the parameters the diagnosis found (needs --data).
         #[arg(long)]
         from_diagnosis: bool,
-        /// Start from the parameters of this diagnosis (what `vmt diagnose --json` printed for this
-        /// model and --data) instead of computing it again; implies --from-diagnosis, needs --data.
+        /// Start from the parameters of this diagnosis (the vmt-diagnose/1 JSON object `vmt diagnose`
+        /// printed for this model and --data) instead of computing it again; implies
+        /// --from-diagnosis, needs --data.
         #[arg(long, value_name = "FILE")]
         diagnosis: Option<PathBuf>,
         /// Measurement set the diagnosis and the history's normalised RMS are computed on.
