@@ -10,8 +10,9 @@
 //!   (`enc_backlash`).
 //!
 //! The 15 000-sample hidden-mode set also with its clock as loggers keep it: its times rounded to
-//! 1 µs (intervals of 665 and 666 µs in turn), and with Gaussian jitter of 0.5 µs on each (no two
-//! intervals alike): the mode's step maps are then kept and reused, or had from a near one.
+//! 1 µs (intervals of 665 and 666 µs in turn), and sampled at instants with Gaussian jitter of
+//! 0.5 µs (no two intervals alike; the generator's logger clock, the same draw otherwise): the
+//! mode's step maps are then kept and reused, or had from a near one.
 //!
 //! Also `vmt compare` of the complete models on the same accelerometer sets (its channel
 //! reports hold each residual's least-squares periodogram), and the periodogram itself on an
@@ -22,13 +23,13 @@
 //! writes its sets under DIR (kept, for timing another build's `vmt diagnose` on the same data)
 //! instead of a temporary directory.
 use criterion::{criterion_group, criterion_main, Criterion};
-use rand::SeedableRng;
-use rand_distr::Distribution;
 use std::path::Path;
 
 #[path = "../tests/gen_timeseries/mod.rs"]
 mod gen_timeseries;
-use gen_timeseries::{accel_set_sized, encoder_set, encoder_set_sized, AccelHidden, EncoderHidden};
+use gen_timeseries::{
+    accel_set_clocked, accel_set_sized, encoder_set, encoder_set_sized, AccelHidden, Clock, EncoderHidden,
+};
 
 fn diagnose(c: &mut Criterion) {
     // The allocator as `vmt` sets it (its `main`), so the times are the command's.
@@ -50,19 +51,24 @@ fn diagnose(c: &mut Criterion) {
         let t = accel_set_sized(&dir, 12, AccelHidden::Resonance, 200.0, Some(samples));
         bench(&mut g, format!("accelerometer passes, hidden mode, {} samples", t.samples), &dir);
         if samples == 15_000 {
-            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(14);
-            let jitter = rand_distr::Normal::new(0.0, 0.5e-6).unwrap();
-            let mut rounded = |t: f64| (t * 1e6).round() / 1e6;
-            let mut jittered = |t: f64| if t > 0.0 { t + jitter.sample(&mut rng) } else { t };
-            let clocks: [(&str, &str, Clock); 2] = [
-                ("res15000_us", "times rounded to 1 µs", &mut rounded),
-                ("res15000_jitter", "0.5 µs jitter on each time", &mut jittered),
-            ];
-            for (name, what, clock) in clocks {
-                let to = root.join(name);
-                retimed(&dir, &to, clock);
-                bench(&mut g, format!("accelerometer passes, hidden mode, {} samples, {what}", t.samples), &to);
-            }
+            let to = root.join("res15000_us");
+            retimed(&dir, &to, &mut |t: f64| (t * 1e6).round() / 1e6);
+            bench(
+                &mut g,
+                format!("accelerometer passes, hidden mode, {} samples, times rounded to 1 µs", t.samples),
+                &to,
+            );
+            // Sampled at jittered instants (each sample, its command and its stamp at the same
+            // instant): a copy of the set with only its stamps jittered is read at its regular clock
+            // (`vmt::modelcheck::ticked_clock`), which times the even clock again.
+            let to = root.join("res15000_jitter");
+            let logger = Clock::Logger { jitter: 0.5e-6, resolution: 1e-9, lost: 0.0 };
+            let t = accel_set_clocked(&to, 12, AccelHidden::Resonance, 200.0, Some(samples), logger);
+            bench(
+                &mut g,
+                format!("accelerometer passes, hidden mode, {} samples, sampled with 0.5 µs jitter", t.samples),
+                &to,
+            );
         }
         let dir = root.join(format!("enc{samples}"));
         let t = encoder_set_sized(&dir, 13, EncoderHidden::None, Some(samples));
@@ -97,9 +103,6 @@ fn diagnose(c: &mut Criterion) {
     }
     g.finish();
 }
-
-/// A set's clock: its times (s) rewritten.
-type Clock<'a> = &'a mut dyn FnMut(f64) -> f64;
 
 /// The set in `from` copied to `to` with each CSV's first column (the time, s) rewritten by `clock`.
 fn retimed(from: &Path, to: &Path, clock: &mut dyn FnMut(f64) -> f64) {

@@ -150,26 +150,41 @@ fn encoder_generator_following_error_is_v_over_kv() {
 /// (`vmt::modelcheck::regular_clock`) and says so in a note.
 #[test]
 fn encoder_complete_model_on_a_rounded_trace_fits_to_the_noise() {
+    complete_encoder_on(ROUNDED_TRACE, &[2000, 2005, 2011], "regular clock of period");
+}
+
+/// The same on traces whose stamps a host wrote with jitter ([`JITTERED_TRACE`]: σ 18.9, 1.0 and
+/// 1.9 µs on draws 2000, 2001 and 2005, 2 % of rows lost). Read at the stamps they gave normalised
+/// RMS 39.4, 10.8 and 26.8; vmt now reads them at the regular clock the command follows
+/// (`vmt::modelcheck::ticked_clock`) and says so in a note.
+#[test]
+fn encoder_complete_model_on_a_jittered_trace_fits_to_the_noise() {
+    complete_encoder_on(JITTERED_TRACE, &[2000, 2001, 2005], "its command follows the clock's ticks");
+}
+
+/// `vmt compare` of the complete model of encoder draws `seeds` written by `trace`: normalised RMS
+/// ≤ 1.1 and a note containing `noted` in each.
+fn complete_encoder_on(trace: Trace, seeds: &[u64], noted: &str) {
     let tmp = tempfile::tempdir().unwrap();
-    let out: Vec<(u64, Option<f64>, Result<serde_json::Value, String>)> = [2000u64, 2005, 2011]
-        .into_par_iter()
-        .map(|seed| {
+    let out: Vec<(u64, EncoderTruth, Result<serde_json::Value, String>)> = seeds
+        .par_iter()
+        .map(|&seed| {
             let dir = tmp.path().join(format!("e{seed}"));
-            let t = encoder_set_traced(&dir, seed, EncoderHidden::None, None, ROUNDED_TRACE);
-            (
-                seed,
-                t.stamp_resolution,
-                vmt(&["compare", "--model", s(&dir.join("model.toml")), "--data", s(&dir), "--json"]),
-            )
+            let t = encoder_set_traced(&dir, seed, EncoderHidden::None, None, trace);
+            (seed, t, vmt(&["compare", "--model", s(&dir.join("model.toml")), "--data", s(&dir), "--json"]))
         })
         .collect();
-    for (seed, q, r) in out {
+    for (seed, t, r) in out {
         let c = r.unwrap_or_else(|e| panic!("draw {seed}: {e}"));
         let nrms = c["normalized_rms"].as_f64().unwrap_or(f64::NAN);
-        let noted = c["notes"]
-            .as_array()
-            .is_some_and(|n| n.iter().any(|v| v.as_str().is_some_and(|s| s.contains("regular clock"))));
-        assert!(nrms <= 1.1 && noted, "draw {seed} (stamps to {q:?} s): normalised RMS {nrms:.3}, clock noted {noted}");
+        let note =
+            c["notes"].as_array().is_some_and(|n| n.iter().any(|v| v.as_str().is_some_and(|s| s.contains(noted))));
+        assert!(
+            nrms <= 1.1 && note,
+            "draw {seed} (stamps to {:?} s, jitter {:e} s): normalised RMS {nrms:.3}, clock noted {note}",
+            t.stamp_resolution,
+            t.stamp_jitter
+        );
     }
 }
 
@@ -250,10 +265,15 @@ fn accel_rates(hidden: AccelHidden, draws: u64, add: bool, clock: Clock) -> Vec<
 /// most a quarter of the shortest log interval) and 2 % of its rows lost.
 const ROUNDED_TRACE: Trace = Trace::Rounded { lost: 0.02 };
 
+/// A controller trace whose rows a host stamps with jitter of 0.3–30 µs ([`Trace::Jittered`]: the
+/// readings at the servo's ticks, the stamps off them) and 2 % of its rows lost.
+const JITTERED_TRACE: Trace = Trace::Jittered { lost: 0.02 };
+
 fn encoder_rates(hidden: EncoderHidden, draws: u64, add: bool, trace: Trace) -> Vec<(EncoderTruth, Outcome)> {
     let on = match trace {
         Trace::Exact => "",
         Trace::Rounded { .. } => "RoundedTrace",
+        Trace::Jittered { .. } => "JitteredTrace",
     };
     loop_rates(
         &format!("enc{hidden:?}{on}"),
@@ -488,6 +508,14 @@ fn encoder_complete_model_false_alarms_on_a_rounded_trace() {
     complete_encoder(ROUNDED_TRACE);
 }
 
+/// [`encoder_complete_model_false_alarms_on_a_rounded_trace`] on a jittered, lossy trace
+/// ([`JITTERED_TRACE`]).
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn encoder_complete_model_false_alarms_on_a_jittered_trace() {
+    complete_encoder(JITTERED_TRACE);
+}
+
 fn complete_encoder(trace: Trace) {
     let r = encoder_rates(EncoderHidden::None, draws(100), false, trace);
     assert_complete_rates(&format!("encoder complete, trace {trace:?}"), r.iter().map(|x| &x.1).collect());
@@ -658,6 +686,11 @@ rate_studies! {
     encoder_hidden_cyclic_lead_on_a_rounded_trace => hidden_encoder(EncoderHidden::CyclicLead, "cyclic_lead", ROUNDED_TRACE);
     encoder_hidden_backlash_on_a_rounded_trace => hidden_encoder(EncoderHidden::Backlash, "backlash", ROUNDED_TRACE);
     encoder_hidden_servo_lag_on_a_rounded_trace => hidden_encoder(EncoderHidden::ServoLag, "servo_lag", ROUNDED_TRACE);
+    encoder_hidden_interpolation_error_on_a_jittered_trace =>
+        hidden_encoder(EncoderHidden::InterpolationError, "interpolation_error", JITTERED_TRACE);
+    encoder_hidden_cyclic_lead_on_a_jittered_trace => hidden_encoder(EncoderHidden::CyclicLead, "cyclic_lead", JITTERED_TRACE);
+    encoder_hidden_backlash_on_a_jittered_trace => hidden_encoder(EncoderHidden::Backlash, "backlash", JITTERED_TRACE);
+    encoder_hidden_servo_lag_on_a_jittered_trace => hidden_encoder(EncoderHidden::ServoLag, "servo_lag", JITTERED_TRACE);
 }
 
 /// Wall time of one `vmt diagnose` on accelerometer sets of `VMT_SAMPLES` samples (default 15 000;
@@ -683,7 +716,7 @@ fn accel_diagnose_wall_time() {
 
 /// Writes one encoder draw to `VMT_OUT` (seed `VMT_SEED`, hidden effect `VMT_HIDDEN` =
 /// none|interp|cyclic|backlash|lag|cyclic+backlash, its trace rounded and lossy with
-/// `VMT_TRACE=rounded`) and prints its truth: a tool for looking at one draw with
+/// `VMT_TRACE=rounded`, jittered and lossy with `VMT_TRACE=jittered`) and prints its truth: a tool for looking at one draw with
 /// `vmt compare`/`diagnose` by hand.
 #[test]
 #[ignore = "tool: writes one encoder draw (see the doc comment)"]
@@ -698,15 +731,19 @@ fn write_encoder_draw() {
         "cyclic+backlash" => EncoderHidden::CyclicLeadAndBacklash,
         _ => EncoderHidden::None,
     };
-    // `VMT_TRACE=rounded`: the trace of [`ROUNDED_TRACE`].
-    let trace = if std::env::var("VMT_TRACE").as_deref() == Ok("rounded") { ROUNDED_TRACE } else { Trace::Exact };
+    // `VMT_TRACE=rounded|jittered`: the trace of [`ROUNDED_TRACE`] or [`JITTERED_TRACE`].
+    let trace = match std::env::var("VMT_TRACE").as_deref() {
+        Ok("rounded") => ROUNDED_TRACE,
+        Ok("jittered") => JITTERED_TRACE,
+        _ => Trace::Exact,
+    };
     let t = encoder_set_traced(&out, seed, hidden, None, trace);
     eprintln!("{t:?}");
 }
 
 /// Writes one accelerometer draw to `VMT_OUT` (seed `VMT_SEED`, e.g. 1000 + k for the k-th draw of
 /// a hidden-mode study; hidden effect `VMT_HIDDEN` = none|mode|roll|mode+roll; about `VMT_SAMPLES`
-/// samples when set, the benchmark's sizes) and prints its truth: the accelerometer twin of
+/// samples when set, the benchmark's sizes; its clock a logger's with `VMT_CLOCK=logger|lossy`) and prints its truth: the accelerometer twin of
 /// [`write_encoder_draw`].
 #[test]
 #[ignore = "tool: writes one accelerometer draw (see the doc comment)"]
@@ -720,7 +757,13 @@ fn write_accel_draw() {
         _ => AccelHidden::None,
     };
     let samples = std::env::var("VMT_SAMPLES").ok().and_then(|v| v.parse().ok());
-    let t = accel_set_sized(&out, seed, hidden, 200.0, samples);
+    // `VMT_CLOCK=logger|lossy`: the clock of [`LOGGER`] or [`LOSSY_LOGGER`].
+    let clock = match std::env::var("VMT_CLOCK").as_deref() {
+        Ok("logger") => LOGGER,
+        Ok("lossy") => LOSSY_LOGGER,
+        _ => Clock::Even,
+    };
+    let t = accel_set_clocked(&out, seed, hidden, 200.0, samples, clock);
     eprintln!("{t:?}");
 }
 

@@ -829,6 +829,11 @@ pub enum Trace {
     /// first lost with probability `lost` (drawn from the trace's own stream, and only when rows
     /// are lost: the rest of the draw is the exact trace's).
     Rounded { lost: f64 },
+    /// The readings still at their servo ticks, each time stamped by a host clock with Gaussian
+    /// jitter (σ drawn log-uniform from 0.3 µs to the smaller of 30 µs and 1/40 of the draw's
+    /// shortest log interval, from the trace's own stream), written as computed (a PC that stamps
+    /// the controller's rows as they arrive); rows lost as in [`Trace::Rounded`].
+    Jittered { lost: f64 },
 }
 
 /// Feedback of the position loop.
@@ -856,8 +861,10 @@ pub struct EncoderTruth {
     /// The controller's servo rate, Hz (its loop runs and its log samples on these ticks).
     pub servo_rate: f64,
     pub samples: usize,
-    /// The times' resolution, s ([`Trace::Rounded`]; None for an exact trace).
+    /// The times' resolution, s ([`Trace::Rounded`]; None for an exact or jittered trace).
     pub stamp_resolution: Option<f64>,
+    /// The σ of the stamps' jitter, s ([`Trace::Jittered`]; 0 otherwise).
+    pub stamp_jitter: f64,
 }
 
 /// One encoder draw, written to `dir` (manifest.toml, runs, model.toml).
@@ -1036,10 +1043,17 @@ pub fn encoder_set_traced(
     };
     let shortest = plans.iter().map(|p| p.every as f64 * h).fold(f64::INFINITY, f64::min);
     let stamp_resolution = match trace {
-        Trace::Exact => None,
+        Trace::Exact | Trace::Jittered { .. } => None,
         Trace::Rounded { .. } => [1e-3, 1e-4, 1e-5, 1e-6].into_iter().find(|q| *q <= shortest / 4.0),
     };
-    let stamp = |t: f64| stamp_resolution.map_or(t, |q| (t / q).round() * q);
+    let stamp_jitter = match trace {
+        Trace::Exact | Trace::Rounded { .. } => 0.0,
+        Trace::Jittered { .. } => lose.log_uniform(0.3e-6, (30e-6f64).min(shortest / 40.0)),
+    };
+    let stamp = |lose: &mut Draw, t: f64| {
+        let t = if stamp_jitter > 0.0 { t + stamp_jitter * lose.normal() } else { t };
+        stamp_resolution.map_or(t, |q| (t / q).round() * q)
+    };
     for p in &plans {
         let (x_start, v_start) = p.cmd[0];
         let first_v = p.cmd.iter().map(|c| c.1).find(|v| *v != 0.0).unwrap_or(1.0);
@@ -1052,7 +1066,9 @@ pub fn encoder_set_traced(
             if i >= p.log_from && i < p.log_to && (i - p.log_from) % p.every == 0 {
                 let (s_read, m_read) = (scale + sigma_scale * d.normal(), xm + sigma_motor * d.normal());
                 let lost = match trace {
-                    Trace::Rounded { lost } => lost > 0.0 && !tc.is_empty() && lose.chance(lost),
+                    Trace::Rounded { lost } | Trace::Jittered { lost } => {
+                        lost > 0.0 && !tc.is_empty() && lose.chance(lost)
+                    }
                     Trace::Exact => false,
                 };
                 if !lost {
@@ -1090,7 +1106,7 @@ pub fn encoder_set_traced(
             direction: p.direction,
             start_time: t0,
             columns: vec![
-                ("t".into(), tc.iter().map(|t| stamp(t - t_first)).collect()),
+                ("t".into(), tc.iter().map(|t| stamp(&mut lose, t - t_first)).collect()),
                 ("x_cmd[mm]".into(), xc.iter().map(|v| v * 1e3).collect()),
                 ("scale[um]".into(), sc.iter().map(|v| v * 1e6).collect()),
                 ("motor[um]".into(), mc.iter().map(|v| v * 1e6).collect()),
@@ -1129,6 +1145,7 @@ pub fn encoder_set_traced(
         servo_rate,
         samples,
         stamp_resolution,
+        stamp_jitter,
     }
 }
 
