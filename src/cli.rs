@@ -1317,30 +1317,21 @@ fn read_diagnosis(file: &Path) -> Result<crate::modelcheck::DiagnoseReport, VmtE
     serde_json::from_value(value).map_err(|e| VmtError::bad(file, "", format!("not a vmt-diagnose/1 report: {e}")))
 }
 
-/// The ranking entry of `name` in the diagnosis `diag` read from `file`, after checking that its
+/// Checks that the diagnosis `diag` read from `file` was made for the model and data: its
 /// normalised RMS is the model's on the data (`rms`, from `compare`; [`DIAGNOSIS_RMS_MATCH`]).
-fn diagnosis_entry(
-    file: &Path,
-    diag: crate::modelcheck::DiagnoseReport,
-    name: vmt_sim::effects::EffectName,
-    rms: f64,
-) -> Result<crate::modelcheck::RankedEffect, VmtError> {
-    let matches = diag.normalized_rms == rms || (diag.normalized_rms / rms - 1.0).abs() <= DIAGNOSIS_RMS_MATCH;
-    if !matches {
-        return Err(VmtError::bad(
-            file,
-            "normalized_rms",
-            format!(
-                "the diagnosis was not made for this model on these data: its normalised RMS is {}, the model's on \
-                 --data is {rms} (run vmt diagnose --json again, or use --from-diagnosis)",
-                diag.normalized_rms
-            ),
-        ));
+fn check_diagnosis_rms(file: &Path, diag: &crate::modelcheck::DiagnoseReport, rms: f64) -> Result<(), VmtError> {
+    if diag.normalized_rms == rms || (diag.normalized_rms / rms - 1.0).abs() <= DIAGNOSIS_RMS_MATCH {
+        return Ok(());
     }
-    diag.ranking
-        .into_iter()
-        .find(|r| r.effect == name)
-        .ok_or_else(|| VmtError::bad(file, "ranking", format!("the diagnosis has no candidate `{name}`")))
+    Err(VmtError::bad(
+        file,
+        "normalized_rms",
+        format!(
+            "the diagnosis was not made for this model on these data: its normalised RMS is {}, the model's on \
+             --data is {rms} (run vmt diagnose --json again, or use --from-diagnosis)",
+            diag.normalized_rms
+        ),
+    ))
 }
 
 /// `vmt add --model M --effect NAME [--from-diagnosis | --diagnosis FILE] [--data D] -o M2`: writes the
@@ -1368,30 +1359,26 @@ pub fn add(model: &Path, effect: &str, from: &FromDiagnosis, data: Option<&Path>
         }
         None => None,
     };
-    // A diagnosis file, read before anything is computed; the input model on the data (the
-    // history's first entry) checks it.
-    let given = match from {
-        FromDiagnosis::File(file) => Some((file, read_diagnosis(file)?)),
-        FromDiagnosis::No | FromDiagnosis::Computed => None,
-    };
-    let r0 = match (&set, data) {
-        (Some(s), Some(d)) if given.is_some() => Some(crate::modelcheck::compare(&m, s, d)?),
-        _ => None,
-    };
-    let entry = match (&set, from, data) {
-        (Some(s), FromDiagnosis::Computed, Some(d)) => {
-            let diag = crate::modelcheck::diagnose(&m, s, d)?;
-            Some(diag.ranking.into_iter().find(|r| r.effect == name).ok_or_else(|| {
-                VmtError::bad(d, "", format!("the diagnosis has no candidate `{name}` on these data"))
-            })?)
+    // The diagnosis the added effect starts from, with where it came from (for errors), and the
+    // input model on the data (the history's first entry) when it checks a diagnosis file (read
+    // before anything is computed).
+    let (diag, r0) = match (from, &set, data) {
+        (FromDiagnosis::No, ..) | (_, None, _) | (_, _, None) => (None, None),
+        (FromDiagnosis::Computed, Some(s), Some(d)) => (Some((d, "", crate::modelcheck::diagnose(&m, s, d)?)), None),
+        (FromDiagnosis::File(file), Some(s), Some(d)) => {
+            let diag = read_diagnosis(file)?;
+            let r0 = crate::modelcheck::compare(&m, s, d)?;
+            check_diagnosis_rms(file, &diag, r0.normalized_rms)?;
+            (Some((file.as_path(), "ranking", diag)), Some(r0))
         }
-        _ => match given {
-            Some((file, diag)) => {
-                Some(diagnosis_entry(file, diag, name, r0.as_ref().map_or(f64::NAN, |r| r.normalized_rms))?)
-            }
-            None => None,
-        },
     };
+    let entry = diag
+        .map(|(place, key, diag)| {
+            diag.ranking.into_iter().find(|r| r.effect == name).ok_or_else(|| {
+                VmtError::bad(place, key, format!("the diagnosis has no candidate `{name}` on these data"))
+            })
+        })
+        .transpose()?;
     let hpath = crate::modelcheck::history_path(out);
     if data.is_some() && hpath.exists() && crate::modelcheck::read_history(&hpath).is_none() {
         return Err(VmtError::bad(
