@@ -214,13 +214,18 @@ pub(crate) fn to_axis_frame(u: [f64; 3], axis: Axis) -> [f64; 3] {
 pub fn channels(set: &MeasurementSet, axis: Axis) -> (Vec<Channel>, Vec<String>) {
     let mut out: Vec<Channel> = Vec::new();
     let mut notes: Vec<String> = Vec::new();
+    let mut clocks = run_clocks(set, axis).into_iter();
     for run in &set.runs {
         if run.axis != axis {
             notes.push(format!("run `{}` moves axis {}, the model's axis is {axis}", run.name, run.axis));
             continue;
         }
         let RunData::PointTable { target, run: cyc, direction, t, columns } = &run.data else {
-            time_series_channels(set, run, &mut out, &mut notes);
+            let clock = clocks.next().flatten();
+            if let Some((_, note)) = &clock {
+                notes.push(note.clone());
+            }
+            time_series_channels(set, run, clock.as_ref().map(|c| c.0.as_slice()), &mut out, &mut notes);
             continue;
         };
         let t0 = run.start_time.unwrap_or(0.0);
@@ -264,42 +269,18 @@ pub fn channels(set: &MeasurementSet, axis: Axis) -> (Vec<Channel>, Vec<String>)
 
 /// The motor-force channels of a constant-velocity or friction-sweep time series (phase 2): every
 /// sample at the run's steady velocity v = feed·direction (the procedures sample only the cruise),
-/// position from `x_cmd`. Other time-series channels are listed in `notes` as not predicted.
+/// position from `x_cmd`; its encoder and accelerometer channels. Each sample at its instant in
+/// `clock` when given ([`run_clocks`]), else at its stamp. Other time-series channels are listed
+/// in `notes` as not predicted.
 pub(crate) fn time_series_channels(
     set: &MeasurementSet,
     run: &crate::measurement::Run,
+    clock: Option<&[f64]>,
     out: &mut Vec<Channel>,
     notes: &mut Vec<String>,
 ) {
     let RunData::TimeSeries { t, columns } = &run.data else { return };
-    // Stamps rounded from a regular clock, or jittered about the clock whose ticks the command
-    // follows, are read at the clock's instants ([`regular_clock`], [`ticked_clock`]).
-    let clock = if let Some(c) = regular_clock(t) {
-        notes.push(format!(
-            "run `{}`: its time stamps, written to {} s, are a regular clock of period {:.9e} s rounded (the \
-             largest stamp is {:.3e} s off it); the model reads the clock's instants",
-            run.name,
-            fmt_num(c.resolution),
-            c.period,
-            c.largest_shift
-        ));
-        Some(c.times)
-    } else if let Some(c) = run.data.command().and_then(|x| ticked_clock(t, x)) {
-        notes.push(format!(
-            "run `{}`: its time stamps scatter about a regular clock of period {:.9e} s (RMS {:.3e} s, largest \
-             {:.3e} s off it), and its command follows the clock's ticks, not the stamps (the median of its fourth \
-             differences is {} times smaller read at the clock); the model reads the clock's instants",
-            run.name,
-            c.period,
-            c.rms_shift,
-            c.largest_shift,
-            if c.roughness_ratio.is_finite() { format!("{:.1e}", c.roughness_ratio) } else { "infinitely many".into() }
-        ));
-        Some(c.times)
-    } else {
-        None
-    };
-    let t = clock.as_ref().unwrap_or(t);
+    let t = clock.filter(|c| c.len() == t.len()).unwrap_or(t);
     let steady = matches!(run.procedure, Procedure::FrictionSweep | Procedure::ConstantVelocity);
     let x: Vec<f64> = run.data.command().map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; t.len()]);
     if run.data.command().is_some() {
@@ -393,6 +374,110 @@ pub(crate) fn steady_channel(
 
 // ------------------------------------------------------------------------------------------
 // The logging clock.
+
+/// The instants each time-series run of `set` on axis `axis` is read at when not its stamps, with
+/// the note that says why, in the order of the runs (None: the stamps as written).
+///
+/// A run whose stamps are a regular clock rounded is read at that clock ([`regular_clock`]); one
+/// whose command follows the regular clock its jittered stamps scatter about, at that clock
+/// ([`ticked_clock`], [`CommandSays::Clock`]). A run whose command cannot tell
+/// ([`CommandSays::Undecided`]: it moves too little between rows, or is written to too few digits,
+/// to show v·δ) is read at its clock when at least one run of the set says clock, none says
+/// stamps, and its stamps scatter alike: an RMS within [`TICKED_ALIKE`] of the median of those
+/// that say clock. One host stamps a set's runs; a logger that samples when its software runs
+/// says stamps wherever its command can tell.
+fn run_clocks(set: &MeasurementSet, axis: Axis) -> Vec<Option<(Vec<f64>, String)>> {
+    enum Reading {
+        Rounded(RegularClock),
+        Ticked(TickedClock),
+        Stamps,
+    }
+    let runs: Vec<(&str, Reading)> = set
+        .runs
+        .iter()
+        .filter(|r| r.axis == axis)
+        .filter_map(|run| {
+            let RunData::TimeSeries { t, .. } = &run.data else { return None };
+            let reading = match regular_clock(t) {
+                Some(c) => Reading::Rounded(c),
+                None => run.data.command().and_then(|x| ticked_clock(t, x)).map_or(Reading::Stamps, Reading::Ticked),
+            };
+            Some((run.name.as_str(), reading))
+        })
+        .collect();
+    let says = |want: CommandSays| -> Vec<(&str, f64)> {
+        runs.iter()
+            .filter_map(|(name, r)| match r {
+                Reading::Ticked(c) if c.says == want => Some((*name, c.rms_shift)),
+                Reading::Rounded(_) | Reading::Ticked(_) | Reading::Stamps => None,
+            })
+            .collect()
+    };
+    let (on_clock, on_stamps) = (says(CommandSays::Clock), says(CommandSays::Stamps));
+    let mut rms: Vec<f64> = on_clock.iter().map(|c| c.1).collect();
+    rms.sort_by(f64::total_cmp);
+    // index: the median of a non-empty list (None when no run says clock).
+    let median = (!rms.is_empty()).then(|| rms[rms.len() / 2]);
+    let alike = |r: f64| median.is_some_and(|m| r <= TICKED_ALIKE * m && r * TICKED_ALIKE >= m);
+    let ratio = |c: &TickedClock| {
+        if c.roughness_ratio.is_finite() {
+            format!("{:.1e}", c.roughness_ratio)
+        } else {
+            "infinitely many".into()
+        }
+    };
+    runs.into_iter()
+        .map(|(name, r)| match r {
+            Reading::Rounded(c) => Some((
+                c.times,
+                format!(
+                    "run `{name}`: its time stamps, written to {} s, are a regular clock of period {:.9e} s rounded \
+                     (the largest stamp is {:.3e} s off it); the model reads the clock's instants",
+                    fmt_num(c.resolution),
+                    c.period,
+                    c.largest_shift
+                ),
+            )),
+            Reading::Ticked(c) => match c.says {
+                CommandSays::Clock => Some((
+                    c.times.clone(),
+                    format!(
+                        "run `{name}`: its time stamps scatter about a regular clock of period {:.9e} s (RMS {:.3e} s, \
+                         largest {:.3e} s off it), and its command follows the clock's ticks, not the stamps (the \
+                         median of its fourth differences is {} times smaller read at the clock); the model reads the \
+                         clock's instants",
+                        c.period,
+                        c.rms_shift,
+                        c.largest_shift,
+                        ratio(&c)
+                    ),
+                )),
+                CommandSays::Undecided if on_stamps.is_empty() && alike(c.rms_shift) => Some((
+                    c.times.clone(),
+                    format!(
+                        "run `{name}`: its time stamps scatter about a regular clock of period {:.9e} s (RMS {:.3e} s, \
+                         largest {:.3e} s off it) as those of run(s) {} whose commands follow their clocks' ticks; its own \
+                         command cannot tell (its fourth differences are {} times smaller read at the clock, against \
+                         {TICKED_ROUGHNESS} needed), and the model reads the clock's instants",
+                        c.period,
+                        c.rms_shift,
+                        c.largest_shift,
+                        on_clock.iter().map(|(n, _)| format!("`{n}`")).collect::<Vec<_>>().join(", "),
+                        ratio(&c)
+                    ),
+                )),
+                CommandSays::Undecided | CommandSays::Stamps => None,
+            },
+            Reading::Stamps => None,
+        })
+        .collect()
+}
+
+/// A run whose command cannot tell follows the set's runs whose commands say clock when its
+/// stamps' RMS scatter is within this factor of theirs (their median), either way ([`run_clocks`]):
+/// the scatter of one host's stamps is estimated to a few per cent over a run of a hundred rows,
+/// and the factor leaves room for a host that is busier in one run than in another.
+pub const TICKED_ALIKE: f64 = 3.0;
 
 /// A run's time stamps read as a regular clock rounded to the stamps' resolution
 /// ([`regular_clock`]).
@@ -536,18 +621,34 @@ pub struct TickedClock {
     /// The largest |t_i − t̂_i|, s (≤ Δ/4).
     pub largest_shift: f64,
     /// The command's roughness read at the stamps over its roughness read at the clock's instants
-    /// (medians of its fourth divided differences, [`command_roughness`]; ≥ [`TICKED_ROUGHNESS`]).
+    /// (medians of its fourth divided differences, [`command_roughness`]).
     pub roughness_ratio: f64,
+    /// What the ratio says ([`TICKED_ROUGHNESS`]).
+    pub says: CommandSays,
     /// The instants t̂_i = t̂₀ + n_i·Δ, s (n_i the tick of sample i: whole, increasing; a step of
     /// more than one is a lost row).
     pub times: Vec<f64>,
 }
 
+/// What a run's command says of the regular clock its stamps scatter about ([`ticked_clock`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CommandSays {
+    /// Read at the stamps it is at least [`TICKED_ROUGHNESS`] times rougher: the readings are on
+    /// the clock's ticks.
+    Clock,
+    /// Read at the clock's instants it is at least [`TICKED_ROUGHNESS`] times rougher: the
+    /// readings are at the stamps.
+    Stamps,
+    /// Neither: the command moves too little between rows, or is written to too few digits, to
+    /// show the jitter.
+    Undecided,
+}
+
 /// The command read at the stamps must be at least this many times rougher than read at the
-/// clock's instants for [`ticked_clock`] to take the clock: on a controller's trace stamped with
-/// jitter the ratio is v·σ_t over the command's rounding (10³ and more), on a logger that samples
-/// at its stamps it is below one, and a command written too coarsely to show the jitter gives
-/// about one.
+/// clock's instants to say clock, or this many times smoother to say stamps ([`CommandSays`]): on
+/// a controller's trace stamped with jitter the ratio is v·σ_t over the command's rounding (10³
+/// and more), on a logger that samples at its stamps it is below one, and a command written too
+/// coarsely to show the jitter gives about one.
 pub const TICKED_ROUGHNESS: f64 = 10.0;
 
 /// Stamps off their clock by more than this fraction of its period are not one clock's ticks
@@ -594,14 +695,16 @@ pub fn command_roughness(x: &[f64], tau: &[f64], period: f64) -> Option<f64> {
     Some(*m)
 }
 
-/// The regular clock behind a run's jittered time stamps `t` (s, increasing), when its command `x`
-/// (m, one value per stamp) says that the readings were taken on that clock's ticks: a controller
-/// logs on its servo ticks, and a host that stamps the rows as they arrive adds its own jitter.
+/// The regular clock behind a run's jittered time stamps `t` (s, increasing), and what its command
+/// `x` (m, one value per stamp) says of it: whether the readings were taken on that clock's ticks
+/// (a controller logs on its servo ticks, and a host that stamps the rows as they arrive adds its
+/// own jitter) or at the stamps.
 ///
 /// The ticks n_i as in [`regular_clock`], the clock the least-squares line t̂_i = t̂₀ + n_i·Δ. It is
-/// taken when every stamp lies within [`TICKED_LARGEST_SHIFT`]·Δ of it, some beyond
-/// [`CLOCK_EXACT`]·Δ, and the command is [`TICKED_ROUGHNESS`] times smoother read at the clock's
-/// instants than at the stamps ([`command_roughness`]). Why the command decides: it is a smooth
+/// a clock when every stamp lies within [`TICKED_LARGEST_SHIFT`]·Δ of it and some beyond
+/// [`CLOCK_EXACT`]·Δ; the command says [`CommandSays::Clock`] when it is [`TICKED_ROUGHNESS`] times
+/// smoother read at the clock's instants than at the stamps ([`command_roughness`]),
+/// [`CommandSays::Stamps`] when the other way round. Why the command decides: it is a smooth
 /// function of the controller's time (linear in a cruise), so read at instants off its own by δ
 /// it gains a roughness of about v·δ; the stamps alone cannot tell a jittered stamp on a regular
 /// reading from a logger that really samples when its software runs (whose command then follows
@@ -610,8 +713,7 @@ pub fn command_roughness(x: &[f64], tau: &[f64], period: f64) -> Option<f64> {
 /// normalised RMS 1.8–39.
 ///
 /// None for fewer than eight stamps, stamps that are not increasing, a command of another length
-/// or not finite, a clock that changes its rate, stamps already exact, or a command that does not
-/// say (standing still, or written too coarsely to show v·δ).
+/// or not finite, a clock that changes its rate, stamps already exact, or a command that stands.
 pub fn ticked_clock(t: &[f64], x: &[f64]) -> Option<TickedClock> {
     let n = t.len();
     if n < 8 || x.len() != n || t.iter().chain(x).any(|v| !v.is_finite()) || t.windows(2).any(|w| w[1] <= w[0]) {
@@ -630,12 +732,20 @@ pub fn ticked_clock(t: &[f64], x: &[f64]) -> Option<TickedClock> {
         return None;
     }
     let (at_stamps, at_clock) = (command_roughness(x, t, period)?, command_roughness(x, &times, period)?);
-    if !(at_stamps >= TICKED_ROUGHNESS * at_clock) || at_stamps == 0.0 {
-        return None;
-    }
+    let says = if at_stamps > 0.0 && at_stamps >= TICKED_ROUGHNESS * at_clock {
+        CommandSays::Clock
+    } else if at_clock > 0.0 && at_clock >= TICKED_ROUGHNESS * at_stamps {
+        CommandSays::Stamps
+    } else {
+        CommandSays::Undecided
+    };
     let rms_shift = (shifts.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt();
-    let roughness_ratio = if at_clock > 0.0 { at_stamps / at_clock } else { f64::INFINITY };
-    Some(TickedClock { period, rms_shift, largest_shift, roughness_ratio, times })
+    let roughness_ratio = match (at_stamps > 0.0, at_clock > 0.0) {
+        (_, true) => at_stamps / at_clock,
+        (true, false) => f64::INFINITY,
+        (false, false) => 1.0,
+    };
+    Some(TickedClock { period, rms_shift, largest_shift, roughness_ratio, says, times })
 }
 
 #[cfg(test)]
@@ -781,23 +891,26 @@ mod tests {
         assert!(qualified >= 200, "{qualified} of 300 draws show their jitter in the command");
     }
 
-    /// What the command does not place on a regular clock keeps its stamps: a logger that samples at
-    /// its jittered stamps (the command read at the stamps), a command written to 1 µm where the
-    /// jitter moves it by v·σ = 25 nm (rounding errors that do not repeat), a command that stands, exact stamps, a rate that changes
-    /// within the run, and a command of another length.
+    /// What the command does not place on a regular clock: a logger that samples at its jittered
+    /// stamps (the command read at the stamps) says stamps in each of 50 draws; a command written
+    /// to 1 µm where the jitter moves it by v·σ = 25 nm (rounding errors that do not repeat) cannot
+    /// tell; a command that stands, exact stamps, a rate that changes within the run, and a
+    /// command of another length give no clock.
     #[test]
     fn stamps_a_command_follows_are_kept() {
         let mut rng = ChaCha8Rng::seed_from_u64(10);
         for d in 0..50 {
             let (_, stamps) = stamped(&mut rng, 0.4e-3, 1.0, 2000, 0.02, 2e-6, 1e-9);
             let at_stamps = command(&mut rng, 0.05, 1e-4, 3.0, &stamps);
-            assert!(ticked_clock(&stamps, &at_stamps).is_none(), "draw {d}: a logger's own instants moved");
+            let says = ticked_clock(&stamps, &at_stamps).map(|c| c.says);
+            assert_eq!(says, Some(CommandSays::Stamps), "draw {d}: a logger's own instants");
         }
         let (truth, stamps) = ticked(&mut rng, 1e-3, 0.0, 3000, 0.0, 0.5e-6);
         // 0.0503 m/s: 50.3 µm a tick, so the rounding to 1 µm does not repeat.
         let coarse: Vec<f64> =
             command(&mut rng, 0.0503, 0.0, 1.0, &truth).iter().map(|x| (x * 1e6).round() / 1e6).collect();
-        assert!(ticked_clock(&stamps, &coarse).is_none(), "a command written to 1 µm decided the clock");
+        let says = ticked_clock(&stamps, &coarse).map(|c| c.says);
+        assert_eq!(says, Some(CommandSays::Undecided), "a command written to 1 µm");
         assert!(ticked_clock(&stamps, &vec![0.25; stamps.len()]).is_none(), "a standing command decided the clock");
         let exact: Vec<f64> = (0..3000).map(|k| 17.0 + k as f64 * 0.25e-3).collect();
         assert!(ticked_clock(&exact, &command(&mut rng, 0.1, 0.0, 1.0, &exact)).is_none(), "exact stamps moved");
