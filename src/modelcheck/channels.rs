@@ -474,9 +474,10 @@ fn run_clocks(set: &MeasurementSet, axis: Axis) -> Vec<Option<(Vec<f64>, String)
 }
 
 /// A run whose command cannot tell follows the set's runs whose commands say clock when its
-/// stamps' RMS scatter is within this factor of theirs (their median), either way ([`run_clocks`]):
-/// the scatter of one host's stamps is estimated to a few per cent over a run of a hundred rows,
-/// and the factor leaves room for a host that is busier in one run than in another.
+/// stamps' RMS scatter is within this factor of theirs (their median), either way (the channels'
+/// reading of each run's clock):
+/// a run of n rows estimates its scatter to about 1/√(2n) (7 % at a hundred rows), and the factor
+/// leaves room for a host that is busier in one run than in another.
 pub const TICKED_ALIKE: f64 = 3.0;
 
 /// A run's time stamps read as a regular clock rounded to the stamps' resolution
@@ -610,8 +611,8 @@ fn clock_ticks(t: &[f64]) -> Option<Vec<f64>> {
     ticks((last - first) / rough[n - 1])
 }
 
-/// A run's time stamps read as the regular clock they scatter about, because its command follows
-/// that clock's ticks and not the stamps ([`ticked_clock`]).
+/// The regular clock a run's jittered time stamps scatter about, and what its command says of it
+/// ([`ticked_clock`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct TickedClock {
     /// The clock's period Δ, s (least squares over the stamps).
