@@ -214,14 +214,12 @@ pub(crate) fn to_axis_frame(u: [f64; 3], axis: Axis) -> [f64; 3] {
 pub fn channels(set: &MeasurementSet, axis: Axis) -> (Vec<Channel>, Vec<String>) {
     let mut out: Vec<Channel> = Vec::new();
     let mut notes: Vec<String> = Vec::new();
-    let mut clocks = run_clocks(set, axis).into_iter();
-    for run in &set.runs {
+    for (run, clock) in set.runs.iter().zip(run_clocks(set, axis)) {
         if run.axis != axis {
             notes.push(format!("run `{}` moves axis {}, the model's axis is {axis}", run.name, run.axis));
             continue;
         }
         let RunData::PointTable { target, run: cyc, direction, t, columns } = &run.data else {
-            let clock = clocks.next().flatten();
             if let Some((_, note)) = &clock {
                 notes.push(note.clone());
             }
@@ -375,8 +373,9 @@ pub(crate) fn steady_channel(
 // ------------------------------------------------------------------------------------------
 // The logging clock.
 
-/// The instants each time-series run of `set` on axis `axis` is read at when not its stamps, with
-/// the note that says why, in the order of the runs (None: the stamps as written).
+/// The instants each run of `set` is read at when not its stamps, with the note that says why, one
+/// entry per run in their order (None: the stamps as written, and every run that is not a time
+/// series on axis `axis`).
 ///
 /// A run whose stamps are a regular clock rounded is read at that clock ([`regular_clock`]); one
 /// whose command follows the regular clock its jittered stamps scatter about, at that clock
@@ -395,14 +394,17 @@ fn run_clocks(set: &MeasurementSet, axis: Axis) -> Vec<Option<(Vec<f64>, String)
     let runs: Vec<(&str, Reading)> = set
         .runs
         .iter()
-        .filter(|r| r.axis == axis)
-        .filter_map(|run| {
-            let RunData::TimeSeries { t, .. } = &run.data else { return None };
-            let reading = match regular_clock(t) {
-                Some(c) => Reading::Rounded(c),
-                None => run.data.command().and_then(|x| ticked_clock(t, x)).map_or(Reading::Stamps, Reading::Ticked),
+        .map(|run| {
+            let reading = match &run.data {
+                RunData::TimeSeries { t, .. } if run.axis == axis => match regular_clock(t) {
+                    Some(c) => Reading::Rounded(c),
+                    None => {
+                        run.data.command().and_then(|x| ticked_clock(t, x)).map_or(Reading::Stamps, Reading::Ticked)
+                    }
+                },
+                RunData::TimeSeries { .. } | RunData::PointTable { .. } => Reading::Stamps,
             };
-            Some((run.name.as_str(), reading))
+            (run.name.as_str(), reading)
         })
         .collect();
     let says = |want: CommandSays| -> Vec<(&str, f64)> {
@@ -692,7 +694,8 @@ pub fn command_roughness(x: &[f64], tau: &[f64], period: f64) -> Option<Roughnes
         .filter(|(xw, _)| xw.windows(2).any(|w| w[1] != w[0]))
         .map(|(xw, tw)| {
             // Newton's table in place: after pass j, d[i] = x[τ_i, …, τ_{i+j}].
-            let mut d = xw.to_vec();
+            let mut d = [0.0; COMMAND_DIFFERENCE_ORDER + 1];
+            d.copy_from_slice(xw);
             for j in 1..=k {
                 for i in 0..=k - j {
                     // index: i + j ≤ k, both windows hold k + 1 values.
