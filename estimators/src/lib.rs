@@ -7,6 +7,7 @@
 
 pub mod accel_straightness;
 pub mod compensation;
+pub mod cpu;
 pub mod dsp;
 pub mod friction_id;
 pub mod input;

@@ -43,6 +43,7 @@ use super::*;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatRef, Par};
 use rayon::prelude::*;
+use vmt_estimators::cpu::clear_upper_state;
 use vmt_estimators::modelcheck::{greedy_rss_from_products, solve_normal, Columns, NestedRss, NormalFactor};
 
 /// What a basis index of a fitted error motion's series is in time at constant velocity.
@@ -1154,6 +1155,7 @@ type RawSeries = Mat<f64>;
 /// (zero where the channel stands), elsewhere the channel's own reading s·φ_k(x) of the motion
 /// `name` (zero where it has none). Unweighted.
 fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
+    clear_upper_state();
     // index: the shape's order, a u32 bounded by `resolvable_order`, widened.
     let top = shx.order as usize;
     let mut raw = Mat::<f64>::zeros(st.n, top + 1);

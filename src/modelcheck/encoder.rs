@@ -40,6 +40,7 @@
 //! 10 nm, two to three times a rotary encoder's noise).
 
 use super::*;
+use vmt_estimators::cpu::clear_upper_state;
 use vmt_estimators::modelcheck::Complex64;
 
 /// What an encoder channel of a time series holds (module doc).
@@ -118,6 +119,7 @@ pub(crate) fn close_loop(st: &Stack, col: &mut [f64]) {
 /// [`close_loop`]). A servo that samples the scale at its own rate aliases such a wave too, which
 /// no log column can show.
 pub(crate) fn close_loop_wave(st: &Stack, p: f64, shift: &[f64], sin: &mut [f64], cos: &mut [f64]) {
+    clear_upper_state();
     let starts = st.channel_starts();
     let (kv, g) = (st.loop_kv, st.loop_gain);
     for (j, k) in closed_pairs(st) {
@@ -159,6 +161,7 @@ pub(crate) fn close_loop_wave(st: &Stack, p: f64, shift: &[f64], sin: &mut [f64]
 /// kv in 1/s. Returns (Im z, Re z) at every sample: the responses to sin θ and cos θ (the system is
 /// real). Non-increasing times hold z.
 pub fn wave_lag(t: &[f64], theta: &[f64], kv: f64) -> Vec<(f64, f64)> {
+    clear_upper_state();
     let n = t.len().min(theta.len());
     // The loop's response kv/(kv + iω) to a phasor of angular frequency ω.
     let transfer = |om: f64| Complex64::new(kv, 0.0) / Complex64::new(kv, om);
@@ -263,6 +266,7 @@ pub(crate) fn gauss_newton_increment(z: &[f64], z_perp: &[f64], r: &[f64], w: &[
 /// n = the interval over h, rounded (0: z held). Returns (Im z, Re z) at every sample: the
 /// responses to sin θ and cos θ.
 pub fn wave_lag_sampled(t: &[f64], theta: &[f64], kv: f64, h: f64) -> Vec<(f64, f64)> {
+    clear_upper_state();
     let n = t.len().min(theta.len());
     let a = (-kv * h).exp();
     // index: called with 1 ≤ i < n, n the shorter of the two lengths.
@@ -451,6 +455,7 @@ pub(crate) fn encoder_channels(
 ///
 /// kv in 1/s, t in s; returns x at every sample (the same unit as u). Non-increasing times hold x.
 pub fn first_order_lag(t: &[f64], u: &[f64], kv: f64) -> Vec<f64> {
+    clear_upper_state();
     let n = t.len().min(u.len());
     let mut out = Vec::with_capacity(n);
     if n == 0 {

@@ -1,6 +1,7 @@
 //! Signatures of the effects on the stacked samples.
 
 use super::*;
+use vmt_estimators::cpu::clear_upper_state;
 
 // ------------------------------------------------------------------------------------------
 // Signatures of the effects on the stacked samples.
@@ -377,6 +378,7 @@ pub(crate) fn free_map(f: f64, zeta: f64, h: f64) -> [[f64; 2]; 2] {
 /// from the unit-scaled states at t_{−1}, (q₀, q̇₀) = (1/ω², 0) and (0, 1/ω), ω = 2πf: the
 /// columns of an unknown starting state.
 pub(crate) fn free_vibration(c: &Channel, f: f64, zeta: f64) -> [Vec<f64>; 2] {
+    clear_upper_state();
     let w = TWO_PI * f;
     let lanes = [(1.0 / (w * w), 0.0), (0.0, 1.0 / w)].map(|start| Lane { start, input: None });
     let mut both = mode_lanes(c, &lanes, f, zeta).into_iter();
@@ -416,6 +418,7 @@ struct Lane<'a> {
 /// without an input has none over the steps. Up to [`MODE_LANES`] lanes run together
 /// ([`mode_lanes_of`]), more in groups of that many.
 fn mode_lanes(c: &Channel, lanes: &[Lane], f: f64, zeta: f64) -> Vec<Vec<f64>> {
+    clear_upper_state();
     let free = lanes.iter().all(|l| l.input.is_none()) && zeta < 1.0;
     let steps = lanes.iter().find_map(|l| l.input).map(|e| e.steps.as_slice());
     let mut outs = Vec::with_capacity(lanes.len());
@@ -711,6 +714,7 @@ impl<'a> Stack<'a> {
 
     /// One column: f(channel, sample index) over all samples.
     pub(crate) fn col(&self, f: impl Fn(&Channel, usize) -> f64) -> Vec<f64> {
+        clear_upper_state();
         let mut v = Vec::with_capacity(self.n);
         for c in self.chans {
             for i in 0..c.y.len() {
@@ -723,6 +727,7 @@ impl<'a> Stack<'a> {
     /// Two columns from one pass: f(channel, sample index, stack index) = (first, second) over all
     /// samples (a sine and a cosine from one `sin_cos`).
     pub(crate) fn col_pair(&self, f: impl Fn(&Channel, usize, usize) -> (f64, f64)) -> (Vec<f64>, Vec<f64>) {
+        clear_upper_state();
         let (mut a, mut b) = (Vec::with_capacity(self.n), Vec::with_capacity(self.n));
         for c in self.chans {
             for i in 0..c.y.len() {
@@ -736,6 +741,7 @@ impl<'a> Stack<'a> {
 
     /// One column: f(channel, sample index, channel index) over all samples.
     pub(crate) fn col_j(&self, f: impl Fn(&Channel, usize, usize) -> f64) -> Vec<f64> {
+        clear_upper_state();
         let mut v = Vec::with_capacity(self.n);
         for (j, c) in self.chans.iter().enumerate() {
             for i in 0..c.y.len() {
@@ -1324,6 +1330,7 @@ pub(crate) fn resonance_gains(st: &Stack) -> Vec<(String, usize, String)> {
 /// - Channels without a predicted excitation: a narrow band at the temporal frequency f, sin/cos of
 ///   2πf·t per segment ([`resonance_segments`]), a run per stretch of the segment's rows.
 pub(crate) fn resonance_runs(st: &Stack, f: f64, zeta: f64) -> Vec<SparseColumn> {
+    clear_upper_state();
     let mut cols = Vec::new();
     let starts = st.channel_starts();
     // The sensors of one pass (the same times, the same tables) share their responses.
@@ -1521,6 +1528,7 @@ pub(crate) fn legendre_to_monomials(first: u32, c: &[f64], range: (f64, f64)) ->
 /// Design columns of effect `name` at hyper-parameters `h` (in the order of [`shape`]), each
 /// passed through a closed position loop onto its following channels ([`close_loop`]).
 pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>> {
+    clear_upper_state();
     let mut cols = open_loop_columns(st, name, sh, h);
     if has_closed_loop(st.chans) {
         match cols.as_mut_slice() {
@@ -1651,6 +1659,7 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
 /// length R = |mean e^{iθ}| ≤ 0.5, and 0.1 ≤ mean sin²θ ≤ 0.9 so both quadratures vary), so that a sinusoid of period p is distinguishable from a
 /// constant on these targets; false at an alias (targets a whole number of periods apart).
 pub(crate) fn phases_spread(st: &Stack, p: f64) -> bool {
+    clear_upper_state();
     let xs = distinct_positions(st);
     if xs.len() < 3 || !(p > 0.0) {
         return false;
@@ -1705,6 +1714,7 @@ fn resolvable_on(xs: &[f64], p: f64) -> bool {
 /// least-squares fit), i.e. fit any data exactly as well. On positions that lie on a lattice of
 /// spacing Δ (the smallest gap) these are 1/q = |1/p − k/Δ|, k = ±1, ±2, … (spatial aliasing).
 pub(crate) fn period_aliases(st: &Stack, p: f64, range: (f64, f64)) -> Vec<f64> {
+    clear_upper_state();
     let xs = distinct_positions(st);
     let delta = xs.windows(2).map(|w| w[1] - w[0]).filter(|g| *g > 0.0).fold(f64::INFINITY, f64::min);
     if !(p > 0.0) || !delta.is_finite() || xs.len() < 3 {
@@ -1818,6 +1828,7 @@ pub(crate) fn interpolation_shift(st: &Stack, ie: &InterpolationError) -> Vec<f6
 /// The prediction of a known (not fitted) effect at every sample, passed through a closed
 /// position loop onto its following channels ([`close_loop`]).
 pub(crate) fn known_prediction(st: &Stack, e: &Effect) -> Vec<f64> {
+    clear_upper_state();
     if let (EffectParams::InterpolationError(ie), true) = (&e.params, has_closed_loop(st.chans)) {
         // A·sin(θ + φ) = A·cos φ·sin θ + A·sin φ·cos θ, through the loop as a wave (`close_loop_wave`).
         // At the table's position (`interpolation_shift`) where the channel reads the chain.

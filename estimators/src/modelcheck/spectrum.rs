@@ -14,6 +14,7 @@
 
 use super::lsq::small_lstsq;
 use super::{check_finite, check_len, check_min, ModelCheckError, Sigma};
+use crate::cpu::clear_upper_state;
 use realfft::num_complex::Complex64;
 use realfft::RealFftPlanner;
 use serde::{Deserialize, Serialize};
@@ -125,6 +126,7 @@ pub fn ls_periodogram(
 /// [`ls_periodogram`] at any frequencies by the explicit weighted fit of mean + cosine + sine at
 /// each (O(n) per frequency).
 fn ls_periodogram_direct(x: &[f64], r: &[f64], w: &[f64], chi0: f64, frequencies: &[f64]) -> Periodogram {
+    clear_upper_state();
     let n = r.len();
     let ones = vec![1.0; n];
     let mut amplitude = Vec::with_capacity(frequencies.len());
@@ -243,6 +245,7 @@ pub const FOURIER_SUM_TOLERANCE: f64 = 1e-17;
 /// non-uniform FFT of Dutt & Rokhlin (1993) and of Press & Rybicki (1989) for the Lomb–Scargle
 /// periodogram.
 pub fn fourier_sums(x: &[f64], a: &[Complex64], f0: f64, df: f64, m: usize) -> Vec<Complex64> {
+    clear_upper_state();
     let tau = 2.0 * std::f64::consts::PI;
     if m == 0 || x.is_empty() {
         return vec![Complex64::new(0.0, 0.0); m];
@@ -360,6 +363,7 @@ pub fn frequency_grid(x: &[f64], oversample: f64, f_max: Option<f64>) -> Result<
 /// the last by 2πΔf·x_i, evaluated afresh every [`RESEED`] frequencies. A frequency at which the
 /// sine or cosine is degenerate on these samples (an alias of 0) reduces by the other alone.
 pub fn sinusoid_reductions(x: &[f64], r: &[f64], w: &[f64], f0: f64, df: f64, m: usize) -> Vec<f64> {
+    clear_upper_state();
     let tau = 2.0 * std::f64::consts::PI;
     let ww: Vec<f64> = w.iter().map(|v| v * v).collect();
     let sw: f64 = ww.iter().sum();
