@@ -18,6 +18,9 @@
 //! reports hold each residual's least-squares periodogram), and the periodogram itself on an
 //! evenly spaced grid (Fourier sums) against the explicit fit at each frequency, in one run.
 //!
+//! And `sin_cos` right after a faer product with the vector state as the product leaves it and
+//! cleared (`vmt_estimators::cpu::clear_upper_state`).
+//!
 //! Run with `cargo bench --bench modelcheck` (quick: `-- --warm-up-time 1 --measurement-time 5
 //! --sample-size 10`; one group: `-- periodogram`). With `VMT_BENCH_SETS=DIR` the `diagnose` group
 //! writes its sets under DIR (kept, for timing another build's `vmt diagnose` on the same data)
@@ -167,5 +170,36 @@ fn periodogram(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, diagnose, compare, periodogram);
+/// libm after faer (`vmt_estimators::cpu`): 20 000 `sin_cos` right after a faer product, with the
+/// vector registers' upper halves as the product left them and cleared (`clear_upper_state`), and
+/// alone (the reference), in one run.
+fn vector_state(c: &mut Criterion) {
+    use faer::linalg::matmul::matmul;
+    use faer::{Accum, Mat, Par};
+    let mut g = c.benchmark_group("vector_state");
+    let x: Vec<f64> = (0..20_000).map(|i| 0.0876 + 2.2e-5 * i as f64).collect();
+    let waves =
+        |x: &[f64]| x.iter().map(|x| (std::f64::consts::TAU * x / 0.0123).sin_cos()).fold(0.0, |a, (s, c)| a + s * c);
+    let a = Mat::<f64>::from_fn(200, 50, |i, j| (i + 2 * j) as f64);
+    let b = Mat::<f64>::from_fn(50, 30, |i, j| (i * j) as f64);
+    let mut m = Mat::<f64>::zeros(200, 30);
+    let mut product = || matmul(m.as_mut(), Accum::Replace, a.as_ref(), b.as_ref(), 1.0, Par::Seq);
+    g.bench_function("20 000 sin_cos after a faer product, state as left", |bch| {
+        bch.iter(|| {
+            product();
+            waves(&x)
+        })
+    });
+    g.bench_function("20 000 sin_cos after a faer product, upper halves cleared", |bch| {
+        bch.iter(|| {
+            product();
+            vmt_estimators::cpu::clear_upper_state();
+            waves(&x)
+        })
+    });
+    g.bench_function("a faer product alone (reference)", |bch| bch.iter(&mut product));
+    g.finish();
+}
+
+criterion_group!(benches, diagnose, compare, periodogram, vector_state);
 criterion_main!(benches);
