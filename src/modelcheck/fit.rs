@@ -406,8 +406,18 @@ impl FactoredCurve {
             ShapeBasis::Harmonics => (top.saturating_sub(1) / 2).max(1),
             _ => ORDER_BLOCK.min(top),
         };
+        // The series' columns of the blocks before, kept (Legendre: a column's values are the
+        // same bits whatever the order the basis is evaluated to, so a block adds only its own).
+        let mut cols: Vec<Vec<f64>> = Vec::new();
         loop {
-            let series = NestedSeries::new(target, w, base, &series_columns(st, name, basis, k))?;
+            if basis == ShapeBasis::Legendre {
+                // index: column counts ≤ k, a u32 order (`top`), narrowed back.
+                let new: Vec<u32> = (cols.len() as u32 + 1..=k).collect();
+                cols.extend(columns(st, name, &shape(st, name, 1, k, false).selected(new), &[]));
+            } else {
+                cols = series_columns(st, name, basis, k);
+            }
+            let series = NestedSeries::new(target, w, base, &cols)?;
             let nr = &series.nested;
             let curve = curve_entries(basis, &nr.rss, &nr.used, |m| base.rank() + m);
             if basis == ShapeBasis::Harmonics || block_ends(&curve, k, top, st.n) {

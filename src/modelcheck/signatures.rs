@@ -1,6 +1,7 @@
 //! Signatures of the effects on the stacked samples.
 
 use super::*;
+use rayon::prelude::*;
 use vmt_estimators::cpu::clear_upper_state;
 
 // ------------------------------------------------------------------------------------------
@@ -712,6 +713,46 @@ impl<'a> Stack<'a> {
         }
     }
 
+    /// `k` columns over all samples, a row per sample: f(channel, sample index, row) writes the
+    /// sample's k values into `row` (zeroed before each call). In blocks of [`ROWS_PER_TASK`]
+    /// samples of one channel, side by side (rayon); a sample's values depend on it alone, so the
+    /// columns are the same bits on any number of threads as one sample after another.
+    pub(crate) fn col_rows(&self, k: usize, f: impl Fn(&Channel, usize, &mut [f64]) + Sync) -> Vec<Vec<f64>> {
+        let mut cols = vec![vec![0.0; self.n]; k];
+        // Per block: its channel, first sample, number of samples, and each column's rows of it.
+        let mut blocks: Vec<(&Channel, usize, usize, Vec<&mut [f64]>)> = Vec::new();
+        let mut rest: Vec<&mut [f64]> = cols.iter_mut().map(|c| c.as_mut_slice()).collect();
+        for c in self.chans {
+            let mut i0 = 0;
+            while i0 < c.y.len() {
+                // index: i0 < the channel's length, and the columns hold the stack's n = Σ lengths.
+                let len = ROWS_PER_TASK.min(c.y.len() - i0);
+                let mine = rest
+                    .iter_mut()
+                    .map(|r| {
+                        let (a, b) = std::mem::take(r).split_at_mut(len);
+                        *r = b;
+                        a
+                    })
+                    .collect();
+                blocks.push((c, i0, len, mine));
+                i0 += len;
+            }
+        }
+        blocks.into_par_iter().for_each(|(c, i0, len, mut mine)| {
+            clear_upper_state();
+            let mut row = vec![0.0; k];
+            for r in 0..len {
+                row.fill(0.0);
+                f(c, i0 + r, &mut row);
+                for (col, v) in mine.iter_mut().zip(&row) {
+                    col[r] = *v;
+                }
+            }
+        });
+        cols
+    }
+
     /// One column: f(channel, sample index) over all samples.
     pub(crate) fn col(&self, f: impl Fn(&Channel, usize) -> f64) -> Vec<f64> {
         clear_upper_state();
@@ -775,6 +816,9 @@ impl<'a> Stack<'a> {
         (lo, hi)
     }
 }
+
+/// Samples of one channel per task of [`Stack::col_rows`].
+const ROWS_PER_TASK: usize = 1024;
 
 /// How an effect's signature is parameterised: names of its linear coefficients and of its
 /// nonlinear hyper-parameters (periods, time constants).
@@ -1552,26 +1596,17 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             // P'_k·2/(b − a), differenced over the sample interval); every order at once per
             // position ([`Shape::terms_at`]; cosines for a motion only accelerometers see).
             let ks = sh.ks();
-            let mut cols: Vec<Vec<f64>> = ks.iter().map(|_| Vec::with_capacity(st.n)).collect();
-            let at = |x: f64| sh.terms_at(x, &ks);
-            for c in st.chans {
-                for i in 0..c.y.len() {
-                    match c.motion_read(i, n) {
-                        MotionRead::Blind => cols.iter_mut().for_each(|col| col.push(0.0)),
-                        MotionRead::Value { s, x } => {
-                            let (p, _) = at(x);
-                            cols.iter_mut().zip(&p).for_each(|(col, pk)| col.push(s * pk));
-                        }
-                        MotionRead::SlopeDifference { s, v, dt, xa, xb } => {
-                            let (d1, d0) = sh.slopes_at_two(xb, xa, Some(&ks));
-                            cols.iter_mut()
-                                .zip(d1.iter().zip(&d0))
-                                .for_each(|(col, (b, a))| col.push(s * v * (b - a) / dt));
-                        }
-                    }
+            st.col_rows(ks.len(), |c, i, row| match c.motion_read(i, n) {
+                MotionRead::Blind => {}
+                MotionRead::Value { s, x } => {
+                    let (p, _) = sh.terms_at(x, &ks);
+                    row.iter_mut().zip(&p).for_each(|(o, pk)| *o = s * pk);
                 }
-            }
-            cols
+                MotionRead::SlopeDifference { s, v, dt, xa, xb } => {
+                    let (d1, d0) = sh.slopes_at_two(xb, xa, Some(&ks));
+                    row.iter_mut().zip(d1.iter().zip(&d0)).for_each(|(o, (b, a))| *o = s * v * (b - a) / dt);
+                }
+            })
         }
         EffectName::Backlash => {
             // Encoder time series: the play p(t; b)/b (take-up b/|v| at a reversal); point tables: −d/2.
