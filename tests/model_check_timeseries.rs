@@ -185,6 +185,52 @@ fn encoder_complete_model_on_a_jittered_trace_with_coarse_stamps() {
     assert!(nrms <= 1.1 && on_clock >= 2, "normalised RMS {nrms:.3}, runs read at a clock {on_clock}");
 }
 
+/// A complete model on encoder draw 2005 (a 4 kHz servo, 1.25 ms rows) whose clock counts Unix
+/// epoch seconds (1.7 × 10⁹ s, where an f64 steps by 0.24 µs): the stamps written to 1 µs in
+/// the `t` column (start times 0), and the run starts in the manifest (`t` from each start).
+/// Normalised RMS ≤ 1.1 both ways, as with its own stamps (0.998); before the reader counted
+/// such times from their first whole second, 1.381 both ways (the rows' intervals off by up to
+/// 0.24 µs, v·δ up to 24 nm against 3–20 nm of noise).
+#[test]
+fn encoder_complete_model_on_epoch_second_stamps_fits_to_the_noise() {
+    const EPOCH: f64 = 1_733_400_000.0;
+    for in_manifest in [false, true] {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("e2005");
+        encoder_set_traced(&dir, 2005, EncoderHidden::None, None, Trace::Exact);
+        let manifest = std::fs::read_to_string(dir.join("manifest.toml")).unwrap();
+        let mut out = String::new();
+        let (mut start, mut file) = (0.0, String::new());
+        for line in manifest.lines() {
+            if let Some(f) = line.strip_prefix("file = ") {
+                file = f.trim_matches('"').to_string();
+            }
+            if let Some(v) = line.strip_prefix("start_time = ") {
+                // The generator writes each run's `file` before its `start_time`.
+                start = v.parse::<f64>().unwrap();
+                let text = std::fs::read_to_string(dir.join(&file)).unwrap();
+                let mut lines = text.lines();
+                let mut csv = format!("{}\n", lines.next().unwrap());
+                for row in lines {
+                    let (t, rest) = row.split_once(',').unwrap();
+                    let t = t.parse::<f64>().unwrap() + if in_manifest { 0.0 } else { EPOCH + start };
+                    csv.push_str(&format!("{t:.6},{rest}\n"));
+                }
+                std::fs::write(dir.join(&file), csv).unwrap();
+                let shown = if in_manifest { EPOCH + start } else { 0.0 };
+                out.push_str(&format!("start_time = {shown:?}\n"));
+            } else {
+                out.push_str(&format!("{line}\n"));
+            }
+        }
+        assert!(start > 0.0, "the draw's runs have start times");
+        std::fs::write(dir.join("manifest.toml"), out).unwrap();
+        let c = vmt(&["compare", "--model", s(&dir.join("model.toml")), "--data", s(&dir), "--json"]).unwrap();
+        let nrms = c["normalized_rms"].as_f64().unwrap_or(f64::NAN);
+        assert!(nrms <= 1.1, "epoch stamps (in the manifest: {in_manifest}): normalised RMS {nrms:.4}");
+    }
+}
+
 /// `vmt compare` of the complete model of encoder draw `seed` on [`JITTERED_TRACE`] with column
 /// `col` of every CSV rewritten with `decimals` decimals (as an export that prints fewer digits
 /// writes it): the normalised RMS and the number of notes that contain `noted`.

@@ -122,6 +122,24 @@ impl MeasurementSet {
         self.runs.iter().find(|r| r.name == name)
     }
 
+    /// The whole seconds the set's times are counted from by the model check: those of its
+    /// earliest run start (`start_time`, 0 when absent) when every run starts at [`LARGE_TIME`] or
+    /// later (a clock's epoch seconds), else 0, so that a run's start less this origin is exact and
+    /// its samples' times keep their stamps' digits ([`MeasurementSet::run_start`]).
+    pub fn time_origin(&self) -> f64 {
+        let first = self.runs.iter().map(|r| r.start_time.unwrap_or(0.0)).fold(f64::INFINITY, f64::min);
+        if first.is_finite() && first >= LARGE_TIME {
+            first.floor()
+        } else {
+            0.0
+        }
+    }
+
+    /// Run `r`'s start, s from the set's [`MeasurementSet::time_origin`].
+    pub fn run_start(&self, r: &Run) -> f64 {
+        r.start_time.unwrap_or(0.0) - self.time_origin()
+    }
+
     /// The smallest and largest position of axis `axis` the set measured at: the targets of its point
     /// tables and the commanded positions (`x_cmd`) of its time series; None when it has neither.
     pub fn position_range(&self, axis: Axis) -> Option<(f64, f64)> {
@@ -334,6 +352,23 @@ impl CsvText {
             .collect()
     }
 
+    /// Time column `i` in seconds, and the origin it is counted from: 0, unless its first value is
+    /// at least [`LARGE_TIME`] (a clock's epoch seconds: at 1.7 × 10⁹ s an f64 steps by 0.24 µs,
+    /// and a stamp's last digits are lost in the sum before any interval is taken). Then the first
+    /// value's whole units are subtracted in each cell's decimal text ([`relative_cell`]), so
+    /// that every digit written stays in the relative time, and returned in seconds.
+    fn times(&self, path: &Path, i: usize) -> Result<(Vec<f64>, f64), VmtError> {
+        let t = self.numbers(path, i, Dimension::Time)?;
+        let Some(&first) = t.first().filter(|v| v.abs() >= LARGE_TIME) else { return Ok((t, 0.0)) };
+        let (name, unit) = &self.header[i];
+        let u: Unit = resolve_unit(unit.as_deref(), Dimension::Time)
+            .map_err(|m| VmtError::bad(path, format!("column {name}"), m.to_string()))?;
+        // index: `first` is t[0], read from rows[0] above.
+        let whole = parse_number(&self.rows[0].1[i]).unwrap_or(first).trunc();
+        let rel: Vec<f64> = self.rows.iter().map(|(_, cells)| u.to_si(relative_cell(&cells[i], whole))).collect();
+        Ok((rel, u.to_si(whole)))
+    }
+
     /// Column `i` as raw numbers with no unit allowed (run numbers, directions).
     fn unitless(&self, path: &Path, i: usize, what: &str) -> Result<Vec<f64>, VmtError> {
         let (name, unit) = &self.header[i];
@@ -367,6 +402,31 @@ enum CellError {
     NotFinite(String),
     #[error("expected a number, got `{0}`")]
     NotANumber(String),
+}
+
+/// Time stamps at least this large, s, are read from their first whole second ([`CsvText::times`]):
+/// below it an f64 keeps 0.1 ns, far below any log's stamps.
+pub const LARGE_TIME: f64 = 1e6;
+
+/// A number cell (already parsed as finite) minus `whole`, an integer: in its decimal text where
+/// it is written as [-]digits[.digits] with at most 18 digits before the point (the integer parts
+/// subtracted exactly, the fraction added), else its value minus `whole`.
+fn relative_cell(cell: &str, whole: f64) -> f64 {
+    let value = || parse_number(cell).map_or(f64::NAN, |v| v - whole);
+    let (neg, body) = match cell.strip_prefix('-') {
+        Some(b) => (true, b),
+        None => (false, cell.strip_prefix('+').unwrap_or(cell)),
+    };
+    let (int, frac) = body.split_once('.').unwrap_or((body, ""));
+    let digits = |s: &str| s.bytes().all(|b| b.is_ascii_digit());
+    if int.is_empty() || int.len() > 18 || !digits(int) || !digits(frac) || whole.abs() >= 1e18 {
+        return value();
+    }
+    let (Ok(i), Ok(f)) = (int.parse::<i64>(), format!("0.{frac}0").parse::<f64>()) else { return value() };
+    let sign = if neg { -1.0 } else { 1.0 };
+    // Exact: both are integers below 10¹⁸ and their difference is a stamp's span.
+    let ints = (if neg { -i } else { i }) - whole as i64;
+    ints as f64 + sign * f
 }
 
 /// Parses one CSV cell as a finite number.
@@ -484,8 +544,10 @@ fn check_increasing(csv: &CsvText, path: &Path, t: &[f64], col: &str) -> Result<
     Ok(())
 }
 
-/// Reads one run's CSV; `sensors` gives the kinds (hence units) of sensor columns.
-fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
+/// Reads one run's CSV; `sensors` gives the kinds (hence units) of sensor columns. Returns the
+/// data and the whole seconds a time series' `t` is counted from ([`CsvText::times`]; 0 for a
+/// point table), which the caller adds to the run's `start_time`.
+fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<(RunData, f64), VmtError> {
     let csv = read_csv_text(path)?;
     let is_table = csv.index("target").is_some();
     let mut columns: Vec<(String, Vec<f64>)> = Vec::new();
@@ -533,9 +595,9 @@ fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
                  `target`, `run`, `direction`",
             )
         })?;
-        let t = csv.numbers(path, ti, Dimension::Time)?;
+        let (t, origin) = csv.times(path, ti)?;
         check_increasing(&csv, path, &t, "t")?;
-        return Ok(RunData::TimeSeries { t, columns });
+        return Ok((RunData::TimeSeries { t, columns }, origin));
     }
     let need = |c: &str| {
         csv.index(c).ok_or_else(|| {
@@ -580,7 +642,7 @@ fn read_run_data(path: &Path, sensors: &[Sensor]) -> Result<RunData, VmtError> {
     };
     check_point_rows(&target, &run, &direction)
         .map_err(|(k, m)| VmtError::bad(path, format!("line {}, column target", csv.line(k)), m))?;
-    Ok(RunData::PointTable { target, run, direction, t, columns })
+    Ok((RunData::PointTable { target, run, direction, t, columns }, 0.0))
 }
 
 // ------------------------------------------------------------------------------------------
@@ -817,7 +879,11 @@ pub fn read(dir: &Path) -> Result<MeasurementSet, VmtError> {
     set_so_far.runs = parsed.iter().map(|(r, _)| r.clone()).collect();
     validate_manifest(&set_so_far, &mpath)?;
     for (mut run, file) in parsed {
-        run.data = read_run_data(&dir.join(&file), &set_so_far.sensors)?;
+        let (data, origin) = read_run_data(&dir.join(&file), &set_so_far.sensors)?;
+        run.data = data;
+        if origin != 0.0 {
+            run.start_time = Some(run.start_time.unwrap_or(0.0) + origin);
+        }
         runs.push(run);
     }
     set_so_far.runs = runs;
@@ -1561,6 +1627,48 @@ mod tests {
         let bad = json.replace("\"axis\":\"x\"", "\"axis\":\"w\"");
         let e = serde_json::from_str::<Sensor>(&bad).unwrap_err().to_string();
         assert!(e.contains("expected an axis \"x\", \"y\" or \"z\", got 'w'"), "{e}");
+    }
+
+    /// Epoch-second stamps keep every written digit: the cells less the first's whole seconds in
+    /// their text, the origin added to the run's start; small stamps are read as they were.
+    #[test]
+    fn epoch_second_stamps_are_counted_from_their_first_whole_second() {
+        assert_eq!(relative_cell("1733400000.005750", 1_733_400_000.0), 0.00575);
+        assert_eq!(relative_cell("1733400001.000001", 1_733_400_000.0), 1.000001);
+        assert_eq!(relative_cell("-1733400000.25", -1_733_400_000.0), -0.25);
+        assert_eq!(relative_cell("+1733400002", 1_733_400_000.0), 2.0);
+        // Exponent form: the value as parsed, less the origin (exact: the two are close).
+        assert_eq!(relative_cell("1.7334000005e9", 1_733_400_000.0), 0.5);
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
+        std::fs::write(
+            dir.join("manifest.toml"),
+            "format = \"vmt-measurements/1\"\n[[sensors]]\nname = \"scale\"\nkind = \"encoder_linear\"\naxis = \"x\"\n\
+             [[runs]]\nname = \"a\"\nfile = \"a.csv\"\nprocedure = \"constant_velocity\"\naxis = \"x\"\nstart_time = 2.5\n\
+             [[runs]]\nname = \"b\"\nfile = \"b.csv\"\nprocedure = \"constant_velocity\"\naxis = \"x\"\n",
+        )
+        .unwrap();
+        let rows = |t: &[&str]| -> String {
+            let body: Vec<String> = t.iter().enumerate().map(|(i, t)| format!("{t},{i},{i}")).collect();
+            format!("t,x_cmd[mm],scale[mm]\n{}\n", body.join("\n"))
+        };
+        std::fs::write(dir.join("a.csv"), rows(&["1733400000.000000", "1733400000.000001", "1733400000.001251"]))
+            .unwrap();
+        std::fs::write(dir.join("b.csv"), rows(&["0.0", "0.001", "0.002"])).unwrap();
+        let set = read(dir).unwrap();
+        let RunData::TimeSeries { t, .. } = &set.runs[0].data else { panic!("a time series") };
+        assert_eq!(t, &vec![0.0, 1e-6, 0.001251]);
+        assert_eq!(set.runs[0].start_time, Some(1_733_400_002.5));
+        let RunData::TimeSeries { t, .. } = &set.runs[1].data else { panic!("a time series") };
+        assert_eq!(t, &vec![0.0, 0.001, 0.002]);
+        assert_eq!(set.runs[1].start_time, None);
+        // One run near 0 s: the set's times are counted from 0.
+        assert_eq!(set.time_origin(), 0.0);
+        let mut late = set.clone();
+        late.runs[1].start_time = Some(1_733_400_010.75);
+        assert_eq!(late.time_origin(), 1_733_400_002.0);
+        assert_eq!(late.run_start(&late.runs[0]), 0.5);
+        assert_eq!(late.run_start(&late.runs[1]), 8.75);
     }
 
     #[test]

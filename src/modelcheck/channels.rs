@@ -226,7 +226,7 @@ pub fn channels(set: &MeasurementSet, axis: Axis) -> (Vec<Channel>, Vec<String>)
             time_series_channels(set, run, clock.as_ref().map(|c| c.0.as_slice()), &mut out, &mut notes);
             continue;
         };
-        let t0 = run.start_time.unwrap_or(0.0);
+        let t0 = set.run_start(run);
         let times: Vec<f64> = match t {
             Some(t) => t.iter().map(|v| t0 + v).collect(),
             None => vec![t0; target.len()],
@@ -295,6 +295,7 @@ pub(crate) fn time_series_channels(
         match (s.kind, run.feed) {
             (SensorKind::Accelerometer, Some(feed)) if run.procedure == Procedure::ConstantVelocity => {
                 out.push(steady_channel(
+                    set,
                     run,
                     name,
                     s,
@@ -307,7 +308,7 @@ pub(crate) fn time_series_channels(
                 ));
             }
             (SensorKind::MotorForce, Some(feed)) if steady => {
-                out.push(steady_channel(run, name, s, [1.0, 0.0, 0.0], [0.0; 3], &x, t, feed, values));
+                out.push(steady_channel(set, run, name, s, [1.0, 0.0, 0.0], [0.0; 3], &x, t, feed, values));
             }
             // Every other kind (named, so that a new one is decided here), and the two above
             // outside their runs or without a feed.
@@ -338,9 +339,10 @@ pub(crate) fn time_series_channels(
 }
 
 /// A channel of a constant-feed time-series run: every sample at the run's signed feed, cycle 1, times
-/// offset by the run's start time; `u`, `r` the sensor's direction and point in the axis frame.
+/// offset by the run's start (from the set's time origin, [`MeasurementSet::run_start`]); `u`, `r` the sensor's direction and point in the axis frame.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn steady_channel(
+    set: &MeasurementSet,
     run: &crate::measurement::Run,
     name: &str,
     s: &crate::measurement::Sensor,
@@ -352,7 +354,7 @@ pub(crate) fn steady_channel(
     values: &[f64],
 ) -> Channel {
     let dir = f64::from(run.direction.unwrap_or(1));
-    let t0 = run.start_time.unwrap_or(0.0);
+    let t0 = set.run_start(run);
     Channel {
         run: run.name.clone(),
         sensor: name.to_string(),

@@ -360,7 +360,7 @@ pub(crate) fn encoder_channels(
     };
     let scale = find(SensorKind::EncoderLinear);
     let motor = find(SensorKind::EncoderRotary);
-    let t0 = run.start_time.unwrap_or(0.0);
+    let t0 = set.run_start(run);
     let times: Vec<f64> = t.iter().map(|v| t0 + v).collect();
     let vel: Vec<f64> = (0..x_cmd.len())
         .map(|i| {
