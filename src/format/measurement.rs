@@ -404,8 +404,9 @@ enum CellError {
     NotANumber(String),
 }
 
-/// Time stamps at least this large, s, are read from their first whole second ([`CsvText::times`]):
-/// below it an f64 keeps 0.1 ns, far below any log's stamps.
+/// Time stamps at least this large, s, are read from their first whole second (the whole part
+/// subtracted in each cell's digits, the run's `start_time` grown by it): below it an f64 keeps
+/// 0.1 ns, far below any log's stamps.
 pub const LARGE_TIME: f64 = 1e6;
 
 /// A number cell (already parsed as finite) minus `whole`, an integer: in its decimal text where
