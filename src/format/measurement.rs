@@ -359,12 +359,14 @@ impl CsvText {
     /// that every digit written stays in the relative time, and returned in seconds.
     fn times(&self, path: &Path, i: usize) -> Result<(Vec<f64>, f64), VmtError> {
         let t = self.numbers(path, i, Dimension::Time)?;
-        let Some(&first) = t.first().filter(|v| v.abs() >= LARGE_TIME) else { return Ok((t, 0.0)) };
+        if !t.first().is_some_and(|v| v.abs() >= LARGE_TIME) {
+            return Ok((t, 0.0));
+        }
         let (name, unit) = &self.header[i];
         let u: Unit = resolve_unit(unit.as_deref(), Dimension::Time)
             .map_err(|m| VmtError::bad(path, format!("column {name}"), m.to_string()))?;
-        // index: `first` is t[0], read from rows[0] above.
-        let whole = parse_number(&self.rows[0].1[i]).unwrap_or(first).trunc();
+        // index: t[0] was read from rows[0] above (so the cell parses), in the file's unit.
+        let whole = parse_number(&self.rows[0].1[i]).map_or(0.0, f64::trunc);
         let rel: Vec<f64> = self.rows.iter().map(|(_, cells)| u.to_si(relative_cell(&cells[i], whole))).collect();
         Ok((rel, u.to_si(whole)))
     }

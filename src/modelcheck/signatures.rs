@@ -379,7 +379,6 @@ pub(crate) fn free_map(f: f64, zeta: f64, h: f64) -> [[f64; 2]; 2] {
 /// from the unit-scaled states at t_{−1}, (q₀, q̇₀) = (1/ω², 0) and (0, 1/ω), ω = 2πf: the
 /// columns of an unknown starting state.
 pub(crate) fn free_vibration(c: &Channel, f: f64, zeta: f64) -> [Vec<f64>; 2] {
-    clear_upper_state();
     let w = TWO_PI * f;
     let lanes = [(1.0 / (w * w), 0.0), (0.0, 1.0 / w)].map(|start| Lane { start, input: None });
     let mut both = mode_lanes(c, &lanes, f, zeta).into_iter();
