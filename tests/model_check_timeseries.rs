@@ -170,8 +170,27 @@ fn encoder_complete_model_on_a_jittered_trace_fits_to_the_noise() {
 /// 1.08: the command's rounding, not the clock).
 #[test]
 fn encoder_complete_model_on_a_jittered_trace_with_a_coarse_command() {
-    let (nrms, followed) = jittered_and_rewritten(2001, 1, 4, "its own command cannot tell");
+    let (nrms, followed) = rewritten(2001, JITTERED_TRACE, 1, 4, "its own command cannot tell");
     assert!(nrms <= 1.1 && followed >= 2, "normalised RMS {nrms:.3}, runs that followed the set's clocks {followed}");
+}
+
+/// Complete models on encoder draws 2000 and 2011 (closed and semi-closed loop) whose command is
+/// written as a controller's export prints it: the rounding reaches every predicted reading
+/// through the following error's lag, at 3–20 nm of noise. Read as written, normalised RMS 1.149
+/// and 1.323 at 0.1 µm (4 decimals of mm), 6.13 and 10.7 at 1 µm (3 decimals). Read as the smooth
+/// profile the values round (`vmt::modelcheck` `smooth_command`, said in a note in every run):
+/// 0.988 and 0.993 at 0.1 µm, held to ≤ 1.1; 1.043 and 1.094 at 1 µm, held to ≤ 1.3, because at
+/// 1 µm the rows leave the profile open by a few hundredths of q in places (the generator's
+/// sinusoidal reversal), and a complete model's ideal is above 1 there (see the report of issue 19).
+#[test]
+fn encoder_complete_model_on_a_command_written_as_an_export_prints_it() {
+    for (seed, decimals, limit) in [(2000, 4, 1.1), (2011, 4, 1.1), (2000, 3, 1.3), (2011, 3, 1.3)] {
+        let (nrms, read) = rewritten(seed, Trace::Exact, 1, decimals, "is read as the smooth profile");
+        assert!(
+            nrms <= limit && read >= 5,
+            "draw {seed}, {decimals} decimals: normalised RMS {nrms:.3}, runs read smooth {read}"
+        );
+    }
 }
 
 /// A jittered trace (draw 2005: σ 1.9 µs, 1.25 ms rows) whose stamps are written to 10 µs (5
@@ -181,7 +200,7 @@ fn encoder_complete_model_on_a_jittered_trace_with_a_coarse_command() {
 /// clock noted.
 #[test]
 fn encoder_complete_model_on_a_jittered_trace_with_coarse_stamps() {
-    let (nrms, on_clock) = jittered_and_rewritten(2005, 0, 5, "scatter about a regular clock");
+    let (nrms, on_clock) = rewritten(2005, JITTERED_TRACE, 0, 5, "scatter about a regular clock");
     assert!(nrms <= 1.1 && on_clock >= 2, "normalised RMS {nrms:.3}, runs read at a clock {on_clock}");
 }
 
@@ -231,13 +250,13 @@ fn encoder_complete_model_on_epoch_second_stamps_fits_to_the_noise() {
     }
 }
 
-/// `vmt compare` of the complete model of encoder draw `seed` on [`JITTERED_TRACE`] with column
-/// `col` of every CSV rewritten with `decimals` decimals (as an export that prints fewer digits
-/// writes it): the normalised RMS and the number of notes that contain `noted`.
-fn jittered_and_rewritten(seed: u64, col: usize, decimals: usize, noted: &str) -> (f64, usize) {
+/// `vmt compare` of the complete model of encoder draw `seed` written by `trace` with column `col`
+/// of every CSV rewritten with `decimals` decimals (as an export that prints fewer digits writes
+/// it): the normalised RMS and the number of notes that contain `noted`.
+fn rewritten(seed: u64, trace: Trace, col: usize, decimals: usize, noted: &str) -> (f64, usize) {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join(format!("e{seed}"));
-    encoder_set_traced(&dir, seed, EncoderHidden::None, None, JITTERED_TRACE);
+    encoder_set_traced(&dir, seed, EncoderHidden::None, None, trace);
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "csv") {
@@ -364,11 +383,16 @@ const ROUNDED_TRACE: Trace = Trace::Rounded { lost: 0.02 };
 /// readings at the servo's ticks, the stamps off them) and 2 % of its rows lost.
 const JITTERED_TRACE: Trace = Trace::Jittered { lost: 0.02 };
 
+/// A controller trace whose command column is written in mm to 4 decimals (0.1 µm,
+/// [`Trace::CoarseCommand`]), rows and times exact.
+const COARSE_COMMAND: Trace = Trace::CoarseCommand { decimals: 4 };
+
 fn encoder_rates(hidden: EncoderHidden, draws: u64, add: bool, trace: Trace) -> Vec<(EncoderTruth, Outcome)> {
     let on = match trace {
         Trace::Exact => "",
         Trace::Rounded { .. } => "RoundedTrace",
         Trace::Jittered { .. } => "JitteredTrace",
+        Trace::CoarseCommand { .. } => "CoarseCommand",
     };
     loop_rates(
         &format!("enc{hidden:?}{on}"),
@@ -611,6 +635,25 @@ fn encoder_complete_model_false_alarms_on_a_jittered_trace() {
     complete_encoder(JITTERED_TRACE);
 }
 
+/// [`encoder_complete_model_false_alarms`] on a trace whose command is written to 0.1 µm
+/// ([`COARSE_COMMAND`]).
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn encoder_complete_model_false_alarms_on_a_coarse_command() {
+    complete_encoder(COARSE_COMMAND);
+}
+
+/// The same with the command written to 1 µm (3 decimals of mm): the share with a `significant`
+/// claim (≤ 2 %) is asserted, the normalised RMS printed (as in every complete study). A command rounded
+/// to 1 µm is known only to what its rows tell of the profile (at a speed where v·h/q is near a
+/// fraction of small denominator, a few hundredths of q over a pass), against 3–20 nm of noise, so
+/// the ideal normalised RMS of a complete model is above 1 by an amount this study measures.
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn encoder_complete_model_false_alarms_on_a_micrometre_command() {
+    complete_encoder(Trace::CoarseCommand { decimals: 3 });
+}
+
 fn complete_encoder(trace: Trace) {
     let r = encoder_rates(EncoderHidden::None, draws(100), false, trace);
     assert_complete_rates(&format!("encoder complete, trace {trace:?}"), r.iter().map(|x| &x.1).collect());
@@ -786,6 +829,11 @@ rate_studies! {
     encoder_hidden_cyclic_lead_on_a_jittered_trace => hidden_encoder(EncoderHidden::CyclicLead, "cyclic_lead", JITTERED_TRACE);
     encoder_hidden_backlash_on_a_jittered_trace => hidden_encoder(EncoderHidden::Backlash, "backlash", JITTERED_TRACE);
     encoder_hidden_servo_lag_on_a_jittered_trace => hidden_encoder(EncoderHidden::ServoLag, "servo_lag", JITTERED_TRACE);
+    encoder_hidden_interpolation_error_on_a_coarse_command =>
+        hidden_encoder(EncoderHidden::InterpolationError, "interpolation_error", COARSE_COMMAND);
+    encoder_hidden_cyclic_lead_on_a_coarse_command => hidden_encoder(EncoderHidden::CyclicLead, "cyclic_lead", COARSE_COMMAND);
+    encoder_hidden_backlash_on_a_coarse_command => hidden_encoder(EncoderHidden::Backlash, "backlash", COARSE_COMMAND);
+    encoder_hidden_servo_lag_on_a_coarse_command => hidden_encoder(EncoderHidden::ServoLag, "servo_lag", COARSE_COMMAND);
 }
 
 /// Wall time of one `vmt diagnose` on accelerometer sets of `VMT_SAMPLES` samples (default 15 000;
@@ -830,6 +878,8 @@ fn write_encoder_draw() {
     let trace = match std::env::var("VMT_TRACE").as_deref() {
         Ok("rounded") => ROUNDED_TRACE,
         Ok("jittered") => JITTERED_TRACE,
+        Ok("coarse") => COARSE_COMMAND,
+        Ok("micrometre") => Trace::CoarseCommand { decimals: 3 },
         _ => Trace::Exact,
     };
     let t = encoder_set_traced(&out, seed, hidden, None, trace);

@@ -1,5 +1,6 @@
 //! Channels: the measurement set as stacked channels with per-sample sensitivities.
 
+use super::command::{decimal_resolution, smooth_command, COMMAND_DEGREE};
 use super::*;
 use vmt_sim::effects::ErrorMotion;
 use vmt_sim::procedures::COMMAND_COLUMN;
@@ -280,7 +281,24 @@ pub(crate) fn time_series_channels(
     let RunData::TimeSeries { t, columns } = &run.data else { return };
     let t = clock.filter(|c| c.len() == t.len()).unwrap_or(t);
     let steady = matches!(run.procedure, Procedure::FrictionSweep | Procedure::ConstantVelocity);
-    let x: Vec<f64> = run.data.command().map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; t.len()]);
+    // A command written to a decimal resolution: read as the smooth profile it rounds.
+    let x = match run.data.command().and_then(|x| smooth_command(t, x, run.feed)) {
+        Some((smooth, r)) if r.pieces > 0 => {
+            notes.push(format!(
+                "run `{}`: its command, written to {} m, is read as the smooth profile those values round ({} \
+                 pieces of one polynomial each, degree ≤ {COMMAND_DEGREE}, fitted for least largest error over {} of {} \
+                 samples; the largest change {:.3e} m)",
+                run.name,
+                fmt_num(r.resolution),
+                r.pieces,
+                r.smoothed,
+                t.len(),
+                r.largest_change
+            ));
+            smooth
+        }
+        Some(_) | None => run.data.command().map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; t.len()]),
+    };
     if run.data.command().is_some() {
         out.extend(encoder_channels(set, run, &x, t, notes));
     }
@@ -544,12 +562,7 @@ pub fn regular_clock(t: &[f64]) -> Option<RegularClock> {
     if n < 3 || t.iter().any(|v| !v.is_finite()) || t.windows(2).any(|w| w[1] <= w[0]) {
         return None;
     }
-    let resolution = (0..=9).map(|k| 10f64.powi(-k)).find(|q| {
-        t.iter().all(|&v| {
-            let m = v / q;
-            (m - m.round()).abs() <= STAMP_TOLERANCE + 4.0 * f64::EPSILON * m.abs()
-        })
-    })?;
+    let resolution = decimal_resolution(t, 9, STAMP_TOLERANCE, 4.0)?;
     // index: n ≥ 3 (checked above).
     let span = t[n - 1] - t[0];
     let ns = clock_ticks(t)?;

@@ -146,6 +146,7 @@ const ALPHA_STEEL: f64 = 11.5e-6;
 
 mod add;
 mod channels;
+mod command;
 mod coupled;
 mod encoder;
 mod fit;

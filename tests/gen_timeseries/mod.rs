@@ -834,6 +834,10 @@ pub enum Trace {
     /// shortest log interval, from the trace's own stream), written as computed (a PC that stamps
     /// the controller's rows as they arrive); rows lost as in [`Trace::Rounded`].
     Jittered { lost: f64 },
+    /// Each row at its servo tick, the time as computed, the command written in mm to `decimals`
+    /// decimals (3: 1 µm, 4: 0.1 µm; as a controller's export prints it). The loop follows the
+    /// exact command: only the written column is rounded.
+    CoarseCommand { decimals: usize },
 }
 
 /// Feedback of the position loop.
@@ -1043,16 +1047,21 @@ pub fn encoder_set_traced(
     };
     let shortest = plans.iter().map(|p| p.every as f64 * h).fold(f64::INFINITY, f64::min);
     let stamp_resolution = match trace {
-        Trace::Exact | Trace::Jittered { .. } => None,
+        Trace::Exact | Trace::Jittered { .. } | Trace::CoarseCommand { .. } => None,
         Trace::Rounded { .. } => [1e-3, 1e-4, 1e-5, 1e-6].into_iter().find(|q| *q <= shortest / 4.0),
     };
     let stamp_jitter = match trace {
-        Trace::Exact | Trace::Rounded { .. } => 0.0,
+        Trace::Exact | Trace::Rounded { .. } | Trace::CoarseCommand { .. } => 0.0,
         Trace::Jittered { .. } => lose.log_uniform(0.3e-6, (30e-6f64).min(shortest / 40.0)),
     };
     let stamp = |lose: &mut Draw, t: f64| {
         let t = if stamp_jitter > 0.0 { t + stamp_jitter * lose.normal() } else { t };
         stamp_resolution.map_or(t, |q| (t / q).round() * q)
+    };
+    // The command column as the trace writes it, mm.
+    let written_command = |mm: f64| match trace {
+        Trace::CoarseCommand { decimals } => format!("{mm:.decimals$}").parse::<f64>().unwrap(),
+        Trace::Exact | Trace::Rounded { .. } | Trace::Jittered { .. } => mm,
     };
     for p in &plans {
         let (x_start, v_start) = p.cmd[0];
@@ -1069,7 +1078,7 @@ pub fn encoder_set_traced(
                     Trace::Rounded { lost } | Trace::Jittered { lost } => {
                         lost > 0.0 && !tc.is_empty() && lose.chance(lost)
                     }
-                    Trace::Exact => false,
+                    Trace::Exact | Trace::CoarseCommand { .. } => false,
                 };
                 if !lost {
                     tc.push(i as f64 * h);
@@ -1107,7 +1116,7 @@ pub fn encoder_set_traced(
             start_time: t0,
             columns: vec![
                 ("t".into(), tc.iter().map(|t| stamp(&mut lose, t - t_first)).collect()),
-                ("x_cmd[mm]".into(), xc.iter().map(|v| v * 1e3).collect()),
+                ("x_cmd[mm]".into(), xc.iter().map(|v| written_command(v * 1e3)).collect()),
                 ("scale[um]".into(), sc.iter().map(|v| v * 1e6).collect()),
                 ("motor[um]".into(), mc.iter().map(|v| v * 1e6).collect()),
             ],
