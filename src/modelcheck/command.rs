@@ -172,17 +172,10 @@ fn minimax_fit(p: &[Vec<f64>], y: &[f64], d: usize) -> Option<(Vec<f64>, f64)> {
 /// (m), when there is one: the line of slope ±`feed` (m/s, signed as the piece moves) when it
 /// holds, else the lowest degree d ≤ `top` (Legendre polynomials of the time scaled to [−1, 1],
 /// values taken relative to the first) whose least-squares fit, or else whose fit of least largest
-/// error ([`minimax_fit`]), holds. Returns d and the fitted values: the least-squares fit moved to
-/// its errors' mid-range, or the fit of least largest error where that one was needed, or with
+/// error ([`minimax_fit`]), holds. Returns the fitted values: the least-squares fit moved to its
+/// errors' mid-range, or the fit of least largest error where that one was needed, or with
 /// `chebyshev` where its error is below the other's.
-fn piece_fit(
-    t: &[f64],
-    x: &[f64],
-    range: f64,
-    top: usize,
-    chebyshev: bool,
-    feed: Option<f64>,
-) -> Option<(usize, Vec<f64>)> {
+fn piece_fit(t: &[f64], x: &[f64], range: f64, top: usize, chebyshev: bool, feed: Option<f64>) -> Option<Vec<f64>> {
     let n = t.len();
     // index: a piece has at least COMMAND_PIECE_MIN samples.
     let (t0, t1, x0) = (t[0], t[n - 1], x[0]);
@@ -199,7 +192,7 @@ fn piece_fit(
         let (lo, hi) = extremes(&r);
         if hi - lo <= range {
             let centre = 0.5 * (lo + hi);
-            return Some((1, t.iter().map(|t| x0 + v * (t - t0) + centre).collect()));
+            return Some(t.iter().map(|t| x0 + v * (t - t0) + centre).collect());
         }
     }
     // Each sample's Legendre values P_0..P_DEG of its scaled time.
@@ -217,11 +210,10 @@ fn piece_fit(
             return None;
         }
         let centre = 0.5 * (lo + hi);
-        let values = match minimax {
+        Some(match minimax {
             Some((fit, err)) if err <= 0.5 * (hi - lo) => fit.iter().map(|v| v + x0).collect(),
             Some(_) | None => x.iter().zip(&r).map(|(x, r)| x - r + centre).collect(),
-        };
-        Some((d, values))
+        })
     })
 }
 
@@ -278,9 +270,9 @@ fn longest_stretch(t: &[f64], x: &[f64], i: usize, range: f64, top: usize, feed:
 ///
 /// (exactly what rounding a smooth profile leaves; [`piece_fit`]: the line of slope ±`feed` first,
 /// then the lowest degree whose least-squares or least-largest-error fit holds; the stretch found
-/// by doubling, then bisection, [`longest_stretch`]), is read as x̂ at the mid-range of its errors (the fit of least
-/// largest error where that is below the least-squares one), and the next stretch starts after it;
-/// a sample no such stretch starts at keeps its value. Each value moves by at most
+/// by doubling, then bisection, [`longest_stretch`]), is read as x̂ at the mid-range of its errors
+/// (the fit of least largest error where that is below the least-squares one), and the next
+/// stretch starts after it; a sample no such stretch starts at keeps its value. Each value moves by at most
 /// q/2·(1 + [`COMMAND_SLACK`]).
 ///
 /// How well: a cruise to O(q/m) over m rows (the unit test's 3 000 rows at 1 µm: 0.0008 q). Where
@@ -307,22 +299,17 @@ pub fn smooth_command(t: &[f64], x: &[f64], feed: Option<f64>) -> Option<(Vec<f6
             .iter()
             .filter_map(|&top| longest_stretch(t, x, i, range, top, feed).map(|e| (top, e)))
             .collect();
-        let Some(longest) = stretches.iter().map(|s| s.1 - i).max() else {
-            i += 1;
-            continue;
-        };
-        let Some(&(top, good)) = stretches.iter().find(|s| (s.1 - i) as f64 >= COMMAND_SHORTER * longest as f64) else {
-            i += 1;
-            continue;
-        };
+        let longest = stretches.iter().map(|s| s.1 - i).max().unwrap_or(0);
+        let chosen = stretches.iter().find(|s| (s.1 - i) as f64 >= COMMAND_SHORTER * longest as f64);
         // The stretch found (it held above: the same fit), read as its polynomial of least
         // largest error.
-        for (k, v) in piece_fit(&t[i..good], &x[i..good], range, top, true, feed)
-            .map(|f| f.1)
-            .unwrap_or_default()
-            .into_iter()
-            .enumerate()
-        {
+        let Some((good, values)) = chosen
+            .and_then(|&(top, good)| piece_fit(&t[i..good], &x[i..good], range, top, true, feed).map(|v| (good, v)))
+        else {
+            i += 1;
+            continue;
+        };
+        for (k, v) in values.into_iter().enumerate() {
             info.largest_change = info.largest_change.max((v - x[i + k]).abs());
             out[i + k] = v;
         }
@@ -399,10 +386,6 @@ mod tests {
             };
             // Rounding alone: about q/√12 = 0.29 q; read back, a third of it or less.
             assert!(rms(&written) > 0.25 * q, "q {q}: {} of q", rms(&written) / q);
-            for b in 0..15 {
-                let e: f64 = (b * 100..b * 100 + 100).map(|i| (smooth[i] - exact[i]).powi(2)).sum::<f64>() / 100.0;
-                eprint!("{:.3} ", e.sqrt() / q);
-            }
             eprintln!("move q {q}: written {:.4} q, read {:.4} q {info:?}", rms(&written) / q, rms(&smooth) / q);
             assert!(rms(&smooth) < 0.1 * q, "q {q}: {} of q ({info:?})", rms(&smooth) / q);
         }
