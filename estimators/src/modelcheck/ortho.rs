@@ -545,7 +545,7 @@ pub fn lstsq_qr(y: &[f64], cols: &[Vec<f64>], w: &[f64]) -> Result<(Vec<f64>, Ve
         let PivotedQr { a: mut f, coeff, perm, rank } = PivotedQr::factor(stacked.get(.., ..p).to_owned(), 0.0);
         let r = Mat::<f64>::from_fn(rank, rank, |i, j| if i <= j { f[(i, j)] } else { 0.0 });
         let size = unit_reflectors(&mut f);
-        apply_reflectors(f.get(.., ..size), &coeff, &mut z, Reflect::Transposed);
+        apply_reflectors(f.get(.., ..size), &coeff, z.as_mut(), Reflect::Transposed);
         // Back substitution R δ = Qᵀz; δ_k belongs to the pivoted column perm[k].
         let mut d = vec![0.0; rank];
         for i in (0..rank).rev() {
@@ -636,7 +636,7 @@ fn thin_q(mut a: Mat<f64>, coeff: &Mat<f64>, rank: usize) -> Mat<f64> {
     let n = a.nrows();
     let size = unit_reflectors(&mut a);
     let mut q = Mat::<f64>::from_fn(n, rank, |i, j| if i == j { 1.0 } else { 0.0 });
-    apply_reflectors(a.get(.., ..size), coeff, &mut q, Reflect::H);
+    apply_reflectors(a.get(.., ..size), coeff, q.as_mut(), Reflect::H);
     q
 }
 
@@ -651,7 +651,7 @@ enum Reflect {
 
 /// x ← H·x or Hᵀ·x (`how`), H the product of the Householder reflectors `basis` (n × p, made as
 /// faer applies them: [`unit_reflectors`]) with block coefficients `coeff`, x n × k.
-fn apply_reflectors(basis: faer::MatRef<'_, f64>, coeff: &Mat<f64>, x: &mut Mat<f64>, how: Reflect) {
+fn apply_reflectors(basis: faer::MatRef<'_, f64>, coeff: &Mat<f64>, x: faer::MatMut<'_, f64>, how: Reflect) {
     use householder::*;
     type Apply = fn(faer::MatRef<'_, f64>, faer::MatRef<'_, f64>, Conj, faer::MatMut<'_, f64>, Par, &mut MemStack);
     let (scratch, apply): (fn(usize, usize, usize) -> faer::dyn_stack::StackReq, Apply) = match how {
@@ -665,7 +665,7 @@ fn apply_reflectors(basis: faer::MatRef<'_, f64>, coeff: &Mat<f64>, x: &mut Mat<
         ),
     };
     let mut mem = MemBuffer::new(scratch(basis.nrows(), coeff.nrows(), x.ncols()));
-    apply(basis, coeff.as_ref(), Conj::No, x.as_mut(), Par::Seq, MemStack::new(&mut mem));
+    apply(basis, coeff.as_ref(), Conj::No, x, Par::Seq, MemStack::new(&mut mem));
 }
 
 /// The reflectors of a Householder QR stored in place in `a` (n × p) made as faer applies them:
@@ -789,7 +789,7 @@ fn tall_thin_q(a: Mat<f64>, reference: f64) -> Mat<f64> {
                 }
             }
             let reflectors = unit_reflectors(&mut blk);
-            apply_reflectors(blk.get(.., ..reflectors), &coeff, &mut x, Reflect::H);
+            apply_reflectors(blk.get(.., ..reflectors), &coeff, x.as_mut(), Reflect::H);
             x
         })
         .collect();
@@ -841,15 +841,53 @@ pub struct NestedSeries {
     pub nested: NestedRss,
     /// The base the series and the data were projected off.
     base: OrthoBase,
-    /// The Householder reflectors of the QR of [unit projected series | projected W·y] (n × (k + 1),
-    /// essentials below a unit diagonal, zeros above); empty when the series is not factored (no
-    /// column off the base, or n ≤ k).
-    basis: Mat<f64>,
-    /// The reflectors' block coefficients.
-    coeff: Mat<f64>,
-    /// Qᵀ of the projected W·y: R's last column, rows 0..=k (the rows below are zero); the
-    /// projected W·y itself (n values) when the series is not factored.
+    /// The series' Householder reflectors, one block per factoring ([`NestedSeries::new`], then
+    /// each [`NestedSeries::extended`]): together the QR of the unit projected series columns off
+    /// the base, k of them; empty when the series is not factored (no column off the base, or
+    /// n ≤ k).
+    blocks: Vec<Reflectors>,
+    /// The reflector of the data's remainder: row k of Qᵀ(W·y) on, after the series' reflectors
+    /// (the last column of the QR of [series | W·y]); None when not factored.
+    data: Option<Reflectors>,
+    /// Qᵀ of the projected W·y: rows 0..=k (the rows below are zero); the projected W·y itself
+    /// (n values) when the series is not factored.
     zy: Vec<f64>,
+    /// The projected W·y with the series' reflectors applied (n values, before the data's own):
+    /// where a further block starts.
+    qy: Vec<f64>,
+    /// Series columns given so far (the index of a further block's first).
+    given: usize,
+    /// Columns factored (k): those off the base.
+    factored: usize,
+    /// The nesting stopped at a dependent column: a further block adds no sums.
+    stopped: bool,
+}
+
+/// One block of Householder reflectors acting on rows `from..` of an n-row matrix: `basis`
+/// (n − from rows, essentials below a unit diagonal, [`unit_reflectors`]) and its block
+/// coefficients.
+#[derive(Debug, Clone)]
+struct Reflectors {
+    from: usize,
+    basis: Mat<f64>,
+    coeff: Mat<f64>,
+}
+
+impl Reflectors {
+    /// The Householder QR of `t` (rows `from..` of an n-row matrix) in place: R's diagonal, its
+    /// reflectors.
+    fn factor(from: usize, mut t: Mat<f64>) -> (Vec<f64>, Reflectors) {
+        let coeff = householder_qr(&mut t);
+        let diag = (0..t.nrows().min(t.ncols())).map(|j| t[(j, j)]).collect();
+        unit_reflectors(&mut t);
+        (diag, Reflectors { from, basis: t, coeff })
+    }
+
+    /// x ← H·x or Hᵀ·x on rows `from..` of x.
+    fn apply(&self, x: &mut Mat<f64>, how: Reflect) {
+        let rows = x.nrows();
+        apply_reflectors(self.basis.as_ref(), &self.coeff, x.get_mut(self.from..rows, ..), how);
+    }
 }
 
 /// [`NestedRss`] with other columns in the base ([`NestedSeries::with_extra`]).
@@ -867,45 +905,99 @@ pub struct NestedRssWith {
 impl NestedSeries {
     /// The QR of the series after `base` and the nested sums ([`nested_rss`]).
     pub fn new(y: &[f64], w: &[f64], base: &OrthoBase, series: &[Vec<f64>]) -> Result<NestedSeries, ModelCheckError> {
-        let n = check_series(y, w, base, series)?;
-        // The series columns the base does not span (projected, unit weighted norm before), then W·y.
-        let projected = base.project_columns(series, w);
-        let used: Vec<usize> = (0..series.len()).filter(|&j| projected[j].iter().any(|v| *v != 0.0)).collect();
-        let norms: Vec<f64> =
-            series.iter().map(|c| c.iter().zip(w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt()).collect();
-        let k = used.len();
+        check_series(y, w, base, series)?;
         let yp = base.project_vector(y, w);
         let rss0: f64 = yp.iter().map(|v| v * v).sum();
-        let mut out = NestedSeries {
+        let out = NestedSeries {
             nested: NestedRss { rss: vec![rss0], used: Vec::new() },
             base: base.clone(),
-            basis: Mat::zeros(0, 0),
-            coeff: Mat::zeros(0, 0),
-            zy: Vec::new(),
+            blocks: Vec::new(),
+            data: None,
+            zy: yp.clone(),
+            qy: yp,
+            given: 0,
+            factored: 0,
+            stopped: false,
         };
-        if k == 0 || n <= k {
-            out.zy = yp;
-            return Ok(out);
+        Ok(match out.clone().with_block(w, series) {
+            Some(f) => f,
+            None => NestedSeries { given: series.len(), ..out },
+        })
+    }
+
+    /// [`NestedSeries::new`] with the columns `series` (those given before first, then more),
+    /// the columns given before not factored again: their reflectors are applied to the new
+    /// columns, and only what is left of these is factored (a QR of the new block on the rows
+    /// below the old). The same sums as [`NestedSeries::new`] on all of `series`, up to rounding,
+    /// at the cost of the new columns alone.
+    pub fn extended(&self, y: &[f64], w: &[f64], series: &[Vec<f64>]) -> Result<NestedSeries, ModelCheckError> {
+        check_series(y, w, &self.base, series)?;
+        if self.blocks.is_empty() || series.len() < self.given {
+            return NestedSeries::new(y, w, &self.base, series);
         }
-        let mut m =
-            Mat::<f64>::from_fn(n, k + 1, |i, j| if j < k { projected[used[j]][i] / norms[used[j]] } else { yp[i] });
-        let coeff = householder_qr(&mut m);
-        // R[j][j]: the part of unit column j left after the base and the columns before it;
-        // R[j][k] = q_jᵀ(Wy).
-        let mut rss = rss0;
-        for j in 0..k {
-            if m[(j, j)].abs() <= 1e-9 {
-                break;
+        let mut out = self.clone();
+        out.data = None;
+        match out.with_block(w, &series[self.given..]) {
+            Some(f) => Ok(f),
+            None => NestedSeries::new(y, w, &self.base, series),
+        }
+    }
+
+    /// `self` with the block `more` (columns given after those before) factored below the
+    /// columns before: each column projected off the base (unit weighted norm before; one the
+    /// base spans is skipped), the earlier reflectors applied, the rows below the earlier columns
+    /// factored; then the data's remainder reflected. None when the columns off the base would be
+    /// n or more (not factored: [`NestedSeries::new`] keeps the projected W·y alone).
+    fn with_block(mut self, w: &[f64], more: &[Vec<f64>]) -> Option<NestedSeries> {
+        let n = self.base.nrows();
+        let projected = self.base.project_columns(more, w);
+        let used: Vec<usize> = (0..more.len()).filter(|&j| projected[j].iter().any(|v| *v != 0.0)).collect();
+        let k0 = self.factored;
+        if k0 + used.len() >= n {
+            return None;
+        }
+        if !used.is_empty() {
+            let norms: Vec<f64> =
+                more.iter().map(|c| c.iter().zip(w).map(|(x, w)| (x * w).powi(2)).sum::<f64>().sqrt()).collect();
+            let mut m = Mat::<f64>::from_fn(n, used.len(), |i, j| projected[used[j]][i] / norms[used[j]]);
+            for b in &self.blocks {
+                b.apply(&mut m, Reflect::Transposed);
             }
-            rss = (rss - m[(j, k)].powi(2)).max(0.0);
-            out.nested.rss.push(rss);
-            out.nested.used.push(used[j]);
+            let (diag, refl) = Reflectors::factor(k0, m.get(k0.., ..).to_owned());
+            let mut qy = Mat::<f64>::from_fn(n, 1, |i, _| self.qy[i]);
+            refl.apply(&mut qy, Reflect::Transposed);
+            self.qy = (0..n).map(|i| qy[(i, 0)]).collect();
+            // R[j][j]: the part of unit column j left after the base and the columns before it;
+            // (Qᵀ·W·y)_j what it explains.
+            let mut rss = *self.nested.rss.last().unwrap_or(&0.0);
+            for (j, &d) in diag.iter().enumerate() {
+                if self.stopped || d.abs() <= 1e-9 {
+                    self.stopped = true;
+                    break;
+                }
+                rss = (rss - self.qy[k0 + j].powi(2)).max(0.0);
+                self.nested.rss.push(rss);
+                self.nested.used.push(self.given + used[j]);
+            }
+            self.blocks.push(refl);
+            self.factored += used.len();
         }
-        out.zy = (0..=k).map(|i| m[(i, k)]).collect();
-        unit_reflectors(&mut m);
-        out.basis = m;
-        out.coeff = coeff;
-        Ok(out)
+        self.given += more.len();
+        let k = self.factored;
+        if k == 0 {
+            self.zy = self.qy.clone();
+            return Some(self);
+        }
+        // The data's remainder (rows k on) reflected onto row k.
+        let (diag, refl) = Reflectors::factor(k, Mat::<f64>::from_fn(n - k, 1, |i, _| self.qy[k + i]));
+        self.zy = self.qy[..k].iter().copied().chain(diag).collect();
+        self.data = Some(refl);
+        Some(self)
+    }
+
+    /// Every reflector of the factored QR in order: the series' blocks, then the data's.
+    fn reflectors(&self) -> impl DoubleEndedIterator<Item = &Reflectors> {
+        self.blocks.iter().chain(self.data.iter())
     }
 
     /// The series' orthonormal directions q_0.., one per column taken (`nested.used`, in order), as
@@ -914,7 +1006,7 @@ impl NestedSeries {
         let m = self.nested.used.len();
         let mut q = Mat::<f64>::from_fn(self.base.nrows(), m, |i, j| if i == j { 1.0 } else { 0.0 });
         if m > 0 {
-            apply_reflectors(self.basis.as_ref(), &self.coeff, &mut q, Reflect::H);
+            self.reflectors().rev().for_each(|r| r.apply(&mut q, Reflect::H));
         }
         q
     }
@@ -952,8 +1044,8 @@ impl NestedSeries {
         // rows below hold no data and are compressed to a triangle (an orthogonal change of them).
         // `lead`: the rows that hold data (k + 1 when factored, else n).
         let lead = self.zy.len();
-        let tail = if self.basis.ncols() > 0 {
-            apply_reflectors(self.basis.as_ref(), &self.coeff, &mut z, Reflect::Transposed);
+        let tail = if !self.blocks.is_empty() {
+            self.reflectors().for_each(|r| r.apply(&mut z, Reflect::Transposed));
             let mut t = z.get(lead.., ..).to_owned();
             let rows = t.nrows().min(t.ncols());
             if rows > 0 {
@@ -1686,6 +1778,51 @@ mod tests {
                 );
                 assert_eq!(b.rank() + k + with.rank[k], joint.rank() + m, "parameters at {m}");
             }
+        }
+    }
+
+    /// A series factored in blocks ([`NestedSeries::extended`]: 20 columns, then 25 more, one of
+    /// them the base's own, then 15 more) gives the sums, directions, Qᵀ(W·y) and sums with other
+    /// columns of one QR of all 60 ([`NestedSeries::new`]) to rounding.
+    #[test]
+    fn a_series_factored_in_blocks_matches_one_qr_of_all_its_columns() {
+        let n = 900;
+        let x: Vec<f64> = (0..n).map(|i| (i as f64 + 0.4 * ((i * 3) % 7) as f64) / n as f64).collect();
+        let y: Vec<f64> = x
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (4.0 * v).cos() + 0.1 * (47.0 * v).sin() + 0.01 * (i % 3) as f64)
+            .collect();
+        let w: Vec<f64> = (0..n).map(|i| 1.0 + 0.5 * (i % 3) as f64).collect();
+        let base_cols: Vec<Vec<f64>> = vec![vec![1.0; n], x.clone()];
+        let mut series: Vec<Vec<f64>> =
+            (1..=60).map(|k| x.iter().map(|v| (k as f64 * std::f64::consts::PI * v).cos()).collect()).collect();
+        series[30] = x.clone();
+        let b = OrthoBase::new(&base_cols, &w).unwrap();
+        let whole = NestedSeries::new(&y, &w, &b, &series).unwrap();
+        let blocks = NestedSeries::new(&y, &w, &b, &series[..20])
+            .and_then(|s| s.extended(&y, &w, &series[..45]))
+            .and_then(|s| s.extended(&y, &w, &series))
+            .unwrap();
+        assert_eq!(blocks.nested.used, whole.nested.used);
+        assert!(!whole.nested.used.contains(&30));
+        let scale = whole.nested.rss[0];
+        for (a, b) in blocks.nested.rss.iter().zip(&whole.nested.rss) {
+            assert!((a - b).abs() <= 1e-12 * scale, "{a} vs {b}");
+        }
+        assert_eq!(blocks.zy.len(), whole.zy.len());
+        for (a, b) in blocks.zy.iter().zip(&whole.zy) {
+            assert!((a - b).abs() <= 1e-10 * scale.sqrt(), "{a} vs {b}");
+        }
+        let (qa, qb) = (blocks.q(), whole.q());
+        let diff =
+            (0..qa.ncols()).flat_map(|j| (0..n).map(move |i| (i, j))).map(|(i, j)| (qa[(i, j)] - qb[(i, j)]).abs());
+        assert!(diff.fold(0.0, f64::max) <= 1e-10);
+        let extra = vec![x.iter().map(|v| (83.0 * v).sin()).collect::<Vec<f64>>()];
+        let (ea, eb) = (blocks.with_extra(&extra, &w).unwrap(), whole.with_extra(&extra, &w).unwrap());
+        assert_eq!(ea.rank, eb.rank);
+        for (a, b) in ea.rss.iter().zip(&eb.rss) {
+            assert!((a - b).abs() <= 1e-10 * scale, "{a} vs {b}");
         }
     }
 }
