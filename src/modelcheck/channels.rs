@@ -281,26 +281,32 @@ pub(crate) fn time_series_channels(
     let RunData::TimeSeries { t, columns } = &run.data else { return };
     let t = clock.filter(|c| c.len() == t.len()).unwrap_or(t);
     let steady = matches!(run.procedure, Procedure::FrictionSweep | Procedure::ConstantVelocity);
-    // A command written to a decimal resolution: read as the smooth profile it rounds.
-    let x = match run.data.command().and_then(|x| smooth_command(t, x, run.feed)) {
+    // A command written to a decimal resolution: read as the smooth profile it rounds, each value
+    // with its uncertainty (none for a command written with every digit).
+    let (x, x_sigma) = match run.data.command().and_then(|x| smooth_command(t, x, run.feed)) {
         Some((smooth, r)) if r.pieces > 0 => {
+            let rms = (r.uncertainty.iter().map(|u| u * u).sum::<f64>() / r.uncertainty.len().max(1) as f64).sqrt();
+            let most = r.uncertainty.iter().copied().fold(0.0, f64::max);
             notes.push(format!(
                 "run `{}`: its command, written to {} m, is read as the smooth profile those values round ({} \
                  pieces of one polynomial each, degree ≤ {COMMAND_DEGREE}, fitted for least largest error over {} of {} \
-                 samples; the largest change {:.3e} m)",
+                 samples; the largest change {:.3e} m); the profile read is uncertain by {:.3e} m RMS over the run, \
+                 {:.3e} m at most (a piece's ends), which the σ of its following channel counts",
                 run.name,
                 fmt_num(r.resolution),
                 r.pieces,
                 r.smoothed,
                 t.len(),
-                r.largest_change
+                r.largest_change,
+                rms,
+                most
             ));
-            smooth
+            (smooth, r.uncertainty)
         }
-        Some(_) | None => run.data.command().map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; t.len()]),
+        Some(_) | None => (run.data.command().map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; t.len()]), Vec::new()),
     };
     if run.data.command().is_some() {
-        out.extend(encoder_channels(set, run, &x, t, notes));
+        out.extend(encoder_channels(set, run, &x, &x_sigma, t, notes));
     }
     for (name, values) in columns {
         if name == COMMAND_COLUMN {

@@ -54,7 +54,12 @@ pub enum EncoderRole {
     /// `s_transmission` is 1 when the channel also carries the transmission (a lone scale in a
     /// semi-closed loop), else 0; `closed` when the scale closes the loop and the run's
     /// transmission channel drives this one through it (−L_kv[T], [`close_loop`]).
-    Following { command: Vec<f64>, s_transmission: f64, closed: bool },
+    /// `command_sigma`: each sample's standard uncertainty of the command (m; empty when it is
+    /// written with every digit), read from a column written to a decimal resolution
+    /// ([`super::command::smooth_command`]): the reading's error δ passes into this channel's
+    /// residual as −L_kv[δ] ≈ −δ (a smooth δ, below the loop's bandwidth), so it adds δ's
+    /// variance to the channel's noise ([`super::report::st_sigma`]).
+    Following { command: Vec<f64>, command_sigma: Vec<f64>, s_transmission: f64, closed: bool },
 }
 
 impl EncoderRole {
@@ -351,6 +356,7 @@ pub(crate) fn encoder_channels(
     set: &MeasurementSet,
     run: &crate::measurement::Run,
     x_cmd: &[f64],
+    x_sigma: &[f64],
     t: &[f64],
     notes: &mut Vec<String>,
 ) -> Vec<Channel> {
@@ -426,7 +432,12 @@ pub(crate) fn encoder_channels(
                     mv.to_vec(),
                     minus(mv, x_cmd),
                     ms.sigma.filter(|v| *v > 0.0),
-                    EncoderRole::Following { command: x_cmd.to_vec(), s_transmission: 0.0, closed },
+                    EncoderRole::Following {
+                        command: x_cmd.to_vec(),
+                        command_sigma: x_sigma.to_vec(),
+                        s_transmission: 0.0,
+                        closed,
+                    },
                 ),
             ]
         }
@@ -438,7 +449,12 @@ pub(crate) fn encoder_channels(
                 v.to_vec(),
                 minus(v, x_cmd),
                 s.sigma.filter(|v| *v > 0.0),
-                EncoderRole::Following { command: x_cmd.to_vec(), s_transmission: s_tr, closed: false },
+                EncoderRole::Following {
+                    command: x_cmd.to_vec(),
+                    command_sigma: x_sigma.to_vec(),
+                    s_transmission: s_tr,
+                    closed: false,
+                },
             )]
         }
         (None, None) => Vec::new(),
@@ -580,7 +596,15 @@ mod tests {
         let follow: Vec<f64> = m_log.iter().zip(x_log).map(|(a, b)| a - b).collect();
         let chans = vec![
             chan(tr_log.to_vec(), EncoderRole::Transmission { drive: m_log.to_vec() }),
-            chan(follow.clone(), EncoderRole::Following { command: x_log.to_vec(), s_transmission: 0.0, closed: true }),
+            chan(
+                follow.clone(),
+                EncoderRole::Following {
+                    command: x_log.to_vec(),
+                    command_sigma: Vec::new(),
+                    s_transmission: 0.0,
+                    closed: true,
+                },
+            ),
         ];
         (chans, follow)
     }
@@ -861,7 +885,12 @@ mod tests {
             sigma: None,
             encoder: Some(role),
         };
-        let follow = || EncoderRole::Following { command: vec![0.0; n], s_transmission: 0.0, closed: true };
+        let follow = || EncoderRole::Following {
+            command: vec![0.0; n],
+            command_sigma: Vec::new(),
+            s_transmission: 0.0,
+            closed: true,
+        };
         let chans: Vec<Channel> = [("a", 2e-3), ("b", 9e-3)]
             .iter()
             .flat_map(|&(run, dt)| {

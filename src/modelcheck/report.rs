@@ -18,7 +18,8 @@ pub struct ChannelReport {
     pub sensor: String,
     /// RMS of the residual, SI unit of the channel (m).
     pub rms: f64,
-    /// RMS of residual/σ.
+    /// RMS of residual/σ, each sample's σ: the channel's `sigma`, with a command's reading
+    /// uncertainty added in quadrature on a following channel ([`st_sigma`]).
     pub normalized_rms: f64,
     /// NRMSE fit, % : 100·(1 − ‖y − ŷ‖/‖y − ȳ‖).
     pub fit_percent: f64,
@@ -975,11 +976,22 @@ pub(crate) struct BasisFault {
     pub message: String,
 }
 
-/// Per-sample σ from per-channel σ (NaN → 1: unweighted first pass).
+/// Per-sample σ from per-channel σ (NaN → 1: unweighted first pass), with a following channel's
+/// command uncertainty added in quadrature (`EncoderRole::Following`'s `command_sigma`).
 pub(crate) fn st_sigma(st: &Stack, sig: &[f64]) -> Vec<f64> {
     let mut v = Vec::with_capacity(st.n);
     for (c, s) in st.chans.iter().zip(sig) {
-        v.extend(std::iter::repeat(if s.is_finite() { *s } else { 1.0 }).take(c.y.len()));
+        let s = if s.is_finite() { *s } else { 1.0 };
+        match &c.encoder {
+            // A following channel of a command read from few decimals: its reading's uncertainty
+            // added in quadrature.
+            Some(EncoderRole::Following { command_sigma, .. }) if command_sigma.len() == c.y.len() => {
+                v.extend(command_sigma.iter().map(|u| s.hypot(*u)));
+            }
+            Some(EncoderRole::Following { .. } | EncoderRole::Transmission { .. }) | None => {
+                v.extend(std::iter::repeat(s).take(c.y.len()))
+            }
+        }
     }
     v
 }
@@ -1082,6 +1094,8 @@ pub fn compare(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Compa
     let f = fit_all(model, &chans, data)?;
     notes.extend(f.notes.iter().cloned());
     let pred_total: Vec<f64> = f.st.y().iter().zip(&f.fs.residual).map(|(y, r)| y - r).collect();
+    // Each sample's σ: its channel's, with a command's reading uncertainty where it has one.
+    let per = st_sigma(&f.st, &f.sig);
     let mut out = Vec::new();
     let mut k0 = 0;
     let mut sum_sq = 0.0;
@@ -1089,10 +1103,10 @@ pub fn compare(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Compa
         let m = c.y.len();
         let r = &f.fs.residual[k0..k0 + m];
         let p = &pred_total[k0..k0 + m];
+        let per_c = &per[k0..k0 + m];
         k0 += m;
-        let s = f.sig[j];
-        sum_sq += r.iter().map(|v| (v / s).powi(2)).sum::<f64>();
-        out.push(channel_report(c, r, p, s, f.est[j], f.fs.coefs[f.st.group[j]]));
+        sum_sq += r.iter().zip(per_c).map(|(v, s)| (v / s).powi(2)).sum::<f64>();
+        out.push(channel_report(c, r, p, (f.sig[j], per_c), f.est[j], f.fs.coefs[f.st.group[j]]));
     }
     let n = f.st.n;
     let at_bound = fit_at_bound(&f.fs);
@@ -1115,9 +1129,18 @@ pub fn compare(model: &Model, set: &MeasurementSet, data: &Path) -> Result<Compa
     })
 }
 
-pub(crate) fn channel_report(c: &Channel, r: &[f64], p: &[f64], s: f64, est: bool, offset: f64) -> ChannelReport {
+/// One channel's residual statistics (FORMAT.md §4): `s` its σ, `per` each sample's ([`st_sigma`]).
+pub(crate) fn channel_report(
+    c: &Channel,
+    r: &[f64],
+    p: &[f64],
+    (s, per): (f64, &[f64]),
+    est: bool,
+    offset: f64,
+) -> ChannelReport {
     let m = r.len();
     let rms = (r.iter().map(|v| v * v).sum::<f64>() / m as f64).sqrt();
+    let normalized_rms = (r.iter().zip(per).map(|(v, s)| (v / s).powi(2)).sum::<f64>() / m as f64).sqrt();
     let lag = (m / 4).clamp(1, 20);
     let acf = autocorrelation(r, lag).ok().map(|a| a.fraction_outside);
     let lb = ljung_box(r, lag, 0).ok().map(|l| l.p_value);
@@ -1178,7 +1201,7 @@ pub(crate) fn channel_report(c: &Channel, r: &[f64], p: &[f64], s: f64, est: boo
         unit: channel_unit(c).into(),
         sensor: c.sensor.clone(),
         rms,
-        normalized_rms: rms / s,
+        normalized_rms,
         fit_percent: fit_percent(&c.y, p).unwrap_or(f64::NAN),
         sigma: s,
         sigma_estimated: est,
