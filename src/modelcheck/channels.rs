@@ -290,8 +290,8 @@ pub(crate) fn time_series_channels(
             notes.push(format!(
                 "run `{}`: its command, written to {} m, is read as the smooth profile those values round ({} \
                  pieces of one polynomial each, degree ≤ {COMMAND_DEGREE}, fitted for least largest error over {} of {} \
-                 samples; the largest change {:.3e} m); the profile read is uncertain by {:.3e} m RMS over the run, \
-                 {:.3e} m at most (a piece's ends), which the σ of its following channel counts",
+                 samples; the largest change {:.3e} m); the profile read is uncertain by {:.3e} m RMS over the run and \
+                 {:.3e} m at most, which the σ of its following channel counts",
                 run.name,
                 fmt_num(r.resolution),
                 r.pieces,
