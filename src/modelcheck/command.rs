@@ -258,9 +258,9 @@ pub const COMMAND_REWRITINGS: usize = 24;
 /// denominator they repeat every few rows with a slow drift (generator draw 2015's crawl at 1 µm:
 /// v·h/q = 0.19992, so five phases drifting by 0.044 q over 556 rows), and the rows then leave a
 /// line's offset open by ±0.08 q, where independent errors would leave q/√(2(m + 1)(m + 2)) =
-/// 0.0013 q. Neither has least squares' leverage a law for a fit of least largest error: on the
-/// unit test's reversal that reading is 2–3 times better inside and 1.3 times worse at its ends,
-/// and the degree chosen leaves part of a profile's shape out.
+/// 0.0013 q. Nor does least squares' leverage law serve a fit of least largest error: on the unit
+/// test's reversal that reading is 2–3 times better inside and 1.3 times worse at its ends, and the
+/// degree chosen leaves part of a profile's shape out.
 pub fn reading_uncertainty(
     t: &[f64],
     written: &[f64],
