@@ -213,8 +213,13 @@ fn piece_fit(t: &[f64], x: &[f64], range: f64, top: usize, read: bool, feed: Opt
             return Some(Piece { values, degree: None });
         }
     }
-    let p = legendre_rows(t, top);
-    (1..=top).find_map(|d| degree_fit(&p, x, range, d, read).map(|values| Piece { values, degree: Some(d) }))
+    lowest_degree_fit(&legendre_rows(t, top), x, range, top, read)
+}
+
+/// The values `x` (`p`: each sample's Legendre values) at the lowest degree d ≤ `top` at which
+/// [`degree_fit`] holds.
+fn lowest_degree_fit(p: &[Vec<f64>], x: &[f64], range: f64, top: usize, read: bool) -> Option<Piece> {
+    (1..=top).find_map(|d| degree_fit(p, x, range, d, read).map(|values| Piece { values, degree: Some(d) }))
 }
 
 /// The values `x` (m; `p`: each sample's Legendre values) as one polynomial of degree `d` whose
@@ -271,11 +276,15 @@ pub fn reading_uncertainty(
 ) -> Vec<f64> {
     let m = t.len();
     let range = q * (1.0 + COMMAND_SLACK);
-    let p = legendre_rows(t, cap);
-    // The profile and its reading back from a writing.
-    let profile = match degree {
-        None => Some(read.to_vec()),
-        Some(_) => degree_fit(&p, written, range, cap, true),
+    // Each sample's Legendre values (a polynomial piece's only), the profile, and its reading back
+    // from a writing.
+    let (p, profile) = match degree {
+        None => (Vec::new(), Some(read.to_vec())),
+        Some(_) => {
+            let p = legendre_rows(t, cap);
+            let profile = degree_fit(&p, written, range, cap, true);
+            (p, profile)
+        }
     };
     let Some(profile) = profile else { return vec![q / 12f64.sqrt(); m] };
     let read_back = |again: &[f64]| -> Option<Vec<f64>> {
@@ -285,7 +294,7 @@ pub fn reading_uncertainty(
                 let (lo, hi) = extremes(&r);
                 Some(profile.iter().map(|x| x + 0.5 * (lo + hi)).collect())
             }
-            Some(_) => (1..=cap).find_map(|d| degree_fit(&p, again, range, d, true)),
+            Some(_) => lowest_degree_fit(&p, again, range, cap, true).map(|piece| piece.values),
         }
     };
     let mut sum2 = vec![0.0; m];

@@ -908,7 +908,7 @@ impl NestedSeries {
         check_series(y, w, base, series)?;
         let yp = base.project_vector(y, w);
         let rss0: f64 = yp.iter().map(|v| v * v).sum();
-        let out = NestedSeries {
+        let mut out = NestedSeries {
             nested: NestedRss { rss: vec![rss0], used: Vec::new() },
             base: base.clone(),
             blocks: Vec::new(),
@@ -919,10 +919,10 @@ impl NestedSeries {
             factored: 0,
             stopped: false,
         };
-        Ok(match out.clone().with_block(w, series) {
-            Some(f) => f,
-            None => NestedSeries { given: series.len(), ..out },
-        })
+        if !out.with_block(w, series) {
+            out.given = series.len();
+        }
+        Ok(out)
     }
 
     /// [`NestedSeries::new`] with the columns `series` (those given before first, then more),
@@ -938,23 +938,24 @@ impl NestedSeries {
         let mut out = self.clone();
         out.data = None;
         match out.with_block(w, &series[self.given..]) {
-            Some(f) => Ok(f),
-            None => NestedSeries::new(y, w, &self.base, series),
+            true => Ok(out),
+            false => NestedSeries::new(y, w, &self.base, series),
         }
     }
 
     /// `self` with the block `more` (columns given after those before) factored below the
     /// columns before: each column projected off the base (unit weighted norm before; one the
     /// base spans is skipped), the earlier reflectors applied, the rows below the earlier columns
-    /// factored; then the data's remainder reflected. None when the columns off the base would be
-    /// n or more (not factored: [`NestedSeries::new`] keeps the projected W·y alone).
-    fn with_block(mut self, w: &[f64], more: &[Vec<f64>]) -> Option<NestedSeries> {
+    /// factored; then the data's remainder reflected. False, and `self` untouched, when the columns
+    /// off the base would be n or more (not factored: [`NestedSeries::new`] keeps the projected W·y
+    /// alone).
+    fn with_block(&mut self, w: &[f64], more: &[Vec<f64>]) -> bool {
         let n = self.base.nrows();
         let projected = self.base.project_columns(more, w);
         let used: Vec<usize> = (0..more.len()).filter(|&j| projected[j].iter().any(|v| *v != 0.0)).collect();
         let k0 = self.factored;
         if k0 + used.len() >= n {
-            return None;
+            return false;
         }
         if !used.is_empty() {
             let norms: Vec<f64> =
@@ -986,13 +987,13 @@ impl NestedSeries {
         let k = self.factored;
         if k == 0 {
             self.zy = self.qy.clone();
-            return Some(self);
+            return true;
         }
         // The data's remainder (rows k on) reflected onto row k.
         let (diag, refl) = Reflectors::factor(k, Mat::<f64>::from_fn(n - k, 1, |i, _| self.qy[k + i]));
         self.zy = self.qy[..k].iter().copied().chain(diag).collect();
         self.data = Some(refl);
-        Some(self)
+        true
     }
 
     /// Every reflector of the factored QR in order: the series' blocks, then the data's.
