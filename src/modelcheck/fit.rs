@@ -1333,15 +1333,23 @@ fn fit_model_orders(
     // Accelerometer passes are always searched so (a mode's columns are its response to the
     // excitation; the shapes' columns, evaluated at every sample, do not change with it).
     let accel = st.chans.iter().any(|c| c.is_accel());
-    let fixed_base =
-        if n_searched > 0 && (accel || st.n > LARGE_SAMPLES || large_design(st.n, design(st, &terms).len())) {
-            let fixed: Vec<FitTerm> = terms.iter().filter(|t| !moving(t)).cloned().collect();
-            let base = OrthoBase::new(&design(st, &fixed), w)?;
-            let target = base.project_vector(&r0, w);
-            Some((base, target))
-        } else {
-            None
-        };
+    let by_projection =
+        n_searched > 0 && (accel || st.n > LARGE_SAMPLES || large_design(st.n, design(st, &terms).len()));
+    // The columns of the terms no search moves, per term (None for a moving one): the fixed base's,
+    // and the final design's as they are.
+    let held_cols: Vec<Option<Vec<Vec<f64>>>> = match by_projection {
+        true => terms.iter().map(|t| (!moving(t)).then(|| columns(st, t.name, &t.shape, &t.hyper))).collect(),
+        false => Vec::new(),
+    };
+    let fixed_base = if by_projection {
+        let fixed: Vec<Vec<f64>> =
+            st.offsets().into_iter().chain(held_cols.iter().flatten().flatten().cloned()).collect();
+        let base = OrthoBase::new(&fixed, w)?;
+        let target = base.project_vector(&r0, w);
+        Some((base, target))
+    } else {
+        None
+    };
     for _ in 0..sweeps {
         let before: Vec<Vec<f64>> = terms.iter().map(|t| t.hyper.clone()).collect();
         for ti in 0..terms.len() {
@@ -1408,7 +1416,16 @@ fn fit_model_orders(
         t.at_bound =
             (0..t.hyper.len()).map(|hi| t.searched[hi] && g[hi].1 && at_grid_end(&g[hi].0, t.hyper[hi])).collect();
     }
-    let cols = design(st, &terms);
+    let cols = match by_projection {
+        true => {
+            let mut cols = st.offsets();
+            for (t, held) in terms.iter().zip(held_cols) {
+                cols.extend(held.unwrap_or_else(|| columns(st, t.name, &t.shape, &t.hyper)));
+            }
+            cols
+        }
+        false => design(st, &terms),
+    };
     let (coefs, residual) = solve_blocks(st, &r0, &cols, sigma)?;
     let shapes = terms
         .iter()

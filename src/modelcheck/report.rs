@@ -1498,46 +1498,48 @@ pub fn diagnose_with(
     // The free shapes' order curves for the re-choice below (`factored_curves`; not on
     // accelerometer channels) need only the fit: factored beside the ranking (rayon).
     let reshape = !st.chans.iter().any(|c| c.is_accel());
-    let rank_all = || -> Result<(), VmtError> {
-        for (group, fs) in [(other_cands, &f.fs), (lead_cands, capped.as_ref().unwrap_or(&f.fs))] {
-            if group.is_empty() {
-                continue;
-            }
-            let group: Vec<Candidate> = group.into_iter().map(|(_, c)| c).collect();
-            let base: Vec<Vec<f64>> = fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
-            let input = vmt_estimators::modelcheck::ResidualInput {
-                residual: &fs.residual,
-                sigma: &sigma,
-                base_columns: &base,
-            };
-            match rank_candidates(&input, &group, &config) {
-                Ok(d) => {
-                    // Bonferroni over all `total` candidates of this diagnosis, not the group's.
-                    let scale = total as f64 / group.len() as f64;
-                    for (r, fit) in d.ranking.into_iter().zip(d.fits) {
-                        let mut r = RankedEffect::typed(r).map_err(|e| VmtError::Internal(e.to_string()))?;
-                        bonferroni(&mut r, scale, config.family_alpha);
-                        // Marginally significant, then explained away by a better-ranked candidate.
-                        let away = fit.conditional_delta_bic.is_some() && r.verdict == Verdict::Noise;
-                        let k_hyper = fit.k - fit.coefficients.len();
-                        fitted.insert(r.effect, (fit.columns, k_hyper, away));
-                        ranking.push(r);
-                    }
-                }
-                Err(ModelCheckError::NothingToExplain) => {
-                    notes.push("the model explains the data exactly: nothing to diagnose".into())
-                }
-                Err(e) => return Err(VmtError::bad(data, "", format!("diagnose: {e}"))),
-            }
+    // Each group ranked against its own fit: the two side by side and beside the curves (rayon),
+    // merged in group order (the first error in that order reported).
+    let rank_group = |group: Vec<(EffectName, Candidate)>, fs: &FitState| {
+        if group.is_empty() {
+            return None;
         }
-        Ok(())
+        let group: Vec<Candidate> = group.into_iter().map(|(_, c)| c).collect();
+        let base: Vec<Vec<f64>> = fs.cols.iter().filter(|c| c.iter().any(|v| *v != 0.0)).cloned().collect();
+        let input =
+            vmt_estimators::modelcheck::ResidualInput { residual: &fs.residual, sigma: &sigma, base_columns: &base };
+        Some((group.len(), rank_candidates(&input, &group, &config)))
     };
-    let (ranked, curves) = rayon::join(rank_all, || match reshape {
-        true => factored_curves(st, model, &f.fs, &w, &f.fs.free_orders())
-            .map_err(|m| VmtError::bad(data, "", format!("re-choosing the shapes: {m}"))),
-        false => Ok(Vec::new()),
-    });
-    ranked?;
+    let lead_fs = capped.as_ref().unwrap_or(&f.fs);
+    let ((other, lead), curves) = rayon::join(
+        || rayon::join(|| rank_group(other_cands, &f.fs), || rank_group(lead_cands, lead_fs)),
+        || match reshape {
+            true => factored_curves(st, model, &f.fs, &w, &f.fs.free_orders())
+                .map_err(|m| VmtError::bad(data, "", format!("re-choosing the shapes: {m}"))),
+            false => Ok(Vec::new()),
+        },
+    );
+    for (len, done) in [other, lead].into_iter().flatten() {
+        match done {
+            Ok(d) => {
+                // Bonferroni over all `total` candidates of this diagnosis, not the group's.
+                let scale = total as f64 / len as f64;
+                for (r, fit) in d.ranking.into_iter().zip(d.fits) {
+                    let mut r = RankedEffect::typed(r).map_err(|e| VmtError::Internal(e.to_string()))?;
+                    bonferroni(&mut r, scale, config.family_alpha);
+                    // Marginally significant, then explained away by a better-ranked candidate.
+                    let away = fit.conditional_delta_bic.is_some() && r.verdict == Verdict::Noise;
+                    let k_hyper = fit.k - fit.coefficients.len();
+                    fitted.insert(r.effect, (fit.columns, k_hyper, away));
+                    ranking.push(r);
+                }
+            }
+            Err(ModelCheckError::NothingToExplain) => {
+                notes.push("the model explains the data exactly: nothing to diagnose".into())
+            }
+            Err(e) => return Err(VmtError::bad(data, "", format!("diagnose: {e}"))),
+        }
+    }
     let curves = curves?;
     if let (Some(cf), Some(orders)) = (&capped, &joint) {
         if let Some(r) = ranking.iter_mut().find(|r| r.effect == EffectName::CyclicLead) {

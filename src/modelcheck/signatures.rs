@@ -1690,21 +1690,103 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
 }
 
 /// True when the phases 2πx/p of the distinct targets spread around the circle (mean resultant
-/// length R = |mean e^{iθ}| ≤ 0.5, and 0.1 ≤ mean sin²θ ≤ 0.9 so both quadratures vary), so that a sinusoid of period p is distinguishable from a
-/// constant on these targets; false at an alias (targets a whole number of periods apart).
+/// length R = |mean e^{iθ}| ≤ 0.5, and 0.1 ≤ mean sin²θ ≤ 0.9 so both quadratures vary), so that a
+/// sinusoid of period p is distinguishable from a constant on these targets; false at an alias
+/// (targets a whole number of periods apart). The sums come from [`phase_sums_fast`] where its
+/// bound settles both tests, else from libm's `sin_cos` (a period scan calls this once per period,
+/// over every distinct position of a log: libm's calls were a third of a cyclic lead's scan).
 pub(crate) fn phases_spread(st: &Stack, p: f64) -> bool {
-    clear_upper_state();
     let xs = distinct_positions(st);
     if xs.len() < 3 || !(p > 0.0) {
         return false;
     }
     let m = xs.len() as f64;
     // Both quadratures must vary: at p = 2 µm on targets rounded to 1 µm the sine vanishes.
-    let (sc, cc, s2) = xs.iter().fold((0.0, 0.0, 0.0), |(a, b, q), x| {
+    let spread =
+        |(sc, cc, s2): (f64, f64, f64)| (sc * sc + cc * cc).sqrt() / m <= 0.5 && (0.1..=0.9).contains(&(s2 / m));
+    if let Some((sc, cc, s2)) = phase_sums_fast(xs, p) {
+        // Settled unless a statistic lies within the sums' bound of its threshold.
+        let off = PHASE_SUMS_BOUND * m;
+        let r = (sc * sc + cc * cc).sqrt();
+        let near = |v: f64, at: f64| (v - at * m).abs() <= 2.0 * off;
+        if !near(r, 0.5) && !near(s2, 0.1) && !near(s2, 0.9) {
+            return spread((sc, cc, s2));
+        }
+    }
+    clear_upper_state();
+    spread(xs.iter().fold((0.0, 0.0, 0.0), |(a, b, q), x| {
         let (s, c) = (TWO_PI * x / p).sin_cos();
         (a + s, b + c, q + s * s)
-    });
-    (sc * sc + cc * cc).sqrt() / m <= 0.5 && (0.1..=0.9).contains(&(s2 / m))
+    }))
+}
+
+/// Largest |θ| (rad) [`phase_sums_fast`] reduces: 10⁶, where k·π/2 with k < 2²⁰ keeps the
+/// two-part reduction exact to 10⁻¹⁶ rad and θ's own rounding is below 3·10⁻¹⁰ rad.
+const PHASE_FAST_MAX: f64 = 1e6;
+
+/// Bound on |fast − libm| of each sum of [`phase_sums_fast`] per position (dimensionless): 10⁻⁸,
+/// above the per-term difference (≤ 3·10⁻¹⁰ from θ = x·(2π/p) against libm's caller's 2πx/p, and
+/// 10⁻¹¹ from the polynomials' truncation) plus the sums' rounding (≤ m·ε per term, m ≤ 10⁵).
+const PHASE_SUMS_BOUND: f64 = 1e-8;
+
+/// (Σ sin θ, Σ cos θ, Σ sin² θ) over θ = 2πx/p for the positions `xs` (m) and the period `p` (m),
+/// each term within 10⁻⁹ of libm's ([`reduced_sin_cos`]), in four interleaved sums (independent
+/// chains, several times faster than `sin_cos`); None when some |θ| > [`PHASE_FAST_MAX`].
+fn phase_sums_fast(xs: &[f64], p: f64) -> Option<(f64, f64, f64)> {
+    const LANES: usize = 4;
+    let omega = TWO_PI / p;
+    let mut acc = [[0.0; LANES]; 3];
+    let mut largest = [0.0_f64; LANES];
+    let mut add = |lane: usize, x: f64| {
+        let theta = omega * x;
+        largest[lane] = largest[lane].max(theta.abs());
+        let (s, c) = reduced_sin_cos(theta);
+        acc[0][lane] += s;
+        acc[1][lane] += c;
+        acc[2][lane] += s * s;
+    };
+    let chunks = xs.chunks_exact(LANES);
+    let rest = chunks.remainder();
+    for chunk in chunks {
+        for (lane, x) in chunk.iter().enumerate() {
+            add(lane, *x);
+        }
+    }
+    for x in rest {
+        add(0, *x);
+    }
+    let total = |a: [f64; LANES]| (a[0] + a[1]) + (a[2] + a[3]);
+    (largest.iter().all(|l| *l <= PHASE_FAST_MAX)).then(|| (total(acc[0]), total(acc[1]), total(acc[2])))
+}
+
+/// sin θ and cos θ to 10⁻¹¹ for |θ| ≤ [`PHASE_FAST_MAX`] ([`phase_sums_fast`]): r = θ − k·π/2 with
+/// k = round(2θ/π) and a two-part π/2 (the high part with 33 significant bits, so k·PIO2_HI is
+/// exact for k < 2²⁰), sin r and cos r by their Taylor series to degree 11 and 12 on |r| ≤ π/4
+/// (truncation below 10⁻¹¹), then the quadrant k mod 4.
+#[inline(always)]
+fn reduced_sin_cos(theta: f64) -> (f64, f64) {
+    const PIO2_HI: f64 = 1.570_796_326_734_125_614_166_259_765_625;
+    const PIO2_LO: f64 = 6.077_100_506_506_192e-11;
+    let k = (theta * std::f64::consts::FRAC_2_PI).round();
+    let r = (theta - k * PIO2_HI) - k * PIO2_LO;
+    let z = r * r;
+    let sr = r
+        * (1.0
+            + z * (-1.0 / 6.0
+                + z * (1.0 / 120.0 + z * (-1.0 / 5040.0 + z * (1.0 / 362_880.0 + z * (-1.0 / 39_916_800.0))))));
+    let cr = 1.0
+        + z * (-0.5
+            + z * (1.0 / 24.0
+                + z * (-1.0 / 720.0 + z * (1.0 / 40_320.0 + z * (-1.0 / 3_628_800.0 + z * (1.0 / 479_001_600.0))))));
+    // Quadrant k mod 4: (sin, cos) = (s, c), (c, −s), (−s, −c), (−c, s). (A saturating cast
+    // beyond the range only makes a wrong term, which the caller then refuses.)
+    let quadrant = (k as i64) & 3;
+    let (s, c) = if quadrant & 1 == 1 { (cr, -sr) } else { (sr, cr) };
+    if quadrant & 2 == 2 {
+        (-s, -c)
+    } else {
+        (s, c)
+    }
 }
 
 /// The distinct sample positions of all channels, sorted (m).
@@ -2204,5 +2286,48 @@ mod step_tests {
         }
         eprintln!("largest difference: {worst:.2e} of the largest entry");
         assert!(worst < 1e-12, "largest difference {worst:.2e}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every term of [`reduced_sin_cos`] is within 2·10⁻¹¹ of libm's `sin_cos` on positions and
+    /// periods spread over the ranges a scan meets (θ up to 7·10⁵ rad, both signs), and the sums of
+    /// [`phase_sums_fast`] within [`PHASE_SUMS_BOUND`] per position of libm's (500 positions, 200
+    /// periods from 2 µm to 20 mm); beyond [`PHASE_FAST_MAX`] the fast sums are refused.
+    #[test]
+    fn fast_phase_sums_agree_with_libm() {
+        let mut worst = 0.0_f64;
+        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut uniform = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..200 {
+            let p = 2e-6 * (1e4_f64).powf(uniform());
+            let span = (PHASE_FAST_MAX * p / TWO_PI).min(2.0);
+            let xs: Vec<f64> = (0..500).map(|_| (uniform() - 0.3) * span).collect();
+            let (sa, ca, qa) = phase_sums_fast(&xs, p).expect("within range");
+            let (mut sb, mut cb, mut qb) = (0.0, 0.0, 0.0);
+            for x in &xs {
+                let theta = TWO_PI * x / p;
+                let (s, c) = reduced_sin_cos(theta);
+                let (sl, cl) = theta.sin_cos();
+                worst = worst.max((s - sl).abs()).max((c - cl).abs());
+                sb += sl;
+                cb += cl;
+                qb += sl * sl;
+            }
+            let m = xs.len() as f64;
+            for (fast, exact) in [(sa, sb), (ca, cb), (qa, qb)] {
+                assert!((fast - exact).abs() <= PHASE_SUMS_BOUND * m, "{fast} vs {exact}");
+            }
+        }
+        assert!(worst <= 2e-11, "largest term difference {worst:e}");
+        assert!(phase_sums_fast(&[0.0, 1.0], 1e-6).is_none());
     }
 }

@@ -34,8 +34,9 @@ pub struct OrthoBase {
 impl OrthoBase {
     /// The basis of the columns `cols` (each n values) weighted by `w` (n values, 1/σ): columns
     /// scaled to unit norm (all-zero columns skipped), factored as a tall-skinny QR (Demmel et al.
-    /// 2012, SIAM J. Sci. Comput. 34:A206): each block of rows ([`QR_ROW_BLOCK`]; two halves from
-    /// 2 × [`QR_HALF_BLOCK`] rows up to it, one block below) by an unpivoted blocked Householder QR
+    /// 2012, SIAM J. Sci. Comput. 34:A206): each block of rows (`qr_block_rows`: an even number of
+    /// equal blocks of at most [`QR_ROW_BLOCK`]; two halves from 2 × [`QR_HALF_BLOCK`] rows up to
+    /// it, one block below) by an unpivoted blocked Householder QR
     /// (level 3, the blocks side by side), then the stacked R factors by a Householder QR with
     /// column pivoting, whose pivots above [`RANK_TOLERANCE`] × the largest count the rank (the
     /// stacked R's Gram matrix is the columns', so these are the pivots of the pivoted QR of all
@@ -650,9 +651,18 @@ enum Reflect {
 }
 
 /// x ← H·x or Hᵀ·x (`how`), H the product of the Householder reflectors `basis` (n × p, made as
-/// faer applies them: [`unit_reflectors`]) with block coefficients `coeff`, x n × k.
+/// faer applies them: [`unit_reflectors`]) with block coefficients `coeff`, x n × k. The columns
+/// of x are independent: from [`APPLY_SPLIT_COLUMNS`] columns and [`APPLY_SPLIT_WORK`] on, x is
+/// split into halves (the first the wider) applied side by side (rayon), each sequential inside;
+/// the split depends on the shapes alone, so the bits do not depend on the number of threads.
 fn apply_reflectors(basis: faer::MatRef<'_, f64>, coeff: &Mat<f64>, x: faer::MatMut<'_, f64>, how: Reflect) {
     use householder::*;
+    let k = x.ncols();
+    if k >= APPLY_SPLIT_COLUMNS && basis.nrows() * basis.ncols() * k >= APPLY_SPLIT_WORK {
+        let (left, right) = x.split_at_col_mut(k.div_ceil(2));
+        rayon::join(|| apply_reflectors(basis, coeff, left, how), || apply_reflectors(basis, coeff, right, how));
+        return;
+    }
     type Apply = fn(faer::MatRef<'_, f64>, faer::MatRef<'_, f64>, Conj, faer::MatMut<'_, f64>, Par, &mut MemStack);
     let (scratch, apply): (fn(usize, usize, usize) -> faer::dyn_stack::StackReq, Apply) = match how {
         Reflect::H => (
@@ -667,6 +677,14 @@ fn apply_reflectors(basis: faer::MatRef<'_, f64>, coeff: &Mat<f64>, x: faer::Mat
     let mut mem = MemBuffer::new(scratch(basis.nrows(), coeff.nrows(), x.ncols()));
     apply(basis, coeff.as_ref(), Conj::No, x, Par::Seq, MemStack::new(&mut mem));
 }
+
+/// Fewest columns of x that [`apply_reflectors`] splits in two: 64 (halves of at least 32
+/// columns keep faer's matrix products at full speed).
+const APPLY_SPLIT_COLUMNS: usize = 64;
+
+/// Least work (rows × reflectors × columns) that [`apply_reflectors`] splits: 2²² (about 4 ms of
+/// products on one core; below it a split costs more than it saves).
+const APPLY_SPLIT_WORK: usize = 1 << 22;
 
 /// The reflectors of a Householder QR stored in place in `a` (n × p) made as faer applies them:
 /// unit diagonal and zeros above it in the first min(n, p) columns, their number returned.
@@ -707,12 +725,15 @@ pub const QR_ROW_BLOCK: usize = 16_384;
 /// 15 000-sample stack is two blocks of 7 500 rows; one of fewer than 8 192 rows stays whole.
 pub const QR_HALF_BLOCK: usize = 4_096;
 
-/// Rows per block of the tall-skinny QR of `n` rows ([`tall_thin_q`]): [`QR_ROW_BLOCK`] above it,
-/// two halves (the first the longer) from 2 × [`QR_HALF_BLOCK`] rows up to it, else all `n`. It
-/// depends on `n` alone, so the bits do not depend on the number of threads.
+/// Rows per block of the tall-skinny QR of `n` rows ([`tall_thin_q`]): above [`QR_ROW_BLOCK`],
+/// the fewest blocks of at most that many rows, made an even number and equal but for the last
+/// (19 910 rows: two of 9 955; 100 000: eight of 12 500), so that two cores share the work
+/// evenly (blocks of 16 384 rows and the rest left one core with 82 % of it); two halves (the
+/// first the longer) from 2 × [`QR_HALF_BLOCK`] rows up to it, else all `n`. It depends on `n`
+/// alone, so the bits do not depend on the number of threads.
 fn qr_block_rows(n: usize) -> usize {
     if n > QR_ROW_BLOCK {
-        QR_ROW_BLOCK
+        n.div_ceil(n.div_ceil(QR_ROW_BLOCK).next_multiple_of(2))
     } else if n >= 2 * QR_HALF_BLOCK {
         n.div_ceil(2)
     } else {
@@ -929,17 +950,19 @@ impl NestedSeries {
     /// the columns given before not factored again: their reflectors are applied to the new
     /// columns, and only what is left of these is factored (a QR of the new block on the rows
     /// below the old). The same sums as [`NestedSeries::new`] on all of `series`, up to rounding,
-    /// at the cost of the new columns alone.
-    pub fn extended(&self, y: &[f64], w: &[f64], series: &[Vec<f64>]) -> Result<NestedSeries, ModelCheckError> {
-        check_series(y, w, &self.base, series)?;
+    /// at the cost of the new columns alone (the series before is consumed: its reflectors are kept,
+    /// not copied).
+    pub fn extended(self, y: &[f64], w: &[f64], series: &[Vec<f64>]) -> Result<NestedSeries, ModelCheckError> {
+        // The columns given before were checked then.
+        check_series(y, w, &self.base, series.get(self.given..).unwrap_or(&[]))?;
         if self.blocks.is_empty() || series.len() < self.given {
             return NestedSeries::new(y, w, &self.base, series);
         }
-        let mut out = self.clone();
+        let mut out = self;
         out.data = None;
-        match out.with_block(w, &series[self.given..]) {
+        match out.with_block(w, &series[out.given..]) {
             true => Ok(out),
-            false => NestedSeries::new(y, w, &self.base, series),
+            false => NestedSeries::new(y, w, &out.base, series),
         }
     }
 
@@ -1425,8 +1448,8 @@ mod tests {
 
     /// The factorisation by blocks of rows ([`OrthoBase::new`], [`OrthoBase::extended`]) against
     /// one Householder QR with column pivoting over all rows (`whole_rows`, the factorisation
-    /// before the blocks): 2 × [`QR_ROW_BLOCK`] + 50 weighted samples (three blocks, the last with
-    /// fewer rows than columns), 2 × [`QR_HALF_BLOCK`] + 1 (two halves), 70 columns of which 3 are
+    /// before the blocks): 2 × [`QR_ROW_BLOCK`] + 50 weighted samples (four blocks: three of 8 205
+    /// rows, the last of 8 203), 2 × [`QR_HALF_BLOCK`] + 1 (two halves), 70 columns of which 3 are
     /// combinations of others and one is zero on all but the last 40 rows, one column all-zero;
     /// then 30 more columns, 2 of them in the span. The same ranks (66, then 94), orthonormal
     /// columns (QᵀQ = I to 1e-12) and the same projection of a test vector (to 1e-10 of its norm);
@@ -1655,8 +1678,8 @@ mod tests {
     /// The QR least squares agrees with the SVD one (`fit_signature`) on a weighted cubic with a
     /// duplicated and an all-zero column: the same fitted values to 1e-12, and the duplicate's
     /// pair of coefficients sums to the SVD's pair sum.
-    /// [`lstsq_qr`] by blocks of rows (2 × [`QR_ROW_BLOCK`] + 50 weighted samples: three blocks,
-    /// the last with fewer rows than columns + 1) leaves the residual of the projection off the
+    /// [`lstsq_qr`] by blocks of rows (2 × [`QR_ROW_BLOCK`] + 50 weighted samples: four blocks,
+    /// three of 8 205 rows and the last of 8 203) leaves the residual of the projection off the
     /// columns' basis ([`OrthoBase::new`], Q formed and applied) to 1e-10 of the data's weighted
     /// norm, with 40 well-conditioned columns (cosines of whole half-periods) of which two are
     /// combinations of others and one all-zero, and its coefficients reproduce the fitted values.
