@@ -857,6 +857,83 @@ pub fn golden_max_each(f: &mut impl FnMut(&[f64]) -> Vec<f64>, ranges: &[(f64, f
     s.iter().map(|t| t.best).collect()
 }
 
+/// Brent's minimisation on [lo, hi] without derivatives (Brent 1973, *Algorithms for Minimization
+/// without Derivatives*, ch. 5): golden-section steps, and a parabola through the three best
+/// points where it falls well inside the bracket, so that a smooth minimum is reached
+/// superlinearly. It stops when the best point x is within 2·tol₁ of the bracket's ends around it,
+/// tol₁ = √ε·|x| + `tol`/3 (ε the f64 epsilon: near a minimum f changes by about (δx)²·f''/2, so x
+/// is not resolved better than √ε relative), or after `max_evals` evaluations of `f`. Returns (x,
+/// f(x)) of the best point evaluated. A search that golden section (ratio 0.618 per evaluation)
+/// took 42 evaluations for, a smooth minimum inside a bracket of 0.46, takes 10–15.
+pub fn brent_min(f: &mut impl FnMut(f64) -> f64, lo: f64, hi: f64, tol: f64, max_evals: usize) -> (f64, f64) {
+    let golden = (3.0 - 5f64.sqrt()) / 2.0;
+    let eps = f64::EPSILON.sqrt();
+    let (mut a, mut b) = if lo <= hi { (lo, hi) } else { (hi, lo) };
+    // x the best point, w the second best, v the previous w; d the last step, e the one before.
+    let mut x = a + golden * (b - a);
+    let (mut w, mut v) = (x, x);
+    let mut fx = f(x);
+    let (mut fw, mut fv) = (fx, fx);
+    let (mut d, mut e) = (0.0_f64, 0.0_f64);
+    for _ in 1..max_evals {
+        let m = 0.5 * (a + b);
+        let tol1 = eps * x.abs() + tol / 3.0;
+        let tol2 = 2.0 * tol1;
+        if (x - m).abs() <= tol2 - 0.5 * (b - a) {
+            break;
+        }
+        // A parabola through (v, fv), (w, fw), (x, fx): its step p/q from x.
+        let (mut p, mut q, mut r) = (0.0, 0.0, 0.0);
+        if e.abs() > tol1 {
+            r = (x - w) * (fx - fv);
+            q = (x - v) * (fx - fw);
+            p = (x - v) * q - (x - w) * r;
+            q = 2.0 * (q - r);
+            if q > 0.0 {
+                p = -p;
+            } else {
+                q = -q;
+            }
+            r = e;
+            e = d;
+        }
+        if p.abs() < (0.5 * q * r).abs() && p > q * (a - x) && p < q * (b - x) {
+            // The parabola's step, kept tol₂ away from the ends.
+            d = p / q;
+            let u = x + d;
+            if u - a < tol2 || b - u < tol2 {
+                d = if x < m { tol1 } else { -tol1 };
+            }
+        } else {
+            // A golden-section step into the larger part.
+            e = if x < m { b - x } else { a - x };
+            d = golden * e;
+        }
+        let u = if d.abs() >= tol1 { x + d } else { x + tol1.copysign(d) };
+        let fu = f(u);
+        if fu <= fx {
+            if u < x {
+                b = x;
+            } else {
+                a = x;
+            }
+            (v, fv, w, fw, x, fx) = (w, fw, x, fx, u, fu);
+        } else {
+            if u < x {
+                a = u;
+            } else {
+                b = u;
+            }
+            if fu <= fw || w == x {
+                (v, fv, w, fw) = (w, fw, u, fu);
+            } else if fu <= fv || v == x || v == w {
+                (v, fv) = (u, fu);
+            }
+        }
+    }
+    (x, fx)
+}
+
 fn cosine(a: &[f64], b: &[f64]) -> f64 {
     let ab: f64 = a.iter().zip(b).map(|(x, y)| x * y).sum();
     let aa: f64 = a.iter().map(|x| x * x).sum();
@@ -1057,6 +1134,35 @@ pub fn forward_select(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Brent's minimisation finds the minimum of a smooth function on a log-scale bracket (the
+    /// residual sum of a loop gain: a quartic well in ln kv, minimum off the bracket's centre) to
+    /// √ε relative in at most 16 evaluations, where golden section took 42; a minimum at an end
+    /// of the bracket is approached to within the tolerance; a linear function's at its low end.
+    #[test]
+    fn brent_finds_a_smooth_minimum_in_few_evaluations() {
+        let at = 32.123_f64.ln();
+        for (lo, hi) in [(25.0_f64.ln(), 40.0_f64.ln()), (30.0_f64.ln(), 33.0_f64.ln())] {
+            let mut evals = 0;
+            let (x, fx) = brent_min(
+                &mut |x: f64| {
+                    evals += 1;
+                    1e4 * (x - at).powi(2) + 3e5 * (x - at).powi(4) + 17.0
+                },
+                lo,
+                hi,
+                1e-10,
+                60,
+            );
+            assert!((x - at).abs() < 1e-7, "{x} vs {at}");
+            assert!((fx - 17.0).abs() < 1e-9);
+            assert!(evals <= 16, "{evals} evaluations");
+        }
+        let (x, _) = brent_min(&mut |x: f64| (x - 5.0).powi(2), 0.0, 2.0, 1e-10, 60);
+        assert!((x - 2.0).abs() < 1e-6, "{x}");
+        let (x, _) = brent_min(&mut |x: f64| x, -1.0, 1.0, 1e-10, 60);
+        assert!((x + 1.0).abs() < 1e-6, "{x}");
+    }
 
     #[test]
     fn verdict_serialises_lowercase_and_entry_has_format_keys() {

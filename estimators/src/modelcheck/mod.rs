@@ -29,7 +29,7 @@ pub mod spectrum;
 pub mod stats;
 
 pub use diagnose::{
-    fit_candidate, forward_select, golden_max, golden_max_each, rank_candidates, Candidate, CandidateFit,
+    brent_min, fit_candidate, forward_select, golden_max, golden_max_each, rank_candidates, Candidate, CandidateFit,
     DiagnoseConfig, Diagnosis, ForwardSelection, HyperParameter, RankingEntry, ResidualInput, Verdict,
 };
 pub use lsq::{fit_signature, solve_normal, Columns, LinearFit, NormalFactor};
