@@ -189,23 +189,24 @@ pub(crate) fn weighted_ss(r: &[f64], w: &[f64]) -> f64 {
 /// of 42 evaluations (l to 2·10⁻⁹ absolute, finer than f resolves): a closed loop's kv took 11–15
 /// on the benchmark's encoder set, 0.15 s less per fit.
 pub(crate) fn line_minimum(a: f64, b: f64, evals: usize, f: &mut dyn FnMut(f64) -> f64) -> f64 {
-    brent_min(&mut |l: f64| f(l.exp()), a.ln(), b.ln(), LINE_SEARCH_TOL, evals).0.exp()
+    line_minimum_each(&[(a, b)], evals, &mut |xs| xs.iter().map(|&x| f(x)).collect())[0]
 }
 
 /// Absolute tolerance on ln x of [`line_minimum`]: 10⁻⁹ (the relative √ε ≈ 1.5·10⁻⁸ of ln x
 /// rules unless ln x is near 0).
 pub(crate) const LINE_SEARCH_TOL: f64 = 1e-9;
 
-/// [`golden`] on several intervals `ranges` in lockstep (`golden_max_each`): `f` gets the next
-/// point of every search still running together and returns their values in order. Each search
-/// ends where [`golden`] alone would.
-pub(crate) fn golden_each(ranges: &[(f64, f64)], iters: usize, f: &mut dyn FnMut(&[f64]) -> Vec<f64>) -> Vec<f64> {
+/// [`line_minimum`] on several intervals `ranges` in lockstep (`brent_min_each`): `f` gets the
+/// next point of every search still running together and returns their values in order. Each
+/// search ends where [`line_minimum`] alone would.
+pub(crate) fn line_minimum_each(
+    ranges: &[(f64, f64)],
+    evals: usize,
+    f: &mut dyn FnMut(&[f64]) -> Vec<f64>,
+) -> Vec<f64> {
     let logs: Vec<(f64, f64)> = ranges.iter().map(|&(a, b)| (a.ln(), b.ln())).collect();
-    let mut neg = |ls: &[f64]| -> Vec<f64> {
-        let xs: Vec<f64> = ls.iter().map(|l| l.exp()).collect();
-        f(&xs).into_iter().map(|v| -v).collect()
-    };
-    golden_max_each(&mut neg, &logs, iters).into_iter().map(|(l, _)| l.exp()).collect()
+    let mut on_logs = |ls: &[f64]| -> Vec<f64> { f(&ls.iter().map(|l| l.exp()).collect::<Vec<f64>>()) };
+    brent_min_each(&mut on_logs, &logs, LINE_SEARCH_TOL, evals).into_iter().map(|(l, _)| l.exp()).collect()
 }
 
 /// How a fitted error motion's shape was set (FORMAT.md §4 `shapes`).
@@ -842,8 +843,9 @@ pub(crate) const LEAD_SCAN_CHUNK: usize = 16;
 /// one orthonormal nested basis of the series (its Householder QR off the other columns,
 /// [`NestedSeries`], the other binding motions held at their orders below the cap at p_hi) and a
 /// 2 × 2 solve per (P, K) (variable projection). The grid's best minima are refined by
-/// golden-section searches between their neighbours, run in lockstep ([`golden_each`]: one matrix
-/// product per round for all of them). Compared with the shapes alone at their free BIC order.
+/// Brent's searches between their neighbours, run in lockstep ([`line_minimum_each`]: one matrix
+/// product per round for all of them; 22 rounds on the benchmark's encoder sets, where golden
+/// section took 31). Compared with the shapes alone at their free BIC order.
 /// None when the motion's basis is not nested (B-splines, table) or nothing is scanned.
 pub(crate) fn lead_shape_scan(
     st: &Stack,
@@ -992,7 +994,7 @@ pub(crate) fn lead_shape_scan(
             minima.push(i);
         }
     }
-    // The searches in lockstep (`golden_each`): each round's periods in one batch, so that the
+    // The searches in lockstep (`line_minimum_each`): each round's periods in one batch, so that the
     // series is read once per round instead of once per search and period.
     let ranges: Vec<(f64, f64)> =
         minima.iter().map(|&i| (grid[i.saturating_sub(1)], grid[(i + 1).min(grid.len() - 1)])).collect();
@@ -1001,7 +1003,7 @@ pub(crate) fn lead_shape_scan(
     let joint_each = |ps: &[f64]| -> Vec<(f64, usize)> {
         ps.par_chunks(LEAD_SCAN_CHUNK / 4).flat_map_iter(|c| joint_and_power(c).into_iter().map(|s| s.0)).collect()
     };
-    let ps = golden_each(&ranges, 30, &mut |ps| joint_each(ps).into_iter().map(|s| s.0).collect());
+    let ps = line_minimum_each(&ranges, 32, &mut |ps| joint_each(ps).into_iter().map(|s| s.0).collect());
     let refined: Vec<(f64, (f64, usize))> = minima
         .iter()
         .zip(ps.iter().zip(joint_each(&ps)))

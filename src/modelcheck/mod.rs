@@ -129,8 +129,8 @@ use std::f64::consts::TAU as TWO_PI;
 use std::path::{Path, PathBuf};
 use vmt_estimators::modelcheck::diagnose::at_grid_end;
 use vmt_estimators::modelcheck::{
-    autocorrelation, bin_by_edges, bin_by_label, brent_min, estimate_noise_sigma, fit_percent, fit_signature,
-    frequency_grid, golden_max_each, greedy_rss, ljung_box, ls_periodogram, lstsq_qr, nested_rss, rank_candidates,
+    autocorrelation, bin_by_edges, bin_by_label, brent_min_each, estimate_noise_sigma, fit_percent, fit_signature,
+    frequency_grid, greedy_rss, ljung_box, ls_periodogram, lstsq_qr, nested_rss, rank_candidates,
     refine_projected_point, sparse_frequency_scan, uniform_edges, Candidate, DiagnoseConfig, HyperParameter,
     ModelCheckError, NestedSeries, OrthoBase, RankingEntry, Sigma, SparseColumn, Verdict,
 };

@@ -866,25 +866,79 @@ pub fn golden_max_each(f: &mut impl FnMut(&[f64]) -> Vec<f64>, ranges: &[(f64, f
 /// f(x)) of the best point evaluated. A search that golden section (ratio 0.618 per evaluation)
 /// took 42 evaluations for, a smooth minimum inside a bracket of 0.46, takes 10–15.
 pub fn brent_min(f: &mut impl FnMut(f64) -> f64, lo: f64, hi: f64, tol: f64, max_evals: usize) -> (f64, f64) {
-    let golden = (3.0 - 5f64.sqrt()) / 2.0;
-    let eps = f64::EPSILON.sqrt();
-    let (mut a, mut b) = if lo <= hi { (lo, hi) } else { (hi, lo) };
-    // x the best point, w the second best, v the previous w; d the last step, e the one before.
-    let mut x = a + golden * (b - a);
-    let (mut w, mut v) = (x, x);
-    let mut fx = f(x);
-    let (mut fw, mut fv) = (fx, fx);
-    let (mut d, mut e) = (0.0_f64, 0.0_f64);
+    brent_min_each(&mut |xs: &[f64]| xs.iter().map(|&x| f(x)).collect(), &[(lo, hi)], tol, max_evals)[0]
+}
+
+/// [`brent_min`] over several intervals `ranges` in lockstep: each round asks `f` for the values
+/// at the next point of every search still running, together (a batch whose evaluations can share
+/// work), and returns one value per point, in order. Each search takes the points and returns the
+/// (argmin, min) that [`brent_min`] would on its interval alone.
+pub fn brent_min_each(
+    f: &mut impl FnMut(&[f64]) -> Vec<f64>,
+    ranges: &[(f64, f64)],
+    tol: f64,
+    max_evals: usize,
+) -> Vec<(f64, f64)> {
+    let mut s: Vec<BrentSearch> = ranges.iter().map(|&(lo, hi)| BrentSearch::new(lo, hi, tol)).collect();
+    let first = f(&s.iter().map(|t| t.x).collect::<Vec<f64>>());
+    // index: `first` holds one value per range, in order (f's contract).
+    s.iter_mut().zip(first).for_each(|(t, fx)| (t.fx, t.fw, t.fv) = (fx, fx, fx));
     for _ in 1..max_evals {
+        let next: Vec<(usize, f64)> = s.iter_mut().enumerate().filter_map(|(k, t)| t.next().map(|u| (k, u))).collect();
+        if next.is_empty() {
+            break;
+        }
+        let values = f(&next.iter().map(|&(_, u)| u).collect::<Vec<f64>>());
+        for (&(k, u), fu) in next.iter().zip(values) {
+            s[k].update(u, fu);
+        }
+    }
+    s.iter().map(|t| (t.x, t.fx)).collect()
+}
+
+/// One search of [`brent_min_each`]: the bracket [a, b]; x the best point, w the second best, v
+/// the previous w, with their values; d the last step and e the one before; `done` once x is
+/// settled.
+struct BrentSearch {
+    a: f64,
+    b: f64,
+    x: f64,
+    w: f64,
+    v: f64,
+    fx: f64,
+    fw: f64,
+    fv: f64,
+    d: f64,
+    e: f64,
+    tol: f64,
+    done: bool,
+}
+
+impl BrentSearch {
+    /// The search on [lo, hi], its first point x at the golden section of the bracket.
+    fn new(lo: f64, hi: f64, tol: f64) -> BrentSearch {
+        let (a, b) = if lo <= hi { (lo, hi) } else { (hi, lo) };
+        let x = a + BRENT_GOLDEN * (b - a);
+        let nan = f64::NAN;
+        BrentSearch { a, b, x, w: x, v: x, fx: nan, fw: nan, fv: nan, d: 0.0, e: 0.0, tol, done: false }
+    }
+
+    /// The next point to evaluate, or None once x is within 2·tol₁ of the bracket's ends around it.
+    fn next(&mut self) -> Option<f64> {
+        if self.done {
+            return None;
+        }
+        let Self { a, b, x, w, v, fx, fw, fv, .. } = *self;
         let m = 0.5 * (a + b);
-        let tol1 = eps * x.abs() + tol / 3.0;
+        let tol1 = f64::EPSILON.sqrt() * x.abs() + self.tol / 3.0;
         let tol2 = 2.0 * tol1;
         if (x - m).abs() <= tol2 - 0.5 * (b - a) {
-            break;
+            self.done = true;
+            return None;
         }
         // A parabola through (v, fv), (w, fw), (x, fx): its step p/q from x.
         let (mut p, mut q, mut r) = (0.0, 0.0, 0.0);
-        if e.abs() > tol1 {
+        if self.e.abs() > tol1 {
             r = (x - w) * (fx - fv);
             q = (x - v) * (fx - fw);
             p = (x - v) * q - (x - w) * r;
@@ -894,45 +948,51 @@ pub fn brent_min(f: &mut impl FnMut(f64) -> f64, lo: f64, hi: f64, tol: f64, max
             } else {
                 q = -q;
             }
-            r = e;
-            e = d;
+            r = self.e;
+            self.e = self.d;
         }
         if p.abs() < (0.5 * q * r).abs() && p > q * (a - x) && p < q * (b - x) {
             // The parabola's step, kept tol₂ away from the ends.
-            d = p / q;
-            let u = x + d;
+            self.d = p / q;
+            let u = x + self.d;
             if u - a < tol2 || b - u < tol2 {
-                d = if x < m { tol1 } else { -tol1 };
+                self.d = if x < m { tol1 } else { -tol1 };
             }
         } else {
             // A golden-section step into the larger part.
-            e = if x < m { b - x } else { a - x };
-            d = golden * e;
+            self.e = if x < m { b - x } else { a - x };
+            self.d = BRENT_GOLDEN * self.e;
         }
-        let u = if d.abs() >= tol1 { x + d } else { x + tol1.copysign(d) };
-        let fu = f(u);
-        if fu <= fx {
-            if u < x {
-                b = x;
+        let d = self.d;
+        Some(if d.abs() >= tol1 { x + d } else { x + tol1.copysign(d) })
+    }
+
+    /// The bracket and the three best points after f(u) = fu.
+    fn update(&mut self, u: f64, fu: f64) {
+        if fu <= self.fx {
+            if u < self.x {
+                self.b = self.x;
             } else {
-                a = x;
+                self.a = self.x;
             }
-            (v, fv, w, fw, x, fx) = (w, fw, x, fx, u, fu);
+            (self.v, self.fv, self.w, self.fw, self.x, self.fx) = (self.w, self.fw, self.x, self.fx, u, fu);
         } else {
-            if u < x {
-                a = u;
+            if u < self.x {
+                self.a = u;
             } else {
-                b = u;
+                self.b = u;
             }
-            if fu <= fw || w == x {
-                (v, fv, w, fw) = (w, fw, u, fu);
-            } else if fu <= fv || v == x || v == w {
-                (v, fv) = (u, fu);
+            if fu <= self.fw || self.w == self.x {
+                (self.v, self.fv, self.w, self.fw) = (self.w, self.fw, u, fu);
+            } else if fu <= self.fv || self.v == self.x || self.v == self.w {
+                (self.v, self.fv) = (u, fu);
             }
         }
     }
-    (x, fx)
 }
+
+/// (3 − √5)/2: the golden section of a bracket, from its nearer end.
+const BRENT_GOLDEN: f64 = 0.381_966_011_250_105_1;
 
 fn cosine(a: &[f64], b: &[f64]) -> f64 {
     let ab: f64 = a.iter().zip(b).map(|(x, y)| x * y).sum();
@@ -1194,38 +1254,59 @@ mod tests {
         assert!((x - 0.3).abs() < 1e-7 && fx <= 0.0);
     }
 
+    /// Five intervals of different widths (disjoint, so that each point names its search) and a
+    /// function on each, with its maximum inside or at an end; one interval so narrow that its
+    /// search stops before the others.
+    const LOCKSTEP_RANGES: [(f64, f64); 5] = [(0.0, 1.0), (-3.0, -0.5), (10.0, 10.0 + 1e-9), (1.2, 1.9), (20.0, 60.0)];
+
+    fn lockstep_f(k: usize, x: f64) -> f64 {
+        match k {
+            0 => -(x - 0.3).powi(2),
+            1 => (x * 1.7).sin() - 0.1 * x * x + x,
+            2 => -(x - 10.0).abs(),
+            3 => x.powi(3),
+            _ => -(x.ln() - 3.5).powi(2) + 0.01 * (5.0 * x).cos(),
+        }
+    }
+
+    /// A batch of points of [`LOCKSTEP_RANGES`]' searches, each valued by its search's function
+    /// times `sign`; counts the batches.
+    fn lockstep_batch(xs: &[f64], sign: f64, calls: &mut usize) -> Vec<f64> {
+        *calls += 1;
+        xs.iter()
+            .map(|&x| sign * lockstep_f(LOCKSTEP_RANGES.iter().position(|&(a, b)| x >= a && x <= b).unwrap(), x))
+            .collect()
+    }
+
     /// Searches in lockstep ([`golden_max_each`]) end where each alone ends ([`golden_max`]), to the
-    /// bit: five intervals of different widths, functions with their maximum inside and at an end,
-    /// one interval so narrow that its search stops before the others; one batch per round.
+    /// bit, on [`LOCKSTEP_RANGES`]; one batch per round.
     #[test]
     fn golden_searches_in_lockstep_end_where_each_alone_ends() {
-        // Disjoint, so that each point names its search.
-        let ranges = [(0.0, 1.0), (-3.0, -0.5), (10.0, 10.0 + 1e-9), (1.2, 1.9), (20.0, 60.0)];
-        let f = |k: usize, x: f64| -> f64 {
-            match k {
-                0 => -(x - 0.3).powi(2),
-                1 => (x * 1.7).sin() - 0.1 * x * x + x,
-                2 => -(x - 10.0).abs(),
-                3 => x.powi(3),
-                _ => -(x.ln() - 3.5).powi(2) + 0.01 * (5.0 * x).cos(),
-            }
-        };
-        let alone: Vec<(f64, f64)> =
-            ranges.iter().enumerate().map(|(k, &(a, b))| golden_max(&mut |x| f(k, x), a, b, 40)).collect();
+        let alone: Vec<(f64, f64)> = LOCKSTEP_RANGES
+            .iter()
+            .enumerate()
+            .map(|(k, &(a, b))| golden_max(&mut |x| lockstep_f(k, x), a, b, 40))
+            .collect();
         let mut calls = 0;
-        let together = golden_max_each(
-            &mut |xs: &[f64]| {
-                calls += 1;
-                xs.iter()
-                    .map(|&x| {
-                        let k = ranges.iter().position(|&(a, b)| x >= a && x <= b).unwrap();
-                        f(k, x)
-                    })
-                    .collect()
-            },
-            &ranges,
-            40,
-        );
+        let together = golden_max_each(&mut |xs: &[f64]| lockstep_batch(xs, 1.0, &mut calls), &LOCKSTEP_RANGES, 40);
+        assert_eq!(alone, together);
+        assert!(calls <= 41, "{calls} batches");
+    }
+
+    /// Brent's searches in lockstep ([`brent_min_each`]) end where each alone ends ([`brent_min`]),
+    /// to the bit, on [`LOCKSTEP_RANGES`] (the functions negated); one batch per round, at most
+    /// the 41 of golden section (an optimum at an end of its bracket, x³ here, is approached by
+    /// golden-section steps alone: 34 rounds).
+    #[test]
+    fn brent_searches_in_lockstep_end_where_each_alone_ends() {
+        let alone: Vec<(f64, f64)> = LOCKSTEP_RANGES
+            .iter()
+            .enumerate()
+            .map(|(k, &(a, b))| brent_min(&mut |x| -lockstep_f(k, x), a, b, 1e-10, 41))
+            .collect();
+        let mut calls = 0;
+        let together =
+            brent_min_each(&mut |xs: &[f64]| lockstep_batch(xs, -1.0, &mut calls), &LOCKSTEP_RANGES, 1e-10, 41);
         assert_eq!(alone, together);
         assert!(calls <= 41, "{calls} batches");
     }

@@ -29,8 +29,8 @@ pub mod spectrum;
 pub mod stats;
 
 pub use diagnose::{
-    brent_min, fit_candidate, forward_select, golden_max, golden_max_each, rank_candidates, Candidate, CandidateFit,
-    DiagnoseConfig, Diagnosis, ForwardSelection, HyperParameter, RankingEntry, ResidualInput, Verdict,
+    brent_min, brent_min_each, fit_candidate, forward_select, golden_max, golden_max_each, rank_candidates, Candidate,
+    CandidateFit, DiagnoseConfig, Diagnosis, ForwardSelection, HyperParameter, RankingEntry, ResidualInput, Verdict,
 };
 pub use lsq::{fit_signature, solve_normal, Columns, LinearFit, NormalFactor};
 pub use ortho::{
