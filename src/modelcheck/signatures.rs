@@ -714,9 +714,31 @@ impl<'a> Stack<'a> {
 
     /// `k` columns over all samples, a row per sample: f(channel, sample index, row) writes the
     /// sample's k values into `row` (zeroed before each call). In blocks of [`ROWS_PER_TASK`]
-    /// samples of one channel, side by side (rayon); a sample's values depend on it alone, so the
-    /// columns are the same bits on any number of threads as one sample after another.
+    /// samples of one channel, side by side (rayon, [`Stack::col_blocks`]); a sample's values
+    /// depend on it alone, so the columns are the same bits on any number of threads as one sample
+    /// after another.
     pub(crate) fn col_rows(&self, k: usize, f: impl Fn(&Channel, usize, &mut [f64]) + Sync) -> Vec<Vec<f64>> {
+        self.col_blocks(k, |c, i0, len, mine| {
+            let mut row = vec![0.0; k];
+            for r in 0..len {
+                row.fill(0.0);
+                f(c, i0 + r, &mut row);
+                for (col, v) in mine.iter_mut().zip(&row) {
+                    col[r] = *v;
+                }
+            }
+        })
+    }
+
+    /// `k` columns over all samples (zeros before), a block of rows at a time: f(channel, first
+    /// sample index, samples, the k columns' rows of the block) for blocks of [`ROWS_PER_TASK`]
+    /// samples of one channel, side by side (rayon). A block's values must depend on its samples
+    /// alone: then the columns are the same bits on any number of threads.
+    pub(crate) fn col_blocks(
+        &self,
+        k: usize,
+        f: impl Fn(&Channel, usize, usize, &mut [&mut [f64]]) + Sync,
+    ) -> Vec<Vec<f64>> {
         let mut cols = vec![vec![0.0; self.n]; k];
         // Per block: its channel, first sample, number of samples, and each column's rows of it.
         let mut blocks: Vec<(&Channel, usize, usize, Vec<&mut [f64]>)> = Vec::new();
@@ -740,14 +762,7 @@ impl<'a> Stack<'a> {
         }
         blocks.into_par_iter().for_each(|(c, i0, len, mut mine)| {
             clear_upper_state();
-            let mut row = vec![0.0; k];
-            for r in 0..len {
-                row.fill(0.0);
-                f(c, i0 + r, &mut row);
-                for (col, v) in mine.iter_mut().zip(&row) {
-                    col[r] = *v;
-                }
-            }
+            f(c, i0, len, &mut mine);
         });
         cols
     }
@@ -1528,6 +1543,58 @@ pub(crate) fn legendre(u: f64, n: usize) -> (Vec<f64>, Vec<f64>) {
     (p, d)
 }
 
+/// A block of [`Shape::terms_at`]'s Legendre values times the reading's sensitivity, s·P_k(u(x_i)),
+/// for the basis indices `ks` of `sh` (a Legendre series) at samples i0..i0 + len of channel `c`
+/// reading motion `name` as a value ([`Channel::motion_read`]: 0 where it is blind), written into
+/// `out` (one slice per index of `ks`). Bonnet's recurrence runs order by order over the block's
+/// samples — the expression of [`legendre`], so the same bits as one sample at a time, without
+/// its chain of divisions from one order to the next in one sample (the samples' recurrences
+/// are independent) and without the slopes.
+fn legendre_value_block(
+    sh: &Shape,
+    ks: &[usize],
+    c: &Channel,
+    name: EffectName,
+    i0: usize,
+    len: usize,
+    out: &mut [&mut [f64]],
+) {
+    let s = c.s_motion(name);
+    if s == 0.0 {
+        return;
+    }
+    let (a, b) = sh.range;
+    // index: samples i0..i0 + len of the channel (`Stack::col_blocks`).
+    let u: Vec<f64> = c.x[i0..i0 + len].iter().map(|x| (2.0 * x - a - b) / (b - a)).collect();
+    let top = ks.iter().copied().max().unwrap_or(0);
+    // Where each order is written: its slots in `out` (ks may repeat an order).
+    let mut slots: Vec<Vec<usize>> = vec![Vec::new(); top + 1];
+    ks.iter().enumerate().for_each(|(j, &k)| slots[k].push(j));
+    let put = |k: usize, p: &[f64], out: &mut [&mut [f64]]| {
+        for &j in &slots[k] {
+            out[j].iter_mut().zip(p).for_each(|(o, pk)| *o = s * pk);
+        }
+    };
+    let mut before = vec![1.0; len];
+    put(0, &before, out);
+    if top == 0 {
+        return;
+    }
+    let mut now = u.clone();
+    put(1, &now, out);
+    let mut next = vec![0.0; len];
+    for k in 1..top {
+        let kf = k as f64;
+        for i in 0..len {
+            next[i] = ((2.0 * kf + 1.0) * u[i] * now[i] - kf * before[i]) / (kf + 1.0);
+        }
+        // (before, now, next) ← (now, next, before): P_{k}, P_{k+1}, and a buffer.
+        std::mem::swap(&mut before, &mut now);
+        std::mem::swap(&mut now, &mut next);
+        put(k + 1, &now, out);
+    }
+}
+
 /// Monomial coefficients m_j (x in m, j = 0..=n) of Σ_k c_k·P_k(u(x)), k = first..first + c.len() − 1,
 /// u = α·x + β with α = 2/(b − a), β = −(a + b)/(b − a): the Legendre series of a fitted error
 /// motion written as FORMAT.md §2 `c_j` (for reading; the fit itself stays in the Legendre basis).
@@ -1581,7 +1648,8 @@ pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Ve
             [sin, cos] if name == EffectName::InterpolationError => {
                 close_loop_wave(st, h[0], &st.interp_shift, sin, cos)
             }
-            cols => cols.iter_mut().for_each(|c| close_loop(st, c)),
+            // Each column through the loop on its own: side by side (rayon), the same bits.
+            cols => cols.par_iter_mut().for_each(|c| close_loop(st, c)),
         }
     }
     cols
@@ -1595,6 +1663,12 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             // P'_k·2/(b − a), differenced over the sample interval); every order at once per
             // position ([`Shape::terms_at`]; cosines for a motion only accelerometers see).
             let ks = sh.ks();
+            // Values only (encoders, lasers) of a Legendre series: order by order over a block's
+            // samples ([`legendre_value_block`]), the same bits as sample by sample.
+            let values_only = st.chans.iter().all(|c| c.s_motion(n) == 0.0 || c.is_laser() || c.encoder.is_some());
+            if sh.basis == ShapeBasis::Legendre && values_only {
+                return st.col_blocks(ks.len(), |c, i0, len, mine| legendre_value_block(sh, &ks, c, n, i0, len, mine));
+            }
             st.col_rows(ks.len(), |c, i, row| match c.motion_read(i, n) {
                 MotionRead::Blind => {}
                 MotionRead::Value { s, x } => {
@@ -2292,6 +2366,57 @@ mod step_tests {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A Legendre series' value columns order by order over blocks of samples
+    /// ([`legendre_value_block`], through `columns`) are the bits of [`Shape::terms_at`] sample by
+    /// sample times the reading's sensitivity: two encoder channels (transmission and following,
+    /// 2 500 and 1 300 samples: several blocks, one short), order 40 and a selection of orders
+    /// (1, 2, 7, 33, 40).
+    #[test]
+    fn legendre_value_columns_by_blocks_are_the_bits_of_terms_at() {
+        let chan = |n: usize, role: EncoderRole| {
+            let t: Vec<f64> = (0..n).map(|i| i as f64 * 1e-3).collect();
+            Channel {
+                run: "r".into(),
+                sensor: "s".into(),
+                kind: SensorKind::EncoderLinear,
+                u: [1.0, 0.0, 0.0],
+                r: [0.0; 3],
+                x: t.iter().map(|t| 0.013 + 0.2 * (0.7 * t).sin()).collect(),
+                d: vec![1.0; n],
+                cycle: vec![1; n],
+                v: vec![0.05; n],
+                y: vec![0.0; n],
+                sigma: None,
+                encoder: Some(role),
+                t,
+            }
+        };
+        let following = EncoderRole::Following {
+            command: vec![0.0; 1300],
+            command_sigma: Vec::new(),
+            s_transmission: -1.0,
+            closed: false,
+        };
+        let chans = vec![chan(2500, EncoderRole::Transmission { drive: vec![0.0; 2500] }), chan(1300, following)];
+        let st = Stack::new(&chans);
+        let whole = shape(&st, EffectName::Positioning, 1, 40, false);
+        for sh in [whole.clone(), whole.selected(vec![1, 2, 7, 33, 40])] {
+            let ks = sh.ks();
+            let cols = open_loop_columns(&st, EffectName::Positioning, &sh, &[]);
+            let mut at = 0;
+            for c in &chans {
+                let s = c.s_motion(EffectName::Positioning);
+                for i in 0..c.y.len() {
+                    let (p, _) = sh.terms_at(c.x[i], &ks);
+                    for (j, pk) in p.iter().enumerate() {
+                        assert_eq!(cols[j][at].to_bits(), (s * pk).to_bits(), "sample {at}, index {}", ks[j]);
+                    }
+                    at += 1;
+                }
+            }
+        }
+    }
 
     /// Every term of [`reduced_sin_cos`] is within 2·10⁻¹¹ of libm's `sin_cos` on positions and
     /// periods spread over the ranges a scan meets (θ up to 7·10⁵ rad, both signs), and the sums of
