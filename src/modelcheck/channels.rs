@@ -103,6 +103,13 @@ impl Channel {
         self.kind.is_laser_line()
     }
 
+    /// Whether an error motion this channel sees is read as its value at the sample's position
+    /// (a laser, an encoder), not as its slopes over the sample interval (an accelerometer):
+    /// [`Channel::motion_read`].
+    pub(crate) fn reads_values(&self) -> bool {
+        self.is_laser() || self.encoder.is_some()
+    }
+
     /// Sensitivity to error motion `name`: u_i for translations, (r × u)_i for rotations
     /// (u·(ε × r) = ε·(r × u)), for lasers (to the motion itself) and accelerometers (to its mean
     /// second derivative, see [`Channel::motion_response`]); 0 for encoders and motor forces.
@@ -159,7 +166,7 @@ impl Channel {
         if s == 0.0 {
             return MotionRead::Blind;
         }
-        if self.is_laser() || self.encoder.is_some() {
+        if self.reads_values() {
             return MotionRead::Value { s, x: self.x[i] };
         }
         match self.interval_ends(i) {

@@ -1343,12 +1343,10 @@ fn fit_model_orders(
     let accel = st.chans.iter().any(|c| c.is_accel());
     let by_projection =
         n_searched > 0 && (accel || st.n > LARGE_SAMPLES || large_design(st.n, design(st, &terms).len()));
-    // The columns of the terms no search moves, per term (None for a moving one): the fixed base's,
-    // and the final design's as they are.
-    let held_cols: Vec<Option<Vec<Vec<f64>>>> = match by_projection {
-        true => terms.iter().map(|t| (!moving(t)).then(|| columns(st, t.name, &t.shape, &t.hyper))).collect(),
-        false => Vec::new(),
-    };
+    // Searched so, the columns of the terms no search moves, per term (None for a moving one, and
+    // for every term otherwise): the fixed base's, and the final design's as they are.
+    let held_cols: Vec<Option<Vec<Vec<f64>>>> =
+        terms.iter().map(|t| (by_projection && !moving(t)).then(|| columns(st, t.name, &t.shape, &t.hyper))).collect();
     let fixed_base = if by_projection {
         let fixed: Vec<Vec<f64>> =
             st.offsets().into_iter().chain(held_cols.iter().flatten().flatten().cloned()).collect();
@@ -1424,16 +1422,11 @@ fn fit_model_orders(
         t.at_bound =
             (0..t.hyper.len()).map(|hi| t.searched[hi] && g[hi].1 && at_grid_end(&g[hi].0, t.hyper[hi])).collect();
     }
-    let cols = match by_projection {
-        true => {
-            let mut cols = st.offsets();
-            for (t, held) in terms.iter().zip(held_cols) {
-                cols.extend(held.unwrap_or_else(|| columns(st, t.name, &t.shape, &t.hyper)));
-            }
-            cols
-        }
-        false => design(st, &terms),
-    };
+    // The design ([`design`]) with the held columns as they are.
+    let mut cols = st.offsets();
+    for (t, held) in terms.iter().zip(held_cols) {
+        cols.extend(held.unwrap_or_else(|| columns(st, t.name, &t.shape, &t.hyper)));
+    }
     let (coefs, residual) = solve_blocks(st, &r0, &cols, sigma)?;
     let shapes = terms
         .iter()

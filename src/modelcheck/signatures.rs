@@ -1536,18 +1536,26 @@ pub(crate) fn legendre(u: f64, n: usize) -> (Vec<f64>, Vec<f64>) {
         d[1] = 1.0;
     }
     for k in 1..n {
-        let kf = k as f64;
-        p[k + 1] = ((2.0 * kf + 1.0) * u * p[k] - kf * p[k - 1]) / (kf + 1.0);
-        d[k + 1] = d[k - 1] + (2.0 * kf + 1.0) * p[k];
+        p[k + 1] = bonnet(k, u, p[k], p[k - 1]);
+        d[k + 1] = d[k - 1] + (2.0 * k as f64 + 1.0) * p[k];
     }
     (p, d)
+}
+
+/// One step of Bonnet's recurrence: P_{k+1}(u) = ((2k+1)·u·P_k − k·P_{k−1})/(k+1) from P_k =
+/// `pk` and P_{k−1} = `pk1` ([`legendre`], [`legendre_value_block`]: one expression, so both give
+/// the same bits).
+#[inline(always)]
+fn bonnet(k: usize, u: f64, pk: f64, pk1: f64) -> f64 {
+    let kf = k as f64;
+    ((2.0 * kf + 1.0) * u * pk - kf * pk1) / (kf + 1.0)
 }
 
 /// A block of [`Shape::terms_at`]'s Legendre values times the reading's sensitivity, s·P_k(u(x_i)),
 /// for the basis indices `ks` of `sh` (a Legendre series) at samples i0..i0 + len of channel `c`
 /// reading motion `name` as a value ([`Channel::motion_read`]: 0 where it is blind), written into
 /// `out` (one slice per index of `ks`). Bonnet's recurrence runs order by order over the block's
-/// samples — the expression of [`legendre`], so the same bits as one sample at a time, without
+/// samples — [`bonnet`], as in [`legendre`], so the same bits as one sample at a time, without
 /// its chain of divisions from one order to the next in one sample (the samples' recurrences
 /// are independent) and without the slopes.
 fn legendre_value_block(
@@ -1584,9 +1592,8 @@ fn legendre_value_block(
     put(1, &now, out);
     let mut next = vec![0.0; len];
     for k in 1..top {
-        let kf = k as f64;
         for i in 0..len {
-            next[i] = ((2.0 * kf + 1.0) * u[i] * now[i] - kf * before[i]) / (kf + 1.0);
+            next[i] = bonnet(k, u[i], now[i], before[i]);
         }
         // (before, now, next) ← (now, next, before): P_{k}, P_{k+1}, and a buffer.
         std::mem::swap(&mut before, &mut now);
@@ -1665,7 +1672,7 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             let ks = sh.ks();
             // Values only (encoders, lasers) of a Legendre series: order by order over a block's
             // samples ([`legendre_value_block`]), the same bits as sample by sample.
-            let values_only = st.chans.iter().all(|c| c.s_motion(n) == 0.0 || c.is_laser() || c.encoder.is_some());
+            let values_only = st.chans.iter().all(|c| c.s_motion(n) == 0.0 || c.reads_values());
             if sh.basis == ShapeBasis::Legendre && values_only {
                 return st.col_blocks(ks.len(), |c, i0, len, mine| legendre_value_block(sh, &ks, c, n, i0, len, mine));
             }
@@ -2425,13 +2432,9 @@ mod tests {
     #[test]
     fn fast_phase_sums_agree_with_libm() {
         let mut worst = 0.0_f64;
-        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut uniform = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let mut uniform = || rng.gen::<f64>();
         for _ in 0..200 {
             let p = 2e-6 * (1e4_f64).powf(uniform());
             let span = (PHASE_FAST_MAX * p / TWO_PI).min(2.0);
