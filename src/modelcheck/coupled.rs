@@ -254,9 +254,12 @@ pub(crate) const POLISH_ROUNDS: usize = 6;
 /// [`polish`] ends when a round moves the frequency by less than this fraction (the frequency's
 /// Cramér–Rao bound on the generator's draws is 10⁻⁵–10⁻⁴ of it).
 pub(crate) const POLISH_HOLD_FREQUENCY: f64 = 2e-5;
-/// [`polish`] ends when a round also moves the damping ratio by less than this fraction (its bound
-/// is about 10⁻³ of it on the generator's draws).
-pub(crate) const POLISH_HOLD_DAMPING: f64 = 5e-4;
+/// [`polish`] ends when a round also moves the damping ratio by less than this fraction: its
+/// Cramér–Rao bound, about 10⁻³ of it on the generator's draws. A smaller move is below what the
+/// data resolve, and the rounds that follow one trade it back and forth with the shapes' selection
+/// (on the benchmark's 15 000-sample mode set at 5 × 10⁻⁴: −5.9 × 10⁻⁴ then +6.1 × 10⁻⁴, two more
+/// rounds and 0.5 s for a damping within 6 × 10⁻⁴ of where the first held).
+pub(crate) const POLISH_HOLD_DAMPING: f64 = 1e-3;
 
 /// The joint optimum θ = (f, ζ, gains…) near `theta` with the shapes of `terms`: (f, ζ, gains)
 /// refined ([`Problem::refine`], within its box), then the shapes re-chosen at the result without
@@ -282,7 +285,7 @@ fn polish<'a>(
     cache: &mut RawGramCache,
     progress: &(dyn Fn(Stage) + Sync),
 ) -> Option<(Vec<FitTerm>, Vec<f64>, Problem<'a>)> {
-    let mut pb = problem(st, &terms, target, w)?;
+    let mut pb = problem(st, &terms, target, w, cache)?;
     for round in 1..=POLISH_ROUNDS {
         progress(Stage::ModePolish { round, most: POLISH_ROUNDS });
         let (next, _) = pb.search(&[], 0, &[], &[], &[theta.clone()])?;
@@ -299,7 +302,7 @@ fn polish<'a>(
         }
         let chosen = reselect(st, &pb, &terms, &theta, target, cache, false)?;
         if chosen != terms {
-            pb = problem(st, &chosen, target, w)?;
+            pb = problem(st, &chosen, target, w, cache)?;
             terms = chosen;
         }
         if held {
@@ -786,8 +789,15 @@ const SCAN_CHUNK: usize = 8;
 /// The translation terms of `terms` that drive the mode through `st`'s fitted excitation (every
 /// excited channel has one input per such term, [`fitted_excitation`]), or None when the mode is
 /// not of that form: segments (no predicted excitation), a given excitation, a basis that is not a
-/// sinusoid in x.
-fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64]) -> Option<Problem<'a>> {
+/// sinusoid in x. The inputs' raw columns are read from their series in `cache` (computed there
+/// once for every problem and re-choice of one joint fit), weighted.
+fn problem<'a>(
+    st: &'a Stack<'a>,
+    terms: &[FitTerm],
+    target: &[f64],
+    w: &'a [f64],
+    cache: &mut RawGramCache,
+) -> Option<Problem<'a>> {
     let ti_r = terms.iter().position(|t| t.name == EffectName::Resonance)?;
     if !resonance_segments(st).is_empty() {
         return None;
@@ -825,17 +835,27 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
         .map(|(_, t)| t.clone())
         .collect();
     let fixed_cols: Vec<Vec<f64>> = design(st, &others).into_iter().filter(|c| c.iter().any(|v| *v != 0.0)).collect();
-    let raw_shapes: Vec<Shape> = inputs
-        .iter()
-        .map(|i| {
-            let mut sh = terms[i.term].shape.clone();
-            sh.select = None;
-            sh.order = i.raw_of.keys().copied().max().unwrap_or(1) as u32 + 1;
-            sh
-        })
-        .collect();
-    // Each input's raw basis indices, ascending (`raw_of`'s keys).
-    let raw_ks: Vec<Vec<usize>> = inputs.iter().map(|i| i.raw_of.keys().copied().collect()).collect();
+    // Each input's raw columns and their per-channel Gram matrices: its motion's series from the
+    // cache, up to the basis index its re-choice reads (one past the order the data resolve,
+    // [`reselect`]) or its largest raw index if that is further, so that the problems and the
+    // re-choices of one joint fit read one series and one set of Gram matrices.
+    let mut series: Vec<(std::sync::Arc<RawSeries>, std::sync::Arc<RawGrams>)> = Vec::new();
+    for i in &inputs {
+        let sh = &terms[i.term].shape;
+        // index: an order ≤ what the data's distinct positions resolve (`resolvable_order`), a u32 widened.
+        let top =
+            (resolvable_order(st, i.name, sh.range) as usize + 1).max(i.raw_of.keys().copied().max().unwrap_or(1));
+        let (shx, raw) = cache.series(st, i.name, sh, top);
+        let grams = cache.get(st, w, i.name, &shx, &raw)?;
+        series.push((raw, grams));
+    }
+    // Each raw column's input and basis index.
+    let mut owner = vec![(0, 0); raw_count];
+    for (m, inp) in inputs.iter().enumerate() {
+        for (&k, &rk) in &inp.raw_of {
+            owner[rk] = (m, k);
+        }
+    }
     let starts_at: Vec<usize> = st.channel_starts();
     let mut free_slots = 0;
     let frees: Vec<Option<usize>> = st
@@ -855,21 +875,13 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
             let s0 = starts_at[j];
             let len = c.y.len();
             let wch = &w[s0..s0 + len];
-            let mut raw = vec![vec![0.0; len]; raw_count];
-            for i in 0..len {
-                for ((inp, sh), ks) in inputs.iter().zip(&raw_shapes).zip(&raw_ks) {
-                    if c.is_accel() {
-                        let Some((xb, xa, v, dt)) = c.interval_ends(i) else { continue };
-                        let (d1, d0) = sh.slopes_at_two(xb, xa, Some(ks));
-                        for (e, &rk) in inp.raw_of.values().enumerate() {
-                            raw[rk][i] = wch[i] * v * (d1[e] - d0[e]) / dt;
-                        }
-                    } else if let MotionRead::Value { s, x } = c.motion_read(i, inp.name) {
-                        let (p, _) = sh.terms_at(x, ks);
-                        for (e, &rk) in inp.raw_of.values().enumerate() {
-                            raw[rk][i] = wch[i] * s * p[e];
-                        }
-                    }
+            // The weighted raw columns: w·u_k over the channel's rows of its input's series.
+            let mut raw = vec![Vec::new(); raw_count];
+            for (inp, (sr, _)) in inputs.iter().zip(&series) {
+                for (&k, &rk) in &inp.raw_of {
+                    // index: k ≤ the series' last basis index (asked of the cache above); the
+                    // channel's rows lie inside the stack's n rows.
+                    raw[rk] = sr.col_as_slice(k)[s0..s0 + len].iter().zip(wch).map(|(u, w)| w * u).collect();
                 }
             }
             let fixed: Vec<(usize, Vec<f64>)> = fixed_cols
@@ -884,18 +896,31 @@ fn problem<'a>(st: &'a Stack<'a>, terms: &[FitTerm], target: &[f64], w: &'a [f64
             all.extend(fixed.iter().map(|(_, f)| f.as_slice()));
             all.push(&y);
             let cols = Columns::new(len, &all).ok()?;
-            // [U | F | y]ᵀ[U | F | y], and its blocks.
+            // UᵀU from the series' Gram matrices on this channel (the same weighted columns; two
+            // inputs of different series by their own products), then [U | F | y]ᵀ[F | y] and
+            // its blocks.
+            let guu: Vec<f64> = (0..r * r)
+                .map(|e| {
+                    let ((ma, ka), (mb, kb)) = (owner[e / r], owner[e % r]);
+                    let ((sa, ga), (sb, _)) = (&series[ma], &series[mb]);
+                    if std::sync::Arc::ptr_eq(sa, sb) {
+                        // index: ka, kb < the series' columns; a channel's Gram is their square.
+                        ga[j][ka * sa.ncols() + kb]
+                    } else {
+                        dot(&raw[e / r], &raw[e % r])
+                    }
+                })
+                .collect();
             let k = r + nf + 1;
-            let g = cols.gram();
+            let t = cols.t_mul(&all[r..]).ok()?;
             let block = |rows: std::ops::Range<usize>, cs: std::ops::Range<usize>| -> Vec<f64> {
-                rows.flat_map(|a| cs.clone().map(move |b| a * k + b)).map(|e| g[e]).collect()
+                rows.flat_map(|a| cs.clone().map(move |b| a * (nf + 1) + b)).map(|e| t[e]).collect()
             };
-            let guu = block(0..r, 0..r);
-            let guf = block(0..r, r..r + nf);
-            let gff = block(r..r + nf, r..r + nf);
-            let bu = block(0..r, k - 1..k);
-            let bf = block(r..r + nf, k - 1..k);
-            let yy = g[k * k - 1];
+            let guf = block(0..r, 0..nf);
+            let gff = block(r..r + nf, 0..nf);
+            let bu = block(0..r, nf..nf + 1);
+            let bf = block(r..r + nf, nf..nf + 1);
+            let yy = t[k * (nf + 1) - 1];
             Some(ChannelGram {
                 start: s0,
                 index: j,
@@ -1159,16 +1184,36 @@ fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
     // index: the shape's order, a u32 bounded by `resolvable_order`, widened.
     let top = shx.order as usize;
     let mut raw = Mat::<f64>::zeros(st.n, top + 1);
+    // An accelerometer channel's rows depend only on its clock, positions and velocities: a channel
+    // with the same ones as an earlier accelerometer (a second axis of one logged pass) copies
+    // that one's rows (`twins`: (its first row, its source's first row, rows)) instead of
+    // computing them again.
+    let starts = st.channel_starts();
+    let source = |j: usize| -> Option<usize> {
+        let c = &st.chans[j];
+        (0..j).find(|&k| {
+            let o = &st.chans[k];
+            c.is_accel() && o.is_accel() && o.y.len() == c.y.len() && o.t == c.t && o.x == c.x && o.v == c.v
+        })
+    };
+    let mut twins = Vec::new();
     // Blocks of at most RAW_SERIES_ROWS rows of one channel each: (channel, its first sample, the
     // block's rows of `raw`), in the stack's order.
     let mut blocks = Vec::new();
     let mut rest = raw.as_mut();
-    for c in st.chans.iter() {
+    for (j, c) in st.chans.iter().enumerate() {
+        let src = source(j);
+        if let Some(k) = src {
+            // index: k < j, both channels of the stack (`channel_starts` has one start per channel).
+            twins.push((starts[j], starts[k], c.y.len()));
+        }
         let mut i0 = 0;
         while i0 < c.y.len() {
             // index: i0 < the channel's length; the stack's n is the sum of its channels' lengths.
             let (mine, others) = rest.split_at_row_mut(RAW_SERIES_ROWS.min(c.y.len() - i0));
-            blocks.push((c, i0, mine));
+            if src.is_none() {
+                blocks.push((c, i0, mine));
+            }
             rest = others;
             i0 += RAW_SERIES_ROWS;
         }
@@ -1191,6 +1236,13 @@ fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
             }
         }
     });
+    for k in 0..raw.ncols() {
+        let col = raw.col_as_slice_mut(k);
+        for &(at, from, len) in &twins {
+            // index: both channels' rows lie inside the stack's n rows (equal clocks: equal lengths).
+            col.copy_within(from..from + len, at);
+        }
+    }
     raw
 }
 
@@ -1202,12 +1254,13 @@ const RAW_SERIES_ROWS: usize = 1024;
 /// so the rounds of [`refit_coupled`] compute it once per series ([`RawGramCache`]).
 type RawGrams = Vec<Vec<f64>>;
 
-/// The [`RawGrams`] of each series the re-selection has met, by (motion, range, order), and the
-/// longest raw series of each (motion, range) ([`RawGramCache::series`]); the motion is part of
-/// the keys only when a channel that is not an accelerometer reads it.
+/// The [`RawGrams`] of each series the re-selections and problems of one joint fit have met
+/// ([`reselect`], [`problem`]), by (motion, range, order), and the longest raw series of each
+/// (motion, range) ([`RawGramCache::series`]); the motion is part of the keys only when a channel
+/// that is not an accelerometer reads it.
 #[derive(Default)]
 struct RawGramCache {
-    grams: BTreeMap<(Option<EffectName>, [u64; 2], u32), RawGrams>,
+    grams: BTreeMap<(Option<EffectName>, [u64; 2], u32), std::sync::Arc<RawGrams>>,
     series: BTreeMap<(Option<EffectName>, [u64; 2]), CachedSeries>,
 }
 
@@ -1239,7 +1292,14 @@ impl RawGramCache {
 
     /// The per-channel Gram matrices of `raw` (the raw columns of motion `name`'s series `shx`),
     /// computed on first use.
-    fn get(&mut self, st: &Stack, w: &[f64], name: EffectName, shx: &Shape, raw: &RawSeries) -> Option<&RawGrams> {
+    fn get(
+        &mut self,
+        st: &Stack,
+        w: &[f64],
+        name: EffectName,
+        shx: &Shape,
+        raw: &RawSeries,
+    ) -> Option<std::sync::Arc<RawGrams>> {
         let reads = st.chans.iter().any(|c| !c.is_accel());
         let key = (reads.then_some(name), [shx.range.0.to_bits(), shx.range.1.to_bits()], shx.order);
         if let std::collections::btree_map::Entry::Vacant(slot) = self.grams.entry(key) {
@@ -1261,9 +1321,9 @@ impl RawGramCache {
                     Some(Columns::new(len, &refs).ok()?.gram())
                 })
                 .collect::<Option<RawGrams>>()?;
-            slot.insert(grams);
+            slot.insert(std::sync::Arc::new(grams));
         }
-        self.grams.get(&key)
+        self.grams.get(&key).cloned()
     }
 }
 
@@ -1515,7 +1575,7 @@ fn reselect(
         // reads their products from the raw columns', [`raw_products`]).
         let keep: Vec<usize> = (0..all.len()).into_par_iter().filter(|&c| coupled_nonzero(st, &raw, &mx, c)).collect();
         let grams = cache.get(st, w, pb.inputs[m].name, &shx, &raw)?;
-        let gram = coupled_gram(grams, raw.ncols(), &mx, &keep);
+        let gram = coupled_gram(&grams, raw.ncols(), &mx, &keep);
         // M = Qᵀ(WS) and (WS)ᵀr from the raw columns' products (the coupled columns never made).
         let r = base.project_vector(target, w);
         let pq = raw_products(st, &raw, base.q(), &r, w);
@@ -1545,7 +1605,7 @@ fn reselect(
             let ks2: Vec<usize> = keep2.iter().map(|&c| all[c]).collect();
             let mx2 = mixes(pb, m, &shx, &ks2, fz, &vec![0.0; gains.len()]);
             let cols2: Vec<usize> = (0..ks2.len()).collect();
-            let gram2 = coupled_gram(grams, raw.ncols(), &mx2, &cols2);
+            let gram2 = coupled_gram(&grams, raw.ncols(), &mx2, &cols2);
             // The extended base begins with the base's columns: their products are those above,
             // and only the new columns' are formed.
             let r2 = base2.project_vector(target, w);
@@ -1626,7 +1686,8 @@ pub(crate) fn refit_coupled<'a>(
             log_grid(5.0, hi, ((hi / 5.0).ln() / step).ceil() as usize + 1).into_iter().map(move |f| (f, z))
         })
         .collect();
-    let pb1 = problem(st_mode, &fs.terms, &fs.target, w)?;
+    let mut cache = RawGramCache::default();
+    let pb1 = problem(st_mode, &fs.terms, &fs.target, w, &mut cache)?;
     let c0 = input_coefs(&pb1, fs);
     let res_coefs = term_coefs(fs, ti_r);
     let g0: Vec<f64> = resonance_gains(st_mode)
@@ -1646,14 +1707,13 @@ pub(crate) fn refit_coupled<'a>(
     progress(Stage::ModeScan { round: 1, rounds: COUPLED_ROUNDS });
     let mut theta1 =
         if at_start { held_theta(&pb1, &c0, &g0) } else { pb1.search(&grid, COUPLED_STARTS, &c0, &g0, &[own])?.0 };
-    let mut cache = RawGramCache::default();
     progress(Stage::ModeShapes { round: 1 });
     let mut terms2 = reselect(st_mode, &pb1, &fs.terms, &theta1, &fs.target, &mut cache, true)?;
     // Further rounds: the scan again with the re-chosen shapes (their coefficients and gains at
     // the last optimum), then the shapes re-chosen at its optimum.
     for round in 2..=COUPLED_ROUNDS {
         progress(Stage::ModeScan { round, rounds: COUPLED_ROUNDS });
-        let pb = problem(st_mode, &terms2, &fs.target, w)?;
+        let pb = problem(st_mode, &terms2, &fs.target, w, &mut cache)?;
         let (beta, _) = pb.coupled(&theta1).ok()?;
         let (c, g) = (pb.shape_coefs(&beta), theta1[2..].to_vec());
         // The later rounds scan around the last optimum (the first scanned the whole range).
@@ -1668,7 +1728,7 @@ pub(crate) fn refit_coupled<'a>(
         terms2 = reselect(st_mode, &pb, &terms2, &theta1, &fs.target, &mut cache, true)?;
     }
     let (pb2, theta, at_bound) = if start == ModeStart::Held {
-        let pb2 = problem(st_mode, &terms2, &fs.target, w)?;
+        let pb2 = problem(st_mode, &terms2, &fs.target, w, &mut cache)?;
         let (beta, _) = pb2.coupled(&theta1).ok()?;
         let theta = held_theta(&pb2, &pb2.shape_coefs(&beta), &theta1[2..]);
         (pb2, theta, [false; 2])
