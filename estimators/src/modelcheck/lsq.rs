@@ -259,10 +259,26 @@ const POWER_HOLD: f64 = 1e-6;
 
 /// The largest eigenvalue of the symmetric positive semi-definite `m` (≥ its largest diagonal
 /// entry), by power iterations from the vector of ones (Rayleigh quotient; deterministic), until
+/// one moves it by less than [`POWER_HOLD`] (at most [`POWER_ITERATIONS`]): the reference of the
+/// tests ([`largest_eigenvalue_until`] that never ends early).
+#[cfg(test)]
+fn largest_eigenvalue(m: &Mat<f64>) -> f64 {
+    largest_eigenvalue_until(m, |_| false)
+}
+
+/// The largest eigenvalue of the symmetric positive semi-definite `m` (≥ its largest diagonal
+/// entry), by power iterations from the vector of ones (Rayleigh quotient; deterministic), until
 /// one moves it by less than [`POWER_HOLD`] (at most [`POWER_ITERATIONS`]). A slight
 /// underestimate at worst (the Rayleigh quotient only grows towards it), which only makes
 /// [`solve_normal`]'s cut a little stricter.
-fn largest_eigenvalue(m: &Mat<f64>) -> f64 {
+///
+/// The iterations end early once `enough` holds for a lower bound of that estimate: each
+/// iteration's Rayleigh quotient λ_k less 10⁻¹² of it (the quotients of power iterates on a
+/// positive semi-definite matrix never decrease, so the estimate is at least λ_k; their rounding,
+/// about p·ε, is below the margin). It then returns λ_k (at least the largest diagonal entry).
+/// [`NormalFactor::new`] asks only which pivots the cut at the estimate keeps: once the cut at
+/// this lower bound keeps those of the cut at an upper bound, every value between them does.
+fn largest_eigenvalue_until(m: &Mat<f64>, enough: impl Fn(f64) -> bool) -> f64 {
     let p = m.nrows();
     let top_diag = (0..p).map(|i| m[(i, i)]).fold(0.0_f64, f64::max);
     let mut v = vec![1.0 / (p.max(1) as f64).sqrt(); p];
@@ -272,6 +288,9 @@ fn largest_eigenvalue(m: &Mat<f64>) -> f64 {
         let mv: Vec<f64> = (0..p).map(|i| super::ortho::dot(m.col_as_slice(i), &v)).collect();
         let last = lambda;
         lambda = v.iter().zip(&mv).map(|(a, b)| a * b).sum();
+        if enough(lambda * (1.0 - 1e-12)) {
+            break;
+        }
         let norm = mv.iter().map(|x| x * x).sum::<f64>().sqrt();
         if !(norm > 0.0) || (lambda - last).abs() < POWER_HOLD * lambda {
             break;
@@ -352,9 +371,14 @@ impl NormalFactor {
             cholesky_in_place(m.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut buf), Default::default())
                 .map_err(|e| ModelCheckError::Numerical(format!("solve_normal: pivoted Cholesky: {e:?}")))?;
         let kept = |cut: f64| (0..info.rank).take_while(|&j| m[(j, j)] * m[(j, j)] >= cut).count();
+        let at_above = kept(DEPENDENT_PIVOT * above);
         let r = match kept(DEPENDENT_PIVOT * top_diag) {
-            r if r == kept(DEPENDENT_PIVOT * above) => r,
-            _ => kept(DEPENDENT_PIVOT * largest_eigenvalue(&scaled())),
+            r if r == at_above => r,
+            // The iterations end once a lower bound of their estimate keeps what the upper one
+            // does ([`largest_eigenvalue_until`]).
+            _ => {
+                kept(DEPENDENT_PIVOT * largest_eigenvalue_until(&scaled(), |lo| kept(DEPENDENT_PIVOT * lo) == at_above))
+            }
         };
         let low = if r == p {
             None
@@ -647,8 +671,9 @@ mod columns_tests {
 mod normal_tests {
     use super::solve_normal;
 
-    /// The rank [`super::NormalFactor`] keeps is the rank at the cut from the power iterations
-    /// whether or not it ran them. 300 random Gram matrices: p = 12–40 columns on 3p samples,
+    /// The rank [`super::NormalFactor`] keeps is the rank at the cut from the power iterations run
+    /// to their end, whether it skipped them, ended them early ([`super::largest_eigenvalue_until`])
+    /// or ran them out. 300 random Gram matrices: p = 12–40 columns on 3p samples,
     /// families of strongly correlated columns (λ_max of the scaled matrix from about 1 to p/2),
     /// and one to three near-dependent columns whose squared distance from the others' span, as a
     /// fraction of their norm, is log-uniform over 10⁻¹⁴–10⁻⁸: across the band [10⁻¹¹·1,
