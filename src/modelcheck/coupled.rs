@@ -1189,13 +1189,7 @@ fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
     // that one's rows (`twins`: (its first row, its source's first row, rows)) instead of
     // computing them again.
     let starts = st.channel_starts();
-    let source = |j: usize| -> Option<usize> {
-        let c = &st.chans[j];
-        (0..j).find(|&k| {
-            let o = &st.chans[k];
-            c.is_accel() && o.is_accel() && o.y.len() == c.y.len() && o.t == c.t && o.x == c.x && o.v == c.v
-        })
-    };
+    let source = |j: usize| raw_twin(st, j);
     let mut twins = Vec::new();
     // Blocks of at most RAW_SERIES_ROWS rows of one channel each: (channel, its first sample, the
     // block's rows of `raw`), in the stack's order.
@@ -1244,6 +1238,17 @@ fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
         }
     }
     raw
+}
+
+/// The first channel of `st` before channel `j` whose rows of a raw series ([`raw_series`]) are
+/// channel j's: both accelerometers with the same clock, positions and velocities (a second axis of
+/// one logged pass). None for a channel that is not an accelerometer or has no such twin.
+fn raw_twin(st: &Stack, j: usize) -> Option<usize> {
+    let c = &st.chans[j];
+    (0..j).find(|&k| {
+        let o = &st.chans[k];
+        c.is_accel() && o.is_accel() && o.y.len() == c.y.len() && o.t == c.t && o.x == c.x && o.v == c.v
+    })
 }
 
 /// Rows of a channel per task of [`raw_series`].
@@ -1304,13 +1309,24 @@ impl RawGramCache {
         let key = (reads.then_some(name), [shx.range.0.to_bits(), shx.range.1.to_bits()], shx.order);
         if let std::collections::btree_map::Entry::Vacant(slot) = self.grams.entry(key) {
             let starts: Vec<usize> = st.channel_starts();
-            // One channel per thread.
-            let grams = st
-                .chans
-                .par_iter()
-                .zip(&starts)
-                .map(|(c, &s0)| {
-                    let len = c.y.len();
+            // A channel whose raw rows and weights are an earlier channel's ([`raw_twin`]; a pass's
+            // second axis with the same σ) has that channel's Gram matrix: the same products.
+            let same = |j: usize| {
+                // index: k < j, both channels of the stack; their rows lie inside the n rows.
+                raw_twin(st, j).filter(|&k| {
+                    let len = st.chans[j].y.len();
+                    w[starts[k]..starts[k] + len] == w[starts[j]..starts[j] + len]
+                })
+            };
+            let copies: Vec<Option<usize>> = (0..st.chans.len()).map(same).collect();
+            // One channel per thread, each computed once.
+            let mut grams = (0..st.chans.len())
+                .into_par_iter()
+                .map(|j| {
+                    if copies[j].is_some() {
+                        return Some(Vec::new());
+                    }
+                    let (len, s0) = (st.chans[j].y.len(), starts[j]);
                     let wc: Vec<Vec<f64>> = (0..raw.ncols())
                         .map(|k| {
                             let col = &raw.col_as_slice(k)[s0..s0 + len];
@@ -1321,6 +1337,12 @@ impl RawGramCache {
                     Some(Columns::new(len, &refs).ok()?.gram())
                 })
                 .collect::<Option<RawGrams>>()?;
+            for (j, k) in copies.iter().enumerate() {
+                if let Some(k) = *k {
+                    // index: k < j (a twin comes first), so its Gram matrix is computed or copied.
+                    grams[j] = grams[k].clone();
+                }
+            }
             slot.insert(std::sync::Arc::new(grams));
         }
         self.grams.get(&key).cloned()
