@@ -842,9 +842,7 @@ fn problem<'a>(
     let mut series: Vec<(std::sync::Arc<RawSeries>, std::sync::Arc<RawGrams>)> = Vec::new();
     for i in &inputs {
         let sh = &terms[i.term].shape;
-        // index: an order ≤ what the data's distinct positions resolve (`resolvable_order`), a u32 widened.
-        let top =
-            (resolvable_order(st, i.name, sh.range) as usize + 1).max(i.raw_of.keys().copied().max().unwrap_or(1));
+        let top = (reselect_order(st, i.name, sh) + 1).max(i.raw_of.keys().copied().max().unwrap_or(1));
         let (shx, raw) = cache.series(st, i.name, sh, top);
         let grams = cache.get(st, w, i.name, &shx, &raw)?;
         series.push((raw, grams));
@@ -1189,14 +1187,13 @@ fn raw_series(st: &Stack, name: EffectName, shx: &Shape) -> RawSeries {
     // that one's rows (`twins`: (its first row, its source's first row, rows)) instead of
     // computing them again.
     let starts = st.channel_starts();
-    let source = |j: usize| raw_twin(st, j);
     let mut twins = Vec::new();
     // Blocks of at most RAW_SERIES_ROWS rows of one channel each: (channel, its first sample, the
     // block's rows of `raw`), in the stack's order.
     let mut blocks = Vec::new();
     let mut rest = raw.as_mut();
     for (j, c) in st.chans.iter().enumerate() {
-        let src = source(j);
+        let src = raw_twin(st, j);
         if let Some(k) = src {
             // index: k < j, both channels of the stack (`channel_starts` has one start per channel).
             twins.push((starts[j], starts[k], c.y.len()));
@@ -1571,8 +1568,7 @@ fn reselect(
     for m in 0..pb.inputs.len() {
         let term = pb.inputs[m].term;
         let sh = terms[term].shape.clone();
-        // index: an order ≤ what the data's distinct positions resolve (`resolvable_order`), a u32 widened.
-        let top = resolvable_order(st, terms[term].name, sh.range) as usize;
+        let top = reselect_order(st, terms[term].name, &sh);
         let all: Vec<usize> = (1..=top).collect();
         let (shx, raw) = series(cache, m, &sh, &all);
         let mx = mixes(pb, m, &shx, &all, fz, gains);
@@ -1652,6 +1648,13 @@ fn reselect(
         terms[term].shape = nsh;
     }
     Some(terms)
+}
+
+/// The highest basis order [`reselect`] offers motion `name`'s shape `sh`: what the data's distinct
+/// positions resolve ([`resolvable_order`]); its series reaches one index further (the partner).
+fn reselect_order(st: &Stack, name: EffectName, sh: &Shape) -> usize {
+    // index: an order ≤ what the data's distinct positions resolve, a u32 widened.
+    resolvable_order(st, name, sh.range) as usize
 }
 
 /// The number of a greedy selection's columns BIC with σ unknown prefers ([`bic_unknown_sigma`]

@@ -257,10 +257,7 @@ const POWER_ITERATIONS: usize = 30;
 /// joint fit to four digits ([`DEPENDENT_PIVOT`]).
 const POWER_HOLD: f64 = 1e-6;
 
-/// The largest eigenvalue of the symmetric positive semi-definite `m` (≥ its largest diagonal
-/// entry), by power iterations from the vector of ones (Rayleigh quotient; deterministic), until
-/// one moves it by less than [`POWER_HOLD`] (at most [`POWER_ITERATIONS`]): the reference of the
-/// tests ([`largest_eigenvalue_until`] that never ends early).
+/// [`largest_eigenvalue_until`] run to its end: the tests' reference.
 #[cfg(test)]
 fn largest_eigenvalue(m: &Mat<f64>) -> f64 {
     largest_eigenvalue_until(m, |_| false)
