@@ -339,19 +339,63 @@ fn response(inp: &Input, k: usize, wave: Wave, scale: f64, fz: (f64, f64), v: f6
     }
 }
 
-/// One channel's mixing A (R × p, [`Problem::mixing`]) by columns: each column's non-zero entries
-/// (raw column, value), ascending in the raw column.
+/// One channel's mixing A (R × p, [`Problem::mixing`]) by columns, compressed: column j's non-zero
+/// entries (raw column, value), ascending in the raw column, are `entries[start[j]..start[j + 1]]`
+/// (one array read in order where a vector per column cost an allocation each and a pointer per
+/// read: the normal equations read every column once per row).
 struct Mixing {
     p: usize,
-    cols: Vec<Vec<(usize, f64)>>,
+    start: Vec<usize>,
+    entries: Vec<(usize, f64)>,
 }
 
 impl Mixing {
+    /// An empty mixing of `p` unknown columns, room for `cap` columns and twice as many entries.
+    fn with_capacity(p: usize, cap: usize) -> Mixing {
+        let mut start = Vec::with_capacity(cap + 1);
+        start.push(0);
+        Mixing { p, start, entries: Vec::with_capacity(2 * cap) }
+    }
+
+    /// Appends a column: `col`'s entries with a non-zero value, in their order.
+    fn push(&mut self, col: &[(usize, f64)]) {
+        self.entries.extend(col.iter().filter(|e| e.1 != 0.0));
+        self.start.push(self.entries.len());
+    }
+
+    /// Number of columns.
+    fn ncols(&self) -> usize {
+        // index: `start` begins with a 0 (`with_capacity`) and gains one end per column.
+        self.start.len() - 1
+    }
+
+    /// Column j's non-zero entries.
+    fn col(&self, j: usize) -> &[(usize, f64)] {
+        &self.entries[self.start[j]..self.start[j + 1]]
+    }
+
+    /// Per column j, the lowest raw column among the entries of columns j.. (R when they have none):
+    /// the raw columns the products with the columns from j on read.
+    fn lowest_from(&self, r: usize) -> Vec<usize> {
+        let mut low = vec![r; self.ncols()];
+        let mut at = r;
+        for j in (0..low.len()).rev() {
+            at = self.col(j).iter().fold(at, |a, e| a.min(e.0));
+            low[j] = at;
+        }
+        low
+    }
+
+    /// The columns from `from` on, in order.
+    fn cols_from(&self, from: usize) -> impl Iterator<Item = &[(usize, f64)]> {
+        self.start[from.min(self.ncols())..].windows(2).map(|w| &self.entries[w[0]..w[1]])
+    }
+
     /// The raw coefficients A·β of the first p entries of β (one per raw column, R of them), each
     /// summed over the columns in their order.
     fn times(&self, r: usize, beta: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; r];
-        for (col, b) in self.cols.iter().zip(beta) {
+        for (col, b) in self.cols_from(0).zip(beta) {
             for &(k, v) in col {
                 out[k] += v * b;
             }
@@ -384,22 +428,21 @@ impl Problem<'_> {
     /// the gain's sensor (the sequential fit with the excitation c held).
     fn mixing(&self, ch: &ChannelGram, fz: (f64, f64), gains: &[f64], excite: Option<&[Vec<f64>]>) -> Mixing {
         let p = self.n_shape() + excite.map_or(0, |_| self.n_gains);
-        let mut cols: Vec<Vec<(usize, f64)>> = Vec::with_capacity(p);
+        let mut cols = Mixing::with_capacity(p, p);
         for (m, inp) in self.inputs.iter().enumerate() {
             let g = ch.gain[m].map_or(0.0, |i| gains.get(i).copied().unwrap_or(0.0));
             for (&k, &wave) in inp.ks.iter().zip(&inp.waves) {
                 let rk = inp.raw_of[&k];
-                let mut col = if !ch.accel {
-                    vec![(rk, 1.0)]
-                } else {
-                    match (excite.is_none() && g != 0.0).then(|| response(inp, k, wave, g, fz, ch.v)).flatten() {
-                        None => vec![(rk, ch.sens[m])],
-                        Some([(_, own), other]) => vec![(rk, ch.sens[m] + own), other],
+                let own = (rk, if ch.accel { ch.sens[m] } else { 1.0 });
+                let resp = (ch.accel && excite.is_none() && g != 0.0).then(|| response(inp, k, wave, g, fz, ch.v));
+                match resp.flatten() {
+                    None => cols.push(&[own]),
+                    // Ascending in the raw column (the partner's may come first).
+                    Some([(_, resp), other]) => {
+                        let own = (rk, own.1 + resp);
+                        cols.push(&if other.0 < rk { [other, own] } else { [own, other] })
                     }
-                };
-                col.sort_by_key(|e| e.0);
-                col.retain(|e| e.1 != 0.0);
-                cols.push(col);
+                }
             }
         }
         if let Some(cs) = excite {
@@ -413,11 +456,12 @@ impl Problem<'_> {
                     }
                 }
             }
-            cols.extend(
-                gcols.iter().map(|c| c.iter().enumerate().filter(|(_, v)| **v != 0.0).map(|(k, v)| (k, *v)).collect()),
-            );
+            for c in &gcols {
+                let col: Vec<(usize, f64)> = c.iter().copied().enumerate().collect();
+                cols.push(&col);
+            }
         }
-        Mixing { p, cols }
+        cols
     }
 
     /// [`Problem::mixing`] of every channel.
@@ -608,37 +652,40 @@ impl Problem<'_> {
         let q = p + self.n_fixed + self.n_free;
         let mut nm = vec![0.0; q * q];
         let mut b = vec![0.0; q];
+        let lows: Vec<Vec<usize>> = self.chans.iter().zip(mix).map(|(ch, a)| a.lowest_from(ch.r)).collect();
         // Row i < p from j = i on: A's column i against each channel's [U | F | φ] through its
-        // Gram matrix, (AᵀG)_i = Σ_k a_ki·G_k (rows of G) with A's columns sparse.
+        // Gram matrix, (AᵀG)_i = Σ_k a_ki·G_k (rows of G) with A's columns sparse, formed only
+        // where the columns from i on read it (from their lowest raw column on).
         nm[..p * q].par_chunks_mut(q.max(1)).enumerate().for_each(|(i, row)| {
             let mut ag = Vec::new();
-            for ((ch, a), fp) in self.chans.iter().zip(mix).zip(free) {
-                let (nz, r) = (&a.cols, ch.r);
-                if nz[i].is_empty() {
+            for (((ch, a), fp), low) in self.chans.iter().zip(mix).zip(free).zip(&lows) {
+                let (nz, r) = (a.col(i), ch.r);
+                if nz.is_empty() {
                     continue;
                 }
+                let lo = low[i];
                 ag.clear();
                 ag.resize(r, 0.0);
-                for &(k, v) in &nz[i] {
-                    ag.iter_mut().zip(&ch.guu[k * r..(k + 1) * r]).for_each(|(x, g)| *x += v * g);
+                for &(k, v) in nz {
+                    ag[lo..].iter_mut().zip(&ch.guu[k * r + lo..(k + 1) * r]).for_each(|(x, g)| *x += v * g);
                 }
-                for (x, col) in row[i..p].iter_mut().zip(&nz[i..p]) {
+                for (x, col) in row[i..p].iter_mut().zip(a.cols_from(i)) {
                     *x += col.iter().map(|&(s, a)| ag[s] * a).sum::<f64>();
                 }
                 let nf = ch.fixed.len();
                 for (fi, g) in ch.fixed.iter().enumerate() {
-                    row[p + g] += nz[i].iter().map(|&(k, v)| v * ch.guf[k * nf + fi]).sum::<f64>();
+                    row[p + g] += nz.iter().map(|&(k, v)| v * ch.guf[k * nf + fi]).sum::<f64>();
                 }
                 if let (Some(slot), Some(fp)) = (ch.free, fp) {
                     for (j, uphi) in fp.uphi.iter().enumerate() {
-                        row[p + self.n_fixed + slot + j] += nz[i].iter().map(|&(k, v)| v * uphi[k]).sum::<f64>();
+                        row[p + self.n_fixed + slot + j] += nz.iter().map(|&(k, v)| v * uphi[k]).sum::<f64>();
                     }
                 }
             }
         });
         // The right-hand side, and the rows of the fixed columns and the free vibration.
         for ((ch, a), fp) in self.chans.iter().zip(mix).zip(free) {
-            for (x, col) in b[..p].iter_mut().zip(&a.cols) {
+            for (x, col) in b[..p].iter_mut().zip(a.cols_from(0)) {
                 if !col.is_empty() {
                     *x += col.iter().map(|&(k, v)| v * ch.bu[k]).sum::<f64>();
                 }
@@ -1014,8 +1061,8 @@ impl Problem<'_> {
                 let (r, nf) = (ch.r, ch.fixed.len());
                 let ax = self.mixing(ch, fz, &[], Some(&c));
                 // Each gain's d_j in this channel's raw columns (zero off its sensor).
-                let ds: Vec<Vec<f64>> = ax.cols[ns..ns + ng]
-                    .iter()
+                let ds: Vec<Vec<f64>> = (ns..ns + ng)
+                    .map(|j| ax.col(j))
                     .map(|col| {
                         let mut d = vec![0.0; r];
                         col.iter().for_each(|&(k, v)| d[k] = v);
@@ -1044,7 +1091,7 @@ impl Problem<'_> {
                             ad[j][at] += pd;
                         }
                     }
-                    for (x, col) in ad[j].iter_mut().zip(&mixing.cols) {
+                    for (x, col) in ad[j].iter_mut().zip(mixing.cols_from(0)) {
                         *x += col.iter().map(|&(k, v)| v * gd[k]).sum::<f64>();
                     }
                     for k in 0..ng {
