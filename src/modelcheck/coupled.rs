@@ -779,6 +779,16 @@ pub(crate) const COUPLED_DAMPING_BOX: (f64, f64) = (0.001, 0.3);
 /// 15 000-sample mode set took 53 steps (386 evaluations, 3.8 s of its 11) crawling 31.15 → 31.48 Hz,
 /// a start that did not win. A winner cut short is refined again: [`polish`] continues from it.
 pub(crate) const COUPLED_EVALUATIONS: usize = 21;
+/// The forward-difference step of the joint refinement's Jacobian in its box coordinates
+/// ([`vmt_estimators::modelcheck::DIFFERENCE_STEP`]): 10⁻⁴. Its cost comes from normal equations
+/// of a few hundred shape unknowns, whose rounding leaves noise of about 10⁻⁶ of it: on the benchmark's 15 000-sample mode
+/// set at 222 unknowns, 1.68904047·10⁴ and 1.68904175·10⁴ at θ 10⁻¹⁵ apart. At the default √ε the
+/// differences were that noise, and the refinement of the second scan's best point ended where it
+/// started (33.078 Hz, ζ 0.0200; 21 evaluations, 0.47 s); at 10⁻⁴ it reaches 32.53 Hz, ζ 0.0299
+/// (cost 1.496·10⁴) and the polish holds after two rounds instead of four. A step of 10⁻⁴ in the
+/// box coordinate moves f by 4·10⁻⁶ of itself (box ±4 %) and ζ by under 2·10⁻⁴ of itself, far
+/// inside the mode's half-power band, so the differences' own error is negligible.
+pub(crate) const COUPLED_DIFFERENCE_STEP: f64 = 1e-4;
 /// The joint frequency scan's levels: (damping ratio, relative frequency step). The refinement
 /// then frees the damping. A mode's response to a wave changes most within its half-power band,
 /// ±ζ around f, so each level steps by about 2ζ: 3 % at ζ = 2 %, 1 % at ζ = 0.5 % (a 55.05 Hz mode
@@ -1156,7 +1166,8 @@ impl Problem<'_> {
             }
         };
         let ahead = |pts: &[Vec<f64>]| kept.ahead(self, pts, in_q);
-        refine_projected_point(&resid, Some(&ahead), &s, &lo, &hi, COUPLED_EVALUATIONS).map_or(s, |r| r.0)
+        refine_projected_point(&resid, Some(&ahead), &s, (&lo, &hi), COUPLED_EVALUATIONS, COUPLED_DIFFERENCE_STEP)
+            .map_or(s, |r| r.0)
     }
 
     /// The joint optimum: a scan over `grid` ((frequency, Hz; damping ratio) points, [`COUPLED_SCAN_LEVELS`]:

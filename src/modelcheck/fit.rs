@@ -1511,7 +1511,7 @@ fn refine_jointly(
             }
         }
     };
-    if let Some((theta, _)) = refine_projected_point(&resid, None, &start, &lo, &hi, 40) {
+    if let Some((theta, _)) = refine_projected_point(&resid, None, &start, (&lo, &hi), 40, DIFFERENCE_STEP) {
         for (&(ti, hi), v) in free.iter().zip(&theta) {
             terms[ti].hyper[hi] = *v;
         }

@@ -132,7 +132,7 @@ use vmt_estimators::modelcheck::{
     autocorrelation, bin_by_edges, bin_by_label, brent_min_each, estimate_noise_sigma, fit_percent, fit_signature,
     frequency_grid, greedy_rss, ljung_box, ls_periodogram, lstsq_qr, nested_rss, rank_candidates,
     refine_projected_point, sparse_frequency_scan, uniform_edges, Candidate, DiagnoseConfig, HyperParameter,
-    ModelCheckError, NestedSeries, OrthoBase, RankingEntry, Sigma, SparseColumn, Verdict,
+    ModelCheckError, NestedSeries, OrthoBase, RankingEntry, Sigma, SparseColumn, Verdict, DIFFERENCE_STEP,
 };
 use vmt_sim::axis_sim::GRAVITY;
 use vmt_sim::effects::{Effect, EffectName, EffectParams};

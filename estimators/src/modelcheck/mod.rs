@@ -39,7 +39,7 @@ pub use ortho::{
 };
 /// The complex numbers of the spectra (num-complex, through realfft), for callers' phasors.
 pub use realfft::num_complex::Complex64;
-pub use refine::{refine_projected, refine_projected_point, AheadFn, ProjectedResidualFn, Refined};
+pub use refine::{refine_projected, refine_projected_point, AheadFn, ProjectedResidualFn, Refined, DIFFERENCE_STEP};
 pub use spectrum::{
     amplitude_spectrum, fourier_sums, frequency_grid, ls_periodogram, sinusoid_reductions, sparse_frequency_scan,
     AmplitudeSpectrum, FrequencyScan, Periodogram,
