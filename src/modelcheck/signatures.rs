@@ -574,16 +574,20 @@ fn use_map(maps: &mut Vec<KeptMap>, f: f64, zeta: f64, dt: f64, m: usize) {
                 Some(at) => maps[at].0.near(f, zeta, h),
                 None => HeldStep::new(f, zeta, h),
             };
-            let mut gk = vec![[0.0; 2]; m];
+            // The least recently used map dropped when the kept ones are full, its gains' buffer
+            // reused (a jittered clock makes a map per sample).
+            let mut gk = match maps.len() >= STEP_MAPS_KEPT {
+                true => maps.remove(0).2,
+                false => Vec::with_capacity(m),
+            };
+            gk.clear();
+            gk.resize(m, [0.0; 2]);
             let mut g = mp.g;
             let mut phi_m = [[1.0, 0.0], [0.0, 1.0]];
             for k in (0..m).rev() {
                 gk[k] = g;
                 g = mat2_times(mp.phi, g);
                 phi_m = mat2(mp.phi, phi_m);
-            }
-            if maps.len() >= STEP_MAPS_KEPT {
-                maps.remove(0);
             }
             maps.push((mp, phi_m, gk));
         }
