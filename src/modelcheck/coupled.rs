@@ -344,26 +344,25 @@ fn response(inp: &Input, k: usize, wave: Wave, scale: f64, fz: (f64, f64), v: f6
 /// (one array read in order where a vector per column cost an allocation each and a pointer per
 /// read: the normal equations read every column once per row).
 struct Mixing {
-    p: usize,
     start: Vec<usize>,
     entries: Vec<(usize, f64)>,
 }
 
 impl Mixing {
-    /// An empty mixing of `p` unknown columns, room for `cap` columns and twice as many entries.
-    fn with_capacity(p: usize, cap: usize) -> Mixing {
+    /// An empty mixing with room for `cap` columns and twice as many entries.
+    fn with_capacity(cap: usize) -> Mixing {
         let mut start = Vec::with_capacity(cap + 1);
         start.push(0);
-        Mixing { p, start, entries: Vec::with_capacity(2 * cap) }
+        Mixing { start, entries: Vec::with_capacity(2 * cap) }
     }
 
     /// Appends a column: `col`'s entries with a non-zero value, in their order.
-    fn push(&mut self, col: &[(usize, f64)]) {
-        self.entries.extend(col.iter().filter(|e| e.1 != 0.0));
+    fn push(&mut self, col: impl IntoIterator<Item = (usize, f64)>) {
+        self.entries.extend(col.into_iter().filter(|e| e.1 != 0.0));
         self.start.push(self.entries.len());
     }
 
-    /// Number of columns.
+    /// Number of columns p: the unknowns it mixes.
     fn ncols(&self) -> usize {
         // index: `start` begins with a 0 (`with_capacity`) and gains one end per column.
         self.start.len() - 1
@@ -428,7 +427,7 @@ impl Problem<'_> {
     /// the gain's sensor (the sequential fit with the excitation c held).
     fn mixing(&self, ch: &ChannelGram, fz: (f64, f64), gains: &[f64], excite: Option<&[Vec<f64>]>) -> Mixing {
         let p = self.n_shape() + excite.map_or(0, |_| self.n_gains);
-        let mut cols = Mixing::with_capacity(p, p);
+        let mut cols = Mixing::with_capacity(p);
         for (m, inp) in self.inputs.iter().enumerate() {
             let g = ch.gain[m].map_or(0.0, |i| gains.get(i).copied().unwrap_or(0.0));
             for (&k, &wave) in inp.ks.iter().zip(&inp.waves) {
@@ -436,11 +435,11 @@ impl Problem<'_> {
                 let own = (rk, if ch.accel { ch.sens[m] } else { 1.0 });
                 let resp = (ch.accel && excite.is_none() && g != 0.0).then(|| response(inp, k, wave, g, fz, ch.v));
                 match resp.flatten() {
-                    None => cols.push(&[own]),
+                    None => cols.push([own]),
                     // Ascending in the raw column (the partner's may come first).
                     Some([(_, resp), other]) => {
                         let own = (rk, own.1 + resp);
-                        cols.push(&if other.0 < rk { [other, own] } else { [own, other] })
+                        cols.push(if other.0 < rk { [other, own] } else { [own, other] })
                     }
                 }
             }
@@ -457,8 +456,7 @@ impl Problem<'_> {
                 }
             }
             for c in &gcols {
-                let col: Vec<(usize, f64)> = c.iter().copied().enumerate().collect();
-                cols.push(&col);
+                cols.push(c.iter().copied().enumerate());
             }
         }
         cols
@@ -595,7 +593,7 @@ impl Problem<'_> {
         if !residual {
             return Ok((beta, Vec::new()));
         }
-        let p = mix.first().map_or(0, |m| m.p);
+        let p = mix.first().map_or(0, Mixing::ncols);
         let mut resid = vec![0.0; self.n];
         for ((ch, a), fp) in self.chans.iter().zip(mix).zip(free) {
             let out = &mut resid[ch.start..ch.start + ch.cols.rows()];
@@ -622,7 +620,7 @@ impl Problem<'_> {
         let mix = self.mixings((theta[0], theta[1]), &theta[2..], None);
         let (nm, b) = self.normal_equations(&mix, free);
         let beta = solve_normal(&nm, &b)?;
-        let p = mix.first().map_or(0, |m| m.p);
+        let p = mix.first().map_or(0, Mixing::ncols);
         let missing = || ModelCheckError::Numerical("coupled fit: a channel's QR is missing".into());
         let mut out = Vec::new();
         for ((ch, a), fp) in self.chans.iter().zip(&mix).zip(free) {
@@ -648,7 +646,7 @@ impl Problem<'_> {
     /// over the channels' Gram matrices: each entry gets one share per channel, added in the
     /// channels' order. The rows of the shape unknowns, most of N, are formed in parallel.
     fn normal_equations(&self, mix: &[Mixing], free: &[Option<FreePart>]) -> (Vec<f64>, Vec<f64>) {
-        let p = mix.first().map_or(0, |m| m.p);
+        let p = mix.first().map_or(0, Mixing::ncols);
         let q = p + self.n_fixed + self.n_free;
         let mut nm = vec![0.0; q * q];
         let mut b = vec![0.0; q];
@@ -781,8 +779,8 @@ pub(crate) const COUPLED_DAMPING_BOX: (f64, f64) = (0.001, 0.3);
 pub(crate) const COUPLED_EVALUATIONS: usize = 21;
 /// The forward-difference step of the joint refinement's Jacobian in its box coordinates
 /// ([`vmt_estimators::modelcheck::DIFFERENCE_STEP`]): 10⁻⁴. Its cost comes from normal equations
-/// of a few hundred shape unknowns, whose rounding leaves noise of about 10⁻⁶ of it: on the benchmark's 15 000-sample mode
-/// set at 222 unknowns, 1.68904047·10⁴ and 1.68904175·10⁴ at θ 10⁻¹⁵ apart. At the default √ε the
+/// of a few hundred shape unknowns, whose rounding leaves noise of about 10⁻⁶ of it: on the
+/// benchmark's 15 000-sample mode set at 222 unknowns, 1.68904047·10⁴ and 1.68904175·10⁴ at θ 10⁻¹⁵ apart. At the default √ε the
 /// differences were that noise, and the refinement of the second scan's best point ended where it
 /// started (33.078 Hz, ζ 0.0200; 21 evaluations, 0.47 s); at 10⁻⁴ it reaches 32.53 Hz, ζ 0.0299
 /// (cost 1.496·10⁴) and the polish holds after two rounds instead of four. A step of 10⁻⁴ in the
@@ -1058,7 +1056,7 @@ impl Problem<'_> {
         let Some(mut at) = fit(&g) else { return (g, f64::INFINITY) };
         for _ in 0..steps {
             let (mix, factor, beta, before) = &at;
-            let (p, q) = (mix.first().map_or(0, |m| m.p), beta.len());
+            let (p, q) = (mix.first().map_or(0, Mixing::ncols), beta.len());
             let c = self.shape_coefs(beta);
             // dᵀr (per gain), Aᵀd (per gain, q values) and dᵀd (ng × ng), summed over the channels.
             let mut dr = vec![0.0; ng];
@@ -1925,7 +1923,7 @@ pub(crate) fn with_mode(st_mode: &Stack, base: &FitState, term: FitTerm, sigma: 
 /// = [U | F | y]·x, x = [−γ | −β_F | 1], γ = A·β_p (A: its [`Mixing`]; β: a solve's coefficients);
 /// the free vibration is not among them.
 fn residual_coef(ch: &ChannelGram, a: &Mixing, beta: &[f64]) -> Vec<f64> {
-    let p = a.p;
+    let p = a.ncols();
     let mut x: Vec<f64> = a.times(ch.r, beta).into_iter().map(|v| -v).collect();
     x.extend(ch.fixed.iter().map(|g| -beta[p + g]));
     x.push(1.0);
