@@ -12,7 +12,7 @@
 //! The 15 000-sample hidden-mode set also with its clock as loggers keep it: its times rounded to
 //! 1 µs (intervals of 665 and 666 µs in turn), and sampled at instants with Gaussian jitter of
 //! 0.5 µs (no two intervals alike; the generator's logger clock, the same draw otherwise): the
-//! mode's step maps are then kept and reused, or had from a near one.
+//! mode's interval maps are then kept and reused, or had from a built one's Taylor tables.
 //!
 //! Also `vmt compare` of the complete models on the same accelerometer sets (its channel
 //! reports hold each residual's least-squares periodogram), and the periodogram itself on an

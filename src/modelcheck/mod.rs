@@ -441,7 +441,8 @@ pub(crate) mod tests {
     }
 
     /// [`assert_steady_resonance_on`] a jittered clock (each interval 665 µs with Gaussian jitter
-    /// of 0.3 µs, none alike): most step maps are had from a kept one (`HeldStep::near`).
+    /// of 0.3 µs, none alike): most interval maps are had from a built one's Taylor tables
+    /// (`BaseMap::interval_at`).
     #[test]
     fn forced_mode_response_on_a_jittered_clock_is_exact() {
         use rand::SeedableRng;
