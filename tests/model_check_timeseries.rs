@@ -360,10 +360,16 @@ const LOGGER: Clock = Clock::Logger { jitter: 0.5e-6, resolution: 1e-6, lost: 0.
 /// one, two, … sample intervals that the model check must not read as longer averages.
 const LOSSY_LOGGER: Clock = Clock::Logger { jitter: 0.5e-6, resolution: 1e-6, lost: 0.02 };
 
+/// [`LOGGER`] stamping to the nanosecond: no two intervals alike, so every interval's mode map is
+/// had from a built one's Taylor tables (the benchmark's `res15000_jitter`); at 1 µs a few
+/// interval lengths recur and their maps are kept.
+const NS_LOGGER: Clock = Clock::Logger { jitter: 0.5e-6, resolution: 1e-9, lost: 0.0 };
+
 fn accel_rates(hidden: AccelHidden, draws: u64, add: bool, clock: Clock) -> Vec<(AccelTruth, Outcome)> {
     let on = match clock {
         Clock::Even => "",
         Clock::Logger { lost, .. } if lost > 0.0 => "LossyLogger",
+        Clock::Logger { resolution, .. } if resolution < 1e-6 => "NsLogger",
         Clock::Logger { .. } => "Logger",
     };
     loop_rates(
@@ -500,6 +506,13 @@ fn accel_complete_model_false_alarms_on_a_loggers_clock() {
 #[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
 fn accel_complete_model_false_alarms_on_a_lossy_logger() {
     complete_accel(LOSSY_LOGGER);
+}
+
+/// [`accel_complete_model_false_alarms`] on a logger that stamps to the nanosecond ([`NS_LOGGER`]).
+#[test]
+#[ignore = "rate study; prints the measured rates (see the report of issue 19)"]
+fn accel_complete_model_false_alarms_on_a_nanosecond_logger() {
+    complete_accel(NS_LOGGER);
 }
 
 fn complete_accel(clock: Clock) {
@@ -818,6 +831,7 @@ rate_studies! {
     accel_hidden_roll => hidden_accel(AccelHidden::Roll, "gravity_tilt", Clock::Even);
     accel_hidden_roll_on_a_loggers_clock => hidden_accel(AccelHidden::Roll, "gravity_tilt", LOGGER);
     accel_hidden_resonance_on_a_lossy_logger => hidden_accel(AccelHidden::Resonance, "resonance", LOSSY_LOGGER);
+    accel_hidden_resonance_on_a_nanosecond_logger => hidden_accel(AccelHidden::Resonance, "resonance", NS_LOGGER);
     accel_hidden_roll_on_a_lossy_logger => hidden_accel(AccelHidden::Roll, "gravity_tilt", LOSSY_LOGGER);
     encoder_hidden_interpolation_error => hidden_encoder(EncoderHidden::InterpolationError, "interpolation_error", Trace::Exact);
     encoder_hidden_cyclic_lead => hidden_encoder(EncoderHidden::CyclicLead, "cyclic_lead", Trace::Exact);
@@ -870,7 +884,8 @@ fn accel_diagnose_wall_time() {
 
 /// Writes one encoder draw to `VMT_OUT` (seed `VMT_SEED`, hidden effect `VMT_HIDDEN` =
 /// none|interp|cyclic|backlash|lag|cyclic+backlash, its trace rounded and lossy with
-/// `VMT_TRACE=rounded`, jittered and lossy with `VMT_TRACE=jittered`) and prints its truth: a tool for looking at one draw with
+/// `VMT_TRACE=rounded`, jittered and lossy with `VMT_TRACE=jittered`; its two passes logged for
+/// `VMT_SAMPLES`/5 rows each when set, as the benchmark's sized sets) and prints its truth: a tool for looking at one draw with
 /// `vmt compare`/`diagnose` by hand.
 #[test]
 #[ignore = "tool: writes one encoder draw (see the doc comment)"]
@@ -893,13 +908,14 @@ fn write_encoder_draw() {
         Ok("micrometre") => MICROMETRE_COMMAND,
         _ => Trace::Exact,
     };
-    let t = encoder_set_traced(&out, seed, hidden, None, trace);
+    let samples = std::env::var("VMT_SAMPLES").ok().and_then(|v| v.parse().ok());
+    let t = encoder_set_traced(&out, seed, hidden, samples, trace);
     eprintln!("{t:?}");
 }
 
 /// Writes one accelerometer draw to `VMT_OUT` (seed `VMT_SEED`, e.g. 1000 + k for the k-th draw of
 /// a hidden-mode study; hidden effect `VMT_HIDDEN` = none|mode|roll|mode+roll; about `VMT_SAMPLES`
-/// samples when set, the benchmark's sizes; its clock a logger's with `VMT_CLOCK=logger|lossy`) and prints its truth: the accelerometer twin of
+/// samples when set, the benchmark's sizes; its clock a logger's with `VMT_CLOCK=logger|lossy|ns`) and prints its truth: the accelerometer twin of
 /// [`write_encoder_draw`].
 #[test]
 #[ignore = "tool: writes one accelerometer draw (see the doc comment)"]
@@ -913,10 +929,11 @@ fn write_accel_draw() {
         _ => AccelHidden::None,
     };
     let samples = std::env::var("VMT_SAMPLES").ok().and_then(|v| v.parse().ok());
-    // `VMT_CLOCK=logger|lossy`: the clock of [`LOGGER`] or [`LOSSY_LOGGER`].
+    // `VMT_CLOCK=logger|lossy|ns`: the clock of [`LOGGER`], [`LOSSY_LOGGER`] or [`NS_LOGGER`].
     let clock = match std::env::var("VMT_CLOCK").as_deref() {
         Ok("logger") => LOGGER,
         Ok("lossy") => LOSSY_LOGGER,
+        Ok("ns") => NS_LOGGER,
         _ => Clock::Even,
     };
     let t = accel_set_clocked(&out, seed, hidden, 200.0, samples, clock);

@@ -525,13 +525,13 @@ fn mode_lanes(c: &Channel, lanes: &[Lane], f: f64, zeta: f64) -> Vec<Vec<f64>> {
     outs
 }
 
-/// Step maps [`mode_lanes_of`] keeps: a log whose clock rounds its times (to µs, say) has a few
-/// distinct intervals in turn, each with its own map (the benchmark's res15000 with its times
+/// Interval maps [`mode_lanes_of`] keeps: a log whose clock rounds its times (to µs, say) has a
+/// few distinct intervals in turn, each with its own map (the benchmark's res15000 with its times
 /// rounded to 1 µs: intervals of 665 and 666 µs).
 const STEP_MAPS_KEPT: usize = 8;
 
-/// Built maps with their tables ([`BaseMap`]) [`mode_lanes_of`] keeps: a gap's lost stretch has a
-/// step of its own.
+/// Built maps with their tables ([`BaseMap`]) [`mode_lanes_of`] keeps: a gap's lost stretch has
+/// steps of its own, and the window's map is had from the same base after it.
 const STEP_BASES_KEPT: usize = 4;
 
 /// Lanes [`mode_lanes`] runs together at most.
@@ -557,8 +557,9 @@ fn mode_lanes_of<const L: usize>(
         *x = [l.start.0, l.start.1];
     }
     let ins: [Option<&Excitation>; L] = std::array::from_fn(|l| lanes.get(l).and_then(|l| l.input));
-    // The step maps built (each with Φᵐ and the m input gains), the one in use last; at most
-    // [`STEP_MAPS_KEPT`], the least recently used dropped first.
+    // The interval maps made (each with Φᵐ and the m input gains), the one in use last, and the
+    // maps built with their tables that they were had from ([`use_map`]); at most
+    // [`STEP_MAPS_KEPT`] and [`STEP_BASES_KEPT`], the least recently used dropped first.
     let mut maps: Vec<IntervalMap> = Vec::new();
     let mut bases: Vec<BaseMap> = Vec::new();
     // The (interval's bits, steps) the last map was found good for: an interval the same to the
