@@ -353,19 +353,19 @@ impl BaseMap {
     /// The map of `m` held steps of `h` (s) of the mode (`f` in Hz, `zeta`) and its tables.
     fn new(f: f64, zeta: f64, h: f64, m: usize) -> BaseMap {
         let step = HeldStep::new(f, zeta, h);
-        let mut gk = vec![[0.0; 2]; m];
+        // The built map: D₀[k] = Φ^{m−1−k}·g and P₀ = Φᵐ.
+        let mut g_terms = vec![[[0.0; 2]; NEAR_ORDER + 1]; m];
         let mut g = step.g;
         let mut phi_m = [[1.0, 0.0], [0.0, 1.0]];
         for k in (0..m).rev() {
-            // index: k < m, gk's length.
-            gk[k] = g;
+            // index: k < m, g_terms' length.
+            g_terms[k][0] = g;
             g = mat2_times(step.phi, g);
             phi_m = mat2(step.phi, phi_m);
         }
         let w = TWO_PI * f;
-        let a_times = |v: [f64; 2]| [v[1], -w * w * v[0] - 2.0 * zeta * w * v[1]];
-        let mm = m as f64;
-        let ma = [[0.0, mm], [-w * w * mm, -2.0 * zeta * w * mm]];
+        let a = [[0.0, 1.0], [-w * w, -2.0 * zeta * w]];
+        let ma = a.map(|row| row.map(|v| v * m as f64));
         let mut phi_terms = [phi_m; NEAR_ORDER + 1];
         for p in 1..=NEAR_ORDER {
             // index: p − 1 < p ≤ NEAR_ORDER.
@@ -374,28 +374,22 @@ impl BaseMap {
         // u_j = Φʲ·b, j = 0..=m.
         let u: Vec<[f64; 2]> =
             std::iter::successors(Some([0.0, -1.0]), |x| Some(mat2_times(step.phi, *x))).take(m + 1).collect();
-        let g_terms = gk
-            .iter()
-            .enumerate()
-            .map(|(k, g0)| {
-                let j = m - 1 - k;
-                let mut t = [*g0; NEAR_ORDER + 1];
-                let (mut cj1, mut cj, mut fact) = (1.0, 1.0, 1.0);
-                for (p, tp) in t.iter_mut().enumerate().skip(1) {
-                    cj1 *= (j + 1) as f64;
-                    cj *= j as f64;
-                    fact *= p as f64;
-                    // index: j + 1 ≤ m, u's last.
-                    let (u1, u0) = (u[j + 1], u[j]);
-                    let mut v = [(cj1 * u1[0] - cj * u0[0]) / fact, (cj1 * u1[1] - cj * u0[1]) / fact];
-                    for _ in 1..p {
-                        v = a_times(v);
-                    }
-                    *tp = v;
+        for (k, t) in g_terms.iter_mut().enumerate() {
+            let j = m - 1 - k;
+            let (mut cj1, mut cj, mut fact) = (1.0, 1.0, 1.0);
+            for (p, tp) in t.iter_mut().enumerate().skip(1) {
+                cj1 *= (j + 1) as f64;
+                cj *= j as f64;
+                fact *= p as f64;
+                // index: j + 1 ≤ m, u's last.
+                let (u1, u0) = (u[j + 1], u[j]);
+                let mut v = [(cj1 * u1[0] - cj * u0[0]) / fact, (cj1 * u1[1] - cj * u0[1]) / fact];
+                for _ in 1..p {
+                    v = mat2_times(a, v);
                 }
-                t
-            })
-            .collect();
+                *tp = v;
+            }
+        }
         BaseMap { h, rate: w * (1.0 + 2.0 * zeta), phi_terms, g_terms }
     }
 
