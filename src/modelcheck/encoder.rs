@@ -89,18 +89,38 @@ pub(crate) fn following_error(c: &Channel, kv: f64) -> Vec<f64> {
 /// [`Stack::loop_kv`] (∞: the identity). Columns zero on the transmission (offsets, servo_lag)
 /// pass unchanged.
 pub(crate) fn close_loop(st: &Stack, col: &mut [f64]) {
+    close_loop_each(st, &mut [col]);
+}
+
+/// Columns per block of [`columns_each`]'s closed loop: each block's lags in one pass over the
+/// samples ([`close_loop_each`]), the blocks side by side.
+pub(crate) const LOOP_COLUMNS: usize = 8;
+
+/// [`close_loop`] for several columns (each n values in stack order) at once: each closed pair's
+/// lag in one pass over its samples for all of them ([`first_order_lag_each`]), the same bits as
+/// [`close_loop`] column by column.
+pub(crate) fn close_loop_each<C: AsMut<[f64]> + AsRef<[f64]>>(st: &Stack, cols: &mut [C]) {
     let starts = st.channel_starts();
     for (j, k) in closed_pairs(st) {
         let c = &st.chans[j];
-        let t = &col[starts[k]..starts[k] + c.y.len()];
-        if t.iter().all(|v| *v == 0.0) {
-            continue;
-        }
-        let mut through = if st.loop_kv.is_finite() { first_order_lag(&c.t, t, st.loop_kv) } else { t.to_vec() };
-        // T + g·(L_kv[T] − T), in place of the lag.
-        through.iter_mut().zip(t).for_each(|(l, t)| *l = t + st.loop_gain * (*l - t));
-        for (y, l) in col[starts[j]..starts[j] + c.y.len()].iter_mut().zip(through) {
-            *y -= l;
+        // index: a pair's channels hold c.y.len() rows each (`closed_pairs`), at their starts.
+        let (tr, fo) = (starts[k]..starts[k] + c.y.len(), starts[j]..starts[j] + c.y.len());
+        // The columns this pair moves: non-zero on its transmission channel.
+        let moved: Vec<usize> =
+            (0..cols.len()).filter(|&q| cols[q].as_ref()[tr.clone()].iter().any(|v| *v != 0.0)).collect();
+        let inputs: Vec<&[f64]> = moved.iter().map(|&q| &cols[q].as_ref()[tr.clone()]).collect();
+        let lagged = if st.loop_kv.is_finite() {
+            first_order_lag_each(&c.t, &inputs, st.loop_kv)
+        } else {
+            inputs.iter().map(|t| t.to_vec()).collect()
+        };
+        for (&q, mut through) in moved.iter().zip(lagged) {
+            let col = cols[q].as_mut();
+            // T + g·(L_kv[T] − T), in place of the lag.
+            through.iter_mut().zip(&col[tr.clone()]).for_each(|(l, t)| *l = t + st.loop_gain * (*l - t));
+            for (y, l) in col[fo.clone()].iter_mut().zip(through) {
+                *y -= l;
+            }
         }
     }
 }
@@ -471,33 +491,56 @@ pub(crate) fn encoder_channels(
 ///
 /// kv in 1/s, t in s; returns x at every sample (the same unit as u). Non-increasing times hold x.
 pub fn first_order_lag(t: &[f64], u: &[f64], kv: f64) -> Vec<f64> {
+    first_order_lag_each(t, &[u], kv).pop().unwrap_or_default()
+}
+
+/// [`first_order_lag`] of several inputs `us` on the clock `t`, in one pass over the samples (each
+/// input's recursion independent of the others', so their latencies overlap): the same bits as
+/// [`first_order_lag`] of each. Each input is taken to its first min(t, its length) values.
+pub fn first_order_lag_each(t: &[f64], us: &[&[f64]], kv: f64) -> Vec<Vec<f64>> {
     clear_upper_state();
-    let n = t.len().min(u.len());
-    let mut out = Vec::with_capacity(n);
+    let n = us.iter().map(|u| t.len().min(u.len())).max().unwrap_or(0);
+    let mut out: Vec<Vec<f64>> = us.iter().map(|u| Vec::with_capacity(t.len().min(u.len()))).collect();
     if n == 0 {
         return out;
     }
-    let s0 = if n > 1 && t[1] > t[0] { (u[1] - u[0]) / (t[1] - t[0]) } else { 0.0 };
-    let mut x = u[0] - s0 / kv;
-    out.push(x);
+    let mut xs: Vec<f64> = us
+        .iter()
+        .map(|u| {
+            let s0 = if t.len().min(u.len()) > 1 && t[1] > t[0] { (u[1] - u[0]) / (t[1] - t[0]) } else { 0.0 };
+            u.first().map_or(0.0, |u0| u0 - s0 / kv)
+        })
+        .collect();
+    for ((o, x), u) in out.iter_mut().zip(&xs).zip(us) {
+        if !u.is_empty() {
+            o.push(*x);
+        }
+    }
     // e^{−kv·h} at a reference interval h_r, reused while |kv·(h − h_r)| < 1e-8 as
     // e^{−kv·h_r}·(1 − kv·(h − h_r)) (error below 1e-16, the rounding of an exp): a log sampled at
     // a fixed rate has one h up to the rounding of its time stamps, so one exp serves every sample.
     let mut reference = (f64::NAN, 0.0);
     for i in 1..n {
         let h = t[i] - t[i - 1];
-        if h > 0.0 {
+        let decay = (h > 0.0).then(|| {
             let dh = kv * (h - reference.0);
-            let decay = if dh.abs() < 1e-8 {
+            if dh.abs() < 1e-8 {
                 reference.1 * (1.0 - dh)
             } else {
                 reference = (h, (-kv * h).exp());
                 reference.1
-            };
-            let s = (u[i] - u[i - 1]) / h;
-            x = u[i] - s / kv + (x - u[i - 1] + s / kv) * decay;
+            }
+        });
+        for ((o, x), u) in out.iter_mut().zip(xs.iter_mut()).zip(us) {
+            if i >= u.len() {
+                continue;
+            }
+            if let Some(decay) = decay {
+                let s = (u[i] - u[i - 1]) / h;
+                *x = u[i] - s / kv + (*x - u[i - 1] + s / kv) * decay;
+            }
+            o.push(*x);
         }
-        out.push(x);
     }
     out
 }

@@ -949,9 +949,11 @@ pub(crate) fn lead_shape_scan(
     // these columns).
     let joint_and_power = |ps: &[f64]| -> Vec<((f64, usize), f64)> {
         // The sine and cosine columns of each period.
-        let raw: Vec<Vec<f64>> = ps
-            .iter()
-            .flat_map(|&p| columns(st, EffectName::CyclicLead, &lead_shape, &[p]).into_iter().take(2))
+        let hs: Vec<[f64; 1]> = ps.iter().map(|&p| [p]).collect();
+        let hs: Vec<&[f64]> = hs.iter().map(|h| h.as_slice()).collect();
+        let raw: Vec<Vec<f64>> = columns_each(st, EffectName::CyclicLead, &lead_shape, &hs)
+            .into_iter()
+            .flat_map(|cols| cols.into_iter().take(2))
             .collect();
         let cp = base.projected_independent(&raw, w);
         let rows = ps.iter().map(|&p| reach(p)).max().unwrap_or(0);

@@ -1351,10 +1351,72 @@ pub fn diagnose_with(
     // A resonance over fitted translations is driven by the guideway the base fit shows.
     let st_mode = fitted_excitation(st, &f.fs).map(|ex| st.with_excitation(ex));
     let w: Vec<f64> = per.iter().map(|s| 1.0 / s).collect();
-    let interp_scan = names
-        .contains(&EffectName::InterpolationError)
-        .then(|| interpolation_periods(st, &f.fs.residual, &w))
-        .flatten();
+    // Shape against cyclic lead (fit.rs `LeadCap`): where the model's shapes keep orders whose
+    // shortest wavelength 2L/K reaches the lead's searched periods, the lead is ranked against the
+    // model refitted with its shapes capped (2L/K > P, so they cannot absorb it), the others
+    // against the model as fitted.
+    let binding: Vec<(EffectName, LeadCap)> =
+        f.fs.shapes
+            .iter()
+            .filter(|c| !c.given)
+            .filter_map(|c| c.lead_cap.filter(|l| !l.in_model && l.free_best > l.order).map(|l| (c.name, l)))
+            .collect();
+    let split = !binding.is_empty() && names.contains(&EffectName::CyclicLead);
+    let fit_sigma = Sigma::PerSample(per.clone());
+    // The interpolation error's periods from the residual (`interpolation_periods`), beside the
+    // lead's joint scan and the capped fit (rayon): neither needs the other.
+    let (interp_scan, lead_fit) = rayon::join(
+        || {
+            names
+                .contains(&EffectName::InterpolationError)
+                .then(|| interpolation_periods(st, &f.fs.residual, &w))
+                .flatten()
+        },
+        || -> Result<_, VmtError> {
+            // The lead's period and the shapes' orders chosen jointly (`lead_shape_scan`): the
+            // orders K* at the best period set the lead's base, and the lead is searched only at
+            // periods those orders cannot represent.
+            let scan = if split {
+                let grid = hyper_grid(st, EffectName::CyclicLead, Hyper::Period).0;
+                match (grid.first(), grid.last()) {
+                    (Some(lo), Some(hi)) => lead_shape_scan(st, &f.fs, &binding, &w, (*lo, *hi)).map_err(|m| {
+                        VmtError::bad(data, "", format!("scanning the cyclic lead against the shapes: {m}"))
+                    })?,
+                    _ => None,
+                }
+            } else {
+                None
+            };
+            let joint: Option<Vec<(EffectName, u32)>> = match &scan {
+                Some(sc) => Some(sc.orders.clone()),
+                // Not nested (B-splines): the shapes capped below the longest period searched.
+                None if split => Some(binding.iter().map(|(m, l)| (*m, l.capped_best)).collect()),
+                None => None,
+            };
+            let capped = match &joint {
+                Some(orders) => {
+                    // Point-table shapes (Legendre, all terms): no sparse selection to carry over.
+                    let order_of = |_: usize, me: &ModelEffect| {
+                        let n = me.effect.name;
+                        let order = orders.iter().find(|(m, _)| *m == n).map(|(_, o)| *o).unwrap_or_else(|| {
+                            f.fs.shapes
+                                .iter()
+                                .find(|c| c.name == n)
+                                .map_or(me.order.unwrap_or(DEFAULT_ORDER), |c| c.order)
+                        });
+                        (order, None)
+                    };
+                    let fs = fit_model_held(st, model, &fit_sigma, &w, &order_of, &f.fs).map_err(|m| {
+                        VmtError::bad(data, "", format!("fitting the model with its shapes capped: {m}"))
+                    })?;
+                    Some(fs)
+                }
+                None => None,
+            };
+            Ok((scan, joint, capped))
+        },
+    );
+    let (scan, joint, capped) = lead_fit?;
     let make = |n: EffectName| -> Candidate {
         {
             let st = match (&st_mode, n == EffectName::Resonance) {
@@ -1423,53 +1485,6 @@ pub fn diagnose_with(
     let sig_vec = significance_sigma(&f, &per);
     let sigma = Sigma::PerSample(sig_vec.clone());
     let config = DiagnoseConfig::default();
-    // Shape against cyclic lead (fit.rs `LeadCap`): where the model's shapes keep orders whose
-    // shortest wavelength 2L/K reaches the lead's searched periods, the lead is ranked against the
-    // model refitted with its shapes capped (2L/K > P, so they cannot absorb it), the others
-    // against the model as fitted.
-    let binding: Vec<(EffectName, LeadCap)> =
-        f.fs.shapes
-            .iter()
-            .filter(|c| !c.given)
-            .filter_map(|c| c.lead_cap.filter(|l| !l.in_model && l.free_best > l.order).map(|l| (c.name, l)))
-            .collect();
-    let split = !binding.is_empty() && names.contains(&EffectName::CyclicLead);
-    let fit_sigma = Sigma::PerSample(per.clone());
-    // The lead's period and the shapes' orders chosen jointly (`lead_shape_scan`): the orders K*
-    // at the best period set the lead's base, and the lead is searched only at periods those orders
-    // cannot represent.
-    let scan = if split {
-        let grid = hyper_grid(st, EffectName::CyclicLead, Hyper::Period).0;
-        match (grid.first(), grid.last()) {
-            (Some(lo), Some(hi)) => lead_shape_scan(st, &f.fs, &binding, &w, (*lo, *hi))
-                .map_err(|m| VmtError::bad(data, "", format!("scanning the cyclic lead against the shapes: {m}")))?,
-            _ => None,
-        }
-    } else {
-        None
-    };
-    let joint: Option<Vec<(EffectName, u32)>> = match &scan {
-        Some(sc) => Some(sc.orders.clone()),
-        // Not nested (B-splines): the shapes capped below the longest period searched.
-        None if split => Some(binding.iter().map(|(m, l)| (*m, l.capped_best)).collect()),
-        None => None,
-    };
-    let capped = match &joint {
-        Some(orders) => {
-            // Point-table shapes (Legendre, all terms): no sparse selection to carry over.
-            let order_of = |_: usize, me: &ModelEffect| {
-                let n = me.effect.name;
-                let order = orders.iter().find(|(m, _)| *m == n).map(|(_, o)| *o).unwrap_or_else(|| {
-                    f.fs.shapes.iter().find(|c| c.name == n).map_or(me.order.unwrap_or(DEFAULT_ORDER), |c| c.order)
-                });
-                (order, None)
-            };
-            let fs = fit_model_held(st, model, &fit_sigma, &w, &order_of, &f.fs)
-                .map_err(|m| VmtError::bad(data, "", format!("fitting the model with its shapes capped: {m}")))?;
-            Some(fs)
-        }
-        None => None,
-    };
     // The lead is searched at periods shorter than the capped shapes' shortest wavelengths.
     let lead_limit = joint.as_ref().map(|orders| {
         binding

@@ -1733,21 +1733,33 @@ pub(crate) fn legendre_to_monomials(first: u32, c: &[f64], range: (f64, f64)) ->
 /// Design columns of effect `name` at hyper-parameters `h` (in the order of [`shape`]), each
 /// passed through a closed position loop onto its following channels ([`close_loop`]).
 pub(crate) fn columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec<Vec<f64>> {
+    columns_each(st, name, sh, &[h]).pop().unwrap_or_default()
+}
+
+/// [`columns`] at each of the hyper-parameter values `hs`: every value's columns on each channel
+/// alone, then all of them through a closed loop together, in blocks of [`LOOP_COLUMNS`] side by
+/// side (rayon), each block's lags in one pass over the samples ([`close_loop_each`]). The same
+/// bits as [`columns`] at each value, on any number of threads.
+pub(crate) fn columns_each(st: &Stack, name: EffectName, sh: &Shape, hs: &[&[f64]]) -> Vec<Vec<Vec<f64>>> {
     clear_upper_state();
-    let mut cols = open_loop_columns(st, name, sh, h);
-    if has_closed_loop(st.chans) {
-        match cols.as_mut_slice() {
+    let mut sets: Vec<Vec<Vec<f64>>> = hs.iter().map(|h| open_loop_columns(st, name, sh, h)).collect();
+    if !has_closed_loop(st.chans) {
+        return sets;
+    }
+    let mut through: Vec<&mut Vec<f64>> = Vec::new();
+    for (set, h) in sets.iter_mut().zip(hs) {
+        match set.as_mut_slice() {
             // A wave in the scale's reading, faster than the log samples it (`close_loop_wave`).
             // (A cyclic lead, 2–60 mm, is sampled densely and takes `close_loop`: passed as a wave
             // it was no longer found against a flexible positioning shape, draw 2007.)
             [sin, cos] if name == EffectName::InterpolationError => {
                 close_loop_wave(st, h[0], &st.interp_shift, sin, cos)
             }
-            // Each column through the loop on its own: side by side (rayon), the same bits.
-            cols => cols.par_iter_mut().for_each(|c| close_loop(st, c)),
+            cols => through.extend(cols.iter_mut()),
         }
     }
-    cols
+    through.par_chunks_mut(LOOP_COLUMNS).for_each(|block| close_loop_each(st, block));
+    sets
 }
 
 /// The columns of [`columns`] on each channel alone, before the loop couples them.
