@@ -575,6 +575,30 @@ pub fn play(drive: &[f64], b: f64) -> Vec<f64> {
 mod tests {
     use super::*;
 
+    /// Several inputs lagged in one pass ([`first_order_lag_each`]) are the bits of each lagged
+    /// alone, on a jittered clock with a repeated and a backward time stamp, inputs of 300, 1, 0 and
+    /// 1 000 values (the last longer than the clock: cut to it).
+    #[test]
+    fn lags_in_one_pass_are_the_bits_of_each_alone() {
+        let t: Vec<f64> = (0..800)
+            .map(|i| match i {
+                100 => 99.0 * 1.3e-3,
+                200 => 198.9 * 1.3e-3,
+                _ => i as f64 * 1.3e-3 + 2e-7 * ((i * 7919) % 13) as f64,
+            })
+            .collect();
+        let u0: Vec<f64> = (0..300).map(|i| (i as f64 * 0.05).sin() * 1e-3).collect();
+        let u3: Vec<f64> = (0..1000).map(|i| 1e-4 * i as f64 + (i as f64 * 0.31).cos() * 1e-6).collect();
+        let us: [&[f64]; 4] = [&u0, &[2.5e-3], &[], &u3];
+        let each = first_order_lag_each(&t, &us, 31.7);
+        for (u, got) in us.iter().zip(&each) {
+            let alone = first_order_lag(&t, u, 31.7);
+            assert_eq!(got.len(), t.len().min(u.len()));
+            assert!(got.iter().zip(&alone).all(|(a, b)| a.to_bits() == b.to_bits()));
+            assert_eq!(got.len(), alone.len());
+        }
+    }
+
     /// A ramp u = v·t is followed with the lag v/kv from the start (settled), and a step response
     /// decays as e^{−kv·t} (hand-worked values).
     #[test]
