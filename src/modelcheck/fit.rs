@@ -949,8 +949,7 @@ pub(crate) fn lead_shape_scan(
     // these columns).
     let joint_and_power = |ps: &[f64]| -> Vec<((f64, usize), f64)> {
         // The sine and cosine columns of each period.
-        let hs: Vec<[f64; 1]> = ps.iter().map(|&p| [p]).collect();
-        let hs: Vec<&[f64]> = hs.iter().map(|h| h.as_slice()).collect();
+        let hs: Vec<&[f64]> = ps.iter().map(std::slice::from_ref).collect();
         let raw: Vec<Vec<f64>> = columns_each(st, EffectName::CyclicLead, &lead_shape, &hs)
             .into_iter()
             .flat_map(|cols| cols.into_iter().take(2))
