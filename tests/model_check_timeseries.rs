@@ -598,15 +598,25 @@ fn hidden_accel(h: AccelHidden, expect: &str, clock: Clock) {
     // per pass hides it), within 2× the bound (the threshold).
     let roll_err = |t: &AccelTruth, o: &Outcome| -> Option<(f64, f64)> {
         let (roll, bound) = (t.roll.as_ref()?, t.roll_crb?);
+        // The fitted tilt is the Legendre series Σ p_k·P_k(u), u = (2x − a − b)/(b − a) on
+        // [tilt_x_lo, tilt_x_hi] (k from 1; P_k by Bonnet's recurrence, written here anew).
         let fitted = o.fitted_after.as_ref();
-        let c = |k: usize| fitted.and_then(|v| v[format!("tilt_acc_y_c{k}")].as_f64());
-        let coefs: Vec<f64> = (1..).map_while(c).collect();
+        let key = |k: &str| fitted.and_then(|v| v[k].as_f64());
+        let coefs: Vec<f64> = (1..).map_while(|k| key(&format!("tilt_acc_y_p{k}"))).collect();
+        let (a, b) = (key("tilt_x_lo").unwrap_or(0.0), key("tilt_x_hi").unwrap_or(1.0));
+        let series = |x: f64| {
+            let u = (2.0 * x - a - b) / (b - a);
+            let (mut p0, mut p1, mut sum) = (1.0, u, 0.0);
+            for (k, ck) in coefs.iter().enumerate() {
+                sum += ck * p1;
+                let n = (k + 1) as f64;
+                (p0, p1) = (p1, ((2.0 * n + 1.0) * u * p1 - n * p0) / (n + 1.0));
+            }
+            sum
+        };
         let (lo, hi) = t.travel;
         let xs: Vec<f64> = (0..400).map(|g| lo + (hi - lo) * (g as f64 + 0.5) / 400.0).collect();
-        let diff: Vec<f64> = xs
-            .iter()
-            .map(|&x| coefs.iter().enumerate().map(|(k, ck)| ck * x.powi(k as i32 + 1)).sum::<f64>() - roll.value(x))
-            .collect();
+        let diff: Vec<f64> = xs.iter().map(|&x| series(x) - roll.value(x)).collect();
         let mean = diff.iter().sum::<f64>() / diff.len() as f64;
         let rms = (diff.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / diff.len() as f64).sqrt();
         Some((if coefs.is_empty() { f64::INFINITY } else { rms }, bound))

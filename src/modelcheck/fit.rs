@@ -564,11 +564,11 @@ fn fit_model_from(
     let m = distinct_positions(st).len() as u32;
     let top = m.saturating_sub(1).max(1);
     let motions: Vec<usize> = (0..first.terms.len()).filter(|&t| first.terms[t].name.is_error_motion()).collect();
-    if motions.is_empty() {
-        return Ok(first);
-    }
     if accel {
         return fit_orders_nested(st, model, sigma, w, first, &motions);
+    }
+    if motions.is_empty() {
+        return Ok(first);
     }
     let lead = lead_period(st, model, &first);
     let n = st.n;
@@ -1057,7 +1057,9 @@ pub(crate) fn resolvable_order(st: &Stack, name: EffectName, range: (f64, f64)) 
 /// held at their columns (a column shared with other channels is refitted on these samples
 /// alone). The constant and slope of a motion seen only by accelerometers have no acceleration:
 /// their columns are zero there and they are not fitted (pinned at 0, said in the report).
-/// Coordinate-wise over the motions, two sweeps when several share a channel; then the model is
+/// A `gravity_tilt` in the model has each accelerometer's degree chosen after the motions
+/// ([`choose_tilt_orders`]). Coordinate-wise over the motions and the tilt, two sweeps when
+/// several motions share a channel or a motion shares one with the tilt; then the model is
 /// refitted at the chosen orders with its searches.
 fn fit_orders_nested(
     st: &Stack,
@@ -1068,11 +1070,20 @@ fn fit_orders_nested(
     motions: &[usize],
 ) -> Result<FitState, ModelCheckError> {
     let mut terms = first.terms.clone();
+    // A `gravity_tilt` whose degrees the model does not give: chosen per accelerometer as well.
+    let tilt = (0..terms.len())
+        .find(|&t| terms[t].name == EffectName::GravityTilt && model.effects[terms[t].index].order.is_none());
+    if motions.is_empty() && tilt.is_none() {
+        return Ok(first);
+    }
     let mut best: BTreeMap<usize, (u32, u32)> = BTreeMap::new();
-    // A second sweep only when two motions share a channel (else each choice is independent).
+    // A second sweep only when two motions share a channel, or a motion shares an accelerometer's
+    // channel with its tilt (else each choice is independent).
     let shared =
         st.chans.iter().any(|c| motions.iter().filter(|&&ti| c.s_motion(first.terms[ti].name) != 0.0).count() > 1);
-    let sweeps = if motions.len() > 1 && shared { 2 } else { 1 };
+    let with_tilt = tilt.is_some()
+        && st.chans.iter().any(|c| c.is_accel() && motions.iter().any(|&ti| c.s_motion(first.terms[ti].name) != 0.0));
+    let sweeps = if (motions.len() > 1 && shared) || with_tilt { 2 } else { 1 };
     let rows_of = |name: EffectName| -> Vec<usize> {
         let mut out = Vec::new();
         let mut k = 0;
@@ -1147,26 +1158,34 @@ fn fit_orders_nested(
             Ok((chosen, searched, shape(st, name, 1, me.order.unwrap_or(chosen), false)))
         }
     };
-    if sweeps == 1 {
-        // Independent choices (no channel sees two of the motions): each on its own thread.
-        let out: Vec<Result<(u32, u32, Shape), ModelCheckError>> =
-            motions.par_iter().map(|&ti| choose(&terms, ti)).collect();
-        for (&ti, r) in motions.iter().zip(out) {
-            let (chosen, searched, sh) = r?;
-            best.insert(ti, (chosen, searched));
-            terms[ti].shape = sh;
-        }
-    } else {
-        for _ in 0..sweeps {
+    for _ in 0..sweeps {
+        if motions.len() > 1 && shared {
             for &ti in motions {
                 let (chosen, searched, sh) = choose(&terms, ti)?;
                 best.insert(ti, (chosen, searched));
                 terms[ti].shape = sh;
             }
+        } else {
+            // Independent choices (no channel sees two of the motions): each on its own thread.
+            let out: Vec<Result<(u32, u32, Shape), ModelCheckError>> =
+                motions.par_iter().map(|&ti| choose(&terms, ti)).collect();
+            for (&ti, r) in motions.iter().zip(out) {
+                let (chosen, searched, sh) = r?;
+                best.insert(ti, (chosen, searched));
+                terms[ti].shape = sh;
+            }
+        }
+        if let Some(ti) = tilt {
+            terms[ti].shape = choose_tilt_orders(st, &terms, ti, &first.target, w)?;
         }
     }
-    let chosen: BTreeMap<usize, (u32, Option<Vec<u32>>)> =
+    // Per model entry: the order and, for a motion, its sparse selection; for the tilt, each
+    // accelerometer's degree.
+    let mut chosen: BTreeMap<usize, (u32, Option<Vec<u32>>)> =
         motions.iter().map(|&ti| (terms[ti].index, (terms[ti].shape.order, terms[ti].shape.select.clone()))).collect();
+    if let Some(ti) = tilt {
+        chosen.insert(terms[ti].index, (terms[ti].shape.order, Some(terms[ti].shape.tilt_orders.clone())));
+    }
     let default = |me: &ModelEffect| me.order.unwrap_or(DEFAULT_ORDER);
     let mut fs = fit_model_fixed(st, model, sigma, w, &|index: usize, me: &ModelEffect| {
         chosen.get(&index).cloned().unwrap_or((default(me), None))
@@ -1181,8 +1200,65 @@ fn fit_orders_nested(
     Ok(fs)
 }
 
-/// Fits the model with each fitted error motion's Legendre order from `order_of(effect index, effect)`:
-/// linear parameters by weighted least squares, hyper-parameters searched (module doc).
+/// Highest Legendre degree of an accelerometer's `gravity_tilt` that BIC may choose
+/// ([`choose_tilt_orders`]): a roll or pitch of correlation length ≥ 0.1 m over a travel of up to
+/// 1 m is within a few hundredths of a µrad at degree 20, and the monomials are still written
+/// ([`MONOMIAL_MAX_ORDER`]).
+pub(crate) const TILT_MAX_ORDER: u32 = 20;
+
+/// The `gravity_tilt` of term `ti` with each accelerometer's Legendre degree chosen by BIC with σ
+/// unknown, n_s·ln(RSS_k/n_s) + (rank + k)·ln n_s, over the degrees 1..N (N: [`TILT_MAX_ORDER`],
+/// at most the distinct positions less one and a quarter of the samples) from the nested residual
+/// sums of one QR (`nested_rss`) on the n_s samples of that sensor, with the offsets and every other
+/// term held at their columns (the other sensors' tilts are nil there). A fixed cubic cannot follow
+/// a wavy roll at piezo-level noise: what it misses is taken up by the flexible straightness and
+/// biases the tilt (generator draw 5011: 2.6 × the roll's Cramér–Rao bound).
+fn choose_tilt_orders(
+    st: &Stack,
+    terms: &[FitTerm],
+    ti: usize,
+    target: &[f64],
+    w: &[f64],
+) -> Result<Shape, ModelCheckError> {
+    let sensors = accel_sensors(st);
+    let others: Vec<FitTerm> = terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
+    let fixed_all = design(st, &others);
+    let mut orders = Vec::with_capacity(sensors.len());
+    for (s, name) in sensors.iter().enumerate() {
+        let mut rows = Vec::new();
+        let mut xs = Vec::new();
+        let mut k = 0;
+        for c in st.chans {
+            if c.sensor == *name && c.is_accel() {
+                rows.extend(k..k + c.y.len());
+                xs.extend(c.x.iter().take(c.y.len()).copied());
+            }
+            k += c.y.len();
+        }
+        xs.sort_by(f64::total_cmp);
+        xs.dedup();
+        let pick = |v: &[f64]| rows.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+        let fixed: Vec<Vec<f64>> = fixed_all.iter().map(|c| pick(c)).filter(|c| c.iter().any(|v| *v != 0.0)).collect();
+        let (wr, y) = (pick(w), pick(target));
+        let base = OrthoBase::new(&fixed, &wr)?;
+        let top = TILT_MAX_ORDER.min(xs.len().saturating_sub(1) as u32).min((rows.len() / 4) as u32).max(1);
+        let only: Vec<u32> = (0..sensors.len()).map(|j| if j == s { top } else { 0 }).collect();
+        let sh = terms[ti].shape.clone().with_tilt_orders(&sensors, only);
+        let series: Vec<Vec<f64>> = columns(st, EffectName::GravityTilt, &sh, &[]).iter().map(|c| pick(c)).collect();
+        let nr = nested_rss(&y, &wr, &base, &series)?;
+        let nm = rows.len() as f64;
+        let bic = |k: usize| nm * (nr.rss[k].max(1e-300) / nm).ln() + (base.rank() + k) as f64 * nm.ln();
+        // At least the slope (the model states a tilt); series column j is degree j + 1.
+        let k = (1..nr.rss.len()).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0);
+        orders.push(if k == 0 { 1 } else { nr.used[k - 1] as u32 + 1 });
+    }
+    Ok(terms[ti].shape.clone().with_tilt_orders(&sensors, orders))
+}
+
+/// Fits the model with each fitted error motion's Legendre order from `order_of(effect index, effect)`
+/// (the order and a sparse selection of the series; for `gravity_tilt`, each accelerometer's
+/// degree in place of the selection): linear parameters by weighted least squares,
+/// hyper-parameters searched (module doc).
 pub(crate) fn fit_model_fixed(
     st: &Stack,
     model: &Model,
@@ -1265,7 +1341,10 @@ fn fit_model_orders(
         let (order, select) = order_of(index, me);
         let mut sh = shape(st, me.effect.name, 1, order, lacks_coulomb(model));
         if let Some(sel) = select {
-            sh = sh.selected(sel);
+            sh = match me.effect.name {
+                EffectName::GravityTilt => sh.with_tilt_orders(&accel_sensors(st), sel),
+                _ => sh.selected(sel),
+            };
         }
         let sh = match requested_basis(me) {
             Some(b) => sh.in_basis(st, b, order),
@@ -1721,10 +1800,28 @@ pub(crate) fn describe(
             m.insert("gain".into(), c[0]);
         }
         EffectName::GravityTilt => {
-            // Tilt of each sensor's sensitive axis, rad: Σ_k c_k·x^k (x in m), by sensor.
-            for (k, v) in sh.coefs.iter().zip(c) {
-                m.insert(format!("tilt_{k}"), *v);
+            // Tilt of each sensor's sensitive axis, rad: its Legendre series Σ_k p_k·P_k(u) on
+            // [x_lo, x_hi] (`tilt_{sensor}_p{k}`), and the same as monomials Σ_j c_j·x^j, x in m
+            // (`tilt_{sensor}_c{j}`, up to [`MONOMIAL_MAX_ORDER`]); the offsets carry the constant.
+            let mut at = 0;
+            while at < sh.coefs.len() {
+                let sensor = sh.coefs[at].rsplit_once("_p").map_or("", |(a, _)| a);
+                let n =
+                    sh.coefs[at..].iter().take_while(|k| k.rsplit_once("_p").map(|(a, _)| a) == Some(sensor)).count();
+                // index: `at..at + n` are coefficient positions counted over `coefs` itself (n ≥ 1).
+                let own = &c[at..at + n];
+                for (k, v) in own.iter().enumerate() {
+                    m.insert(format!("tilt_{sensor}_p{}", k + 1), *v);
+                }
+                if n as u32 <= MONOMIAL_MAX_ORDER {
+                    for (j, v) in legendre_to_monomials(1, own, sh.range).into_iter().enumerate().skip(1) {
+                        m.insert(format!("tilt_{sensor}_c{j}"), v);
+                    }
+                }
+                at += n.max(1);
             }
+            m.insert("tilt_x_lo".into(), sh.range.0);
+            m.insert("tilt_x_hi".into(), sh.range.1);
         }
         no_own_signature!() | EffectName::Backlash | EffectName::ScaleError => {
             m.insert("value".into(), c[0]);

@@ -57,8 +57,10 @@
 //!   and are pinned at 0 (said in `shapes`).
 //! - g·τ_s(x): gravity seen through the tilt of sensor s's sensitive axis (`gravity_tilt`; the
 //!   simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted
-//!   as a polynomial Σ c_k·x^k, k = 1..3, per sensor, shared by its runs). The error-motion columns
-//!   leave gravity out: a given roll or pitch does not predict its g·τ (add `gravity_tilt`).
+//!   per sensor, shared by its runs, as a Legendre series Σ p_k·P_k(u), k = 1..K_s, over the
+//!   positions' range, K_s chosen by BIC up to 20 (`choose_tilt_orders`; 3 as a `diagnose`
+//!   candidate) and written as monomials c_j·x^j too). The error-motion columns leave gravity out: a
+//!   given roll or pitch does not predict its g·τ (add `gravity_tilt`).
 //! - a_mode: a `resonance`, a structural mode q̈ + 2ζω·q̇ + ω²·q = −u·a_ref(t) driven by the
 //!   acceleration of the axis reference point (the simulator's base excitation, `StructuralMode`),
 //!   read as φ·q̈ (φ the mode shape at the sensor). Where the model predicts that excitation on a
@@ -488,20 +490,26 @@ pub(crate) mod tests {
         }
     }
 
-    /// The gravity-tilt column of x^k on an accelerometer is g·x^k (g = 9.80665 m/s²), shared by the
-    /// sensor's runs; a laser channel gets 0.
+    /// The gravity-tilt column of degree k on an accelerometer is g·P_k(u), u = (2x − a − b)/(b − a)
+    /// over the positions' range [a, b] (g = 9.80665 m/s²), shared by the sensor's runs; a laser
+    /// channel gets 0; a sensor's own degree (`with_tilt_orders`) sets its columns and names.
     #[test]
-    fn gravity_tilt_columns_are_g_times_powers_of_x() {
+    fn gravity_tilt_columns_are_g_times_legendre_of_x() {
         let mut laser = accel("c", 3);
         laser.kind = SensorKind::LaserLinear;
         laser.sensor = "laser".into();
         let chans = vec![accel("a", 10), accel("b", 10), laser];
         let st = Stack::new(&chans);
         let sh = shape(&st, EffectName::GravityTilt, 1, 3, false);
-        assert_eq!(sh.coefs, vec!["acc_c1", "acc_c2", "acc_c3"]);
+        assert_eq!(sh.coefs, vec!["acc_p1", "acc_p2", "acc_p3"]);
         let cols = columns(&st, EffectName::GravityTilt, &sh, &[]);
-        // Sample 5 of run b: x = 0.1·0.05 = 0.005 m; c2 column = g·x².
-        assert!((cols[1][15] - GRAVITY * 0.005f64.powi(2)).abs() < 1e-15);
+        // Sample 5 of run b: x = 0.1·0.05 = 0.005 m on [0, 0.009]: u = 1/9, P_2 = (3u² − 1)/2.
+        let u = 1.0 / 9.0;
+        assert!((cols[1][15] - GRAVITY * (3.0 * u * u - 1.0) / 2.0).abs() < 1e-14);
+        assert!(cols.iter().all(|c| c[20..].iter().all(|v| *v == 0.0)));
+        let two = sh.with_tilt_orders(&["acc".to_string()], vec![2]);
+        assert_eq!((two.coefs.clone(), two.order), (vec!["acc_p1".to_string(), "acc_p2".to_string()], 2));
+        assert_eq!(columns(&st, EffectName::GravityTilt, &two, &[]), cols[..2].to_vec());
         assert!(cols.iter().all(|c| c[20..].iter().all(|v| *v == 0.0)));
     }
 }

@@ -943,6 +943,9 @@ pub(crate) struct Shape {
     pub(crate) select: Option<Vec<u32>>,
     /// [`ShapeBasis::Table`]: the positions (m) of its values, ascending; empty otherwise.
     pub(crate) knots: Vec<f64>,
+    /// `gravity_tilt`: each accelerometer's Legendre degree, in [`accel_sensors`] order (0: no
+    /// tilt on that sensor); empty: every accelerometer at `order`.
+    pub(crate) tilt_orders: Vec<u32>,
 }
 
 vmt_core::named_enum! {
@@ -1128,6 +1131,20 @@ impl Shape {
         self.coefs = sel.iter().map(|k| format!("c{k}")).collect();
         self.select = Some(sel);
         self
+    }
+
+    /// A `gravity_tilt` with each accelerometer of `sensors` ([`accel_sensors`]) at its own degree
+    /// `orders` (0: no tilt on it); `order` becomes the highest.
+    pub(crate) fn with_tilt_orders(mut self, sensors: &[String], orders: Vec<u32>) -> Shape {
+        self.order = orders.iter().copied().max().unwrap_or(0);
+        self.coefs = tilt_coefs(sensors, &orders, self.order);
+        self.tilt_orders = orders;
+        self
+    }
+
+    /// A `gravity_tilt`'s degree on accelerometer `s` (in [`accel_sensors`] order).
+    pub(crate) fn tilt_order(&self, s: usize) -> u32 {
+        self.tilt_orders.get(s).copied().unwrap_or(self.order)
     }
 
     /// Values and slopes (d/dx, 1/m) of the basis functions of orders 0..=`order` at x (m).
@@ -1592,9 +1609,7 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
             );
             (names, vec![Hyper::Frequency, Hyper::Damping])
         }
-        EffectName::GravityTilt => {
-            (accel_sensors(st).iter().flat_map(|a| (1..=order).map(move |k| format!("{a}_c{k}"))).collect(), vec![])
-        }
+        EffectName::GravityTilt => (tilt_coefs(&accel_sensors(st), &[], order), vec![]),
         no_own_signature!() => (vec![], vec![]),
     };
     let range = match distinct_positions(st) {
@@ -1608,7 +1623,17 @@ pub(crate) fn shape(st: &Stack, name: EffectName, first_power: u32, order: u32, 
     } else {
         ShapeBasis::Legendre
     };
-    Shape { coefs, hypers, first_power, order, with_fc, range, basis, select: None, knots: vec![] }
+    Shape { coefs, hypers, first_power, order, with_fc, range, basis, select: None, knots: vec![], tilt_orders: vec![] }
+}
+
+/// The coefficient names of a `gravity_tilt` over the accelerometers `sensors`: `{sensor}_p{k}`,
+/// k = 1..its degree (`orders[s]`, else `order`).
+fn tilt_coefs(sensors: &[String], orders: &[u32], order: u32) -> Vec<String> {
+    sensors
+        .iter()
+        .enumerate()
+        .flat_map(|(s, a)| (1..=orders.get(s).copied().unwrap_or(order)).map(move |k| format!("{a}_p{k}")))
+        .collect()
 }
 
 /// Legendre polynomials P_0..P_n at u and their derivatives dP_k/du, by Bonnet's recurrence
@@ -1851,18 +1876,28 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
         }
         EffectName::Resonance => resonance_runs(st, h[0], h[1]).iter().map(|c| c.dense(st.n)).collect(),
         EffectName::GravityTilt => {
-            // g·tilt(x) of each accelerometer's sensitive axis, a polynomial in x shared by its runs.
+            // g·tilt(x) of each accelerometer's sensitive axis, a Legendre series
+            // Σ_k p_k·P_k(u), u = (2x − a − b)/(b − a), k = 1..its degree, shared by its runs.
+            let (a, b) = sh.range;
             let mut cols = Vec::new();
-            for a in accel_sensors(st) {
-                for k in 1..=sh.order {
-                    cols.push(st.col(|c, i| {
-                        if c.sensor == a && c.is_accel() {
-                            GRAVITY * c.x[i].powi(k as i32)
-                        } else {
-                            0.0
+            for (s, name) in accel_sensors(st).iter().enumerate() {
+                // index: a degree the shape was built with (≤ TILT_MAX_ORDER or the model's
+                // checked `order`), widened.
+                let top = sh.tilt_order(s) as usize;
+                let mut own = vec![vec![0.0; st.n]; top];
+                let mut row = 0;
+                for c in st.chans {
+                    if c.sensor == *name && c.is_accel() {
+                        for (i, &x) in c.x.iter().take(c.y.len()).enumerate() {
+                            let (p, _) = legendre((2.0 * x - a - b) / (b - a), top);
+                            for (col, pk) in own.iter_mut().zip(&p[1..]) {
+                                col[row + i] = GRAVITY * pk;
+                            }
                         }
-                    }));
+                    }
+                    row += c.y.len();
                 }
+                cols.extend(own);
             }
             cols
         }
@@ -2413,6 +2448,7 @@ mod slope_tests {
                 basis,
                 select: Some(sel.clone()),
                 knots: vec![],
+                tilt_orders: vec![],
             };
             let ks = sh.ks();
             let coef: Vec<f64> = ks.iter().map(|_| rng.gen_range(-1e-6..1e-6)).collect();
