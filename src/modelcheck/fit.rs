@@ -1208,7 +1208,8 @@ pub(crate) const TILT_MAX_ORDER: u32 = 20;
 
 /// The `gravity_tilt` of term `ti` with each accelerometer's Legendre degree chosen by BIC with σ
 /// unknown, n_s·ln(RSS_k/n_s) + (rank + k)·ln n_s, over the degrees 1..N (N: [`TILT_MAX_ORDER`],
-/// at most the distinct positions less one and a quarter of the samples) from the nested residual
+/// at most the distinct positions less one and a quarter of the samples, and every sensor's
+/// columns within [`MAX_SERIES_VALUES`]) from the nested residual
 /// sums of one QR (`nested_rss`) on the n_s samples of that sensor, with the offsets and every other
 /// term held at their columns (the other sensors' tilts are nil there). A fixed cubic cannot follow
 /// a wavy roll at piezo-level noise: what it misses is taken up by the flexible straightness and
@@ -1241,7 +1242,13 @@ fn choose_tilt_orders(
         let fixed: Vec<Vec<f64>> = fixed_all.iter().map(|c| pick(c)).filter(|c| c.iter().any(|v| *v != 0.0)).collect();
         let (wr, y) = (pick(w), pick(target));
         let base = OrthoBase::new(&fixed, &wr)?;
-        let top = TILT_MAX_ORDER.min(xs.len().saturating_sub(1) as u32).min((rows.len() / 4) as u32).max(1);
+        // Every sensor's columns span the stack: their values held to [`MAX_SERIES_VALUES`].
+        let by_memory = MAX_SERIES_VALUES / st.n.max(1).saturating_mul(sensors.len());
+        let top = TILT_MAX_ORDER
+            .min(xs.len().saturating_sub(1) as u32)
+            .min((rows.len() / 4) as u32)
+            .min(by_memory.min(TILT_MAX_ORDER as usize) as u32)
+            .max(1);
         let only: Vec<u32> = (0..sensors.len()).map(|j| if j == s { top } else { 0 }).collect();
         let sh = terms[ti].shape.clone().with_tilt_orders(&sensors, only);
         let series: Vec<Vec<f64>> = columns(st, EffectName::GravityTilt, &sh, &[]).iter().map(|c| pick(c)).collect();
