@@ -1810,13 +1810,15 @@ pub(crate) fn describe(
             // Tilt of each sensor's sensitive axis, rad: its Legendre series Σ_k p_k·P_k(u) on
             // [x_lo, x_hi] (`tilt_{sensor}_p{k}`), and the same as monomials Σ_j c_j·x^j, x in m
             // (`tilt_{sensor}_c{j}`, up to [`MONOMIAL_MAX_ORDER`]); the offsets carry the constant.
+            // Each sensor's degree (its `{sensor}_p1..` coefficients, in order).
+            let degrees: Vec<usize> = match sh.tilt_orders.as_slice() {
+                [] => vec![sh.order as usize; sh.coefs.len() / (sh.order as usize).max(1)],
+                own => own.iter().map(|&k| k as usize).collect(),
+            };
             let mut at = 0;
-            while at < sh.coefs.len() {
-                let sensor = sh.coefs[at].rsplit_once("_p").map_or("", |(a, _)| a);
-                let n =
-                    sh.coefs[at..].iter().take_while(|k| k.rsplit_once("_p").map(|(a, _)| a) == Some(sensor)).count();
-                // index: `at..at + n` are coefficient positions counted over `coefs` itself (n ≥ 1).
-                let own = &c[at..at + n];
+            for n in degrees.into_iter().filter(|n| *n > 0) {
+                let (Some(first), Some(own)) = (sh.coefs.get(at), c.get(at..at + n)) else { break };
+                let sensor = first.strip_suffix("_p1").unwrap_or(first);
                 for (k, v) in own.iter().enumerate() {
                     m.insert(format!("tilt_{sensor}_p{}", k + 1), *v);
                 }
@@ -1825,7 +1827,7 @@ pub(crate) fn describe(
                         m.insert(format!("tilt_{sensor}_c{j}"), v);
                     }
                 }
-                at += n.max(1);
+                at += n;
             }
             m.insert("tilt_x_lo".into(), sh.range.0);
             m.insert("tilt_x_hi".into(), sh.range.1);
