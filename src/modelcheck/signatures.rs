@@ -1881,8 +1881,8 @@ fn open_loop_columns(st: &Stack, name: EffectName, sh: &Shape, h: &[f64]) -> Vec
             let (a, b) = sh.range;
             let mut cols = Vec::new();
             for (s, name) in accel_sensors(st).iter().enumerate() {
-                // index: a degree the shape was built with (≤ TILT_MAX_ORDER or the model's
-                // checked `order`), widened.
+                // index: a degree the shape was built with (≤ TILT_MAX_ORDER, or DEFAULT_ORDER),
+                // widened; `row + i` runs over this channel's rows of the stack (< st.n).
                 let top = sh.tilt_order(s) as usize;
                 let mut own = vec![vec![0.0; st.n]; top];
                 let mut row = 0;
