@@ -1059,8 +1059,8 @@ pub(crate) fn resolvable_order(st: &Stack, name: EffectName, range: (f64, f64)) 
 /// their columns are zero there and they are not fitted (pinned at 0, said in the report).
 /// A `gravity_tilt` in the model has each accelerometer's degree chosen after the motions
 /// ([`choose_tilt_orders`]). Coordinate-wise over the motions, then the tilt, two sweeps when
-/// several motions share a channel; then the model is refitted at the chosen orders with its
-/// searches.
+/// several motions share a channel or a tilt's degree rose above the one the motions were chosen
+/// against; then the model is refitted at the chosen orders with its searches.
 fn fit_orders_nested(
     st: &Stack,
     model: &Model,
@@ -1077,14 +1077,19 @@ fn fit_orders_nested(
         return Ok(first);
     }
     let mut best: BTreeMap<usize, (u32, u32)> = BTreeMap::new();
-    // A second sweep only when two motions share a channel (else each choice is independent). The
-    // tilt is chosen after the motions in each sweep, not before them again: on the 30 draws of
-    // `accel_hidden_roll` from 5000, a second sweep for it left the roll's error against its bound
-    // as it was (mean 0.682 of the bound, against 0.677 in one) and cost a second choice of the
-    // motions (2.5 s of CPU on 100 000 samples).
+    // A second sweep when two motions share a channel (else each choice is independent), or when a
+    // sensor's tilt came out of a higher degree than the one the motions were chosen against: what
+    // the higher terms take, the motions may have taken in their place (generator draw 1004 of
+    // `accel_hidden_roll`: degree 4 after a cubic; without the second sweep the roll was 2.8 × its
+    // bound, with it 0.4 ×). A tilt of that degree or lower leaves the motions as chosen (on the
+    // draws 5000–5029 of that study, a second sweep then moved the roll's error by at most 0.15 of
+    // its bound, and a second choice of the motions costs about 1 s of CPU on 15 000 samples).
     let shared =
         st.chans.iter().any(|c| motions.iter().filter(|&&ti| c.s_motion(first.terms[ti].name) != 0.0).count() > 1);
-    let sweeps = if motions.len() > 1 && shared { 2 } else { 1 };
+    let n_sensors = accel_sensors(st).len();
+    let degrees = |terms: &[FitTerm]| -> Vec<u32> {
+        tilt.map_or(vec![], |ti| (0..n_sensors).map(|s| terms[ti].shape.tilt_order(s)).collect())
+    };
     let rows_of = |name: EffectName| -> Vec<usize> {
         let mut out = Vec::new();
         let mut k = 0;
@@ -1159,7 +1164,8 @@ fn fit_orders_nested(
             Ok((chosen, searched, shape(st, name, 1, me.order.unwrap_or(chosen), false)))
         }
     };
-    for _ in 0..sweeps {
+    for sweep in 0..2 {
+        let against = degrees(&terms);
         if motions.len() > 1 && shared {
             for &ti in motions {
                 let (chosen, searched, sh) = choose(&terms, ti)?;
@@ -1178,6 +1184,10 @@ fn fit_orders_nested(
         }
         if let Some(ti) = tilt {
             terms[ti].shape = choose_tilt_orders(st, &terms, ti, &first.target, w)?;
+        }
+        let rose = degrees(&terms).iter().zip(&against).any(|(now, was)| now > was);
+        if sweep == 1 || !((motions.len() > 1 && shared) || rose) {
+            break;
         }
     }
     // Per model entry: the order and, for a motion, its sparse selection; for the tilt, each
