@@ -1254,12 +1254,10 @@ fn choose_tilt_orders(
         let (wr, y) = (pick(w), pick(target));
         let base = OrthoBase::new(&fixed, &wr)?;
         // Every sensor's columns span the stack: their values held to [`MAX_SERIES_VALUES`].
-        let by_memory = MAX_SERIES_VALUES / st.n.max(1).saturating_mul(sensors.len());
-        let top = TILT_MAX_ORDER
-            .min(xs.len().saturating_sub(1) as u32)
-            .min((rows.len() / 4) as u32)
-            .min(by_memory.min(TILT_MAX_ORDER as usize) as u32)
-            .max(1);
+        let by_memory =
+            u32::try_from(MAX_SERIES_VALUES / st.n.max(1).saturating_mul(sensors.len())).unwrap_or(u32::MAX);
+        let top =
+            TILT_MAX_ORDER.min(xs.len().saturating_sub(1) as u32).min((rows.len() / 4) as u32).min(by_memory).max(1);
         let only: Vec<u32> = (0..sensors.len()).map(|j| if j == s { top } else { 0 }).collect();
         let sh = terms[ti].shape.clone().with_tilt_orders(&sensors, only);
         let series: Vec<Vec<f64>> = columns(st, EffectName::GravityTilt, &sh, &[]).iter().map(|c| pick(c)).collect();
