@@ -58,7 +58,7 @@
 //! - g·τ_s(x): gravity seen through the tilt of sensor s's sensitive axis (`gravity_tilt`; the
 //!   simulator's reading (R·u)·(a + g ẑ) gives τ = u_y·EAX(x) − u_x·EBX(x) to first order; fitted
 //!   per sensor, shared by its runs, as a Legendre series Σ p_k·P_k(u), k = 1..K_s, over the
-//!   positions' range, K_s chosen by BIC up to 20 (`choose_tilt_orders`; 3 as a `diagnose`
+//!   positions' range, K_s chosen by BIC over 3..20 (`choose_tilt_orders`; 3 as a `diagnose`
 //!   candidate) and written as monomials c_j·x^j too). The error-motion columns leave gravity out: a
 //!   given roll or pitch does not predict its g·τ (add `gravity_tilt`).
 //! - a_mode: a `resonance`, a structural mode q̈ + 2ζω·q̇ + ω²·q = −u·a_ref(t) driven by the
