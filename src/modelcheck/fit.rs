@@ -1269,6 +1269,7 @@ fn choose_tilt_orders(
         // left a roll unfitted once the mode was coupled to the shapes (generator draw 5020 of
         // `accel_hidden_resonance_and_roll`: degree 1, normalised RMS 1.32 after both were added,
         // 0.98 with the cubic).
+        // index: DEFAULT_ORDER is the constant 3, widened; the range below is over `nr.rss` itself.
         let k_min = (DEFAULT_ORDER as usize).min(nr.rss.len().saturating_sub(1)).max(1);
         let k = (k_min..nr.rss.len()).min_by(|a, b| bic(*a).total_cmp(&bic(*b))).unwrap_or(0);
         orders.push(if k == 0 { 1 } else { nr.used[k - 1] as u32 + 1 });
