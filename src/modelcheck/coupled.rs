@@ -1836,23 +1836,22 @@ pub(crate) fn refit_coupled<'a>(
         let rss = weighted_ss(&residual, w);
         Some((st3, terms, cols, coefs, residual, rss, theta[..2].to_vec(), at_bound))
     };
+    // The fit with (f, ζ) held at θ's: the gains fitted to the shapes `terms2` ([`ModeStart::Held`]).
+    let held_fit = |cache: &mut RawGramCache, terms2: Vec<FitTerm>, theta1: &[f64]| {
+        let pb = problem(st_mode, &terms2, &fs.target, w, cache)?;
+        let (beta, _) = pb.coupled(theta1).ok()?;
+        let theta = held_theta(&pb, &pb.shape_coefs(&beta), &theta1[2..]);
+        finish(&pb, terms2, &theta, [false; 2])
+    };
     let done = if start == ModeStart::Held {
-        let pb2 = problem(st_mode, &terms2, &fs.target, w, &mut cache)?;
-        let (beta, _) = pb2.coupled(&theta1).ok()?;
-        let theta = held_theta(&pb2, &pb2.shape_coefs(&beta), &theta1[2..]);
-        finish(&pb2, terms2, &theta, [false; 2])?
+        held_fit(&mut cache, terms2, &theta1)?
     } else {
         // A stated start keeps the fit at the stated (f, ζ) when freeing them ends worse: the
         // polish can leave a far better point (generator draw 5019 of the mode + roll pair, fresh:
         // from the diagnosis's 20.68 Hz, ζ 0.0129 it ended at 26.0 Hz with ζ at its bound, weighted
         // residual 16 × the stated point's).
         let held = match start {
-            ModeStart::Stated => {
-                let pb_h = problem(st_mode, &terms2, &fs.target, w, &mut cache)?;
-                let (beta, _) = pb_h.coupled(&theta1).ok()?;
-                let theta = held_theta(&pb_h, &pb_h.shape_coefs(&beta), &theta1[2..]);
-                finish(&pb_h, terms2.clone(), &theta, [false; 2])
-            }
+            ModeStart::Stated => held_fit(&mut cache, terms2.clone(), &theta1),
             ModeStart::Scan | ModeStart::Held => None,
         };
         let pb2;

@@ -1070,9 +1070,8 @@ fn fit_orders_nested(
     motions: &[usize],
 ) -> Result<FitState, ModelCheckError> {
     let mut terms = first.terms.clone();
-    // A `gravity_tilt` whose degrees the model does not give: chosen per accelerometer as well.
-    let tilt = (0..terms.len())
-        .find(|&t| terms[t].name == EffectName::GravityTilt && model.effects[terms[t].index].order.is_none());
+    // A `gravity_tilt` (a model gives it no `order`): its degree chosen per accelerometer as well.
+    let tilt = (0..terms.len()).find(|&t| terms[t].name == EffectName::GravityTilt);
     if motions.is_empty() && tilt.is_none() {
         return Ok(first);
     }
@@ -1084,8 +1083,8 @@ fn fit_orders_nested(
     // bound, with it 0.4 ×). A tilt of that degree or lower leaves the motions as chosen (on the
     // draws 5000–5029 of that study, a second sweep then moved the roll's error by at most 0.15 of
     // its bound, and a second choice of the motions costs about 1 s of CPU on 15 000 samples).
-    let shared =
-        st.chans.iter().any(|c| motions.iter().filter(|&&ti| c.s_motion(first.terms[ti].name) != 0.0).count() > 1);
+    let shared = motions.len() > 1
+        && st.chans.iter().any(|c| motions.iter().filter(|&&ti| c.s_motion(first.terms[ti].name) != 0.0).count() > 1);
     let n_sensors = accel_sensors(st).len();
     let degrees = |terms: &[FitTerm]| -> Vec<u32> {
         tilt.map_or(vec![], |ti| (0..n_sensors).map(|s| terms[ti].shape.tilt_order(s)).collect())
@@ -1166,7 +1165,7 @@ fn fit_orders_nested(
     };
     for sweep in 0..2 {
         let against = degrees(&terms);
-        if motions.len() > 1 && shared {
+        if shared {
             for &ti in motions {
                 let (chosen, searched, sh) = choose(&terms, ti)?;
                 best.insert(ti, (chosen, searched));
@@ -1186,7 +1185,7 @@ fn fit_orders_nested(
             terms[ti].shape = choose_tilt_orders(st, &terms, ti, &first.target, w)?;
         }
         let rose = degrees(&terms).iter().zip(&against).any(|(now, was)| now > was);
-        if sweep == 1 || !((motions.len() > 1 && shared) || rose) {
+        if sweep == 1 || !(shared || rose) {
             break;
         }
     }
@@ -1235,6 +1234,9 @@ fn choose_tilt_orders(
     let sensors = accel_sensors(st);
     let others: Vec<FitTerm> = terms.iter().enumerate().filter(|(i, _)| *i != ti).map(|(_, t)| t.clone()).collect();
     let fixed_all = design(st, &others);
+    // Every sensor's columns span the stack: their values held to [`MAX_SERIES_VALUES`].
+    let by_memory =
+        u32::try_from(MAX_SERIES_VALUES / st.n.max(1).saturating_mul(sensors.len().max(1))).unwrap_or(u32::MAX);
     let mut orders = Vec::with_capacity(sensors.len());
     for (s, name) in sensors.iter().enumerate() {
         let mut rows = Vec::new();
@@ -1253,9 +1255,6 @@ fn choose_tilt_orders(
         let fixed: Vec<Vec<f64>> = fixed_all.iter().map(|c| pick(c)).filter(|c| c.iter().any(|v| *v != 0.0)).collect();
         let (wr, y) = (pick(w), pick(target));
         let base = OrthoBase::new(&fixed, &wr)?;
-        // Every sensor's columns span the stack: their values held to [`MAX_SERIES_VALUES`].
-        let by_memory =
-            u32::try_from(MAX_SERIES_VALUES / st.n.max(1).saturating_mul(sensors.len())).unwrap_or(u32::MAX);
         let top =
             TILT_MAX_ORDER.min(xs.len().saturating_sub(1) as u32).min((rows.len() / 4) as u32).min(by_memory).max(1);
         let only: Vec<u32> = (0..sensors.len()).map(|j| if j == s { top } else { 0 }).collect();
